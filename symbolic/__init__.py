@@ -1,0 +1,1 @@
+"""The derivation: gearbox description → kinematics → dynamics → analyses (SymPy)."""

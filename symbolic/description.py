@@ -1,0 +1,544 @@
+"""Stage 1: the gearbox as data.
+
+A TOML file describes shafts, planetary sets (with tooth counts), shift elements, the gear table,
+inertias and (for later stages) drivetrain and vehicle values. This module parses and checks it
+and returns an immutable :class:`GearboxDescription`; it knows nothing about any particular
+gearbox. Every physical value is written ``{ value = ..., unit = "...", source = "..." }`` so
+that the file itself says where each number comes from.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from symbolic.errors import GearsymError
+
+#: Names end up in C identifiers, always behind a prefix (``omega_<shaft>``, ``T_<element>``,
+#: ``gear_<name>``), so they may hold letters, digits and underscores only; a leading digit is
+#: allowed because of the prefix (the thesis numbers its shafts 1…8).
+NAME_PATTERN = re.compile(r"^[A-Za-z0-9_]{1,31}$")
+
+#: The unit every quantity key must carry (no conversion: a different unit is an error).
+EXPECTED_UNITS: dict[str, str] = {
+    "inertia": "kg*m^2",
+    "planet_inertia": "kg*m^2",
+    "planet_mass": "kg",
+    "carrier_radius": "m",
+}
+
+DEFAULT_CONFIG_NAME = "thesis_9speed.toml"
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """A physical value with its unit and where it comes from (thesis equation or "assumed")."""
+
+    value: float
+    unit: str
+    source: str
+
+
+@dataclass(frozen=True)
+class Shaft:
+    name: str
+    inertia: Quantity
+
+
+@dataclass(frozen=True)
+class PlanetarySet:
+    """One simple planetary set (2.20–2.23): sun, carrier and ring shafts and a planet body.
+
+    ``planet_mass`` and ``planet_inertia`` are per planet; the lumped planet body of the thesis
+    (J_9…J_12, m_P,j) is ``planet_count`` times these.
+    """
+
+    name: str
+    sun: str
+    carrier: str
+    ring: str
+    planet: str
+    z_sun: int
+    z_planet: int
+    z_ring: int
+    planet_count: int
+    planet_mass: Quantity
+    planet_inertia: Quantity
+    carrier_radius: Quantity
+    teeth_source: str
+
+
+@dataclass(frozen=True)
+class ShiftElement:
+    """A clutch between shafts ``(a, b)`` or a brake on shaft ``(b,)``.
+
+    Sign convention of (2.36): the element torque T acts with +T on ``b`` and −T on ``a`` (a is
+    the housing for a brake); its slip speed is Δω = ω_a − ω_b.
+    """
+
+    name: str
+    kind: str
+    shafts: tuple[str, ...]
+
+    @property
+    def a(self) -> str | None:
+        return self.shafts[0] if self.kind == "clutch" else None
+
+    @property
+    def b(self) -> str:
+        return self.shafts[-1]
+
+
+@dataclass(frozen=True)
+class Gear:
+    name: str
+    closed: tuple[str, ...]
+    ratio: float | None
+    neutral: bool
+
+
+@dataclass(frozen=True)
+class GearboxDescription:
+    """The parsed, checked description. Order of every tuple is the file's order."""
+
+    name: str
+    title: str
+    file: str
+    input_shaft: str
+    output_shaft: str
+    measured_shafts: tuple[str, ...]
+    coordinates: tuple[str, ...]
+    shafts: tuple[Shaft, ...]
+    planetary_sets: tuple[PlanetarySet, ...]
+    shift_elements: tuple[ShiftElement, ...]
+    gears: tuple[Gear, ...]
+    ratio_decimals: int
+    gear_table_source: str
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def shaft_names(self) -> tuple[str, ...]:
+        return tuple(s.name for s in self.shafts)
+
+    @property
+    def planet_names(self) -> tuple[str, ...]:
+        return tuple(p.planet for p in self.planetary_sets)
+
+    @property
+    def body_names(self) -> tuple[str, ...]:
+        """Shafts first, then the lumped planet bodies, as in (2.26)."""
+        return self.shaft_names + self.planet_names
+
+    @property
+    def degrees_of_freedom(self) -> int:
+        """f = f_free − 2·(number of sets) (2.24)."""
+        return len(self.body_names) - 2 * len(self.planetary_sets)
+
+    def element(self, name: str) -> ShiftElement:
+        return next(e for e in self.shift_elements if e.name == name)
+
+    def gear(self, name: str) -> Gear:
+        return next(g for g in self.gears if g.name == name)
+
+    def shaft(self, name: str) -> Shaft:
+        return next(s for s in self.shafts if s.name == name)
+
+
+def default_config_path() -> Path:
+    """Path of the built-in description (the thesis' 9-speed gearbox)."""
+    return Path(str(resources.files("gearsym") / "data" / DEFAULT_CONFIG_NAME))
+
+
+def default_config_text() -> str:
+    return default_config_path().read_text(encoding="utf-8")
+
+
+class _Reader:
+    """Typed access to a TOML table that reports errors with the file and the key path."""
+
+    def __init__(self, file: str, table: dict[str, Any], path: str) -> None:
+        self.file = file
+        self.data = table
+        self.path = path
+        self.used: set[str] = set()
+
+    def key(self, name: str) -> str:
+        return f"{self.path}.{name}" if self.path else name
+
+    def fail(self, name: str, reason: str) -> GearsymError:
+        return GearsymError(self.file, self.key(name), reason)
+
+    def _get(self, name: str, required: bool) -> Any:
+        self.used.add(name)
+        if name not in self.data:
+            if required:
+                near = difflib.get_close_matches(name, [str(k) for k in self.data], n=1)
+                hint = f" (is {near[0]!r} a misspelling?)" if near else ""
+                raise self.fail(name, f"missing required key{hint}")
+            return None
+        return self.data[name]
+
+    def string(self, name: str, required: bool = True, default: str = "") -> str:
+        value = self._get(name, required)
+        if value is None:
+            return default
+        if not isinstance(value, str):
+            raise self.fail(name, f"expected a string, got {type(value).__name__}")
+        return value
+
+    def name(self, name: str = "name") -> str:
+        value = self.string(name)
+        if not NAME_PATTERN.match(value):
+            raise self.fail(
+                name,
+                f"{value!r} is not usable in a C identifier (letters, digits and '_' only, "
+                "at most 31 characters)",
+            )
+        return value
+
+    def integer(self, name: str, required: bool = True, default: int = 0) -> int:
+        value = self._get(name, required)
+        if value is None:
+            return default
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.fail(name, f"expected an integer, got {value!r}")
+        return value
+
+    def positive_integer(self, name: str, required: bool = True, default: int = 0) -> int:
+        value = self.integer(name, required, default)
+        if value <= 0:
+            raise self.fail(name, f"must be a positive integer, got {value}")
+        return value
+
+    def boolean(self, name: str, default: bool = False) -> bool:
+        value = self._get(name, False)
+        if value is None:
+            return default
+        if not isinstance(value, bool):
+            raise self.fail(name, f"expected true or false, got {value!r}")
+        return value
+
+    def number(self, name: str, required: bool = True) -> float | None:
+        value = self._get(name, required)
+        if value is None:
+            return None
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(name, f"expected a number, got {value!r}")
+        if not math.isfinite(value):
+            raise self.fail(name, f"must be finite, got {value!r}")
+        return float(value)
+
+    def string_list(self, name: str, required: bool = True) -> tuple[str, ...]:
+        value = self._get(name, required)
+        if value is None:
+            return ()
+        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+            raise self.fail(name, "expected a list of names (strings)")
+        return tuple(value)
+
+    def quantity(self, name: str, positive: bool = True) -> Quantity:
+        value = self._get(name, True)
+        if not isinstance(value, dict):
+            raise self.fail(name, """expected { value = <number>, unit = "...", source = "..." }""")
+        sub = _Reader(self.file, value, self.key(name))
+        number = sub.number("value")
+        assert number is not None
+        unit = sub.string("unit")
+        source = sub.string("source")
+        sub.reject_unknown()
+        expected = EXPECTED_UNITS.get(name)
+        if expected is not None and unit != expected:
+            raise sub.fail("unit", f"expected {expected!r}, got {unit!r}")
+        if not source.strip():
+            raise sub.fail("source", "must say where the value comes from (or 'assumed')")
+        if positive and number <= 0:
+            raise sub.fail("value", f"must be positive, got {number}")
+        return Quantity(number, unit, source)
+
+    def tables(self, name: str, required: bool = True) -> list[_Reader]:
+        value = self._get(name, required)
+        if value is None:
+            return []
+        if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+            raise self.fail(name, f"expected an array of tables ([[{name}]])")
+        return [_Reader(self.file, t, f"{self.key(name)}[{i}]") for i, t in enumerate(value)]
+
+    def table(self, name: str, required: bool = True) -> _Reader:
+        value = self._get(name, required)
+        if value is None:
+            return _Reader(self.file, {}, self.key(name))
+        if not isinstance(value, dict):
+            raise self.fail(name, f"expected a table ([{name}])")
+        return _Reader(self.file, value, self.key(name))
+
+    def reject_unknown(self) -> None:
+        unknown = sorted(set(self.data) - self.used)
+        if unknown:
+            raise self.fail(unknown[0], "unknown key (misspelt?)")
+
+
+def _label(reader: _Reader, name: str) -> None:
+    """Use the entry's name in its key path, e.g. ``planetary_set[name="2"]``."""
+    reader.path = re.sub(r"\[\d+\]$", f'[name="{name}"]', reader.path)
+
+
+def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
+    """Parse and check a description; raise :class:`GearsymError` on the first problem."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        match = re.search(r"\(at line (\d+), column (\d+)\)", str(err))
+        where = f"line {match.group(1)}, column {match.group(2)}" if match else "TOML"
+        reason = re.sub(r"\s*\(at line \d+, column \d+\)", "", str(err))
+        raise GearsymError(file, where, f"malformed TOML: {reason}") from None
+    root = _Reader(file, data, "")
+
+    gearbox = root.table("gearbox")
+    name = gearbox.name()
+    title = gearbox.string("title", required=False, default=name)
+    input_shaft = gearbox.string("input_shaft")
+    output_shaft = gearbox.string("output_shaft")
+    measured = gearbox.string_list("measured_shafts", required=False)
+    coordinates_given = gearbox.string_list("coordinates", required=False)
+    gearbox.reject_unknown()
+
+    shafts: list[Shaft] = []
+    for r in root.tables("shaft"):
+        shaft_name = r.name()
+        _label(r, shaft_name)
+        shafts.append(Shaft(shaft_name, r.quantity("inertia")))
+        r.reject_unknown()
+    if not shafts:
+        raise root.fail("shaft", "a gearbox needs at least one [[shaft]]")
+
+    sets: list[PlanetarySet] = []
+    for r in root.tables("planetary_set"):
+        set_name = r.name()
+        _label(r, set_name)
+        members = {role: r.string(role) for role in ("sun", "carrier", "ring")}
+        planet = r.name("planet")
+        z_sun = r.positive_integer("z_sun")
+        z_planet = r.positive_integer("z_planet")
+        z_ring = r.positive_integer("z_ring")
+        count = r.positive_integer("planet_count")
+        ps = PlanetarySet(
+            name=set_name,
+            sun=members["sun"],
+            carrier=members["carrier"],
+            ring=members["ring"],
+            planet=planet,
+            z_sun=z_sun,
+            z_planet=z_planet,
+            z_ring=z_ring,
+            planet_count=count,
+            planet_mass=r.quantity("planet_mass"),
+            planet_inertia=r.quantity("planet_inertia"),
+            carrier_radius=r.quantity("carrier_radius"),
+            teeth_source=r.string("teeth_source"),
+        )
+        r.reject_unknown()
+        _check_set(r, ps)
+        sets.append(ps)
+
+    elements: list[ShiftElement] = []
+    for r in root.tables("shift_element"):
+        element_name = r.name()
+        _label(r, element_name)
+        kind = r.string("kind")
+        if kind == "clutch":
+            pair = r.string_list("shafts")
+            if len(pair) != 2:
+                raise r.fail("shafts", "a clutch joins exactly two shafts [a, b]")
+            if pair[0] == pair[1]:
+                raise r.fail("shafts", f"a clutch must join two different shafts, got {pair}")
+            elements.append(ShiftElement(element_name, kind, pair))
+        elif kind == "brake":
+            elements.append(ShiftElement(element_name, kind, (r.string("shaft"),)))
+        else:
+            raise r.fail("kind", f"expected 'clutch' or 'brake', got {kind!r}")
+        r.reject_unknown()
+
+    table = root.table("gear_table", required=False)
+    decimals = table.integer("ratio_decimals", required=False, default=3)
+    table_source = table.string("source", required=False, default="")
+    table.reject_unknown()
+
+    gears: list[Gear] = []
+    for r in root.tables("gear"):
+        gear_name = r.name()
+        _label(r, gear_name)
+        closed = r.string_list("closed")
+        neutral = r.boolean("neutral")
+        ratio = r.number("ratio", required=False)
+        if neutral and ratio is not None:
+            raise r.fail("ratio", "a neutral gear has no ratio")
+        if not neutral and ratio is None:
+            raise r.fail("ratio", "missing required key (or set neutral = true)")
+        if ratio == 0:
+            raise r.fail("ratio", "a gear ratio cannot be zero")
+        gears.append(Gear(gear_name, closed, ratio, neutral))
+        r.reject_unknown()
+
+    extra: dict[str, Any] = {}
+    for section in ("drivetrain", "vehicle", "friction", "shift"):
+        if section in data:
+            root.used.add(section)
+            extra[section] = data[section]
+    root.reject_unknown()
+
+    description = GearboxDescription(
+        name=name,
+        title=title,
+        file=file,
+        input_shaft=input_shaft,
+        output_shaft=output_shaft,
+        measured_shafts=measured,
+        coordinates=coordinates_given,
+        shafts=tuple(shafts),
+        planetary_sets=tuple(sets),
+        shift_elements=tuple(elements),
+        gears=tuple(gears),
+        ratio_decimals=decimals,
+        gear_table_source=table_source,
+        extra=extra,
+    )
+    _check_references(description)
+    if not description.coordinates:
+        # Default generalized coordinates: the first f shafts (thesis 2.28 names them).
+        description = _replace_coordinates(description)
+    return description
+
+
+def _replace_coordinates(d: GearboxDescription) -> GearboxDescription:
+    from dataclasses import replace
+
+    return replace(d, coordinates=d.shaft_names[: d.degrees_of_freedom])
+
+
+def _check_set(r: _Reader, ps: PlanetarySet) -> None:
+    """Buildability: same module for all meshes, equal planet spacing, no planet collision."""
+    if ps.z_ring != ps.z_sun + 2 * ps.z_planet:
+        raise r.fail(
+            "z_ring",
+            f"z_ring must equal z_sun + 2 z_planet = {ps.z_sun + 2 * ps.z_planet} "
+            f"(same module, coaxial), got {ps.z_ring}",
+        )
+    if (ps.z_sun + ps.z_ring) % ps.planet_count != 0:
+        raise r.fail(
+            "planet_count",
+            f"{ps.planet_count} planets cannot be assembled equally spaced: "
+            f"(z_sun + z_ring) = {ps.z_sun + ps.z_ring} is not divisible by {ps.planet_count}",
+        )
+    if not planets_fit(ps.z_sun, ps.z_planet, ps.planet_count):
+        raise r.fail(
+            "planet_count",
+            f"{ps.planet_count} planets of {ps.z_planet} teeth collide around a sun of "
+            f"{ps.z_sun} teeth (need (z_sun + z_planet)·sin(π/n) > z_planet + 2)",
+        )
+
+
+def planets_fit(z_sun: int, z_planet: int, count: int) -> bool:
+    """Neighbour condition: tip circles of adjacent planets (addendum = 1 module) must not touch."""
+    if count < 2:
+        return True
+    return (z_sun + z_planet) * math.sin(math.pi / count) > z_planet + 2
+
+
+def _check_references(d: GearboxDescription) -> None:
+    f = d.file
+    shaft_names = d.shaft_names
+    _no_duplicates(f, "shaft", shaft_names)
+    _no_duplicates(f, "planetary_set", [s.name for s in d.planetary_sets])
+    _no_duplicates(f, "shift_element", [e.name for e in d.shift_elements])
+    _no_duplicates(f, "gear", [g.name for g in d.gears])
+    seen_planets: set[str] = set()
+    for ps in d.planetary_sets:
+        key = f'planetary_set[name="{ps.name}"]'
+        for role in ("sun", "carrier", "ring"):
+            shaft = getattr(ps, role)
+            if shaft not in shaft_names:
+                raise GearsymError(f, f"{key}.{role}", f"unknown shaft {shaft!r}")
+        if len({ps.sun, ps.carrier, ps.ring}) != 3:
+            raise GearsymError(f, key, "sun, carrier and ring must be three different shafts")
+        if ps.planet in shaft_names or ps.planet in seen_planets:
+            raise GearsymError(
+                f, f"{key}.planet", f"planet body {ps.planet!r} is already a shaft or a planet"
+            )
+        seen_planets.add(ps.planet)
+    for e in d.shift_elements:
+        for shaft in e.shafts:
+            if shaft not in shaft_names:
+                key = "shafts" if e.kind == "clutch" else "shaft"
+                raise GearsymError(
+                    f, f'shift_element[name="{e.name}"].{key}', f"unknown shaft {shaft!r}"
+                )
+    for key, shaft in (("input_shaft", d.input_shaft), ("output_shaft", d.output_shaft)):
+        if shaft not in shaft_names:
+            raise GearsymError(f, f"gearbox.{key}", f"unknown shaft {shaft!r}")
+    if d.input_shaft == d.output_shaft:
+        raise GearsymError(f, "gearbox.output_shaft", "input and output shaft must differ")
+    for shaft in d.measured_shafts:
+        if shaft not in shaft_names:
+            raise GearsymError(f, "gearbox.measured_shafts", f"unknown shaft {shaft!r}")
+    body_names = d.body_names
+    for body in d.coordinates:
+        if body not in body_names:
+            raise GearsymError(f, "gearbox.coordinates", f"unknown shaft or planet {body!r}")
+    _no_duplicates(f, "gearbox.coordinates", d.coordinates, plain=True)
+    if d.degrees_of_freedom < 1:
+        raise GearsymError(
+            f, "planetary_set", f"the gearbox has {d.degrees_of_freedom} degrees of freedom"
+        )
+    if d.coordinates and len(d.coordinates) != d.degrees_of_freedom:
+        raise GearsymError(
+            f,
+            "gearbox.coordinates",
+            f"the gearbox has {d.degrees_of_freedom} degrees of freedom (2.24), "
+            f"so it needs {d.degrees_of_freedom} coordinates, got {len(d.coordinates)}",
+        )
+    element_names = {e.name for e in d.shift_elements}
+    for g in d.gears:
+        key = f'gear[name="{g.name}"].closed'
+        for element in g.closed:
+            if element not in element_names:
+                raise GearsymError(f, key, f"unknown shift element {element!r}")
+        _no_duplicates(f, key, g.closed, plain=True)
+
+
+def _no_duplicates(file: str, key: str, names: Any, plain: bool = False) -> None:
+    seen: set[str] = set()
+    for n in names:
+        if n in seen:
+            where = key if plain else f'{key}[name="{n}"]'
+            raise GearsymError(file, where, f"name {n!r} is used twice")
+        seen.add(n)
+
+
+def load_description(path: str | Path | None = None) -> GearboxDescription:
+    """Load a description file, or the built-in default when ``path`` is None.
+
+    Checks the structure (this module) and that every gear leaves the degrees of freedom it
+    claims (via :func:`symbolic.ratios.check_gear_table`).
+    """
+    from symbolic.ratios import check_gear_table
+
+    if path is None:
+        text = default_config_text()
+        file = f"<built-in {DEFAULT_CONFIG_NAME}>"
+    else:
+        file = str(path)
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except FileNotFoundError:
+            raise GearsymError(file, "", "no such file") from None
+        except (OSError, UnicodeDecodeError) as err:
+            raise GearsymError(file, "", f"cannot read: {err}") from None
+    description = parse_description(text, file)
+    check_gear_table(description)
+    return description

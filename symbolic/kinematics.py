@@ -1,0 +1,249 @@
+"""Stage 2: kinematics of the planetary gearbox (thesis 2.20–2.32).
+
+From a :class:`~symbolic.description.GearboxDescription`: the Willis constraints of every set
+(2.22–2.23), the body orientations s(y) (2.26, 2.29) and positions r(y) (2.27, 2.30) for the
+chosen generalized coordinates y (2.28), and the Jacobians J_R = ∂s/∂y and J_T = ∂r/∂y
+(2.31–2.32). All constraints are linear and scleronomic, so s(y) = T·y with a constant matrix T
+and the Jacobians are constant (the thesis' argument for k = 0 in 2.33).
+
+Tooth counts and inertias can each be symbols (z_S_1, J_4, …) or exact numbers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import sympy as sp
+
+from symbolic.description import GearboxDescription
+from symbolic.errors import GearsymError
+
+
+def exact(value: float) -> sp.Rational:
+    """The decimal number exactly as written in the file (0.054 → 27/500), not its binary float."""
+    return sp.Rational(repr(float(value)))
+
+
+@dataclass(frozen=True)
+class GearboxSymbols:
+    """Every symbol the derivation uses, and the numeric value of each symbolic parameter.
+
+    Thesis names in ASCII: phi_<body>, omega_<body>, z_S_<set>, z_P_<set>, z_H_<set>,
+    r_T_<set>, m_P_<set> (lumped planet mass), J_<body> (lumped for planet bodies), T_In,
+    T_Out, T_<element>.
+    """
+
+    angle: dict[str, sp.Symbol]
+    speed: dict[str, sp.Symbol]
+    z_sun: dict[str, sp.Expr]
+    z_planet: dict[str, sp.Expr]
+    z_ring: dict[str, sp.Expr]
+    carrier_radius: dict[str, sp.Expr]
+    planet_mass: dict[str, sp.Expr]
+    inertia: dict[str, sp.Expr]
+    torque: dict[str, sp.Symbol]
+    values: dict[sp.Symbol, sp.Rational] = field(default_factory=dict)
+
+
+def gearbox_symbols(
+    d: GearboxDescription, symbolic_teeth: bool = False, symbolic_inertias: bool = False
+) -> GearboxSymbols:
+    """Symbols (or exact numbers) for teeth, inertias, masses, radii, angles and torques."""
+    values: dict[sp.Symbol, sp.Rational] = {}
+
+    def quantity(name: str, value: sp.Rational, symbolic: bool) -> sp.Expr:
+        symbol = sp.Symbol(name, positive=True)
+        values[symbol] = value
+        return symbol if symbolic else value
+
+    z_sun, z_planet, z_ring, radius, mass = {}, {}, {}, {}, {}
+    inertia: dict[str, sp.Expr] = {}
+    for s in d.shafts:
+        inertia[s.name] = quantity(f"J_{s.name}", exact(s.inertia.value), symbolic_inertias)
+    for ps in d.planetary_sets:
+        j = ps.name
+        z_sun[j] = quantity(f"z_S_{j}", sp.Integer(ps.z_sun), symbolic_teeth)
+        z_planet[j] = quantity(f"z_P_{j}", sp.Integer(ps.z_planet), symbolic_teeth)
+        z_ring[j] = quantity(f"z_H_{j}", sp.Integer(ps.z_ring), symbolic_teeth)
+        n = ps.planet_count
+        radius[j] = quantity(f"r_T_{j}", exact(ps.carrier_radius.value), symbolic_inertias)
+        mass[j] = quantity(f"m_P_{j}", n * exact(ps.planet_mass.value), symbolic_inertias)
+        inertia[ps.planet] = quantity(
+            f"J_{ps.planet}", n * exact(ps.planet_inertia.value), symbolic_inertias
+        )
+    torque = {"In": sp.Symbol("T_In"), "Out": sp.Symbol("T_Out")}
+    for e in d.shift_elements:
+        torque[e.name] = sp.Symbol(f"T_{e.name}")
+    return GearboxSymbols(
+        angle={b: sp.Symbol(f"phi_{b}") for b in d.body_names},
+        speed={b: sp.Symbol(f"omega_{b}") for b in d.body_names},
+        z_sun=z_sun,
+        z_planet=z_planet,
+        z_ring=z_ring,
+        carrier_radius=radius,
+        planet_mass=mass,
+        inertia=inertia,
+        torque=torque,
+        values=values,
+    )
+
+
+def willis_constraints(d: GearboxDescription, sym: GearboxSymbols) -> sp.Matrix:
+    """G with G·ω = 0: two rows per set, (2.22) sun–planet and (2.23) planet–ring."""
+    index = {b: i for i, b in enumerate(d.body_names)}
+    rows = sp.zeros(2 * len(d.planetary_sets), len(index))
+    for r, ps in enumerate(d.planetary_sets):
+        zs, zp, zh = sym.z_sun[ps.name], sym.z_planet[ps.name], sym.z_ring[ps.name]
+        rows[2 * r, index[ps.sun]] += zs
+        rows[2 * r, index[ps.carrier]] += -(zs + zp)
+        rows[2 * r, index[ps.planet]] += zp
+        rows[2 * r + 1, index[ps.ring]] += zh
+        rows[2 * r + 1, index[ps.carrier]] += -(zh - zp)
+        rows[2 * r + 1, index[ps.planet]] += -zp
+    return rows
+
+
+def coordinate_transform(
+    d: GearboxDescription, sym: GearboxSymbols, constraints: sp.Matrix
+) -> sp.Matrix:
+    """T with s = T·y (2.29): every body angle as a linear combination of the coordinates.
+
+    Propagates set by set (a set with two known members gives the other two from its two
+    constraints), which keeps the entries in the compact form of (2.29); falls back to one
+    linear solve when the topology needs it. Raises when the coordinates are dependent or do
+    not determine every body.
+    """
+    bodies = d.body_names
+    f = len(d.coordinates)
+    key = "gearbox.coordinates"
+    rows: dict[str, sp.Matrix] = {}
+    for i, c in enumerate(d.coordinates):
+        rows[c] = sp.Matrix.zeros(1, f)
+        rows[c][0, i] = 1
+    index = {b: i for i, b in enumerate(bodies)}
+    progress = True
+    while progress and len(rows) < len(bodies):
+        progress = False
+        for r, ps in enumerate(d.planetary_sets):
+            members = (ps.sun, ps.carrier, ps.ring, ps.planet)
+            unknown = [m for m in members if m not in rows]
+            if not unknown or len(unknown) > 2:
+                continue
+            block = constraints[2 * r : 2 * r + 2, :]
+            a = sp.Matrix([[block[q, index[m]] for m in unknown] for q in range(2)])
+            known = sp.zeros(2, f)
+            for m in members:
+                if m in rows:
+                    known -= block[:, index[m]] * rows[m]
+            solution = _solve_small(a, known)
+            if solution is None:
+                raise GearsymError(
+                    d.file,
+                    key,
+                    f"coordinates {list(d.coordinates)} are not independent "
+                    f"(planetary set {ps.name!r} relates them)",
+                )
+            for m, row in zip(unknown, solution, strict=True):
+                rows[m] = row
+            progress = True
+    if len(rows) < len(bodies):
+        _solve_remaining(d, constraints, rows, index, f)
+    transform = sp.Matrix.vstack(*(rows[b] for b in bodies))
+    check = (constraints * transform).applyfunc(sp.cancel)
+    if any(entry != 0 for entry in check):
+        raise GearsymError(d.file, key, f"coordinates {list(d.coordinates)} are not independent")
+    return transform
+
+
+def _solve_small(a: sp.Matrix, rhs: sp.Matrix) -> list[sp.Matrix] | None:
+    """Rows X with a·X = rhs for a 2×u system (u ≤ 2); None when inconsistent."""
+    unknowns = a.shape[1]
+    if unknowns == 2:
+        det = sp.cancel(a.det())
+        if det == 0:
+            return None
+        x = (a.adjugate() * rhs / det).applyfunc(sp.cancel)
+        return [x[0, :], x[1, :]]
+    # One unknown: take it from the equation where it appears, the other must then hold.
+    q = 0 if sp.cancel(a[0, 0]) != 0 else 1
+    if sp.cancel(a[q, 0]) == 0:
+        return None
+    x = (rhs[q, :] / a[q, 0]).applyfunc(sp.cancel)
+    other = 1 - q
+    if any(sp.cancel(v) != 0 for v in a[other, 0] * x - rhs[other, :]):
+        return None
+    return [x]
+
+
+def _solve_remaining(
+    d: GearboxDescription,
+    constraints: sp.Matrix,
+    rows: dict[str, sp.Matrix],
+    index: dict[str, int],
+    f: int,
+) -> None:
+    """One linear solve for bodies that set-by-set propagation could not reach."""
+    unknown = [b for b in d.body_names if b not in rows]
+    a = sp.Matrix.hstack(*(constraints[:, index[b]] for b in unknown))
+    rhs = sp.zeros(constraints.shape[0], f)
+    for b, row in rows.items():
+        rhs -= constraints[:, index[b]] * row
+    try:
+        solution, free = a.gauss_jordan_solve(rhs)
+    except ValueError:
+        raise GearsymError(
+            d.file, "gearbox.coordinates", f"coordinates {list(d.coordinates)} are not independent"
+        ) from None
+    if free.shape[0] > 0:
+        raise GearsymError(
+            d.file,
+            "gearbox.coordinates",
+            f"coordinates {list(d.coordinates)} do not determine the motion of "
+            f"{', '.join(unknown)}",
+        )
+    for i, b in enumerate(unknown):
+        rows[b] = solution[i, :].applyfunc(sp.cancel)
+
+
+@dataclass(frozen=True)
+class Kinematics:
+    """s(y) = T·y, r(y), and the constant Jacobians J_R, J_T of every body (2.26–2.32)."""
+
+    bodies: tuple[str, ...]
+    coordinates: tuple[str, ...]
+    coordinate_symbols: tuple[sp.Symbol, ...]
+    constraints: sp.Matrix
+    transform: sp.Matrix
+    orientation: sp.Matrix
+    position: sp.Matrix
+    rotation_jacobian: sp.Matrix
+    translation_jacobian: sp.Matrix
+
+
+def kinematics(d: GearboxDescription, sym: GearboxSymbols) -> Kinematics:
+    """Derive the gearbox kinematics for the description's generalized coordinates (2.28)."""
+    constraints = willis_constraints(d, sym)
+    transform = coordinate_transform(d, sym, constraints)
+    y = sp.Matrix([sym.angle[c] for c in d.coordinates])
+    orientation = transform * y
+    # Shafts do not translate; a planet's centre moves on the carrier circle, so its
+    # cylindrical position coordinate is r_T·φ_carrier (2.27, 2.30).
+    index = {b: i for i, b in enumerate(d.body_names)}
+    position = sp.zeros(len(d.body_names), 1)
+    translation = sp.zeros(len(d.body_names), len(d.coordinates))
+    for ps in d.planetary_sets:
+        i = index[ps.planet]
+        carrier_row = transform[index[ps.carrier], :]
+        position[i] = sym.carrier_radius[ps.name] * orientation[index[ps.carrier]]
+        translation[i, :] = sym.carrier_radius[ps.name] * carrier_row
+    return Kinematics(
+        bodies=d.body_names,
+        coordinates=d.coordinates,
+        coordinate_symbols=tuple(y),
+        constraints=constraints,
+        transform=transform,
+        orientation=orientation,
+        position=position,
+        rotation_jacobian=transform,
+        translation_jacobian=translation,
+    )

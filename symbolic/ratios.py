@@ -1,0 +1,170 @@
+"""Gear ratios from the shaft kinematics (Table 2.1).
+
+Adding the two Willis constraints (2.22) and (2.23) of a set eliminates its planet:
+
+    z_S ω_S + z_H ω_H − (z_S + z_H) ω_T = 0,   i.e.   ω_S + k ω_H − (1 + k) ω_T = 0
+
+with the stationary ratio k = z_H / z_S. A gear closes shift elements (a clutch ties ω_a = ω_b,
+a brake holds ω_b = 0); a drivable gear leaves exactly one degree of freedom and its ratio is
+ω_in / ω_out along it. Ratios depend on the sets only through k, which is what
+:mod:`symbolic.teeth` searches over.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import sympy as sp
+
+from symbolic.description import Gear, GearboxDescription
+from symbolic.errors import GearsymError
+from symbolic.sympy_utils import exact_nullspace
+
+
+def stationary_ratio_symbols(d: GearboxDescription) -> dict[str, sp.Symbol]:
+    """k_<set> = z_ring / z_sun as positive symbols, one per planetary set."""
+    return {ps.name: sp.Symbol(f"k_{ps.name}", positive=True) for ps in d.planetary_sets}
+
+
+def stationary_ratios(d: GearboxDescription) -> dict[str, sp.Rational]:
+    """Exact k = z_ring / z_sun of every set from the description's tooth counts."""
+    return {ps.name: sp.Rational(ps.z_ring, ps.z_sun) for ps in d.planetary_sets}
+
+
+def shaft_constraint_matrix(d: GearboxDescription, k: dict[str, sp.Expr]) -> sp.Matrix:
+    """One row per set: ω_S + k ω_H − (1 + k) ω_T = 0 over the shaft speeds (file order)."""
+    index = {name: i for i, name in enumerate(d.shaft_names)}
+    rows = sp.zeros(len(d.planetary_sets), len(index))
+    for r, ps in enumerate(d.planetary_sets):
+        rows[r, index[ps.sun]] += 1
+        rows[r, index[ps.ring]] += k[ps.name]
+        rows[r, index[ps.carrier]] -= 1 + k[ps.name]
+    return rows
+
+
+def closed_element_rows(d: GearboxDescription, closed: tuple[str, ...]) -> sp.Matrix:
+    """A closed clutch ties ω_a − ω_b = 0; a closed brake holds ω_b = 0."""
+    index = {name: i for i, name in enumerate(d.shaft_names)}
+    rows = sp.zeros(len(closed), len(index))
+    for r, name in enumerate(closed):
+        element = d.element(name)
+        rows[r, index[element.b]] = -1
+        if element.a is not None:
+            rows[r, index[element.a]] = 1
+    return rows
+
+
+def gear_motions(d: GearboxDescription, gear: Gear, k: dict[str, sp.Expr]) -> list[sp.Matrix]:
+    """Basis of the shaft-speed vectors the gear allows (its null space)."""
+    matrix = shaft_constraint_matrix(d, k).col_join(closed_element_rows(d, gear.closed))
+    return exact_nullspace(matrix)
+
+
+@dataclass(frozen=True)
+class GearRatio:
+    """The derived ratio of one gear and the ratio the description expects."""
+
+    gear: str
+    closed: tuple[str, ...]
+    ratio: sp.Rational | None
+    expected: float | None
+    degrees_of_freedom: int
+
+    @property
+    def neutral(self) -> bool:
+        return self.ratio is None
+
+    def rounded(self, decimals: int) -> float | None:
+        return None if self.ratio is None else round(float(self.ratio), decimals)
+
+
+def gear_ratio(d: GearboxDescription, gear: Gear, k: dict[str, sp.Expr] | None = None) -> GearRatio:
+    """ω_in / ω_out of a gear (exact for numeric k), or None for a neutral gear.
+
+    Raises :class:`GearsymError` naming the gear when its closed elements do not leave what
+    the description claims: exactly one degree of freedom for a drivable gear, a free output
+    for a neutral one.
+    """
+    k = stationary_ratios(d) if k is None else k
+    key = f'gear[name="{gear.name}"].closed'
+    motions = gear_motions(d, gear, k)
+    dof = len(motions)
+    i_in = d.shaft_names.index(d.input_shaft)
+    i_out = d.shaft_names.index(d.output_shaft)
+    closed = ", ".join(gear.closed) or "nothing"
+    if gear.neutral:
+        # Neutral: with the input held, the output must still be free to turn.
+        held = [m for m in motions]
+        free_output = _output_free_with_input_held(held, i_in, i_out)
+        if not free_output:
+            raise GearsymError(
+                d.file,
+                key,
+                f"neutral gear {gear.name!r} (closed {closed}) does not free the output: "
+                f"it leaves {dof} degree(s) of freedom and the output follows the input",
+            )
+        return GearRatio(gear.name, gear.closed, None, gear.ratio, dof)
+    if dof != 1:
+        what = "locks the gearbox (0 degrees of freedom)" if dof == 0 else f"leaves {dof}"
+        if dof > 1:
+            what += " degrees of freedom"
+        raise GearsymError(
+            d.file,
+            key,
+            f"gear {gear.name!r} (closed {closed}) {what}; a gear must leave exactly 1 "
+            "(mark it neutral = true if it is a neutral)",
+        )
+    motion = motions[0]
+    w_in, w_out = sp.simplify(motion[i_in]), sp.simplify(motion[i_out])
+    if w_out == 0 or w_in == 0:
+        which = "output" if w_out == 0 else "input"
+        raise GearsymError(
+            d.file, key, f"gear {gear.name!r} (closed {closed}) holds the {which} shaft at rest"
+        )
+    return GearRatio(gear.name, gear.closed, sp.cancel(w_in / w_out), gear.ratio, dof)
+
+
+def _output_free_with_input_held(motions: list[sp.Matrix], i_in: int, i_out: int) -> bool:
+    if not motions:
+        return False
+    basis = sp.Matrix.hstack(*motions)
+    # Combinations c with (basis c)[in] = 0; the output is free if some such c moves it.
+    held = exact_nullspace(sp.Matrix([basis.row(i_in)]))
+    return any(sp.simplify((basis.row(i_out) * c)[0]) != 0 for c in held)
+
+
+def ratio_table(d: GearboxDescription) -> list[GearRatio]:
+    """Every gear of the description with its exact derived ratio."""
+    return [gear_ratio(d, g) for g in d.gears]
+
+
+def check_gear_table(d: GearboxDescription) -> None:
+    """Raise on the first gear whose closed elements leave the wrong degrees of freedom."""
+    for g in d.gears:
+        gear_ratio(d, g)
+
+
+def ratio_expressions(d: GearboxDescription) -> dict[str, sp.Expr | None]:
+    """ω_in / ω_out of every gear as a rational function of the k_<set> symbols.
+
+    Generic in k (pivots are chosen symbolically); used to search tooth counts, whose winners
+    are then re-checked exactly by :func:`gear_ratio`.
+    """
+    k = stationary_ratio_symbols(d)
+    result: dict[str, sp.Expr | None] = {}
+    for g in d.gears:
+        if g.neutral:
+            result[g.name] = None
+            continue
+        motions = gear_motions(d, g, dict(k))
+        if len(motions) != 1:
+            raise GearsymError(
+                d.file,
+                f'gear[name="{g.name}"].closed',
+                f"leaves {len(motions)} degrees of freedom for generic tooth counts",
+            )
+        m = motions[0]
+        i_in = d.shaft_names.index(d.input_shaft)
+        i_out = d.shaft_names.index(d.output_shaft)
+        result[g.name] = sp.factor(sp.cancel(m[i_in] / m[i_out]))
+    return result
