@@ -1,0 +1,1 @@
+"""Numerical validation of emitted code against the SymPy model."""
