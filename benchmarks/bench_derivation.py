@@ -31,7 +31,7 @@ def peer(d, symbolic_teeth: bool):
     phi = [sym.angle[b] for b in d.body_names]
     unknown = [sym.angle[b] for b in d.body_names if b not in d.coordinates]
     (solution,) = sp.linsolve(list(g * sp.Matrix(phi)), unknown)
-    s = sp.Matrix([dict(zip(unknown, solution)).get(p, p) for p in phi])
+    s = sp.Matrix([dict(zip(unknown, solution, strict=True)).get(p, p) for p in phi])
     y = [sym.angle[c] for c in d.coordinates]
     j_r = s.jacobian(y)
     index = {b: i for i, b in enumerate(d.body_names)}
