@@ -33,6 +33,41 @@ EXPECTED_UNITS: dict[str, str] = {
     "carrier_radius": "m",
 }
 
+#: Sections of named quantities for the elastic drivetrain (2.42–2.53), the vehicle and road
+#: loads (2.48–2.49) and the shift-element friction (2.59–2.70): key -> required unit.
+SECTION_UNITS: dict[str, dict[str, str]] = {
+    "drivetrain": {
+        "i_D": "1",
+        "k_ss": "N*m/rad",
+        "d_ss": "N*m*s/rad",
+        "J_cs": "kg*m^2",
+        "J_D": "kg*m^2",
+        "I_wheel": "kg*m^2",
+    },
+    "vehicle": {
+        "m_veh": "kg",
+        "r_dyn": "m",
+        "g": "m/s^2",
+        "rho_air": "kg/m^3",
+        "c_W": "1",
+        "A_front": "m^2",
+        "f_roll": "s/m",
+        "f_R": "1",
+        "zeta": "rad",
+    },
+    "friction": {
+        "sigma0": "N*m/rad",
+        "sigma1": "N*m*s/rad",
+        "z_ba_ratio": "1",
+        "T_oil": "degC",
+    },
+}
+
+#: Quantities that may be zero or negative (everything else must be positive).
+SIGNED_QUANTITIES = {"zeta", "T_oil", "z_ba_ratio"}
+
+ROLLING_RESISTANCE_FORMS = ("thesis", "textbook")
+
 DEFAULT_CONFIG_NAME = "thesis_9speed.toml"
 
 
@@ -85,6 +120,9 @@ class ShiftElement:
     name: str
     kind: str
     shafts: tuple[str, ...]
+    n_disc: int | None = None  # friction surfaces pairs N_disc (2.69)
+    r_m: Quantity | None = None  # mean friction radius (2.69)
+    a_piston: Quantity | None = None  # piston area: F_N = p_N·A (2.69)
 
     @property
     def a(self) -> str | None:
@@ -120,7 +158,11 @@ class GearboxDescription:
     gears: tuple[Gear, ...]
     ratio_decimals: int
     gear_table_source: str
-    extra: dict[str, Any] = field(default_factory=dict)
+    drivetrain: dict[str, Quantity] = field(default_factory=dict)
+    vehicle: dict[str, Quantity] = field(default_factory=dict)
+    friction: dict[str, Quantity] = field(default_factory=dict)
+    rolling_resistance: str = "thesis"
+    mu_map: str = "built-in"
 
     @property
     def shaft_names(self) -> tuple[str, ...]:
@@ -242,7 +284,7 @@ class _Reader:
             raise self.fail(name, "expected a list of names (strings)")
         return tuple(value)
 
-    def quantity(self, name: str, positive: bool = True) -> Quantity:
+    def quantity(self, name: str, positive: bool = True, unit: str | None = None) -> Quantity:
         value = self._get(name, True)
         if not isinstance(value, dict):
             raise self.fail(name, """expected { value = <number>, unit = "...", source = "..." }""")
@@ -252,7 +294,7 @@ class _Reader:
         unit = sub.string("unit")
         source = sub.string("source")
         sub.reject_unknown()
-        expected = EXPECTED_UNITS.get(name)
+        expected = unit if unit is not None else EXPECTED_UNITS.get(name)
         if expected is not None and unit != expected:
             raise sub.fail("unit", f"expected {expected!r}, got {unit!r}")
         if not source.strip():
@@ -357,11 +399,21 @@ def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
                 raise r.fail("shafts", "a clutch joins exactly two shafts [a, b]")
             if pair[0] == pair[1]:
                 raise r.fail("shafts", f"a clutch must join two different shafts, got {pair}")
-            elements.append(ShiftElement(element_name, kind, pair))
         elif kind == "brake":
-            elements.append(ShiftElement(element_name, kind, (r.string("shaft"),)))
+            pair = (r.string("shaft"),)
         else:
             raise r.fail("kind", f"expected 'clutch' or 'brake', got {kind!r}")
+        has_friction = any(k in r.data for k in ("n_disc", "r_m", "a_piston"))
+        elements.append(
+            ShiftElement(
+                element_name,
+                kind,
+                pair,
+                n_disc=r.positive_integer("n_disc") if has_friction else None,
+                r_m=r.quantity("r_m", unit="m") if has_friction else None,
+                a_piston=r.quantity("a_piston", unit="m^2") if has_friction else None,
+            )
+        )
         r.reject_unknown()
 
     table = root.table("gear_table", required=False)
@@ -385,11 +437,25 @@ def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
         gears.append(Gear(gear_name, closed, ratio, neutral))
         r.reject_unknown()
 
-    extra: dict[str, Any] = {}
-    for section in ("drivetrain", "vehicle", "friction", "shift"):
-        if section in data:
-            root.used.add(section)
-            extra[section] = data[section]
+    sections: dict[str, dict[str, Quantity]] = {}
+    rolling = "thesis"
+    mu_map = "built-in"
+    for section, units in SECTION_UNITS.items():
+        r = root.table(section, required=False)
+        values: dict[str, Quantity] = {}
+        for key, unit in units.items():
+            if key in r.data:
+                values[key] = r.quantity(key, positive=key not in SIGNED_QUANTITIES, unit=unit)
+        if section == "vehicle":
+            rolling = r.string("rolling_resistance", required=False, default="thesis")
+            if rolling not in ROLLING_RESISTANCE_FORMS:
+                raise r.fail(
+                    "rolling_resistance", f"expected 'thesis' or 'textbook', got {rolling!r}"
+                )
+        if section == "friction":
+            mu_map = r.string("mu_map", required=False, default="built-in")
+        r.reject_unknown()
+        sections[section] = values
     root.reject_unknown()
 
     description = GearboxDescription(
@@ -406,7 +472,11 @@ def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
         gears=tuple(gears),
         ratio_decimals=decimals,
         gear_table_source=table_source,
-        extra=extra,
+        drivetrain=sections["drivetrain"],
+        vehicle=sections["vehicle"],
+        friction=sections["friction"],
+        rolling_resistance=rolling,
+        mu_map=mu_map,
     )
     _check_references(description)
     if not description.coordinates:

@@ -1,0 +1,364 @@
+"""Stage 3b: the elastic drivetrain and the shift models (thesis 2.42–2.58, 5.1–5.5).
+
+The rigid gearbox M ÿ = B̃ u (2.39) is closed at its output by an elastic side-shaft pair
+(spring k_ss, damper d_ss, 2.47), the differential ratio i_D and an equivalent wheel that carries
+the vehicle (2.45), loaded by rolling, aerodynamic and grade resistance (2.48–2.49):
+
+    φ̇  = ω_out / i_D − ω_C                                   (2.44)
+    T_ss = k_ss φ + d_ss φ̇,    T_out = 2 T_ss / i_D           (2.47), (2.52)
+    I_C^eff ω̇_C = 2 T_ss − T_res,   I_C^eff = I_wheel + m_veh r_dyn²   (2.45), (2.46) corrected
+    T_res = r_dyn (F_r + F_ad + F_g)                          (2.48)
+
+A *shift model* (2.55–2.58) keeps the elements common to both gears locked — their constraints
+are eliminated by projecting M and B̃ onto the remaining motions, ẏ = P z, M_r = Pᵀ M P — and
+lets the off-going and the on-coming element act as input torques. The full model (2.53) locks
+nothing and has every element as an input.
+
+Corrections of printed slips (see README): (2.46) uses m_veh r_dyn² (the square is missing in
+print); (2.51) reflects each inertia through the ratio it turns at: the propeller shaft turns
+with the output shaft (J_cs), the differential cage at ω_out/i_D (J_D / i_D²), and the wheel-side
+half of the differential belongs to I_wheel — instead of counting J_cs^eff twice.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import pairwise
+
+import sympy as sp
+
+from symbolic.description import GearboxDescription, Quantity
+from symbolic.dynamics import GearboxDynamics, gearbox_dynamics
+from symbolic.errors import GearsymError
+from symbolic.kinematics import exact
+from symbolic.model import Model, Variable
+
+#: Vehicle and drivetrain values that are parameters of every drivetrain model (symbols with
+#: defaults). Geometry (teeth, inertias, i_D, r_dyn) is hardware and enters as exact numbers.
+PARAMETER_KEYS = ("m_veh", "k_ss", "d_ss", "zeta", "I_wheel", "rho_air", "c_W", "A_front")
+ROLLING_KEY = {"thesis": "f_roll", "textbook": "f_R"}
+
+DESCRIPTIONS = {
+    "m_veh": "vehicle mass",
+    "k_ss": "side-shaft torsional stiffness, per shaft (2.47)",
+    "d_ss": "side-shaft torsional damping, per shaft (2.47)",
+    "zeta": "road grade angle (2.49)",
+    "I_wheel": "wheel-side inertia: wheels, side shafts, half the differential (2.46)",
+    "rho_air": "air density (2.49b)",
+    "c_W": "drag coefficient (2.49b)",
+    "A_front": "frontal area (2.49b)",
+    "f_roll": "rolling-resistance factor of the thesis' form F_r = v f_roll cos(zeta) m g (2.49a)",
+    "f_R": "rolling-resistance coefficient, F_r = f_R cos(zeta) m g",
+}
+
+
+@dataclass(frozen=True)
+class ShiftSpec:
+    """A single-swap shift: common elements stay locked, one element off, one on (3.1)."""
+
+    name: str
+    from_gear: str
+    to_gear: str
+    locked: tuple[str, ...]
+    off_going: str
+    on_coming: str
+
+
+def shift_spec(d: GearboxDescription, name: str) -> ShiftSpec:
+    """Parse ``"2-3"`` into the elements that stay locked, go off and come on."""
+    parts = name.split("-")
+    if len(parts) != 2:
+        raise GearsymError(d.file, "shift", f"expected FROM-TO (e.g. 2-3), got {name!r}")
+    gears = {g.name: g for g in d.gears}
+    for part in parts:
+        if part not in gears:
+            raise GearsymError(d.file, "shift", f"unknown gear {part!r} in shift {name!r}")
+    g_from, g_to = gears[parts[0]], gears[parts[1]]
+    if g_from.neutral or g_to.neutral:
+        raise GearsymError(d.file, "shift", f"shift {name!r} involves a neutral gear")
+    common = tuple(e for e in g_from.closed if e in g_to.closed)
+    off = [e for e in g_from.closed if e not in g_to.closed]
+    on = [e for e in g_to.closed if e not in g_from.closed]
+    if len(off) != 1 or len(on) != 1:
+        raise GearsymError(
+            d.file,
+            "shift",
+            f"gears {g_from.name!r} and {g_to.name!r} differ by {len(off)} off-going and "
+            f"{len(on)} on-coming elements; a shift model needs exactly one of each",
+        )
+    return ShiftSpec(name, g_from.name, g_to.name, common, off[0], on[0])
+
+
+def adjacent_shifts(d: GearboxDescription) -> list[ShiftSpec]:
+    """Shifts between forward gears adjacent by ratio (largest ratio first)."""
+    from symbolic.ratios import gear_ratio
+
+    forward = []
+    for g in d.gears:
+        if g.neutral:
+            continue
+        ratio = gear_ratio(d, g).ratio
+        if ratio is not None and ratio > 0:
+            forward.append((ratio, g.name))
+    forward.sort(reverse=True)
+    return [shift_spec(d, f"{a}-{b}") for (_, a), (_, b) in pairwise(forward)]
+
+
+def _quantity(d: GearboxDescription, section: str, key: str) -> Quantity:
+    values = getattr(d, section)
+    if key not in values:
+        raise GearsymError(d.file, f"{section}.{key}", "missing (needed by the drivetrain model)")
+    return values[key]
+
+
+def drivetrain_parameters(d: GearboxDescription) -> tuple[Variable, ...]:
+    """The model parameters with defaults, units and sources from the description."""
+    section = {
+        k: "drivetrain" if k in ("k_ss", "d_ss", "I_wheel") else "vehicle" for k in PARAMETER_KEYS
+    }
+    keys = list(PARAMETER_KEYS) + [ROLLING_KEY[d.rolling_resistance]]
+    section[ROLLING_KEY[d.rolling_resistance]] = "vehicle"
+    result = []
+    for key in keys:
+        q = _quantity(d, section[key], key)
+        positive = key != "zeta"
+        result.append(
+            Variable(
+                name=key,
+                symbol=sp.Symbol(key, positive=positive) if positive else sp.Symbol(key, real=True),
+                unit=q.unit,
+                description=DESCRIPTIONS[key],
+                default=q.value,
+                source=q.source,
+            )
+        )
+    return tuple(result)
+
+
+def locked_projection(
+    d: GearboxDescription,
+    dyn: GearboxDynamics,
+    locked: tuple[str, ...],
+    keep: tuple[str, ...],
+) -> sp.Matrix:
+    """P with ẏ = P·z: the motions the locked elements allow, parametrised by the speeds of
+    the shafts in ``keep`` (2.55). Raises when those speeds do not parametrise them."""
+    transform = dyn.kinematics.transform
+    index = {b: i for i, b in enumerate(d.body_names)}
+    rows = []
+    for name in locked:
+        e = d.element(name)
+        row = -transform[index[e.b], :]
+        if e.a is not None:
+            row += transform[index[e.a], :]
+        rows.append(row)
+    chooser = [transform[index[s], :] for s in keep]
+    system = sp.Matrix.vstack(*rows, *chooser) if rows or chooser else sp.zeros(0, 0)
+    if system.shape[0] != system.shape[1] or system.det() == 0:
+        raise GearsymError(
+            d.file,
+            "shift",
+            f"with {', '.join(locked) or 'nothing'} locked, the speeds of "
+            f"{', '.join(keep)} do not parametrise the remaining motion",
+        )
+    inverse = system.inv()
+    return inverse[:, len(rows) :]
+
+
+@dataclass(frozen=True)
+class DrivetrainParts:
+    """The pieces of a drivetrain model before they are assembled into a :class:`Model`."""
+
+    keep: tuple[str, ...]
+    torque_elements: tuple[str, ...]
+    speeds: tuple[sp.Symbol, ...]
+    gearbox_rhs: sp.Matrix  # ż of the kept shaft speeds
+    phi_dot: sp.Expr  # (2.44)
+    side_shaft_torque: sp.Expr  # T_ss (2.47)
+    road_torque: sp.Expr  # T_res (2.48)
+    rolling_and_aero_torque: sp.Expr  # r_dyn (F_r + F_ad), replaced by T_res* in (5.2)
+    grade_lever: sp.Expr  # r_dyn g
+    wheel_inertia: sp.Expr  # I_C^eff (2.46)
+    body_speeds: dict[str, sp.Expr]  # every body's speed in terms of the kept speeds
+    parameters: tuple[Variable, ...]
+    torque_symbols: dict[str, sp.Symbol]
+
+
+def drivetrain_parts(
+    d: GearboxDescription,
+    locked: tuple[str, ...] = (),
+    torque_elements: tuple[str, ...] | None = None,
+    keep: tuple[str, ...] | None = None,
+) -> DrivetrainParts:
+    """Derive gearbox + elastic drivetrain (2.42–2.58); see :func:`drivetrain_model`."""
+    dyn = gearbox_dynamics(d)
+    sym = dyn.symbols
+    if torque_elements is None:
+        torque_elements = tuple(e.name for e in d.shift_elements if e.name not in locked)
+    if keep is None:
+        keep = d.coordinates if not locked else (d.input_shaft, d.output_shaft)
+    projection = locked_projection(d, dyn, locked, keep)
+
+    i_d = exact(_quantity(d, "drivetrain", "i_D").value)
+    r_dyn = exact(_quantity(d, "vehicle", "r_dyn").value)
+    g = exact(_quantity(d, "vehicle", "g").value)
+    j_cs = exact(_quantity(d, "drivetrain", "J_cs").value)
+    j_d = exact(_quantity(d, "drivetrain", "J_D").value)
+    params = drivetrain_parameters(d)
+    p = {v.name: v.symbol for v in params}
+
+    # (2.51) corrected: propeller shaft at ω_out, differential cage at ω_out / i_D.
+    index = {b: i for i, b in enumerate(d.body_names)}
+    transform = dyn.kinematics.transform
+    out_row = transform[index[d.output_shaft], :]
+    mass = dyn.mass_matrix + (j_cs + j_d / i_d**2) * (out_row.T * out_row)
+    reduced_mass = projection.T * mass * projection
+
+    speeds = tuple(sp.Symbol(f"omega_{s}") for s in keep)
+    omega_c = sp.Symbol("omega_C")
+    y_dot = projection * sp.Matrix(speeds)
+    body_speeds = {b: sp.expand((transform[index[b], :] * y_dot)[0]) for b in d.body_names}
+    omega_out = body_speeds[d.output_shaft]
+
+    phi_dot = omega_out / i_d - omega_c  # (2.44)
+    t_ss = p["k_ss"] * sp.Symbol("phi") + p["d_ss"] * phi_dot  # (2.47)
+    t_out = 2 * t_ss / i_d  # (2.52)
+    v = r_dyn * omega_c
+    zeta, m_veh = p["zeta"], p["m_veh"]
+    if d.rolling_resistance == "thesis":
+        f_r = v * p["f_roll"] * sp.cos(zeta) * m_veh * g  # (2.49a) as printed
+    else:
+        f_r = p["f_R"] * sp.cos(zeta) * m_veh * g  # textbook form, forward motion
+    f_ad = sp.Rational(1, 2) * v**2 * p["rho_air"] * p["c_W"] * p["A_front"]  # (2.49b)
+    f_g = sp.sin(zeta) * m_veh * g  # (2.49c)
+
+    column = {str(s): i for i, s in enumerate(dyn.inputs)}
+    generalized = dyn.input_matrix[:, column["T_In"]] * sym.torque["In"]
+    generalized += dyn.input_matrix[:, column["T_Out"]] * t_out
+    for e in torque_elements:
+        generalized += dyn.input_matrix[:, column[f"T_{e}"]] * sym.torque[e]
+    gearbox_rhs = (reduced_mass.inv() * (projection.T * generalized)).applyfunc(sp.expand)
+    return DrivetrainParts(
+        keep=tuple(keep),
+        torque_elements=tuple(torque_elements),
+        speeds=speeds,
+        gearbox_rhs=gearbox_rhs,
+        phi_dot=phi_dot,
+        side_shaft_torque=t_ss,
+        road_torque=r_dyn * (f_r + f_ad + f_g),
+        rolling_and_aero_torque=r_dyn * (f_r + f_ad),
+        grade_lever=r_dyn * g,
+        wheel_inertia=p["I_wheel"] + m_veh * r_dyn**2,  # (2.46) with the square
+        body_speeds=body_speeds,
+        parameters=params,
+        torque_symbols={"In": sym.torque["In"], **{e: sym.torque[e] for e in torque_elements}},
+    )
+
+
+def drivetrain_model(
+    d: GearboxDescription,
+    name: str,
+    locked: tuple[str, ...] = (),
+    torque_elements: tuple[str, ...] | None = None,
+    keep: tuple[str, ...] | None = None,
+    with_wheel_acceleration: bool = False,
+) -> Model:
+    """Gearbox + elastic drivetrain as a :class:`Model` (2.42–2.58).
+
+    ``locked`` elements are constraints, ``torque_elements`` are input torques (all elements
+    by default, less the locked ones); every other element is open (zero torque, 2.54).
+    ``keep`` names the shafts whose speeds are the gearbox states (default: the generalized
+    coordinates when nothing is locked, else input and output shaft). Outputs are the measured
+    shaft speeds (those a locked element makes equal to another are dropped) and the wheel
+    speed (3.31), optionally the wheel acceleration (3.32).
+    """
+    parts = drivetrain_parts(d, locked, torque_elements, keep)
+    wheel = (2 * parts.side_shaft_torque - parts.road_torque) / parts.wheel_inertia  # (2.50)
+    rhs = sp.Matrix([*parts.gearbox_rhs, parts.phi_dot, wheel])
+    states = tuple(
+        Variable(f"omega_{s}", symbol, "rad/s", f"speed of shaft {s}")
+        for s, symbol in zip(parts.keep, parts.speeds, strict=True)
+    ) + (
+        Variable("phi", sp.Symbol("phi"), "rad", "side-shaft twist phi_2/i_D - phi_C (2.43)"),
+        Variable("omega_C", sp.Symbol("omega_C"), "rad/s", "wheel speed"),
+    )
+    inputs = (
+        Variable("T_In", parts.torque_symbols["In"], "N*m", "input torque (engine + e-machine)"),
+    ) + tuple(
+        Variable(f"T_{e}", parts.torque_symbols[e], "N*m", f"{e} torque: +T on b, -T on a (2.36)")
+        for e in parts.torque_elements
+    )
+    outputs: list[Variable] = []
+    output_exprs: list[sp.Expr] = []
+    for s in d.measured_shafts:
+        expr = parts.body_speeds[s]
+        if any(sp.expand(expr - e) == 0 for e in output_exprs):
+            continue
+        outputs.append(Variable(f"y_omega_{s}", sp.Symbol(f"y_omega_{s}"), "rad/s"))
+        output_exprs.append(expr)
+    outputs.append(Variable("y_omega_C", sp.Symbol("y_omega_C"), "rad/s", "wheel speed"))
+    output_exprs.append(sp.Symbol("omega_C"))
+    if with_wheel_acceleration:
+        outputs.append(
+            Variable("y_domega_C", sp.Symbol("y_domega_C"), "rad/s^2", "wheel acceleration")
+        )
+        output_exprs.append(wheel)
+    return Model(
+        name=name,
+        states=states,
+        inputs=inputs,
+        parameters=parts.parameters,
+        outputs=tuple(outputs),
+        rhs=rhs,
+        output_expressions=sp.Matrix(output_exprs),
+        metadata={
+            "gearbox": d.name,
+            "locked": " ".join(locked),
+            "torque_elements": " ".join(parts.torque_elements),
+            "equations": "2.42-2.58",
+            "rolling_resistance": d.rolling_resistance,
+        },
+    )
+
+
+def full_model(d: GearboxDescription, with_wheel_acceleration: bool = False) -> Model:
+    """ẋ_ex = f(x_ex) + B_ex,nl u (2.53): all coordinates, every element an input torque."""
+    return drivetrain_model(d, "full", with_wheel_acceleration=with_wheel_acceleration)
+
+
+def shift_model(d: GearboxDescription, shift: str, with_wheel_acceleration: bool = False) -> Model:
+    """Reduced model of a single-swap shift (2.55–2.58); for 2-3: x = [ω1, ω2, φ, ω_C],
+    u = [T_In, T_K38, T_B05]."""
+    spec = shift_spec(d, shift)
+    return drivetrain_model(
+        d,
+        f"shift_{spec.from_gear}_{spec.to_gear}",
+        locked=spec.locked,
+        torque_elements=(spec.off_going, spec.on_coming),
+        with_wheel_acceleration=with_wheel_acceleration,
+    )
+
+
+def linear_shift_form(
+    d: GearboxDescription, shift: str
+) -> tuple[sp.Matrix, sp.Matrix, list[str], list[str]]:
+    """A_ex, B_ex of the linear form (5.1)–(5.3) of a shift model.
+
+    Rolling and aerodynamic resistance become the input T_res* (5.2); the grade term
+    r_dyn m g sin ζ is linearised at ζ = 0, as (5.5) prints it. Returns (A, B, state names,
+    input names) with inputs [T_In, T_off, T_on, T_res*, ζ].
+    """
+    spec = shift_spec(d, shift)
+    parts = drivetrain_parts(
+        d, locked=spec.locked, torque_elements=(spec.off_going, spec.on_coming)
+    )
+    p = {v.name: v.symbol for v in parts.parameters}
+    t_res_star = sp.Symbol("T_res_star")
+    wheel = (
+        2 * parts.side_shaft_torque - t_res_star - parts.grade_lever * p["m_veh"] * p["zeta"]
+    ) / parts.wheel_inertia  # (5.2), sin ζ ≈ ζ
+    rhs = sp.Matrix([*parts.gearbox_rhs, parts.phi_dot, wheel])
+    x = [*parts.speeds, sp.Symbol("phi"), sp.Symbol("omega_C")]
+    u = [parts.torque_symbols[k] for k in ("In", spec.off_going, spec.on_coming)]
+    u += [t_res_star, p["zeta"]]
+    return rhs.jacobian(x), rhs.jacobian(u), [str(s) for s in x], [str(s) for s in u]
