@@ -60,6 +60,7 @@ SECTION_UNITS: dict[str, dict[str, str]] = {
         "sigma1": "N*m*s/rad",
         "z_ba_ratio": "1",
         "T_oil": "degC",
+        "mu_nominal": "1",
     },
 }
 

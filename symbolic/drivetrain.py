@@ -89,6 +89,45 @@ def shift_spec(d: GearboxDescription, name: str) -> ShiftSpec:
     return ShiftSpec(name, g_from.name, g_to.name, common, off[0], on[0])
 
 
+def element_short_name(d: GearboxDescription, element: str) -> str:
+    """Thesis-style short name: K38 → 38, B05 → 05 (mu_38, F_N05), when unambiguous."""
+    rest = element[1:]
+    shorts = [e.name[1:] for e in d.shift_elements if e.name[:1] in "KB"]
+    if element[:1] in "KB" and rest.isdigit() and shorts.count(rest) == 1:
+        return rest
+    return element
+
+
+def element_slip_in_gear(d: GearboxDescription, gear: str, element: str) -> sp.Expr:
+    """Slip Δω = ω_a − ω_b of an element in a gear, per unit output speed (exact)."""
+    from symbolic.ratios import gear_motions, stationary_ratios
+
+    (motion,) = gear_motions(d, d.gear(gear), stationary_ratios(d))
+    speeds = dict(zip(d.shaft_names, motion, strict=True))
+    motion_out = speeds[d.output_shaft]
+    e = d.element(element)
+    slip = (speeds[e.a] if e.a is not None else 0) - speeds[e.b]
+    return sp.nsimplify(slip / motion_out)
+
+
+def power_on_slip_signs(d: GearboxDescription, spec: ShiftSpec) -> dict[str, int]:
+    """Signs of the slip (and so of the friction torque, 2.70) of the two swapping elements
+    while they slip in a power-on shift.
+
+    The on-coming element slips as the from-gear makes it slip until it engages. The off-going
+    element, in an upshift, slips the other way than the to-gear would make it (the input
+    flares slightly during the torque phase, 3.1); in a downshift, the way the to-gear does.
+    """
+    from symbolic.ratios import gear_ratio
+
+    on = sp.sign(element_slip_in_gear(d, spec.from_gear, spec.on_coming))
+    off_to = sp.sign(element_slip_in_gear(d, spec.to_gear, spec.off_going))
+    upshift = (
+        gear_ratio(d, d.gear(spec.to_gear)).ratio < gear_ratio(d, d.gear(spec.from_gear)).ratio
+    )
+    return {spec.on_coming: int(on), spec.off_going: int(-off_to if upshift else off_to)}
+
+
 def adjacent_shifts(d: GearboxDescription) -> list[ShiftSpec]:
     """Shifts between forward gears adjacent by ratio (largest ratio first)."""
     from symbolic.ratios import gear_ratio
@@ -182,6 +221,8 @@ class DrivetrainParts:
     body_speeds: dict[str, sp.Expr]  # every body's speed in terms of the kept speeds
     parameters: tuple[Variable, ...]
     torque_symbols: dict[str, sp.Symbol]
+    #: With friction inputs: element -> (torque expression, normal-force input, μ parameter).
+    friction: dict[str, tuple[sp.Expr, Variable, Variable]]
 
 
 def drivetrain_parts(
@@ -189,6 +230,7 @@ def drivetrain_parts(
     locked: tuple[str, ...] = (),
     torque_elements: tuple[str, ...] | None = None,
     keep: tuple[str, ...] | None = None,
+    slip_signs: dict[str, int] | None = None,
 ) -> DrivetrainParts:
     """Derive gearbox + elastic drivetrain (2.42–2.58); see :func:`drivetrain_model`."""
     dyn = gearbox_dynamics(d)
@@ -232,11 +274,40 @@ def drivetrain_parts(
     f_ad = sp.Rational(1, 2) * v**2 * p["rho_air"] * p["c_W"] * p["A_front"]  # (2.49b)
     f_g = sp.sin(zeta) * m_veh * g  # (2.49c)
 
+    friction = {}
+    torque = {e: sym.torque[e] for e in torque_elements}
+    if slip_signs is not None:
+        # Sliding friction torque T = k_sign 2 N_disc r_m μ F_N (2.69, 3.14) with the known
+        # slip direction as k_sign; μ is a parameter, F_N a known input.
+        mu_default = _quantity(d, "friction", "mu_nominal")
+        for e in torque_elements:
+            element = d.element(e)
+            if element.n_disc is None or element.r_m is None:
+                raise GearsymError(
+                    d.file, f'shift_element[name="{e}"].n_disc', "missing (needed for mu inputs)"
+                )
+            short = element_short_name(d, e)
+            mu = Variable(
+                f"mu_{short}",
+                sp.Symbol(f"mu_{short}", positive=True),
+                "1",
+                f"friction coefficient of {e} (2.69)",
+                mu_default.value,
+                mu_default.source,
+            )
+            normal = Variable(
+                f"F_N{short}", sp.Symbol(f"F_N{short}"), "N", f"normal force on {e} (2.69)"
+            )
+            gain = 2 * element.n_disc * exact(element.r_m.value)
+            torque[e] = slip_signs[e] * gain * mu.symbol * normal.symbol
+            friction[e] = (torque[e], normal, mu)
+        params = params + tuple(friction[e][2] for e in torque_elements)
+
     column = {str(s): i for i, s in enumerate(dyn.inputs)}
     generalized = dyn.input_matrix[:, column["T_In"]] * sym.torque["In"]
     generalized += dyn.input_matrix[:, column["T_Out"]] * t_out
     for e in torque_elements:
-        generalized += dyn.input_matrix[:, column[f"T_{e}"]] * sym.torque[e]
+        generalized += dyn.input_matrix[:, column[f"T_{e}"]] * torque[e]
     gearbox_rhs = (reduced_mass.inv() * (projection.T * generalized)).applyfunc(sp.expand)
     return DrivetrainParts(
         keep=tuple(keep),
@@ -252,6 +323,7 @@ def drivetrain_parts(
         body_speeds=body_speeds,
         parameters=params,
         torque_symbols={"In": sym.torque["In"], **{e: sym.torque[e] for e in torque_elements}},
+        friction=friction,
     )
 
 
@@ -262,6 +334,7 @@ def drivetrain_model(
     torque_elements: tuple[str, ...] | None = None,
     keep: tuple[str, ...] | None = None,
     with_wheel_acceleration: bool = False,
+    slip_signs: dict[str, int] | None = None,
 ) -> Model:
     """Gearbox + elastic drivetrain as a :class:`Model` (2.42–2.58).
 
@@ -272,7 +345,7 @@ def drivetrain_model(
     shaft speeds (those a locked element makes equal to another are dropped) and the wheel
     speed (3.31), optionally the wheel acceleration (3.32).
     """
-    parts = drivetrain_parts(d, locked, torque_elements, keep)
+    parts = drivetrain_parts(d, locked, torque_elements, keep, slip_signs)
     wheel = (2 * parts.side_shaft_torque - parts.road_torque) / parts.wheel_inertia  # (2.50)
     rhs = sp.Matrix([*parts.gearbox_rhs, parts.phi_dot, wheel])
     states = tuple(
@@ -285,7 +358,11 @@ def drivetrain_model(
     inputs = (
         Variable("T_In", parts.torque_symbols["In"], "N*m", "input torque (engine + e-machine)"),
     ) + tuple(
-        Variable(f"T_{e}", parts.torque_symbols[e], "N*m", f"{e} torque: +T on b, -T on a (2.36)")
+        parts.friction[e][1]
+        if e in parts.friction
+        else Variable(
+            f"T_{e}", parts.torque_symbols[e], "N*m", f"{e} torque: +T on b, -T on a (2.36)"
+        )
         for e in parts.torque_elements
     )
     outputs: list[Variable] = []
@@ -326,16 +403,27 @@ def full_model(d: GearboxDescription, with_wheel_acceleration: bool = False) -> 
     return drivetrain_model(d, "full", with_wheel_acceleration=with_wheel_acceleration)
 
 
-def shift_model(d: GearboxDescription, shift: str, with_wheel_acceleration: bool = False) -> Model:
+def shift_model(
+    d: GearboxDescription,
+    shift: str,
+    with_wheel_acceleration: bool = False,
+    friction_inputs: bool = False,
+) -> Model:
     """Reduced model of a single-swap shift (2.55–2.58); for 2-3: x = [ω1, ω2, φ, ω_C],
-    u = [T_In, T_K38, T_B05]."""
+    u = [T_In, T_K38, T_B05].
+
+    With ``friction_inputs`` the two element torques are sliding friction, k_sign 2 N r μ F_N
+    (2.69, 3.14), with the slip directions of a power-on shift (:func:`power_on_slip_signs`),
+    μ_<element> as parameters and the normal forces as inputs: u = [T_In, F_N38, F_N05].
+    """
     spec = shift_spec(d, shift)
     return drivetrain_model(
         d,
-        f"shift_{spec.from_gear}_{spec.to_gear}",
+        f"shift_{spec.from_gear}_{spec.to_gear}" + ("_mu" if friction_inputs else ""),
         locked=spec.locked,
         torque_elements=(spec.off_going, spec.on_coming),
         with_wheel_acceleration=with_wheel_acceleration,
+        slip_signs=power_on_slip_signs(d, spec) if friction_inputs else None,
     )
 
 
