@@ -292,17 +292,17 @@ class _Reader:
         sub = _Reader(self.file, value, self.key(name))
         number = sub.number("value")
         assert number is not None
-        unit = sub.string("unit")
+        given_unit = sub.string("unit")
         source = sub.string("source")
         sub.reject_unknown()
         expected = unit if unit is not None else EXPECTED_UNITS.get(name)
-        if expected is not None and unit != expected:
-            raise sub.fail("unit", f"expected {expected!r}, got {unit!r}")
+        if expected is not None and given_unit != expected:
+            raise sub.fail("unit", f"expected {expected!r}, got {given_unit!r}")
         if not source.strip():
             raise sub.fail("source", "must say where the value comes from (or 'assumed')")
         if positive and number <= 0:
             raise sub.fail("value", f"must be positive, got {number}")
-        return Quantity(number, unit, source)
+        return Quantity(number, given_unit, source)
 
     def tables(self, name: str, required: bool = True) -> list[_Reader]:
         value = self._get(name, required)

@@ -89,8 +89,8 @@ BAD_CASES = [
     ),
     ("[gearbox]\nname", "[gearbox\nname", "line", "malformed TOML"),
     (
-        'unit = "kg*m^2", source = "assumed" }\n[[shaft]]\nname = "2"',
-        'unit = "g*cm^2", source = "assumed" }\n[[shaft]]\nname = "2"',
+        'inertia = { value = 0.02, unit = "kg*m^2"',
+        'inertia = { value = 0.02, unit = "g*cm^2"',
         'shaft[name="1"].inertia.unit',
         "expected 'kg*m^2'",
     ),

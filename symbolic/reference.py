@@ -1,0 +1,150 @@
+"""The reference model: full gearbox + elastic drivetrain + one friction state per element.
+
+This is the model the reference simulation of a shift integrates (thesis 3.1): the 4-DOF
+gearbox (2.39) with the elastic drivetrain (2.42–2.53) and every shift element acting through
+the elasto-plastic friction model (2.66)–(2.70), driven by the element pressures. Locked
+elements are not constraints here — they stick through their bristle stiffness σ0 — so the same
+equations cover every gear and every phase of a shift.
+
+States: the gearbox coordinates' speeds, φ, ω_C, and z_<element> for every element.
+Inputs: T_In, p_<element> (apply pressure) and mu_<element> (friction coefficient, which the
+simulator reads from the μ map at the current pressure, oil temperature and slip).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import sympy as sp
+
+from symbolic.description import GearboxDescription
+from symbolic.drivetrain import _quantity, drivetrain_parts
+from symbolic.errors import GearsymError
+from symbolic.friction import shift_element_sym
+from symbolic.kinematics import exact
+from symbolic.model import Model, Variable
+
+
+@dataclass(frozen=True)
+class ReferenceModel:
+    """The reference :class:`Model` and the expressions the simulator and the audit need."""
+
+    model: Model
+    slip: dict[str, sp.Expr]  # Δω = ω_a − ω_b of every element (2.59)
+    element_torque: dict[str, sp.Expr]  # T_Cl (2.67)
+    body_speeds: dict[str, sp.Expr]
+    kinetic_energy: sp.Expr  # ½ ẏᵀ M' ẏ + ½ I_C ω_C²
+    spring_energy: sp.Expr  # 2 · ½ k_ss φ²
+    bristle_energy: sp.Expr  # Σ ½ σ0 z²
+    input_power: sp.Expr  # T_In ω_in
+    friction_power: sp.Expr  # Σ T_e Δω_e  (taken out of the shafts)
+    damper_power: sp.Expr  # 2 d_ss φ̇²
+    road_power: sp.Expr  # T_res ω_C
+    side_shaft_torque: sp.Expr
+    road_torque: sp.Expr
+    wheel_acceleration: sp.Expr
+
+
+def reference_model(d: GearboxDescription) -> ReferenceModel:
+    """Build the reference model of the description (all elements with friction states)."""
+    for e in d.shift_elements:
+        if e.n_disc is None or e.r_m is None or e.a_piston is None:
+            raise GearsymError(
+                d.file,
+                f'shift_element[name="{e.name}"].n_disc',
+                "friction data (n_disc, r_m, a_piston) needed by the reference simulation",
+            )
+    friction = {k: exact(_quantity(d, "friction", k).value) for k in ("sigma0", "sigma1")}
+    z_ba = exact(_quantity(d, "friction", "z_ba_ratio").value)
+    parts = drivetrain_parts(d)
+    speeds = parts.body_speeds
+    slip: dict[str, sp.Expr] = {}
+    torque: dict[str, sp.Expr] = {}
+    rates: dict[str, sp.Expr] = {}
+    z_vars, p_vars, mu_vars = [], [], []
+    for e in d.shift_elements:
+        z = sp.Symbol(f"z_{e.name}")
+        p = sp.Symbol(f"p_{e.name}")
+        mu = sp.Symbol(f"mu_{e.name}", positive=True)
+        slip[e.name] = (speeds[e.a] if e.a is not None else 0) - speeds[e.b]
+        assert e.r_m is not None and e.a_piston is not None and e.n_disc is not None
+        rate, t_cl = shift_element_sym(
+            z,
+            slip[e.name],
+            p * exact(e.a_piston.value),
+            mu,
+            friction["sigma0"],
+            friction["sigma1"],
+            e.n_disc,
+            exact(e.r_m.value),
+            z_ba,
+        )
+        rates[e.name], torque[e.name] = rate, t_cl
+        z_vars.append(Variable(f"z_{e.name}", z, "rad", f"bristle deflection of {e.name} (2.66)"))
+        p_vars.append(Variable(f"p_{e.name}", p, "Pa", f"apply pressure of {e.name}"))
+        mu_vars.append(Variable(f"mu_{e.name}", mu, "1", f"friction coefficient of {e.name}"))
+
+    substitution = {parts.torque_symbols[e]: torque[e] for e in parts.torque_elements}
+    gearbox = parts.gearbox_rhs.subs(substitution)
+    wheel = (2 * parts.side_shaft_torque - parts.road_torque) / parts.wheel_inertia
+    rhs = sp.Matrix([*gearbox, parts.phi_dot, wheel, *(rates[e.name] for e in d.shift_elements)])
+
+    states = (
+        *(
+            Variable(f"omega_{s}", sym, "rad/s", f"speed of shaft {s}")
+            for s, sym in zip(parts.keep, parts.speeds, strict=True)
+        ),
+        Variable("phi", sp.Symbol("phi"), "rad", "side-shaft twist (2.43)"),
+        Variable("omega_C", sp.Symbol("omega_C"), "rad/s", "wheel speed"),
+        *z_vars,
+    )
+    inputs = (
+        Variable("T_In", parts.torque_symbols["In"], "N*m", "input torque"),
+        *p_vars,
+        *mu_vars,
+    )
+    outputs = tuple(
+        Variable(f"y_omega_{s}", sp.Symbol(f"y_omega_{s}"), "rad/s") for s in d.measured_shafts
+    ) + (Variable("y_omega_C", sp.Symbol("y_omega_C"), "rad/s"),)
+    output_exprs = sp.Matrix([*(speeds[s] for s in d.measured_shafts), sp.Symbol("omega_C")])
+    model = Model(
+        name="reference",
+        states=states,
+        inputs=inputs,
+        parameters=parts.parameters,
+        outputs=outputs,
+        rhs=rhs,
+        output_expressions=output_exprs,
+        metadata={"gearbox": d.name, "equations": "2.39, 2.42-2.53, 2.66-2.70"},
+    )
+
+    # Energy bookkeeping (README "energy audit"): the extra output-shaft inertia of (2.51).
+    from symbolic.dynamics import gearbox_dynamics
+
+    dyn = gearbox_dynamics(d)
+    i_d = exact(_quantity(d, "drivetrain", "i_D").value)
+    extra = exact(_quantity(d, "drivetrain", "J_cs").value)
+    extra += exact(_quantity(d, "drivetrain", "J_D").value) / i_d**2
+    y_dot = sp.Matrix(parts.speeds)
+    index = {b: i for i, b in enumerate(d.body_names)}
+    out_row = dyn.kinematics.transform[index[d.output_shaft], :]
+    mass = dyn.mass_matrix + extra * (out_row.T * out_row)
+    params = {v.name: v.symbol for v in parts.parameters}
+    omega_c = sp.Symbol("omega_C")
+    kinetic = (y_dot.T * mass * y_dot)[0] / 2 + parts.wheel_inertia * omega_c**2 / 2
+    return ReferenceModel(
+        model=model,
+        slip=slip,
+        element_torque=torque,
+        body_speeds=speeds,
+        kinetic_energy=kinetic,
+        spring_energy=params["k_ss"] * sp.Symbol("phi") ** 2,
+        bristle_energy=sum((friction["sigma0"] * v.symbol**2 / 2 for v in z_vars), sp.Integer(0)),
+        input_power=parts.torque_symbols["In"] * speeds[d.input_shaft],
+        friction_power=sum((torque[e] * slip[e] for e in torque), sp.Integer(0)),
+        damper_power=2 * params["d_ss"] * parts.phi_dot**2,
+        road_power=parts.road_torque * omega_c,
+        side_shaft_torque=parts.side_shaft_torque,
+        road_torque=parts.road_torque,
+        wheel_acceleration=wheel,
+    )

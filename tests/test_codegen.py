@@ -1,0 +1,551 @@
+"""Tests of the code-generation core: symbolic/codegen.py, templates/, validation/c_check.py.
+
+Three hand-written models exercise it: a damped pendulum (sin, cos), a LuGre-type friction model
+(Piecewise, sign, Abs, exp, Min/Max, Heaviside, a compound cube) and a 4-state stiff linear
+chain with a matrix-exponential solution. Each is emitted, compiled in double and single
+precision with the strict flags and loaded once per module (fixture ``built``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+import subprocess
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+from unittest import mock
+
+import jinja2
+import numpy as np
+import pytest
+import scipy.integrate
+import scipy.linalg
+import sympy as sp
+
+from symbolic import codegen
+from symbolic.model import Model, Variable
+from validation import c_check
+
+REPO = Path(__file__).resolve().parents[1]
+V = Variable
+
+# ---------------------------------------------------------------------------------------------
+# Models
+# ---------------------------------------------------------------------------------------------
+
+
+def pendulum_model() -> Model:
+    """Damped pendulum driven by a torque: sin/cos, divisions, integer powers."""
+    th, om, tau, g, l, m, d = sp.symbols("theta omega tau g l m d")
+    rhs = sp.Matrix([om, -(g / l) * sp.sin(th) - d / (m * l**2) * om + tau / (m * l**2)])
+    energy = m * l**2 * om**2 / 2 + m * g * l * (1 - sp.cos(th))
+    return Model(
+        "pendulum",
+        (V("theta", th, "rad"), V("omega", om, "rad/s")),
+        (V("tau", tau, "N·m", "drive torque"),),
+        (
+            V("g", g, "m/s²", default=9.81, source="assumed"),
+            V("l", l, "m", default=0.7, source="assumed"),
+            V("m", m, "kg", default=1.3, source="assumed"),
+            V("d", d, "N·m·s/rad", default=0.05, source="assumed"),
+        ),
+        (V("angle", sp.Symbol("y_angle"), "rad"), V("energy", sp.Symbol("y_energy"), "J")),
+        rhs,
+        sp.Matrix([th, energy]),
+        {"purpose": "codegen test */ comment-closer must be escaped"},
+    )
+
+
+PENDULUM_BOUNDS = {"g": (0.0, 20.0), "l": (0.01, None), "m": (1e-3, 100.0), "d": (0.0, None)}
+
+
+def friction_model() -> Model:
+    """Slider with LuGre bristle friction, a stick/slip clutch torque and a saturated drive."""
+    v, z, th, u, pn = sp.symbols("v z theta u p_N")
+    m, s0, s1, s2, fc, fs, vs, veps, mus, muk, tmax, cw = sp.symbols(
+        "m sigma0 sigma1 sigma2 F_c F_s v_s v_eps mu_s mu_k T_max c_w"
+    )
+    g = fc + (fs - fc) * sp.exp(-((v / vs) ** 2))
+    zdot = v - s0 * sp.Abs(v) * z / g
+    force = s0 * z + s1 * zdot + s2 * v
+    clutch = sp.Piecewise((mus * pn * v / veps, sp.Abs(v) < veps), (muk * pn * sp.sign(v), True))
+    drive = sp.Min(sp.Max(u, 0), tmax)
+    drag = cw * (v + sp.Rational(1, 3) * th) ** 3 / (1 + z**2) ** 2
+    rhs = sp.Matrix([(drive - force - clutch - drag) / m, zdot, v])
+    outputs = sp.Matrix([force, clutch, sp.sqrt(1 + v**2) * sp.Heaviside(th)])
+    params = (
+        V("m", m, "kg", default=2.0),
+        V("sigma0", s0, "N/m", default=50.0),
+        V("sigma1", s1, "N·s/m", default=1.5),
+        V("sigma2", s2, "N·s/m", default=0.4),
+        V("F_c", fc, "N", default=1.0),
+        V("F_s", fs, "N", default=1.5),
+        V("v_s", vs, "m/s", default=0.1),
+        V("v_eps", veps, "m/s", default=0.05),
+        V("mu_s", mus, default=0.14),
+        V("mu_k", muk, default=0.12),
+        V("T_max", tmax, "N", default=1.2),
+        V("c_w", cw, default=0.3),
+    )
+    return Model(
+        "friction",
+        (V("v", v, "m/s"), V("z", z, "m"), V("theta", th, "m")),
+        (V("u", u, "N"), V("p_N", pn, "bar")),
+        params,
+        (V("F", sp.Symbol("F")), V("T_c", sp.Symbol("T_c")), V("w", sp.Symbol("w"))),
+        rhs,
+        outputs,
+    )
+
+
+FRICTION_BOUNDS = {"m": (0.1, 10.0), "sigma0": (1.0, 1e6), "mu_k": (0.0, 0.3)}
+
+
+def stiff_model() -> Model:
+    """Four first-order lags coupled in a chain: dx/dt = A(k, c) x + b u, eigenvalues ~ -k_i."""
+    xs = sp.symbols("x1:5")
+    ks = sp.symbols("k1:5")
+    c, b, u = sp.symbols("c b u")
+    a = sp.zeros(4, 4)
+    for i in range(4):
+        a[i, i] = -ks[i] - c * (2 if 0 < i < 3 else 1)
+        if i > 0:
+            a[i, i - 1] = c
+        if i < 3:
+            a[i, i + 1] = c
+    params = tuple(
+        V(f"k{i + 1}", k, "1/s", default=d)
+        for i, (k, d) in enumerate(zip(ks, STIFF_K, strict=True))
+    ) + (V("c", c, "1/s", default=0.5), V("b", b, default=1.0))
+    return Model(
+        "stiff",
+        tuple(V(f"x{i + 1}", s) for i, s in enumerate(xs)),
+        (V("u", u),),
+        params,
+        (V("y_sum", sp.Symbol("y_sum")),),
+        a * sp.Matrix(xs) + sp.Matrix([0, 0, 0, b * u]),
+        sp.Matrix([sum(xs)]),
+    )
+
+
+def coverage_model() -> Model:
+    """Every remaining printer path: And/Or conditions shared between outputs (boolean
+    temporaries), a Piecewise without default (NaN), atan2, tanh, log, erf, asinh, x**12,
+    x**(3/2), 1/sqrt, pi and E, Max of three, Heaviside of a difference; no inputs."""
+    x, y, k = sp.symbols("x y k")
+    cond = sp.And(x > k, y < 1)
+    first = sp.Piecewise((x**12 / 100, cond), (sp.atan2(x, y + 3), sp.Or(x < -1, y > 1)))
+    second = (
+        sp.tanh(y) * sp.log(1 + x**2)
+        + sp.exp(-k * y) * sp.erf(x)
+        - sp.pi * sp.sign(x - y)
+        + sp.E * sp.Abs(y)
+    )
+    outputs = sp.Matrix(
+        [
+            sp.Piecewise((1, cond), (0, True)) + sp.Heaviside(y - k),
+            sp.asinh(x) * sp.sqrt(k) / sp.sqrt(1 + y**2) + (1 + x**2) ** sp.Rational(3, 2),
+        ]
+    )
+    return Model(
+        "coverage",
+        (V("x", x), V("y", y)),
+        (),
+        (V("k", k, default=0.5),),
+        (V("a", sp.Symbol("a")), V("b", sp.Symbol("b"))),
+        sp.Matrix([first + sp.Max(x, y, k), second]),
+        outputs,
+    )
+
+
+STIFF_K = (1.0, 10.0, 100.0, 2000.0)
+STIFF_BOUNDS = {"k1": (0.0, None), "k2": (0.0, None), "k3": (0.0, None), "k4": (0.0, None)}
+
+MODELS: dict[str, tuple[Callable[[], Model], dict[str, tuple[float | None, float | None]]]] = {
+    "pendulum": (pendulum_model, PENDULUM_BOUNDS),
+    "friction": (friction_model, FRICTION_BOUNDS),
+    "stiff": (stiff_model, STIFF_BOUNDS),
+    "coverage": (coverage_model, {"k": (0.0, 1.0)}),
+}
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict[str, Any]]:
+    """Every model emitted, compiled (double, single) and loaded once."""
+    result = {}
+    for name, (factory, bounds) in MODELS.items():
+        model = factory()
+        entry = c_check.build(model, tmp_path_factory.mktemp(name), bounds)
+        entry.update(model=model, bounds=bounds, dir=tmp_path_factory.mktemp(f"{name}_analysis"))
+        result[name] = entry
+    return result
+
+
+def _defaults(model: Model) -> np.ndarray:
+    return np.array([v.default for v in model.parameters], dtype=np.float64)
+
+
+# ---------------------------------------------------------------------------------------------
+# Function table, Jacobians, CSE, printer
+# ---------------------------------------------------------------------------------------------
+
+
+def test_function_table_rows_and_shapes() -> None:
+    table = codegen.build_function_table(friction_model(), FRICTION_BOUNDS)
+    assert [f.name for f in table] == [
+        "rhs",
+        "outputs",
+        "jac_x",
+        "jac_u",
+        "jac_p",
+        "rk4_step",
+        "linearly_implicit_euler_step",
+        "params_default",
+        "params_validate",
+    ]
+    assert table["jac_p"].outputs[0].shape == (3, 12)
+    assert table["jac_u"].expressions[0].shape == (3, 2)
+    assert [a.name for a in table["rk4_step"].args] == ["x", "u", "p", "h"]
+    assert table["linearly_implicit_euler_step"].returns == "int"
+    assert table.prefix == "gearsym_friction_"
+
+
+def test_smart_jacobian_differentiates_only_where_the_variable_occurs() -> None:
+    table = codegen.build_function_table(friction_model())
+    f = table["rhs"].expressions[0]
+    wrt = [*table.states, *table.inputs, *table.parameters]
+    calls: list[tuple[sp.Basic, sp.Symbol]] = []
+    original = codegen._partial
+
+    def recording_partial(expr: sp.Basic, symbol: sp.Symbol) -> sp.Basic:
+        calls.append((expr, symbol))
+        return original(expr, symbol)
+
+    with mock.patch.object(codegen, "_partial", recording_partial):
+        jac = codegen.smart_jacobian(f, wrt)
+    assert calls and all(symbol in expr.free_symbols for expr, symbol in calls)
+    assert len(calls) < f.shape[0] * len(wrt)  # a dense Jacobian would need one per entry
+    for i, expr in enumerate(f):
+        for j, var in enumerate(wrt):
+            if var not in expr.free_symbols:
+                assert jac[i, j] is sp.S.Zero
+    reference = f.jacobian(wrt).replace(lambda e: isinstance(e, sp.DiracDelta), lambda e: 0)
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        point = {s: sp.Float(rng.uniform(0.2, 1.5)) for s in wrt}
+        got = np.array(jac.xreplace(point).evalf(), dtype=float)
+        want = np.array(reference.xreplace(point).evalf(), dtype=float)
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+
+
+def test_cse_is_one_pass_with_sequential_temporaries() -> None:
+    form = codegen.cse_function(codegen.build_function_table(friction_model())["jac_x"])
+    names = [s.name for s, _ in form.temporaries]
+    assert names == [f"t{k}" for k in range(len(names))]
+    # The compound cube base (v + theta/3) is computed once and multiplied out.
+    assert _cube_base() in [e for _, e in form.temporaries]
+
+
+def _cube_base() -> sp.Expr:
+    v, th = sp.Symbol("v", real=True), sp.Symbol("theta", real=True)
+    return v + th / 3
+
+
+def _c_print(expr: sp.Expr, symbols: dict[sp.Symbol, str]) -> tuple[str, Any]:
+    printer = codegen.GearsymCPrinter(symbols, "gearsym_t_")
+    return printer.doprint(expr), printer
+
+
+def test_c_printer_rules() -> None:
+    x, y = sp.symbols("x y", real=True)
+    names = {x: "x[0]", y: "p->y"}
+    assert _c_print(x**3, names)[0] == "(x[0]*x[0]*x[0])"
+    assert _c_print(y / x**2, names)[0] == "p->y/(x[0]*x[0])"
+    assert "GEARSYM_POW" in _c_print(x**12, names)[0]
+    assert _c_print(x / 3, names)[0] == "(GEARSYM_LIT(1.0)/GEARSYM_LIT(3.0))*x[0]"
+    assert _c_print(sp.Rational(-2, 7), names)[0] == "-(GEARSYM_LIT(2.0)/GEARSYM_LIT(7.0))"
+    assert _c_print(sp.sqrt(x), names)[0] == "GEARSYM_SQRT(x[0])"
+    assert _c_print(sp.pi, names)[0] == "GEARSYM_LIT(3.14159265358979323846)"
+    assert _c_print(sp.Float(0.1) * x, names)[0] == "GEARSYM_LIT(0.1)*x[0]"
+    text, printer = _c_print(sp.Piecewise((x, x > y), (-x, True)) + sp.sign(y), names)
+    assert "((x[0] > p->y) ? x[0] : -x[0])" in text and "gearsym_t_sign(p->y)" in text
+    assert printer.used_helpers == {"sign"}
+    assert _c_print(sp.Max(x, y, 0), names)[0].count("GEARSYM_FMAX") == 2
+    assert _c_print(sp.Abs(x), names)[0] == "GEARSYM_FABS(x[0])"
+    with pytest.raises(NotImplementedError):
+        _c_print(sp.Mod(x, y), names)
+    with pytest.raises(NotImplementedError):
+        _c_print(sp.Function("unknown")(x), names)
+
+
+def test_op_count_follows_the_printer() -> None:
+    x, y = sp.symbols("x y", real=True)
+    form = codegen.CseForm((), (sp.ImmutableMatrix([x**3 + x / 3 - sp.sin(y) / (x * y)]),))
+    ops = codegen.count_operations(form)
+    assert (ops.add, ops.mul, ops.div, dict(ops.calls)) == (2, 4, 1, {"sin": 1})
+    assert ops.format() == "2 add, 4 mul, 1 div, 1 call (sin 1)"
+
+
+def test_names_and_bounds_are_checked() -> None:
+    model = pendulum_model()
+    bad_param = Model(
+        "bad",
+        model.states,
+        model.inputs,
+        (V("int", sp.Symbol("g")), *model.parameters[1:]),
+        model.outputs,
+        model.rhs,
+        model.output_expressions,
+    )
+    with pytest.raises(ValueError, match="'int'"):
+        codegen.emit_c(bad_param)
+    bad_name = Model("my-model", *[getattr(model, a) for a in _FIELDS])
+    with pytest.raises(ValueError, match="model name"):
+        codegen.emit_c(bad_name)
+    with pytest.raises(ValueError, match="unknown parameters"):
+        codegen.emit_c(model, {"nope": (0.0, 1.0)})
+    with pytest.raises(ValueError, match="outside its bounds"):
+        codegen.emit_c(model, {"g": (0.0, 1.0)})
+
+
+_FIELDS = ("states", "inputs", "parameters", "outputs", "rhs", "output_expressions")
+
+
+def test_render_uses_strict_undefined() -> None:
+    with pytest.raises(jinja2.UndefinedError):
+        codegen.render("c_header.h.j2")
+
+
+# ---------------------------------------------------------------------------------------------
+# Emitted C: strict build, ECU rules, agreement with SymPy
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+@pytest.mark.parametrize("precision", ["double", "single"])
+def test_c_matches_sympy(built: dict[str, Any], name: str, precision: str) -> None:
+    entry = built[name]
+    report = c_check.compare_with_sympy(entry["model"], entry[precision], n_points=1000, seed=7)
+    print(report)
+    assert report.n_points == 1000
+    assert report.ok(c_check.TOLERANCE[precision]), str(report)
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_casadi_matches_sympy(built: dict[str, Any], name: str) -> None:
+    entry = built[name]
+    report = c_check.compare_casadi_with_sympy(entry["model"], entry["casadi"], 1000, seed=8)
+    print(report)
+    assert report.ok(c_check.TOLERANCE["double"]), str(report)
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_emitted_c_is_ecu_grade(built: dict[str, Any], name: str) -> None:
+    entry = built[name]
+    c_files = {k: v for k, v in entry["files"].items() if k.endswith((".c", ".h"))}
+    text = "\n".join(c_files.values())
+    assert not re.search(r"\b(malloc|calloc|realloc|free|alloca)\b", text)
+    # File scope holds functions only; any static object would have to be const.
+    assert not re.search(r"^static (?!const\b)[^(]*[;=]", text, re.MULTILINE)
+    for single in (False, True):
+        report = c_check.analyse_object(c_files, entry["dir"], single=single)
+        assert report.mutable_objects == []
+        assert report.dynamic_stack == []
+        assert report.recursive_functions() == []
+        assert max(report.stack_bytes.values()) < 1024
+        libm = set(report.undefined) - {"memcpy", "memset", "memmove"}
+        assert not libm & {"malloc", "calloc", "realloc", "free"}
+        if single:  # float build calls only the f-suffixed functions
+            assert all(fn.endswith("f") for fn in libm), libm
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_single_build_has_no_double_literals(built: dict[str, Any], name: str) -> None:
+    entry = built[name]
+    c_files = {k: v for k, v in entry["files"].items() if k.endswith((".c", ".h"))}
+    code = c_check.preprocessed_own_lines(c_files, entry["dir"], single=True)
+    literals = re.findall(r"(?<![\w.])(?:\d+\.\d*|\.\d+|\d+[eE][-+]?\d+)(?:[eE][-+]?\d+)?\w*", code)
+    assert literals and all(lit.endswith("f") for lit in literals), literals
+    assert "double" not in code
+    assert not re.search(r"\b(sin|cos|exp|sqrt|fabs|fmin|fmax|pow)\(", code)
+
+
+def test_conditions_shared_by_cse_become_int_temporaries(built: dict[str, Any]) -> None:
+    source = built["coverage"]["files"]["gearsym_coverage.c"]
+    assert re.search(r"const int t\d+ = \(\(p->k < x\[0\]\) && \(x\[1\] < GEARSYM_LIT", source)
+    assert "((gearsym_real)NAN)" in source and "GEARSYM_POW(x[0], GEARSYM_LIT(12.0))" in source
+
+
+def test_header_api_and_op_counts(built: dict[str, Any]) -> None:
+    header = built["pendulum"]["files"]["gearsym_pendulum.h"]
+    for macro in ("NX 2", "NU 1", "NP 4", "NY 2", "X_omega 1", "ERR_RANGE 2"):
+        assert f"#define GEARSYM_PENDULUM_{macro}" in header
+    assert "typedef double gearsym_real;" in header and "v##f" in header
+    assert "comment-closer must be escaped" in header and "*/ comment" not in header
+    prototypes = re.findall(r"^(?:void|int) gearsym_pendulum_(\w+)\(", header, re.MULTILINE)
+    assert len(prototypes) == 9
+    docs = re.findall(r"/\*\*(.*?)\*/", header, re.DOTALL)
+    assert len(docs) == 9 and all("Operations" in d for d in docs)
+    assert re.search(r"Operations: \d+ add, \d+ mul, \d+ div, 1 call \(sin 1\)", header)
+
+
+def test_edge_models_compile_strictly(tmp_path: Path) -> None:
+    x, k = sp.symbols("x k")
+    bare = Model("bare", (V("x", x),), (), (), (), sp.Matrix([-x]), sp.zeros(0, 1))
+    unset = Model("unset", (V("x", x),), (), (V("k", k),), (), sp.Matrix([-k * x]), sp.zeros(0, 1))
+    for model in (bare, unset):
+        files = codegen.emit_c(model)
+        for single in (False, True):
+            lib = c_check.load_functions(
+                c_check.compile_shared(files, tmp_path / model.name, single), model, single
+            )
+            assert lib.step("rk4_step", [1.0], [], [2.0] if model.parameters else [], 0.1)[0] > 0
+    assert np.isnan(lib.params_default()[0])  # no default: NaN, which validation rejects
+    assert lib.params_validate([float("nan")]) == (1, 0)
+
+
+def test_params_validate(built: dict[str, Any]) -> None:
+    model = built["pendulum"]["model"]
+    for precision in ("double", "single"):
+        lib = built["pendulum"][precision]
+        p = _defaults(model)
+        assert lib.params_validate(p) == (0, -1)
+        for bad, status in ((np.nan, 1), (np.inf, 1), (-np.inf, 1), (-1.0, 2), (25.0, 2)):
+            q = p.copy()
+            q[0] = bad  # g in (0, 20)
+            assert lib.params_validate(q) == (status, 0)
+        q = p.copy()
+        q[1], q[3] = 0.0, np.nan  # l below 0.01 and d NaN: the first one is reported
+        assert lib.params_validate(q) == (2, 1)
+        q[1] = 1e30  # l has no upper bound
+        assert lib.params_validate(q) == (1, 3)
+
+
+# ---------------------------------------------------------------------------------------------
+# Integrators
+# ---------------------------------------------------------------------------------------------
+
+
+def _linear_solution(model: Model, x0: np.ndarray, u: np.ndarray, p: np.ndarray, t: float) -> Any:
+    """Closed form of a linear model through the matrix exponential of [[A, B u], [0, 0]]."""
+    ref = c_check.evaluate_reference(model, np.concatenate([np.zeros_like(x0), u, p]))
+    nx = len(x0)
+    a = ref["jac_x"][0].reshape(nx, nx, order="F")
+    bu = ref["rhs"][0]  # f(0, u, p) = B u
+    m = np.zeros((nx + 1, nx + 1))
+    m[:nx, :nx], m[:nx, nx] = a, bu
+    return (scipy.linalg.expm(m * t) @ np.append(x0, 1.0))[:nx]
+
+
+def _order(hs: list[float], errors: list[float]) -> float:
+    return float(np.polyfit(np.log(hs), np.log(errors), 1)[0])
+
+
+def test_rk4_converges_with_order_four(built: dict[str, Any]) -> None:
+    hs = [0.1, 0.05, 0.025, 0.0125]
+    # Pendulum against a tight DOP853 solution of the SymPy right-hand side.
+    model, lib = built["pendulum"]["model"], built["pendulum"]["double"]
+    x0, u, p, t_end = np.array([1.0, 0.0]), np.array([0.2]), _defaults(model), 2.0
+
+    def f(_t: float, x: np.ndarray) -> np.ndarray:
+        return c_check.evaluate_reference(model, np.concatenate([x, u, p]))["rhs"][0]
+
+    exact = scipy.integrate.solve_ivp(f, (0, t_end), x0, "DOP853", rtol=1e-13, atol=1e-13).y[:, -1]
+    errors = [np.abs(lib.step("rk4_step", x0, u, p, h, round(t_end / h)) - exact).max() for h in hs]
+    assert 3.8 < _order(hs, errors) < 4.2, errors
+    # Linear chain (non-stiff parameter set) against its matrix exponential.
+    model, lib = built["stiff"]["model"], built["stiff"]["double"]
+    x0, u, p = np.array([1.0, -0.5, 0.25, 2.0]), np.array([0.3]), np.array([1, 2, 3, 4, 0.5, 1.0])
+    exact = _linear_solution(model, x0, u, p, 1.0)
+    errors = [np.abs(lib.step("rk4_step", x0, u, p, h, round(1.0 / h)) - exact).max() for h in hs]
+    assert 3.8 < _order(hs, errors) < 4.2, errors
+
+
+def test_linearly_implicit_euler_is_stable_where_rk4_blows_up(built: dict[str, Any]) -> None:
+    model, lib = built["stiff"]["model"], built["stiff"]["double"]
+    x0, u, p = np.array([1.0, -0.5, 0.25, 2.0]), np.array([0.3]), _defaults(model)
+    h, t_end = 0.01, 0.5  # h * |lambda_max| ~ 20, far outside RK4's stability region (~2.8)
+    exact = _linear_solution(model, x0, u, p, t_end)
+    with np.errstate(all="ignore"):
+        rk4 = lib.step("rk4_step", x0, u, p, h, round(t_end / h))
+    assert not np.all(np.isfinite(rk4)) or np.abs(rk4).max() > 1e6
+    lie = lib.step("linearly_implicit_euler_step", x0, u, p, h, round(t_end / h))
+    assert np.abs(lie - exact).max() < 0.02 * np.abs(x0).max()
+    # First order: halving h halves the error.
+    hs = [0.02, 0.01, 0.005, 0.0025]
+    errors = [
+        np.abs(
+            lib.step("linearly_implicit_euler_step", x0, u, p, hh, round(t_end / hh)) - exact
+        ).max()
+        for hh in hs
+    ]
+    assert 0.9 < _order(hs, errors) < 1.1, errors
+
+
+def test_linearly_implicit_euler_step_formula_with_pivoting(built: dict[str, Any]) -> None:
+    """One step equals x + h (I - h J)^-1 f at random points; the large h makes |h J_21| > 1,
+    so partial pivoting must swap rows."""
+    model, lib = built["pendulum"]["model"], built["pendulum"]["double"]
+    x_all, u_all, p_all = c_check.sample_points(model, 50, seed=3)
+    ref = c_check.evaluate_reference(model, np.hstack([x_all, u_all, p_all]))
+    h = 2.0
+    for k in range(50):
+        jac = ref["jac_x"][k].reshape(2, 2, order="F")
+        expected = x_all[k] + h * np.linalg.solve(np.eye(2) - h * jac, ref["rhs"][k])
+        got = lib.step("linearly_implicit_euler_step", x_all[k], u_all[k], p_all[k], h)
+        np.testing.assert_allclose(got, expected, rtol=1e-11, atol=1e-12)
+
+
+def test_casadi_integrator_matches_closed_form(built: dict[str, Any]) -> None:
+    model, module = built["stiff"]["model"], built["stiff"]["casadi"]
+    x0, u, p = np.array([1.0, -0.5, 0.25, 2.0]), np.array([0.3]), _defaults(model)
+    result = module.integrator(0.5)(x0=x0, u=u, p=p)
+    xf = result["xf"].full().ravel()
+    np.testing.assert_allclose(xf, _linear_solution(model, x0, u, p, 0.5), atol=1e-8)
+    assert np.allclose(module.parameter_defaults().full().ravel(), p)
+
+
+# ---------------------------------------------------------------------------------------------
+# Determinism
+# ---------------------------------------------------------------------------------------------
+
+_DIGEST_SCRIPT = """
+import hashlib, importlib.util, sys
+spec = importlib.util.spec_from_file_location("gearsym_codegen_models", sys.argv[1])
+models = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(models)
+print(models.emitted_digest())
+"""
+
+
+def emitted_digest() -> str:
+    """SHA-256 over the bytes of every emitted file of every test model."""
+    digest = hashlib.sha256()
+    for name in sorted(MODELS):
+        factory, bounds = MODELS[name]
+        for file_name, text in sorted(codegen.emit_all(factory(), bounds).items()):
+            digest.update(file_name.encode() + b"\0" + text.encode("utf-8") + b"\0")
+    return digest.hexdigest()
+
+
+def test_output_is_byte_identical_across_hash_seeds() -> None:
+    procs = []
+    for seed in ("0", "4242"):
+        env = {**os.environ, "PYTHONHASHSEED": seed, "PYTHONPATH": str(REPO)}
+        procs.append(
+            subprocess.Popen(
+                [sys.executable, "-c", _DIGEST_SCRIPT, __file__],
+                env=env,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+            )
+        )
+    outputs = [proc.communicate(timeout=120) for proc in procs]
+    for proc, (_, err) in zip(procs, outputs, strict=True):
+        assert proc.returncode == 0, err
+    digests = {out.strip() for out, _ in outputs}
+    assert digests == {emitted_digest()}

@@ -1,0 +1,187 @@
+"""Shift scenarios: input torque and element pressures over time (thesis 3.1).
+
+A scenario is a TOML file::
+
+    [scenario]
+    name = "power-on upshift 2-3"
+    shift = "2-3"
+    t_end = 1.6
+    vehicle_speed = { value = 8.0, unit = "m/s", source = "assumed" }
+
+    [input_torque]              # T_In = engine + e_machine, piecewise linear in time
+    unit = "N*m"
+    time = [0.0, 0.8, 0.85]
+    engine = [120.0, 120.0, 90.0]
+    e_machine = [30.0, 30.0, -20.0]
+
+    [pressure.K38]              # one table per element; elements not listed stay at 0 Pa
+    unit = "Pa"
+    time = [0.0, 0.5, 0.75]
+    value = [1.0e6, 1.0e6, 0.0]
+
+Bad files raise :class:`GearsymError` naming the file, the key and the reason.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Callable
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from symbolic.description import GearboxDescription
+from symbolic.drivetrain import ShiftSpec, shift_spec
+from symbolic.errors import GearsymError
+
+DEFAULT_SCENARIO = "scenario_2_3.toml"
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A piecewise-linear signal (held constant outside its time range)."""
+
+    time: np.ndarray
+    value: np.ndarray
+
+    def __call__(self, t: float) -> float:
+        return float(np.interp(t, self.time, self.value))
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    file: str
+    shift: ShiftSpec
+    t_end: float
+    vehicle_speed: float
+    engine: Profile
+    e_machine: Profile
+    pressure: dict[str, Profile]
+
+    def input_torque(self, t: float) -> float:
+        return self.engine(t) + self.e_machine(t)
+
+    def breakpoints(self) -> list[float]:
+        """Times where an input changes slope: the integrator restarts there."""
+        times = {0.0, self.t_end}
+        for profile in (self.engine, self.e_machine, *self.pressure.values()):
+            times.update(float(t) for t in profile.time if 0 < t < self.t_end)
+        return sorted(times)
+
+
+def default_scenario_path() -> Path:
+    return Path(str(resources.files("gearsym") / "data" / DEFAULT_SCENARIO))
+
+
+def load_scenario(d: GearboxDescription, path: str | Path | None = None) -> Scenario:
+    """Load and check a scenario against the gearbox description."""
+    file = str(path) if path is not None else f"<built-in {DEFAULT_SCENARIO}>"
+    source = Path(path) if path is not None else default_scenario_path()
+    try:
+        data = tomllib.loads(source.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise GearsymError(file, "", "no such file") from None
+    except tomllib.TOMLDecodeError as err:
+        raise GearsymError(file, "TOML", f"malformed TOML: {err}") from None
+
+    def fail(key: str, reason: str) -> GearsymError:
+        return GearsymError(file, key, reason)
+
+    head = data.get("scenario")
+    if not isinstance(head, dict):
+        raise fail("scenario", "missing table [scenario]")
+    for key in ("shift", "t_end", "vehicle_speed"):
+        if key not in head:
+            raise fail(f"scenario.{key}", "missing required key")
+    unknown = set(head) - {"name", "shift", "t_end", "vehicle_speed"}
+    if unknown:
+        raise fail(f"scenario.{sorted(unknown)[0]}", "unknown key (misspelt?)")
+    try:
+        spec = shift_spec(d, str(head["shift"]))
+    except GearsymError as err:
+        raise fail("scenario.shift", err.reason) from None
+    t_end = head["t_end"]
+    if isinstance(t_end, bool) or not isinstance(t_end, (int, float)) or not t_end > 0:
+        raise fail("scenario.t_end", f"must be a positive number of seconds, got {t_end!r}")
+    speed = head["vehicle_speed"]
+    if not isinstance(speed, dict) or speed.get("unit") != "m/s":
+        raise fail("scenario.vehicle_speed", 'expected { value = ..., unit = "m/s", source = ... }')
+    v0 = speed.get("value")
+    if isinstance(v0, bool) or not isinstance(v0, (int, float)) or not v0 > 0:
+        raise fail("scenario.vehicle_speed.value", f"must be a positive speed, got {v0!r}")
+
+    torque = data.get("input_torque")
+    if not isinstance(torque, dict):
+        raise fail("input_torque", "missing table [input_torque]")
+    if torque.get("unit") != "N*m":
+        raise fail("input_torque.unit", f"expected 'N*m', got {torque.get('unit')!r}")
+    times = _series(fail, "input_torque.time", torque.get("time"))
+    _increasing(fail, "input_torque.time", times)
+    engine = _series(fail, "input_torque.engine", torque.get("engine", [0.0] * len(times)))
+    e_machine = _series(fail, "input_torque.e_machine", torque.get("e_machine", [0.0] * len(times)))
+    for key, values in (("engine", engine), ("e_machine", e_machine)):
+        if len(values) != len(times):
+            raise fail(f"input_torque.{key}", f"has {len(values)} values for {len(times)} times")
+    unknown = set(torque) - {"unit", "time", "engine", "e_machine"}
+    if unknown:
+        raise fail(f"input_torque.{sorted(unknown)[0]}", "unknown key (misspelt?)")
+
+    pressures: dict[str, Profile] = {}
+    element_names = [e.name for e in d.shift_elements]
+    table = data.get("pressure", {})
+    if not isinstance(table, dict):
+        raise fail("pressure", "expected tables [pressure.<element>]")
+    for name, entry in table.items():
+        key = f"pressure.{name}"
+        if name not in element_names:
+            raise fail(key, f"unknown shift element {name!r} (known: {', '.join(element_names)})")
+        if not isinstance(entry, dict) or entry.get("unit") != "Pa":
+            raise fail(f"{key}.unit", "expected unit = 'Pa'")
+        t = _series(fail, f"{key}.time", entry.get("time"))
+        _increasing(fail, f"{key}.time", t)
+        values = _series(fail, f"{key}.value", entry.get("value"))
+        if len(values) != len(t):
+            raise fail(f"{key}.value", f"has {len(values)} values for {len(t)} times")
+        if np.any(values < 0):
+            raise fail(f"{key}.value", f"pressures must not be negative, got {values.min():g} Pa")
+        pressures[name] = Profile(t, values)
+    for name in element_names:
+        pressures.setdefault(name, Profile(np.array([0.0]), np.array([0.0])))
+    unknown = set(data) - {"scenario", "input_torque", "pressure"}
+    if unknown:
+        raise fail(sorted(unknown)[0], "unknown table (misspelt?)")
+    return Scenario(
+        name=str(head.get("name", spec.name)),
+        file=file,
+        shift=spec,
+        t_end=float(t_end),
+        vehicle_speed=float(v0),
+        engine=Profile(times, engine),
+        e_machine=Profile(times, e_machine),
+        pressure=pressures,
+    )
+
+
+def _series(fail: Callable[[str, str], GearsymError], key: str, values: object) -> np.ndarray:
+    if not isinstance(values, list) or not values:
+        raise fail(key, "expected a non-empty list of numbers")
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values):
+        raise fail(key, "expected a list of numbers")
+    array = np.array(values, dtype=float)
+    if not all(math.isfinite(v) for v in array):
+        raise fail(key, "values must be finite")
+    return array
+
+
+def _increasing(fail: Callable[[str, str], GearsymError], key: str, times: np.ndarray) -> None:
+    if np.any(np.diff(times) <= 0):
+        bad = int(np.argmax(np.diff(times) <= 0))
+        raise fail(
+            key,
+            f"times must increase strictly (entry {bad + 1}: {times[bad + 1]:g} after "
+            f"{times[bad]:g})",
+        )
