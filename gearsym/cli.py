@@ -312,6 +312,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--symbolic-inertias", action="store_true", help="keep inertias as symbols")
 
     command("default-config", cmd_default_config, "Print the built-in gearbox description.")
+
+    from gearsym.cmd_dynamics import add_parsers as add_dynamics_parsers
+
+    add_dynamics_parsers(command, config)
     return parser
 
 

@@ -13,6 +13,7 @@ simulator reads from the μ map at the current pressure, oil temperature and sli
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import sympy as sp
@@ -45,9 +46,15 @@ class ReferenceModel:
     wheel_acceleration: sp.Expr
 
 
-def reference_model(d: GearboxDescription) -> ReferenceModel:
-    """Build the reference model of the description (all elements with friction states)."""
-    for e in d.shift_elements:
+def reference_model(d: GearboxDescription, elements: Sequence[str] | None = None) -> ReferenceModel:
+    """Build the reference model of the description.
+
+    ``elements`` (default: all) get a friction state; every other element is open (zero
+    torque), which keeps the model small when a scenario never presses them.
+    """
+    names = [e.name for e in d.shift_elements]
+    chosen = names if elements is None else [n for n in names if n in set(elements)]
+    for e in (d.element(n) for n in chosen):
         if e.n_disc is None or e.r_m is None or e.a_piston is None:
             raise GearsymError(
                 d.file,
@@ -62,7 +69,7 @@ def reference_model(d: GearboxDescription) -> ReferenceModel:
     torque: dict[str, sp.Expr] = {}
     rates: dict[str, sp.Expr] = {}
     z_vars, p_vars, mu_vars = [], [], []
-    for e in d.shift_elements:
+    for e in (d.element(n) for n in chosen):
         z = sp.Symbol(f"z_{e.name}")
         p = sp.Symbol(f"p_{e.name}")
         mu = sp.Symbol(f"mu_{e.name}", positive=True)
@@ -84,10 +91,12 @@ def reference_model(d: GearboxDescription) -> ReferenceModel:
         p_vars.append(Variable(f"p_{e.name}", p, "Pa", f"apply pressure of {e.name}"))
         mu_vars.append(Variable(f"mu_{e.name}", mu, "1", f"friction coefficient of {e.name}"))
 
-    substitution = {parts.torque_symbols[e]: torque[e] for e in parts.torque_elements}
+    substitution = {
+        parts.torque_symbols[e]: torque.get(e, sp.Integer(0)) for e in parts.torque_elements
+    }
     gearbox = parts.gearbox_rhs.subs(substitution)
     wheel = (2 * parts.side_shaft_torque - parts.road_torque) / parts.wheel_inertia
-    rhs = sp.Matrix([*gearbox, parts.phi_dot, wheel, *(rates[e.name] for e in d.shift_elements)])
+    rhs = sp.Matrix([*gearbox, parts.phi_dot, wheel, *(rates[n] for n in chosen)])
 
     states = (
         *(

@@ -1,0 +1,192 @@
+"""``gearsym model`` and ``gearsym simulate``: the dynamics models and the reference shift."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+
+def _load(path: str | None) -> Any:
+    from symbolic.description import load_description
+
+    return load_description(path)
+
+
+def _variables(variables: Any) -> list[dict[str, Any]]:
+    return [
+        {
+            "name": v.name,
+            "unit": v.unit,
+            "description": v.description,
+            **({"default": v.default} if v.default is not None else {}),
+            **({"source": v.source} if v.source else {}),
+        }
+        for v in variables
+    ]
+
+
+def model_dict(d: Any, shift: str | None, friction_inputs: bool, wheel: bool) -> dict[str, Any]:
+    """The model as data: variables, right-hand side (SymPy-parsable strings) and, for a shift,
+    the numeric linear form A_ex, B_ex (5.1)–(5.5) at the defaults."""
+    from symbolic.drivetrain import full_model, linear_shift_form, shift_model
+
+    if shift is None:
+        model = full_model(d, with_wheel_acceleration=wheel)
+    else:
+        model = shift_model(
+            d, shift, with_wheel_acceleration=wheel, friction_inputs=friction_inputs
+        )
+    data: dict[str, Any] = {
+        "name": model.name,
+        "gearbox": d.name,
+        "equations": model.metadata.get("equations", ""),
+        "states": _variables(model.states),
+        "inputs": _variables(model.inputs),
+        "parameters": _variables(model.parameters),
+        "outputs": _variables(model.outputs),
+        # parse with sympy.parse_expr(text, local_dict={name: Symbol(name) for every variable})
+        # (a bare sympify would read zeta as the Riemann zeta function)
+        "rhs": {v.name: str(e) for v, e in zip(model.states, model.rhs, strict=True)},
+        "output_expressions": {
+            v.name: str(e) for v, e in zip(model.outputs, model.output_expressions, strict=True)
+        },
+    }
+    if shift is not None:
+        a, b, x, u = linear_shift_form(d, shift)
+        defaults = {v.symbol: v.default for v in model.parameters if v.default is not None} | {
+            v.symbol: v.default for v in shift_model(d, shift).parameters if v.default is not None
+        }
+        a_num = a.subs(defaults)
+        b_num = b.subs(defaults)
+        data["linear_form"] = {
+            "equations": "5.1-5.5",
+            "states": x,
+            "inputs": u,
+            "A": [[float(a_num[i, j]) for j in range(a.cols)] for i in range(a.rows)],
+            "B": [[float(b_num[i, j]) for j in range(b.cols)] for i in range(b.rows)],
+        }
+    return data
+
+
+def cmd_model(args: argparse.Namespace) -> int:
+    """Print a shift model (or the full model): variables, rhs, and A, B at the defaults."""
+    import sympy as sp
+
+    d = _load(args.config)
+    data = model_dict(d, args.shift, args.friction_inputs, args.with_wheel_acceleration)
+    if args.json:
+        json.dump(data, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return 0
+    print(f"model {data['name']} of {d.title}  (thesis {data['equations']})")
+    for group in ("states", "inputs", "parameters", "outputs"):
+        print(f"  {group}:")
+        for v in data[group]:
+            default = f" = {v['default']:g}" if "default" in v else ""
+            print(f"    {v['name']:<14} [{v['unit']}]{default}  {v['description']}")
+    print("  right-hand side (6 digits shown; --json gives the exact expressions):")
+    names = [v["name"] for group in ("states", "inputs", "parameters") for v in data[group]]
+    symbols = {n: sp.Symbol(n) for n in names}
+    for name, expr in data["rhs"].items():
+        print(f"    d{name}/dt = {sp.parse_expr(expr, local_dict=symbols).evalf(6)}")
+    if "linear_form" in data:
+        lf = data["linear_form"]
+        x, u = ", ".join(lf["states"]), ", ".join(lf["inputs"])
+        print(f"  linear form (5.1): x = [{x}], u = [{u}]")
+        for label in ("A", "B"):
+            print(f"  {label} =")
+            for row in lf[label]:
+                print("    [" + "  ".join(f"{v:11.4g}" for v in row) + "]")
+    return 0
+
+
+class ProgressBar:
+    """A one-line progress display on stderr (plain lines when stderr is not a terminal)."""
+
+    def __init__(self, label: str) -> None:
+        self.label = label
+        self.start = time.perf_counter()
+        self.tty = sys.stderr.isatty()
+        self.last = ""
+
+    def __call__(self, fraction: float, message: str) -> None:
+        width = 24
+        filled = int(round(width * max(0.0, min(1.0, fraction))))
+        bar = "#" * filled + "." * (width - filled)
+        elapsed = time.perf_counter() - self.start
+        line = f"{self.label} [{bar}] {fraction:4.0%} {elapsed:5.1f} s  {message}"
+        if self.tty:
+            sys.stderr.write("\r" + line.ljust(len(self.last)))
+        elif message != self.last:
+            sys.stderr.write(line + "\n")
+        sys.stderr.flush()
+        self.last = line if self.tty else message
+
+    def done(self) -> None:
+        if self.tty:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    """Simulate the scenario's shift with the reference model and write the results."""
+    from validation.report import format_summary, summary, write_outputs
+    from validation.scenario import load_scenario
+    from validation.simulate import simulate
+
+    d = _load(args.config)
+    scenario = load_scenario(d, args.scenario)
+    bar = ProgressBar("simulate")
+    try:
+        result = simulate(d, scenario, progress=bar)
+    finally:
+        bar.done()
+    paths = write_outputs(d, result, args.out, plots=not args.no_plots)
+    if args.json:
+        json.dump({**summary(result), "files": [str(p) for p in paths]}, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+    else:
+        print(format_summary(result))
+        print(f"  wrote {len(paths)} files to {args.out}: {', '.join(p.name for p in paths)}")
+    return 0
+
+
+def add_parsers(
+    command: Callable[..., argparse.ArgumentParser],
+    config: Callable[[argparse.ArgumentParser], None],
+) -> None:
+    """Register ``model`` and ``simulate`` with the main parser."""
+    p = command(
+        "model",
+        cmd_model,
+        "Print the drivetrain model of a shift (2.55-2.58) or the full model (2.53): states, "
+        "inputs, parameters with defaults, right-hand side, and A, B of (5.1) at the defaults.",
+    )
+    config(p)
+    p.add_argument("--shift", help="e.g. 2-3 (default: the full model, every element a torque)")
+    p.add_argument(
+        "--friction-inputs",
+        action="store_true",
+        help="element torques as mu times the normal-force inputs F_N (3.14)",
+    )
+    p.add_argument("--with-wheel-acceleration", action="store_true", help="add the output (3.32)")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+
+    p = command(
+        "simulate",
+        cmd_simulate,
+        "Reference simulation of a shift (thesis 3.1): writes timeseries.csv, phases.csv, "
+        "summary.json (phases, energy audit, model checks) and Figures 3.1-3.3 as PNG.",
+    )
+    config(p)
+    p.add_argument("--scenario", help="scenario TOML (default: the built-in 2-3 power-on upshift)")
+    p.add_argument("--out", required=True, help="output folder (replaced atomically)")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+
+
+__all__ = ["add_parsers", "cmd_model", "cmd_simulate", "model_dict"]

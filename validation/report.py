@@ -1,0 +1,193 @@
+"""Write a simulation's results: time series (CSV), phases, energy audit, checks and plots.
+
+Everything is written into a temporary folder next to the target and moved into place only
+when complete, so a failure leaves no half-written output.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from symbolic.description import GearboxDescription
+from validation.simulate import SimulationResult
+
+
+def summary(result: SimulationResult) -> dict[str, Any]:
+    """The machine-readable summary: phases, audit, model checks, solver statistics."""
+    return {
+        "scenario": result.scenario.name,
+        "scenario_file": result.scenario.file,
+        "shift": result.scenario.shift.name,
+        "t_end_s": float(result.t[-1]),
+        "samples": int(result.t.size),
+        "phases": [p.to_dict() for p in result.phases],
+        "energy_audit": result.audit.to_dict(),
+        "model_checks": [c.to_dict() for c in result.checks],
+        "solver": {k: float(v) for k, v in result.stats.items()},
+        "final_ratio": float(result.signals["ratio"][-1]),
+        "initial_ratio": float(result.signals["ratio"][0]),
+    }
+
+
+def write_outputs(
+    d: GearboxDescription, result: SimulationResult, out: str | Path, plots: bool = True
+) -> list[Path]:
+    """Write ``timeseries.csv``, ``phases.csv``, ``summary.json`` and the PNG plots into
+    ``out`` (replaced atomically). Returns the written paths (final locations)."""
+    target = Path(out)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    try:
+        names = _write_all(d, result, staging, plots)
+        if target.exists():
+            backup = Path(tempfile.mkdtemp(prefix=f".{target.name}.old.", dir=target.parent))
+            os.replace(target, backup / "old")
+            os.replace(staging, target)
+            shutil.rmtree(backup)
+        else:
+            os.replace(staging, target)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return [target / n for n in names]
+
+
+def _write_all(
+    d: GearboxDescription, result: SimulationResult, folder: Path, plots: bool
+) -> list[str]:
+    written = []
+    keys = list(result.signals)
+    with open(folder / "timeseries.csv", "w", newline="", encoding="utf-8") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(["t", *keys])
+        columns = [result.signals[k] for k in keys]
+        for i, t in enumerate(result.t):
+            writer.writerow([f"{t:.6g}", *(f"{c[i]:.10g}" for c in columns)])
+    written.append("timeseries.csv")
+    with open(folder / "phases.csv", "w", newline="", encoding="utf-8") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(["phase", "t_start_s", "t_end_s", "criterion"])
+        for p in result.phases:
+            writer.writerow([p.name, f"{p.t_start:.6g}", f"{p.t_end:.6g}", p.criterion])
+    written.append("phases.csv")
+    (folder / "summary.json").write_text(json.dumps(summary(result), indent=2) + "\n")
+    written.append("summary.json")
+    if plots:
+        written += plot_shift(d, result, folder)
+    return written
+
+
+def plot_shift(d: GearboxDescription, result: SimulationResult, folder: Path) -> list[str]:
+    """Figures 3.1–3.3 of the thesis: speeds and twist; accelerations; torques, slips, T_In
+    and T_res. Phase boundaries are drawn as vertical lines."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    s, t = result.signals, result.t
+    spec = result.scenario.shift
+    measured = [f"omega_{m}" for m in d.measured_shafts if f"omega_{m}" in s]
+
+    def phases(ax: Any) -> None:
+        for p in result.phases[1:]:
+            ax.axvline(p.t_start, color="0.6", lw=0.8, ls="--")
+        ymax = ax.get_ylim()[1]
+        for p in result.phases:
+            ax.text((p.t_start + p.t_end) / 2, ymax, p.name, ha="center", va="bottom", fontsize=7)
+
+    names = []
+    fig, axes = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True)
+    for key in measured:
+        axes[0].plot(t, s[key], label=f"ω_{key.removeprefix('omega_')}")
+    axes[0].plot(t, s["omega_C"], label="ω_C (wheel)")
+    axes[0].set_ylabel("speed / (rad/s)")
+    axes[0].legend(fontsize=8, ncol=2)
+    phases(axes[0])
+    axes[1].plot(t, s["phi"], color="C3")
+    axes[1].set_ylabel("side-shaft twist φ / rad")
+    axes[1].set_xlabel("t / s")
+    fig.suptitle(f"{result.scenario.name}: speeds and side-shaft twist (cf. thesis Fig. 3.1)")
+    fig.tight_layout()
+    fig.savefig(folder / "fig_3_1_speeds.png", dpi=110)
+    plt.close(fig)
+    names.append("fig_3_1_speeds.png")
+
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for key in [f"d{m}" for m in measured] + ["domega_C"]:
+        if key in s:
+            ax.plot(t, s[key], label=f"dω_{key.removeprefix('domega_')}/dt")
+    ax.set_ylabel("acceleration / (rad/s²)")
+    ax.set_xlabel("t / s")
+    ax.legend(fontsize=8, ncol=2)
+    phases(ax)
+    ax.set_title("accelerations (cf. thesis Fig. 3.2)")
+    fig.tight_layout()
+    fig.savefig(folder / "fig_3_2_accelerations.png", dpi=110)
+    plt.close(fig)
+    names.append("fig_3_2_accelerations.png")
+
+    fig, axes = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True)
+    for e in (spec.off_going, spec.on_coming):
+        axes[0].plot(t, s[f"T_{e}"], label=f"T_{e}")
+    axes[0].plot(t, s["T_In"], label="T_In", color="k")
+    axes[0].plot(t, s["T_res"], label="T_res", color="0.5")
+    axes[0].set_ylabel("torque / (N·m)")
+    axes[0].legend(fontsize=8, ncol=2)
+    phases(axes[0])
+    for e in (spec.off_going, spec.on_coming):
+        axes[1].plot(t, s[f"slip_{e}"], label=f"Δω_{e}")
+    axes[1].set_ylabel("slip speed / (rad/s)")
+    axes[1].set_xlabel("t / s")
+    axes[1].legend(fontsize=8)
+    fig.suptitle("transmitted torques, slip speeds, T_In and T_res (cf. thesis Fig. 3.3)")
+    fig.tight_layout()
+    fig.savefig(folder / "fig_3_3_torques.png", dpi=110)
+    plt.close(fig)
+    names.append("fig_3_3_torques.png")
+    return names
+
+
+def format_summary(result: SimulationResult) -> str:
+    """Human-readable summary of a simulation."""
+    lines = [
+        f"{result.scenario.name} ({result.scenario.file})",
+        f"  ratio ω_in/ω_out {result.signals['ratio'][0]:.3f} → {result.signals['ratio'][-1]:.3f}",
+        "  phases (detected from the simulated slips and torques):",
+    ]
+    for p in result.phases:
+        lines.append(f"    {p.name:<13} {p.t_start:7.4f} – {p.t_end:7.4f} s   {p.criterion}")
+    a = result.audit
+    lines.append("  energy audit (J):")
+    for label, value in (
+        ("input work", a.input_work),
+        ("Δ kinetic energy", a.kinetic_change),
+        ("Δ side-shaft spring energy", a.spring_change),
+        ("Δ bristle energy", a.bristle_change),
+        ("friction dissipation", a.friction_dissipation),
+        ("side-shaft damper dissipation", a.damper_dissipation),
+        ("road work", a.road_work),
+    ):
+        lines.append(f"    {label:<30} {value:14.6f}")
+    lines.append(
+        f"    {'residual':<30} {a.residual:14.3e}  (relative {a.relative_residual:.2e})"
+    )
+    if result.checks:
+        lines.append("  reduced models against the reference, inside their phase:")
+        for c in result.checks:
+            lines.append(
+                f"    {c.model:<12} {c.phase:<10} max relative state error "
+                f"{c.max_relative_error:.2e}"
+            )
+    st = result.stats
+    lines.append(
+        f"  Radau: {int(st.get('steps', 0))} steps, {int(st.get('nfev', 0))} f, "
+        f"{int(st.get('njev', 0))} Jacobians; {st.get('wall_time_s', float('nan')):.2f} s"
+    )
+    return "\n".join(lines)

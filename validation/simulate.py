@@ -1,0 +1,772 @@
+"""Reference simulation of a shift (thesis 3.1), its phases, energy audit and model checks.
+
+The reference model (:mod:`symbolic.reference`) is the full gearbox (2.39) with the elastic
+drivetrain (2.42–2.53) and one elasto-plastic friction state per pressed element (2.66)–(2.70).
+It is integrated with SciPy's Radau (stiff, implicit, order 5) and the analytic Jacobian from
+SymPy, restarting at every breakpoint of the scenario's piecewise-linear inputs. μ comes from the
+friction map at each element's pressure, the oil temperature and the current slip.
+
+What is derived from the result, never from the scenario's times:
+
+* the phases (:func:`detect_phases`): from-gear, torque phase (the on-coming element takes over
+  the load), speed phase (the input speed moves to the new ratio), to-gear;
+* the energy audit (:class:`EnergyAudit`): input work = Δ kinetic + Δ spring + Δ bristle energy
+  + friction dissipation + damper dissipation + road work, with the works integrated as extra
+  ODE states at the solver's accuracy;
+* the model checks (:class:`ModelCheck`): each reduced model (the from- and to-gear with their
+  elements locked, the shift model (2.55)–(2.58) with the two swapping elements' torques taken
+  from the reference) integrated inside the phase where it is valid and compared.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import sympy as sp
+from scipy.integrate import solve_ivp
+from scipy.interpolate import RectBivariateSpline
+
+from symbolic.codegen import _real_symbols, smart_jacobian
+from symbolic.description import GearboxDescription
+from symbolic.drivetrain import (
+    _quantity,
+    drivetrain_model,
+    element_short_name,
+    shift_model,
+)
+from symbolic.errors import GearsymError
+from symbolic.friction import DEFAULT_MU_MAP, T_SS_MIN, MuMap
+from symbolic.model import Model
+from symbolic.reference import ReferenceModel, reference_model
+from validation.scenario import Scenario, load_scenario
+
+#: Progress callback: (fraction done in [0, 1], message).
+Progress = Callable[[float, str], None]
+
+ENERGY_TERMS = ("W_in", "W_friction", "W_damper", "W_road")
+
+
+@dataclass(frozen=True)
+class Phase:
+    """One phase of the shift, detected from the simulated slips and torques."""
+
+    name: str
+    t_start: float
+    t_end: float
+    criterion: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "t_start": self.t_start,
+            "t_end": self.t_end,
+            "criterion": self.criterion,
+        }
+
+
+@dataclass(frozen=True)
+class EnergyAudit:
+    """W_in = ΔE_kin + ΔE_spring + ΔE_bristle + W_friction + W_damper + W_road (+ residual)."""
+
+    input_work: float
+    kinetic_change: float
+    spring_change: float
+    bristle_change: float
+    friction_dissipation: float
+    damper_dissipation: float
+    road_work: float
+
+    @property
+    def residual(self) -> float:
+        return self.input_work - (
+            self.kinetic_change
+            + self.spring_change
+            + self.bristle_change
+            + self.friction_dissipation
+            + self.damper_dissipation
+            + self.road_work
+        )
+
+    @property
+    def scale(self) -> float:
+        """The largest term, the reference for the relative residual."""
+        return max(
+            abs(v)
+            for v in (
+                self.input_work,
+                self.kinetic_change,
+                self.spring_change,
+                self.friction_dissipation,
+                self.damper_dissipation,
+                self.road_work,
+            )
+        )
+
+    @property
+    def relative_residual(self) -> float:
+        return abs(self.residual) / self.scale
+
+    def to_dict(self) -> dict[str, float]:
+        return {
+            "input_work_J": self.input_work,
+            "kinetic_energy_change_J": self.kinetic_change,
+            "spring_energy_change_J": self.spring_change,
+            "bristle_energy_change_J": self.bristle_change,
+            "friction_dissipation_J": self.friction_dissipation,
+            "damper_dissipation_J": self.damper_dissipation,
+            "road_work_J": self.road_work,
+            "residual_J": self.residual,
+            "relative_residual": self.relative_residual,
+        }
+
+
+@dataclass(frozen=True)
+class ModelCheck:
+    """A reduced model integrated inside one phase against the reference."""
+
+    model: str
+    phase: str
+    t_start: float
+    t_end: float
+    max_abs_error: dict[str, float]
+    #: max |error| / (max |reference| of that state over the phase), worst state
+    max_relative_error: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "model": self.model,
+            "phase": self.phase,
+            "t_start": self.t_start,
+            "t_end": self.t_end,
+            "max_abs_error": self.max_abs_error,
+            "max_relative_error": self.max_relative_error,
+        }
+
+
+@dataclass(frozen=True)
+class SimulationResult:
+    """Time series (``signals``, sampled at ``t``), phases, audit and model checks."""
+
+    t: np.ndarray
+    signals: dict[str, np.ndarray]
+    phases: tuple[Phase, ...]
+    audit: EnergyAudit
+    checks: tuple[ModelCheck, ...]
+    scenario: Scenario
+    state_names: tuple[str, ...]
+    stats: dict[str, float] = field(default_factory=dict)
+    state_at: Callable[[float], np.ndarray] | None = None
+
+    def phase(self, name: str) -> Phase:
+        for p in self.phases:
+            if p.name == name:
+                return p
+        raise KeyError(name)
+
+
+# ----------------------------------------------------------------------------- numerics
+
+
+def mu_map_of(d: GearboxDescription) -> MuMap:
+    """The description's μ map (2.69): the built-in one or a file relative to the description."""
+    from pathlib import Path
+
+    if d.mu_map == "built-in":
+        return MuMap.from_toml(DEFAULT_MU_MAP)
+    path = Path(d.mu_map)
+    if not path.is_absolute():
+        path = Path(d.file).parent / path
+    if not path.is_file():
+        raise GearsymError(d.file, "friction.mu_map", f"no such file {str(path)!r}")
+    try:
+        return MuMap.from_toml(path)
+    except ValueError as err:
+        raise GearsymError(d.file, "friction.mu_map", str(err)) from None
+
+
+def _lambdify(args: Sequence[Any], expr: Any) -> Callable[..., Any]:
+    # "math" keeps scalar calls cheap (Piecewise prints as a conditional expression).
+    return sp.lambdify(args, expr, modules=["math"], cse=True)
+
+
+class _Compiled:
+    """Lambdified right-hand side, Jacobian and diagnostics of the augmented reference model."""
+
+    def __init__(self, ref: ReferenceModel, d: GearboxDescription, elements: Sequence[str]):
+        model = ref.model
+        # Real symbols so that d|z|/dz = sign(z), not an expression in re/im. Parameters stay
+        # symbols (arguments of the compiled functions): substituting numbers into the Max and
+        # Piecewise of the friction model would make SymPy re-simplify them, which is slow.
+        real = _real_symbols(model)
+        x = [real[s] for s in model.state_symbols]
+        u = [real[s] for s in model.input_symbols]
+        p = [real[s] for s in model.parameter_symbols]
+        defaults = model.parameter_defaults()
+        values = [float(defaults[s]) for s in model.parameter_symbols]
+        self.n = len(x)
+        self.elements = tuple(elements)
+
+        def real_of(e: sp.Expr) -> sp.Expr:
+            # evaluate(False): a renaming needs no re-simplification (Max would redo it)
+            with sp.evaluate(False):
+                return sp.sympify(e).xreplace(real)
+
+        def compile_xu(exprs: Any) -> Callable[[np.ndarray, Sequence[float]], Any]:
+            raw = _lambdify([x, u, p], exprs)
+            return lambda xs, us: raw(xs, us, values)
+
+        def compile_x(exprs: Any) -> Callable[[np.ndarray], Any]:
+            raw = _lambdify([x, p], exprs)
+            return lambda xs: raw(xs, values)
+
+        powers = [ref.input_power, ref.friction_power, ref.damper_power, ref.road_power]
+        full = sp.Matrix([real_of(e) for e in (*model.rhs, *powers)])
+        jac = smart_jacobian(full, x)
+        with sp.evaluate(False):
+            jac = jac.applyfunc(_heaviside_as_piecewise)
+        self.f = compile_xu(list(full))
+        self.jac = compile_xu(jac.tolist())
+        self.slips = compile_x([real_of(ref.slip[e]) for e in self.elements])
+        all_slip = _all_slips(d, ref)
+        self.all_slips = compile_x([real_of(e) for e in all_slip.values()])
+        self.all_slip_names = tuple(all_slip)
+        self.torques = compile_xu([real_of(ref.element_torque[e]) for e in self.elements])
+        self.speeds = compile_x([real_of(ref.body_speeds[s.name]) for s in d.shafts])
+        self.shaft_names = tuple(s.name for s in d.shafts)
+        self.energies = compile_x(
+            [real_of(e) for e in (ref.kinetic_energy, ref.spring_energy, ref.bristle_energy)]
+        )
+        self.side_shaft = compile_x(real_of(ref.side_shaft_torque))
+        self.road = compile_x(real_of(ref.road_torque))
+
+
+def _heaviside_as_piecewise(expr: sp.Expr) -> sp.Expr:
+    # d max(0, a)/da = Heaviside(a); the "math" printer has no Heaviside.
+    return expr.replace(
+        lambda e: isinstance(e, sp.Heaviside),
+        lambda e: sp.Piecewise((1, e.args[0] > 0), (0, True)),
+    )
+
+
+def _all_slips(d: GearboxDescription, ref: ReferenceModel) -> dict[Any, sp.Expr]:
+    speeds = ref.body_speeds
+    return {e: (speeds[e.a] if e.a is not None else 0) - speeds[e.b] for e in d.shift_elements}
+
+
+class _Inputs:
+    """u(t, x): T_In from the scenario, pressures, μ from the map at the current slip."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        elements: tuple[str, ...],
+        mu_map: MuMap,
+        t_oil: float,
+        compiled: _Compiled,
+    ) -> None:
+        self.scenario = scenario
+        self.elements = elements
+        self.compiled = compiled
+        # The oil temperature is constant in a scenario: slice the map once and interpolate
+        # bilinearly in (p_N, |Δω|) with a spline of degree 1 (the map's own trilinear
+        # interpolation restricted to that plane), clamped to the grid like MuMap.
+        p_grid, _, dw_grid = mu_map.grid
+        plane = mu_map(p_grid[:, None], t_oil, dw_grid[None, :])
+        self._mu = RectBivariateSpline(p_grid, dw_grid, plane, kx=1, ky=1)
+        self._p_range = (p_grid[0], p_grid[-1])
+        self._dw_range = (dw_grid[0], dw_grid[-1])
+
+    def pressures(self, t: float) -> np.ndarray:
+        return np.array([self.scenario.pressure[e](t) for e in self.elements])
+
+    def mu(self, p: np.ndarray, slips: np.ndarray) -> np.ndarray:
+        return self._mu.ev(np.clip(p, *self._p_range), np.clip(np.abs(slips), *self._dw_range))
+
+    def __call__(self, t: float, x: np.ndarray) -> list[float]:
+        p = self.pressures(t)
+        mu = self.mu(p, np.asarray(self.compiled.slips(x), dtype=float))
+        return [self.scenario.input_torque(t), *p, *mu]
+
+
+# ----------------------------------------------------------------------------- initial state
+
+
+def quasi_static_state(
+    d: GearboxDescription, ref: ReferenceModel, inputs: _Inputs, compiled: _Compiled
+) -> np.ndarray:
+    """Initial state in the from-gear: speeds at the scenario's vehicle speed, and the bristle
+    deflections and side-shaft twist that make the gearbox accelerate as one rigid gear
+    (closed elements' slip accelerations zero, φ̈ = 0). The conditions are affine in (z, φ)
+    while every slip is zero, so five evaluations of the right-hand side solve them."""
+    scenario = inputs.scenario
+    gear = d.gear(scenario.shift.from_gear)
+    model = ref.model
+    names = [v.name for v in model.states]
+    r_dyn = _quantity(d, "vehicle", "r_dyn").value
+    i_d = _quantity(d, "drivetrain", "i_D").value
+    omega_c = scenario.vehicle_speed / r_dyn
+    omega_out = i_d * omega_c
+    speeds = _gear_speeds(d, gear.name, omega_out)
+    x0 = np.zeros(compiled.n)
+    for i, v in enumerate(model.states):
+        if v.name.startswith("omega_") and v.name != "omega_C":
+            x0[i] = speeds[v.name.removeprefix("omega_")]
+    x0[names.index("omega_C")] = omega_c
+    closed = [e for e in gear.closed if e in compiled.elements]
+    unknowns = [names.index(f"z_{e}") for e in closed] + [names.index("phi")]
+    _sliding_bristles(d, x0, names, inputs, closed)
+    slip_rows = _slip_rows(d, ref, model, closed)
+
+    def residual(values: np.ndarray) -> np.ndarray:
+        x = x0.copy()
+        x[unknowns] = values
+        xdot = np.asarray(compiled.f(x, inputs(0.0, x)), dtype=float)[: compiled.n]
+        out = [row @ xdot for row in slip_rows]
+        phi_ddot = _phi_ddot(d, ref, model, xdot)
+        return np.array([*out, phi_ddot])
+
+    scale = np.array([1e-3] * len(closed) + [1e-2])
+    base = residual(np.zeros(len(unknowns)))
+    columns = [
+        (residual(scale * np.eye(len(unknowns))[k]) - base) / scale[k] for k in range(len(unknowns))
+    ]
+    solution = np.linalg.solve(np.column_stack(columns), -base)
+    x0[unknowns] = solution
+    return x0
+
+
+def _sliding_bristles(
+    d: GearboxDescription,
+    x0: np.ndarray,
+    names: Sequence[str],
+    inputs: _Inputs,
+    closed: Sequence[str],
+) -> None:
+    """Put the bristles of every slipping element at their steady state z_ss sgn(Δω) (2.68):
+    a slipping element starts in steady sliding, not with a relaxed bristle (which would
+    add σ1 Δω, a huge damping torque, at t = 0)."""
+    compiled = inputs.compiled
+    sigma0 = _quantity(d, "friction", "sigma0").value
+    u = inputs(0.0, x0)
+    ne = len(compiled.elements)
+    slips = compiled.slips(x0)
+    for k, e in enumerate(compiled.elements):
+        if e in closed:
+            continue
+        element = d.element(e)
+        assert element.n_disc is not None and element.r_m is not None
+        assert element.a_piston is not None
+        capacity = 2 * element.n_disc * element.r_m.value * u[1 + ne + k]
+        capacity = max(capacity * u[1 + k] * element.a_piston.value, T_SS_MIN)
+        x0[names.index(f"z_{e}")] = math.copysign(capacity / sigma0, slips[k])
+
+
+def _gear_speeds(d: GearboxDescription, gear: str, omega_out: float) -> dict[str, float]:
+    """Every shaft's speed in a gear at the given output speed (kinematics only)."""
+    from symbolic.drivetrain import drivetrain_parts
+
+    parts = drivetrain_parts(d, locked=tuple(d.gear(gear).closed), keep=(d.output_shaft,))
+    out = parts.speeds[0]
+    return {s.name: float(parts.body_speeds[s.name].subs(out, omega_out)) for s in d.shafts}
+
+
+def _slip_rows(
+    d: GearboxDescription, ref: ReferenceModel, model: Model, elements: Sequence[str]
+) -> list[np.ndarray]:
+    x = model.state_symbols
+    return [np.array([float(ref.slip[e].diff(s)) for s in x], dtype=float) for e in elements]
+
+
+def _phi_ddot(d: GearboxDescription, ref: ReferenceModel, model: Model, xdot: np.ndarray) -> float:
+    x = model.state_symbols
+    phi_dot = ref.model.rhs[[str(s) for s in x].index("phi")]
+    row = np.array([float(sp.diff(phi_dot, s)) for s in x], dtype=float)
+    return float(row @ xdot)
+
+
+# ----------------------------------------------------------------------------- simulation
+
+
+def simulate(
+    d: GearboxDescription,
+    scenario: Scenario | None = None,
+    progress: Progress | None = None,
+    rtol: float = 1e-9,
+    sample_time: float = 5e-4,
+    check_models: bool = True,
+    method: str = "Radau",
+) -> SimulationResult:
+    """Integrate the reference model through the scenario (thesis 3.1).
+
+    ``method`` is a stiff SciPy integrator with a Jacobian ("Radau" or "BDF"); the tests run
+    both and compare. ``sample_time`` is the spacing of the returned time series (the solver
+    chooses its own steps; the samples come from its dense output).
+    """
+    if method not in ("Radau", "BDF"):
+        raise ValueError(f"method must be 'Radau' or 'BDF', got {method!r}")
+    start = time.perf_counter()
+    scenario = scenario if scenario is not None else load_scenario(d)
+    report = progress or (lambda fraction, message: None)
+    elements = tuple(
+        e.name for e in d.shift_elements if float(np.max(scenario.pressure[e.name].value)) > 0
+    )
+    report(0.0, "deriving the reference model")
+    ref = reference_model(d, elements)
+    compiled = _Compiled(ref, d, elements)
+    t_oil = _quantity(d, "friction", "T_oil").value
+    inputs = _Inputs(scenario, elements, mu_map_of(d), t_oil, compiled)
+    x0 = quasi_static_state(d, ref, inputs, compiled)
+    n = compiled.n
+    names = tuple(v.name for v in ref.model.states)
+    atol = _absolute_tolerances(names, rtol, x0)
+
+    def fun(t: float, y: np.ndarray) -> np.ndarray:
+        return np.asarray(compiled.f(y[:n], inputs(t, y[:n])), dtype=float)
+
+    def jac(t: float, y: np.ndarray) -> np.ndarray:
+        out = np.zeros((len(y), len(y)))
+        out[:, :n] = np.asarray(compiled.jac(y[:n], inputs(t, y[:n])), dtype=float)
+        return out
+
+    y = np.concatenate([x0, np.zeros(len(ENERGY_TERMS))])
+    breakpoints = scenario.breakpoints()
+    segments = []
+    stats = {"nfev": 0.0, "njev": 0.0, "nlu": 0.0, "steps": 0.0}
+    report(0.0, f"integrating {len(breakpoints) - 1} segments with {method} (rtol {rtol:g})")
+    for t0, t1 in zip(breakpoints[:-1], breakpoints[1:], strict=True):
+        sol = solve_ivp(
+            fun,
+            (t0, t1),
+            y,
+            method=method,
+            jac=jac,
+            rtol=rtol,
+            atol=atol,
+            dense_output=True,
+        )
+        if not sol.success:
+            raise GearsymError(
+                scenario.file,
+                "scenario",
+                f"integration failed at t = {sol.t[-1]:.6g} s: {sol.message}",
+            )
+        stats["nfev"] += sol.nfev
+        stats["njev"] += sol.njev
+        stats["nlu"] += sol.nlu
+        stats["steps"] += len(sol.t) - 1
+        segments.append((t0, t1, sol.sol))
+        y = sol.y[:, -1]
+        report(t1 / scenario.t_end, f"t = {t1:.3f} s of {scenario.t_end:g} s")
+
+    def state_at(t: float) -> np.ndarray:
+        for t0, t1, dense in segments:
+            if t <= t1 or t1 == segments[-1][1]:
+                return np.asarray(dense(min(max(t, t0), t1)), dtype=float)
+        raise AssertionError("unreachable")
+
+    grid = np.unique(np.concatenate([np.arange(0.0, scenario.t_end, sample_time), breakpoints]))
+    states = np.array([state_at(t) for t in grid])
+    signals = _signals(d, grid, states, names, inputs, compiled, scenario)
+    audit = _audit(states, x0, compiled)
+    phases = detect_phases(d, scenario, grid, signals)
+    checks: tuple[ModelCheck, ...] = ()
+    if check_models:
+        report(1.0, "checking the reduced models phase by phase")
+        checks = check_reduced_models(d, scenario, phases, names, state_at, inputs, compiled)
+    stats["wall_time_s"] = time.perf_counter() - start
+    return SimulationResult(
+        t=grid,
+        signals=signals,
+        phases=phases,
+        audit=audit,
+        checks=checks,
+        scenario=scenario,
+        state_names=names,
+        stats=stats,
+        state_at=state_at,
+    )
+
+
+def _absolute_tolerances(names: Sequence[str], rtol: float, x0: np.ndarray) -> np.ndarray:
+    # Per-state scales: speeds ~ 100 rad/s, twist ~ 1e-2 rad, bristles ~ 1e-4 rad, works ~ 1e3 J.
+    scale = []
+    for name in names:
+        if name.startswith("z_"):
+            scale.append(1e-6)
+        elif name == "phi":
+            scale.append(1e-3)
+        else:
+            scale.append(1.0)
+    scale += [1.0] * len(ENERGY_TERMS)
+    return rtol * np.array(scale)
+
+
+def _signals(
+    d: GearboxDescription,
+    grid: np.ndarray,
+    states: np.ndarray,
+    names: Sequence[str],
+    inputs: _Inputs,
+    compiled: _Compiled,
+    scenario: Scenario,
+) -> dict[str, np.ndarray]:
+    n = compiled.n
+    rows: dict[str, list[float]] = {}
+
+    def put(key: str, value: float) -> None:
+        rows.setdefault(key, []).append(float(value))
+
+    index = {name: i for i, name in enumerate(names)}
+    for t, y in zip(grid, states, strict=True):
+        x = y[:n]
+        u = inputs(float(t), x)
+        xdot = np.asarray(compiled.f(x, u), dtype=float)
+        for s, w in zip(compiled.shaft_names, compiled.speeds(x), strict=True):
+            put(f"omega_{s}", w)
+        put("phi", x[index["phi"]])
+        put("omega_C", x[index["omega_C"]])
+        for name in names:
+            if name.startswith("omega_"):
+                put(f"d{name}", xdot[index[name]])
+        put("T_In", u[0])
+        put("T_engine", scenario.engine(float(t)))
+        put("T_e_machine", scenario.e_machine(float(t)))
+        torques = compiled.torques(x, u)
+        ne = len(compiled.elements)
+        for k, e in enumerate(compiled.elements):
+            short = element_short_name(d, e)
+            area = d.element(e).a_piston
+            assert area is not None
+            put(f"p_{e}", u[1 + k])
+            put(f"F_N{short}", u[1 + k] * area.value)
+            put(f"mu_{short}", u[1 + ne + k])
+            put(f"z_{e}", x[index[f"z_{e}"]])
+        torque_of = dict(zip(compiled.elements, torques, strict=True))
+        for e, slip in zip(compiled.all_slip_names, compiled.all_slips(x), strict=True):
+            put(f"slip_{e.name}", slip)
+            put(f"T_{e.name}", torque_of.get(e.name, 0.0))
+        t_ss = compiled.side_shaft(x)
+        put("T_ss", t_ss)
+        put("T_out", 2 * t_ss / _quantity(d, "drivetrain", "i_D").value)
+        put("T_res", compiled.road(x))
+        w_in = rows[f"omega_{d.input_shaft}"][-1]
+        w_out = rows[f"omega_{d.output_shaft}"][-1]
+        put("ratio", w_in / w_out if w_out != 0 else math.nan)
+        put("v_vehicle", x[index["omega_C"]] * _quantity(d, "vehicle", "r_dyn").value)
+        for k, term in enumerate(ENERGY_TERMS):
+            put(term, y[n + k])
+    return {k: np.array(v) for k, v in rows.items()}
+
+
+def _audit(states: np.ndarray, x0: np.ndarray, compiled: _Compiled) -> EnergyAudit:
+    n = compiled.n
+    end = states[-1]
+    e0 = np.asarray(compiled.energies(x0), dtype=float)
+    e1 = np.asarray(compiled.energies(end[:n]), dtype=float)
+    w_in, w_fric, w_damp, w_road = end[n:]
+    bristle = e1[2] - e0[2]
+    return EnergyAudit(
+        input_work=float(w_in),
+        kinetic_change=float(e1[0] - e0[0]),
+        spring_change=float(e1[1] - e0[1]),
+        bristle_change=float(bristle),
+        # Σ T_e Δω_e is what the shafts give to the elements; the bristles store part of it.
+        friction_dissipation=float(w_fric - bristle),
+        damper_dissipation=float(w_damp),
+        road_work=float(w_road),
+    )
+
+
+# ----------------------------------------------------------------------------- phases
+
+
+def detect_phases(
+    d: GearboxDescription,
+    scenario: Scenario,
+    t: np.ndarray,
+    signals: dict[str, np.ndarray],
+    torque_fraction: float = 0.05,
+    ratio_fraction: float = 0.02,
+    sync_fraction: float = 0.01,
+) -> tuple[Phase, ...]:
+    """The four phases of a power-on upshift from the simulated signals (thesis 3.1).
+
+    * torque phase starts when the on-coming element carries ``torque_fraction`` of the torque
+      it carries at the end;
+    * speed phase starts when the ratio ω_in/ω_out has moved ``ratio_fraction`` of the way from
+      the from-gear ratio to the to-gear ratio;
+    * the to-gear starts when the on-coming element's slip has fallen below ``sync_fraction``
+      of its slip at the start of the torque phase and stays there.
+    """
+    spec = scenario.shift
+    on, off = spec.on_coming, spec.off_going
+    t_on = np.abs(signals[f"T_{on}"])
+    slip_on = np.abs(signals[f"slip_{on}"])
+    ratio = signals["ratio"]
+    r_from = d.gear(spec.from_gear)
+    r_to = d.gear(spec.to_gear)
+    from symbolic.ratios import gear_ratio
+
+    ratio_from = float(gear_ratio(d, r_from).ratio)
+    ratio_to = float(gear_ratio(d, r_to).ratio)
+
+    def fail(reason: str) -> GearsymError:
+        return GearsymError(scenario.file, "scenario", f"shift {spec.name} not completed: {reason}")
+
+    final = t_on[-1]
+    if final <= 0:
+        raise fail(f"{on} carries no torque at the end")
+    i1 = _first(t_on > torque_fraction * final)
+    if i1 is None:
+        raise fail(f"{on} never takes over the load")
+    progress = (ratio_from - ratio) / (ratio_from - ratio_to)
+    i2 = _first(progress > ratio_fraction, i1)
+    if i2 is None:
+        raise fail(f"the ratio never leaves {ratio_from:.3f}")
+    reference_slip = slip_on[i1]
+    below = slip_on < sync_fraction * reference_slip
+    i3 = None
+    for i in range(i2, len(t)):
+        if below[i] and np.all(below[i:]):
+            i3 = i
+            break
+    if i3 is None:
+        raise fail(f"{on} does not synchronise before t_end = {scenario.t_end:g} s")
+    t1, t2, t3 = float(t[i1]), float(t[i2]), float(t[i3])
+    return (
+        Phase(
+            f"gear {spec.from_gear}",
+            float(t[0]),
+            t1,
+            f"until T_{on} exceeds {torque_fraction:.0%} of its final value",
+        ),
+        Phase(
+            "torque phase",
+            t1,
+            t2,
+            f"{on} takes over the load from {off}; the ratio has moved < {ratio_fraction:.0%}",
+        ),
+        Phase(
+            "speed phase",
+            t2,
+            t3,
+            f"ratio moves to gear {spec.to_gear}; ends when |slip_{on}| < {sync_fraction:.0%} "
+            "of its initial value",
+        ),
+        Phase(f"gear {spec.to_gear}", t3, float(t[-1]), f"{on} synchronised"),
+    )
+
+
+def _first(mask: np.ndarray, start: int = 0) -> int | None:
+    hits = np.flatnonzero(mask[start:])
+    return None if hits.size == 0 else int(start + hits[0])
+
+
+# ----------------------------------------------------------------------------- model checks
+
+
+def check_reduced_models(
+    d: GearboxDescription,
+    scenario: Scenario,
+    phases: Sequence[Phase],
+    names: Sequence[str],
+    state_at: Callable[[float], np.ndarray],
+    inputs: _Inputs,
+    compiled: _Compiled,
+) -> tuple[ModelCheck, ...]:
+    """Integrate each reduced model inside its phase from the reference state, with the
+    reference's input torque (and, for the shift model, the swapping elements' transmitted
+    torques), and compare the states they share."""
+    spec = scenario.shift
+    index = {name: i for i, name in enumerate(names)}
+    element_index = {e: k for k, e in enumerate(compiled.elements)}
+    n = compiled.n
+
+    def reference_torque(e: str) -> Callable[[float], float]:
+        def value(t: float) -> float:
+            x = state_at(t)[:n]
+            return float(compiled.torques(x, inputs(t, x))[element_index[e]])
+
+        return value
+
+    def speed_of(shaft: str) -> Callable[[np.ndarray], float]:
+        position = compiled.shaft_names.index(shaft)
+        return lambda y: float(compiled.speeds(y[:n])[position])
+
+    jobs: list[tuple[Model, Phase, list[Callable[[float], float]]]] = []
+    gear_from, torque_phase, speed_phase, gear_to = phases
+    for gear, phase in ((spec.from_gear, gear_from), (spec.to_gear, gear_to)):
+        model = drivetrain_model(
+            d,
+            f"gear_{gear}",
+            locked=tuple(d.gear(gear).closed),
+            torque_elements=(),
+            keep=(d.output_shaft,),
+        )
+        jobs.append((model, phase, [scenario.input_torque]))
+    shift = shift_model(d, spec.name)
+    merged = Phase("shift", torque_phase.t_start, speed_phase.t_end, "torque + speed phase")
+    jobs.append(
+        (
+            shift,
+            merged,
+            [
+                scenario.input_torque,
+                reference_torque(spec.off_going),
+                reference_torque(spec.on_coming),
+            ],
+        )
+    )
+    checks = []
+    for model, phase, u_funcs in jobs:
+        if phase.t_end - phase.t_start <= 0:
+            continue
+        params = model.parameter_defaults()
+        rhs = model.rhs.xreplace({k: sp.Float(v) for k, v in params.items()})
+        f = _lambdify([model.state_symbols, model.input_symbols], list(rhs))
+        readers: list[Callable[[np.ndarray], float]] = []
+        for v in model.states:
+            if v.name in ("phi", "omega_C"):
+                readers.append(lambda y, i=index[v.name]: float(y[i]))
+            else:
+                readers.append(speed_of(v.name.removeprefix("omega_")))
+        y_start = state_at(phase.t_start)
+        x0 = np.array([r(y_start) for r in readers])
+
+        def fun(t: float, x: np.ndarray, f: Any = f, u_funcs: Any = u_funcs) -> np.ndarray:
+            return np.asarray(f(x, [u(t) for u in u_funcs]), dtype=float)
+
+        times = np.linspace(phase.t_start, phase.t_end, 201)
+        breaks = [
+            phase.t_start,
+            *(b for b in scenario.breakpoints() if phase.t_start < b < phase.t_end),
+            phase.t_end,
+        ]
+        pieces = []
+        x = x0
+        for a, b in zip(breaks[:-1], breaks[1:], strict=True):
+            sol = solve_ivp(
+                fun, (a, b), x, method="Radau", rtol=1e-10, atol=1e-10, dense_output=True
+            )
+            pieces.append((a, b, sol.sol))
+            x = sol.y[:, -1]
+        reduced = np.array([next(s for a, b, s in pieces if a <= t <= b)(t) for t in times])
+        reference = np.array([[r(state_at(t)) for r in readers] for t in times])
+        errors = np.max(np.abs(reduced - reference), axis=0)
+        scales = np.maximum(np.max(np.abs(reference), axis=0), 1e-12)
+        checks.append(
+            ModelCheck(
+                model=model.name,
+                phase=phase.name,
+                t_start=phase.t_start,
+                t_end=phase.t_end,
+                max_abs_error={v.name: float(e) for v, e in zip(model.states, errors, strict=True)},
+                max_relative_error=float(np.max(errors / scales)),
+            )
+        )
+    return tuple(checks)
