@@ -250,7 +250,16 @@ def cmd_run(args: argparse.Namespace) -> int:
         f"B̃ {dyn.input_matrix.rows}×{dyn.input_matrix.cols}"
     )
     print()
-    return cmd_ratios(argparse.Namespace(config=args.config, json=False))
+    status = cmd_ratios(argparse.Namespace(config=args.config, json=False))
+    if args.config is None or args.scenario is not None:
+        from gearsym.cmd_dynamics import cmd_simulate
+
+        print()
+        simulate_args = argparse.Namespace(
+            config=args.config, scenario=args.scenario, out=args.out, no_plots=False, json=False
+        )
+        status = max(status, cmd_simulate(simulate_args))
+    return status
 
 
 # ----------------------------------------------------------------------------- parser
@@ -273,8 +282,14 @@ def build_parser() -> argparse.ArgumentParser:
             "config", nargs="?", help="gearbox description (TOML); default: the built-in gearbox"
         )
 
-    p = command("run", cmd_run, "Main job: derive the model and print the gear table.")
+    p = command(
+        "run",
+        cmd_run,
+        "Main job: derive the model, print the gear table, simulate the default shift.",
+    )
     config(p)
+    p.add_argument("--scenario", help="shift scenario (default: built-in 2-3, built-in gearbox)")
+    p.add_argument("--out", default="out/run", help="folder for the simulation results")
 
     p = command("ratios", cmd_ratios, "Derive every gear's ratio ω_in/ω_out (Table 2.1).")
     config(p)

@@ -75,9 +75,13 @@ def reference_model(d: GearboxDescription, elements: Sequence[str] | None = None
         mu = sp.Symbol(f"mu_{e.name}", positive=True)
         slip[e.name] = (speeds[e.a] if e.a is not None else 0) - speeds[e.b]
         assert e.r_m is not None and e.a_piston is not None and e.n_disc is not None
+        # Build the friction law on a plain slip symbol, then put the slip expression in
+        # without re-evaluation: SymPy's Max re-simplification on the long slip expressions
+        # is slow, and a substitution changes nothing it could simplify.
+        dw = sp.Symbol(f"dw_{e.name}", real=True)
         rate, t_cl = shift_element_sym(
             z,
-            slip[e.name],
+            dw,
             p * exact(e.a_piston.value),
             mu,
             friction["sigma0"],
@@ -86,7 +90,9 @@ def reference_model(d: GearboxDescription, elements: Sequence[str] | None = None
             exact(e.r_m.value),
             z_ba,
         )
-        rates[e.name], torque[e.name] = rate, t_cl
+        with sp.evaluate(False):
+            rates[e.name] = rate.xreplace({dw: slip[e.name]})
+            torque[e.name] = t_cl.xreplace({dw: slip[e.name]})
         z_vars.append(Variable(f"z_{e.name}", z, "rad", f"bristle deflection of {e.name} (2.66)"))
         p_vars.append(Variable(f"p_{e.name}", p, "Pa", f"apply pressure of {e.name}"))
         mu_vars.append(Variable(f"mu_{e.name}", mu, "1", f"friction coefficient of {e.name}"))
@@ -94,7 +100,8 @@ def reference_model(d: GearboxDescription, elements: Sequence[str] | None = None
     substitution = {
         parts.torque_symbols[e]: torque.get(e, sp.Integer(0)) for e in parts.torque_elements
     }
-    gearbox = parts.gearbox_rhs.subs(substitution)
+    with sp.evaluate(False):
+        gearbox = parts.gearbox_rhs.xreplace(substitution)
     wheel = (2 * parts.side_shaft_torque - parts.road_torque) / parts.wheel_inertia
     rhs = sp.Matrix([*gearbox, parts.phi_dot, wheel, *(rates[n] for n in chosen)])
 

@@ -24,6 +24,7 @@ Bad files raise :class:`GearsymError` naming the file, the key and the reason.
 
 from __future__ import annotations
 
+import bisect
 import math
 import tomllib
 from collections.abc import Callable
@@ -48,7 +49,24 @@ class Profile:
     value: np.ndarray
 
     def __call__(self, t: float) -> float:
-        return float(np.interp(t, self.time, self.value))
+        # Scalar bisection: np.interp's per-call overhead dominated the simulator's inputs.
+        times = self.time
+        if t <= times[0]:
+            return float(self.value[0])
+        if t >= times[-1]:
+            return float(self.value[-1])
+        k = bisect.bisect_right(self._times, t)
+        t0, t1 = self._times[k - 1], self._times[k]
+        v0, v1 = self._values[k - 1], self._values[k]
+        return v0 + (v1 - v0) * (t - t0) / (t1 - t0)
+
+    @property
+    def _times(self) -> list[float]:
+        return self.__dict__.setdefault("_time_list", [float(v) for v in self.time])
+
+    @property
+    def _values(self) -> list[float]:
+        return self.__dict__.setdefault("_value_list", [float(v) for v in self.value])
 
 
 @dataclass(frozen=True)

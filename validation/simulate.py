@@ -30,6 +30,7 @@ import numpy as np
 import sympy as sp
 from scipy.integrate import solve_ivp
 from scipy.interpolate import RectBivariateSpline
+from sympy.logic.boolalg import ITE
 
 from symbolic.codegen import _real_symbols, smart_jacobian
 from symbolic.description import GearboxDescription
@@ -191,7 +192,26 @@ def mu_map_of(d: GearboxDescription) -> MuMap:
 
 def _lambdify(args: Sequence[Any], expr: Any) -> Callable[..., Any]:
     # "math" keeps scalar calls cheap (Piecewise prints as a conditional expression).
-    return sp.lambdify(args, expr, modules=["math"], cse=True)
+    return sp.lambdify(args, _without_ite(expr), modules=["math"], cse=True)
+
+
+def _without_ite(expr: Any) -> Any:
+    """ITE(a, b, c) → (a ∧ b) ∨ (¬a ∧ c): the printer would rewrite each ITE into a Piecewise
+    and re-simplify it, which dominated the compile time; the logic is the same."""
+    if isinstance(expr, (list, tuple)):
+        return [_without_ite(e) for e in expr]
+    expr = sp.sympify(expr)
+    if not expr.has(ITE):
+        return expr
+    with sp.evaluate(False):
+        return expr.replace(
+            lambda e: isinstance(e, ITE),
+            lambda e: sp.Or(
+                sp.And(e.args[0], e.args[1], evaluate=False),
+                sp.And(sp.Not(e.args[0], evaluate=False), e.args[2], evaluate=False),
+                evaluate=False,
+            ),
+        )
 
 
 class _Compiled:
@@ -396,16 +416,18 @@ def simulate(
     d: GearboxDescription,
     scenario: Scenario | None = None,
     progress: Progress | None = None,
-    rtol: float = 1e-9,
+    rtol: float = 1e-8,
     sample_time: float = 5e-4,
     check_models: bool = True,
     method: str = "Radau",
+    analytic_jacobian: bool = True,
 ) -> SimulationResult:
     """Integrate the reference model through the scenario (thesis 3.1).
 
     ``method`` is a stiff SciPy integrator with a Jacobian ("Radau" or "BDF"); the tests run
     both and compare. ``sample_time`` is the spacing of the returned time series (the solver
-    chooses its own steps; the samples come from its dense output).
+    chooses its own steps; the samples come from its dense output). ``analytic_jacobian``
+    False lets SciPy difference the right-hand side instead (the benchmark's peer).
     """
     if method not in ("Radau", "BDF"):
         raise ValueError(f"method must be 'Radau' or 'BDF', got {method!r}")
@@ -444,7 +466,7 @@ def simulate(
             (t0, t1),
             y,
             method=method,
-            jac=jac,
+            jac=jac if analytic_jacobian else None,
             rtol=rtol,
             atol=atol,
             dense_output=True,
