@@ -251,6 +251,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     )
     print()
     status = cmd_ratios(argparse.Namespace(config=args.config, json=False))
+    from gearsym.cmd_observability import print_observability_summary
+
+    print()
+    print_observability_summary(d)  # verdict of (4.12) for the 2-3 shift
     if args.config is None or args.scenario is not None:
         from gearsym.cmd_dynamics import cmd_simulate
 
@@ -331,6 +335,10 @@ def build_parser() -> argparse.ArgumentParser:
     from gearsym.cmd_dynamics import add_parsers as add_dynamics_parsers
 
     add_dynamics_parsers(command, config)
+
+    from gearsym.cmd_analysis import register as add_analysis_parsers
+
+    add_analysis_parsers(command, config)
     return parser
 
 

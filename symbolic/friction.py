@@ -42,8 +42,14 @@ Regularisations of the shift element (2.67)-(2.69), needed by a simulator:
   it, ``T dw - d/dt(sigma0 z^2 / 2) = sigma0 |z| |dw| r + sigma1 dw^2 max(0, 1 - r) >= 0``: the
   element is passive with storage ``V = sigma0 z^2 / 2``.
 * At exactly ``dw = 0`` the bristle keeps its deflection (``dz/dt`` is proportional to ``dw``, as
-  in Dupont 2002); in a simulation the unbalanced bristle torque produces slip at once, and the
-  bristle then relaxes.
+  in Dupont 2002). Dupont's model assumes a constant normal force: when the capacity drops
+  below ``sigma0 |z|`` of a sticking element, (2.67) would keep transmitting ``sigma0 z`` at zero
+  slip for ever (an equilibrium of the literal equations, seen in the 2-3 reference simulation
+  when K38's pressure is lowered). The elastic term is therefore limited to the capacity,
+  ``sat(sigma0 z, |T_SS|)``: the unbalanced torque makes the element slip at once, and the
+  bristle relaxes. Passivity still holds: while over-deflected with ``sign z = sign dw`` the
+  dissipation is ``|T_SS| |dw| + sigma0 |z| |dw| (r - 1) >= 0``; with ``sign z != sign dw``
+  it is ``(sigma0 |z| - |T_SS|) |dw| + sigma1 dw^2 >= 0``.
 """
 
 from __future__ import annotations
@@ -266,7 +272,9 @@ def elastoplastic_sym(
     z_ss = f_ss / sigma0
     r = ep_alpha_sym(z, dw, z_ss, z_ba_ratio * z_ss) * sp.Abs(z) / z_ss
     zdot = dw * (1 - r)
-    return zdot, sigma0 * z + sigma1 * dw * sp.Max(0, 1 - r) + sigma2 * dw
+    # the bristle force never exceeds the capacity (see the module docstring)
+    elastic = sp.Piecewise((f_ss * sp.sign(z), sp.Abs(z) > z_ss), (sigma0 * z, True))
+    return zdot, elastic + sigma1 * dw * sp.Max(0, 1 - r) + sigma2 * dw
 
 
 def elastoplastic_num(
@@ -286,7 +294,7 @@ def elastoplastic_num(
     r = ep_alpha_num(z, dw, z_ss, z_ba_ratio * z_ss) * np.abs(z) / z_ss
     zdot = np.multiply(dw, 1.0 - r)
     force = (
-        np.multiply(sigma0, z)
+        np.clip(np.multiply(sigma0, z), -np.asarray(f_ss), np.asarray(f_ss))
         + np.multiply(sigma1, dw) * np.maximum(0.0, 1.0 - r)
         + np.multiply(sigma2, dw)
     )

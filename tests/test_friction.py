@@ -121,12 +121,14 @@ def test_dissipation_nonnegative_pointwise():
 
 
 def test_overdeflected_bristle_relaxes_without_driving_the_shafts():
-    # Hand derivation at z = 2 z_ss, dw > 0: alpha = 1, r = 2, so dz/dt = dw (1 - 2) = -dw and
-    # the clipped damping vanishes: T = sigma0 z = 2 T_SS.
+    # Hand derivation at z = 2 z_ss, dw > 0: alpha = 1, r = 2, so dz/dt = dw (1 - 2) = -dw, the
+    # clipped damping vanishes and the elastic term is limited to the capacity: T = T_SS.
     dw = 10.0
     zdot, torque = element(2 * Z_SS, dw)
     assert zdot == pytest.approx(-dw)
-    assert torque == pytest.approx(2 * T_SS)
+    assert torque == pytest.approx(T_SS)
+    # sticking (dw = 0) with the capacity dropped to half the bristle force: T_SS, not 2 T_SS
+    assert element(2 * Z_SS, 0.0)[1] == pytest.approx(T_SS)
     # The literal (2.67), T = sigma0 z + sigma1 dz/dt, would generate energy here:
     # T dw - sigma0 z dz/dt = 4 T_SS dw - sigma1 dw^2 < 0 for dw > 4 T_SS / sigma1 = 15.4 rad/s.
     dw = 20.0

@@ -615,11 +615,13 @@ def detect_phases(
     torque_fraction: float = 0.05,
     ratio_fraction: float = 0.02,
     sync_fraction: float = 0.01,
+    capacity_fraction: float = 0.98,
 ) -> tuple[Phase, ...]:
     """The four phases of a power-on upshift from the simulated signals (thesis 3.1).
 
     * torque phase starts when the on-coming element carries ``torque_fraction`` of the torque
-      it carries at the end;
+      it carries at the end, or earlier when the off-going element starts to slide (its torque
+      reaches ``capacity_fraction`` of its capacity 2 N_disc r_m μ F_N);
     * speed phase starts when the ratio ω_in/ω_out has moved ``ratio_fraction`` of the way from
       the from-gear ratio to the to-gear ratio;
     * the to-gear starts when the on-coming element's slip has fallen below ``sync_fraction``
@@ -643,9 +645,17 @@ def detect_phases(
     final = t_on[-1]
     if final <= 0:
         raise fail(f"{on} carries no torque at the end")
-    i1 = _first(t_on > torque_fraction * final)
-    if i1 is None:
+    takes_load = _first(t_on > torque_fraction * final)
+    if takes_load is None:
         raise fail(f"{on} never takes over the load")
+    # the off-going element brought to slip also ends the from-gear (3.1): it slides once its
+    # torque reaches the capacity 2 N_disc r_m μ F_N (2.69)
+    element, short = d.element(off), element_short_name(d, off)
+    assert element.n_disc is not None and element.r_m is not None
+    force = signals[f"F_N{short}"]
+    capacity = 2 * element.n_disc * element.r_m.value * signals[f"mu_{short}"] * force
+    slides = _first((force > 0) & (np.abs(signals[f"T_{off}"]) >= capacity_fraction * capacity))
+    i1 = takes_load if slides is None else min(takes_load, slides)
     progress = (ratio_from - ratio) / (ratio_from - ratio_to)
     i2 = _first(progress > ratio_fraction, i1)
     if i2 is None:
@@ -665,7 +675,7 @@ def detect_phases(
             f"gear {spec.from_gear}",
             float(t[0]),
             t1,
-            f"until T_{on} exceeds {torque_fraction:.0%} of its final value",
+            f"until {off} slides or T_{on} exceeds {torque_fraction:.0%} of its final value",
         ),
         Phase(
             "torque phase",

@@ -1,0 +1,316 @@
+"""``gearsym sensitivity`` and ``gearsym fim``: sensitivities and Fisher information of a shift
+(thesis 3.2–3.3), and :func:`print_fim_summary` for ``make run``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from symbolic.errors import GearsymError
+
+
+def _load(path: str | None) -> Any:
+    from symbolic.description import load_description
+
+    return load_description(path)
+
+
+def _say(message: str) -> None:
+    print(f"  … {message}", file=sys.stderr, flush=True)
+
+
+def _parameter_list(values: Sequence[str] | None) -> list[str] | None:
+    """``--params m_veh,k_ss zeta`` → ['m_veh', 'k_ss', 'zeta'] (commas or spaces)."""
+    if not values:
+        return None
+    return [n for v in values for n in v.split(",") if n]
+
+
+def _overrides(d: Any, items: Sequence[str] | None) -> dict[str, float]:
+    result = {}
+    for item in items or ():
+        name, sep, value = item.partition("=")
+        try:
+            if not sep:
+                raise ValueError
+            result[name.strip()] = float(value)
+        except ValueError:
+            raise GearsymError(d.file, "set", f"expected NAME=VALUE, got {item!r}") from None
+    return result
+
+
+def _prepare(args: argparse.Namespace, wheel: bool) -> tuple[Any, list[str] | None, dict, Any]:
+    """Load the description and check the parameter names before the (slow) simulation."""
+    from symbolic.sensitivity import select_parameters
+    from validation.sensitivity_run import driven_shift_model, parameter_values
+
+    d = _load(args.config)
+    names = _parameter_list(args.params)
+    scenario = None
+    if args.scenario is not None:
+        from validation.scenario import load_scenario
+
+        scenario = load_scenario(d, args.scenario)
+    shift = scenario.shift.name if scenario is not None else "2-3"
+    driven = driven_shift_model(d, shift, wheel)
+    select_parameters(driven.model, names, file=d.file)
+    overrides = _overrides(d, args.set)
+    parameter_values(driven.model, overrides)
+    return d, names, overrides, scenario
+
+
+def _reference(d: Any, scenario: Any) -> Any:
+    from validation.sensitivity_run import reference_data
+
+    start = time.perf_counter()
+    _say("simulating the reference shift (validation.simulate)")
+    data = reference_data(d, scenario)
+    _say(f"reference simulated in {time.perf_counter() - start:.1f} s")
+    return data
+
+
+# ----------------------------------------------------------------------------- sensitivity
+
+
+def cmd_sensitivity(args: argparse.Namespace) -> int:
+    """Sensitivities along the reference shift: PNG per parameter (Figs. 3.4–3.8) and a CSV."""
+    import numpy as np
+
+    from validation.sensitivity_run import (
+        phase_of,
+        plot_sensitivities,
+        run_sensitivities,
+        write_csv,
+    )
+
+    d, names, overrides, scenario = _prepare(args, False)
+    data = _reference(d, scenario)
+    run = run_sensitivities(
+        d,
+        names,
+        data=data,
+        overrides=overrides,
+        mode=args.sliding,
+        initial=args.initial,
+        progress=_say,
+    )
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [write_csv(run, out / "sensitivities.csv")]
+    if not args.no_plots:
+        _say("plotting")
+        paths += plot_sensitivities(run, out)
+    tr = run.trajectory
+    norm = run.normalised
+    phases = [p.name for p in run.phases]
+    where = np.array([phase_of(run.phases, t) for t in tr.t])
+    peaks = {
+        p: {
+            phase: {
+                x: float(np.max(np.abs(norm[where == phase, i, j]), initial=0.0))
+                for i, x in enumerate(tr.state_names)
+            }
+            for phase in phases
+        }
+        for j, p in enumerate(tr.parameter_names)
+    }
+    if args.json:
+        json.dump(
+            {
+                "parameters": list(tr.parameter_names),
+                "nominal": dict(zip(tr.parameter_names, map(float, run.scales), strict=True)),
+                "nominal_states": dict(
+                    zip(tr.state_names, map(float, run.nominal_states), strict=True)
+                ),
+                "max_abs_normalised_sensitivity": peaks,
+                "drift": run.drift(),
+                "sliding": args.sliding,
+                "timings_s": run.timings,
+                "files": [str(p) for p in paths],
+            },
+            sys.stdout,
+            indent=2,
+        )
+        sys.stdout.write("\n")
+        return 0
+    print(
+        f"Sensitivities of the {data.shift} shift model driven by the reference "
+        f"(3.2–3.7; sliding {args.sliding}, S(0) {args.initial}); "
+        f"derived in {run.timings['derive_s']:.2f} s, integrated in "
+        f"{run.timings['integrate_s']:.2f} s"
+    )
+    drift = ", ".join(f"{k} {v:.2%}" for k, v in run.drift().items())
+    print(f"  open-loop drift from the reference (max |Δx|/x0): {drift}")
+    print("  max |S_N| (3.3) per phase; states " + ", ".join(tr.state_names))
+    width = 6 * len(tr.state_names) - 1
+    print(f"    {'parameter':<10} {'p0':>9}  " + "  ".join(f"{ph:>{width}}" for ph in phases))
+    for j, p in enumerate(tr.parameter_names):
+        cells = [" ".join(f"{peaks[p][ph][x]:5.0e}" for x in tr.state_names) for ph in phases]
+        print(f"    {p:<10} {run.scales[j]:>9.4g}  " + "  ".join(f"{c:>{width}}" for c in cells))
+    print(f"  wrote {len(paths)} files to {out}: {', '.join(p.name for p in paths)}")
+    return 0
+
+
+# ----------------------------------------------------------------------------- fim
+
+
+def cmd_fim(args: argparse.Namespace) -> int:
+    """Fisher information per phase and over the shift (3.16–3.32)."""
+    from validation.fisher import fim_study, format_text, plot_scatter, study_json
+
+    d, names, overrides, scenario = _prepare(args, args.with_wheel_acceleration)
+    data = _reference(d, scenario)
+    study = fim_study(
+        d,
+        names,
+        data=data,
+        with_wheel_acceleration=args.with_wheel_acceleration,
+        sample_time=args.sample_time,
+        speed_error=args.speed_error,
+        acceleration_error=args.acceleration_error,
+        gamma_max=args.gamma_max,
+        mode=args.sliding,
+        restart=args.restart,
+        overrides=overrides,
+        progress=_say,
+    )
+    paths: list[Path] = []
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        report = out / "fim.json"
+        report.write_text(json.dumps(study_json(study), indent=2) + "\n", encoding="utf-8")
+        (out / "fim.txt").write_text(format_text(study) + "\n", encoding="utf-8")
+        paths = [report, out / "fim.txt", *plot_scatter(study, out)]
+    if args.json:
+        data_out = study_json(study)
+        data_out["files"] = [str(p) for p in paths]
+        json.dump(data_out, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return 0
+    print(format_text(study))
+    if paths:
+        print(f"\n  wrote {len(paths)} files to {args.out}")
+    return 0
+
+
+def print_fim_summary(d: Any, result: Any = None) -> None:
+    """A few lines for ``make run``: per phase, the parameters of the thesis set that stay
+    estimable after the elimination (3.3), from the speeds alone and with ω̇_C (3.32).
+
+    ``result`` is a :class:`validation.simulate.SimulationResult` of the default shift (it is
+    simulated when omitted).
+    """
+    from validation.fisher import GAMMA_MAX, SAMPLE_TIME, fim_study, summary_lines
+    from validation.sensitivity_run import reference_data, reference_from_result
+
+    start = time.perf_counter()
+    data = reference_from_result(result) if result is not None else reference_data(d)
+    study = fim_study(d, data=data, with_wheel_acceleration=True)
+    print(
+        f"Fisher information (3.25) of m_veh, k_ss, d_ss, mu_38, zeta per phase: estimable "
+        f"after elimination (γ ≤ {GAMMA_MAX:g}, samples every {SAMPLE_TIME * 1e3:g} ms; "
+        f"{time.perf_counter() - start:.1f} s)"
+    )
+    for line in summary_lines(study):
+        print(f"  {line}")
+
+
+# ----------------------------------------------------------------------------- parser
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    from symbolic.sensitivity import DEFAULT_PARAMETERS
+    from validation.sensitivity_run import SLIDING_MODES
+
+    p.add_argument(
+        "--params",
+        nargs="+",
+        metavar="NAME",
+        help=f"parameters, comma or space separated (default: {','.join(DEFAULT_PARAMETERS)})",
+    )
+    p.add_argument("--scenario", help="scenario TOML (default: the built-in 2-3 upshift)")
+    p.add_argument(
+        "--sliding",
+        choices=SLIDING_MODES,
+        default="detected",
+        help="when μ acts on an element's torque: 'detected' from the record (|T| at the "
+        "friction capacity), or 'phases' as the thesis assumes (torque and speed phase)",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="NAME=VALUE",
+        help="evaluate at another parameter value (repeatable), e.g. --set zeta=0.03",
+    )
+
+
+def register(
+    command: Callable[..., argparse.ArgumentParser],
+    config: Callable[[argparse.ArgumentParser], None],
+) -> None:
+    """Register ``sensitivity`` and ``fim`` with the main parser."""
+    from validation.fisher import ACCELERATION_ERROR, GAMMA_MAX, SAMPLE_TIME, SPEED_ERROR
+
+    p = command(
+        "sensitivity",
+        cmd_sensitivity,
+        "Parameter sensitivities (3.2-3.7) of the shift model along the reference shift: "
+        "sensitivities.csv and one PNG per parameter (Figures 3.4-3.8).",
+    )
+    config(p)
+    _common(p)
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument(
+        "--initial",
+        choices=("stationary", "zero"),
+        default="stationary",
+        help="S(0): consistent with the quasi-static start (phi solves phi''=0), or zero",
+    )
+    p.add_argument("--no-plots", action="store_true", help="CSV only")
+    p.add_argument("--json", action="store_true", help="machine-readable summary")
+
+    p = command(
+        "fim",
+        cmd_fim,
+        "Fisher information per shift phase (3.16-3.32): Cramér-Rao bounds, normalised "
+        "scatter, eigen-analysis and parameter elimination.",
+    )
+    config(p)
+    _common(p)
+    p.add_argument(
+        "--with-wheel-acceleration",
+        action="store_true",
+        help="also measure the wheel acceleration (3.32), at --acceleration-error",
+    )
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.add_argument("--out", help="folder for fim.json, fim.txt and bar charts (Figs. 3.9-3.14)")
+    p.add_argument("--sample-time", type=float, default=SAMPLE_TIME, help="measurement period in s")
+    p.add_argument(
+        "--speed-error",
+        type=float,
+        default=SPEED_ERROR,
+        help="relative error r of the measured speeds (3.26)",
+    )
+    p.add_argument(
+        "--acceleration-error",
+        type=float,
+        default=ACCELERATION_ERROR,
+        help="relative error of the wheel acceleration (3.32)",
+    )
+    p.add_argument(
+        "--gamma-max", type=float, default=GAMMA_MAX, help="limit of the scatter γ (3.27)"
+    )
+    p.add_argument(
+        "--restart",
+        action="store_true",
+        help="restart the sensitivities at every phase (information of the phase alone)",
+    )
+
+
+__all__ = ["cmd_fim", "cmd_sensitivity", "print_fim_summary", "register"]
