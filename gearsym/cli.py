@@ -256,13 +256,16 @@ def cmd_run(args: argparse.Namespace) -> int:
     print()
     print_observability_summary(d)  # verdict of (4.12) for the 2-3 shift
     if args.config is None or args.scenario is not None:
-        from gearsym.cmd_dynamics import cmd_simulate
+        from gearsym.cmd_analysis import print_fim_summary
+        from gearsym.cmd_dynamics import simulate_and_write
+        from validation.report import format_summary
 
         print()
-        simulate_args = argparse.Namespace(
-            config=args.config, scenario=args.scenario, out=args.out, no_plots=False, json=False
-        )
-        status = max(status, cmd_simulate(simulate_args))
+        result, paths = simulate_and_write(d, args.scenario, args.out)
+        print(format_summary(result))
+        print(f"  wrote {', '.join(p.name for p in paths)} to {args.out}")
+        print()
+        print_fim_summary(d, result)
     return status
 
 

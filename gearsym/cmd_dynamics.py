@@ -132,20 +132,29 @@ class ProgressBar:
             sys.stderr.flush()
 
 
-def cmd_simulate(args: argparse.Namespace) -> int:
-    """Simulate the scenario's shift with the reference model and write the results."""
-    from validation.report import format_summary, summary, write_outputs
+def simulate_and_write(
+    d: Any, scenario_path: str | None, out: str, plots: bool = True
+) -> tuple[Any, list[Any]]:
+    """Simulate a scenario with a progress display and write the results into ``out``."""
+    from validation.report import write_outputs
     from validation.scenario import load_scenario
     from validation.simulate import simulate
 
-    d = _load(args.config)
-    scenario = load_scenario(d, args.scenario)
+    scenario = load_scenario(d, scenario_path)
     bar = ProgressBar("simulate")
     try:
         result = simulate(d, scenario, progress=bar)
     finally:
         bar.done()
-    paths = write_outputs(d, result, args.out, plots=not args.no_plots)
+    return result, write_outputs(d, result, out, plots=plots)
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    """Simulate the scenario's shift with the reference model and write the results."""
+    from validation.report import format_summary, summary
+
+    d = _load(args.config)
+    result, paths = simulate_and_write(d, args.scenario, args.out, plots=not args.no_plots)
     if args.json:
         json.dump({**summary(result), "files": [str(p) for p in paths]}, sys.stdout, indent=2)
         sys.stdout.write("\n")
