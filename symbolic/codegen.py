@@ -20,6 +20,11 @@ Conventions of the emitted code (also written into the generated header):
 * ``gearsym_real`` is ``double``, or ``float`` when compiled with ``-DGEARSYM_SINGLE_PRECISION``;
   literals go through ``GEARSYM_LIT`` and math calls through ``GEARSYM_<FN>`` macros so that the
   float build has ``f`` literals and ``sinf``-style calls and never promotes to double;
+* the pointer parameters of the expression functions (rhs, outputs, Jacobians) are ``restrict``
+  in their definitions (outputs never alias inputs there), so the compiler keeps inputs in
+  registers across the stores; the header declarations omit it (the function type is the same);
+* rationals are exact constant quotients when numerator and denominator are exact in float
+  (at most 2**24), else 21-digit decimals (never a float literal out of range);
 * Jacobians are taken with model symbols treated as real, and the Dirac deltas that appear when
   differentiating ``sign``/``Heaviside`` are dropped: the emitted Jacobian is the derivative almost
   everywhere, which is what a Newton step or an EKF can use.
@@ -74,6 +79,10 @@ TEMPLATE_DIR = Path(__file__).resolve().parents[1] / "templates"
 #: ``None`` 303 operations in 0.12 s, ``"basic"`` 327 operations in 0.27 s ("basic" saved 6 on the
 #: pendulum but cost 30 on the friction model). Hence no optimizations.
 CSE_OPTIMIZATIONS: str | None = None
+
+#: Rationals whose numerator and denominator are at most this (2**24, the largest range of
+#: integers exact in float) print as an exact constant quotient; others as a decimal.
+EXACT_FLOAT_INTEGER = 2**24
 
 #: Integer powers up to this magnitude are printed as products (``x*x*x``), larger ones as pow().
 MAX_INLINE_POWER = 8
@@ -752,7 +761,7 @@ class _SharedPrinting:
 
     def _coefficient(self, coeff: sp.Number) -> str:
         if coeff.is_Rational and coeff.q != 1:
-            return "(" + self._number(coeff.p) + "/" + self._number(coeff.q) + ")"
+            return self._print_Rational(coeff)
         return self._number(float(coeff))
 
     def _print_Integer(self, expr: sp.Integer) -> str:
@@ -763,8 +772,14 @@ class _SharedPrinting:
     def _print_Rational(self, expr: sp.Rational) -> str:
         if expr.q == 1:
             return self._print_Integer(sp.Integer(expr.p))
-        # Exact: both integers are exact literals and the division is folded at compile time.
-        text = "(" + self._number(abs(expr.p)) + "/" + self._number(expr.q) + ")"
+        if max(abs(expr.p), expr.q) <= EXACT_FLOAT_INTEGER:
+            # Exact: both integers are exact literals (in float too) and the division is folded
+            # at compile time into the correctly rounded quotient.
+            text = "(" + self._number(abs(expr.p)) + "/" + self._number(expr.q) + ")"
+        else:
+            # Larger integers would be rounded (or overflow float) as literals: print the
+            # quotient itself with 21 significant digits, correctly rounded in float and double.
+            text = self._decimal(str(sp.Float(abs(expr), 21)))
         return ("-" if expr < 0 else "") + text
 
     _print_Half = _print_Rational

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from symbolic.description import load_description
+from symbolic.description import default_config_text, load_description
 from symbolic.drivetrain import power_on_slip_signs, shift_model, shift_spec
 from validation.scenario import default_scenario_path, load_scenario
 from validation.simulate import simulate
@@ -134,7 +134,27 @@ def test_reduced_models_follow_the_reference_inside_their_phase(result):
     assert set(checks) == {"gear_2", "gear_3", "shift_2_3"}
     assert checks["gear_2"].max_relative_error < 1e-3
     assert checks["shift_2_3"].max_relative_error < 2e-2
-    assert checks["gear_3"].max_relative_error < 3e-2
+    assert checks["gear_3"].max_relative_error < 1.5e-2
+
+
+def test_reduced_model_differences_are_the_bristle_compliance(tmp_path, result):
+    """Ten times the bristle stiffness σ0 (σ1 by √10, the same damping ratio): the reduced
+    models' differences from the reference shrink about tenfold, so they are the compliance of
+    the closed elements, not an error of the reduction."""
+    text = default_config_text()
+    for old, new in (
+        ("sigma0 = { value = 2.0e5,", "sigma0 = { value = 2.0e6,"),
+        ("sigma1 = { value = 150.0,", "sigma1 = { value = 474.3,"),
+    ):
+        assert old in text, old
+        text = text.replace(old, new)
+    path = tmp_path / "stiff.toml"
+    path.write_text(text)
+    stiff = simulate(load_description(path))
+    soft = {c.model: c.max_relative_error for c in result.checks}
+    for c in stiff.checks:
+        if c.model != "gear_2":  # gear 2 is already at the integration tolerance
+            assert c.max_relative_error < soft[c.model] / 5, (c.model, soft[c.model])
 
 
 # ----------------------------------------------------------------------------- command line

@@ -316,7 +316,12 @@ def load_casadi_module(path: Path) -> ModuleType:
         raise ImportError(path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
-    spec.loader.exec_module(module)
+    # No __pycache__ next to the emitted file: generated/ must hold exactly what was generated.
+    saved, sys.dont_write_bytecode = sys.dont_write_bytecode, True
+    try:
+        spec.loader.exec_module(module)
+    finally:
+        sys.dont_write_bytecode = saved
     return module
 
 
@@ -462,6 +467,9 @@ class ComparisonReport:
     max_error: dict[str, float] = field(default_factory=dict)
     worst_point: dict[str, int] = field(default_factory=dict)
     extra: dict[str, float] = field(default_factory=dict)
+    #: Optional second metric of some functions, allowing for their conditioning (filled by
+    #: :func:`validation.generated_check.conditioned_error`); not part of :meth:`worst`.
+    conditioned: dict[str, float] = field(default_factory=dict)
 
     def worst(self) -> float:
         return max([*self.max_error.values(), *self.extra.values()], default=0.0)
@@ -472,7 +480,10 @@ class ComparisonReport:
     def __str__(self) -> str:
         rows = [f"{self.target}: {self.n_points} points, floor {self.floor:g}"]
         for name, err in {**self.max_error, **self.extra}.items():
-            rows.append(f"  {name:<10} {err:.3e}")
+            more = (
+                f" (conditioned {self.conditioned[name]:.3e})" if name in self.conditioned else ""
+            )
+            rows.append(f"  {name:<10} {err:.3e}{more}")
         return "\n".join(rows)
 
 

@@ -175,9 +175,7 @@ def format_summary(result: SimulationResult) -> str:
         ("road work", a.road_work),
     ):
         lines.append(f"    {label:<30} {value:14.6f}")
-    lines.append(
-        f"    {'residual':<30} {a.residual:14.3e}  (relative {a.relative_residual:.2e})"
-    )
+    lines.append(f"    {'residual':<30} {a.residual:14.3e}  (relative {a.relative_residual:.2e})")
     if result.checks:
         lines.append("  reduced models against the reference, inside their phase:")
         for c in result.checks:

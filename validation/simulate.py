@@ -732,7 +732,18 @@ def check_reduced_models(
 
     jobs: list[tuple[Model, Phase, list[Callable[[float], float]]]] = []
     gear_from, torque_phase, speed_phase, gear_to = phases
-    for gear, phase in ((spec.from_gear, gear_from), (spec.to_gear, gear_to)):
+    # The rigid to-gear model is valid once the on-coming element has stuck, not merely
+    # synchronised to 1 %: start its check at the first sample where the slip is below
+    # 1e-4 of the initial one (about 0.02 rad/s here).
+    on_index = element_index[spec.on_coming]
+    slip0 = abs(compiled.slips(state_at(0.0)[:n])[on_index])
+    stuck = gear_to.t_start
+    for t in np.arange(gear_to.t_start, gear_to.t_end, 5e-4):
+        if abs(compiled.slips(state_at(float(t))[:n])[on_index]) < 1e-4 * slip0:
+            stuck = float(t)
+            break
+    locked_to = Phase(gear_to.name, stuck, gear_to.t_end, f"{spec.on_coming} stuck")
+    for gear, phase in ((spec.from_gear, gear_from), (spec.to_gear, locked_to)):
         model = drivetrain_model(
             d,
             f"gear_{gear}",

@@ -1,0 +1,108 @@
+"""Object size of the emitted C on a Cortex-M4F, against CasADi's generated C.
+
+Every emitted source of the built-in gearbox is cross-compiled as a TCU team would
+(``arm-none-eabi-gcc -mcpu=cortex-m4 -mfpu=fpv4-sp-d16 -mfloat-abi=hard -mthumb
+-DGEARSYM_SINGLE_PRECISION -O2``, plus ``-ffunction-sections`` so that ``arm-none-eabi-size -A``
+reports every function). Reported: the code of each model's nine functions and of the whole set.
+
+Peer, same flags and the same compiler in the same run: ``casadi.CodeGenerator`` C (with
+``casadi_real`` float) of the same five expression functions (rhs, outputs, jac_x, jac_u, jac_p)
+of the emitted CasADi module. Compared: the code that evaluates them (gearsym: the five functions
+and their helpers; CasADi: its evaluation functions, wrappers and helpers, without the API
+boilerplate (name, sparsity, work-size queries) and sparsity tables it also emits). Target:
+gearsym no larger for every model.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+from codegen_peers import EXPR_FUNCTIONS, casadi_c, casadi_module, run, write_tree
+
+FLAGS = (
+    "-mcpu=cortex-m4",
+    "-mfpu=fpv4-sp-d16",
+    "-mfloat-abi=hard",
+    "-mthumb",
+    "-DGEARSYM_SINGLE_PRECISION",
+    "-O2",
+    "-ffunction-sections",
+    "-fdata-sections",
+)
+_BOILERPLATE = re.compile(
+    r"_(checkout|release|incref|decref|n_in|n_out|default_in|name_in|name_out|sparsity_in|"
+    r"sparsity_out|work|work_bytes|casadi_version|casadi_int_size|casadi_real_size)$"
+)
+
+
+def sections(obj: Path) -> dict[str, int]:
+    """Section name -> size of an object (``arm-none-eabi-size -A``)."""
+    result = {}
+    for line in run(["arm-none-eabi-size", "-A", str(obj)]).splitlines()[2:]:
+        parts = line.split()
+        if len(parts) == 3 and parts[1].isdigit():
+            result[parts[0]] = int(parts[1])
+    return result
+
+
+def compile_m4(source: Path, include: Path) -> dict[str, int]:
+    obj = source.with_suffix(".m4.o")
+    run(["arm-none-eabi-gcc", *FLAGS, "-I", str(include), "-c", str(source), "-o", str(obj)])
+    return sections(obj)
+
+
+def code(secs: dict[str, int]) -> int:
+    return sum(v for k, v in secs.items() if k.startswith(".text"))
+
+
+def main() -> int:
+    if shutil.which("arm-none-eabi-gcc") is None:
+        print("arm-none-eabi-gcc is not installed (apt-get install gcc-arm-none-eabi)")
+        return 1
+    ok = True
+    print(f"Cortex-M4F object code, bytes of .text (arm-none-eabi-gcc {' '.join(FLAGS[:6])})")
+    with tempfile.TemporaryDirectory(prefix="gearsym-bench-") as tmp:
+        out = Path(tmp)
+        models = write_tree(out)
+        c_dir = out / "c"
+        total = 0
+        for source in sorted(c_dir.glob("*.c")):
+            if source.name == "main.c":
+                continue
+            secs = compile_m4(source, c_dir)
+            total += code(secs)
+            if source.stem == "gearsym_mu_map":
+                rodata = sum(v for k, v in secs.items() if k.startswith(".rodata"))
+                print(f"  {'mu_map':<14} all {code(secs):6d} (+ {rodata} bytes of tables)")
+                continue
+            name = source.stem.removeprefix("gearsym_")
+            prefix = f".text.gearsym_{name}_"
+            ours = sum(
+                v
+                for k, v in secs.items()
+                if k.startswith(prefix)
+                and k[len(prefix) :] in (*EXPR_FUNCTIONS, "sign", "heaviside")
+            )
+            module = casadi_module(out, name)
+            peer_source = casadi_c(module, EXPR_FUNCTIONS, out / "peer", f"cas_{name}", "float")
+            peer = compile_m4(peer_source, peer_source.parent)
+            theirs = sum(
+                v for k, v in peer.items() if k.startswith(".text.") and not _BOILERPLATE.search(k)
+            )
+            met = ours <= theirs
+            ok &= met
+            print(
+                f"  {name:<14} all {code(secs):6d} | 5 expression functions: gearsym {ours:6d}, "
+                f"CasADi {theirs:6d} ({code(peer):6d} with its API): {theirs / ours:4.2f}x | "
+                f"target no larger: {'met' if met else 'MISSED'}"
+            )
+        print(f"  all {len(models)} models and the mu map: {total} bytes of code")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,513 @@
+"""What ``gearsym generate`` emits for one gearbox, as a pure function: description in, files out.
+
+:func:`generate_tree` returns ``{relative path: text}`` for
+
+* ``c/gearsym_<model>.{h,c}`` and ``python/gearsym_<model>_casadi.py`` for every model of
+  :func:`gearbox_models`: the full model (2.53), every adjacent shift model (2.55–2.58) with the
+  element torques as inputs (``shift_<a>_<b>``) and, when the description has friction data, with
+  the normal forces as inputs and μ as parameters (``shift_<a>_<b>_mu``, 2.69), and the
+  elasto-plastic shift-element friction model (``shift_element``, 2.66–2.70);
+* ``c/gearsym_mu_map.{h,c}`` and ``python/gearsym_mu_map_casadi.py``: the μ(p_N, T_oil, |Δω|)
+  map of the description, trilinear and clamped like :class:`symbolic.friction.MuMap`;
+* ``c/main.c``: an example a TCU engineer compiles alone (build line in its header comment);
+* ``README.md`` (what is where, and the build line) and ``MANIFEST`` (SHA-256 of every file;
+  its first line marks a directory that ``gearsym generate`` may replace).
+
+Nothing in the output depends on the time, the machine, absolute paths or ``PYTHONHASHSEED``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import sympy as sp
+
+from symbolic.codegen import (
+    Bounds,
+    _comment_text,
+    _float_repr,
+    build_function_table,
+    emit_all,
+    file_names,
+    render,
+)
+from symbolic.description import GearboxDescription, Quantity
+from symbolic.drivetrain import (
+    ShiftSpec,
+    adjacent_shifts,
+    element_short_name,
+    full_model,
+    power_on_slip_signs,
+    shift_model,
+)
+from symbolic.errors import GearsymError
+from symbolic.friction import DEFAULT_MU_MAP, T_SS_MIN, MuMap, shift_element_sym
+from symbolic.model import Model, Variable
+
+__all__ = [
+    "MANIFEST_MARKER",
+    "EmittedModel",
+    "GeneratedTree",
+    "gearbox_models",
+    "generate_tree",
+    "load_mu_map",
+    "mu_map_files",
+    "sample_ranges",
+    "shift_element_model",
+]
+
+#: First line of ``MANIFEST``; ``gearsym generate`` only replaces directories that carry it.
+MANIFEST_MARKER = "# gearsym generate output: do not edit, regenerate with `gearsym generate`."
+
+C_DIR = "c"
+PYTHON_DIR = "python"
+
+#: Plausibility ranges that the emitted ``params_validate`` enforces (ERR_RANGE outside).
+#: Closed intervals; ``None`` means unbounded. Model defaults must lie inside.
+PARAMETER_BOUNDS: dict[str, tuple[float | None, float | None]] = {
+    "m_veh": (100.0, 100000.0),
+    "k_ss": (1.0, 1.0e7),
+    "d_ss": (0.0, 1.0e5),
+    "zeta": (-0.5, 0.5),
+    "I_wheel": (0.01, 1000.0),
+    "rho_air": (0.5, 2.0),
+    "c_W": (0.05, 2.0),
+    "A_front": (0.1, 20.0),
+    "f_roll": (0.0, 0.1),
+    "f_R": (0.0, 0.1),
+    "sigma0": (1.0, 1.0e9),
+    "sigma1": (0.0, 1.0e6),
+    "z_ba_ratio": (0.0, 0.99),
+    "t_ss_min": (1.0e-9, 1.0e3),
+    "n_disc": (1.0, 50.0),
+    "r_m": (0.005, 1.0),
+}
+MU_BOUNDS = (0.0, 1.0)  # every μ_<element> parameter
+
+#: Where the parameter of each bound lives in the description (for the one-line error).
+_PARAMETER_KEYS = {
+    "k_ss": "drivetrain.k_ss",
+    "d_ss": "drivetrain.d_ss",
+    "I_wheel": "drivetrain.I_wheel",
+    "sigma0": "friction.sigma0",
+    "sigma1": "friction.sigma1",
+    "z_ba_ratio": "friction.z_ba_ratio",
+}
+
+#: Sampling ranges of states and inputs for validation, by name prefix (first match wins).
+_RANGES_BY_PREFIX: tuple[tuple[str, tuple[float, float]], ...] = (
+    ("omega_C", (-150.0, 150.0)),  # wheel speed, rad/s (about ±180 km/h)
+    ("omega_", (-600.0, 600.0)),  # shaft speeds, rad/s
+    ("phi", (-0.05, 0.05)),  # side-shaft twist, rad
+    ("T_", (-800.0, 800.0)),  # torques, N m
+    ("F_N", (0.0, 20000.0)),  # normal forces, N (an open element has 0)
+    ("z", (-0.02, 0.02)),  # bristle deflection of the friction model, rad
+    ("dw", (-50.0, 50.0)),  # slip, rad/s
+    ("mu", (0.08, 0.16)),  # friction coefficient input
+)
+#: Sampling ranges of parameters without a default.
+_PARAMETER_RANGES = {"n_disc": (2.0, 8.0), "r_m": (0.05, 0.12)}
+
+
+@dataclass(frozen=True)
+class EmittedModel:
+    """One emitted model: the model, the ranges its ``params_validate`` enforces, and what it is."""
+
+    model: Model
+    bounds: dict[str, tuple[float | None, float | None]]
+    role: str  # "full", "shift", "shift_mu" or "shift_element"
+    summary: str
+    shift: ShiftSpec | None = None
+
+
+@dataclass(frozen=True)
+class GeneratedTree:
+    """The output of :func:`generate_tree`: files by relative path, and what produced them."""
+
+    files: dict[str, str]
+    models: tuple[EmittedModel, ...]
+    mu_map: MuMap
+    example_models: tuple[str, ...] = field(default=())
+
+
+# ---------------------------------------------------------------------------------------------
+# Models
+# ---------------------------------------------------------------------------------------------
+
+
+def _bounds(d: GearboxDescription, model: Model) -> dict[str, tuple[float | None, float | None]]:
+    """Bounds per parameter; a description default outside them is a one-line user error."""
+    bounds = {}
+    for v in model.parameters:
+        if v.name.startswith("mu_"):
+            lo, hi = MU_BOUNDS
+        elif v.name in PARAMETER_BOUNDS:
+            lo, hi = PARAMETER_BOUNDS[v.name]
+        else:
+            continue
+        if v.default is not None and not (
+            (lo is None or v.default >= lo) and (hi is None or v.default <= hi)
+        ):
+            key = _PARAMETER_KEYS.get(v.name, f"vehicle.{v.name}")
+            if v.name.startswith("mu_"):
+                key = "friction.mu_nominal"
+            raise GearsymError(
+                d.file,
+                key,
+                f"value {v.default:g} lies outside the range [{lo:g}, {hi:g}] that the "
+                "generated params_validate accepts",
+            )
+        bounds[v.name] = (lo, hi)
+    return bounds
+
+
+def _has_friction_data(d: GearboxDescription) -> bool:
+    needed = ("sigma0", "sigma1", "z_ba_ratio", "mu_nominal")
+    return all(k in d.friction for k in needed) and all(
+        e.n_disc is not None and e.r_m is not None for e in d.shift_elements
+    )
+
+
+def _quantity_default(q: Quantity) -> tuple[float, str]:
+    return float(q.value), q.source
+
+
+def shift_element_model(d: GearboxDescription) -> Model:
+    """The elasto-plastic friction model of one shift element (2.66)–(2.70) as a :class:`Model`.
+
+    State ``z`` (bristle deflection, rad), inputs ``dw`` (slip ω_a − ω_b), ``F_N`` (normal force),
+    ``mu`` (friction coefficient, e.g. from ``gearsym_mu_map``); output ``T`` (element torque, +T
+    on shaft b, −T on shaft a). Parameters ``sigma0``, ``sigma1``, ``z_ba_ratio`` from the
+    description's ``[friction]``, the regularisation ``t_ss_min``, and the element geometry
+    ``n_disc``, ``r_m`` (no default: set them per element; the README lists them).
+
+    The expressions are those of :func:`symbolic.friction.shift_element_sym` (with its
+    regularisations: capacity floored at ``t_ss_min``, passive damping, elastic torque limited
+    to the capacity).
+    """
+    z, dw, f_n, mu = (sp.Symbol(n, real=True) for n in ("z", "dw", "F_N", "mu"))
+    s0, s1, ratio, t_min, n_disc, r_m = (
+        sp.Symbol(n, positive=True)
+        for n in ("sigma0", "sigma1", "z_ba_ratio", "t_ss_min", "n_disc", "r_m")
+    )
+    # The model of symbolic/friction.py itself, so the emitted code follows it.
+    zdot, torque = shift_element_sym(z, dw, f_n, mu, s0, s1, n_disc, r_m, ratio, t_min)
+
+    def friction_value(key: str, fallback: float) -> tuple[float, str]:
+        if key in d.friction:
+            return _quantity_default(d.friction[key])
+        return fallback, "assumed"
+
+    sigma0 = friction_value("sigma0", 2.0e5)
+    sigma1 = friction_value("sigma1", 150.0)
+    z_ba = friction_value("z_ba_ratio", 0.6)
+    elements = ", ".join(
+        f"{e.name} (n_disc {e.n_disc}, r_m {_float_repr(e.r_m.value)} m)"
+        for e in d.shift_elements
+        if e.n_disc is not None and e.r_m is not None
+    )
+    return Model(
+        name="shift_element",
+        states=(Variable("z", z, "rad", "bristle deflection (2.66)"),),
+        inputs=(
+            Variable("dw", dw, "rad/s", "slip omega_a - omega_b"),
+            Variable("F_N", f_n, "N", "normal force on the disc pack, p_N A_piston (2.69)"),
+            Variable("mu", mu, "1", "friction coefficient, e.g. from gearsym_mu_map (2.69)"),
+        ),
+        parameters=(
+            Variable("sigma0", s0, "N*m/rad", "bristle stiffness (2.66)", *sigma0),
+            Variable("sigma1", s1, "N*m*s/rad", "bristle damping (2.67)", *sigma1),
+            Variable("z_ba_ratio", ratio, "1", "break-away deflection z_ba / z_ss (2.66)", *z_ba),
+            Variable(
+                "t_ss_min",
+                t_min,
+                "N*m",
+                "floor of the capacity |T_Cl,SS| (regularises an open element)",
+                T_SS_MIN,
+                "symbolic/friction.py T_SS_MIN",
+            ),
+            Variable("n_disc", n_disc, "1", "friction disc count N_disc of the element (2.69)"),
+            Variable("r_m", r_m, "m", "mean friction radius of the element (2.69)"),
+        ),
+        outputs=(Variable("T", sp.Symbol("T"), "N*m", "element torque T_Cl (2.67)"),),
+        rhs=sp.Matrix([zdot]),
+        output_expressions=sp.Matrix([torque]),
+        metadata={
+            "gearbox": d.name,
+            "equations": "2.66-2.70",
+            "elements": elements or "none with friction data",
+        },
+    )
+
+
+def gearbox_models(
+    d: GearboxDescription, progress: Callable[[str], None] | None = None
+) -> list[EmittedModel]:
+    """Every model ``gearsym generate`` emits for ``d``, in output order."""
+    say = progress or (lambda message: None)
+    models = []
+    say("deriving the full model (2.53)")
+    full = full_model(d)
+    models.append(EmittedModel(full, _bounds(d, full), "full", "full model (2.53)"))
+    friction = _has_friction_data(d)
+    for spec in adjacent_shifts(d):
+        say(f"deriving shift model {spec.name} (2.55-2.58)")
+        m = shift_model(d, spec.name)
+        what = f"shift {spec.name}: {spec.off_going} off, {spec.on_coming} on, torque inputs"
+        models.append(EmittedModel(m, _bounds(d, m), "shift", what, spec))
+        if friction:
+            m = shift_model(d, spec.name, friction_inputs=True)
+            what = f"shift {spec.name}: normal-force inputs, mu parameters (2.69)"
+            models.append(EmittedModel(m, _bounds(d, m), "shift_mu", what, spec))
+    if friction:
+        say("building the shift-element friction model (2.66-2.70)")
+        m = shift_element_model(d)
+        models.append(
+            EmittedModel(m, _bounds(d, m), "shift_element", "shift-element friction (2.66-2.70)")
+        )
+    return models
+
+
+def sample_ranges(model: Model) -> dict[str, tuple[float, float]]:
+    """Physically meaningful sampling ranges of the states and inputs (and of parameters that
+    have no default) of an emitted model, for :mod:`validation.c_check`."""
+    ranges = {}
+    for v in (*model.states, *model.inputs):
+        for prefix, bounds in _RANGES_BY_PREFIX:
+            if v.name.startswith(prefix):
+                ranges[v.name] = bounds
+                break
+    for v in model.parameters:
+        if v.default is None and v.name in _PARAMETER_RANGES:
+            ranges[v.name] = _PARAMETER_RANGES[v.name]
+    return ranges
+
+
+# ---------------------------------------------------------------------------------------------
+# The μ map
+# ---------------------------------------------------------------------------------------------
+
+
+def load_mu_map(d: GearboxDescription) -> MuMap:
+    """The μ map the description names (``friction.mu_map``: "built-in" or a path relative to
+    the description file); a bad map is a one-line :class:`GearsymError`."""
+    if d.mu_map == "built-in":
+        path = DEFAULT_MU_MAP
+        origin = "built-in mu_map_default.toml"
+    else:
+        base = Path(d.file).parent if not d.file.startswith("<") else Path.cwd()
+        path = base / d.mu_map
+        origin = d.mu_map
+        if not path.is_file():
+            raise GearsymError(d.file, "friction.mu_map", f"no such file: {d.mu_map}")
+    try:
+        mu_map = MuMap.from_toml(path)
+    except ValueError as err:
+        raise GearsymError(d.file, "friction.mu_map", str(err)) from None
+    mu_map.origin = origin  # never an absolute path: it is printed into the output
+    return mu_map
+
+
+def _c_literals(values: Sequence[float], per_line: int) -> list[str]:
+    items = [f"GEARSYM_LIT({_float_repr(float(v))})" for v in values]
+    return [", ".join(items[i : i + per_line]) for i in range(0, len(items), per_line)]
+
+
+def _py_tuple(values: Sequence[float], per_line: int = 7) -> list[str]:
+    items = [_float_repr(float(v)) for v in values]
+    return [", ".join(items[i : i + per_line]) + "," for i in range(0, len(items), per_line)]
+
+
+def mu_map_files(mu_map: MuMap) -> dict[str, str]:
+    """``gearsym_mu_map.{h,c}`` and ``gearsym_mu_map_casadi.py`` for ``mu_map``."""
+    p_n, t_oil, dw = mu_map.grid
+    flat = mu_map.table.reshape(-1)  # C order: [i][j][k] at (i*NT + j)*ND + k
+    context = {
+        "origin": _comment_text(mu_map.origin),
+        "axes": [
+            {"name": "p_N", "macro": "P_N", "unit": "Pa", "values": _c_literals(p_n, 6)},
+            {"name": "T_oil", "macro": "T_OIL", "unit": "degC", "values": _c_literals(t_oil, 6)},
+            {"name": "dw", "macro": "DW", "unit": "rad/s", "values": _c_literals(dw, 6)},
+        ],
+        "sizes": (len(p_n), len(t_oil), len(dw)),
+        "c_values": _c_literals(flat, len(dw)),
+        "py_axes": {"P_N": _py_tuple(p_n), "T_OIL": _py_tuple(t_oil), "DW": _py_tuple(dw)},
+        "py_values": _py_tuple(flat, len(dw)),
+        "range_text": (
+            f"p_N [{_float_repr(p_n[0])}, {_float_repr(p_n[-1])}] Pa, "
+            f"T_oil [{_float_repr(t_oil[0])}, {_float_repr(t_oil[-1])}] degC, "
+            f"|dw| [{_float_repr(dw[0])}, {_float_repr(dw[-1])}] rad/s"
+        ),
+    }
+    return {
+        f"{C_DIR}/gearsym_mu_map.h": render("c_mu_map.h.j2", **context),
+        f"{C_DIR}/gearsym_mu_map.c": render("c_mu_map.c.j2", **context),
+        f"{PYTHON_DIR}/gearsym_mu_map_casadi.py": render("casadi_mu_map.py.j2", **context),
+    }
+
+
+# ---------------------------------------------------------------------------------------------
+# Example and index
+# ---------------------------------------------------------------------------------------------
+
+
+def _example_shift(models: Sequence[EmittedModel]) -> EmittedModel:
+    """The shift model main.c drives: 2-3 (the thesis' example) if there is one, with friction
+    inputs if available."""
+    shifts = [m for m in models if m.role in ("shift", "shift_mu")]
+    if not shifts:
+        raise ValueError("no shift model to show in the example")
+    preferred = [m for m in shifts if m.shift is not None and m.shift.name == "2-3"] or shifts
+    with_mu = [m for m in preferred if m.role == "shift_mu"]
+    return (with_mu or preferred)[0]
+
+
+def _example_context(d: GearboxDescription, models: Sequence[EmittedModel]) -> dict[str, Any]:
+    from symbolic.ratios import gear_ratio
+
+    shift = _example_shift(models)
+    spec = shift.shift
+    assert spec is not None
+    full = next(m for m in models if m.role == "full")
+    element = next((m for m in models if m.role == "shift_element"), None)
+    sm = shift.model
+    macro = f"GEARSYM_{sm.name.upper()}_"
+    ratio = float(gear_ratio(d, d.gear(spec.from_gear)).ratio)
+    ratio_to = float(gear_ratio(d, d.gear(spec.to_gear)).ratio)
+    i_d = float(d.drivetrain["i_D"].value)
+    r_dyn = float(d.vehicle["r_dyn"].value)
+    speed = 15.0  # m/s
+    omega_c = speed / r_dyn
+    omega_out = omega_c * i_d
+    initial = {
+        f"omega_{d.input_shaft}": ratio * omega_out,
+        f"omega_{d.output_shaft}": omega_out,
+        "omega_C": omega_c,
+    }
+    x0 = [_float_repr(round(initial.get(v.name, 0.0), 6)) for v in sm.states]
+    apply_pressure = 5.0e5  # Pa
+    slip = 20.0  # rad/s
+    t_oil = float(d.friction["T_oil"].value) if "T_oil" in d.friction else 80.0
+    inputs = []
+    mu_settings = []
+    for v in sm.inputs:
+        if v.name == "T_In":
+            inputs.append((v.name, "GEARSYM_LIT(150.0)", "engine torque"))
+    if shift.role == "shift_mu":
+        for elem_name, role in ((spec.off_going, "off-going"), (spec.on_coming, "on-coming")):
+            e = d.element(elem_name)
+            short = element_short_name(d, elem_name)
+            if role == "off-going":
+                inputs.append((f"F_N{short}", "GEARSYM_LIT(0.0)", f"{role} {e.name} released"))
+            else:
+                assert e.a_piston is not None
+                area = f"GEARSYM_LIT({_float_repr(e.a_piston.value)})"
+                inputs.append((f"F_N{short}", f"P_APPLY * {area}", f"{role} {e.name}: p_N A"))
+            mu_settings.append((f"mu_{short}", f"{role} {e.name}"))
+    else:
+        # Sliding torque of the on-coming element with the sign of its slip (2.70).
+        sign = power_on_slip_signs(d, spec)[spec.on_coming]
+        inputs.append((f"T_{spec.off_going}", "GEARSYM_LIT(0.0)", "off-going element open"))
+        inputs.append(
+            (f"T_{spec.on_coming}", f"GEARSYM_LIT({300.0 * sign})", "on-coming element sliding")
+        )
+    element_view = None
+    if element is not None:
+        e = d.element(spec.on_coming)
+        element_view = {
+            "name": e.name,
+            "n_disc": _float_repr(float(e.n_disc or 0)),
+            "r_m": _float_repr(e.r_m.value if e.r_m else 0.0),
+            "area": _float_repr(e.a_piston.value if e.a_piston else 0.0),
+        }
+    c_files = [file_names(sm)["source"], "gearsym_mu_map.c", file_names(full.model)["source"]]
+    if element is not None:
+        c_files.insert(2, file_names(element.model)["source"])
+    return {
+        "gearbox": d.name,
+        "shift": spec.name,
+        "from_gear": spec.from_gear,
+        "to_gear": spec.to_gear,
+        "ratio_to": _float_repr(round(ratio_to, 12)),
+        "omega_in": f"omega_{d.input_shaft}",
+        "omega_out": f"omega_{d.output_shaft}",
+        "shift_model": sm.name,
+        "shift_macro": macro,
+        "shift_header": file_names(sm)["header"],
+        "shift_states": [v.name for v in sm.states],
+        "x0": x0,
+        "inputs": inputs,
+        "mu_settings": mu_settings,
+        "t_oil": _float_repr(t_oil),
+        "apply_pressure": _float_repr(apply_pressure),
+        "slip": _float_repr(slip),
+        "speed": _float_repr(speed),
+        "full_model": full.model.name,
+        "full_macro": f"GEARSYM_{full.model.name.upper()}_",
+        "full_header": file_names(full.model)["header"],
+        "element": element_view,
+        "element_header": file_names(element.model)["header"] if element else None,
+        "c_files": c_files,
+    }
+
+
+def _readme(d: GearboxDescription, models: Sequence[EmittedModel], example: dict) -> str:
+    rows = []
+    for m in models:
+        names = file_names(m.model)
+        rows.append(
+            {
+                "name": m.model.name,
+                "summary": m.summary,
+                "sizes": f"{len(m.model.states)} / {len(m.model.inputs)} / "
+                f"{len(m.model.parameters)} / {len(m.model.outputs)}",
+                "states": ", ".join(v.name for v in m.model.states),
+                "inputs": ", ".join(v.name for v in m.model.inputs),
+                "c": f"{C_DIR}/{names['header']}, {C_DIR}/{names['source']}",
+                "python": f"{PYTHON_DIR}/{names['casadi']}",
+            }
+        )
+    functions = [spec.name for spec in build_function_table(models[0].model)]
+    return render(
+        "generated_readme.md.j2",
+        gearbox=d.name,
+        title=d.title,
+        models=rows,
+        functions=functions,
+        example=example,
+    )
+
+
+def _manifest(files: Mapping[str, str]) -> str:
+    lines = [MANIFEST_MARKER, f"# {len(files)} files, SHA-256 of each:"]
+    for path in sorted(files):
+        digest = hashlib.sha256(files[path].encode("utf-8")).hexdigest()
+        lines.append(f"{digest}  {path}")
+    return "\n".join(lines) + "\n"
+
+
+def generate_tree(
+    d: GearboxDescription, progress: Callable[[str], None] | None = None
+) -> GeneratedTree:
+    """Every file of the output directory for ``d``, by relative path (``/`` separated)."""
+    say = progress or (lambda message: None)
+    models = gearbox_models(d, say)
+    files: dict[str, str] = {}
+    for m in models:
+        say(f"emitting {m.model.name}")
+        bounds: Bounds = m.bounds
+        for name, text in emit_all(m.model, bounds).items():
+            folder = PYTHON_DIR if name.endswith(".py") else C_DIR
+            files[f"{folder}/{name}"] = text
+    say("emitting the mu map and the example")
+    mu_map = load_mu_map(d)
+    files.update(mu_map_files(mu_map))
+    example = _example_context(d, models)
+    files[f"{C_DIR}/main.c"] = render("c_example_main.c.j2", **example)
+    files["README.md"] = _readme(d, models, example)
+    files["MANIFEST"] = _manifest(files)
+    return GeneratedTree(files, tuple(models), mu_map, tuple(example["c_files"]))
