@@ -339,6 +339,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_dynamics_parsers(command, config)
 
+    from gearsym.cmd_observability import add_observability_parser
+
+    add_observability_parser(command, config)
+
     from gearsym.cmd_generate import add_generate_parser
 
     add_generate_parser(command, config)
