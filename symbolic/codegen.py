@@ -338,10 +338,17 @@ def build_function_table(model: Model, bounds: Bounds | None = None) -> Function
 
     ``bounds`` maps parameter names to ``(min, max)`` (either may be ``None``); the emitted
     ``params_validate`` rejects values outside. :class:`~symbolic.model.Variable` carries no range
-    itself, hence the separate mapping.
+    itself, hence the separate mapping. ``model.metadata["integrators"]`` (default
+    ``"rk4 linearly_implicit_euler"``) selects the emitted integrator steps.
     """
     _check_names(model)
     param_bounds = _normalise_bounds(model, bounds)
+    # A model may ask for the explicit step only (metadata integrators = "rk4"): the
+    # sensitivity systems (3.7) are non-stiff and their NX x NX implicit solve would put
+    # kilobytes of matrix on an ECU's stack.
+    implicit_step = "linearly_implicit_euler" in model.metadata.get(
+        "integrators", "rk4 linearly_implicit_euler"
+    )
     real = _real_symbols(model)
     xs = tuple(real[v.symbol] for v in model.states)
     us = tuple(real[v.symbol] for v in model.inputs)
@@ -373,6 +380,24 @@ def build_function_table(model: Model, bounds: Bounds | None = None) -> Function
             f"({nx} x {n}), dense column-major: {name}[i + j*{nx}] = d xdot_i / d {what[0]}_j.",
         )
 
+    implicit = (
+        FunctionSpec(
+            "linearly_implicit_euler_step",
+            (*xup, step),
+            (Output("x_next", (nx, 1)),),
+            (),
+            "One linearly implicit Euler step x_next = x + h (I - h df/dx)^-1 f(x, u, p) "
+            "(Rosenbrock-Euler, order 1, L-stable on linear models: use it for stiff models). "
+            "Solves the NX x NX system by Gaussian elimination with partial pivoting on the "
+            "stack. Returns OK, or ERR_SINGULAR (x_next untouched) if a pivot is zero or not "
+            "finite. x_next may alias x.",
+            kind="linearly_implicit_euler",
+            returns="int",
+        ),
+    )
+    if not implicit_step:
+        implicit = ()
+
     functions = (
         FunctionSpec(
             "rhs",
@@ -401,19 +426,7 @@ def build_function_table(model: Model, bounds: Bounds | None = None) -> Function
             "the step. x_next may alias x (in-place stepping).",
             kind="rk4",
         ),
-        FunctionSpec(
-            "linearly_implicit_euler_step",
-            (*xup, step),
-            (Output("x_next", (nx, 1)),),
-            (),
-            "One linearly implicit Euler step x_next = x + h (I - h df/dx)^-1 f(x, u, p) "
-            "(Rosenbrock-Euler, order 1, L-stable on linear models: use it for stiff models). "
-            "Solves the NX x NX system by Gaussian elimination with partial pivoting on the "
-            "stack. Returns OK, or ERR_SINGULAR (x_next untouched) if a pivot is zero or not "
-            "finite. x_next may alias x.",
-            kind="linearly_implicit_euler",
-            returns="int",
-        ),
+        *implicit,
         FunctionSpec(
             "params_default",
             (),

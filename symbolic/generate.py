@@ -18,6 +18,7 @@ Nothing in the output depends on the time, the machine, absolute paths or ``PYTH
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -47,6 +48,7 @@ from symbolic.drivetrain import (
 from symbolic.errors import GearsymError
 from symbolic.friction import DEFAULT_MU_MAP, T_SS_MIN, MuMap, shift_element_sym
 from symbolic.model import Model, Variable
+from symbolic.sensitivity import sensitivity_model
 
 __all__ = [
     "MANIFEST_MARKER",
@@ -100,6 +102,7 @@ _PARAMETER_KEYS = {
 
 #: Sampling ranges of states and inputs for validation, by name prefix (first match wins).
 _RANGES_BY_PREFIX: tuple[tuple[str, tuple[float, float]], ...] = (
+    ("S_", (-10.0, 10.0)),  # sensitivities ∂x/∂p (3.2); compared relatively, any scale
     ("omega_C", (-150.0, 150.0)),  # wheel speed, rad/s (about ±180 km/h)
     ("omega_", (-600.0, 600.0)),  # shaft speeds, rad/s
     ("phi", (-0.05, 0.05)),  # side-shaft twist, rad
@@ -119,7 +122,7 @@ class EmittedModel:
 
     model: Model
     bounds: dict[str, tuple[float | None, float | None]]
-    role: str  # "full", "shift", "shift_mu" or "shift_element"
+    role: str  # "full", "shift", "shift_mu", "sensitivity" or "shift_element"
     summary: str
     shift: ShiftSpec | None = None
 
@@ -244,6 +247,12 @@ def shift_element_model(d: GearboxDescription) -> Model:
     )
 
 
+def sensitivity_parameters(d: GearboxDescription, spec: ShiftSpec) -> list[str]:
+    """The thesis' parameter set (3.2) for a shift: m_veh, k_ss, d_ss, μ of the off-going
+    element, ζ."""
+    return ["m_veh", "k_ss", "d_ss", f"mu_{element_short_name(d, spec.off_going)}", "zeta"]
+
+
 def gearbox_models(
     d: GearboxDescription, progress: Callable[[str], None] | None = None
 ) -> list[EmittedModel]:
@@ -263,6 +272,14 @@ def gearbox_models(
             m = shift_model(d, spec.name, friction_inputs=True)
             what = f"shift {spec.name}: normal-force inputs, mu parameters (2.69)"
             models.append(EmittedModel(m, _bounds(d, m), "shift_mu", what, spec))
+            # the sensitivity system [x; S] (3.5)-(3.7) of that model for the thesis'
+            # parameter set, with the off-going element's μ (3.14)
+            parameters = sensitivity_parameters(d, spec)
+            say(f"deriving the sensitivity system of shift {spec.name} (3.7)")
+            s = sensitivity_model(m, parameters)
+            s = dataclasses.replace(s, metadata={**s.metadata, "integrators": "rk4"})
+            what = f"shift {spec.name}: sensitivities to {', '.join(parameters)} (3.7)"
+            models.append(EmittedModel(s, _bounds(d, s), "sensitivity", what, spec))
     if friction:
         say("building the shift-element friction model (2.66-2.70)")
         m = shift_element_model(d)

@@ -110,6 +110,7 @@ def test_every_model_is_emitted(tree: Any) -> None:
         {"full", "shift_element"}
         | {f"shift_{s}" for s in shifts}
         | {f"shift_{s}_mu" for s in shifts}
+        | {f"shift_{s}_mu_sens" for s in shifts}
     )
     for name in names:
         for path in (
@@ -161,7 +162,7 @@ def comparisons(tree: Any, tmp_path_factory: pytest.TempPathFactory) -> list:
 
 
 def test_c_and_casadi_match_sympy_for_every_model(comparisons: list) -> None:
-    assert len(comparisons) == 3 * 18
+    assert len(comparisons) == 3 * 26  # 26 models: C double, C single, CasADi
     for report in comparisons:
         print(report)
     failed = [str(r) for r in comparisons if not generated_check.comparison_ok(r)]
@@ -370,7 +371,8 @@ def test_changed_tooth_counts_regenerate_compile_and_validate_in_one_command(
     print(result.stdout)
     assert result.returncode == 0, result.stdout + result.stderr
     assert "FAILED" not in result.stdout
-    assert len(re.findall(r"max error .* at 1000 points", result.stdout)) == 3 * 18
+    emitted = len(list(out.glob("c/gearsym_*.h"))) - 1  # every model, and the μ map
+    assert len(re.findall(r"max error .* at 1000 points", result.stdout)) == 3 * emitted
     assert "main.c: compiled strictly and ran in double, single" in result.stdout
     assert "integration check:" in result.stdout
     assert re.search(r"0\.00100 +256 +\S+ +4\.0\d", result.stdout)  # RK4 order 4
