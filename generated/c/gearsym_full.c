@@ -55,7 +55,7 @@ void gearsym_full_rhs(
     xdot[2] = GEARSYM_LIT(15.8186966349485431992)*u[4] - GEARSYM_LIT(2.01877416044759217035)*u[5] + GEARSYM_LIT(8.91392785187186918403)*u[3] + GEARSYM_LIT(0.479202363395624619234)*u[0] - GEARSYM_LIT(6.08156611842418536193)*u[6] - GEARSYM_LIT(2.66308761663673731059)*u[2] - GEARSYM_LIT(8.43472548847624456480)*u[1] + GEARSYM_LIT(1.76043821397102936521)*x[5]*p->d_ss - GEARSYM_LIT(0.713016692576358592633)*t0 - GEARSYM_LIT(1.76043821397102936521)*t2;
     xdot[3] = GEARSYM_LIT(19.1493337105732538323)*u[4] - GEARSYM_LIT(1.55439087599070556571)*u[5] + GEARSYM_LIT(11.0307981015269006487)*u[3] + GEARSYM_LIT(8.87774902248273298948)*u[0] + GEARSYM_LIT(7.19010503258522261261)*u[6] + GEARSYM_LIT(2.11687024965503146463)*u[2] - GEARSYM_LIT(2.15304907904416765919)*u[1] - GEARSYM_LIT(0.548999815375105466979)*t0 + GEARSYM_LIT(1.35548054416113539797)*t1 - GEARSYM_LIT(1.35548054416113539797)*t2;
     xdot[4] = t3;
-    xdot[5] = (-(GEARSYM_LIT(68921.0)/GEARSYM_LIT(3906250.0))*p->A_front*p->c_W*p->rho_air*(x[5]*x[5]) + GEARSYM_LIT(2.0)*t3*p->d_ss - (GEARSYM_LIT(1649061.0)/GEARSYM_LIT(1562500.0))*x[5]*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta) + GEARSYM_LIT(2.0)*x[4]*p->k_ss - (GEARSYM_LIT(40221.0)/GEARSYM_LIT(12500.0))*p->m_veh*GEARSYM_SIN(p->zeta))/(p->I_wheel + (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*p->m_veh);
+    xdot[5] = (-GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[5]*x[5]) + GEARSYM_LIT(2.0)*t3*p->d_ss - GEARSYM_LIT(1.05990859890000000000)*x[5]*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta) + GEARSYM_LIT(2.0)*x[4]*p->k_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*p->m_veh*GEARSYM_SIN(p->zeta))/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
 }
 
 /**
@@ -90,7 +90,7 @@ void gearsym_full_jac_x(
     const gearsym_full_params *restrict p,
     gearsym_real *restrict jac_x)
 {
-    const gearsym_real t0 = (GEARSYM_LIT(1.0)/(p->I_wheel + (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*p->m_veh));
+    const gearsym_real t0 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh));
     const gearsym_real t1 = t0*p->d_ss;
     (void)u;
     jac_x[0] = GEARSYM_LIT(0.0);
@@ -128,7 +128,7 @@ void gearsym_full_jac_x(
     jac_x[32] = GEARSYM_LIT(1.76043821397102936521)*p->d_ss;
     jac_x[33] = GEARSYM_LIT(1.35548054416113539797)*p->d_ss;
     jac_x[34] = -GEARSYM_LIT(1.0);
-    jac_x[35] = t0*(-(GEARSYM_LIT(68921.0)/GEARSYM_LIT(1953125.0))*x[5]*p->A_front*p->c_W*p->rho_air - (GEARSYM_LIT(1649061.0)/GEARSYM_LIT(1562500.0))*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta)) - GEARSYM_LIT(2.0)*t1;
+    jac_x[35] = t0*(-GEARSYM_LIT(0.0355139609030000000000)*x[5]*p->A_front*p->c_W*p->rho_air - GEARSYM_LIT(1.05990859890000000000)*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta)) - GEARSYM_LIT(2.0)*t1;
 }
 
 /**
@@ -202,26 +202,26 @@ void gearsym_full_jac_p(
     const gearsym_full_params *restrict p,
     gearsym_real *restrict jac_p)
 {
-    const gearsym_real t0 = p->I_wheel + (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*p->m_veh;
+    const gearsym_real t0 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
     const gearsym_real t1 = (GEARSYM_LIT(1.0)/t0);
     const gearsym_real t2 = GEARSYM_SIN(p->zeta);
-    const gearsym_real t3 = (GEARSYM_LIT(40221.0)/GEARSYM_LIT(12500.0))*t2;
+    const gearsym_real t3 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t2;
     const gearsym_real t4 = GEARSYM_COS(p->zeta);
-    const gearsym_real t5 = (GEARSYM_LIT(1649061.0)/GEARSYM_LIT(1562500.0))*x[5];
+    const gearsym_real t5 = GEARSYM_LIT(1.05990859890000000000)*x[5];
     const gearsym_real t6 = t5*p->f_roll;
     const gearsym_real t7 = t4*p->m_veh;
     const gearsym_real t8 = (x[5]*x[5]);
-    const gearsym_real t9 = (GEARSYM_LIT(68921.0)/GEARSYM_LIT(3906250.0))*t8*p->A_front*p->c_W;
+    const gearsym_real t9 = GEARSYM_LIT(0.0177569804515000000000)*t8*p->A_front*p->c_W;
     const gearsym_real t10 = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1] - x[5];
     const gearsym_real t11 = (GEARSYM_LIT(2.0)*t10*p->d_ss + GEARSYM_LIT(2.0)*x[4]*p->k_ss - t3*p->m_veh - t9*p->rho_air - t6*t7)/(t0*t0);
-    const gearsym_real t12 = (GEARSYM_LIT(68921.0)/GEARSYM_LIT(3906250.0))*t1*t8*p->rho_air;
+    const gearsym_real t12 = GEARSYM_LIT(0.0177569804515000000000)*t1*t8*p->rho_air;
     (void)u;
     jac_p[0] = GEARSYM_LIT(0.0);
     jac_p[1] = GEARSYM_LIT(0.0);
     jac_p[2] = GEARSYM_LIT(0.0);
     jac_p[3] = GEARSYM_LIT(0.0);
     jac_p[4] = GEARSYM_LIT(0.0);
-    jac_p[5] = t1*(-t3 - t4*t6) - (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*t11;
+    jac_p[5] = t1*(-t3 - t4*t6) - GEARSYM_LIT(0.108043690000000000000)*t11;
     jac_p[6] = -GEARSYM_LIT(0.0728690529127854759354)*x[4];
     jac_p[7] = -GEARSYM_LIT(6.91709479501806549186)*x[4];
     jac_p[8] = -GEARSYM_LIT(1.76043821397102936521)*x[4];
@@ -239,7 +239,7 @@ void gearsym_full_jac_p(
     jac_p[20] = GEARSYM_LIT(0.0);
     jac_p[21] = GEARSYM_LIT(0.0);
     jac_p[22] = GEARSYM_LIT(0.0);
-    jac_p[23] = t1*(t2*t6*p->m_veh - (GEARSYM_LIT(40221.0)/GEARSYM_LIT(12500.0))*t7);
+    jac_p[23] = t1*(t2*t6*p->m_veh - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t7);
     jac_p[24] = GEARSYM_LIT(0.0);
     jac_p[25] = GEARSYM_LIT(0.0);
     jac_p[26] = GEARSYM_LIT(0.0);
@@ -420,7 +420,7 @@ void gearsym_full_params_default(
     p->zeta = GEARSYM_LIT(0.0);
     p->I_wheel = GEARSYM_LIT(6.4);
     p->rho_air = GEARSYM_LIT(1.2);
-    p->c_W = GEARSYM_LIT(0.28);
+    p->c_W = GEARSYM_LIT(0.2782);
     p->A_front = GEARSYM_LIT(2.35);
     p->f_roll = GEARSYM_LIT(0.001);
 }

@@ -53,7 +53,7 @@ void gearsym_shift_1_2_mu_rhs(
     xdot[0] = GEARSYM_LIT(12.1535920572330550166)*u[0] + GEARSYM_LIT(1.26551356519507148330)*x[3]*p->d_ss - GEARSYM_LIT(5.23769988672470955434)*t0 - GEARSYM_LIT(7.22848435408155808103)*t1 - GEARSYM_LIT(0.512561184769166254881)*t2 - GEARSYM_LIT(1.26551356519507148330)*t3;
     xdot[1] = GEARSYM_LIT(1.56227649623331574613)*u[0] + GEARSYM_LIT(0.763504011555191344960)*x[3]*p->d_ss + GEARSYM_LIT(4.81762848291806133085)*t0 + GEARSYM_LIT(1.52452105376693055405)*t1 - GEARSYM_LIT(0.309236132667149187914)*t2 - GEARSYM_LIT(0.763504011555191344960)*t3;
     xdot[2] = t4;
-    xdot[3] = (-(GEARSYM_LIT(68921.0)/GEARSYM_LIT(3906250.0))*p->A_front*p->c_W*p->rho_air*(x[3]*x[3]) + GEARSYM_LIT(2.0)*t4*p->d_ss - (GEARSYM_LIT(1649061.0)/GEARSYM_LIT(1562500.0))*x[3]*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta) + GEARSYM_LIT(2.0)*x[2]*p->k_ss - (GEARSYM_LIT(40221.0)/GEARSYM_LIT(12500.0))*p->m_veh*GEARSYM_SIN(p->zeta))/(p->I_wheel + (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*p->m_veh);
+    xdot[3] = (-GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[3]*x[3]) + GEARSYM_LIT(2.0)*t4*p->d_ss - GEARSYM_LIT(1.05990859890000000000)*x[3]*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta) + GEARSYM_LIT(2.0)*x[2]*p->k_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*p->m_veh*GEARSYM_SIN(p->zeta))/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
 }
 
 /**
@@ -88,7 +88,7 @@ void gearsym_shift_1_2_mu_jac_x(
     const gearsym_shift_1_2_mu_params *restrict p,
     gearsym_real *restrict jac_x)
 {
-    const gearsym_real t0 = (GEARSYM_LIT(1.0)/(p->I_wheel + (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*p->m_veh));
+    const gearsym_real t0 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh));
     const gearsym_real t1 = t0*p->d_ss;
     (void)u;
     jac_x[0] = GEARSYM_LIT(0.0);
@@ -106,7 +106,7 @@ void gearsym_shift_1_2_mu_jac_x(
     jac_x[12] = GEARSYM_LIT(1.26551356519507148330)*p->d_ss;
     jac_x[13] = GEARSYM_LIT(0.763504011555191344960)*p->d_ss;
     jac_x[14] = -GEARSYM_LIT(1.0);
-    jac_x[15] = t0*(-(GEARSYM_LIT(68921.0)/GEARSYM_LIT(1953125.0))*x[3]*p->A_front*p->c_W*p->rho_air - (GEARSYM_LIT(1649061.0)/GEARSYM_LIT(1562500.0))*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta)) - GEARSYM_LIT(2.0)*t1;
+    jac_x[15] = t0*(-GEARSYM_LIT(0.0355139609030000000000)*x[3]*p->A_front*p->c_W*p->rho_air - GEARSYM_LIT(1.05990859890000000000)*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta)) - GEARSYM_LIT(2.0)*t1;
 }
 
 /**
@@ -149,23 +149,23 @@ void gearsym_shift_1_2_mu_jac_p(
     const gearsym_shift_1_2_mu_params *restrict p,
     gearsym_real *restrict jac_p)
 {
-    const gearsym_real t0 = p->I_wheel + (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*p->m_veh;
+    const gearsym_real t0 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
     const gearsym_real t1 = (GEARSYM_LIT(1.0)/t0);
     const gearsym_real t2 = GEARSYM_SIN(p->zeta);
-    const gearsym_real t3 = (GEARSYM_LIT(40221.0)/GEARSYM_LIT(12500.0))*t2;
+    const gearsym_real t3 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t2;
     const gearsym_real t4 = GEARSYM_COS(p->zeta);
-    const gearsym_real t5 = (GEARSYM_LIT(1649061.0)/GEARSYM_LIT(1562500.0))*x[3];
+    const gearsym_real t5 = GEARSYM_LIT(1.05990859890000000000)*x[3];
     const gearsym_real t6 = t5*p->f_roll;
     const gearsym_real t7 = t4*p->m_veh;
     const gearsym_real t8 = (x[3]*x[3]);
-    const gearsym_real t9 = (GEARSYM_LIT(68921.0)/GEARSYM_LIT(3906250.0))*t8*p->A_front*p->c_W;
+    const gearsym_real t9 = GEARSYM_LIT(0.0177569804515000000000)*t8*p->A_front*p->c_W;
     const gearsym_real t10 = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1] - x[3];
     const gearsym_real t11 = (GEARSYM_LIT(2.0)*t10*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss - t3*p->m_veh - t9*p->rho_air - t6*t7)/(t0*t0);
-    const gearsym_real t12 = (GEARSYM_LIT(68921.0)/GEARSYM_LIT(3906250.0))*t1*t8*p->rho_air;
+    const gearsym_real t12 = GEARSYM_LIT(0.0177569804515000000000)*t1*t8*p->rho_air;
     jac_p[0] = GEARSYM_LIT(0.0);
     jac_p[1] = GEARSYM_LIT(0.0);
     jac_p[2] = GEARSYM_LIT(0.0);
-    jac_p[3] = t1*(-t3 - t4*t6) - (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*t11;
+    jac_p[3] = t1*(-t3 - t4*t6) - GEARSYM_LIT(0.108043690000000000000)*t11;
     jac_p[4] = -GEARSYM_LIT(1.26551356519507148330)*x[2];
     jac_p[5] = -GEARSYM_LIT(0.763504011555191344960)*x[2];
     jac_p[6] = GEARSYM_LIT(0.0);
@@ -177,7 +177,7 @@ void gearsym_shift_1_2_mu_jac_p(
     jac_p[12] = GEARSYM_LIT(0.0);
     jac_p[13] = GEARSYM_LIT(0.0);
     jac_p[14] = GEARSYM_LIT(0.0);
-    jac_p[15] = t1*(t2*t6*p->m_veh - (GEARSYM_LIT(40221.0)/GEARSYM_LIT(12500.0))*t7);
+    jac_p[15] = t1*(t2*t6*p->m_veh - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t7);
     jac_p[16] = GEARSYM_LIT(0.0);
     jac_p[17] = GEARSYM_LIT(0.0);
     jac_p[18] = GEARSYM_LIT(0.0);
@@ -356,7 +356,7 @@ void gearsym_shift_1_2_mu_params_default(
     p->zeta = GEARSYM_LIT(0.0);
     p->I_wheel = GEARSYM_LIT(6.4);
     p->rho_air = GEARSYM_LIT(1.2);
-    p->c_W = GEARSYM_LIT(0.28);
+    p->c_W = GEARSYM_LIT(0.2782);
     p->A_front = GEARSYM_LIT(2.35);
     p->f_roll = GEARSYM_LIT(0.001);
     p->mu_05 = GEARSYM_LIT(0.12);

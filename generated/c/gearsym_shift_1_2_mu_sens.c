@@ -55,21 +55,21 @@ void gearsym_shift_1_2_mu_sens_rhs(
     const gearsym_real t5 = GEARSYM_LIT(0.309236132667149187914)*x[1];
     const gearsym_real t6 = GEARSYM_LIT(0.763504011555191344960)*x[2];
     const gearsym_real t7 = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1] - x[3];
-    const gearsym_real t8 = p->I_wheel + (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*p->m_veh;
+    const gearsym_real t8 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
     const gearsym_real t9 = (GEARSYM_LIT(1.0)/t8);
     const gearsym_real t10 = GEARSYM_SIN(p->zeta);
-    const gearsym_real t11 = (GEARSYM_LIT(40221.0)/GEARSYM_LIT(12500.0))*t10;
+    const gearsym_real t11 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t10;
     const gearsym_real t12 = GEARSYM_COS(p->zeta);
     const gearsym_real t13 = t12*p->m_veh;
-    const gearsym_real t14 = (GEARSYM_LIT(1649061.0)/GEARSYM_LIT(1562500.0))*p->f_roll;
+    const gearsym_real t14 = GEARSYM_LIT(1.05990859890000000000)*p->f_roll;
     const gearsym_real t15 = t14*x[3];
     const gearsym_real t16 = p->A_front*p->c_W*p->rho_air;
-    const gearsym_real t17 = GEARSYM_LIT(2.0)*t7*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss - t11*p->m_veh - (GEARSYM_LIT(68921.0)/GEARSYM_LIT(3906250.0))*t16*(x[3]*x[3]) - t13*t15;
+    const gearsym_real t17 = GEARSYM_LIT(2.0)*t7*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss - t11*p->m_veh - GEARSYM_LIT(0.0177569804515000000000)*t16*(x[3]*x[3]) - t13*t15;
     const gearsym_real t18 = x[5]*p->d_ss;
     const gearsym_real t19 = x[6]*p->k_ss;
     const gearsym_real t20 = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t9;
     const gearsym_real t21 = GEARSYM_LIT(2.0)*t9;
-    const gearsym_real t22 = t9*(-GEARSYM_LIT(2.0)*p->d_ss - (GEARSYM_LIT(68921.0)/GEARSYM_LIT(1953125.0))*t16*x[3] - t13*t14);
+    const gearsym_real t22 = t9*(-GEARSYM_LIT(2.0)*p->d_ss - GEARSYM_LIT(0.0355139609030000000000)*t16*x[3] - t13*t14);
     const gearsym_real t23 = x[9]*p->d_ss;
     const gearsym_real t24 = x[10]*p->k_ss;
     const gearsym_real t25 = x[13]*p->d_ss;
@@ -85,7 +85,7 @@ void gearsym_shift_1_2_mu_sens_rhs(
     xdot[4] = GEARSYM_LIT(1.26551356519507148330)*x[7]*p->d_ss - GEARSYM_LIT(0.512561184769166254881)*t18 - GEARSYM_LIT(1.26551356519507148330)*t19;
     xdot[5] = GEARSYM_LIT(0.763504011555191344960)*x[7]*p->d_ss - GEARSYM_LIT(0.309236132667149187914)*t18 - GEARSYM_LIT(0.763504011555191344960)*t19;
     xdot[6] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[5] - x[7];
-    xdot[7] = t22*x[7] - (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*t17/(t8*t8) + t18*t20 + t19*t21 + t9*(-t11 - t12*t15);
+    xdot[7] = t22*x[7] - GEARSYM_LIT(0.108043690000000000000)*t17/(t8*t8) + t18*t20 + t19*t21 + t9*(-t11 - t12*t15);
     xdot[8] = GEARSYM_LIT(1.26551356519507148330)*x[11]*p->d_ss - GEARSYM_LIT(0.512561184769166254881)*t23 - GEARSYM_LIT(1.26551356519507148330)*t24 - t3;
     xdot[9] = GEARSYM_LIT(0.763504011555191344960)*x[11]*p->d_ss - GEARSYM_LIT(0.309236132667149187914)*t23 - GEARSYM_LIT(0.763504011555191344960)*t24 - t6;
     xdot[10] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[9] - x[11];
@@ -101,7 +101,7 @@ void gearsym_shift_1_2_mu_sens_rhs(
     xdot[20] = GEARSYM_LIT(1.26551356519507148330)*x[23]*p->d_ss - GEARSYM_LIT(0.512561184769166254881)*t29 - GEARSYM_LIT(1.26551356519507148330)*t30;
     xdot[21] = GEARSYM_LIT(0.763504011555191344960)*x[23]*p->d_ss - GEARSYM_LIT(0.309236132667149187914)*t29 - GEARSYM_LIT(0.763504011555191344960)*t30;
     xdot[22] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[21] - x[23];
-    xdot[23] = t22*x[23] + t20*t29 + t21*t30 + t9*(t10*t15*p->m_veh - (GEARSYM_LIT(40221.0)/GEARSYM_LIT(12500.0))*t13);
+    xdot[23] = t22*x[23] + t20*t29 + t21*t30 + t9*(t10*t15*p->m_veh - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t13);
 }
 
 /**
@@ -166,7 +166,7 @@ void gearsym_shift_1_2_mu_sens_jac_x(
 {
     const gearsym_real t0 = -GEARSYM_LIT(0.512561184769166254881)*p->d_ss;
     const gearsym_real t1 = -GEARSYM_LIT(0.309236132667149187914)*p->d_ss;
-    const gearsym_real t2 = p->I_wheel + (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*p->m_veh;
+    const gearsym_real t2 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
     const gearsym_real t3 = (GEARSYM_LIT(1.0)/t2);
     const gearsym_real t4 = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t3;
     const gearsym_real t5 = t4*p->d_ss;
@@ -177,8 +177,8 @@ void gearsym_shift_1_2_mu_sens_jac_x(
     const gearsym_real t10 = t9*p->k_ss;
     const gearsym_real t11 = GEARSYM_LIT(1.26551356519507148330)*p->d_ss;
     const gearsym_real t12 = GEARSYM_LIT(0.763504011555191344960)*p->d_ss;
-    const gearsym_real t13 = (GEARSYM_LIT(1649061.0)/GEARSYM_LIT(1562500.0))*p->f_roll*GEARSYM_COS(p->zeta);
-    const gearsym_real t14 = (GEARSYM_LIT(68921.0)/GEARSYM_LIT(1953125.0))*p->A_front*p->c_W*p->rho_air;
+    const gearsym_real t13 = GEARSYM_LIT(1.05990859890000000000)*p->f_roll*GEARSYM_COS(p->zeta);
+    const gearsym_real t14 = GEARSYM_LIT(0.0355139609030000000000)*p->A_front*p->c_W*p->rho_air;
     const gearsym_real t15 = -GEARSYM_LIT(2.0)*p->d_ss - t13*p->m_veh - t14*x[3];
     const gearsym_real t16 = t15*t3;
     const gearsym_real t17 = t14*t3;
@@ -214,7 +214,7 @@ void gearsym_shift_1_2_mu_sens_jac_x(
     jac_x[28] = GEARSYM_LIT(0.0);
     jac_x[29] = GEARSYM_LIT(0.0);
     jac_x[30] = GEARSYM_LIT(0.0);
-    jac_x[31] = -(GEARSYM_LIT(26896.0)/GEARSYM_LIT(308625.0))*t6*p->d_ss;
+    jac_x[31] = -GEARSYM_LIT(0.0875202025111381125962)*t6*p->d_ss;
     jac_x[32] = GEARSYM_LIT(0.0);
     jac_x[33] = GEARSYM_LIT(0.0);
     jac_x[34] = GEARSYM_LIT(0.0);
@@ -238,7 +238,7 @@ void gearsym_shift_1_2_mu_sens_jac_x(
     jac_x[52] = GEARSYM_LIT(0.0);
     jac_x[53] = GEARSYM_LIT(0.0);
     jac_x[54] = GEARSYM_LIT(0.0);
-    jac_x[55] = -(GEARSYM_LIT(3362.0)/GEARSYM_LIT(15625.0))*t6*p->k_ss;
+    jac_x[55] = -GEARSYM_LIT(0.216087380000000000000)*t6*p->k_ss;
     jac_x[56] = -GEARSYM_LIT(1.26551356519507148330);
     jac_x[57] = -GEARSYM_LIT(0.763504011555191344960);
     jac_x[58] = GEARSYM_LIT(0.0);
@@ -262,7 +262,7 @@ void gearsym_shift_1_2_mu_sens_jac_x(
     jac_x[76] = GEARSYM_LIT(0.0);
     jac_x[77] = GEARSYM_LIT(0.0);
     jac_x[78] = GEARSYM_LIT(0.0);
-    jac_x[79] = -t17*x[7] - t13*t3 - (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*t15*t6;
+    jac_x[79] = -t17*x[7] - t13*t3 - GEARSYM_LIT(0.108043690000000000000)*t15*t6;
     jac_x[80] = GEARSYM_LIT(0.0);
     jac_x[81] = GEARSYM_LIT(0.0);
     jac_x[82] = GEARSYM_LIT(0.0);
@@ -278,7 +278,7 @@ void gearsym_shift_1_2_mu_sens_jac_x(
     jac_x[92] = GEARSYM_LIT(0.0);
     jac_x[93] = GEARSYM_LIT(0.0);
     jac_x[94] = GEARSYM_LIT(0.0);
-    jac_x[95] = -t17*x[23] + (GEARSYM_LIT(1649061.0)/GEARSYM_LIT(1562500.0))*t3*p->f_roll*p->m_veh*GEARSYM_SIN(p->zeta);
+    jac_x[95] = -t17*x[23] + GEARSYM_LIT(1.05990859890000000000)*t3*p->f_roll*p->m_veh*GEARSYM_SIN(p->zeta);
     jac_x[96] = GEARSYM_LIT(0.0);
     jac_x[97] = GEARSYM_LIT(0.0);
     jac_x[98] = GEARSYM_LIT(0.0);
@@ -861,12 +861,12 @@ void gearsym_shift_1_2_mu_sens_jac_p(
     const gearsym_shift_1_2_mu_sens_params *restrict p,
     gearsym_real *restrict jac_p)
 {
-    const gearsym_real t0 = p->I_wheel + (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*p->m_veh;
+    const gearsym_real t0 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
     const gearsym_real t1 = (GEARSYM_LIT(1.0)/t0);
     const gearsym_real t2 = GEARSYM_SIN(p->zeta);
-    const gearsym_real t3 = (GEARSYM_LIT(40221.0)/GEARSYM_LIT(12500.0))*t2;
+    const gearsym_real t3 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t2;
     const gearsym_real t4 = GEARSYM_COS(p->zeta);
-    const gearsym_real t5 = (GEARSYM_LIT(1649061.0)/GEARSYM_LIT(1562500.0))*t4;
+    const gearsym_real t5 = GEARSYM_LIT(1.05990859890000000000)*t4;
     const gearsym_real t6 = t5*p->f_roll;
     const gearsym_real t7 = t6*x[3];
     const gearsym_real t8 = -t3 - t7;
@@ -876,27 +876,27 @@ void gearsym_shift_1_2_mu_sens_jac_p(
     const gearsym_real t12 = p->A_front*p->c_W;
     const gearsym_real t13 = t12*p->rho_air;
     const gearsym_real t14 = (x[3]*x[3]);
-    const gearsym_real t15 = (GEARSYM_LIT(68921.0)/GEARSYM_LIT(3906250.0))*t14;
+    const gearsym_real t15 = GEARSYM_LIT(0.0177569804515000000000)*t14;
     const gearsym_real t16 = GEARSYM_LIT(2.0)*p->d_ss*((GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1] - x[3]) + GEARSYM_LIT(2.0)*x[2]*p->k_ss - t10 - t11 - t13*t15;
     const gearsym_real t17 = t16*t9;
     const gearsym_real t18 = t9*p->d_ss;
-    const gearsym_real t19 = (GEARSYM_LIT(26896.0)/GEARSYM_LIT(308625.0))*t18;
-    const gearsym_real t20 = (GEARSYM_LIT(3362.0)/GEARSYM_LIT(15625.0))*t9;
+    const gearsym_real t19 = GEARSYM_LIT(0.0875202025111381125962)*t18;
+    const gearsym_real t20 = GEARSYM_LIT(0.216087380000000000000)*t9;
     const gearsym_real t21 = t20*p->k_ss;
     const gearsym_real t22 = t8*t9;
-    const gearsym_real t23 = t9*(-GEARSYM_LIT(2.0)*p->d_ss - t6*p->m_veh - (GEARSYM_LIT(68921.0)/GEARSYM_LIT(1953125.0))*t13*x[3]);
-    const gearsym_real t24 = -t1*t6 - (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*t23;
+    const gearsym_real t23 = t9*(-GEARSYM_LIT(2.0)*p->d_ss - t6*p->m_veh - GEARSYM_LIT(0.0355139609030000000000)*t13*x[3]);
+    const gearsym_real t24 = -t1*t6 - GEARSYM_LIT(0.108043690000000000000)*t23;
     const gearsym_real t25 = (GEARSYM_LIT(1.0)/(t0*t0*t0));
     const gearsym_real t26 = t20*x[2];
     const gearsym_real t27 = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*x[1] - GEARSYM_LIT(2.0)*x[3];
     const gearsym_real t28 = t27*t9;
-    const gearsym_real t29 = (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*t28;
-    const gearsym_real t30 = (GEARSYM_LIT(40221.0)/GEARSYM_LIT(12500.0))*t4;
+    const gearsym_real t29 = GEARSYM_LIT(0.108043690000000000000)*t28;
+    const gearsym_real t30 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t4;
     const gearsym_real t31 = t1*t30;
-    const gearsym_real t32 = (GEARSYM_LIT(1649061.0)/GEARSYM_LIT(1562500.0))*t2*p->f_roll;
+    const gearsym_real t32 = GEARSYM_LIT(1.05990859890000000000)*t2*p->f_roll;
     const gearsym_real t33 = t32*x[3]*p->m_veh - t30*p->m_veh;
     const gearsym_real t34 = t33*t9;
-    const gearsym_real t35 = (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*t34;
+    const gearsym_real t35 = GEARSYM_LIT(0.108043690000000000000)*t34;
     const gearsym_real t36 = GEARSYM_LIT(2.0)*x[2];
     const gearsym_real t37 = GEARSYM_LIT(2.0)*t1;
     const gearsym_real t38 = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t1;
@@ -906,7 +906,7 @@ void gearsym_shift_1_2_mu_sens_jac_p(
     const gearsym_real t42 = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t18;
     const gearsym_real t43 = GEARSYM_LIT(2.0)*t9*p->k_ss;
     const gearsym_real t44 = t1*t15;
-    const gearsym_real t45 = (GEARSYM_LIT(68921.0)/GEARSYM_LIT(1953125.0))*t39;
+    const gearsym_real t45 = GEARSYM_LIT(0.0355139609030000000000)*t39;
     const gearsym_real t46 = t12*t45;
     const gearsym_real t47 = p->A_front*p->rho_air;
     const gearsym_real t48 = t45*t47;
@@ -917,11 +917,11 @@ void gearsym_shift_1_2_mu_sens_jac_p(
     jac_p[0] = GEARSYM_LIT(0.0);
     jac_p[1] = GEARSYM_LIT(0.0);
     jac_p[2] = GEARSYM_LIT(0.0);
-    jac_p[3] = t1*t8 - (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*t17;
+    jac_p[3] = t1*t8 - GEARSYM_LIT(0.108043690000000000000)*t17;
     jac_p[4] = GEARSYM_LIT(0.0);
     jac_p[5] = GEARSYM_LIT(0.0);
     jac_p[6] = GEARSYM_LIT(0.0);
-    jac_p[7] = -t19*x[5] + t24*x[7] - t21*x[6] + GEARSYM_LIT(0.0231486341120000000000)*t16*t25 - (GEARSYM_LIT(3362.0)/GEARSYM_LIT(15625.0))*t22;
+    jac_p[7] = -t19*x[5] + t24*x[7] - t21*x[6] + GEARSYM_LIT(0.0233468778976322000000)*t16*t25 - GEARSYM_LIT(0.216087380000000000000)*t22;
     jac_p[8] = GEARSYM_LIT(0.0);
     jac_p[9] = GEARSYM_LIT(0.0);
     jac_p[10] = GEARSYM_LIT(0.0);
@@ -937,7 +937,7 @@ void gearsym_shift_1_2_mu_sens_jac_p(
     jac_p[20] = GEARSYM_LIT(0.0);
     jac_p[21] = GEARSYM_LIT(0.0);
     jac_p[22] = GEARSYM_LIT(0.0);
-    jac_p[23] = -t19*x[21] + t24*x[23] - t21*x[22] + (GEARSYM_LIT(1649061.0)/GEARSYM_LIT(1562500.0))*t1*t2*x[3]*p->f_roll - t31 - t35;
+    jac_p[23] = -t19*x[21] + t24*x[23] - t21*x[22] + GEARSYM_LIT(1.05990859890000000000)*t1*t2*x[3]*p->f_roll - t31 - t35;
     jac_p[24] = -GEARSYM_LIT(1.26551356519507148330)*x[2];
     jac_p[25] = -GEARSYM_LIT(0.763504011555191344960)*x[2];
     jac_p[26] = GEARSYM_LIT(0.0);
@@ -1017,7 +1017,7 @@ void gearsym_shift_1_2_mu_sens_jac_p(
     jac_p[100] = GEARSYM_LIT(0.0);
     jac_p[101] = GEARSYM_LIT(0.0);
     jac_p[102] = GEARSYM_LIT(0.0);
-    jac_p[103] = -t42*x[5] - t23*x[7] - t43*x[6] + (GEARSYM_LIT(3362.0)/GEARSYM_LIT(15625.0))*t16*t25 - t22;
+    jac_p[103] = -t42*x[5] - t23*x[7] - t43*x[6] + GEARSYM_LIT(0.216087380000000000000)*t16*t25 - t22;
     jac_p[104] = GEARSYM_LIT(0.0);
     jac_p[105] = GEARSYM_LIT(0.0);
     jac_p[106] = GEARSYM_LIT(0.0);
@@ -1041,7 +1041,7 @@ void gearsym_shift_1_2_mu_sens_jac_p(
     jac_p[124] = GEARSYM_LIT(0.0);
     jac_p[125] = GEARSYM_LIT(0.0);
     jac_p[126] = GEARSYM_LIT(0.0);
-    jac_p[127] = GEARSYM_LIT(0.00189818799718400000000)*t14*t9*p->A_front*p->c_W - t46*x[7];
+    jac_p[127] = GEARSYM_LIT(0.00191852969123792603500)*t14*t9*p->A_front*p->c_W - t46*x[7];
     jac_p[128] = GEARSYM_LIT(0.0);
     jac_p[129] = GEARSYM_LIT(0.0);
     jac_p[130] = GEARSYM_LIT(0.0);
@@ -1065,7 +1065,7 @@ void gearsym_shift_1_2_mu_sens_jac_p(
     jac_p[148] = GEARSYM_LIT(0.0);
     jac_p[149] = GEARSYM_LIT(0.0);
     jac_p[150] = GEARSYM_LIT(0.0);
-    jac_p[151] = GEARSYM_LIT(0.00189818799718400000000)*t14*t9*p->A_front*p->rho_air - t48*x[7];
+    jac_p[151] = GEARSYM_LIT(0.00191852969123792603500)*t14*t9*p->A_front*p->rho_air - t48*x[7];
     jac_p[152] = GEARSYM_LIT(0.0);
     jac_p[153] = GEARSYM_LIT(0.0);
     jac_p[154] = GEARSYM_LIT(0.0);
@@ -1089,7 +1089,7 @@ void gearsym_shift_1_2_mu_sens_jac_p(
     jac_p[172] = GEARSYM_LIT(0.0);
     jac_p[173] = GEARSYM_LIT(0.0);
     jac_p[174] = GEARSYM_LIT(0.0);
-    jac_p[175] = -t50*x[7] + GEARSYM_LIT(0.00189818799718400000000)*t14*t9*p->c_W*p->rho_air;
+    jac_p[175] = -t50*x[7] + GEARSYM_LIT(0.00191852969123792603500)*t14*t9*p->c_W*p->rho_air;
     jac_p[176] = GEARSYM_LIT(0.0);
     jac_p[177] = GEARSYM_LIT(0.0);
     jac_p[178] = GEARSYM_LIT(0.0);
@@ -1113,7 +1113,7 @@ void gearsym_shift_1_2_mu_sens_jac_p(
     jac_p[196] = GEARSYM_LIT(0.0);
     jac_p[197] = GEARSYM_LIT(0.0);
     jac_p[198] = GEARSYM_LIT(0.0);
-    jac_p[199] = -t52*x[7] + GEARSYM_LIT(0.113544050319360000000)*t4*t9*x[3]*p->m_veh - t51;
+    jac_p[199] = -t52*x[7] + GEARSYM_LIT(0.114516436087885941000)*t4*t9*x[3]*p->m_veh - t51;
     jac_p[200] = GEARSYM_LIT(0.0);
     jac_p[201] = GEARSYM_LIT(0.0);
     jac_p[202] = GEARSYM_LIT(0.0);
@@ -1129,7 +1129,7 @@ void gearsym_shift_1_2_mu_sens_jac_p(
     jac_p[212] = GEARSYM_LIT(0.0);
     jac_p[213] = GEARSYM_LIT(0.0);
     jac_p[214] = GEARSYM_LIT(0.0);
-    jac_p[215] = -t52*x[23] + (GEARSYM_LIT(1649061.0)/GEARSYM_LIT(1562500.0))*t1*t2*x[3]*p->m_veh;
+    jac_p[215] = -t52*x[23] + GEARSYM_LIT(1.05990859890000000000)*t1*t2*x[3]*p->m_veh;
     jac_p[216] = -GEARSYM_LIT(5.23769988672470955434)*u[1];
     jac_p[217] = GEARSYM_LIT(4.81762848291806133085)*u[1];
     jac_p[218] = GEARSYM_LIT(0.0);
@@ -1235,7 +1235,7 @@ void gearsym_shift_1_2_mu_sens_params_default(
     p->zeta = GEARSYM_LIT(0.0);
     p->I_wheel = GEARSYM_LIT(6.4);
     p->rho_air = GEARSYM_LIT(1.2);
-    p->c_W = GEARSYM_LIT(0.28);
+    p->c_W = GEARSYM_LIT(0.2782);
     p->A_front = GEARSYM_LIT(2.35);
     p->f_roll = GEARSYM_LIT(0.001);
     p->mu_05 = GEARSYM_LIT(0.12);

@@ -72,7 +72,7 @@ typedef struct gearsym_shift_3_4_params {
     gearsym_real zeta; /* [rad]; road grade angle (2.49); default 0.0; range [-0.5, 0.5]; source: assumed (level road) */
     gearsym_real I_wheel; /* [kg*m^2]; wheel-side inertia: wheels, side shafts, half the differential (2.46); default 6.4; range [0.01, 1000.0]; source: (5.4), (5.5) row 4: I_C^eff = 0.108 m_veh + 6.4 */
     gearsym_real rho_air; /* [kg/m^3]; air density (2.49b); default 1.2; range [0.5, 2.0]; source: assumed (air at 20 degC) */
-    gearsym_real c_W; /* [1]; drag coefficient (2.49b); default 0.28; range [0.05, 2.0]; source: (3.8) row 4: r_dyn^3 rho c_W A = 14.7/526.9 with A = 2.35 */
+    gearsym_real c_W; /* [1]; drag coefficient (2.49b); default 0.2782; range [0.05, 2.0]; source: (3.8) row 4: r_dyn^3 rho c_W A = 14.7/526.9 with A = 2.35 */
     gearsym_real A_front; /* [m^2]; frontal area (2.49b); default 2.35; range [0.1, 20.0]; source: assumed (public data for this vehicle class) */
     gearsym_real f_roll; /* [s/m]; rolling-resistance factor of the thesis' form F_r = v f_roll cos(zeta) m g (2.49a); default 0.001; range [0.0, 0.1]; source: assumed: thesis form (2.49a), F_r = v f_roll cos(zeta) m g; equals f_R = 0.010 at 10 m/s */
 } gearsym_shift_3_4_params;

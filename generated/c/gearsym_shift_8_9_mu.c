@@ -52,7 +52,7 @@ void gearsym_shift_8_9_mu_rhs(
     xdot[0] = GEARSYM_LIT(0.276265980852698919638)*u[1]*p->mu_38 + GEARSYM_LIT(2.96714704224089417744)*u[0] + GEARSYM_LIT(3.46434343303613180533)*x[3]*p->d_ss - GEARSYM_LIT(3.39589781264432030130)*t0 - GEARSYM_LIT(1.40313626287409145619)*t1 - GEARSYM_LIT(3.46434343303613180533)*t2;
     xdot[1] = GEARSYM_LIT(1.01181788782529450984)*u[1]*p->mu_38 + GEARSYM_LIT(4.27673196808310471369)*u[0] + GEARSYM_LIT(5.23901114661380261579)*x[3]*p->d_ss - GEARSYM_LIT(3.32580544704322010438)*t0 - GEARSYM_LIT(2.12191621977067744665)*t1 - GEARSYM_LIT(5.23901114661380261579)*t2;
     xdot[2] = t3;
-    xdot[3] = (-(GEARSYM_LIT(68921.0)/GEARSYM_LIT(3906250.0))*p->A_front*p->c_W*p->rho_air*(x[3]*x[3]) + GEARSYM_LIT(2.0)*t3*p->d_ss - (GEARSYM_LIT(1649061.0)/GEARSYM_LIT(1562500.0))*x[3]*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta) + GEARSYM_LIT(2.0)*x[2]*p->k_ss - (GEARSYM_LIT(40221.0)/GEARSYM_LIT(12500.0))*p->m_veh*GEARSYM_SIN(p->zeta))/(p->I_wheel + (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*p->m_veh);
+    xdot[3] = (-GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[3]*x[3]) + GEARSYM_LIT(2.0)*t3*p->d_ss - GEARSYM_LIT(1.05990859890000000000)*x[3]*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta) + GEARSYM_LIT(2.0)*x[2]*p->k_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*p->m_veh*GEARSYM_SIN(p->zeta))/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
 }
 
 /**
@@ -87,7 +87,7 @@ void gearsym_shift_8_9_mu_jac_x(
     const gearsym_shift_8_9_mu_params *restrict p,
     gearsym_real *restrict jac_x)
 {
-    const gearsym_real t0 = (GEARSYM_LIT(1.0)/(p->I_wheel + (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*p->m_veh));
+    const gearsym_real t0 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh));
     const gearsym_real t1 = t0*p->d_ss;
     (void)u;
     jac_x[0] = GEARSYM_LIT(0.0);
@@ -105,7 +105,7 @@ void gearsym_shift_8_9_mu_jac_x(
     jac_x[12] = GEARSYM_LIT(3.46434343303613180533)*p->d_ss;
     jac_x[13] = GEARSYM_LIT(5.23901114661380261579)*p->d_ss;
     jac_x[14] = -GEARSYM_LIT(1.0);
-    jac_x[15] = t0*(-(GEARSYM_LIT(68921.0)/GEARSYM_LIT(1953125.0))*x[3]*p->A_front*p->c_W*p->rho_air - (GEARSYM_LIT(1649061.0)/GEARSYM_LIT(1562500.0))*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta)) - GEARSYM_LIT(2.0)*t1;
+    jac_x[15] = t0*(-GEARSYM_LIT(0.0355139609030000000000)*x[3]*p->A_front*p->c_W*p->rho_air - GEARSYM_LIT(1.05990859890000000000)*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta)) - GEARSYM_LIT(2.0)*t1;
 }
 
 /**
@@ -148,23 +148,23 @@ void gearsym_shift_8_9_mu_jac_p(
     const gearsym_shift_8_9_mu_params *restrict p,
     gearsym_real *restrict jac_p)
 {
-    const gearsym_real t0 = p->I_wheel + (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*p->m_veh;
+    const gearsym_real t0 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
     const gearsym_real t1 = (GEARSYM_LIT(1.0)/t0);
     const gearsym_real t2 = GEARSYM_SIN(p->zeta);
-    const gearsym_real t3 = (GEARSYM_LIT(40221.0)/GEARSYM_LIT(12500.0))*t2;
+    const gearsym_real t3 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t2;
     const gearsym_real t4 = GEARSYM_COS(p->zeta);
-    const gearsym_real t5 = (GEARSYM_LIT(1649061.0)/GEARSYM_LIT(1562500.0))*x[3];
+    const gearsym_real t5 = GEARSYM_LIT(1.05990859890000000000)*x[3];
     const gearsym_real t6 = t5*p->f_roll;
     const gearsym_real t7 = t4*p->m_veh;
     const gearsym_real t8 = (x[3]*x[3]);
-    const gearsym_real t9 = (GEARSYM_LIT(68921.0)/GEARSYM_LIT(3906250.0))*t8*p->A_front*p->c_W;
+    const gearsym_real t9 = GEARSYM_LIT(0.0177569804515000000000)*t8*p->A_front*p->c_W;
     const gearsym_real t10 = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1] - x[3];
     const gearsym_real t11 = (GEARSYM_LIT(2.0)*t10*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss - t3*p->m_veh - t9*p->rho_air - t6*t7)/(t0*t0);
-    const gearsym_real t12 = (GEARSYM_LIT(68921.0)/GEARSYM_LIT(3906250.0))*t1*t8*p->rho_air;
+    const gearsym_real t12 = GEARSYM_LIT(0.0177569804515000000000)*t1*t8*p->rho_air;
     jac_p[0] = GEARSYM_LIT(0.0);
     jac_p[1] = GEARSYM_LIT(0.0);
     jac_p[2] = GEARSYM_LIT(0.0);
-    jac_p[3] = t1*(-t3 - t4*t6) - (GEARSYM_LIT(1681.0)/GEARSYM_LIT(15625.0))*t11;
+    jac_p[3] = t1*(-t3 - t4*t6) - GEARSYM_LIT(0.108043690000000000000)*t11;
     jac_p[4] = -GEARSYM_LIT(3.46434343303613180533)*x[2];
     jac_p[5] = -GEARSYM_LIT(5.23901114661380261579)*x[2];
     jac_p[6] = GEARSYM_LIT(0.0);
@@ -176,7 +176,7 @@ void gearsym_shift_8_9_mu_jac_p(
     jac_p[12] = GEARSYM_LIT(0.0);
     jac_p[13] = GEARSYM_LIT(0.0);
     jac_p[14] = GEARSYM_LIT(0.0);
-    jac_p[15] = t1*(t2*t6*p->m_veh - (GEARSYM_LIT(40221.0)/GEARSYM_LIT(12500.0))*t7);
+    jac_p[15] = t1*(t2*t6*p->m_veh - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t7);
     jac_p[16] = GEARSYM_LIT(0.0);
     jac_p[17] = GEARSYM_LIT(0.0);
     jac_p[18] = GEARSYM_LIT(0.0);
@@ -355,7 +355,7 @@ void gearsym_shift_8_9_mu_params_default(
     p->zeta = GEARSYM_LIT(0.0);
     p->I_wheel = GEARSYM_LIT(6.4);
     p->rho_air = GEARSYM_LIT(1.2);
-    p->c_W = GEARSYM_LIT(0.28);
+    p->c_W = GEARSYM_LIT(0.2782);
     p->A_front = GEARSYM_LIT(2.35);
     p->f_roll = GEARSYM_LIT(0.001);
     p->mu_38 = GEARSYM_LIT(0.12);

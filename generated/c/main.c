@@ -45,10 +45,10 @@ int main(void)
 {
     gearsym_shift_2_3_mu_params p;
     gearsym_real x[GEARSYM_SHIFT_2_3_MU_NX] = {
-        GEARSYM_LIT(366.199736), /* omega_1 */
-        GEARSYM_LIT(112.911585), /* omega_2 */
+        GEARSYM_LIT(365.419877), /* omega_1 */
+        GEARSYM_LIT(112.671129), /* omega_2 */
         GEARSYM_LIT(0.0), /* phi */
-        GEARSYM_LIT(45.731707) /* omega_C */
+        GEARSYM_LIT(45.634317) /* omega_C */
     };
     gearsym_real u[GEARSYM_SHIFT_2_3_MU_NU] = { GEARSYM_LIT(0.0) };
     const gearsym_real slip_sign = gap(x) > GEARSYM_LIT(0.0) ? GEARSYM_LIT(1.0) : -GEARSYM_LIT(1.0);
