@@ -30,7 +30,7 @@ import numpy as np
 import sympy as sp
 from scipy.integrate import solve_ivp
 from scipy.interpolate import RectBivariateSpline
-from sympy.logic.boolalg import ITE
+from sympy.printing.pycode import PythonCodePrinter
 
 from symbolic.codegen import _real_symbols, smart_jacobian
 from symbolic.description import GearboxDescription
@@ -190,28 +190,24 @@ def mu_map_of(d: GearboxDescription) -> MuMap:
         raise GearsymError(d.file, "friction.mu_map", str(err)) from None
 
 
+class _ScalarPrinter(PythonCodePrinter):
+    """Python printer for scalar ("math") functions that prints ITE and Heaviside directly:
+    rewriting them into Piecewise first made SymPy re-simplify, which dominated compile time."""
+
+    def _print_ITE(self, expr: Any) -> str:
+        a, b, c = (self._print(x) for x in expr.args)
+        return f"(({b}) if ({a}) else ({c}))"
+
+    def _print_Heaviside(self, expr: Any) -> str:
+        # d max(0, a)/da; the value at a = 0 is immaterial for a Newton Jacobian
+        return f"(1.0 if ({self._print(expr.args[0])}) > 0 else 0.0)"
+
+
 def _lambdify(args: Sequence[Any], expr: Any) -> Callable[..., Any]:
     # "math" keeps scalar calls cheap (Piecewise prints as a conditional expression).
-    return sp.lambdify(args, _without_ite(expr), modules=["math"], cse=True)
-
-
-def _without_ite(expr: Any) -> Any:
-    """ITE(a, b, c) → (a ∧ b) ∨ (¬a ∧ c): the printer would rewrite each ITE into a Piecewise
-    and re-simplify it, which dominated the compile time; the logic is the same."""
-    if isinstance(expr, (list, tuple)):
-        return [_without_ite(e) for e in expr]
-    expr = sp.sympify(expr)
-    if not expr.has(ITE):
-        return expr
-    with sp.evaluate(False):
-        return expr.replace(
-            lambda e: isinstance(e, ITE),
-            lambda e: sp.Or(
-                sp.And(e.args[0], e.args[1], evaluate=False),
-                sp.And(sp.Not(e.args[0], evaluate=False), e.args[2], evaluate=False),
-                evaluate=False,
-            ),
-        )
+    # the printer writes math.sin etc.; give the generated code that module
+    namespace = ["math", {"math": math}]
+    return sp.lambdify(args, expr, modules=namespace, cse=True, printer=_ScalarPrinter)
 
 
 class _Compiled:
@@ -247,8 +243,6 @@ class _Compiled:
         powers = [ref.input_power, ref.friction_power, ref.damper_power, ref.road_power]
         full = sp.Matrix([real_of(e) for e in (*model.rhs, *powers)])
         jac = smart_jacobian(full, x)
-        with sp.evaluate(False):
-            jac = jac.applyfunc(_heaviside_as_piecewise)
         self.f = compile_xu(list(full))
         self.jac = compile_xu(jac.tolist())
         self.slips = compile_x([real_of(ref.slip[e]) for e in self.elements])
@@ -263,14 +257,6 @@ class _Compiled:
         )
         self.side_shaft = compile_x(real_of(ref.side_shaft_torque))
         self.road = compile_x(real_of(ref.road_torque))
-
-
-def _heaviside_as_piecewise(expr: sp.Expr) -> sp.Expr:
-    # d max(0, a)/da = Heaviside(a); the "math" printer has no Heaviside.
-    return expr.replace(
-        lambda e: isinstance(e, sp.Heaviside),
-        lambda e: sp.Piecewise((1, e.args[0] > 0), (0, True)),
-    )
 
 
 def _all_slips(d: GearboxDescription, ref: ReferenceModel) -> dict[Any, sp.Expr]:
