@@ -84,6 +84,7 @@ from sympy.polys.domains import QQ
 from sympy.polys.matrices import DomainMatrix
 
 from symbolic.model import Model
+from symbolic.sympy_utils import smart_jacobian
 
 __all__ = [
     "MODULUS",
@@ -397,25 +398,6 @@ def augment(
 # ---------------------------------------------------------------------------------------------
 # Lie derivatives and the observability matrix (4.4)–(4.11)
 # ---------------------------------------------------------------------------------------------
-
-
-def smart_jacobian(
-    exprs: Sequence[sp.Expr],
-    variables: Sequence[sp.Symbol],
-    free_symbols: Sequence[set[sp.Basic]] | None = None,
-) -> sp.Matrix:
-    """Jacobian ``d exprs / d variables`` that differentiates only where a variable occurs.
-
-    Entries whose expression does not contain the variable are zero without calling
-    ``diff`` (which would still walk the whole expression). ``free_symbols`` may pass the
-    precomputed free-symbol sets of ``exprs``.
-    """
-    rows = []
-    for i, e in enumerate(exprs):
-        e = sp.sympify(e)
-        free = e.free_symbols if free_symbols is None else free_symbols[i]
-        rows.append([e.diff(v) if v in free else sp.S.Zero for v in variables])
-    return sp.Matrix(len(rows), len(variables), lambda i, j: rows[i][j])
 
 
 @dataclass

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import sympy as sp
 from sympy.polys.matrices import DomainMatrix
 
@@ -18,13 +20,21 @@ def exact_nullspace(matrix: sp.Matrix) -> list[sp.Matrix]:
     return [basis[i, :].T for i in range(basis.rows)]
 
 
-def smart_jacobian(expressions: sp.Matrix, variables: list[sp.Symbol]) -> sp.Matrix:
-    """∂expressions/∂variables, differentiating only entries in which the variable occurs."""
-    result = sp.zeros(expressions.rows, len(variables))
-    for i in range(expressions.rows):
-        entry = expressions[i]
-        present = entry.free_symbols
-        for j, v in enumerate(variables):
-            if v in present:
-                result[i, j] = sp.diff(entry, v)
-    return result
+def smart_jacobian(
+    exprs: Sequence[sp.Expr],
+    variables: Sequence[sp.Symbol],
+    free_symbols: Sequence[set[sp.Basic]] | None = None,
+) -> sp.Matrix:
+    """Jacobian ``d exprs / d variables`` that differentiates only where a variable occurs.
+
+    Entries whose expression does not contain the variable are zero without calling ``diff``
+    (which would still walk the whole expression). ``free_symbols`` may pass the precomputed
+    free-symbol sets of ``exprs``. (:func:`symbolic.codegen.smart_jacobian` is the forward-mode
+    variant over a CSE graph that the emitters use.)
+    """
+    rows = []
+    for i, e in enumerate(exprs):
+        e = sp.sympify(e)
+        free = e.free_symbols if free_symbols is None else free_symbols[i]
+        rows.append([e.diff(v) if v in free else sp.S.Zero for v in variables])
+    return sp.Matrix(len(rows), len(variables), lambda i, j: rows[i][j])
