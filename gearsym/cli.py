@@ -11,6 +11,7 @@ import json
 import sys
 import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 from symbolic.errors import GearsymError
@@ -265,7 +266,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(format_summary(result))
         print(f"  wrote {', '.join(p.name for p in paths)} to {args.out}")
         print()
-        print_fim_summary(d, result)
+        print_fim_summary(d, result, out=Path(args.out))
     return status
 
 

@@ -199,15 +199,31 @@ def cmd_fim(args: argparse.Namespace) -> int:
     return 0
 
 
-def print_fim_summary(d: Any, result: Any = None) -> None:
+def print_fim_summary(d: Any, result: Any = None, out: Path | None = None) -> None:
     """A few lines for ``make run``: per phase, the parameters of the thesis set that stay
     estimable after the elimination (3.3), from the speeds alone and with ω̇_C (3.32).
 
     ``result`` is a :class:`validation.simulate.SimulationResult` of the default shift (it is
-    simulated when omitted).
+    simulated when omitted). With ``out``, also write what ``gearsym sensitivity`` and
+    ``gearsym fim`` write (CSV, JSON, text, Figures 3.4–3.14) into ``out/sensitivity`` and
+    ``out/fim``.
     """
-    from validation.fisher import GAMMA_MAX, SAMPLE_TIME, fim_study, summary_lines
-    from validation.sensitivity_run import reference_data, reference_from_result
+    from validation.fisher import (
+        GAMMA_MAX,
+        SAMPLE_TIME,
+        fim_study,
+        format_text,
+        plot_scatter,
+        study_json,
+        summary_lines,
+    )
+    from validation.sensitivity_run import (
+        plot_sensitivities,
+        reference_data,
+        reference_from_result,
+        run_sensitivities,
+        write_csv,
+    )
 
     start = time.perf_counter()
     data = reference_from_result(result) if result is not None else reference_data(d)
@@ -219,6 +235,21 @@ def print_fim_summary(d: Any, result: Any = None) -> None:
     )
     for line in summary_lines(study):
         print(f"  {line}")
+    if out is None:
+        return
+    fim_dir, sens_dir = out / "fim", out / "sensitivity"
+    fim_dir.mkdir(parents=True, exist_ok=True)
+    sens_dir.mkdir(parents=True, exist_ok=True)
+    (fim_dir / "fim.json").write_text(json.dumps(study_json(study), indent=2) + "\n")
+    (fim_dir / "fim.txt").write_text(format_text(study) + "\n", encoding="utf-8")
+    charts = plot_scatter(study, fim_dir)
+    run = run_sensitivities(d, data=data)
+    write_csv(run, sens_dir / "sensitivities.csv")
+    figures = plot_sensitivities(run, sens_dir)
+    print(
+        f"  wrote fim.json, fim.txt and {len(charts)} bar charts to {fim_dir}; "
+        f"sensitivities.csv and {len(figures)} plots to {sens_dir}"
+    )
 
 
 # ----------------------------------------------------------------------------- parser

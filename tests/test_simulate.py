@@ -255,3 +255,16 @@ def test_scenario_loader_reads_the_default(description):
     scenario = load_scenario(description)
     assert scenario.shift.off_going == "K38" and scenario.shift.on_coming == "B05"
     assert scenario.input_torque(0.0) == 150.0
+
+
+def test_run_is_the_main_job_end_to_end(tmp_path):
+    """`gearsym run` (what `make run` calls): gear table, observability verdict, simulation,
+    FIM summary, and the files of `simulate`, `sensitivity` and `fim` in one folder."""
+    out = tmp_path / "run"
+    result = gearsym("run", "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    for text in ("All ratios match", "generic rank of Q", "energy audit", "Fisher information"):
+        assert text in result.stdout
+    for name in ("timeseries.csv", "summary.json", "fim/fim.json", "sensitivity/sensitivities.csv"):
+        assert (out / name).stat().st_size > 0, name
+    assert len(list((out / "sensitivity").glob("sensitivity_*.png"))) == 5
