@@ -315,7 +315,7 @@ def _normalise_bounds(
     return tuple(result)
 
 
-def _real_symbols(model: Model) -> dict[sp.Symbol, sp.Symbol]:
+def real_symbols(model: Model) -> dict[sp.Symbol, sp.Symbol]:
     """Map every model symbol to a real symbol named after its Variable.
 
     Real symbols make ``d|x|/dx = sign(x)`` instead of an expression in ``re``/``im``. Variable
@@ -349,7 +349,7 @@ def build_function_table(model: Model, bounds: Bounds | None = None) -> Function
     implicit_step = "linearly_implicit_euler" in model.metadata.get(
         "integrators", "rk4 linearly_implicit_euler"
     )
-    real = _real_symbols(model)
+    real = real_symbols(model)
     xs = tuple(real[v.symbol] for v in model.states)
     us = tuple(real[v.symbol] for v in model.inputs)
     ps = tuple(real[v.symbol] for v in model.parameters)

@@ -143,7 +143,8 @@ def adjacent_shifts(d: GearboxDescription) -> list[ShiftSpec]:
     return [shift_spec(d, f"{a}-{b}") for (_, a), (_, b) in pairwise(forward)]
 
 
-def _quantity(d: GearboxDescription, section: str, key: str) -> Quantity:
+def quantity(d: GearboxDescription, section: str, key: str) -> Quantity:
+    """The value ``[section] key`` of the description, or a one-line error if it is missing."""
     values = getattr(d, section)
     if key not in values:
         raise GearsymError(d.file, f"{section}.{key}", "missing (needed by the drivetrain model)")
@@ -159,7 +160,7 @@ def drivetrain_parameters(d: GearboxDescription) -> tuple[Variable, ...]:
     section[ROLLING_KEY[d.rolling_resistance]] = "vehicle"
     result = []
     for key in keys:
-        q = _quantity(d, section[key], key)
+        q = quantity(d, section[key], key)
         positive = key != "zeta"
         result.append(
             Variable(
@@ -241,11 +242,11 @@ def drivetrain_parts(
         keep = d.coordinates if not locked else (d.input_shaft, d.output_shaft)
     projection = locked_projection(d, dyn, locked, keep)
 
-    i_d = exact(_quantity(d, "drivetrain", "i_D").value)
-    r_dyn = exact(_quantity(d, "vehicle", "r_dyn").value)
-    g = exact(_quantity(d, "vehicle", "g").value)
-    j_cs = exact(_quantity(d, "drivetrain", "J_cs").value)
-    j_d = exact(_quantity(d, "drivetrain", "J_D").value)
+    i_d = exact(quantity(d, "drivetrain", "i_D").value)
+    r_dyn = exact(quantity(d, "vehicle", "r_dyn").value)
+    g = exact(quantity(d, "vehicle", "g").value)
+    j_cs = exact(quantity(d, "drivetrain", "J_cs").value)
+    j_d = exact(quantity(d, "drivetrain", "J_D").value)
     params = drivetrain_parameters(d)
     p = {v.name: v.symbol for v in params}
 
@@ -279,7 +280,7 @@ def drivetrain_parts(
     if slip_signs is not None:
         # Sliding friction torque T = k_sign 2 N_disc r_m μ F_N (2.69, 3.14) with the known
         # slip direction as k_sign; μ is a parameter, F_N a known input.
-        mu_default = _quantity(d, "friction", "mu_nominal")
+        mu_default = quantity(d, "friction", "mu_nominal")
         for e in torque_elements:
             element = d.element(e)
             if element.n_disc is None or element.r_m is None:

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import sympy as sp
 
 from symbolic.description import GearboxDescription
-from symbolic.drivetrain import _quantity, drivetrain_parts
+from symbolic.drivetrain import drivetrain_parts, quantity
 from symbolic.errors import GearsymError
 from symbolic.friction import shift_element_sym
 from symbolic.kinematics import exact
@@ -61,8 +61,8 @@ def reference_model(d: GearboxDescription, elements: Sequence[str] | None = None
                 f'shift_element[name="{e.name}"].n_disc',
                 "friction data (n_disc, r_m, a_piston) needed by the reference simulation",
             )
-    friction = {k: exact(_quantity(d, "friction", k).value) for k in ("sigma0", "sigma1")}
-    z_ba = exact(_quantity(d, "friction", "z_ba_ratio").value)
+    friction = {k: exact(quantity(d, "friction", k).value) for k in ("sigma0", "sigma1")}
+    z_ba = exact(quantity(d, "friction", "z_ba_ratio").value)
     parts = drivetrain_parts(d)
     speeds = parts.body_speeds
     slip: dict[str, sp.Expr] = {}
@@ -138,9 +138,9 @@ def reference_model(d: GearboxDescription, elements: Sequence[str] | None = None
     from symbolic.dynamics import gearbox_dynamics
 
     dyn = gearbox_dynamics(d)
-    i_d = exact(_quantity(d, "drivetrain", "i_D").value)
-    extra = exact(_quantity(d, "drivetrain", "J_cs").value)
-    extra += exact(_quantity(d, "drivetrain", "J_D").value) / i_d**2
+    i_d = exact(quantity(d, "drivetrain", "i_D").value)
+    extra = exact(quantity(d, "drivetrain", "J_cs").value)
+    extra += exact(quantity(d, "drivetrain", "J_D").value) / i_d**2
     y_dot = sp.Matrix(parts.speeds)
     index = {b: i for i, b in enumerate(d.body_names)}
     out_row = dyn.kinematics.transform[index[d.output_shaft], :]

@@ -268,3 +268,15 @@ def test_run_is_the_main_job_end_to_end(tmp_path):
     for name in ("timeseries.csv", "summary.json", "fim/fim.json", "sensitivity/sensitivities.csv"):
         assert (out / name).stat().st_size > 0, name
     assert len(list((out / "sensitivity").glob("sensitivity_*.png"))) == 5
+
+
+def test_profile_matches_numpy_interp():
+    """The scenario's scalar interpolation against np.interp (held constant outside)."""
+    from validation.scenario import Profile
+
+    rng = np.random.default_rng(3)
+    times = np.cumsum(rng.uniform(0.01, 0.2, 12))
+    values = rng.uniform(-5.0, 5.0, 12)
+    profile = Profile(times, values)
+    for t in rng.uniform(times[0] - 0.5, times[-1] + 0.5, 500):
+        assert profile(float(t)) == pytest.approx(float(np.interp(t, times, values)), abs=1e-12)

@@ -38,13 +38,13 @@ from symbolic.fisher import (
     submatrix,
 )
 from validation.sensitivity_run import (
-    PhaseWindow,
     Progress,
     ReferenceData,
     SensitivityRun,
     reference_data,
     run_sensitivities,
 )
+from validation.simulate import Phase
 
 SAMPLE_TIME = 0.01  # s, assumed TCU measurement period
 SPEED_ERROR = 0.01  # relative error r_i of ω1, ω2, ω_C (3.26), assumed
@@ -125,7 +125,7 @@ class FimStudy:
         }
 
 
-def _in_window(t: np.ndarray, phase: PhaseWindow, last: bool) -> np.ndarray:
+def _in_window(t: np.ndarray, phase: Phase, last: bool) -> np.ndarray:
     return (t >= phase.t_start) & ((t < phase.t_end) | (last & (t <= phase.t_end)))
 
 
@@ -169,7 +169,7 @@ def fim_study(
     )
     floor = measurement_floor(tr.y, floor_fraction)  # over the whole record (3.26)
 
-    pieces: list[tuple[PhaseWindow, np.ndarray, np.ndarray, np.ndarray]] = []
+    pieces: list[tuple[Phase, np.ndarray, np.ndarray, np.ndarray]] = []
     for k, phase in enumerate(run.phases):
         last = k == len(run.phases) - 1
         if restart:
@@ -191,7 +191,7 @@ def fim_study(
         windows.append(
             _window(phase, y, dy, sets, errors, floor, names, run.scales, gamma_max, position)
         )
-    whole = PhaseWindow(WHOLE_SHIFT, float(tr.t[0]), float(tr.t[-1]))
+    whole = Phase(WHOLE_SHIFT, float(tr.t[0]), float(tr.t[-1]))
     y_all = np.concatenate([p[2] for p in pieces])
     dy_all = np.concatenate([p[3] for p in pieces])
     windows.append(_window(whole, y_all, dy_all, sets, errors, floor, names, run.scales, gamma_max))
@@ -211,7 +211,7 @@ def fim_study(
 
 
 def _window(
-    phase: PhaseWindow,
+    phase: Phase,
     y: np.ndarray,
     dy: np.ndarray,
     sets: Sequence[tuple[int, ...]],

@@ -28,7 +28,7 @@ import bisect
 import math
 import tomllib
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
@@ -47,26 +47,22 @@ class Profile:
 
     time: np.ndarray
     value: np.ndarray
+    # plain floats for scalar bisection: np.interp's per-call overhead dominated the inputs
+    _t: list[float] = field(init=False, repr=False, compare=False)
+    _v: list[float] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_t", [float(v) for v in self.time])
+        object.__setattr__(self, "_v", [float(v) for v in self.value])
 
     def __call__(self, t: float) -> float:
-        # Scalar bisection: np.interp's per-call overhead dominated the simulator's inputs.
-        times = self.time
-        if t <= times[0]:
-            return float(self.value[0])
-        if t >= times[-1]:
-            return float(self.value[-1])
-        k = bisect.bisect_right(self._times, t)
-        t0, t1 = self._times[k - 1], self._times[k]
-        v0, v1 = self._values[k - 1], self._values[k]
-        return v0 + (v1 - v0) * (t - t0) / (t1 - t0)
-
-    @property
-    def _times(self) -> list[float]:
-        return self.__dict__.setdefault("_time_list", [float(v) for v in self.time])
-
-    @property
-    def _values(self) -> list[float]:
-        return self.__dict__.setdefault("_value_list", [float(v) for v in self.value])
+        ts, vs = self._t, self._v
+        if t <= ts[0]:
+            return vs[0]
+        if t >= ts[-1]:
+            return vs[-1]
+        k = bisect.bisect_right(ts, t)
+        return vs[k - 1] + (vs[k] - vs[k - 1]) * (t - ts[k - 1]) / (ts[k] - ts[k - 1])
 
 
 @dataclass(frozen=True)

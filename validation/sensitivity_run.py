@@ -52,6 +52,7 @@ from symbolic.sensitivity import (
     sensitivity_equations,
     stationary_initial_sensitivity,
 )
+from validation.simulate import Phase
 
 #: Reference scale of parameters whose nominal value is zero, for the normalisation (3.3) and
 #: the normalised scatter (3.27): the road grade ζ is 0 on a level road, so a 5 % grade
@@ -70,21 +71,12 @@ Progress = Callable[[str], None]
 
 
 @dataclass(frozen=True)
-class PhaseWindow:
-    """A named time window (a shift phase, 3.1), duck-compatible with ``simulate.Phase``."""
-
-    name: str
-    t_start: float
-    t_end: float
-
-
-@dataclass(frozen=True)
 class ReferenceData:
     """The recorded signals the shift model is driven with (``SimulationResult`` subset)."""
 
     t: np.ndarray
     signals: dict[str, np.ndarray]
-    phases: tuple[PhaseWindow, ...]
+    phases: tuple[Phase, ...]
     shift: str
     source: str
 
@@ -94,7 +86,7 @@ class ReferenceData:
         t = np.concatenate([[t_start], self.t[inside], [t_end]])
         signals = {k: np.interp(t, self.t, v) for k, v in self.signals.items()}
         phases = tuple(
-            PhaseWindow(p.name, max(p.t_start, t_start), min(p.t_end, t_end))
+            Phase(p.name, max(p.t_start, t_start), min(p.t_end, t_end), p.criterion)
             for p in self.phases
             if p.t_end > t_start and p.t_start < t_end
         )
@@ -126,7 +118,7 @@ def reference_from_result(result: Any) -> ReferenceData:
     return ReferenceData(
         t=np.asarray(result.t, dtype=float),
         signals={k: np.asarray(v, dtype=float) for k, v in result.signals.items()},
-        phases=tuple(PhaseWindow(p.name, float(p.t_start), float(p.t_end)) for p in result.phases),
+        phases=tuple(result.phases),
         shift=shift.name if shift is not None else "2-3",
         source="validation.simulate",
     )
@@ -608,7 +600,7 @@ class SensitivityRun:
     """Sensitivities of the driven shift model along the reference shift (3.2–3.4)."""
 
     trajectory: SensitivityTrajectory
-    phases: tuple[PhaseWindow, ...]
+    phases: tuple[Phase, ...]
     values: dict[str, float]  # parameter values used
     scales: np.ndarray  # p_j0 (3.3) per chosen parameter
     nominal_states: np.ndarray  # x_i0 = max |x_i(t)| (3.4)
@@ -732,7 +724,7 @@ def write_csv(run: SensitivityRun, path: Path) -> Path:
     return path
 
 
-def phase_of(phases: Sequence[PhaseWindow], t: float) -> str:
+def phase_of(phases: Sequence[Phase], t: float) -> str:
     """Name of the phase containing t (the last phase includes its end)."""
     for k, p in enumerate(phases):
         if p.t_start <= t < p.t_end or (k == len(phases) - 1 and t <= p.t_end):

@@ -32,12 +32,12 @@ from scipy.integrate import solve_ivp
 from scipy.interpolate import RectBivariateSpline
 from sympy.printing.pycode import PythonCodePrinter
 
-from symbolic.codegen import _real_symbols, smart_jacobian
+from symbolic.codegen import real_symbols, smart_jacobian
 from symbolic.description import GearboxDescription
 from symbolic.drivetrain import (
-    _quantity,
     drivetrain_model,
     element_short_name,
+    quantity,
     shift_model,
 )
 from symbolic.errors import GearsymError
@@ -59,7 +59,7 @@ class Phase:
     name: str
     t_start: float
     t_end: float
-    criterion: str
+    criterion: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -218,7 +218,7 @@ class _Compiled:
         # Real symbols so that d|z|/dz = sign(z), not an expression in re/im. Parameters stay
         # symbols (arguments of the compiled functions): substituting numbers into the Max and
         # Piecewise of the friction model would make SymPy re-simplify them, which is slow.
-        real = _real_symbols(model)
+        real = real_symbols(model)
         x = [real[s] for s in model.state_symbols]
         u = [real[s] for s in model.input_symbols]
         p = [real[s] for s in model.parameter_symbols]
@@ -313,8 +313,8 @@ def quasi_static_state(
     gear = d.gear(scenario.shift.from_gear)
     model = ref.model
     names = [v.name for v in model.states]
-    r_dyn = _quantity(d, "vehicle", "r_dyn").value
-    i_d = _quantity(d, "drivetrain", "i_D").value
+    r_dyn = quantity(d, "vehicle", "r_dyn").value
+    i_d = quantity(d, "drivetrain", "i_D").value
     omega_c = scenario.vehicle_speed / r_dyn
     omega_out = i_d * omega_c
     speeds = _gear_speeds(d, gear.name, omega_out)
@@ -326,15 +326,17 @@ def quasi_static_state(
     closed = [e for e in gear.closed if e in compiled.elements]
     unknowns = [names.index(f"z_{e}") for e in closed] + [names.index("phi")]
     _sliding_bristles(d, x0, names, inputs, closed)
-    slip_rows = _slip_rows(d, ref, model, closed)
+    # d/dt of each closed element's slip and of φ̇ (all linear in the speeds) must vanish
+    phi_dot = model.rhs[names.index("phi")]
+    rows = np.array(
+        [_linear_row(ref.slip[e], model.state_symbols) for e in closed]
+        + [_linear_row(phi_dot, model.state_symbols)]
+    )
 
     def residual(values: np.ndarray) -> np.ndarray:
         x = x0.copy()
         x[unknowns] = values
-        xdot = np.asarray(compiled.f(x, inputs(0.0, x)), dtype=float)[: compiled.n]
-        out = [row @ xdot for row in slip_rows]
-        phi_ddot = _phi_ddot(d, ref, model, xdot)
-        return np.array([*out, phi_ddot])
+        return rows @ np.asarray(compiled.f(x, inputs(0.0, x)), dtype=float)[: compiled.n]
 
     scale = np.array([1e-3] * len(closed) + [1e-2])
     base = residual(np.zeros(len(unknowns)))
@@ -357,7 +359,7 @@ def _sliding_bristles(
     a slipping element starts in steady sliding, not with a relaxed bristle (which would
     add σ1 Δω, a huge damping torque, at t = 0)."""
     compiled = inputs.compiled
-    sigma0 = _quantity(d, "friction", "sigma0").value
+    sigma0 = quantity(d, "friction", "sigma0").value
     u = inputs(0.0, x0)
     ne = len(compiled.elements)
     slips = compiled.slips(x0)
@@ -381,18 +383,9 @@ def _gear_speeds(d: GearboxDescription, gear: str, omega_out: float) -> dict[str
     return {s.name: float(parts.body_speeds[s.name].subs(out, omega_out)) for s in d.shafts}
 
 
-def _slip_rows(
-    d: GearboxDescription, ref: ReferenceModel, model: Model, elements: Sequence[str]
-) -> list[np.ndarray]:
-    x = model.state_symbols
-    return [np.array([float(ref.slip[e].diff(s)) for s in x], dtype=float) for e in elements]
-
-
-def _phi_ddot(d: GearboxDescription, ref: ReferenceModel, model: Model, xdot: np.ndarray) -> float:
-    x = model.state_symbols
-    phi_dot = ref.model.rhs[[str(s) for s in x].index("phi")]
-    row = np.array([float(sp.diff(phi_dot, s)) for s in x], dtype=float)
-    return float(row @ xdot)
+def _linear_row(expr: sp.Expr, x: Sequence[sp.Symbol]) -> np.ndarray:
+    """Coefficients of an expression linear in the states x."""
+    return np.array([float(sp.diff(expr, s)) for s in x], dtype=float)
 
 
 # ----------------------------------------------------------------------------- simulation
@@ -426,7 +419,7 @@ def simulate(
     report(0.0, "deriving the reference model")
     ref = reference_model(d, elements)
     compiled = _Compiled(ref, d, elements)
-    t_oil = _quantity(d, "friction", "T_oil").value
+    t_oil = quantity(d, "friction", "T_oil").value
     inputs = _Inputs(scenario, elements, mu_map_of(d), t_oil, compiled)
     x0 = quasi_static_state(d, ref, inputs, compiled)
     n = compiled.n
@@ -560,12 +553,12 @@ def _signals(
             put(f"T_{e.name}", torque_of.get(e.name, 0.0))
         t_ss = compiled.side_shaft(x)
         put("T_ss", t_ss)
-        put("T_out", 2 * t_ss / _quantity(d, "drivetrain", "i_D").value)
+        put("T_out", 2 * t_ss / quantity(d, "drivetrain", "i_D").value)
         put("T_res", compiled.road(x))
         w_in = rows[f"omega_{d.input_shaft}"][-1]
         w_out = rows[f"omega_{d.output_shaft}"][-1]
         put("ratio", w_in / w_out if w_out != 0 else math.nan)
-        put("v_vehicle", x[index["omega_C"]] * _quantity(d, "vehicle", "r_dyn").value)
+        put("v_vehicle", x[index["omega_C"]] * quantity(d, "vehicle", "r_dyn").value)
         for k, term in enumerate(ENERGY_TERMS):
             put(term, y[n + k])
     return {k: np.array(v) for k, v in rows.items()}
