@@ -8,10 +8,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from typing import Any
 
 from symbolic.errors import GearsymError
@@ -233,40 +234,76 @@ def cmd_default_config(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_scenario(d: Any, path: str | None) -> tuple[Any, str | None]:
+    """The scenario ``gearsym run`` simulates, or ``None`` and why not. A scenario the user
+    names must load (its errors are errors); the built-in one is tried on any gearbox."""
+    from validation.scenario import load_scenario
+
+    if path is not None:
+        return load_scenario(d, path), None
+    try:
+        return load_scenario(d, None), None
+    except GearsymError as err:
+        return None, (
+            f"the built-in 2-3 scenario does not fit this gearbox ({err.key}: {err.reason}); "
+            "give one with --scenario FILE"
+        )
+
+
 def cmd_run(args: argparse.Namespace) -> int:
-    """The main job: derive the model of the gearbox and print its gear table."""
+    """The main job: derive the model, print the gear table and the observability verdict,
+    simulate the shift scenario, and its sensitivities and Fisher information; everything the
+    description supports, and what was skipped, with the reason."""
     from symbolic.dynamics import gearbox_dynamics
+    from symbolic.output_dir import OutputDir
+    from symbolic.ratios import ratio_table
 
     d = _load(args.config)
-    print(f"gearsym: {d.title}")
-    start = time.perf_counter()
-    dyn = gearbox_dynamics(d, symbolic_inertias=True)
-    m = dyn.mass_matrix
-    f = len(dyn.kinematics.coordinates)
-    print(
-        f"  derived kinematics and dynamics in {time.perf_counter() - start:.2f} s: "
-        f"{len(d.body_names)} bodies, {len(d.planetary_sets)} sets, {f} DOF, "
-        f"y = [{', '.join(str(s) for s in dyn.kinematics.coordinate_symbols)}], "
-        f"M {m.rows}×{m.cols} with {sum(1 for e in m if e != 0)} nonzero entries, "
-        f"B̃ {dyn.input_matrix.rows}×{dyn.input_matrix.cols}"
-    )
-    print()
-    status = cmd_ratios(argparse.Namespace(config=args.config, json=False))
-    from gearsym.cmd_observability import print_observability_summary
-
-    print()
-    print_observability_summary(d)  # verdict of (4.12) for the 2-3 shift
-    if args.config is None or args.scenario is not None:
-        from gearsym.cmd_analysis import print_fim_summary
-        from gearsym.cmd_dynamics import simulate_and_write
-        from validation.report import format_summary
+    scenario, skipped = _run_scenario(d, args.scenario)
+    with OutputDir(args.out, "run") as out:  # refuses a foreign DIR before the work
+        print(f"gearsym: {d.title}")
+        start = time.perf_counter()
+        dyn = gearbox_dynamics(d, symbolic_inertias=True)
+        m = dyn.mass_matrix
+        f = len(dyn.kinematics.coordinates)
+        print(
+            f"  derived kinematics and dynamics in {time.perf_counter() - start:.2f} s: "
+            f"{len(d.body_names)} bodies, {len(d.planetary_sets)} sets, {f} DOF, "
+            f"y = [{', '.join(str(s) for s in dyn.kinematics.coordinate_symbols)}], "
+            f"M {m.rows}×{m.cols} with {sum(1 for e in m if e != 0)} nonzero entries, "
+            f"B̃ {dyn.input_matrix.rows}×{dyn.input_matrix.cols}"
+        )
+        print()
+        status = cmd_ratios(argparse.Namespace(config=args.config, json=False))
+        ratios = {r.gear: (None if r.ratio is None else float(r.ratio)) for r in ratio_table(d)}
+        (out.path / "ratios.json").write_text(json.dumps(ratios, indent=2) + "\n")
+        from gearsym.cmd_observability import print_observability_summary
 
         print()
-        result, paths = simulate_and_write(d, args.scenario, args.out)
-        print(format_summary(result))
-        print(f"  wrote {', '.join(p.name for p in paths)} to {args.out}")
-        print()
-        print_fim_summary(d, result, out=Path(args.out))
+        print_observability_summary(d)  # verdict of (4.12) for the 2-3 shift
+        steps = {"ratios": "done", "observability": "done"}
+        if scenario is not None:
+            from gearsym.cmd_analysis import print_fim_summary
+            from gearsym.cmd_dynamics import simulate_with_progress
+            from validation.report import format_summary, write_results
+
+            print()
+            result = simulate_with_progress(d, scenario)
+            write_results(d, result, out.path)
+            print(format_summary(result))
+            print()
+            print_fim_summary(d, result, folder=out.path)
+            steps |= {"simulation": "done", "sensitivity": "done", "fim": "done"}
+        else:
+            print()
+            for step in ("simulation", "sensitivity", "fim"):
+                steps[step] = f"skipped: {skipped}"
+            print(f"simulation, sensitivities and FIM skipped: {skipped}")
+        (out.path / "run.json").write_text(
+            json.dumps({"gearbox": d.name, "file": d.file, "steps": steps}, indent=2) + "\n"
+        )
+        paths = out.commit()
+    print(f"  wrote {len(paths)} files to {args.out}")
     return status
 
 
@@ -296,8 +333,14 @@ def build_parser() -> argparse.ArgumentParser:
         "Main job: derive the model, print the gear table, simulate the default shift.",
     )
     config(p)
-    p.add_argument("--scenario", help="shift scenario (default: built-in 2-3, built-in gearbox)")
-    p.add_argument("--out", default="out/run", help="folder for the simulation results")
+    p.add_argument(
+        "--scenario", help="shift scenario (default: the built-in 2-3, where the gearbox fits it)"
+    )
+    p.add_argument(
+        "--out",
+        default="out/run",
+        help="folder for every result (replaced atomically, and only if gearsym wrote it)",
+    )
 
     p = command("ratios", cmd_ratios, "Derive every gear's ratio ω_in/ω_out (Table 2.1).")
     config(p)
@@ -354,17 +397,33 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(BaseException):
+    """SIGTERM, raised like Ctrl-C so that every ``with`` block cleans up on the way out."""
+
+
+def _terminate(signum: int, frame: Any) -> None:
+    raise Terminated
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
     try:
         return int(args.handler(args))
     except GearsymError as err:
         print(f"gearsym: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("gearsym: interrupted", file=sys.stderr)
+        print("gearsym: interrupted; nothing was written", file=sys.stderr)
         return 130
+    except Terminated:
+        print("gearsym: terminated; nothing was written", file=sys.stderr)
+        return 143
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

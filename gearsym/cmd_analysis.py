@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import time
@@ -12,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from symbolic.errors import GearsymError
+from symbolic.output_dir import OutputDir
 
 
 def _load(path: str | None) -> Any:
@@ -47,7 +49,11 @@ def _overrides(d: Any, items: Sequence[str] | None) -> dict[str, float]:
 def _prepare(args: argparse.Namespace, wheel: bool) -> tuple[Any, list[str] | None, dict, Any]:
     """Load the description and check the parameter names before the (slow) simulation."""
     from symbolic.sensitivity import select_parameters
-    from validation.sensitivity_run import driven_shift_model, parameter_values
+    from validation.sensitivity_run import (
+        driven_shift_model,
+        parameter_values,
+        thesis_parameters,
+    )
 
     d = _load(args.config)
     names = _parameter_list(args.params)
@@ -58,6 +64,8 @@ def _prepare(args: argparse.Namespace, wheel: bool) -> tuple[Any, list[str] | No
         scenario = load_scenario(d, args.scenario)
     shift = scenario.shift.name if scenario is not None else "2-3"
     driven = driven_shift_model(d, shift, wheel)
+    if names is None:
+        names = list(thesis_parameters(driven))
     select_parameters(driven.model, names, file=d.file)
     overrides = _overrides(d, args.set)
     parameter_values(driven.model, overrides)
@@ -89,22 +97,22 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
     )
 
     d, names, overrides, scenario = _prepare(args, False)
-    data = _reference(d, scenario)
-    run = run_sensitivities(
-        d,
-        names,
-        data=data,
-        overrides=overrides,
-        mode=args.sliding,
-        initial=args.initial,
-        progress=_say,
-    )
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = [write_csv(run, out / "sensitivities.csv")]
-    if not args.no_plots:
-        _say("plotting")
-        paths += plot_sensitivities(run, out)
+    with OutputDir(args.out, "sensitivity") as out:  # refuses a foreign DIR before the work
+        data = _reference(d, scenario)
+        run = run_sensitivities(
+            d,
+            names,
+            data=data,
+            overrides=overrides,
+            mode=args.sliding,
+            initial=args.initial,
+            progress=_say,
+        )
+        write_csv(run, out.path / "sensitivities.csv")
+        if not args.no_plots:
+            _say("plotting")
+            plot_sensitivities(run, out.path)
+        paths = out.commit()
     tr = run.trajectory
     norm = run.normalised
     phases = [p.name for p in run.phases]
@@ -152,7 +160,7 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
     for j, p in enumerate(tr.parameter_names):
         cells = [" ".join(f"{peaks[p][ph][x]:5.0e}" for x in tr.state_names) for ph in phases]
         print(f"    {p:<10} {run.scales[j]:>9.4g}  " + "  ".join(f"{c:>{width}}" for c in cells))
-    print(f"  wrote {len(paths)} files to {out}: {', '.join(p.name for p in paths)}")
+    print(f"  wrote {len(paths)} files to {args.out}: {', '.join(p.name for p in paths)}")
     return 0
 
 
@@ -161,32 +169,30 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
 
 def cmd_fim(args: argparse.Namespace) -> int:
     """Fisher information per phase and over the shift (3.16–3.32)."""
-    from validation.fisher import fim_study, format_text, plot_scatter, study_json
+    from validation.fisher import fim_study, format_text, study_json
 
     d, names, overrides, scenario = _prepare(args, args.with_wheel_acceleration)
-    data = _reference(d, scenario)
-    study = fim_study(
-        d,
-        names,
-        data=data,
-        with_wheel_acceleration=args.with_wheel_acceleration,
-        sample_time=args.sample_time,
-        speed_error=args.speed_error,
-        acceleration_error=args.acceleration_error,
-        gamma_max=args.gamma_max,
-        mode=args.sliding,
-        restart=args.restart,
-        overrides=overrides,
-        progress=_say,
-    )
-    paths: list[Path] = []
-    if args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        report = out / "fim.json"
-        report.write_text(json.dumps(study_json(study), indent=2) + "\n", encoding="utf-8")
-        (out / "fim.txt").write_text(format_text(study) + "\n", encoding="utf-8")
-        paths = [report, out / "fim.txt", *plot_scatter(study, out)]
+    with contextlib.ExitStack() as stack:
+        out = stack.enter_context(OutputDir(args.out, "fim")) if args.out else None
+        data = _reference(d, scenario)
+        study = fim_study(
+            d,
+            names,
+            data=data,
+            with_wheel_acceleration=args.with_wheel_acceleration,
+            sample_time=args.sample_time,
+            speed_error=args.speed_error,
+            acceleration_error=args.acceleration_error,
+            gamma_max=args.gamma_max,
+            mode=args.sliding,
+            restart=not args.carry_over,
+            overrides=overrides,
+            progress=_say,
+        )
+        paths: list[Path] = []
+        if out is not None:
+            write_fim(study, out.path)
+            paths = out.commit()
     if args.json:
         data_out = study_json(study)
         data_out["files"] = [str(p) for p in paths]
@@ -199,24 +205,26 @@ def cmd_fim(args: argparse.Namespace) -> int:
     return 0
 
 
-def print_fim_summary(d: Any, result: Any = None, out: Path | None = None) -> None:
-    """A few lines for ``make run``: per phase, the parameters of the thesis set that stay
+def write_fim(study: Any, folder: Path) -> list[str]:
+    """``fim.json``, ``fim.txt`` and the bar charts (Figs. 3.9–3.14) into ``folder``."""
+    from validation.fisher import format_text, plot_scatter, study_json
+
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "fim.json").write_text(json.dumps(study_json(study), indent=2) + "\n")
+    (folder / "fim.txt").write_text(format_text(study) + "\n", encoding="utf-8")
+    return ["fim.json", "fim.txt", *(p.name for p in plot_scatter(study, folder))]
+
+
+def print_fim_summary(d: Any, result: Any = None, folder: Path | None = None) -> None:
+    """A few lines for ``gearsym run``: per phase, the thesis' parameters (3.2) that stay
     estimable after the elimination (3.3), from the speeds alone and with ω̇_C (3.32).
 
-    ``result`` is a :class:`validation.simulate.SimulationResult` of the default shift (it is
-    simulated when omitted). With ``out``, also write what ``gearsym sensitivity`` and
-    ``gearsym fim`` write (CSV, JSON, text, Figures 3.4–3.14) into ``out/sensitivity`` and
-    ``out/fim``.
+    ``result`` is a :class:`validation.simulate.SimulationResult` (the default shift is
+    simulated when omitted). With ``folder``, also write what ``gearsym sensitivity`` and
+    ``gearsym fim`` write (CSV, JSON, text, Figures 3.4–3.14) into ``folder/sensitivity`` and
+    ``folder/fim``.
     """
-    from validation.fisher import (
-        GAMMA_MAX,
-        SAMPLE_TIME,
-        fim_study,
-        format_text,
-        plot_scatter,
-        study_json,
-        summary_lines,
-    )
+    from validation.fisher import GAMMA_MAX, SAMPLE_TIME, SENSITIVITY_VIEW, fim_study, summary_lines
     from validation.sensitivity_run import (
         plot_sensitivities,
         reference_data,
@@ -229,26 +237,24 @@ def print_fim_summary(d: Any, result: Any = None, out: Path | None = None) -> No
     data = reference_from_result(result) if result is not None else reference_data(d)
     study = fim_study(d, data=data, with_wheel_acceleration=True)
     print(
-        f"Fisher information (3.25) of m_veh, k_ss, d_ss, mu_38, zeta per phase: estimable "
-        f"after elimination (γ ≤ {GAMMA_MAX:g}, samples every {SAMPLE_TIME * 1e3:g} ms; "
-        f"{time.perf_counter() - start:.1f} s)"
+        f"Fisher information (3.25) of {', '.join(study.parameters)} per phase of the "
+        f"{data.shift} shift: estimable after elimination (γ ≤ {GAMMA_MAX:g}, samples every "
+        f"{SAMPLE_TIME * 1e3:g} ms; {time.perf_counter() - start:.1f} s)"
     )
+    print(f"  sensitivities {SENSITIVITY_VIEW[True]}")
     for line in summary_lines(study):
         print(f"  {line}")
-    if out is None:
+    if folder is None:
         return
-    fim_dir, sens_dir = out / "fim", out / "sensitivity"
-    fim_dir.mkdir(parents=True, exist_ok=True)
-    sens_dir.mkdir(parents=True, exist_ok=True)
-    (fim_dir / "fim.json").write_text(json.dumps(study_json(study), indent=2) + "\n")
-    (fim_dir / "fim.txt").write_text(format_text(study) + "\n", encoding="utf-8")
-    charts = plot_scatter(study, fim_dir)
+    charts = write_fim(study, folder / "fim")
     run = run_sensitivities(d, data=data)
+    sens_dir = folder / "sensitivity"
+    sens_dir.mkdir(parents=True, exist_ok=True)
     write_csv(run, sens_dir / "sensitivities.csv")
     figures = plot_sensitivities(run, sens_dir)
     print(
-        f"  wrote fim.json, fim.txt and {len(charts)} bar charts to {fim_dir}; "
-        f"sensitivities.csv and {len(figures)} plots to {sens_dir}"
+        f"  fim/: fim.json, fim.txt and {len(charts) - 2} bar charts; "
+        f"sensitivity/: sensitivities.csv and {len(figures)} plots"
     )
 
 
@@ -338,10 +344,11 @@ def register(
         "--gamma-max", type=float, default=GAMMA_MAX, help="limit of the scatter γ (3.27)"
     )
     p.add_argument(
-        "--restart",
+        "--carry-over",
         action="store_true",
-        help="restart the sensitivities at every phase (information of the phase alone)",
+        help="carry the sensitivities over from t0 (the thesis' view) instead of restarting "
+        "them at every phase: a phase then also shows what earlier phases revealed",
     )
 
 
-__all__ = ["cmd_fim", "cmd_sensitivity", "print_fim_summary", "register"]
+__all__ = ["cmd_fim", "cmd_sensitivity", "print_fim_summary", "register", "write_fim"]

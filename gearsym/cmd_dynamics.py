@@ -132,29 +132,29 @@ class ProgressBar:
             sys.stderr.flush()
 
 
-def simulate_and_write(
-    d: Any, scenario_path: str | None, out: str, plots: bool = True
-) -> tuple[Any, list[Any]]:
-    """Simulate a scenario with a progress display and write the results into ``out``."""
-    from validation.report import write_outputs
-    from validation.scenario import load_scenario
+def simulate_with_progress(d: Any, scenario: Any) -> Any:
+    """Simulate a loaded scenario with a progress display on stderr."""
     from validation.simulate import simulate
 
-    scenario = load_scenario(d, scenario_path)
     bar = ProgressBar("simulate")
     try:
-        result = simulate(d, scenario, progress=bar)
+        return simulate(d, scenario, progress=bar)
     finally:
         bar.done()
-    return result, write_outputs(d, result, out, plots=plots)
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Simulate the scenario's shift with the reference model and write the results."""
-    from validation.report import format_summary, summary
+    from symbolic.output_dir import OutputDir
+    from validation.report import format_summary, summary, write_results
+    from validation.scenario import load_scenario
 
     d = _load(args.config)
-    result, paths = simulate_and_write(d, args.scenario, args.out, plots=not args.no_plots)
+    scenario = load_scenario(d, args.scenario)
+    with OutputDir(args.out, "simulate") as out:  # refuses a foreign DIR before the work
+        result = simulate_with_progress(d, scenario)
+        write_results(d, result, out.path, plots=not args.no_plots)
+        paths = out.commit()
     if args.json:
         json.dump({**summary(result), "files": [str(p) for p in paths]}, sys.stdout, indent=2)
         sys.stdout.write("\n")
@@ -193,7 +193,11 @@ def add_parsers(
     )
     config(p)
     p.add_argument("--scenario", help="scenario TOML (default: the built-in 2-3 power-on upshift)")
-    p.add_argument("--out", required=True, help="output folder (replaced atomically)")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="output folder (replaced atomically, and only if gearsym wrote it)",
+    )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
 

@@ -19,8 +19,7 @@ Nothing in the output depends on the time, the machine, absolute paths or ``PYTH
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -48,6 +47,7 @@ from symbolic.drivetrain import (
 from symbolic.errors import GearsymError
 from symbolic.friction import DEFAULT_MU_MAP, T_SS_MIN, MuMap, shift_element_sym
 from symbolic.model import Model, Variable
+from symbolic.output_dir import MANIFEST, manifest_marker, manifest_text
 from symbolic.sensitivity import sensitivity_model
 
 __all__ = [
@@ -63,7 +63,7 @@ __all__ = [
 ]
 
 #: First line of ``MANIFEST``; ``gearsym generate`` only replaces directories that carry it.
-MANIFEST_MARKER = "# gearsym generate output: do not edit, regenerate with `gearsym generate`."
+MANIFEST_MARKER = manifest_marker("generate")
 
 C_DIR = "c"
 PYTHON_DIR = "python"
@@ -499,14 +499,6 @@ def _readme(d: GearboxDescription, models: Sequence[EmittedModel], example: dict
     )
 
 
-def _manifest(files: Mapping[str, str]) -> str:
-    lines = [MANIFEST_MARKER, f"# {len(files)} files, SHA-256 of each:"]
-    for path in sorted(files):
-        digest = hashlib.sha256(files[path].encode("utf-8")).hexdigest()
-        lines.append(f"{digest}  {path}")
-    return "\n".join(lines) + "\n"
-
-
 def generate_tree(
     d: GearboxDescription, progress: Callable[[str], None] | None = None
 ) -> GeneratedTree:
@@ -526,5 +518,5 @@ def generate_tree(
     example = _example_context(d, models)
     files[f"{C_DIR}/main.c"] = render("c_example_main.c.j2", **example)
     files["README.md"] = _readme(d, models, example)
-    files["MANIFEST"] = _manifest(files)
+    files[MANIFEST] = manifest_text({k: v.encode("utf-8") for k, v in files.items()}, "generate")
     return GeneratedTree(files, tuple(models), mu_map, tuple(example["c_files"]))

@@ -199,3 +199,77 @@ def test_wheel_acceleration_lowers_every_scatter(study):
         without, with_acc = w.results
         finite = np.isfinite(without.full.gamma)
         assert np.all(with_acc.full.gamma[finite] <= without.full.gamma[finite] * (1 + 1e-9))
+
+
+def _null(result, name):
+    """True when ``name`` alone spans a null direction of the window's FIM."""
+    return {name: 1.0} in [
+        {k: round(abs(v), 6) for k, v in d.items()} for d in result.full.null_directions
+    ]
+
+
+@pytest.fixture(scope="module")
+def four_parameters():
+    from symbolic.description import load_description
+    from validation.fisher import fim_study
+    from validation.sensitivity_run import reference_data
+
+    d = load_description()
+    data = reference_data(d)
+    names = ["m_veh", "mu_38", "mu_05", "zeta"]
+    return {restart: fim_study(d, names, data=data, restart=restart) for restart in (True, False)}
+
+
+def test_a_phase_claims_no_friction_information_where_its_element_carries_none(
+    four_parameters,
+):
+    """Issue 9: K38 is open in the speed phase and gear 3, so μ38 cannot act on the outputs
+    there (μ acts only through the sliding torque μ·F_N, 3.14): by default each phase counts
+    only its own information, and μ38 is an exact null direction. μ05 is not called
+    estimable in gear 3 (B05 sticks; see the next test for the little it reveals)."""
+    study = four_parameters[True]
+    by_name = {w.name: w.results[0] for w in study.windows}
+    assert study.settings["restart"] is True
+    assert "restarted at each phase" in study.settings["sensitivities"]
+    for phase in ("speed phase", "gear 3"):
+        assert _null(by_name[phase], "mu_38"), phase
+        assert "mu_38" not in by_name[phase].elimination.final
+    mu_05 = list(study.parameters).index("mu_05")
+    assert by_name["gear 3"].full.gamma[mu_05] > study.settings["gamma_max"]
+    assert "mu_05" not in by_name["gear 3"].elimination.final
+    assert "mu_38" in by_name["torque phase"].elimination.final  # where K38 slides
+
+
+def test_the_carried_over_view_is_labelled_as_such(four_parameters):
+    """The thesis' continuous view (sensitivities from t0) remains available, labelled: there
+    μ38's torque-phase perturbation is still seen in the speed phase."""
+    from validation.fisher import format_text
+
+    carried = four_parameters[False]
+    assert "carried over from t0" in format_text(carried)
+    speed = next(w for w in carried.windows if w.name == "speed phase").results[0]
+    assert not _null(speed, "mu_38")
+
+
+def test_gear_3_sees_mu_05_only_while_b05_still_slides():
+    """The evidence behind μ05's finite scatter in gear 3: the phase starts when B05's slip
+    has fallen below its threshold, but B05 still slides at capacity for about a millisecond.
+    From the first sample at which it sticks on, μ05 has no influence at all (S ≡ 0)."""
+    from symbolic.description import load_description
+    from validation.sensitivity_run import (
+        driven_shift_model,
+        reference_data,
+        run_sensitivities,
+        sliding_masks,
+    )
+
+    d = load_description()
+    data = reference_data(d)
+    gear3 = next(p for p in data.phases if p.name == "gear 3")
+    window = data.window(gear3.t_start, gear3.t_end)
+    sliding = window.t[sliding_masks(d, driven_shift_model(d, "2-3"), window)["B05"]]
+    assert 0 < sliding.size and sliding.max() < gear3.t_start + 2e-3
+    after = data.window(float(sliding.max()) + 1e-3, gear3.t_end)
+    run = run_sensitivities(d, ["m_veh", "mu_05", "zeta"], data=after, initial="zero")
+    assert np.all(run.trajectory.S[:, :, 1] == 0.0)
+    assert np.any(run.trajectory.S[:, :, 0] != 0.0)  # m_veh still acts

@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import os
 import re
 import shutil
@@ -320,14 +321,15 @@ def test_refuses_to_replace_a_foreign_directory(tmp_path: Path) -> None:
     (tmp_path / "mine.txt").write_text("keep me")
     result = _gearsym("generate", "--out", str(tmp_path))
     assert result.returncode == 2
-    assert "was not written by gearsym generate" in result.stderr
+    assert "was not written by gearsym" in result.stderr
     assert (tmp_path / "mine.txt").read_text() == "keep me"
 
 
 def _fake_tree(out: Path) -> None:
     out.mkdir()
-    (out / "MANIFEST").write_text(MANIFEST_MARKER + "\n")
     (out / "old.txt").write_text("old")
+    digest = hashlib.sha256(b"old").hexdigest()  # a tree gearsym wrote: every file listed
+    (out / "MANIFEST").write_text(f"{MANIFEST_MARKER}\n# 1 files\n{digest}  old.txt\n")
 
 
 def test_failure_while_writing_leaves_the_old_output(tmp_path: Path, capsys: Any) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,6 +23,7 @@ from validation.scenario import default_scenario_path, load_scenario
 from validation.simulate import simulate
 
 TABLE_2_1 = {"2": 3.243, "3": 2.252}
+SIMPSON = Path(__file__).parent / "data" / "simpson_3speed.toml"
 
 
 @pytest.fixture(scope="module")
@@ -203,6 +205,7 @@ def test_simulate_cli_writes_everything(tmp_path):
             "fig_3_1_speeds.png",
             "fig_3_2_accelerations.png",
             "fig_3_3_torques.png",
+            "MANIFEST",
         ]
     )
     assert all((out / f).stat().st_size > 0 for f in files)
@@ -268,6 +271,24 @@ def test_run_is_the_main_job_end_to_end(tmp_path):
     for name in ("timeseries.csv", "summary.json", "fim/fim.json", "sensitivity/sensitivities.csv"):
         assert (out / name).stat().st_size > 0, name
     assert len(list((out / "sensitivity").glob("sensitivity_*.png"))) == 5
+    steps = json.loads((out / "run.json").read_text())["steps"]
+    assert set(steps.values()) == {"done"}
+    assert json.loads((out / "ratios.json").read_text())["2"] == pytest.approx(3.243, abs=5e-4)
+    assert [p.name for p in tmp_path.iterdir()] == ["run"]  # no staging folder, no lock left
+
+
+def test_run_on_another_gearbox_says_what_it_skipped_and_why(tmp_path):
+    """A gearbox the built-in 2-3 scenario does not fit: gear table and observability run,
+    the simulation is skipped with its reason (stdout and run.json), --out is honoured."""
+    out = tmp_path / "simpson"
+    result = gearsym("run", str(SIMPSON), "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    assert "All ratios match" in result.stdout
+    assert "simulation, sensitivities and FIM skipped: the built-in 2-3 scenario" in result.stdout
+    steps = json.loads((out / "run.json").read_text())["steps"]
+    assert steps["ratios"] == "done"
+    assert steps["simulation"].startswith("skipped: the built-in 2-3 scenario does not fit")
+    assert sorted(json.loads((out / "ratios.json").read_text())) == ["1", "2", "3", "N", "R"]
 
 
 def test_profile_matches_numpy_interp():

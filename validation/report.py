@@ -1,20 +1,18 @@
 """Write a simulation's results: time series (CSV), phases, energy audit, checks and plots.
 
-Everything is written into a temporary folder next to the target and moved into place only
-when complete, so a failure leaves no half-written output.
+Commands write through :class:`symbolic.output_dir.OutputDir` (a staging folder swapped in only
+when complete), so a failure leaves no half-written output.
 """
 
 from __future__ import annotations
 
 import csv
 import json
-import os
-import shutil
-import tempfile
 from pathlib import Path
 from typing import Any
 
 from symbolic.description import GearboxDescription
+from symbolic.output_dir import OutputDir
 from validation.simulate import SimulationResult
 
 
@@ -38,24 +36,19 @@ def summary(result: SimulationResult) -> dict[str, Any]:
 def write_outputs(
     d: GearboxDescription, result: SimulationResult, out: str | Path, plots: bool = True
 ) -> list[Path]:
-    """Write ``timeseries.csv``, ``phases.csv``, ``summary.json`` and the PNG plots into
-    ``out`` (replaced atomically). Returns the written paths (final locations)."""
-    target = Path(out)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
-    try:
-        names = _write_all(d, result, staging, plots)
-        if target.exists():
-            backup = Path(tempfile.mkdtemp(prefix=f".{target.name}.old.", dir=target.parent))
-            os.replace(target, backup / "old")
-            os.replace(staging, target)
-            shutil.rmtree(backup)
-        else:
-            os.replace(staging, target)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    return [target / n for n in names]
+    """Write ``timeseries.csv``, ``phases.csv``, ``summary.json`` and the PNG plots as the
+    new content of ``out`` (through :class:`OutputDir`: atomic, never over a directory gearsym
+    did not write). Returns the final paths."""
+    with OutputDir(out, "simulate") as staged:
+        write_results(d, result, staged.path, plots)
+        return staged.commit()
+
+
+def write_results(
+    d: GearboxDescription, result: SimulationResult, folder: Path, plots: bool = True
+) -> list[str]:
+    """Write the simulation's files into the existing ``folder``; returns their names."""
+    return _write_all(d, result, folder, plots)
 
 
 def _write_all(

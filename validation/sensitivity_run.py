@@ -192,6 +192,12 @@ def driven_shift_model(
     )
 
 
+def thesis_parameters(driven: DrivenShift) -> tuple[str, ...]:
+    """The thesis' parameter set (3.2) for this shift: m_veh, k_ss, d_ss, μ of the off-going
+    element (μ38 for the 2-3 shift of the built-in gearbox), ζ."""
+    return ("m_veh", "k_ss", "d_ss", driven.mu[driven.spec.off_going], "zeta")
+
+
 def sliding_masks(
     d: GearboxDescription,
     driven: DrivenShift,
@@ -662,6 +668,8 @@ def run_sensitivities(
         timings["reference_s"] = time.perf_counter() - start
     start = time.perf_counter()
     driven = driven_shift_model(d, data.shift, with_wheel_acceleration)
+    if parameters is None:
+        parameters = thesis_parameters(driven)
     eqs = sensitivity_equations(driven.model, parameters, file=d.file)
     compiled = CompiledModel(eqs.augmented)
     timings["derive_s"] = time.perf_counter() - start
