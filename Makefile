@@ -5,7 +5,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test lint format bench clean
+.PHONY: run test lint format bench fuzz clean
 
 $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null || { echo "make: $(PYTHON) not found (need Python 3.11+; set PYTHON=...)"; exit 2; }
@@ -23,6 +23,10 @@ lint: $(STAMP)
 
 test: lint
 	$(BIN)/python -m pytest -q
+
+# The nightly hostile-input run: the property suite with a larger budget (fixed seed).
+fuzz: $(STAMP)
+	GEARSYM_FUZZ_EXAMPLES=$${GEARSYM_FUZZ_EXAMPLES:-2000} $(BIN)/python -m pytest -q tests/test_fuzz_cli.py
 
 format: $(STAMP)
 	$(BIN)/ruff format .

@@ -22,17 +22,15 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import sympy as sp
 from scipy.integrate import solve_ivp
-from scipy.interpolate import RectBivariateSpline
-from sympy.printing.pycode import PythonCodePrinter
+from scipy.interpolate import CubicHermiteSpline, RectBivariateSpline
 
-from symbolic.codegen import real_symbols, smart_jacobian
 from symbolic.description import GearboxDescription
 from symbolic.drivetrain import (
     drivetrain_model,
@@ -43,6 +41,7 @@ from symbolic.drivetrain import (
 from symbolic.errors import GearsymError
 from symbolic.friction import DEFAULT_MU_MAP, T_SS_MIN, MuMap
 from symbolic.model import Model
+from symbolic.numeric import bilinear, casadi_function, integrate_linear_inputs, to_casadi
 from symbolic.reference import ReferenceModel, reference_model
 from validation.scenario import Scenario, load_scenario
 
@@ -190,73 +189,74 @@ def mu_map_of(d: GearboxDescription) -> MuMap:
         raise GearsymError(d.file, "friction.mu_map", str(err)) from None
 
 
-class _ScalarPrinter(PythonCodePrinter):
-    """Python printer for scalar ("math") functions that prints ITE and Heaviside directly:
-    rewriting them into Piecewise first made SymPy re-simplify, which dominated compile time."""
+class _Function:
+    """A CasADi function called with NumPy values: a vector as a 1-D array, a scalar as a
+    float, a matrix as a 2-D array."""
 
-    def _print_ITE(self, expr: Any) -> str:
-        a, b, c = (self._print(x) for x in expr.args)
-        return f"(({b}) if ({a}) else ({c}))"
+    def __init__(self, function: Any, shape: str = "vector") -> None:
+        self.function = function
+        self.shape = shape
 
-    def _print_Heaviside(self, expr: Any) -> str:
-        # d max(0, a)/da; the value at a = 0 is immaterial for a Newton Jacobian
-        return f"(1.0 if ({self._print(expr.args[0])}) > 0 else 0.0)"
+    def __call__(self, *args: Any) -> Any:
+        out = self.function(*args)
+        if self.shape == "scalar":
+            return float(out)
+        array = out.full()
+        return array.ravel() if self.shape == "vector" else array
 
-
-def _lambdify(args: Sequence[Any], expr: Any) -> Callable[..., Any]:
-    # "math" keeps scalar calls cheap (Piecewise prints as a conditional expression).
-    # the printer writes math.sin etc.; give the generated code that module
-    namespace = ["math", {"math": math}]
-    return sp.lambdify(args, expr, modules=namespace, cse=True, printer=_ScalarPrinter)
+    def many(self, *columns: np.ndarray) -> np.ndarray:
+        """Evaluate at N points at once (each argument N × size): N × outputs."""
+        count = columns[0].shape[0]
+        out = self.function.map(count)(*(np.ascontiguousarray(c.T) for c in columns))
+        return np.asarray(out.full()).T
 
 
 class _Compiled:
-    """Lambdified right-hand side, Jacobian and diagnostics of the augmented reference model."""
+    """Right-hand side, Jacobian and diagnostics of the augmented reference model, as CasADi
+    functions (one translation of the SymPy expressions; CasADi differentiates, so no SymPy
+    Jacobian of the friction model's Max and Piecewise has to be simplified)."""
 
     def __init__(self, ref: ReferenceModel, d: GearboxDescription, elements: Sequence[str]):
+        import casadi as ca
+
         model = ref.model
-        # Real symbols so that d|z|/dz = sign(z), not an expression in re/im. Parameters stay
-        # symbols (arguments of the compiled functions): substituting numbers into the Max and
-        # Piecewise of the friction model would make SymPy re-simplify them, which is slow.
-        real = real_symbols(model)
-        x = [real[s] for s in model.state_symbols]
-        u = [real[s] for s in model.input_symbols]
-        p = [real[s] for s in model.parameter_symbols]
         defaults = model.parameter_defaults()
-        values = [float(defaults[s]) for s in model.parameter_symbols]
-        self.n = len(x)
+        self.n = len(model.states)
         self.elements = tuple(elements)
+        self.x = ca.SX.sym("x", self.n)
+        self.u = ca.SX.sym("u", len(model.inputs))
+        mapping: dict[Any, Any] = {s: self.x[i] for i, s in enumerate(model.state_symbols)}
+        mapping.update({s: self.u[i] for i, s in enumerate(model.input_symbols)})
+        mapping.update({s: float(defaults[s]) for s in model.parameter_symbols})
 
-        def real_of(e: sp.Expr) -> sp.Expr:
-            # evaluate(False): a renaming needs no re-simplification (Max would redo it)
-            with sp.evaluate(False):
-                return sp.sympify(e).xreplace(real)
+        def sx(exprs: Any) -> Any:
+            return ca.vertcat(*[to_casadi(e, mapping) for e in exprs])
 
-        def compile_xu(exprs: Any) -> Callable[[np.ndarray, Sequence[float]], Any]:
-            raw = _lambdify([x, u, p], exprs)
-            return lambda xs, us: raw(xs, us, values)
+        def xu(name: str, exprs: Any, shape: str = "vector") -> _Function:
+            return _Function(ca.Function(name, [self.x, self.u], [sx(exprs)]), shape)
 
-        def compile_x(exprs: Any) -> Callable[[np.ndarray], Any]:
-            raw = _lambdify([x, p], exprs)
-            return lambda xs: raw(xs, values)
+        def x_only(name: str, exprs: Any, shape: str = "vector") -> _Function:
+            return _Function(ca.Function(name, [self.x], [sx(exprs)]), shape)
 
         powers = [ref.input_power, ref.friction_power, ref.damper_power, ref.road_power]
-        full = sp.Matrix([real_of(e) for e in (*model.rhs, *powers)])
-        jac = smart_jacobian(full, x)
-        self.f = compile_xu(list(full))
-        self.jac = compile_xu(jac.tolist())
-        self.slips = compile_x([real_of(ref.slip[e]) for e in self.elements])
-        all_slip = _all_slips(d, ref)
-        self.all_slips = compile_x([real_of(e) for e in all_slip.values()])
-        self.all_slip_names = tuple(all_slip)
-        self.torques = compile_xu([real_of(ref.element_torque[e]) for e in self.elements])
-        self.speeds = compile_x([real_of(ref.body_speeds[s.name]) for s in d.shafts])
-        self.shaft_names = tuple(s.name for s in d.shafts)
-        self.energies = compile_x(
-            [real_of(e) for e in (ref.kinetic_energy, ref.spring_energy, ref.bristle_energy)]
+        self.rhs_sx = sx([*model.rhs, *powers])  # [ẋ; the four powers of the energy audit]
+        self.f = _Function(ca.Function("f", [self.x, self.u], [self.rhs_sx]))
+        self.jac = _Function(
+            ca.Function("jac_x", [self.x, self.u], [ca.jacobian(self.rhs_sx, self.x)]), "matrix"
         )
-        self.side_shaft = compile_x(real_of(ref.side_shaft_torque))
-        self.road = compile_x(real_of(ref.road_torque))
+        self.slips_sx = sx([ref.slip[e] for e in self.elements])
+        self.slips = _Function(ca.Function("slips", [self.x], [self.slips_sx]))
+        all_slip = _all_slips(d, ref)
+        self.all_slips = x_only("all_slips", list(all_slip.values()))
+        self.all_slip_names = tuple(all_slip)
+        self.torques = xu("torques", [ref.element_torque[e] for e in self.elements])
+        self.speeds = x_only("speeds", [ref.body_speeds[s.name] for s in d.shafts])
+        self.shaft_names = tuple(s.name for s in d.shafts)
+        self.energies = x_only(
+            "energies", [ref.kinetic_energy, ref.spring_energy, ref.bristle_energy]
+        )
+        self.side_shaft = x_only("side_shaft", [ref.side_shaft_torque], "scalar")
+        self.road = x_only("road", [ref.road_torque], "scalar")
 
 
 def _all_slips(d: GearboxDescription, ref: ReferenceModel) -> dict[Any, sp.Expr]:
@@ -284,6 +284,8 @@ class _Inputs:
         p_grid, _, dw_grid = mu_map.grid
         plane = mu_map(p_grid[:, None], t_oil, dw_grid[None, :])
         self._mu = RectBivariateSpline(p_grid, dw_grid, plane, kx=1, ky=1)
+        self.map_grid = (p_grid, dw_grid)
+        self.map_plane = plane
         self._p_range = (p_grid[0], p_grid[-1])
         self._dw_range = (dw_grid[0], dw_grid[-1])
 
@@ -297,6 +299,13 @@ class _Inputs:
         p = self.pressures(t)
         mu = self.mu(p, np.asarray(self.compiled.slips(x), dtype=float))
         return [self.scenario.input_torque(t), *p, *mu]
+
+    def many(self, times: np.ndarray, states: np.ndarray) -> np.ndarray:
+        """u at N times and states (N × n): N × inputs."""
+        torque = np.array([self.scenario.input_torque(float(t)) for t in times])
+        p = np.array([self.pressures(float(t)) for t in times]).reshape(len(times), -1)
+        mu = self.mu(p, self.compiled.slips.many(states))
+        return np.column_stack([torque, p, mu])
 
 
 # ----------------------------------------------------------------------------- initial state
@@ -391,6 +400,9 @@ def _linear_row(expr: sp.Expr, x: Sequence[sp.Symbol]) -> np.ndarray:
 # ----------------------------------------------------------------------------- simulation
 
 
+METHODS = ("cvodes", "Radau", "BDF")
+
+
 def simulate(
     d: GearboxDescription,
     scenario: Scenario | None = None,
@@ -398,18 +410,20 @@ def simulate(
     rtol: float = 1e-8,
     sample_time: float = 5e-4,
     check_models: bool = True,
-    method: str = "Radau",
+    method: str = "cvodes",
     analytic_jacobian: bool = True,
 ) -> SimulationResult:
     """Integrate the reference model through the scenario (thesis 3.1).
 
-    ``method`` is a stiff SciPy integrator with a Jacobian ("Radau" or "BDF"); the tests run
-    both and compare. ``sample_time`` is the spacing of the returned time series (the solver
-    chooses its own steps; the samples come from its dense output). ``analytic_jacobian``
-    False lets SciPy difference the right-hand side instead (the benchmark's peer).
+    ``method``: "cvodes" (default; SUNDIALS CVODES through CasADi, BDF with CasADi's exact
+    Jacobian, in C) or a stiff SciPy integrator, "Radau" or "BDF" (the cross-checks; the tests
+    compare them). Every method restarts at each breakpoint of the scenario's inputs.
+    ``sample_time`` is the spacing of the returned time series; between samples the state is a
+    cubic Hermite interpolant (values and derivatives at the samples). ``analytic_jacobian``
+    False lets SciPy difference the right-hand side instead (SciPy methods only).
     """
-    if method not in ("Radau", "BDF"):
-        raise ValueError(f"method must be 'Radau' or 'BDF', got {method!r}")
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     start = time.perf_counter()
     scenario = scenario if scenario is not None else load_scenario(d)
     report = progress or (lambda fraction, message: None)
@@ -425,20 +439,75 @@ def simulate(
     n = compiled.n
     names = tuple(v.name for v in ref.model.states)
     atol = _absolute_tolerances(names, rtol, x0)
+    y0 = np.concatenate([x0, np.zeros(len(ENERGY_TERMS))])
+    breakpoints = scenario.breakpoints()
+    grid = np.unique(np.concatenate([np.arange(0.0, scenario.t_end, sample_time), breakpoints]))
+    report(0.0, f"integrating {len(breakpoints) - 1} segments with {method} (rtol {rtol:g})")
+    if method == "cvodes":
+        states, stats = _integrate_cvodes(
+            compiled, inputs, y0, grid, breakpoints, rtol, atol, report
+        )
+    else:
+        states, stats = _integrate_scipy(
+            compiled, inputs, y0, grid, breakpoints, rtol, atol, method, analytic_jacobian, report
+        )
+    rates = np.array(
+        [compiled.f(y[:n], inputs(float(t), y[:n])) for t, y in zip(grid, states, strict=True)]
+    )
+    dense = CubicHermiteSpline(grid, states, rates, axis=0)
+
+    def state_at(t: float) -> np.ndarray:
+        return np.asarray(dense(min(max(t, grid[0]), grid[-1])), dtype=float)
+
+    signals = _signals(d, grid, states, names, inputs, compiled, scenario)
+    audit = _audit(states, x0, compiled)
+    phases = detect_phases(d, scenario, grid, signals)
+    checks: tuple[ModelCheck, ...] = ()
+    if check_models:
+        report(1.0, "checking the reduced models phase by phase")
+        checks = check_reduced_models(d, scenario, phases, names, grid, states, signals, compiled)
+    stats["wall_time_s"] = time.perf_counter() - start
+    return SimulationResult(
+        t=grid,
+        signals=signals,
+        phases=phases,
+        audit=audit,
+        checks=checks,
+        scenario=scenario,
+        state_names=names,
+        stats=stats,
+        state_at=state_at,
+    )
+
+
+def _integrate_scipy(
+    compiled: _Compiled,
+    inputs: _Inputs,
+    y0: np.ndarray,
+    grid: np.ndarray,
+    breakpoints: Sequence[float],
+    rtol: float,
+    atol: np.ndarray,
+    method: str,
+    analytic_jacobian: bool,
+    report: Progress,
+) -> tuple[np.ndarray, dict[str, float]]:
+    """SciPy's Radau or BDF, segment by segment; the states at ``grid`` from its dense output."""
+    n = compiled.n
+    t_end = breakpoints[-1]
 
     def fun(t: float, y: np.ndarray) -> np.ndarray:
-        return np.asarray(compiled.f(y[:n], inputs(t, y[:n])), dtype=float)
+        return compiled.f(y[:n], inputs(t, y[:n]))
 
     def jac(t: float, y: np.ndarray) -> np.ndarray:
         out = np.zeros((len(y), len(y)))
-        out[:, :n] = np.asarray(compiled.jac(y[:n], inputs(t, y[:n])), dtype=float)
+        out[:, :n] = compiled.jac(y[:n], inputs(t, y[:n]))
         return out
 
-    y = np.concatenate([x0, np.zeros(len(ENERGY_TERMS))])
-    breakpoints = scenario.breakpoints()
-    segments = []
+    y = y0
+    states = np.zeros((len(grid), len(y0)))
+    states[0] = y0
     stats = {"nfev": 0.0, "njev": 0.0, "nlu": 0.0, "steps": 0.0}
-    report(0.0, f"integrating {len(breakpoints) - 1} segments with {method} (rtol {rtol:g})")
     for t0, t1 in zip(breakpoints[:-1], breakpoints[1:], strict=True):
         sol = solve_ivp(
             fun,
@@ -452,45 +521,85 @@ def simulate(
         )
         if not sol.success:
             raise GearsymError(
-                scenario.file,
+                inputs.scenario.file,
                 "scenario",
                 f"integration failed at t = {sol.t[-1]:.6g} s: {sol.message}",
             )
+        inside = (grid > t0) & (grid <= t1)
+        states[inside] = np.asarray(sol.sol(grid[inside])).T
         stats["nfev"] += sol.nfev
         stats["njev"] += sol.njev
         stats["nlu"] += sol.nlu
         stats["steps"] += len(sol.t) - 1
-        segments.append((t0, t1, sol.sol))
         y = sol.y[:, -1]
-        report(t1 / scenario.t_end, f"t = {t1:.3f} s of {scenario.t_end:g} s")
+        report(t1 / t_end, f"t = {t1:.3f} s of {t_end:g} s")
+    return states, stats
 
-    def state_at(t: float) -> np.ndarray:
-        for t0, t1, dense in segments:
-            if t <= t1 or t1 == segments[-1][1]:
-                return np.asarray(dense(min(max(t, t0), t1)), dtype=float)
-        raise AssertionError("unreachable")
 
-    grid = np.unique(np.concatenate([np.arange(0.0, scenario.t_end, sample_time), breakpoints]))
-    states = np.array([state_at(t) for t in grid])
-    signals = _signals(d, grid, states, names, inputs, compiled, scenario)
-    audit = _audit(states, x0, compiled)
-    phases = detect_phases(d, scenario, grid, signals)
-    checks: tuple[ModelCheck, ...] = ()
-    if check_models:
-        report(1.0, "checking the reduced models phase by phase")
-        checks = check_reduced_models(d, scenario, phases, names, state_at, inputs, compiled)
-    stats["wall_time_s"] = time.perf_counter() - start
-    return SimulationResult(
-        t=grid,
-        signals=signals,
-        phases=phases,
-        audit=audit,
-        checks=checks,
-        scenario=scenario,
-        state_names=names,
-        stats=stats,
-        state_at=state_at,
-    )
+def _integrate_cvodes(
+    compiled: _Compiled,
+    inputs: _Inputs,
+    y0: np.ndarray,
+    grid: np.ndarray,
+    breakpoints: Sequence[float],
+    rtol: float,
+    atol: np.ndarray,
+    report: Progress,
+) -> tuple[np.ndarray, dict[str, float]]:
+    """CVODES (BDF, CasADi's exact Jacobian) segment by segment. Inside a segment every
+    scenario input is linear in time, so T_In and the pressures enter as a + b (t − t0) with
+    (a, b) per segment, and μ as the μ map's bilinear interpolation at the pressure and the
+    current |slip| (as :class:`_Inputs`). The states are scaled by atol/rtol so that one scalar
+    tolerance means the per-state ``atol``."""
+    import casadi as ca
+
+    n, ne = compiled.n, len(compiled.elements)
+    size = len(y0)
+    scale = atol / rtol
+    xi = ca.SX.sym("xi", size)
+    t = ca.SX.sym("t")
+    coefficients = ca.SX.sym("c", 2 * (1 + ne) + 1)  # a (1+ne), b (1+ne), t0
+    a, b, t0 = coefficients[: 1 + ne], coefficients[1 + ne : 2 * (1 + ne)], coefficients[-1]
+    driven = a + b * (t - t0)  # T_In and the pressures
+    x = xi[:n] * scale[:n]
+    slip = ca.substitute(compiled.slips_sx, compiled.x, x)
+    p_grid, dw_grid = inputs.map_grid
+    mu = [
+        bilinear(driven[1 + k], ca.fabs(slip[k]), p_grid, dw_grid, inputs.map_plane)
+        for k in range(ne)
+    ]
+    u = ca.vertcat(driven, *mu)
+    rhs = ca.substitute(compiled.rhs_sx, ca.vertcat(compiled.x, compiled.u), ca.vertcat(x, u))
+    dae = {"x": xi, "t": t, "p": coefficients, "ode": rhs / scale}
+    options = {"abstol": rtol, "reltol": rtol, "max_num_steps": 200000}
+    states = np.zeros((len(grid), size))
+    states[0] = y0
+    y = y0 / scale
+    stats = {"nfev": 0.0, "steps": 0.0}
+    t_end = breakpoints[-1]
+    scenario = inputs.scenario
+    for ta, tb in zip(breakpoints[:-1], breakpoints[1:], strict=True):
+        inside = np.flatnonzero((grid > ta) & (grid <= tb))
+        tout = [float(v) for v in grid[inside]]
+        if not tout or tout[-1] < tb:
+            tout.append(float(tb))
+        ua = np.array([scenario.input_torque(ta), *inputs.pressures(ta)])
+        ub = np.array([scenario.input_torque(tb), *inputs.pressures(tb)])
+        c = np.concatenate([ua, (ub - ua) / (tb - ta), [ta]])
+        step = ca.integrator("segment", "cvodes", dae, float(ta), tout, options)
+        try:
+            out = np.asarray(step(x0=y, p=c)["xf"].full())
+        except RuntimeError as err:
+            raise GearsymError(
+                scenario.file, "scenario", f"integration failed in [{ta:.6g}, {tb:.6g}] s: {err}"
+            ) from None
+        states[inside] = (out[:, : len(inside)] * scale[:, None]).T
+        y = out[:, -1]
+        solver_stats = step.stats()
+        stats["nfev"] += float(solver_stats.get("nfevals", 0))
+        stats["steps"] += float(solver_stats.get("nsteps", 0))
+        report(tb / t_end, f"t = {tb:.3f} s of {t_end:g} s")
+    return states, stats
 
 
 def _absolute_tolerances(names: Sequence[str], rtol: float, x0: np.ndarray) -> np.ndarray:
@@ -516,52 +625,49 @@ def _signals(
     compiled: _Compiled,
     scenario: Scenario,
 ) -> dict[str, np.ndarray]:
+    """Every recorded signal at every sample (vectorised over the samples)."""
     n = compiled.n
-    rows: dict[str, list[float]] = {}
-
-    def put(key: str, value: float) -> None:
-        rows.setdefault(key, []).append(float(value))
-
+    x = states[:, :n]
+    u = inputs.many(grid, x)
+    xdot = compiled.f.many(x, u)
     index = {name: i for i, name in enumerate(names)}
-    for t, y in zip(grid, states, strict=True):
-        x = y[:n]
-        u = inputs(float(t), x)
-        xdot = np.asarray(compiled.f(x, u), dtype=float)
-        for s, w in zip(compiled.shaft_names, compiled.speeds(x), strict=True):
-            put(f"omega_{s}", w)
-        put("phi", x[index["phi"]])
-        put("omega_C", x[index["omega_C"]])
-        for name in names:
-            if name.startswith("omega_"):
-                put(f"d{name}", xdot[index[name]])
-        put("T_In", u[0])
-        put("T_engine", scenario.engine(float(t)))
-        put("T_e_machine", scenario.e_machine(float(t)))
-        torques = compiled.torques(x, u)
-        ne = len(compiled.elements)
-        for k, e in enumerate(compiled.elements):
-            short = element_short_name(d, e)
-            area = d.element(e).a_piston
-            assert area is not None
-            put(f"p_{e}", u[1 + k])
-            put(f"F_N{short}", u[1 + k] * area.value)
-            put(f"mu_{short}", u[1 + ne + k])
-            put(f"z_{e}", x[index[f"z_{e}"]])
-        torque_of = dict(zip(compiled.elements, torques, strict=True))
-        for e, slip in zip(compiled.all_slip_names, compiled.all_slips(x), strict=True):
-            put(f"slip_{e.name}", slip)
-            put(f"T_{e.name}", torque_of.get(e.name, 0.0))
-        t_ss = compiled.side_shaft(x)
-        put("T_ss", t_ss)
-        put("T_out", 2 * t_ss / quantity(d, "drivetrain", "i_D").value)
-        put("T_res", compiled.road(x))
-        w_in = rows[f"omega_{d.input_shaft}"][-1]
-        w_out = rows[f"omega_{d.output_shaft}"][-1]
-        put("ratio", w_in / w_out if w_out != 0 else math.nan)
-        put("v_vehicle", x[index["omega_C"]] * quantity(d, "vehicle", "r_dyn").value)
-        for k, term in enumerate(ENERGY_TERMS):
-            put(term, y[n + k])
-    return {k: np.array(v) for k, v in rows.items()}
+    out: dict[str, np.ndarray] = {}
+    for k, s in enumerate(compiled.shaft_names):
+        out[f"omega_{s}"] = compiled.speeds.many(x)[:, k]
+    out["phi"] = x[:, index["phi"]]
+    out["omega_C"] = x[:, index["omega_C"]]
+    for name in names:
+        if name.startswith("omega_"):
+            out[f"d{name}"] = xdot[:, index[name]]
+    out["T_In"] = u[:, 0]
+    out["T_engine"] = np.array([scenario.engine(float(t)) for t in grid])
+    out["T_e_machine"] = np.array([scenario.e_machine(float(t)) for t in grid])
+    torques = compiled.torques.many(x, u)
+    ne = len(compiled.elements)
+    for k, e in enumerate(compiled.elements):
+        short = element_short_name(d, e)
+        area = d.element(e).a_piston
+        assert area is not None
+        out[f"p_{e}"] = u[:, 1 + k]
+        out[f"F_N{short}"] = u[:, 1 + k] * area.value
+        out[f"mu_{short}"] = u[:, 1 + ne + k]
+        out[f"z_{e}"] = x[:, index[f"z_{e}"]]
+    slips = compiled.all_slips.many(x)
+    for k, e in enumerate(compiled.all_slip_names):
+        out[f"slip_{e.name}"] = slips[:, k]
+        position = compiled.elements.index(e.name) if e.name in compiled.elements else None
+        out[f"T_{e.name}"] = torques[:, position] if position is not None else np.zeros(len(grid))
+    t_ss = compiled.side_shaft.many(x)[:, 0]
+    out["T_ss"] = t_ss
+    out["T_out"] = 2 * t_ss / quantity(d, "drivetrain", "i_D").value
+    out["T_res"] = compiled.road.many(x)[:, 0]
+    w_in, w_out = out[f"omega_{d.input_shaft}"], out[f"omega_{d.output_shaft}"]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out["ratio"] = np.where(w_out != 0, w_in / np.where(w_out != 0, w_out, 1.0), math.nan)
+    out["v_vehicle"] = x[:, index["omega_C"]] * quantity(d, "vehicle", "r_dyn").value
+    for k, term in enumerate(ENERGY_TERMS):
+        out[term] = states[:, n + k]
+    return {key: np.array(value, dtype=float) for key, value in out.items()}
 
 
 def _audit(states: np.ndarray, x0: np.ndarray, compiled: _Compiled) -> EnergyAudit:
@@ -686,41 +792,34 @@ def check_reduced_models(
     scenario: Scenario,
     phases: Sequence[Phase],
     names: Sequence[str],
-    state_at: Callable[[float], np.ndarray],
-    inputs: _Inputs,
+    grid: np.ndarray,
+    states: np.ndarray,
+    signals: Mapping[str, np.ndarray],
     compiled: _Compiled,
 ) -> tuple[ModelCheck, ...]:
-    """Integrate each reduced model inside its phase from the reference state, with the
-    reference's input torque (and, for the shift model, the swapping elements' transmitted
-    torques), and compare the states they share."""
+    """Integrate each reduced model inside its phase from the reference state (CVODES, rtol
+    1e-10), with the reference's input torque (and, for the shift model, the swapping elements'
+    transmitted torques), linear between the reference's samples, and compare the states they
+    share at the reference's own samples (no interpolation of the reference states)."""
     spec = scenario.shift
     index = {name: i for i, name in enumerate(names)}
     element_index = {e: k for k, e in enumerate(compiled.elements)}
     n = compiled.n
+    speeds = compiled.speeds.many(states[:, :n])
 
-    def reference_torque(e: str) -> Callable[[float], float]:
-        def value(t: float) -> float:
-            x = state_at(t)[:n]
-            return float(compiled.torques(x, inputs(t, x))[element_index[e]])
+    def reader(name: str) -> np.ndarray:
+        if name in ("phi", "omega_C"):
+            return states[:, index[name]]
+        return speeds[:, compiled.shaft_names.index(name.removeprefix("omega_"))]
 
-        return value
-
-    def speed_of(shaft: str) -> Callable[[np.ndarray], float]:
-        position = compiled.shaft_names.index(shaft)
-        return lambda y: float(compiled.speeds(y[:n])[position])
-
-    jobs: list[tuple[Model, Phase, list[Callable[[float], float]]]] = []
+    jobs: list[tuple[Model, Phase, list[str]]] = []
     gear_from, torque_phase, speed_phase, gear_to = phases
     # The rigid to-gear model is valid once the on-coming element has stuck, not merely
     # synchronised to 1 %: start its check at the first sample where the slip is below
     # 1e-4 of the initial one (about 0.02 rad/s here).
-    on_index = element_index[spec.on_coming]
-    slip0 = abs(compiled.slips(state_at(0.0)[:n])[on_index])
-    stuck = gear_to.t_start
-    for t in np.arange(gear_to.t_start, gear_to.t_end, 5e-4):
-        if abs(compiled.slips(state_at(float(t))[:n])[on_index]) < 1e-4 * slip0:
-            stuck = float(t)
-            break
+    slip_on = np.abs(compiled.slips.many(states[:, :n])[:, element_index[spec.on_coming]])
+    stuck_at = np.flatnonzero((grid >= gear_to.t_start) & (slip_on < 1e-4 * slip_on[0]))
+    stuck = float(grid[stuck_at[0]]) if stuck_at.size else gear_to.t_start
     locked_to = Phase(gear_to.name, stuck, gear_to.t_end, f"{spec.on_coming} stuck")
     for gear, phase in ((spec.from_gear, gear_from), (spec.to_gear, locked_to)):
         model = drivetrain_model(
@@ -730,55 +829,32 @@ def check_reduced_models(
             torque_elements=(),
             keep=(d.output_shaft,),
         )
-        jobs.append((model, phase, [scenario.input_torque]))
+        jobs.append((model, phase, ["T_In"]))
     shift = shift_model(d, spec.name)
     merged = Phase("shift", torque_phase.t_start, speed_phase.t_end, "torque + speed phase")
     jobs.append(
         (
             shift,
             merged,
-            [
-                scenario.input_torque,
-                reference_torque(spec.off_going),
-                reference_torque(spec.on_coming),
-            ],
+            ["T_In", f"T_{spec.off_going}", f"T_{spec.on_coming}"],
         )
     )
     checks = []
-    for model, phase, u_funcs in jobs:
+    for model, phase, input_signals in jobs:
         if phase.t_end - phase.t_start <= 0:
             continue
         params = model.parameter_defaults()
         rhs = model.rhs.xreplace({k: sp.Float(v) for k, v in params.items()})
-        f = _lambdify([model.state_symbols, model.input_symbols], list(rhs))
-        readers: list[Callable[[np.ndarray], float]] = []
-        for v in model.states:
-            if v.name in ("phi", "omega_C"):
-                readers.append(lambda y, i=index[v.name]: float(y[i]))
-            else:
-                readers.append(speed_of(v.name.removeprefix("omega_")))
-        y_start = state_at(phase.t_start)
-        x0 = np.array([r(y_start) for r in readers])
-
-        def fun(t: float, x: np.ndarray, f: Any = f, u_funcs: Any = u_funcs) -> np.ndarray:
-            return np.asarray(f(x, [u(t) for u in u_funcs]), dtype=float)
-
-        times = np.linspace(phase.t_start, phase.t_end, 201)
-        breaks = [
-            phase.t_start,
-            *(b for b in scenario.breakpoints() if phase.t_start < b < phase.t_end),
-            phase.t_end,
-        ]
-        pieces = []
-        x = x0
-        for a, b in zip(breaks[:-1], breaks[1:], strict=True):
-            sol = solve_ivp(
-                fun, (a, b), x, method="Radau", rtol=1e-10, atol=1e-10, dense_output=True
-            )
-            pieces.append((a, b, sol.sol))
-            x = sol.y[:, -1]
-        reduced = np.array([next(s for a, b, s in pieces if a <= t <= b)(t) for t in times])
-        reference = np.array([[r(state_at(t)) for r in readers] for t in times])
+        f = casadi_function(
+            "reduced", [("x", model.state_symbols), ("u", model.input_symbols)], [("xdot", rhs)]
+        )
+        # every sample of the phase: the recorded inputs are linear between samples (T_In
+        # exactly, its breakpoints are samples; the element torques to the sampling's accuracy)
+        inside = np.flatnonzero((grid >= phase.t_start) & (grid <= phase.t_end))
+        times = grid[inside]
+        u = np.column_stack([signals[name][inside] for name in input_signals])
+        reference = np.column_stack([reader(v.name)[inside] for v in model.states])
+        reduced = integrate_linear_inputs(f, reference[0], times, u)
         errors = np.max(np.abs(reduced - reference), axis=0)
         scales = np.maximum(np.max(np.abs(reference), axis=0), 1e-12)
         checks.append(

@@ -1,0 +1,444 @@
+"""Property-based hostile-input suite (issue 9): mutate valid gearbox descriptions and scenarios
+and hold every command to the error contract.
+
+For every mutated input and every command: exit 0 with a correct result, or exit 2 with one
+line on stderr and no traceback (``ratios`` may also exit 1, after saying which gears differ
+from the expected table); no file outside the chosen ``--out`` changes; code that ``generate``
+emits compiles under the strict flags. A result is "correct" when an independent computation
+agrees: the gear ratios are re-derived here with NumPy from the mutated TOML (Willis equations
+by hand), not with gearsym's SymPy code.
+
+The budget is fixed and the seed too (``derandomize``), so ``make test`` is reproducible. The
+nightly run raises the budget: ``GEARSYM_FUZZ_EXAMPLES=2000 make fuzz`` (see the Makefile).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+import io
+import math
+import os
+import shutil
+import signal
+import subprocess
+import tempfile
+import tomllib
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import tomli_w
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
+
+from gearsym import cli
+
+ROOT = Path(__file__).resolve().parents[1]
+BUILT_IN = ROOT / "gearsym" / "data" / "thesis_9speed.toml"
+SIMPSON = ROOT / "tests" / "data" / "simpson_3speed.toml"
+SCENARIO = ROOT / "gearsym" / "data" / "scenario_2_3.toml"
+BASES = {
+    "thesis": tomllib.loads(BUILT_IN.read_text(encoding="utf-8")),
+    "simpson": tomllib.loads(SIMPSON.read_text(encoding="utf-8")),
+}
+SCENARIO_BASE = tomllib.loads(SCENARIO.read_text(encoding="utf-8"))
+
+EXAMPLES = int(os.environ.get("GEARSYM_FUZZ_EXAMPLES", "60"))
+SLOW_EXAMPLES = max(2, EXAMPLES // 15)  # generate and simulate take seconds per example
+COMMAND_SECONDS = 120  # one command on one mutated file; a hang is a failure
+
+FUZZ = settings(
+    max_examples=EXAMPLES,
+    deadline=None,
+    derandomize=True,  # a fixed seed: the same examples in every run of make test
+    database=None,
+    suppress_health_check=list(HealthCheck),
+)
+SLOW = settings(FUZZ, max_examples=SLOW_EXAMPLES)
+
+# ----------------------------------------------------------------------------- mutations
+
+HOSTILE_NAMES = [
+    "",
+    "a\n",
+    "x y",
+    "int",
+    "for",
+    "_Bool",
+    "_X",
+    "__x",
+    "res",
+    "In",
+    "ss",
+    "out",
+    "engine",
+    "e_machine",
+    "C",
+    "mu",
+    "1_2",
+    "38",
+    "k38",
+    "K38",
+    "B05",
+    "NAN",
+    "sinf",
+    "ö",
+    "x" * 40,
+    'q"""q',
+    "a*/b",
+]
+
+SPECIAL_INTS = [0, -1, 1, 2, 3, 10**400, -(10**400), 2**63, 10**9]
+SPECIAL_FLOATS = [0.0, -0.0, 1e-300, 1e300, -1.0, math.nan, math.inf, -math.inf]
+
+scalar_values = st.one_of(
+    st.sampled_from(SPECIAL_INTS),
+    st.integers(min_value=-(2**63), max_value=2**63 - 1),
+    st.sampled_from(SPECIAL_FLOATS),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from(HOSTILE_NAMES),
+    st.text(max_size=12),
+    st.booleans(),
+)
+values = st.one_of(
+    scalar_values,
+    st.lists(scalar_values, max_size=4),
+    st.just({}),
+    st.builds(
+        lambda v, u: {"value": v, "unit": u, "source": "fuzz"},
+        scalar_values,
+        st.sampled_from(["kg*m^2", "kg", "m", "1", "Pa", "N*m", "s", "furlong"]),
+    ),
+)
+
+
+def _paths(tree: Any, prefix: tuple[Any, ...] = ()) -> Iterator[tuple[Any, ...]]:
+    """Every key path of a TOML tree (dict keys and list indices)."""
+    if isinstance(tree, dict):
+        for key, value in tree.items():
+            yield (*prefix, key)
+            yield from _paths(value, (*prefix, key))
+    elif isinstance(tree, list):
+        for index, value in enumerate(tree):
+            yield (*prefix, index)
+            yield from _paths(value, (*prefix, index))
+
+
+def _get(tree: Any, path: tuple[Any, ...]) -> Any:
+    for key in path:
+        tree = tree[key]
+    return tree
+
+
+def _mutate(tree: dict[str, Any], data: st.DataObject) -> dict[str, Any]:
+    tree = copy.deepcopy(tree)
+    for _ in range(data.draw(st.integers(1, 3), label="mutations")):
+        paths = list(_paths(tree))
+        path = data.draw(st.sampled_from(paths), label="path")
+        parent, key = _get(tree, path[:-1]), path[-1]
+        kind = data.draw(
+            st.sampled_from(["replace", "delete", "rename", "add-key", "duplicate"]),
+            label="kind",
+        )
+        if kind == "replace":
+            parent[key] = data.draw(values, label="value")
+        elif kind == "delete":
+            del parent[key]
+        elif kind == "rename":
+            names = [p for p in paths if p[-1] in ("name", "sun", "ring", "carrier", "shaft")]
+            if not names:
+                continue
+            target = data.draw(st.sampled_from(names), label="name path")
+            _get(tree, target[:-1])[target[-1]] = data.draw(
+                st.sampled_from(HOSTILE_NAMES), label="name"
+            )
+        elif kind == "add-key" and isinstance(parent, dict):
+            parent[data.draw(st.sampled_from(["extra", "nmae", "Name"]))] = 1
+        elif kind == "duplicate" and isinstance(parent, list) and parent:
+            parent.append(copy.deepcopy(parent[key]))
+    return tree
+
+
+def _rename_everywhere(tree: Any, old: str, new: str) -> Any:
+    """Every string equal to ``old`` becomes ``new`` (a consistent rename of a shaft, set,
+    element or gear, wherever the description refers to it)."""
+    if isinstance(tree, dict):
+        return {k: _rename_everywhere(v, old, new) for k, v in tree.items()}
+    if isinstance(tree, list):
+        return [_rename_everywhere(v, old, new) for v in tree]
+    return new if tree == old else tree
+
+
+def _plausible_change(tree: dict[str, Any], data: st.DataObject) -> dict[str, Any]:
+    """A change a user makes on purpose: rename something consistently (to a plain or a
+    hostile name), scale a physical value, or scale a set's teeth (same ratios)."""
+    tree = copy.deepcopy(tree)
+    kind = data.draw(st.sampled_from(["rename", "scale-value", "scale-teeth"]), label="change")
+    if kind == "rename":
+        section = data.draw(st.sampled_from(["shaft", "shift_element", "gear"]), label="what")
+        old = data.draw(st.sampled_from([e["name"] for e in tree[section]]), label="old")
+        new = data.draw(
+            st.one_of(
+                st.sampled_from(HOSTILE_NAMES),
+                st.from_regex(r"[A-Za-z][A-Za-z0-9_]{0,6}", fullmatch=True),
+            ),
+            label="new",
+        )
+        return _rename_everywhere(tree, old, new)
+    if kind == "scale-value":
+        quantities = [p for p in _paths(tree) if p[-1] == "value"]
+        path = data.draw(st.sampled_from(quantities), label="quantity")
+        factor = data.draw(st.sampled_from([0.5, 0.9, 1.1, 2.0, -1.0, 0.0]), label="factor")
+        _get(tree, path[:-1])["value"] = _get(tree, path) * factor
+        return tree
+    ps = data.draw(st.sampled_from(tree["planetary_set"]), label="set")
+    factor = data.draw(st.sampled_from([2, 3]), label="teeth factor")
+    for key in ("z_sun", "z_planet", "z_ring"):
+        ps[key] *= factor
+    return tree
+
+
+def _dump(tree: dict[str, Any]) -> str | None:
+    """TOML text of a mutated tree, or None when TOML cannot express it (e.g. mixed arrays
+    that tomli_w refuses): those examples test nothing and are skipped by the caller."""
+    try:
+        return tomli_w.dumps(tree)
+    except (TypeError, ValueError):
+        return None
+
+
+RAW_ATTACKS = [
+    lambda text: text[: len(text) // 2],  # truncated
+    lambda text: text.replace("=", "==", 1),
+    lambda text: "\ufeff" + text,  # BOM
+    lambda text: "x = " + "[" * 5000 + "]" * 5000 + "\n" + text,  # deep nesting
+    lambda text: text + "\n[gearbox]\nname = 'again'\n",  # a table twice
+]
+
+# ----------------------------------------------------------------------------- running
+
+
+class _Timeout(BaseException):
+    pass
+
+
+def _alarm(signum: int, frame: Any) -> None:
+    raise _Timeout
+
+
+def run_cli(argv: list[str]) -> tuple[int, str, str]:
+    """``gearsym ARGV`` in-process: (exit code, stdout, stderr). Any exception other than
+    argparse's SystemExit propagates: that is a traceback the user would see."""
+    out, err = io.StringIO(), io.StringIO()
+    previous = signal.signal(signal.SIGALRM, _alarm)
+    signal.alarm(COMMAND_SECONDS)
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                status = cli.main(argv)
+            except SystemExit as exc:  # argparse usage errors
+                status = int(exc.code or 0)
+    except _Timeout:
+        pytest.fail(f"gearsym {' '.join(argv)} ran longer than {COMMAND_SECONDS} s")
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
+    return status, out.getvalue(), err.getvalue()
+
+
+def _snapshot(root: Path, skip: Path | None = None) -> dict[str, bytes]:
+    files = {}
+    for path in sorted(root.rglob("*")):
+        if skip is not None and (path == skip or skip in path.parents):
+            continue
+        if path.is_file() or path.is_symlink():
+            files[path.relative_to(root).as_posix()] = path.read_bytes()
+    return files
+
+
+@contextlib.contextmanager
+def workdir() -> Iterator[Path]:
+    """A fresh temporary working directory (hypothesis forbids function-scoped fixtures)."""
+    previous = os.getcwd()
+    with tempfile.TemporaryDirectory(prefix="gearsym-fuzz-") as folder:
+        os.chdir(folder)
+        try:
+            yield Path(folder)
+        finally:
+            os.chdir(previous)
+
+
+def assert_contract(status: int, stdout: str, stderr: str, allow: tuple[int, ...] = (0, 2)) -> None:
+    event(f"exit {status}")  # --hypothesis-show-statistics shows how often each outcome ran
+    assert status in allow, (status, stdout[-2000:], stderr[-2000:])
+    assert "Traceback" not in stderr
+    if status == 2:
+        lines = stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("gearsym: "), stderr[-2000:]
+
+
+# ----------------------------------------------------------------------------- ratios, by hand
+
+
+def independent_ratios(tree: dict[str, Any]) -> dict[str, float | None]:
+    """ω_in/ω_out per gear from the TOML alone (NumPy): Willis z_s ω_s + z_r ω_r =
+    (z_s + z_r) ω_c per set, ω_a = ω_b per closed clutch, ω_b = 0 per closed brake, ω_in = 1.
+    None where the output speed is not determined (a neutral)."""
+    box = tree["gearbox"]
+    shafts = [s["name"] for s in tree["shaft"]]
+    index = {name: k for k, name in enumerate(shafts)}
+    rows = []
+    for ps in tree["planetary_set"]:
+        row = np.zeros(len(shafts))
+        row[index[ps["sun"]]] += ps["z_sun"]
+        row[index[ps["ring"]]] += ps["z_ring"]
+        row[index[ps["carrier"]]] -= ps["z_sun"] + ps["z_ring"]
+        rows.append(row)
+    elements = {e["name"]: e for e in tree["shift_element"]}
+    result: dict[str, float | None] = {}
+    for gear in tree["gear"]:
+        a = list(rows)
+        for name in gear.get("closed", []):
+            e = elements[name]
+            row = np.zeros(len(shafts))
+            if e["kind"] == "clutch":
+                row[index[e["shafts"][0]]] += 1.0
+                row[index[e["shafts"][1]]] -= 1.0
+            else:
+                row[index[e["shaft"]]] = 1.0
+            a.append(row)
+        drive = np.zeros(len(shafts))
+        drive[index[box["input_shaft"]]] = 1.0
+        matrix = np.vstack([*a, drive])
+        rhs = np.zeros(len(matrix))
+        rhs[-1] = 1.0
+        omega, *_ = np.linalg.lstsq(matrix, rhs, rcond=None)
+        _, sv, vt = np.linalg.svd(matrix)
+        null = vt[np.sum(sv > 1e-9 * sv[0]) :]
+        out = index[box["output_shaft"]]
+        determined = np.allclose(matrix @ omega, rhs, atol=1e-9) and np.all(
+            np.abs(null[:, out]) < 1e-9
+        )
+        result[gear["name"]] = 1.0 / omega[out] if determined and omega[out] != 0 else None
+    return result
+
+
+def test_the_independent_ratios_reproduce_table_2_1() -> None:
+    """The hand solver itself, against the thesis' printed Table 2.1."""
+    table = {"1": 5.354, "2": 3.243, "3": 2.252, "4": 1.636, "5": 1.211, "6": 1.0}
+    got = independent_ratios(BASES["thesis"])
+    for gear, ratio in table.items():
+        assert round(got[gear], 3) == ratio
+
+
+# ----------------------------------------------------------------------------- properties
+
+
+@FUZZ
+@given(data=st.data(), base=st.sampled_from(sorted(BASES)))
+def test_mutated_descriptions_keep_the_error_contract(data: st.DataObject, base: str) -> None:
+    if data.draw(st.booleans(), label="plausible"):
+        tree = _plausible_change(BASES[base], data)
+    else:
+        tree = _mutate(BASES[base], data)
+    text = _dump(tree)
+    if text is None:
+        return
+    with workdir() as root:
+        config = root / "box.toml"
+        config.write_text(text, encoding="utf-8")
+        before = _snapshot(root)
+        status, stdout, stderr = run_cli(["ratios", "--json", str(config)])
+        assert_contract(status, stdout, stderr, allow=(0, 1, 2))
+        if status in (0, 1):
+            import json
+
+            got = json.loads(stdout)
+            ratios = got.get("ratios", got) if isinstance(got, dict) else got
+            expected = independent_ratios(tomllib.loads(text))
+            for gear, value in expected.items():
+                if value is None:
+                    assert ratios[gear] is None, gear
+                else:
+                    assert ratios[gear] == pytest.approx(value, rel=1e-9), gear
+        status, stdout, stderr = run_cli(["ratios", str(config)])
+        assert_contract(status, stdout, stderr, allow=(0, 1, 2))
+        status, stdout, stderr = run_cli(["show", str(config), "--what", "mass-matrix"])
+        assert_contract(status, stdout, stderr)
+        status, stdout, stderr = run_cli(["model", str(config), "--shift", "2-3"])
+        assert_contract(status, stdout, stderr)
+        assert _snapshot(root) == before  # nothing written without --out
+
+
+@FUZZ
+@given(attack=st.sampled_from(range(len(RAW_ATTACKS))), encoding=st.sampled_from(["utf-8", "x"]))
+def test_broken_files_are_one_line_errors(attack: int, encoding: str) -> None:
+    text = RAW_ATTACKS[attack](BUILT_IN.read_text(encoding="utf-8"))
+    with workdir() as root:
+        config = root / "box.toml"
+        if encoding == "utf-8":
+            config.write_text(text, encoding="utf-8")
+        else:
+            config.write_bytes(b"\xff\xfe" + text.encode("utf-16-le"))  # not UTF-8
+        status, stdout, stderr = run_cli(["ratios", str(config)])
+        assert_contract(status, stdout, stderr, allow=(0, 1, 2))
+
+
+@SLOW
+@given(data=st.data())
+def test_mutated_scenarios_keep_the_error_contract(data: st.DataObject) -> None:
+    tree = _mutate(SCENARIO_BASE, data)
+    text = _dump(tree)
+    if text is None:
+        return
+    with workdir() as root:
+        scenario = root / "scenario.toml"
+        scenario.write_text(text, encoding="utf-8")
+        before = _snapshot(root)
+        out = root / "sim"
+        status, stdout, stderr = run_cli(
+            ["simulate", "--scenario", str(scenario), "--out", str(out), "--no-plots"]
+        )
+        assert_contract(status, stdout, stderr)
+        assert _snapshot(root, skip=out) == before
+        leftovers = [p.name for p in root.iterdir() if p.name.startswith(".")]
+        assert leftovers == []
+        assert out.exists() == (status == 0)
+
+
+def _strict_compile(c_dir: Path, build: Path) -> None:
+    compiler = shutil.which("cc") or shutil.which("gcc")
+    if compiler is None:
+        pytest.skip("no C compiler")
+    flags = ["-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Wconversion", "-Werror"]
+    for source in sorted(c_dir.glob("*.c")):
+        result = subprocess.run(
+            [compiler, *flags, "-c", str(source), "-o", str(build / (source.stem + ".o"))],
+            capture_output=True,
+            text=True,
+        )
+        assert result.returncode == 0, f"{source.name}: {result.stderr[-3000:]}"
+
+
+@SLOW
+@given(data=st.data())
+def test_changed_descriptions_generate_compilable_code_or_one_line(data: st.DataObject) -> None:
+    tree = _plausible_change(BASES["thesis"], data)
+    text = _dump(tree)
+    if text is None:
+        return
+    with workdir() as root:
+        config = root / "box.toml"
+        config.write_text(text, encoding="utf-8")
+        before = _snapshot(root)
+        out = root / "gen"
+        status, stdout, stderr = run_cli(["generate", str(config), "--out", str(out)])
+        assert_contract(status, stdout, stderr)
+        assert _snapshot(root, skip=out) == before
+        if status == 0:
+            build = root / "build"
+            build.mkdir()
+            _strict_compile(out / "c", build)
