@@ -47,6 +47,7 @@ from symbolic.drivetrain import (
 )
 from symbolic.errors import GearsymError
 from symbolic.model import Model, Variable
+from symbolic.numeric import to_casadi
 from symbolic.sensitivity import (
     SensitivityEquations,
     sensitivity_equations,
@@ -487,49 +488,6 @@ def finite_difference_sensitivities(
 
 
 # ----------------------------------------------------------------------------- CasADi peer
-
-
-def to_casadi(expr: sp.Expr, mapping: Mapping[sp.Symbol, Any]) -> Any:
-    """A SymPy expression as a CasADi SX/MX expression (symbols looked up in ``mapping``)."""
-    import casadi as ca
-
-    functions = {
-        sp.sin: ca.sin,
-        sp.cos: ca.cos,
-        sp.tan: ca.tan,
-        sp.exp: ca.exp,
-        sp.log: ca.log,
-        sp.tanh: ca.tanh,
-        sp.atan: ca.atan,
-        sp.Abs: ca.fabs,
-        sp.sign: ca.sign,
-    }
-
-    def walk(e: sp.Basic) -> Any:
-        if e.is_Symbol:
-            return mapping[e]
-        if e.is_Number:
-            return float(e)
-        if e.is_Add:
-            total = walk(e.args[0])
-            for a in e.args[1:]:
-                total = total + walk(a)
-            return total
-        if e.is_Mul:
-            total = walk(e.args[0])
-            for a in e.args[1:]:
-                total = total * walk(a)
-            return total
-        if e.is_Pow:
-            base, exponent = e.args
-            if exponent.is_Integer:
-                return ca.constpow(walk(base), int(exponent))
-            return walk(base) ** walk(exponent)
-        if e.func in functions:
-            return functions[e.func](*(walk(a) for a in e.args))
-        raise NotImplementedError(f"no CasADi translation for {e.func}")
-
-    return walk(expr)
 
 
 def casadi_sensitivities(
