@@ -32,6 +32,7 @@ from scipy.integrate import solve_ivp
 from scipy.interpolate import RectBivariateSpline
 from sympy.printing.pycode import PythonCodePrinter
 
+from symbolic import naming
 from symbolic.codegen import real_symbols, smart_jacobian
 from symbolic.description import GearboxDescription
 from symbolic.drivetrain import (
@@ -44,12 +45,16 @@ from symbolic.errors import GearsymError
 from symbolic.friction import DEFAULT_MU_MAP, T_SS_MIN, MuMap
 from symbolic.model import Model
 from symbolic.reference import ReferenceModel, reference_model
-from validation.scenario import Scenario, load_scenario
+from validation.scenario import SAMPLE_TIME, Scenario, load_scenario
 
 #: Progress callback: (fraction done in [0, 1], message).
 Progress = Callable[[float, str], None]
 
-ENERGY_TERMS = ("W_in", "W_friction", "W_damper", "W_road")
+ENERGY_TERMS = naming.ENERGY_TERMS
+
+#: Most samples one simulation returns (and writes to timeseries.csv): 100 000 rows are about
+#: 75 MB of CSV. The scenario's t_end limit keeps the default sampling at 20 000.
+SAMPLES_MAX = 100_000
 
 
 @dataclass(frozen=True)
@@ -396,7 +401,7 @@ def simulate(
     scenario: Scenario | None = None,
     progress: Progress | None = None,
     rtol: float = 1e-8,
-    sample_time: float = 5e-4,
+    sample_time: float = SAMPLE_TIME,
     check_models: bool = True,
     method: str = "Radau",
     analytic_jacobian: bool = True,
@@ -412,6 +417,13 @@ def simulate(
         raise ValueError(f"method must be 'Radau' or 'BDF', got {method!r}")
     start = time.perf_counter()
     scenario = scenario if scenario is not None else load_scenario(d)
+    if not scenario.t_end / sample_time <= SAMPLES_MAX:
+        raise GearsymError(
+            scenario.file,
+            "scenario.t_end",
+            f"{scenario.t_end:g} s at {sample_time:g} s per sample is more than {SAMPLES_MAX} "
+            "samples, the limit of a simulation",
+        )
     report = progress or (lambda fraction, message: None)
     elements = tuple(
         e.name for e in d.shift_elements if float(np.max(scenario.pressure[e.name].value)) > 0
@@ -523,44 +535,51 @@ def _signals(
         rows.setdefault(key, []).append(float(value))
 
     index = {name: i for i, name in enumerate(names)}
+    i_d = quantity(d, "drivetrain", "i_D").value
+    r_dyn = quantity(d, "vehicle", "r_dyn").value
+    element_names = [e.name for e in d.shift_elements]
+    short = {e: naming.element_short_name(e, element_names) for e in compiled.elements}
     for t, y in zip(grid, states, strict=True):
         x = y[:n]
         u = inputs(float(t), x)
         xdot = np.asarray(compiled.f(x, u), dtype=float)
         for s, w in zip(compiled.shaft_names, compiled.speeds(x), strict=True):
-            put(f"omega_{s}", w)
-        put("phi", x[index["phi"]])
-        put("omega_C", x[index["omega_C"]])
+            put(naming.speed(s), w)
+        put(naming.TWIST, x[index[naming.TWIST]])
+        put(naming.WHEEL_SPEED, x[index[naming.WHEEL_SPEED]])
         for name in names:
-            if name.startswith("omega_"):
-                put(f"d{name}", xdot[index[name]])
-        put("T_In", u[0])
-        put("T_engine", scenario.engine(float(t)))
-        put("T_e_machine", scenario.e_machine(float(t)))
+            if name.startswith(naming.speed("")):
+                put(naming.derivative(name), xdot[index[name]])
+        put(naming.INPUT_TORQUE, u[0])
+        put(naming.ENGINE_TORQUE, scenario.engine(float(t)))
+        put(naming.E_MACHINE_TORQUE, scenario.e_machine(float(t)))
         torques = compiled.torques(x, u)
         ne = len(compiled.elements)
         for k, e in enumerate(compiled.elements):
-            short = element_short_name(d, e)
             area = d.element(e).a_piston
             assert area is not None
-            put(f"p_{e}", u[1 + k])
-            put(f"F_N{short}", u[1 + k] * area.value)
-            put(f"mu_{short}", u[1 + ne + k])
-            put(f"z_{e}", x[index[f"z_{e}"]])
+            put(naming.pressure(e), u[1 + k])
+            put(naming.normal_force(short[e]), u[1 + k] * area.value)
+            put(naming.friction_coefficient(short[e]), u[1 + ne + k])
+            put(naming.bristle(e), x[index[naming.bristle(e)]])
         torque_of = dict(zip(compiled.elements, torques, strict=True))
         for e, slip in zip(compiled.all_slip_names, compiled.all_slips(x), strict=True):
-            put(f"slip_{e.name}", slip)
-            put(f"T_{e.name}", torque_of.get(e.name, 0.0))
+            put(naming.slip_column(e.name), slip)
+            put(naming.torque(e.name), torque_of.get(e.name, 0.0))
         t_ss = compiled.side_shaft(x)
-        put("T_ss", t_ss)
-        put("T_out", 2 * t_ss / quantity(d, "drivetrain", "i_D").value)
-        put("T_res", compiled.road(x))
-        w_in = rows[f"omega_{d.input_shaft}"][-1]
-        w_out = rows[f"omega_{d.output_shaft}"][-1]
-        put("ratio", w_in / w_out if w_out != 0 else math.nan)
-        put("v_vehicle", x[index["omega_C"]] * quantity(d, "vehicle", "r_dyn").value)
+        put(naming.SIDE_SHAFT_TORQUE, t_ss)
+        put(naming.DRIVETRAIN_OUTPUT_TORQUE, 2 * t_ss / i_d)
+        put(naming.ROAD_TORQUE, compiled.road(x))
+        w_in = rows[naming.speed(d.input_shaft)][-1]
+        w_out = rows[naming.speed(d.output_shaft)][-1]
+        put(naming.RATIO, w_in / w_out if w_out != 0 else math.nan)
+        put(naming.VEHICLE_SPEED, x[index[naming.WHEEL_SPEED]] * r_dyn)
         for k, term in enumerate(ENERGY_TERMS):
             put(term, y[n + k])
+    # Two signals under one name would interleave in one column; check_names prevents it.
+    shared = [k for k, v in rows.items() if len(v) != len(grid)]
+    if shared:
+        raise AssertionError(f"signals share the column names {shared}")
     return {k: np.array(v) for k, v in rows.items()}
 
 
@@ -608,9 +627,9 @@ def detect_phases(
     """
     spec = scenario.shift
     on, off = spec.on_coming, spec.off_going
-    t_on = np.abs(signals[f"T_{on}"])
-    slip_on = np.abs(signals[f"slip_{on}"])
-    ratio = signals["ratio"]
+    t_on = np.abs(signals[naming.torque(on)])
+    slip_on = np.abs(signals[naming.slip_column(on)])
+    ratio = signals[naming.RATIO]
     r_from = d.gear(spec.from_gear)
     r_to = d.gear(spec.to_gear)
     from symbolic.ratios import gear_ratio
@@ -631,9 +650,12 @@ def detect_phases(
     # torque reaches the capacity 2 N_disc r_m μ F_N (2.69)
     element, short = d.element(off), element_short_name(d, off)
     assert element.n_disc is not None and element.r_m is not None
-    force = signals[f"F_N{short}"]
-    capacity = 2 * element.n_disc * element.r_m.value * signals[f"mu_{short}"] * force
-    slides = _first((force > 0) & (np.abs(signals[f"T_{off}"]) >= capacity_fraction * capacity))
+    force = signals[naming.normal_force(short)]
+    mu = signals[naming.friction_coefficient(short)]
+    capacity = 2 * element.n_disc * element.r_m.value * mu * force
+    slides = _first(
+        (force > 0) & (np.abs(signals[naming.torque(off)]) >= capacity_fraction * capacity)
+    )
     i1 = takes_load if slides is None else min(takes_load, slides)
     progress = (ratio_from - ratio) / (ratio_from - ratio_to)
     i2 = _first(progress > ratio_fraction, i1)
