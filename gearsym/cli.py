@@ -13,8 +13,10 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, NoReturn
 
+from gearsym.options import number
+from symbolic.description import PLANET_COUNT_MAX, TEETH_MAX
 from symbolic.errors import GearsymError
 
 
@@ -37,32 +39,49 @@ def _progress(message: str) -> None:
 
 
 def cmd_ratios(args: argparse.Namespace) -> int:
+    """Gear table; exit code 1 when a derived ratio differs from the expected one (text and
+    JSON alike). The JSON stays ``{gear: ratio or null}`` (README, tests); the gears that
+    differ are named on stderr."""
     from symbolic.ratios import ratio_table
 
     d = _load(args.config)
     table = ratio_table(d)
+    places = d.ratio_decimals
+    differ = [
+        r.gear
+        for r in table
+        if not r.neutral
+        and r.expected is not None
+        and r.rounded(places) != round(r.expected, places)
+    ]
+    source = f" ({d.gear_table_source})" if d.gear_table_source else ""
     if args.json:
         _emit_json({r.gear: (None if r.ratio is None else float(r.ratio)) for r in table})
+        if differ:
+            first = next(r for r in table if r.gear == differ[0])
+            print(
+                f'gearsym: {d.file}: gear[name="{first.gear}"].ratio: derived '
+                f"{float(first.ratio):.{places}f} differs from the expected "
+                f"{first.expected:.{places}f}{source}; gears that differ: {', '.join(differ)}",
+                file=sys.stderr,
+            )
+            return 1
         return 0
     print(f"Gear ratios ω_{d.input_shaft}/ω_{d.output_shaft} of {d.title}")
     print(f"{'gear':>5}  {'closed':<20} {'derived':>10} {'expected':>10}  ok")
-    mismatches = 0
     for r in table:
         closed = " ".join(r.closed)
         if r.neutral:
             print(f"{r.gear:>5}  {closed:<20} {'neutral':>10} {'—':>10}  ✓")
             continue
-        derived = r.rounded(d.ratio_decimals)
-        ok = r.expected is None or derived == round(r.expected, d.ratio_decimals)
-        mismatches += not ok
-        expected = "—" if r.expected is None else f"{r.expected:.{d.ratio_decimals}f}"
-        value = f"{float(r.ratio):.{d.ratio_decimals}f}"
+        ok = r.gear not in differ
+        expected = "—" if r.expected is None else f"{r.expected:.{places}f}"
+        value = f"{float(r.ratio):.{places}f}"
         print(f"{r.gear:>5}  {closed:<20} {value:>10} {expected:>10}  {'✓' if ok else '✗'}")
-    source = f" ({d.gear_table_source})" if d.gear_table_source else ""
-    if mismatches:
-        print(f"{mismatches} gear(s) differ from the expected table{source}.")
+    if differ:
+        print(f"{len(differ)} gear(s) differ from the expected table{source}.")
         return 1
-    print(f"All ratios match the expected table{source} to {d.ratio_decimals} decimals.")
+    print(f"All ratios match the expected table{source} to {places} decimals.")
     return 0
 
 
@@ -74,8 +93,8 @@ def _range(text: str) -> tuple[int, int]:
         low, high = (int(v) for v in text.split(":"))
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected LOW:HIGH, got {text!r}") from None
-    if not 0 < low <= high:
-        raise argparse.ArgumentTypeError(f"expected 0 < LOW <= HIGH, got {text!r}")
+    if not 0 < low <= high <= TEETH_MAX:
+        raise argparse.ArgumentTypeError(f"expected 0 < LOW <= HIGH <= {TEETH_MAX}, got {text!r}")
     return low, high
 
 
@@ -84,8 +103,10 @@ def _counts(text: str) -> tuple[int, ...]:
         counts = tuple(int(v) for v in text.split(","))
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected N[,N...], got {text!r}") from None
-    if not counts or min(counts) < 1:
-        raise argparse.ArgumentTypeError(f"planet counts must be positive, got {text!r}")
+    if not counts or min(counts) < 1 or max(counts) > PLANET_COUNT_MAX:
+        raise argparse.ArgumentTypeError(
+            f"planet counts must be 1 to {PLANET_COUNT_MAX}, got {text!r}"
+        )
     return counts
 
 
@@ -310,8 +331,16 @@ def cmd_run(args: argparse.Namespace) -> int:
 # ----------------------------------------------------------------------------- parser
 
 
+class _Parser(argparse.ArgumentParser):
+    """Usage errors (a bad option value, say) as one line, like every other error, exit 2."""
+
+    def error(self, message: str) -> NoReturn:
+        where = self.prog.removeprefix("gearsym").strip() or "command line"
+        self.exit(2, f"gearsym: {where}: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="gearsym",
         description="Planetary automatic transmission → validated symbolic model → TCU code.",
     )
@@ -354,7 +383,12 @@ def build_parser() -> argparse.ArgumentParser:
     config(p)
     p.add_argument("--sun", type=_range, default=(17, 110), help="sun teeth LOW:HIGH")
     p.add_argument("--planet", type=_range, default=(13, 60), help="planet teeth LOW:HIGH")
-    p.add_argument("--ring-max", type=int, default=180, help="largest ring tooth count")
+    p.add_argument(
+        "--ring-max",
+        type=number(int, minimum=1, maximum=TEETH_MAX),
+        default=180,
+        help="largest ring tooth count",
+    )
     p.add_argument(
         "--planet-count",
         type=_counts,
@@ -363,11 +397,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--tolerance",
-        type=float,
+        type=number(float, above=0),
         default=None,
         help="largest ratio error (default: half a unit of the table's last printed decimal)",
     )
-    p.add_argument("--top", type=int, default=10, help="how many candidates to list")
+    p.add_argument(
+        "--top", type=number(int, minimum=1), default=10, help="how many candidates to list"
+    )
     p.add_argument("--json", action="store_true", help="machine-readable output")
 
     p = command("show", cmd_show, "Print a derived quantity (constraints, M, B̃, …).")

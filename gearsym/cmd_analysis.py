@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import math
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -43,6 +44,8 @@ def _overrides(d: Any, items: Sequence[str] | None) -> dict[str, float]:
             result[name.strip()] = float(value)
         except ValueError:
             raise GearsymError(d.file, "set", f"expected NAME=VALUE, got {item!r}") from None
+        if not math.isfinite(result[name.strip()]):
+            raise GearsymError(d.file, "set", f"the value must be finite, got {item!r}")
     return result
 
 
@@ -57,6 +60,7 @@ def _prepare(args: argparse.Namespace, wheel: bool) -> tuple[Any, list[str] | No
 
     d = _load(args.config)
     names = _parameter_list(args.params)
+    overrides = _overrides(d, args.set)  # before the slow derivation below
     scenario = None
     if args.scenario is not None:
         from validation.scenario import load_scenario
@@ -67,7 +71,6 @@ def _prepare(args: argparse.Namespace, wheel: bool) -> tuple[Any, list[str] | No
     if names is None:
         names = list(thesis_parameters(driven))
     select_parameters(driven.model, names, file=d.file)
-    overrides = _overrides(d, args.set)
     parameter_values(driven.model, overrides)
     return d, names, overrides, scenario
 
@@ -292,7 +295,9 @@ def register(
     config: Callable[[argparse.ArgumentParser], None],
 ) -> None:
     """Register ``sensitivity`` and ``fim`` with the main parser."""
+    from gearsym.options import number
     from validation.fisher import ACCELERATION_ERROR, GAMMA_MAX, SAMPLE_TIME, SPEED_ERROR
+    from validation.scenario import SAMPLE_TIME as RECORD_SAMPLE_TIME
 
     p = command(
         "sensitivity",
@@ -327,21 +332,30 @@ def register(
     )
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.add_argument("--out", help="folder for fim.json, fim.txt and bar charts (Figs. 3.9-3.14)")
-    p.add_argument("--sample-time", type=float, default=SAMPLE_TIME, help="measurement period in s")
+    p.add_argument(
+        "--sample-time",
+        # finer than the simulated record (validation.scenario.SAMPLE_TIME) adds nothing
+        type=number(float, minimum=RECORD_SAMPLE_TIME),
+        default=SAMPLE_TIME,
+        help="measurement period in s",
+    )
     p.add_argument(
         "--speed-error",
-        type=float,
+        type=number(float, above=0),
         default=SPEED_ERROR,
         help="relative error r of the measured speeds (3.26)",
     )
     p.add_argument(
         "--acceleration-error",
-        type=float,
+        type=number(float, above=0),
         default=ACCELERATION_ERROR,
         help="relative error of the wheel acceleration (3.32)",
     )
     p.add_argument(
-        "--gamma-max", type=float, default=GAMMA_MAX, help="limit of the scatter γ (3.27)"
+        "--gamma-max",
+        type=number(float, above=0),
+        default=GAMMA_MAX,
+        help="limit of the scatter γ (3.27)",
     )
     p.add_argument(
         "--carry-over",

@@ -66,13 +66,14 @@ def write_files(files: dict[str, str], root: Path) -> None:
 def cmd_generate(args: argparse.Namespace) -> int:
     """Generate, optionally check, and move the result into place."""
     from symbolic.description import load_description
-    from symbolic.generate import generate_tree
+    from symbolic.generate import check_generatable, generate_tree
 
     shown = args.out
     if args.points < 1:
         raise GearsymError(shown, "--points", f"must be positive, got {args.points}")
     start = time.perf_counter()
     d = load_description(args.config)
+    check_generatable(d)
     with OutputDir(args.out, "generate") as out:  # refuses a foreign DIR before the work
         _progress(f"generating code for {d.name}")
         tree = generate_tree(d, progress=_progress)

@@ -32,6 +32,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, NoReturn, TextIO
 
+from gearsym.options import number
 from symbolic.errors import GearsymError
 
 if TYPE_CHECKING:
@@ -1100,7 +1101,7 @@ def add_observability_parser(
     )
     p.add_argument(
         "--max-order",
-        type=int,
+        type=number(int),  # negative: analyze_shift's one-line error (it checks API calls too)
         default=None,
         help="rank every derivative order up to N (default: grow until full rank or no gain, "
         "at most n-1)",
@@ -1116,15 +1117,20 @@ def add_observability_parser(
         action="store_true",
         help="skip factoring the witness minor (test only inputs held at zero or constant)",
     )
-    p.add_argument("--seed", type=int, default=None, help="seed of the random points")
+    p.add_argument("--seed", type=number(int), default=None, help="seed of the random points")
     p.add_argument(
         "--time-budget",
-        type=float,
+        type=number(float, above=0),
         default=None,
         help="seconds for the verdict (exceeded: partial result, exit 2) and for each drop check "
         "(exceeded: reported as not decided)",
     )
-    p.add_argument("--size-budget", type=int, default=None, help="operations per derivative order")
+    p.add_argument(
+        "--size-budget",
+        type=number(int, minimum=1),
+        default=None,
+        help="operations per derivative order",
+    )
     p.add_argument("--json", action="store_true", help="machine-readable report")
     return p
 

@@ -33,7 +33,6 @@ Conventions of the emitted code (also written into the generated header):
 from __future__ import annotations
 
 import itertools
-import keyword
 import re
 from collections import Counter
 from collections.abc import Iterable, Iterator, Mapping, Sequence
@@ -50,6 +49,7 @@ from sympy.printing.precedence import PRECEDENCE
 from sympy.printing.pycode import PythonCodePrinter
 
 from symbolic.model import Model, Variable
+from symbolic.naming import c_identifier_problem, function_prefix, macro_prefix, model_file_names
 
 __all__ = [
     "CSE_OPTIMIZATIONS",
@@ -234,36 +234,9 @@ def _drop_distributions(expr: sp.Expr) -> sp.Expr:
     return expr
 
 
-# fmt: off
-_C_KEYWORDS = frozenset({
-    "auto", "break", "case", "char", "const", "continue", "default", "do", "double", "else",
-    "enum", "extern", "float", "for", "goto", "if", "inline", "int", "long", "register",
-    "restrict", "return", "short", "signed", "sizeof", "static", "struct", "switch", "typedef",
-    "union", "unsigned", "void", "volatile", "while", "_Bool", "_Complex", "_Imaginary",
-})
-# fmt: on
-# Object-like macros of <math.h>, <stddef.h> and common ECU headers: a struct field of that name
-# would be macro-expanded in ``p->NAME``.
-# fmt: off
-_C_MACRO_NAMES = frozenset({
-    "NAN", "INFINITY", "HUGE_VAL", "HUGE_VALF", "HUGE_VALL", "NULL", "EOF", "FP_NAN",
-    "FP_INFINITE", "FP_ZERO", "FP_NORMAL", "FP_SUBNORMAL", "FP_FAST_FMA", "MATH_ERRNO",
-    "MATH_ERREXCEPT", "math_errhandling", "errno", "TRUE", "FALSE",
-})
-# fmt: on
-_IDENTIFIER = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
-
-
 def _check_identifier(name: str, what: str) -> str | None:
-    if not _IDENTIFIER.match(name):
-        return f"{what} {name!r} is not a C identifier"
-    if name in _C_KEYWORDS or name in _C_MACRO_NAMES or keyword.iskeyword(name):
-        return f"{what} {name!r} is a C keyword, a standard macro or a Python keyword"
-    if name.startswith("__") or re.match(r"^_[A-Z]", name) or name.upper().startswith("GEARSYM"):
-        return f"{what} {name!r} is a reserved identifier"
-    if re.match(r"^M_[A-Z0-9_]+$", name):
-        return f"{what} {name!r} collides with a <math.h> constant"
-    return None
+    problem = c_identifier_problem(name)
+    return f"{what} {name!r} {problem}" if problem else None
 
 
 def _check_names(model: Model) -> None:
@@ -450,8 +423,8 @@ def build_function_table(model: Model, bounds: Bounds | None = None) -> Function
     )
     return FunctionTable(
         model=model,
-        prefix=f"gearsym_{model.name}_",
-        macro_prefix=f"GEARSYM_{model.name.upper()}_",
+        prefix=function_prefix(model.name),
+        macro_prefix=macro_prefix(model.name),
         states=xs,
         inputs=us,
         parameters=ps,
@@ -1104,8 +1077,7 @@ def _wrap(text: str, width: int = 92) -> list[str]:
 
 def file_names(model: Model) -> dict[str, str]:
     """Names of the emitted files: keys ``"header"``, ``"source"``, ``"casadi"``."""
-    base = f"gearsym_{model.name}"
-    return {"header": f"{base}.h", "source": f"{base}.c", "casadi": f"{base}_casadi.py"}
+    return model_file_names(model.name)
 
 
 def _c_symbol_map(spec: FunctionSpec) -> dict[sp.Symbol, str]:

@@ -12,18 +12,30 @@ from __future__ import annotations
 import difflib
 import math
 import re
-import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from symbolic.errors import GearsymError
+from symbolic.input_files import parse_toml, read_text, shown, unknown_key_reason
 
 #: Names end up in C identifiers, always behind a prefix (``omega_<shaft>``, ``T_<element>``,
-#: ``gear_<name>``), so they may hold letters, digits and underscores only; a leading digit is
-#: allowed because of the prefix (the thesis numbers its shafts 1…8).
-NAME_PATTERN = re.compile(r"^[A-Za-z0-9_]{1,31}$")
+#: ``shift_<gear>_<gear>``), so they may hold letters, digits and underscores only; a leading
+#: digit is allowed because of the prefix (the thesis numbers its shafts 1…8). An underscore
+#: only between two letters or digits: ``__`` is reserved in C and C++ and separates generated
+#: names (``S_<state>__<parameter>``, ``<input>__d1``), so ``_x``, ``x_`` and ``a__b`` could make
+#: two different things one name. Matched with ``fullmatch`` (``$`` would accept "x\n").
+NAME_PATTERN = re.compile(r"[A-Za-z0-9]+(?:_[A-Za-z0-9]+)*")
+NAME_MAX_LENGTH = 31
+
+#: Stated limits (README "Limits and the error contract"); each keeps a wrong number from
+#: running for hours or overflowing a float instead of failing at once.
+TEETH_MAX = 1000  # z_sun, z_planet, z_ring: real sets stay below ~200
+PLANET_COUNT_MAX = 100
+N_DISC_MAX = 100
+RATIO_DECIMALS_MAX = 12  # a double carries 15-17 significant digits
+ENTRIES_MAX = 100  # shafts, planetary sets, shift elements and gears, each
 
 #: The unit every quantity key must carry (no conversion: a different unit is an error).
 EXPECTED_UNITS: dict[str, str] = {
@@ -237,11 +249,12 @@ class _Reader:
 
     def name(self, name: str = "name") -> str:
         value = self.string(name)
-        if not NAME_PATTERN.match(value):
+        if not NAME_PATTERN.fullmatch(value) or len(value) > NAME_MAX_LENGTH:
             raise self.fail(
                 name,
-                f"{value!r} is not usable in a C identifier (letters, digits and '_' only, "
-                "at most 31 characters)",
+                f"{shown(value)} is not usable in a C identifier (letters and digits, joined by "
+                f"single '_'; no leading, trailing or double '_'; at most {NAME_MAX_LENGTH} "
+                "characters)",
             )
         return value
 
@@ -250,13 +263,17 @@ class _Reader:
         if value is None:
             return default
         if isinstance(value, bool) or not isinstance(value, int):
-            raise self.fail(name, f"expected an integer, got {value!r}")
+            raise self.fail(name, f"expected an integer, got {shown(value)}")
         return value
 
-    def positive_integer(self, name: str, required: bool = True, default: int = 0) -> int:
+    def positive_integer(
+        self, name: str, required: bool = True, default: int = 0, maximum: int | None = None
+    ) -> int:
         value = self.integer(name, required, default)
         if value <= 0:
-            raise self.fail(name, f"must be a positive integer, got {value}")
+            raise self.fail(name, f"must be a positive integer, got {_short(value)}")
+        if maximum is not None and value > maximum:
+            raise self.fail(name, f"must be at most {maximum}, got {_short(value)}")
         return value
 
     def boolean(self, name: str, default: bool = False) -> bool:
@@ -264,7 +281,7 @@ class _Reader:
         if value is None:
             return default
         if not isinstance(value, bool):
-            raise self.fail(name, f"expected true or false, got {value!r}")
+            raise self.fail(name, f"expected true or false, got {shown(value)}")
         return value
 
     def number(self, name: str, required: bool = True) -> float | None:
@@ -272,9 +289,9 @@ class _Reader:
         if value is None:
             return None
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.fail(name, f"expected a number, got {value!r}")
+            raise self.fail(name, f"expected a number, got {shown(value)}")
         if not math.isfinite(value):
-            raise self.fail(name, f"must be finite, got {value!r}")
+            raise self.fail(name, f"must be finite, got {shown(value)}")
         return float(value)
 
     def string_list(self, name: str, required: bool = True) -> tuple[str, ...]:
@@ -310,6 +327,8 @@ class _Reader:
             return []
         if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
             raise self.fail(name, f"expected an array of tables ([[{name}]])")
+        if len(value) > ENTRIES_MAX:
+            raise self.fail(name, f"at most {ENTRIES_MAX} [[{name}]] entries, got {len(value)}")
         return [_Reader(self.file, t, f"{self.key(name)}[{i}]") for i, t in enumerate(value)]
 
     def table(self, name: str, required: bool = True) -> _Reader:
@@ -323,7 +342,13 @@ class _Reader:
     def reject_unknown(self) -> None:
         unknown = sorted(set(self.data) - self.used)
         if unknown:
-            raise self.fail(unknown[0], "unknown key (misspelt?)")
+            raise self.fail(unknown[0], unknown_key_reason(unknown[0], self.used))
+
+
+def _short(value: int) -> str:
+    """An integer for a message: 10**400 is not worth 401 digits."""
+    text = str(value)
+    return text if len(text) <= 20 else f"a {len(text)}-digit number"
 
 
 def _label(reader: _Reader, name: str) -> None:
@@ -333,13 +358,7 @@ def _label(reader: _Reader, name: str) -> None:
 
 def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
     """Parse and check a description; raise :class:`GearsymError` on the first problem."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as err:
-        match = re.search(r"\(at line (\d+), column (\d+)\)", str(err))
-        where = f"line {match.group(1)}, column {match.group(2)}" if match else "TOML"
-        reason = re.sub(r"\s*\(at line \d+, column \d+\)", "", str(err))
-        raise GearsymError(file, where, f"malformed TOML: {reason}") from None
+    data = parse_toml(text, file)
     root = _Reader(file, data, "")
 
     gearbox = root.table("gearbox")
@@ -366,10 +385,10 @@ def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
         _label(r, set_name)
         members = {role: r.string(role) for role in ("sun", "carrier", "ring")}
         planet = r.name("planet")
-        z_sun = r.positive_integer("z_sun")
-        z_planet = r.positive_integer("z_planet")
-        z_ring = r.positive_integer("z_ring")
-        count = r.positive_integer("planet_count")
+        z_sun = r.positive_integer("z_sun", maximum=TEETH_MAX)
+        z_planet = r.positive_integer("z_planet", maximum=TEETH_MAX)
+        z_ring = r.positive_integer("z_ring", maximum=TEETH_MAX)
+        count = r.positive_integer("planet_count", maximum=PLANET_COUNT_MAX)
         ps = PlanetarySet(
             name=set_name,
             sun=members["sun"],
@@ -403,14 +422,14 @@ def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
         elif kind == "brake":
             pair = (r.string("shaft"),)
         else:
-            raise r.fail("kind", f"expected 'clutch' or 'brake', got {kind!r}")
+            raise r.fail("kind", f"expected 'clutch' or 'brake', got {shown(kind)}")
         has_friction = any(k in r.data for k in ("n_disc", "r_m", "a_piston"))
         elements.append(
             ShiftElement(
                 element_name,
                 kind,
                 pair,
-                n_disc=r.positive_integer("n_disc") if has_friction else None,
+                n_disc=r.positive_integer("n_disc", maximum=N_DISC_MAX) if has_friction else None,
                 r_m=r.quantity("r_m", unit="m") if has_friction else None,
                 a_piston=r.quantity("a_piston", unit="m^2") if has_friction else None,
             )
@@ -419,6 +438,11 @@ def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
 
     table = root.table("gear_table", required=False)
     decimals = table.integer("ratio_decimals", required=False, default=3)
+    if not 0 <= decimals <= RATIO_DECIMALS_MAX:
+        raise table.fail(
+            "ratio_decimals",
+            f"must be 0 to {RATIO_DECIMALS_MAX} (decimals of a double), got {_short(decimals)}",
+        )
     table_source = table.string("source", required=False, default="")
     table.reject_unknown()
 
@@ -451,7 +475,7 @@ def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
             rolling = r.string("rolling_resistance", required=False, default="thesis")
             if rolling not in ROLLING_RESISTANCE_FORMS:
                 raise r.fail(
-                    "rolling_resistance", f"expected 'thesis' or 'textbook', got {rolling!r}"
+                    "rolling_resistance", f"expected 'thesis' or 'textbook', got {shown(rolling)}"
                 )
         if section == "friction":
             mu_map = r.string("mu_map", required=False, default="built-in")
@@ -483,6 +507,9 @@ def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
     if not description.coordinates:
         # Default generalized coordinates: the first f shafts (thesis 2.28 names them).
         description = _replace_coordinates(description)
+    from symbolic.naming import check_names
+
+    check_names(description)
     return description
 
 
@@ -534,7 +561,7 @@ def _check_references(d: GearboxDescription) -> None:
         for role in ("sun", "carrier", "ring"):
             shaft = getattr(ps, role)
             if shaft not in shaft_names:
-                raise GearsymError(f, f"{key}.{role}", f"unknown shaft {shaft!r}")
+                raise GearsymError(f, f"{key}.{role}", f"unknown shaft {shown(shaft)}")
         if len({ps.sun, ps.carrier, ps.ring}) != 3:
             raise GearsymError(f, key, "sun, carrier and ring must be three different shafts")
         if ps.planet in shaft_names or ps.planet in seen_planets:
@@ -547,20 +574,20 @@ def _check_references(d: GearboxDescription) -> None:
             if shaft not in shaft_names:
                 key = "shafts" if e.kind == "clutch" else "shaft"
                 raise GearsymError(
-                    f, f'shift_element[name="{e.name}"].{key}', f"unknown shaft {shaft!r}"
+                    f, f'shift_element[name="{e.name}"].{key}', f"unknown shaft {shown(shaft)}"
                 )
     for key, shaft in (("input_shaft", d.input_shaft), ("output_shaft", d.output_shaft)):
         if shaft not in shaft_names:
-            raise GearsymError(f, f"gearbox.{key}", f"unknown shaft {shaft!r}")
+            raise GearsymError(f, f"gearbox.{key}", f"unknown shaft {shown(shaft)}")
     if d.input_shaft == d.output_shaft:
         raise GearsymError(f, "gearbox.output_shaft", "input and output shaft must differ")
     for shaft in d.measured_shafts:
         if shaft not in shaft_names:
-            raise GearsymError(f, "gearbox.measured_shafts", f"unknown shaft {shaft!r}")
+            raise GearsymError(f, "gearbox.measured_shafts", f"unknown shaft {shown(shaft)}")
     body_names = d.body_names
     for body in d.coordinates:
         if body not in body_names:
-            raise GearsymError(f, "gearbox.coordinates", f"unknown shaft or planet {body!r}")
+            raise GearsymError(f, "gearbox.coordinates", f"unknown shaft or planet {shown(body)}")
     _no_duplicates(f, "gearbox.coordinates", d.coordinates, plain=True)
     if d.degrees_of_freedom < 1:
         raise GearsymError(
@@ -578,17 +605,20 @@ def _check_references(d: GearboxDescription) -> None:
         key = f'gear[name="{g.name}"].closed'
         for element in g.closed:
             if element not in element_names:
-                raise GearsymError(f, key, f"unknown shift element {element!r}")
+                raise GearsymError(f, key, f"unknown shift element {shown(element)}")
         _no_duplicates(f, key, g.closed, plain=True)
 
 
 def _no_duplicates(file: str, key: str, names: Any, plain: bool = False) -> None:
-    seen: set[str] = set()
+    # Ignoring case: names become parts of file names, include guards and upper-case macros.
+    seen: dict[str, str] = {}
     for n in names:
-        if n in seen:
+        if n.casefold() in seen:
             where = key if plain else f'{key}[name="{n}"]'
-            raise GearsymError(file, where, f"name {n!r} is used twice")
-        seen.add(n)
+            first = seen[n.casefold()]
+            also = "" if first == n else f" (as {first!r}; names must differ in more than case)"
+            raise GearsymError(file, where, f"name {n!r} is used twice{also}")
+        seen[n.casefold()] = n
 
 
 def load_description(path: str | Path | None = None) -> GearboxDescription:
@@ -604,12 +634,7 @@ def load_description(path: str | Path | None = None) -> GearboxDescription:
         file = f"<built-in {DEFAULT_CONFIG_NAME}>"
     else:
         file = str(path)
-        try:
-            text = Path(path).read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise GearsymError(file, "", "no such file") from None
-        except (OSError, UnicodeDecodeError) as err:
-            raise GearsymError(file, "", f"cannot read: {err}") from None
+        text = read_text(path, file)
     description = parse_description(text, file)
     check_gear_table(description)
     return description

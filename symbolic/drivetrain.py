@@ -27,6 +27,7 @@ from itertools import pairwise
 
 import sympy as sp
 
+from symbolic import naming
 from symbolic.description import GearboxDescription, Quantity
 from symbolic.dynamics import GearboxDynamics, gearbox_dynamics
 from symbolic.errors import GearsymError
@@ -91,11 +92,7 @@ def shift_spec(d: GearboxDescription, name: str) -> ShiftSpec:
 
 def element_short_name(d: GearboxDescription, element: str) -> str:
     """Thesis-style short name: K38 → 38, B05 → 05 (mu_38, F_N05), when unambiguous."""
-    rest = element[1:]
-    shorts = [e.name[1:] for e in d.shift_elements if e.name[:1] in "KB"]
-    if element[:1] in "KB" and rest.isdigit() and shorts.count(rest) == 1:
-        return rest
-    return element
+    return naming.element_short_name(element, [e.name for e in d.shift_elements])
 
 
 def element_slip_in_gear(d: GearboxDescription, gear: str, element: str) -> sp.Expr:
@@ -257,14 +254,14 @@ def drivetrain_parts(
     mass = dyn.mass_matrix + (j_cs + j_d / i_d**2) * (out_row.T * out_row)
     reduced_mass = projection.T * mass * projection
 
-    speeds = tuple(sp.Symbol(f"omega_{s}") for s in keep)
-    omega_c = sp.Symbol("omega_C")
+    speeds = tuple(sp.Symbol(naming.speed(s)) for s in keep)
+    omega_c = sp.Symbol(naming.WHEEL_SPEED)
     y_dot = projection * sp.Matrix(speeds)
     body_speeds = {b: sp.expand((transform[index[b], :] * y_dot)[0]) for b in d.body_names}
     omega_out = body_speeds[d.output_shaft]
 
     phi_dot = omega_out / i_d - omega_c  # (2.44)
-    t_ss = p["k_ss"] * sp.Symbol("phi") + p["d_ss"] * phi_dot  # (2.47)
+    t_ss = p["k_ss"] * sp.Symbol(naming.TWIST) + p["d_ss"] * phi_dot  # (2.47)
     t_out = 2 * t_ss / i_d  # (2.52)
     v = r_dyn * omega_c
     zeta, m_veh = p["zeta"], p["m_veh"]
@@ -289,15 +286,18 @@ def drivetrain_parts(
                 )
             short = element_short_name(d, e)
             mu = Variable(
-                f"mu_{short}",
-                sp.Symbol(f"mu_{short}", positive=True),
+                naming.friction_coefficient(short),
+                sp.Symbol(naming.friction_coefficient(short), positive=True),
                 "1",
                 f"friction coefficient of {e} (2.69)",
                 mu_default.value,
                 mu_default.source,
             )
             normal = Variable(
-                f"F_N{short}", sp.Symbol(f"F_N{short}"), "N", f"normal force on {e} (2.69)"
+                naming.normal_force(short),
+                sp.Symbol(naming.normal_force(short)),
+                "N",
+                f"normal force on {e} (2.69)",
             )
             gain = 2 * element.n_disc * exact(element.r_m.value)
             torque[e] = slip_signs[e] * gain * mu.symbol * normal.symbol
@@ -305,10 +305,10 @@ def drivetrain_parts(
         params = params + tuple(friction[e][2] for e in torque_elements)
 
     column = {str(s): i for i, s in enumerate(dyn.inputs)}
-    generalized = dyn.input_matrix[:, column["T_In"]] * sym.torque["In"]
-    generalized += dyn.input_matrix[:, column["T_Out"]] * t_out
+    generalized = dyn.input_matrix[:, column[naming.INPUT_TORQUE]] * sym.torque[naming.INPUT]
+    generalized += dyn.input_matrix[:, column[naming.OUTPUT_TORQUE]] * t_out
     for e in torque_elements:
-        generalized += dyn.input_matrix[:, column[f"T_{e}"]] * torque[e]
+        generalized += dyn.input_matrix[:, column[naming.torque(e)]] * torque[e]
     gearbox_rhs = (reduced_mass.inv() * (projection.T * generalized)).applyfunc(sp.expand)
     return DrivetrainParts(
         keep=tuple(keep),
@@ -323,7 +323,10 @@ def drivetrain_parts(
         wheel_inertia=p["I_wheel"] + m_veh * r_dyn**2,  # (2.46) with the square
         body_speeds=body_speeds,
         parameters=params,
-        torque_symbols={"In": sym.torque["In"], **{e: sym.torque[e] for e in torque_elements}},
+        torque_symbols={
+            naming.INPUT: sym.torque[naming.INPUT],
+            **{e: sym.torque[e] for e in torque_elements},
+        },
         friction=friction,
     )
 
@@ -350,19 +353,32 @@ def drivetrain_model(
     wheel = (2 * parts.side_shaft_torque - parts.road_torque) / parts.wheel_inertia  # (2.50)
     rhs = sp.Matrix([*parts.gearbox_rhs, parts.phi_dot, wheel])
     states = tuple(
-        Variable(f"omega_{s}", symbol, "rad/s", f"speed of shaft {s}")
+        Variable(naming.speed(s), symbol, "rad/s", f"speed of shaft {s}")
         for s, symbol in zip(parts.keep, parts.speeds, strict=True)
     ) + (
-        Variable("phi", sp.Symbol("phi"), "rad", "side-shaft twist phi_2/i_D - phi_C (2.43)"),
-        Variable("omega_C", sp.Symbol("omega_C"), "rad/s", "wheel speed"),
+        Variable(
+            naming.TWIST,
+            sp.Symbol(naming.TWIST),
+            "rad",
+            "side-shaft twist phi_2/i_D - phi_C (2.43)",
+        ),
+        Variable(naming.WHEEL_SPEED, sp.Symbol(naming.WHEEL_SPEED), "rad/s", "wheel speed"),
     )
     inputs = (
-        Variable("T_In", parts.torque_symbols["In"], "N*m", "input torque (engine + e-machine)"),
+        Variable(
+            naming.INPUT_TORQUE,
+            parts.torque_symbols[naming.INPUT],
+            "N*m",
+            "input torque (engine + e-machine)",
+        ),
     ) + tuple(
         parts.friction[e][1]
         if e in parts.friction
         else Variable(
-            f"T_{e}", parts.torque_symbols[e], "N*m", f"{e} torque: +T on b, -T on a (2.36)"
+            naming.torque(e),
+            parts.torque_symbols[e],
+            "N*m",
+            f"{e} torque: +T on b, -T on a (2.36)",
         )
         for e in parts.torque_elements
     )
@@ -372,14 +388,15 @@ def drivetrain_model(
         expr = parts.body_speeds[s]
         if any(sp.expand(expr - e) == 0 for e in output_exprs):
             continue
-        outputs.append(Variable(f"y_omega_{s}", sp.Symbol(f"y_omega_{s}"), "rad/s"))
+        y = naming.measured(naming.speed(s))
+        outputs.append(Variable(y, sp.Symbol(y), "rad/s"))
         output_exprs.append(expr)
-    outputs.append(Variable("y_omega_C", sp.Symbol("y_omega_C"), "rad/s", "wheel speed"))
-    output_exprs.append(sp.Symbol("omega_C"))
+    y = naming.measured(naming.WHEEL_SPEED)
+    outputs.append(Variable(y, sp.Symbol(y), "rad/s", "wheel speed"))
+    output_exprs.append(sp.Symbol(naming.WHEEL_SPEED))
     if with_wheel_acceleration:
-        outputs.append(
-            Variable("y_domega_C", sp.Symbol("y_domega_C"), "rad/s^2", "wheel acceleration")
-        )
+        y = naming.measured(naming.derivative(naming.WHEEL_SPEED))
+        outputs.append(Variable(y, sp.Symbol(y), "rad/s^2", "wheel acceleration"))
         output_exprs.append(wheel)
     return Model(
         name=name,
@@ -401,7 +418,7 @@ def drivetrain_model(
 
 def full_model(d: GearboxDescription, with_wheel_acceleration: bool = False) -> Model:
     """ẋ_ex = f(x_ex) + B_ex,nl u (2.53): all coordinates, every element an input torque."""
-    return drivetrain_model(d, "full", with_wheel_acceleration=with_wheel_acceleration)
+    return drivetrain_model(d, naming.FULL_MODEL, with_wheel_acceleration=with_wheel_acceleration)
 
 
 def shift_model(
@@ -420,7 +437,7 @@ def shift_model(
     spec = shift_spec(d, shift)
     return drivetrain_model(
         d,
-        f"shift_{spec.from_gear}_{spec.to_gear}" + ("_mu" if friction_inputs else ""),
+        naming.shift_model_name(spec.from_gear, spec.to_gear, friction_inputs),
         locked=spec.locked,
         torque_elements=(spec.off_going, spec.on_coming),
         with_wheel_acceleration=with_wheel_acceleration,
@@ -442,12 +459,12 @@ def linear_shift_form(
         d, locked=spec.locked, torque_elements=(spec.off_going, spec.on_coming)
     )
     p = {v.name: v.symbol for v in parts.parameters}
-    t_res_star = sp.Symbol("T_res_star")
+    t_res_star = sp.Symbol(naming.RESISTANCE_INPUT)
     wheel = (
         2 * parts.side_shaft_torque - t_res_star - parts.grade_lever * p["m_veh"] * p["zeta"]
     ) / parts.wheel_inertia  # (5.2), sin ζ ≈ ζ
     rhs = sp.Matrix([*parts.gearbox_rhs, parts.phi_dot, wheel])
-    x = [*parts.speeds, sp.Symbol("phi"), sp.Symbol("omega_C")]
-    u = [parts.torque_symbols[k] for k in ("In", spec.off_going, spec.on_coming)]
+    x = [*parts.speeds, sp.Symbol(naming.TWIST), sp.Symbol(naming.WHEEL_SPEED)]
+    u = [parts.torque_symbols[k] for k in (naming.INPUT, spec.off_going, spec.on_coming)]
     u += [t_res_star, p["zeta"]]
     return rhs.jacobian(x), rhs.jacobian(u), [str(s) for s in x], [str(s) for s in u]

@@ -54,7 +54,6 @@ Regularisations of the shift element (2.67)-(2.69), needed by a simulator:
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 from typing import NoReturn
 
@@ -62,6 +61,9 @@ import numpy as np
 import sympy as sp
 from numpy.typing import ArrayLike
 from scipy.interpolate import RegularGridInterpolator
+
+from symbolic.errors import GearsymError
+from symbolic.input_files import parse_toml, read_text
 
 Num = float | np.ndarray
 """Numeric result: a NumPy scalar (``np.float64`` is a ``float``) or an array."""
@@ -439,10 +441,9 @@ class MuMap:
         dw[k])``. Units must be Pa, degC, rad/s and 1 (see ``AXES``)."""
         origin = str(path)
         try:
-            with open(path, "rb") as fh:
-                doc = tomllib.load(fh)
-        except (OSError, tomllib.TOMLDecodeError) as exc:
-            _fail(origin, "<file>", f"cannot read TOML: {exc}")
+            doc = parse_toml(read_text(path, origin), origin)
+        except GearsymError as err:  # unreadable, too large, not UTF-8 or not TOML
+            _fail(origin, err.key or "<file>", f"cannot read TOML: {err.reason}")
         tables = {f"axes.{name}": (doc.get("axes", {}).get(name), unit) for name, unit in cls.AXES}
         tables["mu"] = (doc.get("mu"), "1")
         for key, (table, unit) in tables.items():

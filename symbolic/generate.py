@@ -26,6 +26,7 @@ from typing import Any
 
 import sympy as sp
 
+from symbolic import naming
 from symbolic.codegen import (
     Bounds,
     _comment_text,
@@ -214,7 +215,7 @@ def shift_element_model(d: GearboxDescription) -> Model:
         if e.n_disc is not None and e.r_m is not None
     )
     return Model(
-        name="shift_element",
+        name=naming.SHIFT_ELEMENT_MODEL,
         states=(Variable("z", z, "rad", "bristle deflection (2.66)"),),
         inputs=(
             Variable("dw", dw, "rad/s", "slip omega_a - omega_b"),
@@ -250,7 +251,21 @@ def shift_element_model(d: GearboxDescription) -> Model:
 def sensitivity_parameters(d: GearboxDescription, spec: ShiftSpec) -> list[str]:
     """The thesis' parameter set (3.2) for a shift: m_veh, k_ss, d_ss, μ of the off-going
     element, ζ."""
-    return ["m_veh", "k_ss", "d_ss", f"mu_{element_short_name(d, spec.off_going)}", "zeta"]
+    mu = naming.friction_coefficient(element_short_name(d, spec.off_going))
+    return ["m_veh", "k_ss", "d_ss", mu, "zeta"]
+
+
+def check_generatable(d: GearboxDescription) -> None:
+    """Raise the description's errors that ``generate`` would meet (too few forward gears,
+    missing drivetrain or vehicle data) before any work is reported: one line, exit 2."""
+    if not adjacent_shifts(d):
+        raise GearsymError(
+            d.file,
+            "gear",
+            "gearsym generate needs at least two forward gears (positive ratio): it emits the "
+            "models of the shifts between them and an example that drives one",
+        )
+    full_model(d)
 
 
 def gearbox_models(
@@ -258,12 +273,14 @@ def gearbox_models(
 ) -> list[EmittedModel]:
     """Every model ``gearsym generate`` emits for ``d``, in output order."""
     say = progress or (lambda message: None)
+    check_generatable(d)
+    shifts = adjacent_shifts(d)
     models = []
     say("deriving the full model (2.53)")
     full = full_model(d)
     models.append(EmittedModel(full, _bounds(d, full), "full", "full model (2.53)"))
     friction = _has_friction_data(d)
-    for spec in adjacent_shifts(d):
+    for spec in shifts:
         say(f"deriving shift model {spec.name} (2.55-2.58)")
         m = shift_model(d, spec.name)
         what = f"shift {spec.name}: {spec.off_going} off, {spec.on_coming} on, torque inputs"
@@ -360,10 +377,11 @@ def mu_map_files(mu_map: MuMap) -> dict[str, str]:
             f"|dw| [{_float_repr(dw[0])}, {_float_repr(dw[-1])}] rad/s"
         ),
     }
+    names = naming.model_file_names(naming.MU_MAP)
     return {
-        f"{C_DIR}/gearsym_mu_map.h": render("c_mu_map.h.j2", **context),
-        f"{C_DIR}/gearsym_mu_map.c": render("c_mu_map.c.j2", **context),
-        f"{PYTHON_DIR}/gearsym_mu_map_casadi.py": render("casadi_mu_map.py.j2", **context),
+        f"{C_DIR}/{names['header']}": render("c_mu_map.h.j2", **context),
+        f"{C_DIR}/{names['source']}": render("c_mu_map.c.j2", **context),
+        f"{PYTHON_DIR}/{names['casadi']}": render("casadi_mu_map.py.j2", **context),
     }
 
 
@@ -392,7 +410,7 @@ def _example_context(d: GearboxDescription, models: Sequence[EmittedModel]) -> d
     full = next(m for m in models if m.role == "full")
     element = next((m for m in models if m.role == "shift_element"), None)
     sm = shift.model
-    macro = f"GEARSYM_{sm.name.upper()}_"
+    macro = naming.macro_prefix(sm.name)
     ratio = float(gear_ratio(d, d.gear(spec.from_gear)).ratio)
     ratio_to = float(gear_ratio(d, d.gear(spec.to_gear)).ratio)
     i_d = float(d.drivetrain["i_D"].value)
@@ -401,9 +419,9 @@ def _example_context(d: GearboxDescription, models: Sequence[EmittedModel]) -> d
     omega_c = speed / r_dyn
     omega_out = omega_c * i_d
     initial = {
-        f"omega_{d.input_shaft}": ratio * omega_out,
-        f"omega_{d.output_shaft}": omega_out,
-        "omega_C": omega_c,
+        naming.speed(d.input_shaft): ratio * omega_out,
+        naming.speed(d.output_shaft): omega_out,
+        naming.WHEEL_SPEED: omega_c,
     }
     x0 = [_float_repr(round(initial.get(v.name, 0.0), 6)) for v in sm.states]
     apply_pressure = 5.0e5  # Pa
@@ -412,26 +430,27 @@ def _example_context(d: GearboxDescription, models: Sequence[EmittedModel]) -> d
     inputs = []
     mu_settings = []
     for v in sm.inputs:
-        if v.name == "T_In":
+        if v.name == naming.INPUT_TORQUE:
             inputs.append((v.name, "GEARSYM_LIT(150.0)", "engine torque"))
     if shift.role == "shift_mu":
         for elem_name, role in ((spec.off_going, "off-going"), (spec.on_coming, "on-coming")):
             e = d.element(elem_name)
             short = element_short_name(d, elem_name)
             if role == "off-going":
-                inputs.append((f"F_N{short}", "GEARSYM_LIT(0.0)", f"{role} {e.name} released"))
+                force = naming.normal_force(short)
+                inputs.append((force, "GEARSYM_LIT(0.0)", f"{role} {e.name} released"))
             else:
                 assert e.a_piston is not None
                 area = f"GEARSYM_LIT({_float_repr(e.a_piston.value)})"
-                inputs.append((f"F_N{short}", f"P_APPLY * {area}", f"{role} {e.name}: p_N A"))
-            mu_settings.append((f"mu_{short}", f"{role} {e.name}"))
+                force = naming.normal_force(short)
+                inputs.append((force, f"P_APPLY * {area}", f"{role} {e.name}: p_N A"))
+            mu_settings.append((naming.friction_coefficient(short), f"{role} {e.name}"))
     else:
         # Sliding torque of the on-coming element with the sign of its slip (2.70).
         sign = power_on_slip_signs(d, spec)[spec.on_coming]
-        inputs.append((f"T_{spec.off_going}", "GEARSYM_LIT(0.0)", "off-going element open"))
-        inputs.append(
-            (f"T_{spec.on_coming}", f"GEARSYM_LIT({300.0 * sign})", "on-coming element sliding")
-        )
+        off, on = naming.torque(spec.off_going), naming.torque(spec.on_coming)
+        inputs.append((off, "GEARSYM_LIT(0.0)", "off-going element open"))
+        inputs.append((on, f"GEARSYM_LIT({300.0 * sign})", "on-coming element sliding"))
     element_view = None
     if element is not None:
         e = d.element(spec.on_coming)
@@ -450,8 +469,8 @@ def _example_context(d: GearboxDescription, models: Sequence[EmittedModel]) -> d
         "from_gear": spec.from_gear,
         "to_gear": spec.to_gear,
         "ratio_to": _float_repr(round(ratio_to, 12)),
-        "omega_in": f"omega_{d.input_shaft}",
-        "omega_out": f"omega_{d.output_shaft}",
+        "omega_in": naming.speed(d.input_shaft),
+        "omega_out": naming.speed(d.output_shaft),
         "shift_model": sm.name,
         "shift_macro": macro,
         "shift_header": file_names(sm)["header"],
@@ -464,7 +483,7 @@ def _example_context(d: GearboxDescription, models: Sequence[EmittedModel]) -> d
         "slip": _float_repr(slip),
         "speed": _float_repr(speed),
         "full_model": full.model.name,
-        "full_macro": f"GEARSYM_{full.model.name.upper()}_",
+        "full_macro": naming.macro_prefix(full.model.name),
         "full_header": file_names(full.model)["header"],
         "element": element_view,
         "element_header": file_names(element.model)["header"] if element else None,

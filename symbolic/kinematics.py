@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 import sympy as sp
 
+from symbolic import naming
 from symbolic.description import GearboxDescription
 from symbolic.errors import GearsymError
 
@@ -59,24 +60,35 @@ def gearbox_symbols(
     z_sun, z_planet, z_ring, radius, mass = {}, {}, {}, {}, {}
     inertia: dict[str, sp.Expr] = {}
     for s in d.shafts:
-        inertia[s.name] = quantity(f"J_{s.name}", exact(s.inertia.value), symbolic_inertias)
+        inertia[s.name] = quantity(
+            naming.inertia(s.name), exact(s.inertia.value), symbolic_inertias
+        )
     for ps in d.planetary_sets:
         j = ps.name
-        z_sun[j] = quantity(f"z_S_{j}", sp.Integer(ps.z_sun), symbolic_teeth)
-        z_planet[j] = quantity(f"z_P_{j}", sp.Integer(ps.z_planet), symbolic_teeth)
-        z_ring[j] = quantity(f"z_H_{j}", sp.Integer(ps.z_ring), symbolic_teeth)
+        z_sun[j] = quantity(naming.sun_teeth(j), sp.Integer(ps.z_sun), symbolic_teeth)
+        z_planet[j] = quantity(naming.planet_teeth(j), sp.Integer(ps.z_planet), symbolic_teeth)
+        z_ring[j] = quantity(naming.ring_teeth(j), sp.Integer(ps.z_ring), symbolic_teeth)
         n = ps.planet_count
-        radius[j] = quantity(f"r_T_{j}", exact(ps.carrier_radius.value), symbolic_inertias)
-        mass[j] = quantity(f"m_P_{j}", n * exact(ps.planet_mass.value), symbolic_inertias)
-        inertia[ps.planet] = quantity(
-            f"J_{ps.planet}", n * exact(ps.planet_inertia.value), symbolic_inertias
+        radius[j] = quantity(
+            naming.carrier_radius(j), exact(ps.carrier_radius.value), symbolic_inertias
         )
-    torque = {"In": sp.Symbol("T_In"), "Out": sp.Symbol("T_Out")}
+        mass[j] = quantity(
+            naming.planet_mass(j), n * exact(ps.planet_mass.value), symbolic_inertias
+        )
+        inertia[ps.planet] = quantity(
+            naming.inertia(ps.planet), n * exact(ps.planet_inertia.value), symbolic_inertias
+        )
+    # An element named In or Out would overwrite these keys: symbolic.naming.check_names
+    # rejects it when the description is loaded.
+    torque = {
+        naming.INPUT: sp.Symbol(naming.INPUT_TORQUE),
+        naming.OUTPUT: sp.Symbol(naming.OUTPUT_TORQUE),
+    }
     for e in d.shift_elements:
-        torque[e.name] = sp.Symbol(f"T_{e.name}")
+        torque[e.name] = sp.Symbol(naming.torque(e.name))
     return GearboxSymbols(
-        angle={b: sp.Symbol(f"phi_{b}") for b in d.body_names},
-        speed={b: sp.Symbol(f"omega_{b}") for b in d.body_names},
+        angle={b: sp.Symbol(naming.angle(b)) for b in d.body_names},
+        speed={b: sp.Symbol(naming.speed(b)) for b in d.body_names},
         z_sun=z_sun,
         z_planet=z_planet,
         z_ring=z_ring,

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import sympy as sp
 
+from symbolic import naming
 from symbolic.description import Gear, GearboxDescription
 from symbolic.errors import GearsymError
 from symbolic.sympy_utils import exact_nullspace
@@ -23,7 +24,10 @@ from symbolic.sympy_utils import exact_nullspace
 
 def stationary_ratio_symbols(d: GearboxDescription) -> dict[str, sp.Symbol]:
     """k_<set> = z_ring / z_sun as positive symbols, one per planetary set."""
-    return {ps.name: sp.Symbol(f"k_{ps.name}", positive=True) for ps in d.planetary_sets}
+    return {
+        ps.name: sp.Symbol(naming.stationary_ratio(ps.name), positive=True)
+        for ps in d.planetary_sets
+    }
 
 
 def stationary_ratios(d: GearboxDescription) -> dict[str, sp.Rational]:

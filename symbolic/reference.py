@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import sympy as sp
 
+from symbolic import naming
 from symbolic.description import GearboxDescription
 from symbolic.drivetrain import drivetrain_parts, quantity
 from symbolic.errors import GearsymError
@@ -70,15 +71,15 @@ def reference_model(d: GearboxDescription, elements: Sequence[str] | None = None
     rates: dict[str, sp.Expr] = {}
     z_vars, p_vars, mu_vars = [], [], []
     for e in (d.element(n) for n in chosen):
-        z = sp.Symbol(f"z_{e.name}")
-        p = sp.Symbol(f"p_{e.name}")
-        mu = sp.Symbol(f"mu_{e.name}", positive=True)
+        z = sp.Symbol(naming.bristle(e.name))
+        p = sp.Symbol(naming.pressure(e.name))
+        mu = sp.Symbol(naming.friction_coefficient(e.name), positive=True)
         slip[e.name] = (speeds[e.a] if e.a is not None else 0) - speeds[e.b]
         assert e.r_m is not None and e.a_piston is not None and e.n_disc is not None
         # Build the friction law on a plain slip symbol, then put the slip expression in
         # without re-evaluation: SymPy's Max re-simplification on the long slip expressions
         # is slow, and a substitution changes nothing it could simplify.
-        dw = sp.Symbol(f"dw_{e.name}", real=True)
+        dw = sp.Symbol(naming.slip_symbol(e.name), real=True)
         rate, t_cl = shift_element_sym(
             z,
             dw,
@@ -93,9 +94,9 @@ def reference_model(d: GearboxDescription, elements: Sequence[str] | None = None
         with sp.evaluate(False):
             rates[e.name] = rate.xreplace({dw: slip[e.name]})
             torque[e.name] = t_cl.xreplace({dw: slip[e.name]})
-        z_vars.append(Variable(f"z_{e.name}", z, "rad", f"bristle deflection of {e.name} (2.66)"))
-        p_vars.append(Variable(f"p_{e.name}", p, "Pa", f"apply pressure of {e.name}"))
-        mu_vars.append(Variable(f"mu_{e.name}", mu, "1", f"friction coefficient of {e.name}"))
+        z_vars.append(Variable(z.name, z, "rad", f"bristle deflection of {e.name} (2.66)"))
+        p_vars.append(Variable(p.name, p, "Pa", f"apply pressure of {e.name}"))
+        mu_vars.append(Variable(mu.name, mu, "1", f"friction coefficient of {e.name}"))
 
     substitution = {
         parts.torque_symbols[e]: torque.get(e, sp.Integer(0)) for e in parts.torque_elements
@@ -107,24 +108,26 @@ def reference_model(d: GearboxDescription, elements: Sequence[str] | None = None
 
     states = (
         *(
-            Variable(f"omega_{s}", sym, "rad/s", f"speed of shaft {s}")
+            Variable(naming.speed(s), sym, "rad/s", f"speed of shaft {s}")
             for s, sym in zip(parts.keep, parts.speeds, strict=True)
         ),
-        Variable("phi", sp.Symbol("phi"), "rad", "side-shaft twist (2.43)"),
-        Variable("omega_C", sp.Symbol("omega_C"), "rad/s", "wheel speed"),
+        Variable(naming.TWIST, sp.Symbol(naming.TWIST), "rad", "side-shaft twist (2.43)"),
+        Variable(naming.WHEEL_SPEED, sp.Symbol(naming.WHEEL_SPEED), "rad/s", "wheel speed"),
         *z_vars,
     )
     inputs = (
-        Variable("T_In", parts.torque_symbols["In"], "N*m", "input torque"),
+        Variable(naming.INPUT_TORQUE, parts.torque_symbols[naming.INPUT], "N*m", "input torque"),
         *p_vars,
         *mu_vars,
     )
-    outputs = tuple(
-        Variable(f"y_omega_{s}", sp.Symbol(f"y_omega_{s}"), "rad/s") for s in d.measured_shafts
-    ) + (Variable("y_omega_C", sp.Symbol("y_omega_C"), "rad/s"),)
-    output_exprs = sp.Matrix([*(speeds[s] for s in d.measured_shafts), sp.Symbol("omega_C")])
+    measured = [naming.measured(naming.speed(s)) for s in d.measured_shafts]
+    measured.append(naming.measured(naming.WHEEL_SPEED))
+    outputs = tuple(Variable(y, sp.Symbol(y), "rad/s") for y in measured)
+    output_exprs = sp.Matrix(
+        [*(speeds[s] for s in d.measured_shafts), sp.Symbol(naming.WHEEL_SPEED)]
+    )
     model = Model(
-        name="reference",
+        name=naming.REFERENCE_MODEL,
         states=states,
         inputs=inputs,
         parameters=parts.parameters,
@@ -146,7 +149,7 @@ def reference_model(d: GearboxDescription, elements: Sequence[str] | None = None
     out_row = dyn.kinematics.transform[index[d.output_shaft], :]
     mass = dyn.mass_matrix + extra * (out_row.T * out_row)
     params = {v.name: v.symbol for v in parts.parameters}
-    omega_c = sp.Symbol("omega_C")
+    omega_c = sp.Symbol(naming.WHEEL_SPEED)
     kinetic = (y_dot.T * mass * y_dot)[0] / 2 + parts.wheel_inertia * omega_c**2 / 2
     return ReferenceModel(
         model=model,
@@ -154,9 +157,9 @@ def reference_model(d: GearboxDescription, elements: Sequence[str] | None = None
         element_torque=torque,
         body_speeds=speeds,
         kinetic_energy=kinetic,
-        spring_energy=params["k_ss"] * sp.Symbol("phi") ** 2,
+        spring_energy=params["k_ss"] * sp.Symbol(naming.TWIST) ** 2,
         bristle_energy=sum((friction["sigma0"] * v.symbol**2 / 2 for v in z_vars), sp.Integer(0)),
-        input_power=parts.torque_symbols["In"] * speeds[d.input_shaft],
+        input_power=parts.torque_symbols[naming.INPUT] * speeds[d.input_shaft],
         friction_power=sum((torque[e] * slip[e] for e in torque), sp.Integer(0)),
         damper_power=2 * params["d_ss"] * parts.phi_dot**2,
         road_power=parts.road_torque * omega_c,

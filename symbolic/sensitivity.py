@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import sympy as sp
 
+from symbolic import naming
 from symbolic.errors import GearsymError
 from symbolic.model import Model, Variable
 from symbolic.sympy_utils import smart_jacobian
@@ -158,7 +159,7 @@ def sensitivity_equations(
         [*model.output_expressions, *[dy[i, j] for j in range(m) for i in range(dy.rows)]]
     )
     augmented = Model(
-        name=f"{model.name}_sens",
+        name=naming.sensitivity_model_name(model.name),
         states=states,
         inputs=model.inputs,
         parameters=model.parameters,

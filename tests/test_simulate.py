@@ -217,6 +217,8 @@ def test_simulate_cli_writes_everything(tmp_path):
 
 
 DEFAULT = default_scenario_path().read_text()
+# A missing ']' is reported at the end of the table header's line, like a description's.
+_HEADER_LINE = DEFAULT.splitlines().index("[scenario]") + 1
 
 BAD_SCENARIOS = [
     ("[pressure.K38]", "[pressure.K39]", "pressure.K39", "unknown shift element 'K39'"),
@@ -234,7 +236,12 @@ BAD_SCENARIOS = [
     ),
     ('shift = "2-3"', 'shift = "2-4"', "scenario.shift", "needs exactly one of each"),
     ("t_end = 1.2", "t_end = -1.2", "scenario.t_end", "must be a positive number"),
-    ("[scenario]\nname", "[scenario\nname", "TOML", "malformed TOML"),
+    (
+        "[scenario]\nname",
+        "[scenario\nname",
+        f"line {_HEADER_LINE}, column {len('[scenario') + 1}",
+        "malformed TOML",
+    ),
 ]
 
 

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import bisect
 import math
-import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import resources
@@ -37,8 +36,16 @@ import numpy as np
 from symbolic.description import GearboxDescription
 from symbolic.drivetrain import ShiftSpec, shift_spec
 from symbolic.errors import GearsymError
+from symbolic.input_files import parse_toml, read_text, shown, unknown_key_reason
 
 DEFAULT_SCENARIO = "scenario_2_3.toml"
+
+#: Stated limits (README "Limits and the error contract"). A scenario is one shift (the
+#: built-in one lasts 1.2 s); 10 s at the simulation's 0.5 ms samples is 20 000 rows of
+#: timeseries.csv (about 12 MB), where 300 s wrote 356 MB and 1e9 s ran out of memory.
+T_END_MAX = 10.0  # s
+SAMPLE_TIME = 5e-4  # s, spacing of the simulated time series (validation.simulate)
+POINTS_MAX = 1000  # points per piecewise-linear profile
 
 
 @dataclass(frozen=True)
@@ -95,44 +102,56 @@ def load_scenario(d: GearboxDescription, path: str | Path | None = None) -> Scen
     """Load and check a scenario against the gearbox description."""
     file = str(path) if path is not None else f"<built-in {DEFAULT_SCENARIO}>"
     source = Path(path) if path is not None else default_scenario_path()
-    try:
-        data = tomllib.loads(source.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise GearsymError(file, "", "no such file") from None
-    except tomllib.TOMLDecodeError as err:
-        raise GearsymError(file, "TOML", f"malformed TOML: {err}") from None
+    data = parse_toml(read_text(source, file), file)
 
     def fail(key: str, reason: str) -> GearsymError:
         return GearsymError(file, key, reason)
 
+    def only(table: dict, key: str, known: tuple[str, ...]) -> None:
+        unknown = sorted(set(table) - set(known))
+        if unknown:
+            raise fail(f"{key}.{unknown[0]}", unknown_key_reason(unknown[0], known))
+
+    unknown = sorted(set(data) - {"scenario", "input_torque", "pressure"})
+    if unknown:
+        known = ("scenario", "input_torque", "pressure")
+        raise fail(unknown[0], unknown_key_reason(unknown[0], known, "table"))
     head = data.get("scenario")
     if not isinstance(head, dict):
         raise fail("scenario", "missing table [scenario]")
     for key in ("shift", "t_end", "vehicle_speed"):
         if key not in head:
             raise fail(f"scenario.{key}", "missing required key")
-    unknown = set(head) - {"name", "shift", "t_end", "vehicle_speed"}
-    if unknown:
-        raise fail(f"scenario.{sorted(unknown)[0]}", "unknown key (misspelt?)")
+    only(head, "scenario", ("name", "shift", "t_end", "vehicle_speed"))
+    title = head.get("name")
+    if title is not None and not isinstance(title, str):
+        raise fail("scenario.name", f"expected a string, got {shown(title)}")
     try:
         spec = shift_spec(d, str(head["shift"]))
     except GearsymError as err:
         raise fail("scenario.shift", err.reason) from None
-    t_end = head["t_end"]
-    if isinstance(t_end, bool) or not isinstance(t_end, (int, float)) or not t_end > 0:
-        raise fail("scenario.t_end", f"must be a positive number of seconds, got {t_end!r}")
+    t_end = _number(fail, "scenario.t_end", head["t_end"])
+    if not 0 < t_end <= T_END_MAX:
+        raise fail(
+            "scenario.t_end",
+            f"must be a positive number of seconds, at most {T_END_MAX:g} (one shift; the "
+            f"limit bounds the run time and the {SAMPLE_TIME * 1e3:g} ms samples written), "
+            f"got {t_end:g}",
+        )
     speed = head["vehicle_speed"]
     if not isinstance(speed, dict) or speed.get("unit") != "m/s":
         raise fail("scenario.vehicle_speed", 'expected { value = ..., unit = "m/s", source = ... }')
-    v0 = speed.get("value")
-    if isinstance(v0, bool) or not isinstance(v0, (int, float)) or not v0 > 0:
-        raise fail("scenario.vehicle_speed.value", f"must be a positive speed, got {v0!r}")
+    only(speed, "scenario.vehicle_speed", ("value", "unit", "source"))
+    v0 = _number(fail, "scenario.vehicle_speed.value", speed.get("value"))
+    if not v0 > 0:
+        raise fail("scenario.vehicle_speed.value", f"must be a positive speed, got {v0:g}")
 
     torque = data.get("input_torque")
     if not isinstance(torque, dict):
         raise fail("input_torque", "missing table [input_torque]")
+    only(torque, "input_torque", ("unit", "time", "engine", "e_machine"))
     if torque.get("unit") != "N*m":
-        raise fail("input_torque.unit", f"expected 'N*m', got {torque.get('unit')!r}")
+        raise fail("input_torque.unit", f"expected 'N*m', got {shown(torque.get('unit'))}")
     times = _series(fail, "input_torque.time", torque.get("time"))
     _increasing(fail, "input_torque.time", times)
     engine = _series(fail, "input_torque.engine", torque.get("engine", [0.0] * len(times)))
@@ -140,9 +159,6 @@ def load_scenario(d: GearboxDescription, path: str | Path | None = None) -> Scen
     for key, values in (("engine", engine), ("e_machine", e_machine)):
         if len(values) != len(times):
             raise fail(f"input_torque.{key}", f"has {len(values)} values for {len(times)} times")
-    unknown = set(torque) - {"unit", "time", "engine", "e_machine"}
-    if unknown:
-        raise fail(f"input_torque.{sorted(unknown)[0]}", "unknown key (misspelt?)")
 
     pressures: dict[str, Profile] = {}
     element_names = [e.name for e in d.shift_elements]
@@ -152,9 +168,12 @@ def load_scenario(d: GearboxDescription, path: str | Path | None = None) -> Scen
     for name, entry in table.items():
         key = f"pressure.{name}"
         if name not in element_names:
-            raise fail(key, f"unknown shift element {name!r} (known: {', '.join(element_names)})")
+            raise fail(
+                key, f"unknown shift element {shown(name)} (known: {', '.join(element_names)})"
+            )
         if not isinstance(entry, dict) or entry.get("unit") != "Pa":
             raise fail(f"{key}.unit", "expected unit = 'Pa'")
+        only(entry, key, ("unit", "time", "value"))
         t = _series(fail, f"{key}.time", entry.get("time"))
         _increasing(fail, f"{key}.time", t)
         values = _series(fail, f"{key}.value", entry.get("value"))
@@ -165,24 +184,32 @@ def load_scenario(d: GearboxDescription, path: str | Path | None = None) -> Scen
         pressures[name] = Profile(t, values)
     for name in element_names:
         pressures.setdefault(name, Profile(np.array([0.0]), np.array([0.0])))
-    unknown = set(data) - {"scenario", "input_torque", "pressure"}
-    if unknown:
-        raise fail(sorted(unknown)[0], "unknown table (misspelt?)")
     return Scenario(
-        name=str(head.get("name", spec.name)),
+        name=title if title is not None else spec.name,
         file=file,
         shift=spec,
-        t_end=float(t_end),
-        vehicle_speed=float(v0),
+        t_end=t_end,
+        vehicle_speed=v0,
         engine=Profile(times, engine),
         e_machine=Profile(times, e_machine),
         pressure=pressures,
     )
 
 
+def _number(fail: Callable[[str, str], GearsymError], key: str, value: object) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise fail(key, f"expected a number, got {shown(value)}")
+    if not math.isfinite(value):
+        raise fail(key, f"must be finite, got {shown(value)}")
+    return float(value)
+
+
 def _series(fail: Callable[[str, str], GearsymError], key: str, values: object) -> np.ndarray:
     if not isinstance(values, list) or not values:
         raise fail(key, "expected a non-empty list of numbers")
+    if len(values) > POINTS_MAX:
+        # every point can be a breakpoint, where the integrator restarts
+        raise fail(key, f"at most {POINTS_MAX} points per profile, got {len(values)}")
     if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values):
         raise fail(key, "expected a list of numbers")
     array = np.array(values, dtype=float)

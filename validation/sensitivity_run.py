@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 import sympy as sp
 
+from symbolic import naming
 from symbolic.description import GearboxDescription
 from symbolic.drivetrain import (
     ShiftSpec,
@@ -157,7 +158,7 @@ def driven_shift_model(
     rhs = friction.rhs
     stick: list[Variable] = []
     for e in elements:
-        v = by_name[f"T_{e}"]
+        v = by_name[naming.torque(e)]
         column = torque.rhs.diff(v.symbol)
         if column.free_symbols & set(torque.input_symbols):
             raise AssertionError(f"shift model is not affine in T_{e}")
@@ -187,9 +188,9 @@ def driven_shift_model(
         spec=spec,
         elements=elements,
         gain=gain,
-        mu={e: f"mu_{short[e]}" for e in elements},
-        normal_force={e: f"F_N{short[e]}" for e in elements},
-        stick_torque={e: f"T_{e}" for e in elements},
+        mu={e: naming.friction_coefficient(short[e]) for e in elements},
+        normal_force={e: naming.normal_force(short[e]) for e in elements},
+        stick_torque={e: naming.torque(e) for e in elements},
     )
 
 
@@ -212,7 +213,7 @@ def sliding_masks(
     masks = {}
     for e in driven.elements:
         short = element_short_name(d, e)
-        force = data.signals[f"F_N{short}"]
+        force = data.signals[naming.normal_force(short)]
         if mode == "phases":
             inside = np.zeros(len(data.t), dtype=bool)
             for p in data.phases:
@@ -222,8 +223,9 @@ def sliding_masks(
             continue
         element = d.element(e)
         assert element.n_disc is not None and element.r_m is not None
-        capacity = 2 * element.n_disc * element.r_m.value * data.signals[f"mu_{short}"] * force
-        torque = np.abs(data.signals[f"T_{e}"])
+        mu = data.signals[naming.friction_coefficient(short)]
+        capacity = 2 * element.n_disc * element.r_m.value * mu * force
+        torque = np.abs(data.signals[naming.torque(e)])
         masks[e] = (force > 0) & (torque >= capacity_fraction * capacity)
     return masks
 
@@ -237,7 +239,7 @@ def driving_inputs(
     """Input samples (N, n_u) of the driven model in its input order, from the record."""
     columns: dict[str, np.ndarray] = {"T_In": data.signals["T_In"]}
     for e in driven.elements:
-        torque = data.signals[f"T_{e}"]
+        torque = data.signals[naming.torque(e)]
         slide = masks[e]
         mu0 = values[driven.mu[e]]
         columns[driven.normal_force[e]] = np.where(slide, torque / (driven.gain[e] * mu0), 0.0)

@@ -31,6 +31,7 @@ import sympy as sp
 from scipy.integrate import solve_ivp
 from scipy.interpolate import CubicHermiteSpline, RectBivariateSpline
 
+from symbolic import naming
 from symbolic.description import GearboxDescription
 from symbolic.drivetrain import (
     drivetrain_model,
@@ -43,12 +44,16 @@ from symbolic.friction import DEFAULT_MU_MAP, T_SS_MIN, MuMap
 from symbolic.model import Model
 from symbolic.numeric import bilinear, casadi_function, integrate_linear_inputs, to_casadi
 from symbolic.reference import ReferenceModel, reference_model
-from validation.scenario import Scenario, load_scenario
+from validation.scenario import SAMPLE_TIME, Scenario, load_scenario
 
 #: Progress callback: (fraction done in [0, 1], message).
 Progress = Callable[[float, str], None]
 
-ENERGY_TERMS = ("W_in", "W_friction", "W_damper", "W_road")
+ENERGY_TERMS = naming.ENERGY_TERMS
+
+#: Most samples one simulation returns (and writes to timeseries.csv): 100 000 rows are about
+#: 75 MB of CSV. The scenario's t_end limit keeps the default sampling at 20 000.
+SAMPLES_MAX = 100_000
 
 
 @dataclass(frozen=True)
@@ -408,7 +413,7 @@ def simulate(
     scenario: Scenario | None = None,
     progress: Progress | None = None,
     rtol: float = 1e-8,
-    sample_time: float = 5e-4,
+    sample_time: float = SAMPLE_TIME,
     check_models: bool = True,
     method: str = "cvodes",
     analytic_jacobian: bool = True,
@@ -426,6 +431,13 @@ def simulate(
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     start = time.perf_counter()
     scenario = scenario if scenario is not None else load_scenario(d)
+    if not scenario.t_end / sample_time <= SAMPLES_MAX:
+        raise GearsymError(
+            scenario.file,
+            "scenario.t_end",
+            f"{scenario.t_end:g} s at {sample_time:g} s per sample is more than {SAMPLES_MAX} "
+            "samples, the limit of a simulation",
+        )
     report = progress or (lambda fraction, message: None)
     elements = tuple(
         e.name for e in d.shift_elements if float(np.max(scenario.pressure[e.name].value)) > 0
@@ -632,42 +644,53 @@ def _signals(
     xdot = compiled.f.many(x, u)
     index = {name: i for i, name in enumerate(names)}
     out: dict[str, np.ndarray] = {}
+
+    def put(key: str, value: np.ndarray) -> None:
+        # two signals under one name would lose one column; check_names prevents it
+        if key in out:
+            raise AssertionError(f"two signals share the column name {key!r}")
+        out[key] = np.asarray(value, dtype=float)
+
+    element_names = [e.name for e in d.shift_elements]
+    short = {e: naming.element_short_name(e, element_names) for e in compiled.elements}
+    speeds = compiled.speeds.many(x)
     for k, s in enumerate(compiled.shaft_names):
-        out[f"omega_{s}"] = compiled.speeds.many(x)[:, k]
-    out["phi"] = x[:, index["phi"]]
-    out["omega_C"] = x[:, index["omega_C"]]
+        put(naming.speed(s), speeds[:, k])
+    put(naming.TWIST, x[:, index[naming.TWIST]])
+    put(naming.WHEEL_SPEED, x[:, index[naming.WHEEL_SPEED]])
     for name in names:
-        if name.startswith("omega_"):
-            out[f"d{name}"] = xdot[:, index[name]]
-    out["T_In"] = u[:, 0]
-    out["T_engine"] = np.array([scenario.engine(float(t)) for t in grid])
-    out["T_e_machine"] = np.array([scenario.e_machine(float(t)) for t in grid])
+        if name.startswith(naming.speed("")):
+            put(naming.derivative(name), xdot[:, index[name]])
+    put(naming.INPUT_TORQUE, u[:, 0])
+    put(naming.ENGINE_TORQUE, np.array([scenario.engine(float(t)) for t in grid]))
+    put(naming.E_MACHINE_TORQUE, np.array([scenario.e_machine(float(t)) for t in grid]))
     torques = compiled.torques.many(x, u)
     ne = len(compiled.elements)
     for k, e in enumerate(compiled.elements):
-        short = element_short_name(d, e)
         area = d.element(e).a_piston
         assert area is not None
-        out[f"p_{e}"] = u[:, 1 + k]
-        out[f"F_N{short}"] = u[:, 1 + k] * area.value
-        out[f"mu_{short}"] = u[:, 1 + ne + k]
-        out[f"z_{e}"] = x[:, index[f"z_{e}"]]
+        put(naming.pressure(e), u[:, 1 + k])
+        put(naming.normal_force(short[e]), u[:, 1 + k] * area.value)
+        put(naming.friction_coefficient(short[e]), u[:, 1 + ne + k])
+        put(naming.bristle(e), x[:, index[naming.bristle(e)]])
     slips = compiled.all_slips.many(x)
     for k, e in enumerate(compiled.all_slip_names):
-        out[f"slip_{e.name}"] = slips[:, k]
+        put(naming.slip_column(e.name), slips[:, k])
         position = compiled.elements.index(e.name) if e.name in compiled.elements else None
-        out[f"T_{e.name}"] = torques[:, position] if position is not None else np.zeros(len(grid))
+        zero = np.zeros(len(grid))
+        put(naming.torque(e.name), torques[:, position] if position is not None else zero)
     t_ss = compiled.side_shaft.many(x)[:, 0]
-    out["T_ss"] = t_ss
-    out["T_out"] = 2 * t_ss / quantity(d, "drivetrain", "i_D").value
-    out["T_res"] = compiled.road.many(x)[:, 0]
-    w_in, w_out = out[f"omega_{d.input_shaft}"], out[f"omega_{d.output_shaft}"]
+    put(naming.SIDE_SHAFT_TORQUE, t_ss)
+    put(naming.DRIVETRAIN_OUTPUT_TORQUE, 2 * t_ss / quantity(d, "drivetrain", "i_D").value)
+    put(naming.ROAD_TORQUE, compiled.road.many(x)[:, 0])
+    w_in, w_out = out[naming.speed(d.input_shaft)], out[naming.speed(d.output_shaft)]
     with np.errstate(divide="ignore", invalid="ignore"):
-        out["ratio"] = np.where(w_out != 0, w_in / np.where(w_out != 0, w_out, 1.0), math.nan)
-    out["v_vehicle"] = x[:, index["omega_C"]] * quantity(d, "vehicle", "r_dyn").value
+        put(naming.RATIO, np.where(w_out != 0, w_in / np.where(w_out != 0, w_out, 1.0), math.nan))
+    r_dyn = quantity(d, "vehicle", "r_dyn").value
+    put(naming.VEHICLE_SPEED, x[:, index[naming.WHEEL_SPEED]] * r_dyn)
     for k, term in enumerate(ENERGY_TERMS):
-        out[term] = states[:, n + k]
-    return {key: np.array(value, dtype=float) for key, value in out.items()}
+        put(term, states[:, n + k])
+    return out
 
 
 def _audit(states: np.ndarray, x0: np.ndarray, compiled: _Compiled) -> EnergyAudit:
@@ -714,9 +737,9 @@ def detect_phases(
     """
     spec = scenario.shift
     on, off = spec.on_coming, spec.off_going
-    t_on = np.abs(signals[f"T_{on}"])
-    slip_on = np.abs(signals[f"slip_{on}"])
-    ratio = signals["ratio"]
+    t_on = np.abs(signals[naming.torque(on)])
+    slip_on = np.abs(signals[naming.slip_column(on)])
+    ratio = signals[naming.RATIO]
     r_from = d.gear(spec.from_gear)
     r_to = d.gear(spec.to_gear)
     from symbolic.ratios import gear_ratio
@@ -737,9 +760,12 @@ def detect_phases(
     # torque reaches the capacity 2 N_disc r_m μ F_N (2.69)
     element, short = d.element(off), element_short_name(d, off)
     assert element.n_disc is not None and element.r_m is not None
-    force = signals[f"F_N{short}"]
-    capacity = 2 * element.n_disc * element.r_m.value * signals[f"mu_{short}"] * force
-    slides = _first((force > 0) & (np.abs(signals[f"T_{off}"]) >= capacity_fraction * capacity))
+    force = signals[naming.normal_force(short)]
+    mu = signals[naming.friction_coefficient(short)]
+    capacity = 2 * element.n_disc * element.r_m.value * mu * force
+    slides = _first(
+        (force > 0) & (np.abs(signals[naming.torque(off)]) >= capacity_fraction * capacity)
+    )
     i1 = takes_load if slides is None else min(takes_load, slides)
     progress = (ratio_from - ratio) / (ratio_from - ratio_to)
     i2 = _first(progress > ratio_fraction, i1)
