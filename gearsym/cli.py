@@ -8,13 +8,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import signal
 import sys
-import threading
 import time
 from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
+from gearsym.interrupts import Terminated, check, sigterm_raises
 from gearsym.options import number
 from symbolic.description import PLANET_COUNT_MAX, TEETH_MAX
 from symbolic.errors import GearsymError
@@ -32,6 +31,7 @@ def _emit_json(data: Any) -> None:
 
 
 def _progress(message: str) -> None:
+    check()
     print(f"  … {message}", file=sys.stderr, flush=True)
 
 
@@ -281,7 +281,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     d = _load(args.config)
     scenario, skipped = _run_scenario(d, args.scenario)
-    with OutputDir(args.out, "run") as out:  # refuses a foreign DIR before the work
+    with OutputDir(args.out, "run", before_commit=check) as out:
         print(f"gearsym: {d.title}")
         start = time.perf_counter()
         dyn = gearbox_dynamics(d, symbolic_inertias=True)
@@ -433,21 +433,12 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-class Terminated(BaseException):
-    """SIGTERM, raised like Ctrl-C so that every ``with`` block cleans up on the way out."""
-
-
-def _terminate(signum: int, frame: Any) -> None:
-    raise Terminated
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    main_thread = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
     try:
-        return int(args.handler(args))
+        with sigterm_raises():
+            return int(args.handler(args))
     except GearsymError as err:
         print(f"gearsym: {err}", file=sys.stderr)
         return 2
@@ -457,9 +448,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Terminated:
         print("gearsym: terminated; nothing was written", file=sys.stderr)
         return 143
-    finally:
-        if main_thread:
-            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

@@ -13,6 +13,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from gearsym.interrupts import check
 from symbolic.errors import GearsymError
 from symbolic.output_dir import OutputDir
 
@@ -24,6 +25,7 @@ def _load(path: str | None) -> Any:
 
 
 def _say(message: str) -> None:
+    check()
     print(f"  … {message}", file=sys.stderr, flush=True)
 
 
@@ -100,7 +102,7 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
     )
 
     d, names, overrides, scenario = _prepare(args, False)
-    with OutputDir(args.out, "sensitivity") as out:  # refuses a foreign DIR before the work
+    with OutputDir(args.out, "sensitivity", before_commit=check) as out:
         data = _reference(d, scenario)
         run = run_sensitivities(
             d,
@@ -176,7 +178,11 @@ def cmd_fim(args: argparse.Namespace) -> int:
 
     d, names, overrides, scenario = _prepare(args, args.with_wheel_acceleration)
     with contextlib.ExitStack() as stack:
-        out = stack.enter_context(OutputDir(args.out, "fim")) if args.out else None
+        out = (
+            stack.enter_context(OutputDir(args.out, "fim", before_commit=check))
+            if args.out
+            else None
+        )
         data = _reference(d, scenario)
         study = fim_study(
             d,
@@ -265,8 +271,8 @@ def print_fim_summary(d: Any, result: Any = None, folder: Path | None = None) ->
 
 
 def _common(p: argparse.ArgumentParser) -> None:
-    from symbolic.sensitivity import DEFAULT_PARAMETERS
-    from validation.sensitivity_run import SLIDING_MODES
+    from symbolic.defaults import SENSITIVITY_PARAMETERS as DEFAULT_PARAMETERS
+    from symbolic.defaults import SLIDING_MODES
 
     p.add_argument(
         "--params",
@@ -296,8 +302,13 @@ def register(
 ) -> None:
     """Register ``sensitivity`` and ``fim`` with the main parser."""
     from gearsym.options import number
-    from validation.fisher import ACCELERATION_ERROR, GAMMA_MAX, SAMPLE_TIME, SPEED_ERROR
-    from validation.scenario import SAMPLE_TIME as RECORD_SAMPLE_TIME
+    from symbolic.defaults import (
+        ACCELERATION_ERROR,
+        GAMMA_MAX,
+        RECORD_SAMPLE_TIME,
+        SAMPLE_TIME,
+        SPEED_ERROR,
+    )
 
     p = command(
         "sensitivity",

@@ -9,6 +9,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from gearsym.interrupts import check
+
 
 def _load(path: str | None) -> Any:
     from symbolic.description import load_description
@@ -114,6 +116,7 @@ class ProgressBar:
         self.last = ""
 
     def __call__(self, fraction: float, message: str) -> None:
+        check()
         width = 24
         filled = int(round(width * max(0.0, min(1.0, fraction))))
         bar = "#" * filled + "." * (width - filled)
@@ -151,7 +154,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
     d = _load(args.config)
     scenario = load_scenario(d, args.scenario)
-    with OutputDir(args.out, "simulate") as out:  # refuses a foreign DIR before the work
+    with OutputDir(args.out, "simulate", before_commit=check) as out:
         result = simulate_with_progress(d, scenario)
         write_results(d, result, out.path, plots=not args.no_plots)
         paths = out.commit()

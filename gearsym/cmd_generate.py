@@ -19,6 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from gearsym.interrupts import check
 from symbolic.errors import GearsymError
 from symbolic.output_dir import OutputDir
 
@@ -51,6 +52,7 @@ def add_generate_parser(command: Callable[..., Any], config: Callable[..., None]
 
 
 def _progress(message: str) -> None:
+    check()
     print(f"  … {message}", file=sys.stderr, flush=True)
 
 
@@ -74,7 +76,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     d = load_description(args.config)
     check_generatable(d)
-    with OutputDir(args.out, "generate") as out:  # refuses a foreign DIR before the work
+    with OutputDir(args.out, "generate", before_commit=check) as out:
         _progress(f"generating code for {d.name}")
         tree = generate_tree(d, progress=_progress)
         write_files(tree.files, out.path)

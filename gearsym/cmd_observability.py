@@ -43,8 +43,8 @@ if TYPE_CHECKING:
     from symbolic.observability import ObservabilityResult, PartialResult, RankDropReport
 
 #: The shift of thesis chapter 3 and 4 and its parameter vector p of (4.1).
-DEFAULT_SHIFT = "2-3"
-DEFAULT_PARAMETERS = ("m_veh", "mu_38", "mu_05", "zeta")
+from symbolic.defaults import DEFAULT_SHIFT
+from symbolic.defaults import OBSERVABILITY_PARAMETERS as DEFAULT_PARAMETERS
 
 #: Input-constant combinations are tested for every subset up to this many inputs; beyond, only
 #: single inputs and all inputs together.

@@ -27,7 +27,7 @@ import os
 import re
 import shutil
 import tempfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from types import TracebackType
 
@@ -159,7 +159,17 @@ class OutputDir:
     removes the staging directory and leaves ``target`` as it was.
     """
 
-    def __init__(self, target: str | Path, command: str, *, shown: str | None = None) -> None:
+    def __init__(
+        self,
+        target: str | Path,
+        command: str,
+        *,
+        shown: str | None = None,
+        before_commit: Callable[[], None] | None = None,
+    ) -> None:
+        """``before_commit`` runs first thing in :meth:`commit`; an exception it raises (e.g.
+        a cancellation the caller noticed) leaves ``target`` untouched."""
+        self.before_commit = before_commit
         self.shown = shown if shown is not None else str(target)
         self.command = command
         manifest_marker(command)  # validates the name early
@@ -316,6 +326,8 @@ class OutputDir:
     def commit(self) -> list[Path]:
         """Write ``MANIFEST`` and swap the staging directory in; returns the final paths of
         every file written (``MANIFEST`` last)."""
+        if self.before_commit is not None:
+            self.before_commit()
         staging = self.path
         written = self._seal(staging)
         old: Path | None = None

@@ -23,13 +23,13 @@ from dataclasses import dataclass
 import sympy as sp
 
 from symbolic import naming
-from symbolic.errors import GearsymError
-from symbolic.model import Model, Variable
-from symbolic.sympy_utils import smart_jacobian
 
 #: The parameters the thesis studies (3.2): vehicle mass, side-shaft stiffness and damping,
 #: friction coefficient of the off-going clutch K38, road grade.
-DEFAULT_PARAMETERS: tuple[str, ...] = ("m_veh", "k_ss", "d_ss", "mu_38", "zeta")
+from symbolic.defaults import SENSITIVITY_PARAMETERS as DEFAULT_PARAMETERS
+from symbolic.errors import GearsymError
+from symbolic.model import Model, Variable
+from symbolic.sympy_utils import smart_jacobian
 
 
 def sensitivity_name(state: str, parameter: str) -> str:

@@ -25,6 +25,13 @@ from typing import Any
 
 import numpy as np
 
+from symbolic.defaults import (
+    ACCELERATION_ERROR,
+    FLOOR_FRACTION,
+    GAMMA_MAX,
+    SAMPLE_TIME,
+    SPEED_ERROR,
+)
 from symbolic.description import GearboxDescription
 from symbolic.fisher import (
     Elimination,
@@ -45,12 +52,6 @@ from validation.sensitivity_run import (
     run_sensitivities,
 )
 from validation.simulate import Phase
-
-SAMPLE_TIME = 0.01  # s, assumed TCU measurement period
-SPEED_ERROR = 0.01  # relative error r_i of ω1, ω2, ω_C (3.26), assumed
-ACCELERATION_ERROR = 0.10  # relative error of ω̇_C (3.32), "deutlich höher", assumed
-FLOOR_FRACTION = 0.01  # y_min = 1 % of the largest measured value (3.26)
-GAMMA_MAX = 0.1  # limit of the normalised scatter (3.27), assumed
 
 WHEEL_ACCELERATION = "y_domega_C"
 

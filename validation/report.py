@@ -27,7 +27,7 @@ def summary(result: SimulationResult) -> dict[str, Any]:
         "phases": [p.to_dict() for p in result.phases],
         "energy_audit": result.audit.to_dict(),
         "model_checks": [c.to_dict() for c in result.checks],
-        "solver": {k: float(v) for k, v in result.stats.items()},
+        "solver": {"method": result.method, **{k: float(v) for k, v in result.stats.items()}},
         "final_ratio": float(result.signals["ratio"][-1]),
         "initial_ratio": float(result.signals["ratio"][0]),
     }
@@ -178,7 +178,7 @@ def format_summary(result: SimulationResult) -> str:
             )
     st = result.stats
     lines.append(
-        f"  Radau: {int(st.get('steps', 0))} steps, {int(st.get('nfev', 0))} f, "
-        f"{int(st.get('njev', 0))} Jacobians; {st.get('wall_time_s', float('nan')):.2f} s"
+        f"  {result.method}: {int(st.get('steps', 0))} steps, {int(st.get('nfev', 0))} f; "
+        f"{st.get('wall_time_s', float('nan')):.2f} s"
     )
     return "\n".join(lines)

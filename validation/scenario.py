@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from symbolic.defaults import RECORD_SAMPLE_TIME as SAMPLE_TIME
 from symbolic.description import GearboxDescription
 from symbolic.drivetrain import ShiftSpec, shift_spec
 from symbolic.errors import GearsymError
@@ -44,7 +45,7 @@ DEFAULT_SCENARIO = "scenario_2_3.toml"
 #: built-in one lasts 1.2 s); 10 s at the simulation's 0.5 ms samples is 20 000 rows of
 #: timeseries.csv (about 12 MB), where 300 s wrote 356 MB and 1e9 s ran out of memory.
 T_END_MAX = 10.0  # s
-SAMPLE_TIME = 5e-4  # s, spacing of the simulated time series (validation.simulate)
+
 POINTS_MAX = 1000  # points per piecewise-linear profile
 
 

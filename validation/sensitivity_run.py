@@ -38,6 +38,7 @@ import numpy as np
 import sympy as sp
 
 from symbolic import naming
+from symbolic.defaults import SLIDING_MODES, SLIDING_PHASES
 from symbolic.description import GearboxDescription
 from symbolic.drivetrain import (
     ShiftSpec,
@@ -61,9 +62,8 @@ from validation.simulate import Phase
 #: (0.05 rad, assumed) stands in for p_j0.
 ZERO_NOMINAL_SCALES: dict[str, float] = {"zeta": 0.05}
 
-SLIDING_MODES = ("detected", "phases")
+
 #: The phases in which the thesis takes both swapping elements as sliding (3.1).
-SLIDING_PHASES = ("torque phase", "speed phase")
 
 #: Progress callback: a message for stderr.
 Progress = Callable[[str], None]

@@ -166,6 +166,7 @@ class SimulationResult:
     state_names: tuple[str, ...]
     stats: dict[str, float] = field(default_factory=dict)
     state_at: Callable[[float], np.ndarray] | None = None
+    method: str = "cvodes"
 
     def phase(self, name: str) -> Phase:
         for p in self.phases:
@@ -489,6 +490,7 @@ def simulate(
         state_names=names,
         stats=stats,
         state_at=state_at,
+        method=method,
     )
 
 
