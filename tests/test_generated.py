@@ -234,7 +234,7 @@ def test_single_build_has_no_double_literals(tmp_path: Path) -> None:
     sources = generated_check.library_sources(GENERATED / C_DIR)
     code = c_check.preprocessed_own_lines(sources, tmp_path, single=True)
     literals = re.findall(r"(?<![\w.])(?:\d+\.\d*|\.\d+|\d+[eE][-+]?\d+)(?:[eE][-+]?\d+)?\w*", code)
-    assert literals and all(lit.endswith("f") for lit in literals)
+    assert literals and all(lit[-1] in "fF" for lit in literals)
     assert "double" not in code
     assert not re.search(r"\b(sin|cos|exp|sqrt|fabs|fmin|fmax|pow)\(", code)
 
