@@ -1084,7 +1084,8 @@ class CasadiPrinter(_SharedPrinting, PythonCodePrinter):
         if name == "Heaviside":
             x = args[0]
             h0 = self._print(expr.args[1] if len(expr.args) > 1 else sp.S.Half)
-            return f"ca.if_else({x} > 0, 1.0, ca.if_else({x} < 0, 0.0, {h0}))"
+            # NaN stays NaN, as in the C helper (the comparisons alone would give h0)
+            return self._nan_guard([x], f"ca.if_else({x} > 0, 1.0, ca.if_else({x} < 0, 0.0, {h0}))")
         if _CASADI_FUNCTIONS.get(name):
             return f"ca.{_CASADI_FUNCTIONS[name]}({', '.join(args)})"
         return self._print_not_supported(expr)

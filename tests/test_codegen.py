@@ -379,6 +379,30 @@ def test_single_build_has_no_double_literals(built: dict[str, Any], name: str) -
     assert not re.search(r"\b(sin|cos|exp|sqrt|fabs|fmin|fmax|pow)\(", code)
 
 
+def test_sanitizers_and_nan_contract_on_the_test_models(
+    built: dict[str, Any], tmp_path: Path
+) -> None:
+    """The four test models (Piecewise with and without default, shared And/Or conditions, Min,
+    Max of three, sign, Heaviside, no inputs) under ASan/UBSan with NaN, ±inf, ±0, ±huge, ±tiny
+    and boundary arguments: see validation/nan_check.py."""
+    from validation import nan_check
+
+    reason = nan_check.sanitizer_support(build_dir=tmp_path / "probe")
+    if reason is not None:
+        pytest.skip(reason)
+    models, sources = [], {}
+    for entry in built.values():
+        models.append(nan_check.CheckedModel(entry["model"], entry["bounds"], {}))
+        sources.update({k: v for k, v in entry["files"].items() if k.endswith((".c", ".h"))})
+    report = nan_check.run(models, sources, tmp_path / "build")
+    assert report.ok, "\n".join(report.failures[:50])
+    assert report.calls["double"] == report.calls["single"] > 10_000
+    for entry in built.values():
+        strict = nan_check.strict_entries(entry["model"])
+        checked = nan_check.CheckedModel(entry["model"], entry["bounds"], {})
+        assert nan_check.casadi_failures(entry["casadi"], checked, strict) == []
+
+
 def test_conditions_shared_by_cse_become_int_temporaries(built: dict[str, Any]) -> None:
     source = built["coverage"]["files"]["gearsym_coverage.c"]
     assert re.search(r"const int t\d+ = \(\(p->k < x\[0\]\) && \(x\[1\] < GEARSYM_LIT", source)

@@ -103,7 +103,7 @@ def _jac_u(x: Any, u: Any, p: Any) -> list[Any]:
     t13 = (t3 < t6)
     t14 = _nan_guard((t3, t7, u[0]*x[0], t6), ca.if_else(t8, 0.0, ca.if_else(t13, (1.0/2.0)*ca.sin(t12) + (1.0/2.0), 1.0)))
     t15 = ca.cos(t12)
-    t16 = ca.if_else(t1 - p[3] > 0, 1.0, ca.if_else(t1 - p[3] < 0, 0.0, (1.0/2.0)))
+    t16 = _nan_guard((t1 - p[3],), ca.if_else(t1 - p[3] > 0, 1.0, ca.if_else(t1 - p[3] < 0, 0.0, (1.0/2.0))))
     t17 = t16*t4*u[0]
     t18 = t17*_nan_guard((t3, t7, u[0]*x[0], t6), ca.if_else(t8, 0.0, ca.if_else(t13, -(1.0/4.0)*t11*t15, 0.0)))
     t19 = t10**(-2)
@@ -146,11 +146,11 @@ def _jac_p(x: Any, u: Any, p: Any) -> list[Any]:
     t23 = t15*_nan_guard((t0, t6, u[0]*x[0], t5), ca.if_else(t7, 0.0, ca.if_else(t12, t21*(-(1.0/2.0)*t10 + 3.14159265358979323846*t20*t8), 0.0)))
     t24 = t23*p[2]
     t25 = t3 - p[3]
-    t26 = ca.if_else(-t25 > 0, 1.0, ca.if_else(-t25 < 0, 0.0, (1.0/2.0)))
+    t26 = _nan_guard((-t25,), ca.if_else(-t25 > 0, 1.0, ca.if_else(-t25 < 0, 0.0, (1.0/2.0))))
     t27 = t16*t18
     t28 = t14*t24
     t29 = t0*t13*p[0]/t4**2 - t0*t14*p[0]*_nan_guard((t0, t6, u[0]*x[0], t5), ca.if_else(t7, 0.0, ca.if_else(t12, -t1*t22, 0.0)))
-    t30 = ca.if_else(t25 > 0, 1.0, ca.if_else(t25 < 0, 0.0, (1.0/2.0)))
+    t30 = _nan_guard((t25,), ca.if_else(t25 > 0, 1.0, ca.if_else(t25 < 0, 0.0, (1.0/2.0))))
     t31 = t27*t30
     t32 = t28*t30
     t33 = 2.0*u[1]*u[2]*p[4]
