@@ -25,6 +25,9 @@ Conventions of the emitted code (also written into the generated header):
   registers across the stores; the header declarations omit it (the function type is the same);
 * rationals are exact constant quotients when numerator and denominator are exact in float
   (at most 2**24), else 21-digit decimals (never a float literal out of range);
+* NaN is never hidden: ``Min``/``Max`` print as helpers that return NaN for a NaN argument
+  (C99's and CasADi's fmin/fmax return the other one), and a ``Piecewise`` returns NaN when an
+  operand of its conditions is NaN (a comparison with NaN is false and would pick a branch);
 * Jacobians are taken with model symbols treated as real, and the Dirac deltas that appear when
   differentiating ``sign``/``Heaviside`` are dropped: the emitted Jacobian is the derivative almost
   everywhere, which is what a Newton step or an EKF can use.

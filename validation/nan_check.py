@@ -155,14 +155,13 @@ def rk4_nan_entries(rhs_strict: Sequence[frozenset[int]], nx: int, target: int) 
     """
     if target == -1:
         return set(range(nx))
-    states = set(range(nx))
-    nan_args = {target}  # NaN entries among (stage state, u, p)
+    nan_args = {target}  # NaN entries among (stage state, u, p): x_j or u/p, at every stage
     ks: set[int] = set()
     for _ in range(4):
         k = {i for i in range(nx) if rhs_strict[i] & nan_args}
         ks |= k
-        nan_args = ({target} & states) | k | ({target} - states)
-    return ks | ({target} & states)
+        nan_args = {target} | k  # the next stage's state is x + c h k
+    return ks | ({target} & set(range(nx)))
 
 
 def expected_validate(

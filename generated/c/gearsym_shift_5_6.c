@@ -8,7 +8,7 @@
 
 #include "gearsym_shift_5_6.h"
 
-/* Machine epsilon of the working precision (pivot tolerance of the linearly implicit step). */
+/* Machine epsilon of the working precision (singularity test of the linearly implicit step). */
 #ifdef GEARSYM_SINGLE_PRECISION
 #define GEARSYM_EPSILON FLT_EPSILON
 #else
