@@ -25,6 +25,9 @@ Conventions of the emitted code (also written into the generated header):
   registers across the stores; the header declarations omit it (the function type is the same);
 * rationals are exact constant quotients when numerator and denominator are exact in float
   (at most 2**24), else 21-digit decimals (never a float literal out of range);
+* NaN is never hidden: ``Min``/``Max`` print as helpers that return NaN for a NaN argument
+  (C99's and CasADi's fmin/fmax return the other one), and a ``Piecewise`` returns NaN when an
+  operand of its conditions is NaN (a comparison with NaN is false and would pick a branch);
 * Jacobians are taken with model symbols treated as real, and the Dirac deltas that appear when
   differentiating ``sign``/``Heaviside`` are dropped: the emitted Jacobian is the derivative almost
   everywhere, which is what a Newton step or an EKF can use.
@@ -68,6 +71,7 @@ __all__ = [
     "emit_c",
     "emit_casadi",
     "file_names",
+    "has_implicit_step",
     "render",
     "smart_jacobian",
 ]
@@ -306,6 +310,18 @@ def _doc_variables(variables: Sequence[Variable]) -> str:
     return ", ".join(f"{v.name} [{v.unit}]" for v in variables) or "none"
 
 
+def has_implicit_step(model: Model) -> bool:
+    """Whether ``linearly_implicit_euler_step`` is emitted for ``model``.
+
+    A model may ask for the explicit step only (metadata ``integrators = "rk4"``): the
+    sensitivity systems (3.7) are non-stiff and their NX x NX implicit solve would put kilobytes
+    of matrix on an ECU's stack.
+    """
+    return "linearly_implicit_euler" in model.metadata.get(
+        "integrators", "rk4 linearly_implicit_euler"
+    )
+
+
 def build_function_table(model: Model, bounds: Bounds | None = None) -> FunctionTable:
     """Build the function table that drives every emitter.
 
@@ -316,12 +332,7 @@ def build_function_table(model: Model, bounds: Bounds | None = None) -> Function
     """
     _check_names(model)
     param_bounds = _normalise_bounds(model, bounds)
-    # A model may ask for the explicit step only (metadata integrators = "rk4"): the
-    # sensitivity systems (3.7) are non-stiff and their NX x NX implicit solve would put
-    # kilobytes of matrix on an ECU's stack.
-    implicit_step = "linearly_implicit_euler" in model.metadata.get(
-        "integrators", "rk4 linearly_implicit_euler"
-    )
+    implicit_step = has_implicit_step(model)
     real = real_symbols(model)
     xs = tuple(real[v.symbol] for v in model.states)
     us = tuple(real[v.symbol] for v in model.inputs)
@@ -362,8 +373,11 @@ def build_function_table(model: Model, bounds: Bounds | None = None) -> Function
             "One linearly implicit Euler step x_next = x + h (I - h df/dx)^-1 f(x, u, p) "
             "(Rosenbrock-Euler, order 1, L-stable on linear models: use it for stiff models). "
             "Solves the NX x NX system by Gaussian elimination with partial pivoting on the "
-            "stack. Returns OK, or ERR_SINGULAR (x_next untouched) if a pivot is zero or not "
-            "finite. x_next may alias x.",
+            "stack. Returns OK; ERR_NONFINITE if x, u, h, f, df/dx or the result holds a NaN "
+            "or an infinity (a NaN parameter shows up there); ERR_SINGULAR if I - h df/dx is "
+            "singular to working precision: a zero pivot, or 1/||(I - h df/dx)^-1|| (its "
+            "distance to singularity) not above NX eps max_i(1 + sum_j |h df_i/dx_j|), in the "
+            "inf-norm. On error x_next is untouched. x_next may alias x.",
             kind="linearly_implicit_euler",
             returns="int",
         ),
@@ -531,7 +545,8 @@ class OpCount:
 
     Counted on the CSE'd form following the printer's rules: ``b**3`` is 2 mul, ``x/3`` is 1 mul
     (the constant ``1/3`` is folded at compile time), a negation is free, ``Min``/``Max`` of n
-    arguments are n-1 calls, a Piecewise of n pieces is n-1 selects (``?:``).
+    arguments are n-1 calls, a Piecewise of n pieces is n-1 selects (``?:``) plus its NaN guard
+    (one ``isnan`` compare per operand of its conditions, the ``||`` between them, one select).
     """
 
     add: int = 0
@@ -632,8 +647,6 @@ _FUNCTION_NAMES = {  # SymPy class name -> C99 double-precision function
     "floor": "floor",
     "ceiling": "ceil",
     "Abs": "fabs",
-    "Min": "fmin",
-    "Max": "fmax",
     # sympy.codegen.cfunctions
     "expm1": "expm1",
     "log1p": "log1p",
@@ -644,10 +657,47 @@ _FUNCTION_NAMES = {  # SymPy class name -> C99 double-precision function
     "Sqrt": "sqrt",
     "hypot": "hypot",
 }
-_HELPER_FUNCTIONS = ("sign", "Heaviside")  # printed as calls of static helpers in the .c
+# Printed as calls of static helpers in the .c (Min/Max: C99's fmin/fmax return the other
+# argument for a NaN, which would turn a NaN input into a finite result; the helpers do not).
+_HELPER_FUNCTIONS = ("sign", "Heaviside", "Min", "Max")
+#: Name under which a helper call is counted in :class:`OpCount`.
+_HELPER_COUNT_NAMES = {"Min": "min", "Max": "max"}
 
 
-def _count(expr: sp.Basic, acc: OpCount) -> None:
+def _condition_operands(
+    conditions: Iterable[sp.Basic], definitions: Mapping[sp.Symbol, sp.Basic]
+) -> list[sp.Basic]:
+    """The non-constant operands of every comparison in ``conditions``, in order, once each.
+
+    ``definitions`` maps boolean CSE temporaries to their expressions, which are expanded. A
+    comparison with a NaN operand is false (``!=``: true) in IEEE arithmetic, so a Piecewise would
+    silently pick a branch; the printers return NaN instead when any of these operands is NaN.
+    """
+    operands: list[sp.Basic] = []
+
+    def visit(cond: sp.Basic) -> None:
+        if isinstance(cond, BooleanAtom):
+            return
+        if isinstance(cond, sp.core.relational.Relational):
+            for side in (cond.lhs, cond.rhs):
+                if not side.is_number and side not in operands:
+                    operands.append(side)
+        elif isinstance(cond, (sp.And, sp.Or, sp.Not)):
+            for arg in cond.args:
+                visit(arg)
+        elif isinstance(cond, sp.Symbol) and cond in definitions:
+            visit(definitions[cond])
+        else:  # never guard partially: an unknown condition must not pass silently
+            raise NotImplementedError(f"cannot find the operands of condition {cond}")
+
+    for cond in conditions:
+        visit(cond)
+    return operands
+
+
+def _count(
+    expr: sp.Basic, acc: OpCount, definitions: Mapping[sp.Symbol, sp.Basic] | None = None
+) -> None:
     if expr.is_Atom or isinstance(expr, BooleanAtom):
         return
     if expr.is_Add:
@@ -674,6 +724,12 @@ def _count(expr: sp.Basic, acc: OpCount) -> None:
         last_default = expr.args[-1].cond == sp.true
         acc.select += len(expr.args) - (1 if last_default else 0)
         children = [a for pair in expr.args for a in pair.args]
+        operands = _condition_operands([pair.cond for pair in expr.args], definitions or {})
+        if operands:  # the NaN guard: one isnan per operand, joined by ||, and one select
+            acc.compare += len(operands)
+            acc.logic += len(operands) - 1
+            acc.select += 1
+            children = children + operands
     elif isinstance(expr, sp.core.relational.Relational):
         acc.compare += 1
         children = expr.args
@@ -685,23 +741,28 @@ def _count(expr: sp.Basic, acc: OpCount) -> None:
         children = expr.args
     elif isinstance(expr, sp.Function):
         name = type(expr).__name__
-        c_name = _FUNCTION_NAMES.get(name, name)
+        c_name = _FUNCTION_NAMES.get(name, _HELPER_COUNT_NAMES.get(name, name))
         acc.calls[c_name] += len(expr.args) - 1 if name in ("Min", "Max") else 1
         children = expr.args
     else:
         children = expr.args
     for child in children:
-        _count(child, acc)
+        _count(child, acc, definitions)
+
+
+def _boolean_definitions(form: CseForm) -> dict[sp.Symbol, sp.Basic]:
+    return {s: e for s, e in form.temporaries if isinstance(e, Boolean)}
 
 
 def count_operations(form: CseForm) -> OpCount:
     """Operations of the CSE'd form, as printed by :class:`GearsymCPrinter`."""
     acc = OpCount()
+    definitions = _boolean_definitions(form)
     for _, expr in form.temporaries:
-        _count(expr, acc)
+        _count(expr, acc, definitions)
     for matrix in form.outputs:
         for expr in matrix:
-            _count(expr, acc)
+            _count(expr, acc, definitions)
     return acc
 
 
@@ -727,6 +788,7 @@ class _SharedPrinting:
     """Printing rules common to the C and the CasADi printer (mixed into both)."""
 
     _symbol_map: dict[sp.Symbol, str]
+    _conditions: dict[sp.Symbol, sp.Basic]  # boolean CSE temporaries -> their expressions
 
     def _print_Symbol(self, expr: sp.Symbol) -> str:
         return self._symbol_map.get(expr, expr.name)
@@ -789,6 +851,9 @@ class _SharedPrinting:
             text = self._print(sp.nan)  # no piece applies: SymPy's value is undefined
         for piece in reversed(pieces):
             text = self._select(self._print(piece.cond), self._print(piece.expr), text)
+        operands = _condition_operands([a.cond for a in expr.args], self._conditions)
+        if operands:
+            text = self._nan_guard([self._print(o) for o in operands], text)
         return text
 
     def _print_Relational(self, expr: sp.core.relational.Relational) -> str:
@@ -818,6 +883,9 @@ class _SharedPrinting:
     def _select(self, cond: str, then: str, other: str) -> str:
         raise NotImplementedError
 
+    def _nan_guard(self, operands: Sequence[str], text: str) -> str:
+        raise NotImplementedError
+
 
 class GearsymCPrinter(_SharedPrinting, C99CodePrinter):
     """C99 printer for ``gearsym_real`` code that builds warning-free in float and double.
@@ -825,13 +893,22 @@ class GearsymCPrinter(_SharedPrinting, C99CodePrinter):
     Literals are printed as ``GEARSYM_LIT(1.5)`` and math functions as ``GEARSYM_SIN(...)``; the
     emitted source maps these to ``1.5f``/``sinf`` or ``1.5``/``sin``. Integer powers up to
     :data:`MAX_INLINE_POWER` become products, rationals become exact constant quotients,
-    Piecewise becomes nested ``?:``, ``sign``/``Heaviside`` become static helper functions.
-    ``used_macros`` and ``used_helpers`` record what the printed code needs.
+    Piecewise becomes nested ``?:`` that gives NaN when an operand of a condition is NaN;
+    ``sign``/``Heaviside``/``Min``/``Max`` become static helper functions (Min/Max propagate
+    NaN, unlike C99's fmin/fmax). ``conditions`` maps boolean CSE temporaries to their
+    expressions (for the NaN guard). ``used_macros`` and ``used_helpers`` record what the
+    printed code needs.
     """
 
-    def __init__(self, symbol_map: Mapping[sp.Symbol, str], helper_prefix: str) -> None:
+    def __init__(
+        self,
+        symbol_map: Mapping[sp.Symbol, str],
+        helper_prefix: str,
+        conditions: Mapping[sp.Symbol, sp.Basic] | None = None,
+    ) -> None:
         super().__init__({"strict": True})
         self._symbol_map = dict(symbol_map)
+        self._conditions = dict(conditions or {})
         self._helper_prefix = helper_prefix
         self.used_macros: set[str] = set()
         self.used_helpers: set[str] = set()
@@ -845,6 +922,10 @@ class GearsymCPrinter(_SharedPrinting, C99CodePrinter):
     def _select(self, cond: str, then: str, other: str) -> str:
         return f"({cond} ? {then} : {other})"
 
+    def _nan_guard(self, operands: Sequence[str], text: str) -> str:
+        test = " || ".join(f"isnan({o})" for o in operands)
+        return f"(({test}) ? {self._print(sp.nan)} : {text})"
+
     def _call(self, c_name: str, *args: str) -> str:
         macro = "GEARSYM_" + c_name.upper()
         self.used_macros.add(c_name)
@@ -853,10 +934,12 @@ class GearsymCPrinter(_SharedPrinting, C99CodePrinter):
     def _print_Function(self, expr: sp.Function) -> str:
         name = type(expr).__name__
         if name in ("Min", "Max"):
+            helper = _HELPER_COUNT_NAMES[name]
+            self.used_helpers.add(helper)
             args = [self._print(a) for a in expr.args]
             text = args[-1]
             for arg in reversed(args[:-1]):
-                text = self._call(_FUNCTION_NAMES[name], arg, text)
+                text = f"{self._helper_prefix}{helper}({arg}, {text})"
             return text
         if name in _FUNCTION_NAMES:
             return self._call(_FUNCTION_NAMES[name], *(self._print(a) for a in expr.args))
@@ -932,11 +1015,20 @@ class CasadiPrinter(_SharedPrinting, PythonCodePrinter):
     """Python printer whose output builds CasADi expressions (``ca.sin``, ``ca.if_else``, ...).
 
     Works on the same CSE'd form as the C printer; symbols map to ``x[i]``, ``u[i]``, ``p[i]``.
+    NaN behaves as in the C: ``Min``/``Max`` and a Piecewise whose condition has a NaN operand
+    give NaN (CasADi's fmin/fmax drop a NaN argument, like C99's). They call helpers of the
+    emitted module (``_min``, ``_max``, ``_nan_guard``); ``used_helpers`` records which.
     """
 
-    def __init__(self, symbol_map: Mapping[sp.Symbol, str]) -> None:
+    def __init__(
+        self,
+        symbol_map: Mapping[sp.Symbol, str],
+        conditions: Mapping[sp.Symbol, sp.Basic] | None = None,
+    ) -> None:
         super().__init__({"strict": True, "fully_qualified_modules": False})
         self._symbol_map = dict(symbol_map)
+        self._conditions = dict(conditions or {})
+        self.used_helpers: set[str] = set()
 
     def _number(self, value: float) -> str:
         return _float_repr(value)
@@ -947,13 +1039,19 @@ class CasadiPrinter(_SharedPrinting, PythonCodePrinter):
     def _select(self, cond: str, then: str, other: str) -> str:
         return f"ca.if_else({cond}, {then}, {other})"
 
+    def _nan_guard(self, operands: Sequence[str], text: str) -> str:
+        self.used_helpers.add("nan_guard")
+        return f"_nan_guard({_python_tuple(operands)}, {text})"
+
     def _print_Function(self, expr: sp.Function) -> str:
         name = type(expr).__name__
         args = [self._print(a) for a in expr.args]
         if name in ("Min", "Max"):
+            helper = _HELPER_COUNT_NAMES[name]
+            self.used_helpers.add(helper)
             text = args[-1]
             for arg in reversed(args[:-1]):
-                text = f"ca.{_FUNCTION_NAMES[name]}({arg}, {text})"
+                text = f"_{helper}({arg}, {text})"
             return text
         if name == "erfc":
             return f"(1.0 - ca.erf({args[0]}))"
@@ -962,7 +1060,8 @@ class CasadiPrinter(_SharedPrinting, PythonCodePrinter):
         if name == "Heaviside":
             x = args[0]
             h0 = self._print(expr.args[1] if len(expr.args) > 1 else sp.S.Half)
-            return f"ca.if_else({x} > 0, 1.0, ca.if_else({x} < 0, 0.0, {h0}))"
+            # NaN stays NaN, as in the C helper (the comparisons alone would give h0)
+            return self._nan_guard([x], f"ca.if_else({x} > 0, 1.0, ca.if_else({x} < 0, 0.0, {h0}))")
         if _CASADI_FUNCTIONS.get(name):
             return f"ca.{_CASADI_FUNCTIONS[name]}({', '.join(args)})"
         return self._print_not_supported(expr)
@@ -1104,21 +1203,32 @@ def _used_args(spec: FunctionSpec, form: CseForm) -> set[str]:
     return {arg.name for arg in spec.args if any(s in free for s in arg.symbols)}
 
 
-def _lie_step_ops(n: int) -> OpCount:
+def _lie_step_ops(n: int, n_inputs: int) -> OpCount:
     """Own operations of the linearly implicit Euler step (without rhs and jac_x)."""
-    ops = OpCount(add=n, mul=n * n)  # A = I - h J
-    for k in range(n):  # elimination: divisions, row updates of A and b
+    ops = OpCount(mul=n * n)  # -h J
+    ops.compare += 1 + n + n_inputs + n + n * n  # isfinite of h, x, u, f and -h J
+    ops.calls["fabs"] += n * n  # scale: row sums of |h J| and their maximum
+    ops.add += n * n + n  # row sums (starting at 1), then the identity
+    ops.compare += n
+    for k in range(n):  # factorisation: multipliers and row updates
         m = n - k - 1
         ops.div += m
-        ops.mul += m * m + m
-        ops.add += m * m + m
-    ops.mul += n * (n - 1) // 2  # back substitution
-    ops.add += n * (n - 1) // 2
-    ops.div += n
-    ops.mul += n  # x + h k
-    ops.add += n
+        ops.mul += m * m
+        ops.add += m * m
     ops.calls["fabs"] += n * (n + 1) // 2  # pivot search
-    ops.compare += n * (n - 1) // 2 + n
+    ops.compare += n * (n - 1) // 2 + 2 * n  # pivot search, zero and isfinite tests
+    solves = n + 1  # the step, and the n columns of the inverse
+    ops.mul += solves * n * (n - 1)  # forward and back substitution
+    ops.add += solves * n * (n - 1)
+    ops.div += solves * n
+    ops.calls["fabs"] += n * n  # row sums of |A^-1|, their maximum
+    ops.add += n * n
+    ops.compare += n
+    ops.mul += 3  # ||A^-1|| NX eps scale
+    ops.compare += 1
+    ops.mul += n  # x + h k, and its isfinite
+    ops.add += n
+    ops.compare += n
     return ops
 
 
@@ -1131,7 +1241,8 @@ def _render_c_functions(
     views = []
     counts: dict[str, OpCount] = {}
     for spec in table:
-        printer = GearsymCPrinter(_c_symbol_map(spec), table.prefix)
+        conditions = _boolean_definitions(forms[spec.name]) if spec.name in forms else {}
+        printer = GearsymCPrinter(_c_symbol_map(spec), table.prefix, conditions)
         view: dict[str, Any] = {
             "name": spec.name,
             "kind": spec.kind,
@@ -1166,11 +1277,11 @@ def _render_c_functions(
             op_text = f"Operations: {total.format()} (4 rhs calls + {own.format()})."
         elif spec.kind == "linearly_implicit_euler":
             used_macros.add("fabs")
-            own = _lie_step_ops(nx)
+            own = _lie_step_ops(nx, len(table.inputs))
             total = counts["rhs"] + counts["jac_x"] + own
             op_text = (
                 f"Operations (at most): {total.format()} (rhs + jac_x + {own.format()} for "
-                "forming I - h J and the elimination)."
+                "the checks, forming I - h J, its LU factors, the solve and ||(I - h J)^-1||)."
             )
         elif spec.kind == "params_default":
             (defaults,) = spec.expressions
@@ -1265,6 +1376,7 @@ def _emit_c(table: FunctionTable, forms: Mapping[str, CseForm]) -> dict[str, str
     context["functions"] = functions
     context["math_macros"] = [(m.upper(), m) for m in sorted(used_macros)]
     context["helpers"] = sorted(used_helpers)
+    context["implicit_step"] = any(f["kind"] == "linearly_implicit_euler" for f in functions)
     names = file_names(table.model)
     return {
         names["header"]: render("c_header.h.j2", **context),
@@ -1286,11 +1398,12 @@ def emit_casadi(model: Model, bounds: Bounds | None = None) -> dict[str, str]:
 def _emit_casadi(table: FunctionTable, forms: Mapping[str, CseForm]) -> dict[str, str]:
     model = table.model
     functions = []
+    helpers: set[str] = set()
     for spec in table:
         if spec.kind != "expr":
             continue  # step and parameter functions are C-only; CasADi has its own integrators
-        printer = CasadiPrinter(_casadi_symbol_map(spec))
         form = forms[spec.name]
+        printer = CasadiPrinter(_casadi_symbol_map(spec), _boolean_definitions(form))
         outputs = []
         for out, matrix in zip(spec.outputs, form.outputs, strict=True):
             entries = [
@@ -1311,8 +1424,10 @@ def _emit_casadi(table: FunctionTable, forms: Mapping[str, CseForm]) -> dict[str
                 "outputs": outputs,
             }
         )
+        helpers |= printer.used_helpers
     context = _common_context(table)
     context["functions"] = functions
+    context["helpers"] = sorted(helpers)
     defaults = [
         'float("nan")' if v.default is None else _float_repr(float(v.default))
         for v in model.parameters

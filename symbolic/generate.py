@@ -19,6 +19,8 @@ Nothing in the output depends on the time, the machine, absolute paths or ``PYTH
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -59,6 +61,7 @@ __all__ = [
     "generate_tree",
     "load_mu_map",
     "mu_map_files",
+    "mu_map_origin",
     "sample_ranges",
     "shift_element_model",
 ]
@@ -328,22 +331,46 @@ def sample_ranges(model: Model) -> dict[str, tuple[float, float]]:
 
 def load_mu_map(d: GearboxDescription) -> MuMap:
     """The μ map the description names (``friction.mu_map``: "built-in" or a path relative to
-    the description file); a bad map is a one-line :class:`GearsymError`."""
+    the description file); a bad map is a one-line :class:`GearsymError`.
+
+    Its ``origin``, which the emitted files print, is :func:`mu_map_origin`: the file's name
+    reduced to safe characters and the SHA-256 of its bytes, never a path.
+    """
     if d.mu_map == "built-in":
         path = DEFAULT_MU_MAP
-        origin = "built-in mu_map_default.toml"
+        label = "built-in"
     else:
         base = Path(d.file).parent if not d.file.startswith("<") else Path.cwd()
         path = base / d.mu_map
-        origin = d.mu_map
+        label = ""
         if not path.is_file():
             raise GearsymError(d.file, "friction.mu_map", f"no such file: {d.mu_map}")
     try:
+        data = path.read_bytes()
         mu_map = MuMap.from_toml(path)
+    except OSError as err:
+        raise GearsymError(d.file, "friction.mu_map", f"cannot read: {err.strerror}") from None
     except ValueError as err:
         raise GearsymError(d.file, "friction.mu_map", str(err)) from None
-    mu_map.origin = origin  # never an absolute path: it is printed into the output
+    mu_map.origin = mu_map_origin(path.name, data, label)
     return mu_map
+
+
+_UNSAFE_NAME_CHARACTERS = re.compile(r"[^A-Za-z0-9._+-]")
+
+
+def mu_map_origin(file_name: str, data: bytes, label: str = "") -> str:
+    """``"[label ]<name> (SHA-256 <hex>)"``: the map's file name with every character outside
+    ``[A-Za-z0-9._+-]`` replaced by ``_`` (so it needs no escaping in a C comment, a Python
+    docstring or Markdown, and holds no directory), and the digest that identifies the data."""
+    name = _UNSAFE_NAME_CHARACTERS.sub("_", Path(file_name).name) or "_"
+    digest = hashlib.sha256(data).hexdigest()
+    return f"{label + ' ' if label else ''}{name} (SHA-256 {digest})"
+
+
+def _docstring_text(text: str) -> str:
+    """Text safe inside a triple-quoted Python docstring: one line, no backslash, no quote."""
+    return " ".join(str(text).split()).replace("\\", "/").replace('"', "'")
 
 
 def _c_literals(values: Sequence[float], per_line: int) -> list[str]:
@@ -361,7 +388,9 @@ def mu_map_files(mu_map: MuMap) -> dict[str, str]:
     p_n, t_oil, dw = mu_map.grid
     flat = mu_map.table.reshape(-1)  # C order: [i][j][k] at (i*NT + j)*ND + k
     context = {
-        "origin": _comment_text(mu_map.origin),
+        "origin": _comment_text(mu_map.origin),  # C comments
+        "py_origin": _docstring_text(mu_map.origin),
+        "origin_repr": repr(mu_map.origin),
         "axes": [
             {"name": "p_N", "macro": "P_N", "unit": "Pa", "values": _c_literals(p_n, 6)},
             {"name": "T_oil", "macro": "T_OIL", "unit": "degC", "values": _c_literals(t_oil, 6)},
@@ -491,7 +520,9 @@ def _example_context(d: GearboxDescription, models: Sequence[EmittedModel]) -> d
     }
 
 
-def _readme(d: GearboxDescription, models: Sequence[EmittedModel], example: dict) -> str:
+def _readme(
+    d: GearboxDescription, models: Sequence[EmittedModel], example: dict, mu_map: MuMap
+) -> str:
     rows = []
     for m in models:
         names = file_names(m.model)
@@ -515,6 +546,8 @@ def _readme(d: GearboxDescription, models: Sequence[EmittedModel], example: dict
         models=rows,
         functions=functions,
         example=example,
+        # mu_map_origin() leaves only [A-Za-z0-9._+-] and spaces: no Markdown escaping needed
+        mu_map_origin=mu_map.origin,
     )
 
 
@@ -536,6 +569,6 @@ def generate_tree(
     files.update(mu_map_files(mu_map))
     example = _example_context(d, models)
     files[f"{C_DIR}/main.c"] = render("c_example_main.c.j2", **example)
-    files["README.md"] = _readme(d, models, example)
+    files["README.md"] = _readme(d, models, example, mu_map)
     files[MANIFEST] = manifest_text({k: v.encode("utf-8") for k, v in files.items()}, "generate")
     return GeneratedTree(files, tuple(models), mu_map, tuple(example["c_files"]))

@@ -271,9 +271,15 @@ def test_c_printer_rules() -> None:
     assert _c_print(sp.pi, names)[0] == "GEARSYM_LIT(3.14159265358979323846)"
     assert _c_print(sp.Float(0.1) * x, names)[0] == "GEARSYM_LIT(0.1)*x[0]"
     text, printer = _c_print(sp.Piecewise((x, x > y), (-x, True)) + sp.sign(y), names)
-    assert "((x[0] > p->y) ? x[0] : -x[0])" in text and "gearsym_t_sign(p->y)" in text
+    # a comparison with NaN is false: the guard keeps a NaN operand from picking a branch
+    guarded = (
+        "((isnan(x[0]) || isnan(p->y)) ? ((gearsym_real)NAN) : ((x[0] > p->y) ? x[0] : -x[0]))"
+    )
+    assert guarded in text and "gearsym_t_sign(p->y)" in text
     assert printer.used_helpers == {"sign"}
-    assert _c_print(sp.Max(x, y, 0), names)[0].count("GEARSYM_FMAX") == 2
+    text, printer = _c_print(sp.Max(x, y, 0) + sp.Min(x, 1), names)
+    assert text.count("gearsym_t_max(") == 2 and text.count("gearsym_t_min(") == 1
+    assert "FMAX" not in text and printer.used_helpers == {"max", "min"}
     assert _c_print(sp.Abs(x), names)[0] == "GEARSYM_FABS(x[0])"
     with pytest.raises(NotImplementedError):
         _c_print(sp.Mod(x, y), names)
@@ -368,9 +374,33 @@ def test_single_build_has_no_double_literals(built: dict[str, Any], name: str) -
     c_files = {k: v for k, v in entry["files"].items() if k.endswith((".c", ".h"))}
     code = c_check.preprocessed_own_lines(c_files, entry["dir"], single=True)
     literals = re.findall(r"(?<![\w.])(?:\d+\.\d*|\.\d+|\d+[eE][-+]?\d+)(?:[eE][-+]?\d+)?\w*", code)
-    assert literals and all(lit.endswith("f") for lit in literals), literals
+    assert literals and all(lit[-1] in "fF" for lit in literals), literals
     assert "double" not in code
     assert not re.search(r"\b(sin|cos|exp|sqrt|fabs|fmin|fmax|pow)\(", code)
+
+
+def test_sanitizers_and_nan_contract_on_the_test_models(
+    built: dict[str, Any], tmp_path: Path
+) -> None:
+    """The four test models (Piecewise with and without default, shared And/Or conditions, Min,
+    Max of three, sign, Heaviside, no inputs) under ASan/UBSan with NaN, ±inf, ±0, ±huge, ±tiny
+    and boundary arguments: see validation/nan_check.py."""
+    from validation import nan_check
+
+    reason = nan_check.sanitizer_support(build_dir=tmp_path / "probe")
+    if reason is not None:
+        pytest.skip(reason)
+    models, sources = [], {}
+    for entry in built.values():
+        models.append(nan_check.CheckedModel(entry["model"], entry["bounds"], {}))
+        sources.update({k: v for k, v in entry["files"].items() if k.endswith((".c", ".h"))})
+    report = nan_check.run(models, sources, tmp_path / "build")
+    assert report.ok, "\n".join(report.failures[:50])
+    assert report.calls["double"] == report.calls["single"] > 10_000
+    for entry in built.values():
+        strict = nan_check.strict_entries(entry["model"])
+        checked = nan_check.CheckedModel(entry["model"], entry["bounds"], {})
+        assert nan_check.casadi_failures(entry["casadi"], checked, strict) == []
 
 
 def test_conditions_shared_by_cse_become_int_temporaries(built: dict[str, Any]) -> None:
@@ -497,6 +527,54 @@ def test_linearly_implicit_euler_step_formula_with_pivoting(built: dict[str, Any
         expected = x_all[k] + h * np.linalg.solve(np.eye(2) - h * jac, ref["rhs"][k])
         got = lib.step("linearly_implicit_euler_step", x_all[k], u_all[k], p_all[k], h)
         np.testing.assert_allclose(got, expected, rtol=1e-11, atol=1e-12)
+
+
+def test_linearly_implicit_euler_refuses_non_finite_arguments(built: dict[str, Any]) -> None:
+    """NaN or ±inf in x, u, h or a parameter that f or J depend on: ERR_NONFINITE (1), and
+    x_next is not written. The stiff chain's f and J depend on every parameter."""
+    model = built["stiff"]["model"]
+    x0, u, p, h = np.array([1.0, -0.5, 0.25, 2.0]), np.array([0.3]), _defaults(model), 0.01
+    for precision in ("double", "single"):
+        lib = built["stiff"][precision]
+        status, x_next = lib.step_status("linearly_implicit_euler_step", x0, u, p, h)
+        assert status == 0 and np.all(np.isfinite(x_next))
+        for bad in (np.nan, np.inf, -np.inf):
+            cases = [(x0.copy(), u.copy(), p.copy(), h) for _ in range(4 + 1 + len(p))]
+            for k in range(4):
+                cases[k][0][k] = bad
+            cases[4][1][0] = bad
+            for k in range(len(p)):
+                cases[5 + k][2][k] = bad
+            cases.append((x0, u, p, bad))
+            for xc, uc, pc, hc in cases:
+                status, x_next = lib.step_status("linearly_implicit_euler_step", xc, uc, pc, hc)
+                assert status == 1, (precision, bad, xc, uc, pc, hc)
+                assert np.all(x_next == -12345.0)  # untouched
+
+
+def test_linearly_implicit_euler_reports_a_singular_matrix(built: dict[str, Any]) -> None:
+    """The stiff chain is linear, f = A x + b u with A symmetric: with h = 1/lambda for an
+    eigenvalue lambda of A, I - h A is singular, and the step must say so (ERR_SINGULAR, 3)
+    instead of returning the huge result of a rounding-level pivot. With h moved by 1e-6
+    relative, the matrix is regular (condition about 1e9) and the step matches NumPy."""
+    model = built["stiff"]["model"]
+    x0, u, p = np.array([1.0, -0.5, 0.25, 2.0]), np.array([0.3]), _defaults(model)
+    ref = c_check.evaluate_reference(model, np.concatenate([x0, u, p]))
+    a = ref["jac_x"][0].reshape(4, 4, order="F")
+    f = ref["rhs"][0]
+    eigenvalues = np.linalg.eigvalsh(a)  # A is symmetric: real eigenvalues, all negative
+    for precision in ("double", "single"):
+        lib = built["stiff"][precision]
+        for lam in eigenvalues:
+            status, x_next = lib.step_status("linearly_implicit_euler_step", x0, u, p, 1 / lam)
+            assert status == 3 and np.all(x_next == -12345.0), (precision, lam, x_next)
+    lib = built["stiff"]["double"]
+    lam = eigenvalues[-1]  # the slowest mode, about -1.5
+    h = (1 + 1e-6) / lam
+    status, x_next = lib.step_status("linearly_implicit_euler_step", x0, u, p, h)
+    expected = x0 + h * np.linalg.solve(np.eye(4) - h * a, f)
+    assert status == 0
+    np.testing.assert_allclose(x_next, expected, rtol=1e-6)
 
 
 def test_casadi_integrator_matches_closed_form(built: dict[str, Any]) -> None:

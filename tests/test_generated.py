@@ -15,7 +15,9 @@
 
 from __future__ import annotations
 
+import ast
 import hashlib
+import json
 import os
 import re
 import shutil
@@ -30,8 +32,15 @@ import pytest
 
 from gearsym import cli
 from symbolic.description import load_description
-from symbolic.friction import shift_element_num
-from symbolic.generate import C_DIR, MANIFEST_MARKER, generate_tree, shift_element_model
+from symbolic.friction import DEFAULT_MU_MAP, shift_element_num
+from symbolic.generate import (
+    C_DIR,
+    MANIFEST_MARKER,
+    generate_tree,
+    load_mu_map,
+    mu_map_files,
+    shift_element_model,
+)
 from validation import c_check, generated_check
 
 REPO = Path(__file__).resolve().parents[1]
@@ -191,6 +200,60 @@ def test_mu_map_matches_the_reference(tree: Any, tmp_path: Path) -> None:
     assert report.extra["NaN propagates (C)"] == 0.0
 
 
+def _config_with_mu_map(tmp_path: Path, mu_map: str) -> Path:
+    from symbolic.description import default_config_text
+
+    text = default_config_text()
+    assert 'mu_map = "built-in"' in text
+    config = tmp_path / "gearbox.toml"
+    # json.dumps gives a valid TOML basic string (escapes \\, \" and control characters)
+    config.write_text(text.replace('mu_map = "built-in"', f"mu_map = {json.dumps(mu_map)}"))
+    return config
+
+
+def test_hostile_mu_map_file_name_is_printed_safely(tmp_path: Path) -> None:
+    """friction.mu_map names a file whose path holds a docstring end, a comment end, a
+    backslash and a newline: the output names the map by its file name with only
+    [A-Za-z0-9._+-] kept and the file's SHA-256, never by its path, and every emitted file
+    still compiles (C, both precisions) or imports (Python)."""
+    data = DEFAULT_MU_MAP.read_bytes()
+    folder, name = 'we"""ird*', 'na\\me"""\n*x.toml'  # folder + "/" + name holds "*/"
+    (tmp_path / folder).mkdir()
+    (tmp_path / folder / name).write_bytes(data)
+    config = _config_with_mu_map(tmp_path, f"{folder}/{name}")
+    tree = generate_tree(load_description(str(config)))
+    origin = f"na_me_____x.toml (SHA-256 {hashlib.sha256(data).hexdigest()})"
+    assert tree.mu_map.origin == origin
+    for path, text in tree.files.items():
+        assert str(tmp_path) not in text and "ird*" not in text and "na\\me" not in text, path
+        if path.endswith(".py"):
+            ast.parse(text, filename=path)  # a stray triple quote or backslash would break it
+    assert f"Data: {origin}." in tree.files["c/gearsym_mu_map.h"]
+    assert f"Data: {origin}." in tree.files["c/gearsym_mu_map.c"]
+    assert f"μ map data: `{origin}`." in tree.files["README.md"]
+    out = tmp_path / "out"
+    c_check.write_files(
+        {k.split("/")[1]: v for k, v in tree.files.items() if k.startswith("python/gearsym_mu")},
+        out,
+    )
+    module = c_check.load_casadi_module(out / "gearsym_mu_map_casadi.py")
+    assert module.ORIGIN == origin
+    assert module.mu_map(4e5, 80.0, 10.0) == pytest.approx(float(tree.mu_map(4e5, 80.0, 10.0)))
+    sources = {k.split("/")[1]: v for k, v in tree.files.items() if k.startswith("c/gearsym_mu")}
+    for single in (False, True):
+        c_check.compile_shared(sources, tmp_path / "c", single=single)  # no diagnostic at all
+
+
+def test_absolute_mu_map_path_is_not_printed(tmp_path: Path) -> None:
+    data = DEFAULT_MU_MAP.read_bytes()
+    (tmp_path / "my map.toml").write_bytes(data)
+    config = _config_with_mu_map(tmp_path, str(tmp_path / "my map.toml"))
+    mu_map = load_mu_map(load_description(str(config)))
+    assert mu_map.origin == f"my_map.toml (SHA-256 {hashlib.sha256(data).hexdigest()})"
+    for text in mu_map_files(mu_map).values():
+        assert str(tmp_path) not in text and "my_map.toml (SHA-256" in text
+
+
 def test_shift_element_model_equals_the_friction_module() -> None:
     """The emitted friction model (written in the normalised deflection) is (2.66)-(2.70) of
     symbolic/friction.py, including the open element and the over-deflected bristle."""
@@ -235,7 +298,7 @@ def test_single_build_has_no_double_literals(tmp_path: Path) -> None:
     sources = generated_check.library_sources(GENERATED / C_DIR)
     code = c_check.preprocessed_own_lines(sources, tmp_path, single=True)
     literals = re.findall(r"(?<![\w.])(?:\d+\.\d*|\.\d+|\d+[eE][-+]?\d+)(?:[eE][-+]?\d+)?\w*", code)
-    assert literals and all(lit.endswith("f") for lit in literals)
+    assert literals and all(lit[-1] in "fF" for lit in literals)
     assert "double" not in code
     assert not re.search(r"\b(sin|cos|exp|sqrt|fabs|fmin|fmax|pow)\(", code)
 

@@ -287,6 +287,22 @@ class CFunctions:
                 raise RuntimeError(f"{name} returned {status}")
         return xb[:nx].astype(np.float64)
 
+    def step_status(
+        self, name: str, x: Any, u: Any, p: Any, h: float, sentinel: float = -12345.0
+    ) -> tuple[int, np.ndarray]:
+        """One step into a separate ``x_next`` filled with ``sentinel`` beforehand: returns the
+        status (0 for ``rk4_step``, which returns nothing) and ``x_next`` (still all
+        ``sentinel`` where the step did not write)."""
+        nx = len(self.model.states)
+        xb = self._buffer(x, nx)
+        ub = self._buffer(u, len(self.model.inputs))
+        out = np.full(max(nx, 1), sentinel, dtype=self.dtype)
+        params = p if isinstance(p, self.Params) else self.params(p)
+        status = self._functions[name](
+            self._ptr(xb), self._ptr(ub), ctypes.byref(params), self.real(h), self._ptr(out)
+        )
+        return int(status or 0), out[:nx].astype(np.float64)
+
     def params_default(self) -> np.ndarray:
         """Values written by ``params_default``, model order."""
         params = self.Params()

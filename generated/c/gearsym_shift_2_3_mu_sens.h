@@ -41,7 +41,18 @@ typedef double gearsym_real;
 #define GEARSYM_SHIFT_2_3_MU_SENS_NP 11
 #define GEARSYM_SHIFT_2_3_MU_SENS_NY 18
 
-/* Return codes. */
+/*
+ * Return codes. NaN is never hidden: a NaN argument gives NaN in every result that depends on
+ * it, or one of these errors.
+ *   ERR_NONFINITE  params_validate: a parameter is NaN or +-inf. linearly_implicit_euler_step:
+ *                  x, u, h, f, df/dx (where a NaN parameter shows) or the result holds a NaN
+ *                  or +-inf.
+ *   ERR_RANGE      params_validate: a parameter lies outside its accepted range.
+ *   ERR_SINGULAR   linearly_implicit_euler_step: A = I - h df/dx is singular to working
+ *                  precision: a zero pivot, or 1/||A^-1|| (its distance to singularity) not
+ *                  above NX eps max_i(1 + sum_j |h df_i/dx_j|), inf-norm, eps of gearsym_real.
+ * The step leaves x_next untouched on an error.
+ */
 #define GEARSYM_SHIFT_2_3_MU_SENS_OK 0
 #define GEARSYM_SHIFT_2_3_MU_SENS_ERR_NONFINITE 1
 #define GEARSYM_SHIFT_2_3_MU_SENS_ERR_RANGE 2

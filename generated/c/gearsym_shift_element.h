@@ -36,7 +36,18 @@ typedef double gearsym_real;
 #define GEARSYM_SHIFT_ELEMENT_NP 6
 #define GEARSYM_SHIFT_ELEMENT_NY 1
 
-/* Return codes. */
+/*
+ * Return codes. NaN is never hidden: a NaN argument gives NaN in every result that depends on
+ * it, or one of these errors.
+ *   ERR_NONFINITE  params_validate: a parameter is NaN or +-inf. linearly_implicit_euler_step:
+ *                  x, u, h, f, df/dx (where a NaN parameter shows) or the result holds a NaN
+ *                  or +-inf.
+ *   ERR_RANGE      params_validate: a parameter lies outside its accepted range.
+ *   ERR_SINGULAR   linearly_implicit_euler_step: A = I - h df/dx is singular to working
+ *                  precision: a zero pivot, or 1/||A^-1|| (its distance to singularity) not
+ *                  above NX eps max_i(1 + sum_j |h df_i/dx_j|), inf-norm, eps of gearsym_real.
+ * The step leaves x_next untouched on an error.
+ */
 #define GEARSYM_SHIFT_ELEMENT_OK 0
 #define GEARSYM_SHIFT_ELEMENT_ERR_NONFINITE 1
 #define GEARSYM_SHIFT_ELEMENT_ERR_RANGE 2
@@ -68,7 +79,7 @@ typedef struct gearsym_shift_element_params {
 
 /**
  * State derivative xdot = f(x, u, p). States: z [rad]. Inputs: dw [rad/s], F_N [N], mu [1].
- * Operations: 5 add, 15 mul, 3 div, 2 calls (fabs 1, sin 1), 2 select, 3 cmp, 1 logic; 5
+ * Operations: 5 add, 16 mul, 3 div, 2 calls (fabs 1, sin 1), 3 select, 7 cmp, 4 logic; 5
  * temporaries (sympy.count_ops of the CSE'd form: 29).
  */
 void gearsym_shift_element_rhs(
@@ -79,8 +90,8 @@ void gearsym_shift_element_rhs(
 
 /**
  * Outputs y = h(x, u, p): T [N*m].
- * Operations: 6 add, 18 mul, 3 div, 3 calls (fabs 1, sign 1, sin 1), 3 select, 4 cmp, 1 logic;
- * 5 temporaries (sympy.count_ops of the CSE'd form: 36).
+ * Operations: 6 add, 19 mul, 3 div, 3 calls (fabs 1, sign 1, sin 1), 5 select, 10 cmp, 5
+ * logic; 5 temporaries (sympy.count_ops of the CSE'd form: 36).
  */
 void gearsym_shift_element_outputs(
     const gearsym_real *x,
@@ -91,8 +102,8 @@ void gearsym_shift_element_outputs(
 /**
  * Jacobian of the state derivative with respect to x (states), d xdot / d x (1 x 1), dense
  * column-major: jac_x[i + j*1] = d xdot_i / d x_j.
- * Operations: 5 add, 19 mul, 3 div, 4 calls (cos 1, fabs 1, sign 1, sin 1), 4 select, 3 cmp, 1
- * logic; 10 temporaries (sympy.count_ops of the CSE'd form: 40).
+ * Operations: 5 add, 21 mul, 3 div, 4 calls (cos 1, fabs 1, sign 1, sin 1), 6 select, 11 cmp,
+ * 7 logic; 10 temporaries (sympy.count_ops of the CSE'd form: 40).
  */
 void gearsym_shift_element_jac_x(
     const gearsym_real *x,
@@ -103,8 +114,8 @@ void gearsym_shift_element_jac_x(
 /**
  * Jacobian of the state derivative with respect to u (inputs), d xdot / d u (1 x 3), dense
  * column-major: jac_u[i + j*1] = d xdot_i / d u_j.
- * Operations: 12 add, 55 mul, 5 div, 4 calls (Heaviside 1, cos 1, fabs 1, sin 1), 8 select, 3
- * cmp, 1 logic; 24 temporaries (sympy.count_ops of the CSE'd form: 89).
+ * Operations: 12 add, 59 mul, 5 div, 4 calls (Heaviside 1, cos 1, fabs 1, sin 1), 12 select,
+ * 19 cmp, 13 logic; 24 temporaries (sympy.count_ops of the CSE'd form: 89).
  */
 void gearsym_shift_element_jac_u(
     const gearsym_real *x,
@@ -115,8 +126,8 @@ void gearsym_shift_element_jac_u(
 /**
  * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
  * xdot / d p (1 x 6), dense column-major: jac_p[i + j*1] = d xdot_i / d p_j.
- * Operations: 16 add, 68 mul, 5 div, 5 calls (Heaviside 2, cos 1, fabs 1, sin 1), 10 select, 3
- * cmp, 1 logic; 34 temporaries (sympy.count_ops of the CSE'd form: 112).
+ * Operations: 16 add, 73 mul, 5 div, 5 calls (Heaviside 2, cos 1, fabs 1, sin 1), 15 select,
+ * 23 cmp, 16 logic; 34 temporaries (sympy.count_ops of the CSE'd form: 112).
  */
 void gearsym_shift_element_jac_p(
     const gearsym_real *x,
@@ -127,7 +138,7 @@ void gearsym_shift_element_jac_p(
 /**
  * One classical explicit Runge-Kutta step (order 4) of size h, u held constant over the step.
  * x_next may alias x (in-place stepping).
- * Operations: 27 add, 67 mul, 12 div, 8 calls (fabs 4, sin 4), 8 select, 12 cmp, 4 logic (4
+ * Operations: 27 add, 71 mul, 12 div, 8 calls (fabs 4, sin 4), 12 select, 28 cmp, 16 logic (4
  * rhs calls + 7 add, 7 mul, 0 div, 0 calls).
  */
 void gearsym_shift_element_rk4_step(
@@ -140,11 +151,14 @@ void gearsym_shift_element_rk4_step(
 /**
  * One linearly implicit Euler step x_next = x + h (I - h df/dx)^-1 f(x, u, p)
  * (Rosenbrock-Euler, order 1, L-stable on linear models: use it for stiff models). Solves the
- * NX x NX system by Gaussian elimination with partial pivoting on the stack. Returns OK, or
- * ERR_SINGULAR (x_next untouched) if a pivot is zero or not finite. x_next may alias x.
- * Operations (at most): 12 add, 36 mul, 7 div, 7 calls (cos 1, fabs 3, sign 1, sin 2), 6
- * select, 7 cmp, 2 logic (rhs + jac_x + 2 add, 2 mul, 1 div, 1 call (fabs 1), 1 cmp for
- * forming I - h J and the elimination).
+ * NX x NX system by Gaussian elimination with partial pivoting on the stack. Returns OK;
+ * ERR_NONFINITE if x, u, h, f, df/dx or the result holds a NaN or an infinity (a NaN parameter
+ * shows up there); ERR_SINGULAR if I - h df/dx is singular to working precision: a zero pivot,
+ * or 1/||(I - h df/dx)^-1|| (its distance to singularity) not above NX eps max_i(1 + sum_j |h
+ * df_i/dx_j|), in the inf-norm. On error x_next is untouched. x_next may alias x.
+ * Operations (at most): 14 add, 42 mul, 8 div, 9 calls (cos 1, fabs 5, sign 1, sin 2), 9
+ * select, 31 cmp, 11 logic (rhs + jac_x + 4 add, 5 mul, 2 div, 3 calls (fabs 3), 13 cmp for
+ * the checks, forming I - h J, its LU factors, the solve and ||(I - h J)^-1||).
  */
 int gearsym_shift_element_linearly_implicit_euler_step(
     const gearsym_real *x,

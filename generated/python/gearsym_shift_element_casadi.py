@@ -25,27 +25,46 @@ OUTPUT_NAMES: tuple[str, ...] = ('T',)
 PARAMETER_DEFAULTS: tuple[float, ...] = (200000.0, 150.0, 0.6, 0.001, float("nan"), float("nan"))
 
 
+def _isnan(v: Any) -> Any:
+    """1 where v is NaN, the one value not <= inf (CasADi folds v != v to 0 symbolically)."""
+    return ca.logic_not(v <= ca.inf)
+
+
+def _max(a: Any, b: Any) -> Any:
+    """Max(a, b), NaN if a or b is NaN (as the C; ca.fmax would return the other argument)."""
+    return ca.if_else(ca.logic_or(_isnan(a), _isnan(b)), float("nan"), ca.fmax(a, b))
+
+
+def _nan_guard(operands: tuple[Any, ...], value: Any) -> Any:
+    """NaN if an operand of a Piecewise condition is NaN (a comparison with NaN is false, so the
+    selection would silently take another branch), else value; as the C."""
+    flag = _isnan(operands[0])
+    for operand in operands[1:]:
+        flag = ca.logic_or(flag, _isnan(operand))
+    return ca.if_else(flag, float("nan"), value)
+
+
 def _rhs(x: Any, u: Any, p: Any) -> list[Any]:
     """State derivative xdot = f(x, u, p). States: z [rad]. Inputs: dw [rad/s], F_N [N], mu [1]."""
     t0 = ca.fabs(x[0])
-    t1 = ca.fmax(p[3], 2.0*u[1]*u[2]*p[4]*p[5])
+    t1 = _max(p[3], 2.0*u[1]*u[2]*p[4]*p[5])
     t2 = p[0]**(-1)
     t3 = t1*t2
     t4 = t3*p[2]
     xdot = ca.SX(1, 1)
-    xdot[0, 0] = u[0]*(-t0*p[0]*ca.if_else(ca.logic_or((t0 <= t4), (u[0]*x[0] <= 0.0)), 0.0, ca.if_else((t0 < t3), (1.0/2.0)*ca.sin(3.14159265358979323846*(t0 - (1.0/2.0)*t3 - (1.0/2.0)*t4)/(t1*t2 - t4)) + (1.0/2.0), 1.0))/t1 + 1.0)
+    xdot[0, 0] = u[0]*(-t0*p[0]*_nan_guard((t0, t4, u[0]*x[0], t3), ca.if_else(ca.logic_or((t0 <= t4), (u[0]*x[0] <= 0.0)), 0.0, ca.if_else((t0 < t3), (1.0/2.0)*ca.sin(3.14159265358979323846*(t0 - (1.0/2.0)*t3 - (1.0/2.0)*t4)/(t1*t2 - t4)) + (1.0/2.0), 1.0)))/t1 + 1.0)
     return [xdot]
 
 
 def _outputs(x: Any, u: Any, p: Any) -> list[Any]:
     """Outputs y = h(x, u, p): T [N*m]."""
-    t0 = ca.fmax(p[3], 2.0*u[1]*u[2]*p[4]*p[5])
+    t0 = _max(p[3], 2.0*u[1]*u[2]*p[4]*p[5])
     t1 = ca.fabs(x[0])
     t2 = p[0]**(-1)
     t3 = t0*t2
     t4 = t3*p[2]
     y = ca.SX(1, 1)
-    y[0, 0] = u[0]*p[1]*ca.fmax(0.0, -t1*p[0]*ca.if_else(ca.logic_or((t1 <= t4), (u[0]*x[0] <= 0.0)), 0.0, ca.if_else((t1 < t3), (1.0/2.0)*ca.sin(3.14159265358979323846*(t1 - (1.0/2.0)*t3 - (1.0/2.0)*t4)/(t0*t2 - t4)) + (1.0/2.0), 1.0))/t0 + 1.0) + ca.if_else((t1 > t3), t0*ca.sign(x[0]), x[0]*p[0])
+    y[0, 0] = u[0]*p[1]*_max(0.0, -t1*p[0]*_nan_guard((t1, t4, u[0]*x[0], t3), ca.if_else(ca.logic_or((t1 <= t4), (u[0]*x[0] <= 0.0)), 0.0, ca.if_else((t1 < t3), (1.0/2.0)*ca.sin(3.14159265358979323846*(t1 - (1.0/2.0)*t3 - (1.0/2.0)*t4)/(t0*t2 - t4)) + (1.0/2.0), 1.0)))/t0 + 1.0) + _nan_guard((t1, t3), ca.if_else((t1 > t3), t0*ca.sign(x[0]), x[0]*p[0]))
     return [y]
 
 
@@ -53,7 +72,7 @@ def _jac_x(x: Any, u: Any, p: Any) -> list[Any]:
     """Jacobian of the state derivative with respect to x (states), d xdot / d x (1 x 1), dense column-major: jac_x[i + j*1] = d xdot_i / d x_j."""
     t0 = ca.fabs(x[0])
     t1 = p[0]**(-1)
-    t2 = ca.fmax(p[3], 2.0*u[1]*u[2]*p[4]*p[5])
+    t2 = _max(p[3], 2.0*u[1]*u[2]*p[4]*p[5])
     t3 = t1*t2
     t4 = t3*p[2]
     t5 = ca.logic_or((t0 <= t4), (u[0]*x[0] <= 0.0))
@@ -62,7 +81,7 @@ def _jac_x(x: Any, u: Any, p: Any) -> list[Any]:
     t8 = (t0 < t3)
     t9 = p[0]/t2
     jac_x = ca.SX(1, 1)
-    jac_x[0, 0] = u[0]*(-t0*t9*ca.if_else(t5, 0.0, ca.if_else(t8, (1.0/2.0)*t6*ca.cos(t7), 0.0)) - t9*ca.if_else(t5, 0.0, ca.if_else(t8, (1.0/2.0)*ca.sin(t7) + (1.0/2.0), 1.0)))*ca.sign(x[0])
+    jac_x[0, 0] = u[0]*(-t0*t9*_nan_guard((t0, t4, u[0]*x[0], t3), ca.if_else(t5, 0.0, ca.if_else(t8, (1.0/2.0)*t6*ca.cos(t7), 0.0))) - t9*_nan_guard((t0, t4, u[0]*x[0], t3), ca.if_else(t5, 0.0, ca.if_else(t8, (1.0/2.0)*ca.sin(t7) + (1.0/2.0), 1.0))))*ca.sign(x[0])
     return [jac_x]
 
 
@@ -70,7 +89,7 @@ def _jac_u(x: Any, u: Any, p: Any) -> list[Any]:
     """Jacobian of the state derivative with respect to u (inputs), d xdot / d u (1 x 3), dense column-major: jac_u[i + j*1] = d xdot_i / d u_j."""
     t0 = 2.0*u[2]*p[4]*p[5]
     t1 = t0*u[1]
-    t2 = ca.fmax(t1, p[3])
+    t2 = _max(t1, p[3])
     t3 = ca.fabs(x[0])
     t4 = t3/t2
     t5 = p[0]**(-1)
@@ -82,15 +101,15 @@ def _jac_u(x: Any, u: Any, p: Any) -> list[Any]:
     t11 = 3.14159265358979323846/t10
     t12 = t11*t9
     t13 = (t3 < t6)
-    t14 = ca.if_else(t8, 0.0, ca.if_else(t13, (1.0/2.0)*ca.sin(t12) + (1.0/2.0), 1.0))
+    t14 = _nan_guard((t3, t7, u[0]*x[0], t6), ca.if_else(t8, 0.0, ca.if_else(t13, (1.0/2.0)*ca.sin(t12) + (1.0/2.0), 1.0)))
     t15 = ca.cos(t12)
-    t16 = ca.if_else(t1 - p[3] > 0, 1.0, ca.if_else(t1 - p[3] < 0, 0.0, (1.0/2.0)))
+    t16 = _nan_guard((t1 - p[3],), ca.if_else(t1 - p[3] > 0, 1.0, ca.if_else(t1 - p[3] < 0, 0.0, (1.0/2.0))))
     t17 = t16*t4*u[0]
-    t18 = t17*ca.if_else(t8, 0.0, ca.if_else(t13, -(1.0/4.0)*t11*t15, 0.0))
+    t18 = t17*_nan_guard((t3, t7, u[0]*x[0], t6), ca.if_else(t8, 0.0, ca.if_else(t13, -(1.0/4.0)*t11*t15, 0.0)))
     t19 = t10**(-2)
     t20 = (1.0/2.0)*t15
-    t21 = t17*p[2]*ca.if_else(t8, 0.0, ca.if_else(t13, t20*(-(1.0/2.0)*t11 + 3.14159265358979323846*t19*t9), 0.0))
-    t22 = t14*t3*p[0]/t2**2 - t4*p[0]*ca.if_else(t8, 0.0, ca.if_else(t13, -3.14159265358979323846*t19*t20*t5*t9, 0.0))
+    t21 = t17*p[2]*_nan_guard((t3, t7, u[0]*x[0], t6), ca.if_else(t8, 0.0, ca.if_else(t13, t20*(-(1.0/2.0)*t11 + 3.14159265358979323846*t19*t9), 0.0)))
+    t22 = t14*t3*p[0]/t2**2 - t4*p[0]*_nan_guard((t3, t7, u[0]*x[0], t6), ca.if_else(t8, 0.0, ca.if_else(t13, -3.14159265358979323846*t19*t20*t5*t9, 0.0)))
     t23 = 2.0*u[1]*p[4]*p[5]
     jac_u = ca.SX(1, 3)
     jac_u[0, 0] = -t14*t4*p[0] + 1.0
@@ -105,7 +124,7 @@ def _jac_p(x: Any, u: Any, p: Any) -> list[Any]:
     t1 = p[0]**(-1)
     t2 = 2.0*u[1]*u[2]*p[5]
     t3 = t2*p[4]
-    t4 = ca.fmax(t3, p[3])
+    t4 = _max(t3, p[3])
     t5 = t1*t4
     t6 = t5*p[2]
     t7 = ca.logic_or((t0 <= t6), (u[0]*x[0] <= 0.0))
@@ -114,29 +133,29 @@ def _jac_p(x: Any, u: Any, p: Any) -> list[Any]:
     t10 = 3.14159265358979323846/t9
     t11 = t10*t8
     t12 = (t0 < t5)
-    t13 = ca.if_else(t7, 0.0, ca.if_else(t12, (1.0/2.0)*ca.sin(t11) + (1.0/2.0), 1.0))
+    t13 = _nan_guard((t0, t6, u[0]*x[0], t5), ca.if_else(t7, 0.0, ca.if_else(t12, (1.0/2.0)*ca.sin(t11) + (1.0/2.0), 1.0)))
     t14 = t4**(-1)
     t15 = t0*u[0]
     t16 = t14*t15
     t17 = ca.cos(t11)
-    t18 = ca.if_else(t7, 0.0, ca.if_else(t12, -(1.0/4.0)*t10*t17, 0.0))
+    t18 = _nan_guard((t0, t6, u[0]*x[0], t5), ca.if_else(t7, 0.0, ca.if_else(t12, -(1.0/4.0)*t10*t17, 0.0)))
     t19 = t1*t15
     t20 = t9**(-2)
     t21 = (1.0/2.0)*t17
     t22 = 3.14159265358979323846*t20*t21*t8
-    t23 = t15*ca.if_else(t7, 0.0, ca.if_else(t12, t21*(-(1.0/2.0)*t10 + 3.14159265358979323846*t20*t8), 0.0))
+    t23 = t15*_nan_guard((t0, t6, u[0]*x[0], t5), ca.if_else(t7, 0.0, ca.if_else(t12, t21*(-(1.0/2.0)*t10 + 3.14159265358979323846*t20*t8), 0.0)))
     t24 = t23*p[2]
     t25 = t3 - p[3]
-    t26 = ca.if_else(-t25 > 0, 1.0, ca.if_else(-t25 < 0, 0.0, (1.0/2.0)))
+    t26 = _nan_guard((-t25,), ca.if_else(-t25 > 0, 1.0, ca.if_else(-t25 < 0, 0.0, (1.0/2.0))))
     t27 = t16*t18
     t28 = t14*t24
-    t29 = t0*t13*p[0]/t4**2 - t0*t14*p[0]*ca.if_else(t7, 0.0, ca.if_else(t12, -t1*t22, 0.0))
-    t30 = ca.if_else(t25 > 0, 1.0, ca.if_else(t25 < 0, 0.0, (1.0/2.0)))
+    t29 = t0*t13*p[0]/t4**2 - t0*t14*p[0]*_nan_guard((t0, t6, u[0]*x[0], t5), ca.if_else(t7, 0.0, ca.if_else(t12, -t1*t22, 0.0)))
+    t30 = _nan_guard((t25,), ca.if_else(t25 > 0, 1.0, ca.if_else(t25 < 0, 0.0, (1.0/2.0))))
     t31 = t27*t30
     t32 = t28*t30
     t33 = 2.0*u[1]*u[2]*p[4]
     jac_p = ca.SX(1, 6)
-    jac_p[0, 0] = t1*t24 - t13*t16 + t14*t19*ca.if_else(t7, 0.0, ca.if_else(t12, -t22*t4, 0.0)) + t18*t19
+    jac_p[0, 0] = t1*t24 - t13*t16 + t14*t19*_nan_guard((t0, t6, u[0]*x[0], t5), ca.if_else(t7, 0.0, ca.if_else(t12, -t22*t4, 0.0))) + t18*t19
     jac_p[0, 2] = -t23
     jac_p[0, 3] = t26*t29*u[0] - t26*t27 - t26*t28
     jac_p[0, 4] = 2.0*t29*t30*u[1]*u[0]*u[2]*p[5] - t2*t31 - t2*t32
