@@ -13,10 +13,9 @@ import sys
 import time
 
 import sympy as sp
-
-from symbolic.description import load_description
-from symbolic.dynamics import gearbox_dynamics
-from symbolic.kinematics import gearbox_symbols, willis_constraints
+from gearsym.symbolic.description import load_description
+from gearsym.symbolic.dynamics import gearbox_dynamics
+from gearsym.symbolic.kinematics import gearbox_symbols, willis_constraints
 
 
 def ours(d, symbolic_teeth: bool):

@@ -25,10 +25,9 @@ import sys
 import time
 
 import sympy as sp
-
-from symbolic.description import load_description
-from symbolic.drivetrain import shift_model
-from symbolic.observability import analyze_observability
+from gearsym.symbolic.description import load_description
+from gearsym.symbolic.drivetrain import shift_model
+from gearsym.symbolic.observability import analyze_observability
 
 P = ["m_veh", "mu_38", "mu_05", "zeta"]
 PEER_TIMEOUT = 180.0

@@ -6,8 +6,8 @@ included) for the full model, every shift model in both input forms, the frictio
 process per source, one after the other. Target: under 30 s on this machine.
 
 Peer, measured in the same run: the textbook SymPy route for the same models: the same
-derivation (:func:`symbolic.generate.gearbox_models`), then per model ``Matrix.jacobian`` for
-∂f/∂x, ∂f/∂u, ∂f/∂p, ``sympy.cse`` and ``sympy.ccode`` per function into one C file, compiled
+derivation (:func:`gearsym.symbolic.generate.gearbox_models`), then per model ``Matrix.jacobian``
+for ∂f/∂x, ∂f/∂u, ∂f/∂p, ``sympy.cse`` and ``sympy.ccode`` per function into one C file, compiled
 the same way (no step functions, no parameter struct, no CasADi module: it does less).
 """
 
@@ -21,10 +21,9 @@ from pathlib import Path
 
 import sympy as sp
 from codegen_peers import REPO, run
-
-from symbolic.description import load_description
-from symbolic.generate import gearbox_models
-from validation.c_check import STRICT_FLAGS
+from gearsym.symbolic.description import load_description
+from gearsym.symbolic.generate import gearbox_models
+from gearsym.validation.c_check import STRICT_FLAGS
 
 TARGET_S = 30.0
 
@@ -39,8 +38,9 @@ def compile_all(c_dir: Path, strict: bool = True) -> int:
 
 def ours_in_process(out: Path) -> tuple[float, float, int]:
     """Derive and emit in this process (like the peer), then compile."""
+    from gearsym.symbolic.generate import generate_tree
+
     from gearsym.cmd_generate import write_files
-    from symbolic.generate import generate_tree
 
     start = time.perf_counter()
     sp.core.cache.clear_cache()
@@ -68,7 +68,7 @@ def ours(out: Path) -> tuple[float, float, int]:
 
 
 def _textbook_c(model: object) -> str:
-    m = model  # a symbolic.model.Model
+    m = model  # a gearsym.symbolic.model.Model
     xs, us, ps = m.state_symbols, m.input_symbols, m.parameter_symbols  # type: ignore[attr-defined]
     f = m.rhs  # type: ignore[attr-defined]
     blocks = {

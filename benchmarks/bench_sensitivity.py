@@ -14,10 +14,9 @@ import sys
 import time
 
 import sympy as sp
-
-from symbolic.description import load_description
-from symbolic.sensitivity import sensitivity_equations
-from validation.sensitivity_run import (
+from gearsym.symbolic.description import load_description
+from gearsym.symbolic.sensitivity import sensitivity_equations
+from gearsym.validation.sensitivity_run import (
     CompiledModel,
     Interpolated,
     driven_shift_model,

@@ -16,10 +16,9 @@ import sys
 import time
 
 import sympy as sp
-
-from symbolic.description import load_description
-from symbolic.drivetrain import adjacent_shifts, full_model, shift_model
-from validation.simulate import simulate
+from gearsym.symbolic.description import load_description
+from gearsym.symbolic.drivetrain import adjacent_shifts, full_model, shift_model
+from gearsym.validation.simulate import simulate
 
 
 def rotated(runs: dict, rounds: int = 3) -> dict[str, list[float]]:

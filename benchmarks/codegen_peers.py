@@ -11,10 +11,9 @@ from pathlib import Path
 from types import ModuleType
 
 import casadi as ca
-
-from symbolic.codegen import build_function_table, count_operations, cse_function
-from symbolic.description import load_description
-from symbolic.generate import generate_tree
+from gearsym.symbolic.codegen import build_function_table, count_operations, cse_function
+from gearsym.symbolic.description import load_description
+from gearsym.symbolic.generate import generate_tree
 
 REPO = Path(__file__).resolve().parents[1]
 EXPR_FUNCTIONS = ("rhs", "outputs", "jac_x", "jac_u", "jac_p")

@@ -15,12 +15,12 @@ from typing import Any, NoReturn
 
 from gearsym.interrupts import Terminated, check, sigterm_raises
 from gearsym.options import number
-from symbolic.description import PLANET_COUNT_MAX, TEETH_MAX
-from symbolic.errors import GearsymError
+from gearsym.symbolic.description import PLANET_COUNT_MAX, TEETH_MAX
+from gearsym.symbolic.errors import GearsymError
 
 
 def _load(path: str | None) -> Any:
-    from symbolic.description import load_description
+    from gearsym.symbolic.description import load_description
 
     return load_description(path)
 
@@ -42,7 +42,7 @@ def cmd_ratios(args: argparse.Namespace) -> int:
     """Gear table; exit code 1 when a derived ratio differs from the expected one (text and
     JSON alike). The JSON stays ``{gear: ratio or null}`` (README, tests); the gears that
     differ are named on stderr."""
-    from symbolic.ratios import ratio_table
+    from gearsym.symbolic.ratios import ratio_table
 
     d = _load(args.config)
     table = ratio_table(d)
@@ -111,7 +111,7 @@ def _counts(text: str) -> tuple[int, ...]:
 
 
 def cmd_fit_teeth(args: argparse.Namespace) -> int:
-    from symbolic.teeth import ToothRanges, fit_teeth
+    from gearsym.symbolic.teeth import ToothRanges, fit_teeth
 
     d = _load(args.config)
     ranges = ToothRanges(
@@ -182,7 +182,7 @@ def _matrix_json(m: Any) -> list[list[str]]:
 def cmd_show(args: argparse.Namespace) -> int:
     import sympy as sp
 
-    from symbolic.dynamics import gearbox_dynamics
+    from gearsym.symbolic.dynamics import gearbox_dynamics
 
     d = _load(args.config)
     dyn = gearbox_dynamics(
@@ -249,7 +249,7 @@ def cmd_show(args: argparse.Namespace) -> int:
 
 
 def cmd_default_config(args: argparse.Namespace) -> int:
-    from symbolic.description import default_config_text
+    from gearsym.symbolic.description import default_config_text
 
     sys.stdout.write(default_config_text())
     return 0
@@ -258,7 +258,7 @@ def cmd_default_config(args: argparse.Namespace) -> int:
 def _run_scenario(d: Any, path: str | None) -> tuple[Any, str | None]:
     """The scenario ``gearsym run`` simulates, or ``None`` and why not. A scenario the user
     names must load (its errors are errors); the built-in one is tried on any gearbox."""
-    from validation.scenario import load_scenario
+    from gearsym.validation.scenario import load_scenario
 
     if path is not None:
         return load_scenario(d, path), None
@@ -275,9 +275,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     """The main job: derive the model, print the gear table and the observability verdict,
     simulate the shift scenario, and its sensitivities and Fisher information; everything the
     description supports, and what was skipped, with the reason."""
-    from symbolic.dynamics import gearbox_dynamics
-    from symbolic.output_dir import OutputDir
-    from symbolic.ratios import ratio_table
+    from gearsym.symbolic.dynamics import gearbox_dynamics
+    from gearsym.symbolic.output_dir import OutputDir
+    from gearsym.symbolic.ratios import ratio_table
 
     d = _load(args.config)
     scenario, skipped = _run_scenario(d, args.scenario)
@@ -306,7 +306,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         if scenario is not None:
             from gearsym.cmd_analysis import print_fim_summary
             from gearsym.cmd_dynamics import simulate_with_progress
-            from validation.report import format_summary, write_results
+            from gearsym.validation.report import format_summary, write_results
 
             print()
             result = simulate_with_progress(d, scenario)

@@ -14,12 +14,12 @@ from pathlib import Path
 from typing import Any
 
 from gearsym.interrupts import check
-from symbolic.errors import GearsymError
-from symbolic.output_dir import OutputDir
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.output_dir import OutputDir
 
 
 def _load(path: str | None) -> Any:
-    from symbolic.description import load_description
+    from gearsym.symbolic.description import load_description
 
     return load_description(path)
 
@@ -53,8 +53,8 @@ def _overrides(d: Any, items: Sequence[str] | None) -> dict[str, float]:
 
 def _prepare(args: argparse.Namespace, wheel: bool) -> tuple[Any, list[str] | None, dict, Any]:
     """Load the description and check the parameter names before the (slow) simulation."""
-    from symbolic.sensitivity import select_parameters
-    from validation.sensitivity_run import (
+    from gearsym.symbolic.sensitivity import select_parameters
+    from gearsym.validation.sensitivity_run import (
         driven_shift_model,
         parameter_values,
         thesis_parameters,
@@ -65,7 +65,7 @@ def _prepare(args: argparse.Namespace, wheel: bool) -> tuple[Any, list[str] | No
     overrides = _overrides(d, args.set)  # before the slow derivation below
     scenario = None
     if args.scenario is not None:
-        from validation.scenario import load_scenario
+        from gearsym.validation.scenario import load_scenario
 
         scenario = load_scenario(d, args.scenario)
     shift = scenario.shift.name if scenario is not None else "2-3"
@@ -78,10 +78,10 @@ def _prepare(args: argparse.Namespace, wheel: bool) -> tuple[Any, list[str] | No
 
 
 def _reference(d: Any, scenario: Any) -> Any:
-    from validation.sensitivity_run import reference_data
+    from gearsym.validation.sensitivity_run import reference_data
 
     start = time.perf_counter()
-    _say("simulating the reference shift (validation.simulate)")
+    _say("simulating the reference shift (gearsym.validation.simulate)")
     data = reference_data(d, scenario)
     _say(f"reference simulated in {time.perf_counter() - start:.1f} s")
     return data
@@ -94,7 +94,7 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
     """Sensitivities along the reference shift: PNG per parameter (Figs. 3.4–3.8) and a CSV."""
     import numpy as np
 
-    from validation.sensitivity_run import (
+    from gearsym.validation.sensitivity_run import (
         phase_of,
         plot_sensitivities,
         run_sensitivities,
@@ -174,7 +174,7 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
 
 def cmd_fim(args: argparse.Namespace) -> int:
     """Fisher information per phase and over the shift (3.16–3.32)."""
-    from validation.fisher import fim_study, format_text, study_json
+    from gearsym.validation.fisher import fim_study, format_text, study_json
 
     d, names, overrides, scenario = _prepare(args, args.with_wheel_acceleration)
     with contextlib.ExitStack() as stack:
@@ -216,7 +216,7 @@ def cmd_fim(args: argparse.Namespace) -> int:
 
 def write_fim(study: Any, folder: Path) -> list[str]:
     """``fim.json``, ``fim.txt`` and the bar charts (Figs. 3.9–3.14) into ``folder``."""
-    from validation.fisher import format_text, plot_scatter, study_json
+    from gearsym.validation.fisher import format_text, plot_scatter, study_json
 
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "fim.json").write_text(json.dumps(study_json(study), indent=2) + "\n")
@@ -228,13 +228,19 @@ def print_fim_summary(d: Any, result: Any = None, folder: Path | None = None) ->
     """A few lines for ``gearsym run``: per phase, the thesis' parameters (3.2) that stay
     estimable after the elimination (3.3), from the speeds alone and with ω̇_C (3.32).
 
-    ``result`` is a :class:`validation.simulate.SimulationResult` (the default shift is
+    ``result`` is a :class:`gearsym.validation.simulate.SimulationResult` (the default shift is
     simulated when omitted). With ``folder``, also write what ``gearsym sensitivity`` and
     ``gearsym fim`` write (CSV, JSON, text, Figures 3.4–3.14) into ``folder/sensitivity`` and
     ``folder/fim``.
     """
-    from validation.fisher import GAMMA_MAX, SAMPLE_TIME, SENSITIVITY_VIEW, fim_study, summary_lines
-    from validation.sensitivity_run import (
+    from gearsym.validation.fisher import (
+        GAMMA_MAX,
+        SAMPLE_TIME,
+        SENSITIVITY_VIEW,
+        fim_study,
+        summary_lines,
+    )
+    from gearsym.validation.sensitivity_run import (
         plot_sensitivities,
         reference_data,
         reference_from_result,
@@ -271,8 +277,8 @@ def print_fim_summary(d: Any, result: Any = None, folder: Path | None = None) ->
 
 
 def _common(p: argparse.ArgumentParser) -> None:
-    from symbolic.defaults import SENSITIVITY_PARAMETERS as DEFAULT_PARAMETERS
-    from symbolic.defaults import SLIDING_MODES
+    from gearsym.symbolic.defaults import SENSITIVITY_PARAMETERS as DEFAULT_PARAMETERS
+    from gearsym.symbolic.defaults import SLIDING_MODES
 
     p.add_argument(
         "--params",
@@ -302,7 +308,7 @@ def register(
 ) -> None:
     """Register ``sensitivity`` and ``fim`` with the main parser."""
     from gearsym.options import number
-    from symbolic.defaults import (
+    from gearsym.symbolic.defaults import (
         ACCELERATION_ERROR,
         GAMMA_MAX,
         RECORD_SAMPLE_TIME,
@@ -345,7 +351,7 @@ def register(
     p.add_argument("--out", help="folder for fim.json, fim.txt and bar charts (Figs. 3.9-3.14)")
     p.add_argument(
         "--sample-time",
-        # finer than the simulated record (validation.scenario.SAMPLE_TIME) adds nothing
+        # finer than the simulated record (gearsym.validation.scenario.SAMPLE_TIME) adds nothing
         type=number(float, minimum=RECORD_SAMPLE_TIME),
         default=SAMPLE_TIME,
         help="measurement period in s",

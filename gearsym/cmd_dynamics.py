@@ -13,7 +13,7 @@ from gearsym.interrupts import check
 
 
 def _load(path: str | None) -> Any:
-    from symbolic.description import load_description
+    from gearsym.symbolic.description import load_description
 
     return load_description(path)
 
@@ -34,7 +34,7 @@ def _variables(variables: Any) -> list[dict[str, Any]]:
 def model_dict(d: Any, shift: str | None, friction_inputs: bool, wheel: bool) -> dict[str, Any]:
     """The model as data: variables, right-hand side (SymPy-parsable strings) and, for a shift,
     the numeric linear form A_ex, B_ex (5.1)–(5.5) at the defaults."""
-    from symbolic.drivetrain import full_model, linear_shift_form, shift_model
+    from gearsym.symbolic.drivetrain import full_model, linear_shift_form, shift_model
 
     if shift is None:
         model = full_model(d, with_wheel_acceleration=wheel)
@@ -137,7 +137,7 @@ class ProgressBar:
 
 def simulate_with_progress(d: Any, scenario: Any) -> Any:
     """Simulate a loaded scenario with a progress display on stderr."""
-    from validation.simulate import simulate
+    from gearsym.validation.simulate import simulate
 
     bar = ProgressBar("simulate")
     try:
@@ -148,9 +148,9 @@ def simulate_with_progress(d: Any, scenario: Any) -> Any:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Simulate the scenario's shift with the reference model and write the results."""
-    from symbolic.output_dir import OutputDir
-    from validation.report import format_summary, summary, write_results
-    from validation.scenario import load_scenario
+    from gearsym.symbolic.output_dir import OutputDir
+    from gearsym.validation.report import format_summary, summary, write_results
+    from gearsym.validation.scenario import load_scenario
 
     d = _load(args.config)
     scenario = load_scenario(d, args.scenario)

@@ -1,12 +1,13 @@
 """``gearsym generate [CONFIG] --out DIR [--check]``: emit the C and CasADi code of a gearbox.
 
-Everything is generated in memory first (:func:`symbolic.generate.generate_tree`), then written
-through :class:`symbolic.output_dir.OutputDir`: into a staging directory next to ``DIR``, swapped
-in only when complete, and only over a ``DIR`` that gearsym wrote (see that module's rules).
+Everything is generated in memory first (:func:`gearsym.symbolic.generate.generate_tree`), then
+written through :class:`gearsym.symbolic.output_dir.OutputDir`: into a staging directory next to
+``DIR``, swapped in only when complete, and only over a ``DIR`` that gearsym wrote (see that
+module's rules).
 
-With ``--check`` the new files are compiled and validated (:mod:`validation.generated_check`)
-before they replace ``DIR``; if a check fails, ``DIR`` stays as it was and the exit code is 1.
-Progress goes to stderr, the summary to stdout.
+With ``--check`` the new files are compiled and validated
+(:mod:`gearsym.validation.generated_check`) before they replace ``DIR``; if a check fails, ``DIR``
+stays as it was and the exit code is 1. Progress goes to stderr, the summary to stdout.
 """
 
 from __future__ import annotations
@@ -20,8 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from gearsym.interrupts import check
-from symbolic.errors import GearsymError
-from symbolic.output_dir import OutputDir
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.output_dir import OutputDir
 
 __all__ = ["add_generate_parser", "cmd_generate", "write_files"]
 
@@ -67,8 +68,8 @@ def write_files(files: dict[str, str], root: Path) -> None:
 
 def cmd_generate(args: argparse.Namespace) -> int:
     """Generate, optionally check, and move the result into place."""
-    from symbolic.description import load_description
-    from symbolic.generate import check_generatable, generate_tree
+    from gearsym.symbolic.description import load_description
+    from gearsym.symbolic.generate import check_generatable, generate_tree
 
     shown = args.out
     if args.points < 1:
@@ -81,7 +82,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
         tree = generate_tree(d, progress=_progress)
         write_files(tree.files, out.path)
         if args.check:
-            from validation.generated_check import check_tree
+            from gearsym.validation.generated_check import check_tree
 
             with tempfile.TemporaryDirectory(prefix="gearsym-check-") as build:
                 report = check_tree(

@@ -3,9 +3,9 @@
 The shift model (2.55–2.58) with the clutch torques written as μ times the known normal force
 (2.69) is augmented with the estimated parameters as random-walk states (4.1), default
 ``p = [m_veh, μ38, μ05, ζ]``; its outputs are the measured speeds (3.31), optionally with the
-wheel acceleration (3.32). The engine (:mod:`symbolic.observability`) differentiates the outputs
-along the dynamics (4.4), takes the Jacobian ``Q`` (4.7) and decides its generic rank exactly
-((4.12); a full-rank verdict carries a witness, a deficient one an error bound).
+wheel acceleration (3.32). The engine (:mod:`gearsym.symbolic.observability`) differentiates the
+outputs along the dynamics (4.4), takes the Jacobian ``Q`` (4.7) and decides its generic rank
+exactly ((4.12); a full-rank verdict carries a witness, a deficient one an error bound).
 
 The thesis claims (4.12): rank ``Q_123 = 8`` "for all operating points and inputs". This command
 checks that claim instead of assuming it: besides the generic verdict it looks for the sets where
@@ -33,18 +33,18 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, NoReturn, TextIO
 
 from gearsym.options import number
-from symbolic.errors import GearsymError
+from gearsym.symbolic.errors import GearsymError
 
 if TYPE_CHECKING:
     import sympy as sp
 
-    from symbolic.description import GearboxDescription
-    from symbolic.model import Model
-    from symbolic.observability import ObservabilityResult, PartialResult, RankDropReport
+    from gearsym.symbolic.description import GearboxDescription
+    from gearsym.symbolic.model import Model
+    from gearsym.symbolic.observability import ObservabilityResult, PartialResult, RankDropReport
 
 #: The shift of thesis chapter 3 and 4 and its parameter vector p of (4.1).
-from symbolic.defaults import DEFAULT_SHIFT
-from symbolic.defaults import OBSERVABILITY_PARAMETERS as DEFAULT_PARAMETERS
+from gearsym.symbolic.defaults import DEFAULT_SHIFT
+from gearsym.symbolic.defaults import OBSERVABILITY_PARAMETERS as DEFAULT_PARAMETERS
 
 #: Input-constant combinations are tested for every subset up to this many inputs; beyond, only
 #: single inputs and all inputs together.
@@ -248,7 +248,7 @@ def select_outputs(d: GearboxDescription, model: Model, items: Sequence[str]) ->
     """
     import sympy as sp
 
-    from symbolic.model import Variable
+    from gearsym.symbolic.model import Variable
 
     existing = dict(zip((v.name for v in model.outputs), model.output_expressions, strict=True))
     local = {v.name: v.symbol for v in (*model.states, *model.inputs, *model.parameters)}
@@ -298,7 +298,7 @@ def select_outputs(d: GearboxDescription, model: Model, items: Sequence[str]) ->
 
 def parse_input_models(d: GearboxDescription, model: Model, items: Sequence[str]) -> dict[str, str]:
     """``NAME=generic|constant|poly:K`` per input; ``all=...`` sets every input first."""
-    from symbolic.observability import InputModel
+    from gearsym.symbolic.observability import InputModel
 
     inputs = [v.name for v in model.inputs]
     general: dict[str, str] = {}
@@ -432,7 +432,7 @@ class _DropFinder:
         self.descriptions = {v.name: v.description for v in model.inputs}
 
     def _anchor(self, models: Mapping[str, str]) -> ObservabilityResult:
-        from symbolic.observability import rank_under_conditions
+        from gearsym.symbolic.observability import rank_under_conditions
 
         merged = {**self.result.input_models, **models}
         key = tuple(sorted(merged.items()))
@@ -453,7 +453,7 @@ class _DropFinder:
     def _rank(
         self, conditions: Mapping[str, str], models: Mapping[str, str], max_order: int
     ) -> RankDropReport:
-        from symbolic.observability import InputModel, rank_under_conditions
+        from gearsym.symbolic.observability import InputModel, rank_under_conditions
 
         if max_order <= self.result.max_order:
             # Up to the orders already derived, an input model is a point restriction on the
@@ -492,7 +492,7 @@ class _DropFinder:
         note: str = "",
     ) -> RankDrop:
         """Rank on the set (``report`` if already computed against the generic verdict)."""
-        from symbolic.observability import BudgetExceeded, SamplingError
+        from gearsym.symbolic.observability import BudgetExceeded, SamplingError
 
         base = RankDrop(
             label=label,
@@ -578,7 +578,7 @@ class _DropFinder:
         """
         import sympy as sp
 
-        from symbolic.observability import exact_rational
+        from gearsym.symbolic.observability import exact_rational
 
         model = self.model
         params = {v.name: v.symbol for v in model.parameters}
@@ -642,14 +642,14 @@ def find_rank_drops(
     held constant (supersets of a set that already drops are implied — holding more inputs
     constant only specialises ``Q`` — and are not tested); and, with ``factor_minor``, the
     zero sets of the factors of the witness minor and the coordinate hyperplanes on which it
-    vanishes (:func:`symbolic.observability.propose_rank_drop_conditions`). Each confirmed
+    vanishes (:func:`gearsym.symbolic.observability.propose_rank_drop_conditions`). Each confirmed
     drop is then re-ranked with one more derivative order at a time up to ``y^(n-1)`` (4.4),
     spending about ``higher_order_seconds`` on it. Returns (tested candidates, implied sets
     not tested, notes).
     """
     import random
 
-    from symbolic.observability import propose_rank_drop_conditions
+    from gearsym.symbolic.observability import propose_rank_drop_conditions
 
     seed = random.SystemRandom().randrange(2**63) if seed is None else seed
     finder = _DropFinder(model, result, seed, time_budget, higher_order_seconds)
@@ -755,8 +755,8 @@ def analyze_shift(
     :class:`GearsymError` for bad input and for an exceeded budget; in that case the error's
     ``partial`` attribute holds the sound partial result.
     """
-    from symbolic.drivetrain import shift_model
-    from symbolic.observability import (
+    from gearsym.symbolic.drivetrain import shift_model
+    from gearsym.symbolic.observability import (
         BudgetExceeded,
         ObservabilityError,
         analyze_observability,
@@ -1018,7 +1018,7 @@ def _partial_dict(partial: PartialResult) -> dict[str, Any]:
 
 def cmd_observability(args: argparse.Namespace) -> int:
     """``gearsym observability``: verdict (4.12), per-variable observability, rank drops."""
-    from symbolic.description import load_description
+    from gearsym.symbolic.description import load_description
 
     d = load_description(args.config)
     try:

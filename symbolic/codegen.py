@@ -1,4 +1,4 @@
-"""Code generation core: one :class:`~symbolic.model.Model` in, C99 and CasADi sources out.
+"""Code generation core: one :class:`~gearsym.symbolic.model.Model` in, C99 and CasADi sources out.
 
 Pipeline (every stage is a pure function, and the output is byte-identical across runs):
 
@@ -46,13 +46,17 @@ from typing import Any
 
 import jinja2
 import sympy as sp
+from gearsym.symbolic.model import Model, Variable
+from gearsym.symbolic.naming import (
+    c_identifier_problem,
+    function_prefix,
+    macro_prefix,
+    model_file_names,
+)
 from sympy.logic.boolalg import Boolean, BooleanAtom
 from sympy.printing.c import C99CodePrinter
 from sympy.printing.precedence import PRECEDENCE
 from sympy.printing.pycode import PythonCodePrinter
-
-from symbolic.model import Model, Variable
-from symbolic.naming import c_identifier_problem, function_prefix, macro_prefix, model_file_names
 
 __all__ = [
     "CSE_OPTIMIZATIONS",
@@ -326,8 +330,8 @@ def build_function_table(model: Model, bounds: Bounds | None = None) -> Function
     """Build the function table that drives every emitter.
 
     ``bounds`` maps parameter names to ``(min, max)`` (either may be ``None``); the emitted
-    ``params_validate`` rejects values outside. :class:`~symbolic.model.Variable` carries no range
-    itself, hence the separate mapping. ``model.metadata["integrators"]`` (default
+    ``params_validate`` rejects values outside. :class:`~gearsym.symbolic.model.Variable` carries
+    no range itself, hence the separate mapping. ``model.metadata["integrators"]`` (default
     ``"rk4 linearly_implicit_euler"``) selects the emitted integrator steps.
     """
     _check_names(model)

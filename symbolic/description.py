@@ -17,8 +17,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from symbolic.errors import GearsymError
-from symbolic.input_files import parse_toml, read_text, shown, unknown_key_reason
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.input_files import parse_toml, read_text, shown, unknown_key_reason
 
 #: Names end up in C identifiers, always behind a prefix (``omega_<shaft>``, ``T_<element>``,
 #: ``shift_<gear>_<gear>``), so they may hold letters, digits and underscores only; a leading
@@ -507,7 +507,7 @@ def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
     if not description.coordinates:
         # Default generalized coordinates: the first f shafts (thesis 2.28 names them).
         description = _replace_coordinates(description)
-    from symbolic.naming import check_names
+    from gearsym.symbolic.naming import check_names
 
     check_names(description)
     return description
@@ -625,9 +625,9 @@ def load_description(path: str | Path | None = None) -> GearboxDescription:
     """Load a description file, or the built-in default when ``path`` is None.
 
     Checks the structure (this module) and that every gear leaves the degrees of freedom it
-    claims (via :func:`symbolic.ratios.check_gear_table`).
+    claims (via :func:`gearsym.symbolic.ratios.check_gear_table`).
     """
-    from symbolic.ratios import check_gear_table
+    from gearsym.symbolic.ratios import check_gear_table
 
     if path is None:
         text = default_config_text()

@@ -26,13 +26,12 @@ from dataclasses import dataclass
 from itertools import pairwise
 
 import sympy as sp
-
-from symbolic import naming
-from symbolic.description import GearboxDescription, Quantity
-from symbolic.dynamics import GearboxDynamics, gearbox_dynamics
-from symbolic.errors import GearsymError
-from symbolic.kinematics import exact
-from symbolic.model import Model, Variable
+from gearsym.symbolic import naming
+from gearsym.symbolic.description import GearboxDescription, Quantity
+from gearsym.symbolic.dynamics import GearboxDynamics, gearbox_dynamics
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.kinematics import exact
+from gearsym.symbolic.model import Model, Variable
 
 #: Vehicle and drivetrain values that are parameters of every drivetrain model (symbols with
 #: defaults). Geometry (teeth, inertias, i_D, r_dyn) is hardware and enters as exact numbers.
@@ -97,7 +96,7 @@ def element_short_name(d: GearboxDescription, element: str) -> str:
 
 def element_slip_in_gear(d: GearboxDescription, gear: str, element: str) -> sp.Expr:
     """Slip Δω = ω_a − ω_b of an element in a gear, per unit output speed (exact)."""
-    from symbolic.ratios import gear_motions, stationary_ratios
+    from gearsym.symbolic.ratios import gear_motions, stationary_ratios
 
     (motion,) = gear_motions(d, d.gear(gear), stationary_ratios(d))
     speeds = dict(zip(d.shaft_names, motion, strict=True))
@@ -115,7 +114,7 @@ def power_on_slip_signs(d: GearboxDescription, spec: ShiftSpec) -> dict[str, int
     element, in an upshift, slips the other way than the to-gear would make it (the input
     flares slightly during the torque phase, 3.1); in a downshift, the way the to-gear does.
     """
-    from symbolic.ratios import gear_ratio
+    from gearsym.symbolic.ratios import gear_ratio
 
     on = sp.sign(element_slip_in_gear(d, spec.from_gear, spec.on_coming))
     off_to = sp.sign(element_slip_in_gear(d, spec.to_gear, spec.off_going))
@@ -127,7 +126,7 @@ def power_on_slip_signs(d: GearboxDescription, spec: ShiftSpec) -> dict[str, int
 
 def adjacent_shifts(d: GearboxDescription) -> list[ShiftSpec]:
     """Shifts between forward gears adjacent by ratio (largest ratio first)."""
-    from symbolic.ratios import gear_ratio
+    from gearsym.symbolic.ratios import gear_ratio
 
     forward = []
     for g in d.gears:

@@ -18,9 +18,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import sympy as sp
-
-from symbolic.description import GearboxDescription
-from symbolic.kinematics import GearboxSymbols, Kinematics, gearbox_symbols, kinematics
+from gearsym.symbolic.description import GearboxDescription
+from gearsym.symbolic.kinematics import GearboxSymbols, Kinematics, gearbox_symbols, kinematics
 
 
 def mass_matrix(d: GearboxDescription, sym: GearboxSymbols, kin: Kinematics) -> sp.Matrix:

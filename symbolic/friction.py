@@ -59,11 +59,10 @@ from typing import NoReturn
 
 import numpy as np
 import sympy as sp
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.input_files import parse_toml, read_text
 from numpy.typing import ArrayLike
 from scipy.interpolate import RegularGridInterpolator
-
-from symbolic.errors import GearsymError
-from symbolic.input_files import parse_toml, read_text
 
 Num = float | np.ndarray
 """Numeric result: a NumPy scalar (``np.float64`` is a ``float``) or an array."""

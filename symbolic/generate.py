@@ -8,7 +8,7 @@
   the normal forces as inputs and μ as parameters (``shift_<a>_<b>_mu``, 2.69), and the
   elasto-plastic shift-element friction model (``shift_element``, 2.66–2.70);
 * ``c/gearsym_mu_map.{h,c}`` and ``python/gearsym_mu_map_casadi.py``: the μ(p_N, T_oil, |Δω|)
-  map of the description, trilinear and clamped like :class:`symbolic.friction.MuMap`;
+  map of the description, trilinear and clamped like :class:`gearsym.symbolic.friction.MuMap`;
 * ``c/main.c``: an example a TCU engineer compiles alone (build line in its header comment);
 * ``README.md`` (what is where, and the build line) and ``MANIFEST`` (SHA-256 of every file;
   its first line marks a directory that ``gearsym generate`` may replace).
@@ -27,9 +27,8 @@ from pathlib import Path
 from typing import Any
 
 import sympy as sp
-
-from symbolic import naming
-from symbolic.codegen import (
+from gearsym.symbolic import naming
+from gearsym.symbolic.codegen import (
     Bounds,
     _comment_text,
     _float_repr,
@@ -38,8 +37,8 @@ from symbolic.codegen import (
     file_names,
     render,
 )
-from symbolic.description import GearboxDescription, Quantity
-from symbolic.drivetrain import (
+from gearsym.symbolic.description import GearboxDescription, Quantity
+from gearsym.symbolic.drivetrain import (
     ShiftSpec,
     adjacent_shifts,
     element_short_name,
@@ -47,11 +46,11 @@ from symbolic.drivetrain import (
     power_on_slip_signs,
     shift_model,
 )
-from symbolic.errors import GearsymError
-from symbolic.friction import DEFAULT_MU_MAP, T_SS_MIN, MuMap, shift_element_sym
-from symbolic.model import Model, Variable
-from symbolic.output_dir import MANIFEST, manifest_marker, manifest_text
-from symbolic.sensitivity import sensitivity_model
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.friction import DEFAULT_MU_MAP, T_SS_MIN, MuMap, shift_element_sym
+from gearsym.symbolic.model import Model, Variable
+from gearsym.symbolic.output_dir import MANIFEST, manifest_marker, manifest_text
+from gearsym.symbolic.sensitivity import sensitivity_model
 
 __all__ = [
     "MANIFEST_MARKER",
@@ -192,7 +191,7 @@ def shift_element_model(d: GearboxDescription) -> Model:
     description's ``[friction]``, the regularisation ``t_ss_min``, and the element geometry
     ``n_disc``, ``r_m`` (no default: set them per element; the README lists them).
 
-    The expressions are those of :func:`symbolic.friction.shift_element_sym` (with its
+    The expressions are those of :func:`gearsym.symbolic.friction.shift_element_sym` (with its
     regularisations: capacity floored at ``t_ss_min``, passive damping, elastic torque limited
     to the capacity).
     """
@@ -311,7 +310,7 @@ def gearbox_models(
 
 def sample_ranges(model: Model) -> dict[str, tuple[float, float]]:
     """Physically meaningful sampling ranges of the states and inputs (and of parameters that
-    have no default) of an emitted model, for :mod:`validation.c_check`."""
+    have no default) of an emitted model, for :mod:`gearsym.validation.c_check`."""
     ranges = {}
     for v in (*model.states, *model.inputs):
         for prefix, bounds in _RANGES_BY_PREFIX:
@@ -431,7 +430,7 @@ def _example_shift(models: Sequence[EmittedModel]) -> EmittedModel:
 
 
 def _example_context(d: GearboxDescription, models: Sequence[EmittedModel]) -> dict[str, Any]:
-    from symbolic.ratios import gear_ratio
+    from gearsym.symbolic.ratios import gear_ratio
 
     shift = _example_shift(models)
     spec = shift.shift

@@ -18,7 +18,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from symbolic.errors import GearsymError
+from gearsym.symbolic.errors import GearsymError
 
 __all__ = ["MAX_INPUT_BYTES", "parse_toml", "read_text", "shown", "unknown_key_reason"]
 

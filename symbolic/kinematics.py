@@ -1,7 +1,7 @@
 """Stage 2: kinematics of the planetary gearbox (thesis 2.20–2.32).
 
-From a :class:`~symbolic.description.GearboxDescription`: the Willis constraints of every set
-(2.22–2.23), the body orientations s(y) (2.26, 2.29) and positions r(y) (2.27, 2.30) for the
+From a :class:`~gearsym.symbolic.description.GearboxDescription`: the Willis constraints of every
+set (2.22–2.23), the body orientations s(y) (2.26, 2.29) and positions r(y) (2.27, 2.30) for the
 chosen generalized coordinates y (2.28), and the Jacobians J_R = ∂s/∂y and J_T = ∂r/∂y
 (2.31–2.32). All constraints are linear and scleronomic, so s(y) = T·y with a constant matrix T
 and the Jacobians are constant (the thesis' argument for k = 0 in 2.33).
@@ -14,10 +14,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import sympy as sp
-
-from symbolic import naming
-from symbolic.description import GearboxDescription
-from symbolic.errors import GearsymError
+from gearsym.symbolic import naming
+from gearsym.symbolic.description import GearboxDescription
+from gearsym.symbolic.errors import GearsymError
 
 
 def exact(value: float) -> sp.Rational:
@@ -78,7 +77,7 @@ def gearbox_symbols(
         inertia[ps.planet] = quantity(
             naming.inertia(ps.planet), n * exact(ps.planet_inertia.value), symbolic_inertias
         )
-    # An element named In or Out would overwrite these keys: symbolic.naming.check_names
+    # An element named In or Out would overwrite these keys: gearsym.symbolic.naming.check_names
     # rejects it when the description is loaded.
     torque = {
         naming.INPUT: sp.Symbol(naming.INPUT_TORQUE),

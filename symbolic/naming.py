@@ -18,10 +18,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from symbolic.errors import GearsymError
+from gearsym.symbolic.errors import GearsymError
 
 if TYPE_CHECKING:
-    from symbolic.description import GearboxDescription
+    from gearsym.symbolic.description import GearboxDescription
 
 # ---------------------------------------------------------------------------------------------
 # Symbols of the gearbox (2.26-2.39) and the drivetrain (2.42-2.58)
@@ -289,7 +289,7 @@ def check_names(d: GearboxDescription) -> None:
     (no function or macro suffix of one model starts like another's), so the model names
     stand for them.
     """
-    from symbolic.drivetrain import DESCRIPTIONS, ROLLING_KEY, shift_spec
+    from gearsym.symbolic.drivetrain import DESCRIPTIONS, ROLLING_KEY, shift_spec
 
     f = d.file
     names = _Space(

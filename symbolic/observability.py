@@ -80,11 +80,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import sympy as sp
+from gearsym.symbolic.model import Model
+from gearsym.symbolic.sympy_utils import smart_jacobian
 from sympy.polys.domains import QQ
 from sympy.polys.matrices import DomainMatrix
-
-from symbolic.model import Model
-from symbolic.sympy_utils import smart_jacobian
 
 __all__ = [
     "MODULUS",

@@ -31,7 +31,7 @@ from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from types import TracebackType
 
-from symbolic.errors import GearsymError
+from gearsym.symbolic.errors import GearsymError
 
 __all__ = [
     "MANIFEST",

@@ -7,7 +7,7 @@ Adding the two Willis constraints (2.22) and (2.23) of a set eliminates its plan
 with the stationary ratio k = z_H / z_S. A gear closes shift elements (a clutch ties ω_a = ω_b,
 a brake holds ω_b = 0); a drivable gear leaves exactly one degree of freedom and its ratio is
 ω_in / ω_out along it. Ratios depend on the sets only through k, which is what
-:mod:`symbolic.teeth` searches over.
+:mod:`gearsym.symbolic.teeth` searches over.
 """
 
 from __future__ import annotations
@@ -15,11 +15,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import sympy as sp
-
-from symbolic import naming
-from symbolic.description import Gear, GearboxDescription
-from symbolic.errors import GearsymError
-from symbolic.sympy_utils import exact_nullspace
+from gearsym.symbolic import naming
+from gearsym.symbolic.description import Gear, GearboxDescription
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.sympy_utils import exact_nullspace
 
 
 def stationary_ratio_symbols(d: GearboxDescription) -> dict[str, sp.Symbol]:

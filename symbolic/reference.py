@@ -17,14 +17,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import sympy as sp
-
-from symbolic import naming
-from symbolic.description import GearboxDescription
-from symbolic.drivetrain import drivetrain_parts, quantity
-from symbolic.errors import GearsymError
-from symbolic.friction import shift_element_sym
-from symbolic.kinematics import exact
-from symbolic.model import Model, Variable
+from gearsym.symbolic import naming
+from gearsym.symbolic.description import GearboxDescription
+from gearsym.symbolic.drivetrain import drivetrain_parts, quantity
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.friction import shift_element_sym
+from gearsym.symbolic.kinematics import exact
+from gearsym.symbolic.model import Model, Variable
 
 
 @dataclass(frozen=True)
@@ -138,7 +137,7 @@ def reference_model(d: GearboxDescription, elements: Sequence[str] | None = None
     )
 
     # Energy bookkeeping (README "energy audit"): the extra output-shaft inertia of (2.51).
-    from symbolic.dynamics import gearbox_dynamics
+    from gearsym.symbolic.dynamics import gearbox_dynamics
 
     dyn = gearbox_dynamics(d)
     i_d = exact(quantity(d, "drivetrain", "i_D").value)

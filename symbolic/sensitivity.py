@@ -10,7 +10,7 @@ with ∂f/∂x (3.8) common to every parameter and the inhomogeneous term ∂f/�
 included) per parameter (3.9)–(3.15). Outputs ``y = h(x, u, p)`` get the sensitivities
 ``∂y/∂p_j = ∂h/∂x · S_j + ∂h/∂p_j`` that the Fisher information (3.25) needs.
 
-:func:`sensitivity_equations` derives all of this for any :class:`~symbolic.model.Model` and
+:func:`sensitivity_equations` derives all of this for any :class:`~gearsym.symbolic.model.Model` and
 any subset of its parameters, and returns the augmented system ``[x; S_1; …; S_m]`` as a new
 ``Model``, so the code emitters (C, CasADi) and the integrators consume it like any other model.
 """
@@ -21,15 +21,14 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import sympy as sp
-
-from symbolic import naming
+from gearsym.symbolic import naming
 
 #: The parameters the thesis studies (3.2): vehicle mass, side-shaft stiffness and damping,
 #: friction coefficient of the off-going clutch K38, road grade.
-from symbolic.defaults import SENSITIVITY_PARAMETERS as DEFAULT_PARAMETERS
-from symbolic.errors import GearsymError
-from symbolic.model import Model, Variable
-from symbolic.sympy_utils import smart_jacobian
+from gearsym.symbolic.defaults import SENSITIVITY_PARAMETERS as DEFAULT_PARAMETERS
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.model import Model, Variable
+from gearsym.symbolic.sympy_utils import smart_jacobian
 
 
 def sensitivity_name(state: str, parameter: str) -> str:

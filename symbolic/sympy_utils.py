@@ -29,8 +29,8 @@ def smart_jacobian(
 
     Entries whose expression does not contain the variable are zero without calling ``diff``
     (which would still walk the whole expression). ``free_symbols`` may pass the precomputed
-    free-symbol sets of ``exprs``. (:func:`symbolic.codegen.smart_jacobian` is the forward-mode
-    variant over a CSE graph that the emitters use.)
+    free-symbol sets of ``exprs``. (:func:`gearsym.symbolic.codegen.smart_jacobian` is the
+    forward-mode variant over a CSE graph that the emitters use.)
     """
     rows = []
     for i, e in enumerate(exprs):

@@ -1,7 +1,7 @@
 """Search integer tooth counts that reproduce a target ratio table.
 
 Gear ratios depend on a set's teeth only through its stationary ratio k = z_ring / z_sun
-(:mod:`symbolic.ratios`). The search therefore
+(:mod:`gearsym.symbolic.ratios`). The search therefore
 
 1. lists, per set, every buildable (z_sun, z_planet, z_ring) in the given ranges — z_ring =
    z_sun + 2 z_planet, equal planet spacing ((z_sun + z_ring) divisible by the planet count) and
@@ -23,10 +23,9 @@ from fractions import Fraction
 
 import numpy as np
 import sympy as sp
-
-from symbolic.description import GearboxDescription, planets_fit
-from symbolic.errors import GearsymError
-from symbolic.ratios import gear_ratio, ratio_expressions, stationary_ratio_symbols
+from gearsym.symbolic.description import GearboxDescription, planets_fit
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.ratios import gear_ratio, ratio_expressions, stationary_ratio_symbols
 
 
 @dataclass(frozen=True)

@@ -8,8 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
-
-from symbolic.description import default_config_text
+from gearsym.symbolic.description import default_config_text
 
 DATA = Path(__file__).parent / "data"
 

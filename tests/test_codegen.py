@@ -24,10 +24,9 @@ import pytest
 import scipy.integrate
 import scipy.linalg
 import sympy as sp
-
-from symbolic import codegen
-from symbolic.model import Model, Variable
-from validation import c_check
+from gearsym.symbolic import codegen
+from gearsym.symbolic.model import Model, Variable
+from gearsym.validation import c_check
 
 REPO = Path(__file__).resolve().parents[1]
 V = Variable
@@ -385,7 +384,7 @@ def test_sanitizers_and_nan_contract_on_the_test_models(
     """The four test models (Piecewise with and without default, shared And/Or conditions, Min,
     Max of three, sign, Heaviside, no inputs) under ASan/UBSan with NaN, ±inf, ±0, ±huge, ±tiny
     and boundary arguments: see validation/nan_check.py."""
-    from validation import nan_check
+    from gearsym.validation import nan_check
 
     reason = nan_check.sanitizer_support(build_dir=tmp_path / "probe")
     if reason is not None:

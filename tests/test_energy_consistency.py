@@ -11,9 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from symbolic.description import load_description
-from symbolic.dynamics import gearbox_dynamics
+from gearsym.symbolic.description import load_description
+from gearsym.symbolic.dynamics import gearbox_dynamics
 
 DATA = Path(__file__).parent / "data"
 

@@ -15,9 +15,8 @@ import tomllib
 import numpy as np
 import pytest
 import sympy as sp
+from gearsym.symbolic import friction as fr
 from scipy.integrate import solve_ivp
-
-from symbolic import friction as fr
 
 N_DISC, R_M, MU, F_N = 4, 0.08, 0.12, 5000.0
 SIGMA0, SIGMA1, RATIO = 1e5, 100.0, 0.7

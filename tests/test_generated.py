@@ -4,7 +4,7 @@
   CI runs), and the output is byte-identical across runs and ``PYTHONHASHSEED`` values;
 * every emitted model (full model, every shift model in both input forms, the shift-element
   friction model) in C (double and single, strict flags) and in CasADi matches SymPy at 1000
-  random points; the μ map matches :class:`symbolic.friction.MuMap`;
+  random points; the μ map matches :class:`gearsym.symbolic.friction.MuMap`;
 * ``main.c`` compiles alone and runs; the ECU rules hold on the objects; cppcheck is clean; the
   code cross-compiles for a Cortex-M4F (these two skip only if the tool is not installed);
 * the command's failure modes: one-line errors with exit code 2, no half-written output, no
@@ -29,11 +29,9 @@ from unittest import mock
 
 import numpy as np
 import pytest
-
-from gearsym import cli
-from symbolic.description import load_description
-from symbolic.friction import DEFAULT_MU_MAP, shift_element_num
-from symbolic.generate import (
+from gearsym.symbolic.description import load_description
+from gearsym.symbolic.friction import DEFAULT_MU_MAP, shift_element_num
+from gearsym.symbolic.generate import (
     C_DIR,
     MANIFEST_MARKER,
     generate_tree,
@@ -41,7 +39,9 @@ from symbolic.generate import (
     mu_map_files,
     shift_element_model,
 )
-from validation import c_check, generated_check
+from gearsym.validation import c_check, generated_check
+
+from gearsym import cli
 
 REPO = Path(__file__).resolve().parents[1]
 GENERATED = REPO / "generated"
@@ -112,7 +112,7 @@ def test_output_holds_no_paths_or_times(tree: Any) -> None:
 
 
 def test_every_model_is_emitted(tree: Any) -> None:
-    from symbolic.drivetrain import adjacent_shifts
+    from gearsym.symbolic.drivetrain import adjacent_shifts
 
     shifts = [s.name.replace("-", "_") for s in adjacent_shifts(load_description(None))]
     names = {m.model.name for m in tree.models}
@@ -136,8 +136,7 @@ def test_every_model_is_emitted(tree: Any) -> None:
 def test_large_rationals_print_as_decimals_and_small_ones_exactly() -> None:
     """Exact inertias make rationals like 6.2e49/3.2e50: as literals they would overflow float."""
     import sympy as sp
-
-    from symbolic.codegen import CasadiPrinter, GearsymCPrinter
+    from gearsym.symbolic.codegen import CasadiPrinter, GearsymCPrinter
 
     printer = GearsymCPrinter({}, "m_")
     assert printer.doprint(sp.Rational(-2, 7)) == "-(GEARSYM_LIT(2.0)/GEARSYM_LIT(7.0))"
@@ -201,7 +200,7 @@ def test_mu_map_matches_the_reference(tree: Any, tmp_path: Path) -> None:
 
 
 def _config_with_mu_map(tmp_path: Path, mu_map: str) -> Path:
-    from symbolic.description import default_config_text
+    from gearsym.symbolic.description import default_config_text
 
     text = default_config_text()
     assert 'mu_map = "built-in"' in text

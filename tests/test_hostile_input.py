@@ -12,20 +12,20 @@ import os
 from pathlib import Path
 
 import pytest
-
-from gearsym.cli import main
-from symbolic import naming
-from symbolic.codegen import build_function_table
-from symbolic.description import (
+from gearsym.symbolic import naming
+from gearsym.symbolic.codegen import build_function_table
+from gearsym.symbolic.description import (
     PLANET_COUNT_MAX,
     RATIO_DECIMALS_MAX,
     TEETH_MAX,
     default_config_text,
     load_description,
 )
-from symbolic.input_files import MAX_INPUT_BYTES
-from symbolic.model import Model, Variable
-from validation.scenario import POINTS_MAX, T_END_MAX, default_scenario_path
+from gearsym.symbolic.input_files import MAX_INPUT_BYTES
+from gearsym.symbolic.model import Model, Variable
+from gearsym.validation.scenario import POINTS_MAX, T_END_MAX, default_scenario_path
+
+from gearsym.cli import main
 
 DESCRIPTION = default_config_text()
 SCENARIO = default_scenario_path().read_text(encoding="utf-8")

@@ -7,8 +7,7 @@ import math
 from pathlib import Path
 
 import pytest
-
-from validation.integration_check import GENERATED, IntegrationReport, integration_check
+from gearsym.validation.integration_check import GENERATED, IntegrationReport, integration_check
 
 
 @pytest.fixture(scope="module")

@@ -17,9 +17,8 @@ from fractions import Fraction
 import numpy as np
 import pytest
 import sympy as sp
-
-from symbolic.model import Model, Variable
-from symbolic.observability import (
+from gearsym.symbolic.model import Model, Variable
+from gearsym.symbolic.observability import (
     MODULUS,
     BudgetExceeded,
     InputModel,
@@ -703,14 +702,14 @@ NORMAL_FORCES_CONSTANT = {"F_N38": "constant", "F_N05": "constant"}
 
 @pytest.fixture(scope="module")
 def thesis_gearbox():
-    from symbolic.description import load_description
+    from gearsym.symbolic.description import load_description
 
     return load_description(None)
 
 
 @pytest.fixture(scope="module")
 def shift23(thesis_gearbox):
-    from symbolic.drivetrain import shift_model
+    from gearsym.symbolic.drivetrain import shift_model
 
     return shift_model(thesis_gearbox, "2-3", friction_inputs=True)
 
@@ -935,7 +934,7 @@ def test_real_2_3_textbook_rolling_resistance_phi_offset_unobservable(thesis_gea
     # observable at all (rank 7 at every order; orders up to 4 checked here).
     import dataclasses
 
-    from symbolic.drivetrain import shift_model
+    from gearsym.symbolic.drivetrain import shift_model
 
     d = dataclasses.replace(thesis_gearbox, rolling_resistance="textbook")
     model = shift_model(d, "2-3", friction_inputs=True)
@@ -970,7 +969,7 @@ def test_real_2_3_search_confirms_the_hand_derived_drops(shift23_result):
 
 
 def _linear_form_defaults(d, **overrides):
-    from symbolic.drivetrain import drivetrain_parameters, linear_shift_form
+    from gearsym.symbolic.drivetrain import drivetrain_parameters, linear_shift_form
 
     a, b, xs, us = linear_shift_form(d, "2-3")
     values = {v.symbol: sp.Rational(repr(v.default)) for v in drivetrain_parameters(d)}
@@ -1007,9 +1006,8 @@ def test_linear_form_5_1_kalman_rank(thesis_gearbox, measured, overrides, expect
 
 
 def test_factor_polynomial_splits_exactly():
+    from gearsym.symbolic.observability import _drop_constant_lines, _factor_polynomial
     from sympy.polys.rings import ring
-
-    from symbolic.observability import _drop_constant_lines, _factor_polynomial
 
     r, x, y, z, w = ring("x,y,z,w", sp.ZZ)
     parts = [x, x, y * z + 3 * w, z**2 + w**3 + 1, 7 * y * w - 2 * x * z]

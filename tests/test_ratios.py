@@ -6,10 +6,9 @@ from pathlib import Path
 
 import pytest
 import sympy as sp
-
-from symbolic.description import load_description
-from symbolic.ratios import ratio_expressions, ratio_table
-from symbolic.teeth import ToothRanges, fit_teeth, with_teeth
+from gearsym.symbolic.description import load_description
+from gearsym.symbolic.ratios import ratio_expressions, ratio_table
+from gearsym.symbolic.teeth import ToothRanges, fit_teeth, with_teeth
 
 DATA = Path(__file__).parent / "data"
 

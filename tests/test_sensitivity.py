@@ -21,12 +21,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import sympy as sp
-
-from symbolic.description import default_config_text, load_description, parse_description
-from symbolic.drivetrain import shift_model
-from symbolic.errors import GearsymError
-from symbolic.model import Model, Variable
-from symbolic.sensitivity import (
+from gearsym.symbolic.description import default_config_text, load_description, parse_description
+from gearsym.symbolic.drivetrain import shift_model
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.model import Model, Variable
+from gearsym.symbolic.sensitivity import (
     DEFAULT_PARAMETERS,
     select_parameters,
     sensitivity_equations,
@@ -310,7 +309,7 @@ def test_augmented_model(eqs):
 
 
 def test_augmented_model_can_be_emitted(eqs):
-    from symbolic.codegen import build_function_table
+    from gearsym.symbolic.codegen import build_function_table
 
     table = build_function_table(eqs.augmented)
     assert len(table.states) == 24
@@ -368,7 +367,7 @@ def test_cli_bad_parameter_exits_2(capsys, tmp_path):
 def test_linear_ode_closed_form():
     """ẋ = −a x + b u, u = 1, x(0) = x0: x = x0 e^{−at} + (b/a)(1 − e^{−at}),
     ∂x/∂b = (1 − e^{−at})/a, ∂x/∂a = −t x0 e^{−at} − (b/a²)(1 − e^{−at}) + (b/a) t e^{−at}."""
-    from validation.sensitivity_run import Interpolated, integrate_sensitivities
+    from gearsym.validation.sensitivity_run import Interpolated, integrate_sensitivities
 
     x, u, a, b = sp.symbols("x u a b")
     model = Model(
@@ -405,14 +404,14 @@ def test_linear_ode_closed_form():
 
 @pytest.fixture(scope="module")
 def reference():
-    from validation.sensitivity_run import reference_data
+    from gearsym.validation.sensitivity_run import reference_data
 
     return reference_data(load_description())
 
 
 @pytest.fixture(scope="module")
 def setup(reference):
-    from validation.sensitivity_run import (
+    from gearsym.validation.sensitivity_run import (
         Interpolated,
         driven_shift_model,
         driving_inputs,
@@ -438,7 +437,7 @@ def setup(reference):
 
 
 def test_driven_model_reproduces_the_reference(reference):
-    from validation.sensitivity_run import run_sensitivities
+    from gearsym.validation.sensitivity_run import run_sensitivities
 
     run = run_sensitivities(load_description(), data=reference)
     drift = run.drift()
@@ -456,7 +455,10 @@ def test_driven_model_reproduces_the_reference(reference):
 
 def test_finite_differences(reference, setup):
     """Central differences (2 m extra integrations) agree with the integrated (3.7)."""
-    from validation.sensitivity_run import finite_difference_sensitivities, integrate_sensitivities
+    from gearsym.validation.sensitivity_run import (
+        finite_difference_sensitivities,
+        integrate_sensitivities,
+    )
 
     driven, eqs, values, _, inputs, x0 = setup
     t_eval = reference.t[::20]
@@ -472,7 +474,7 @@ def test_finite_differences(reference, setup):
 def test_casadi_forward_mode(reference, setup):
     """CVODES (rtol 1e-12) through CasADi with forward-mode AD, independent of the symbolic
     sensitivity equations, agrees with the integrated (3.7) on the first 0.7 s."""
-    from validation.sensitivity_run import casadi_sensitivities, integrate_sensitivities
+    from gearsym.validation.sensitivity_run import casadi_sensitivities, integrate_sensitivities
 
     driven, eqs, values, u, inputs, x0 = setup
     keep = reference.t <= 0.7

@@ -10,10 +10,9 @@ from __future__ import annotations
 
 import pytest
 import sympy as sp
-
-from symbolic.description import load_description
-from symbolic.drivetrain import adjacent_shifts, linear_shift_form, shift_model, shift_spec
-from symbolic.errors import GearsymError
+from gearsym.symbolic.description import load_description
+from gearsym.symbolic.drivetrain import adjacent_shifts, linear_shift_form, shift_model, shift_spec
+from gearsym.symbolic.errors import GearsymError
 
 d_ss, k_ss, m_veh = sp.symbols("d_ss k_ss m_veh", positive=True)
 

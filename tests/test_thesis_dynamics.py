@@ -10,9 +10,8 @@ from __future__ import annotations
 
 import pytest
 import sympy as sp
-
-from symbolic.description import load_description
-from symbolic.dynamics import gearbox_dynamics
+from gearsym.symbolic.description import load_description
+from gearsym.symbolic.dynamics import gearbox_dynamics
 
 S = sp.Symbol
 

@@ -38,9 +38,8 @@ from typing import Any
 
 import numpy as np
 import sympy as sp
-
-from symbolic.codegen import FunctionSpec, build_function_table, emit_all, file_names
-from symbolic.model import Model
+from gearsym.symbolic.codegen import FunctionSpec, build_function_table, emit_all, file_names
+from gearsym.symbolic.model import Model
 
 STRICT_FLAGS: tuple[str, ...] = (
     "-std=c99",
@@ -484,7 +483,7 @@ class ComparisonReport:
     worst_point: dict[str, int] = field(default_factory=dict)
     extra: dict[str, float] = field(default_factory=dict)
     #: Optional second metric of some functions, allowing for their conditioning (filled by
-    #: :func:`validation.generated_check.conditioned_error`); not part of :meth:`worst`.
+    #: :func:`gearsym.validation.generated_check.conditioned_error`); not part of :meth:`worst`.
     conditioned: dict[str, float] = field(default_factory=dict)
 
     def worst(self) -> float:

@@ -1,6 +1,6 @@
 """Stage 4d: the Fisher-information study of the reference shift (thesis 3.3, Figs. 3.9–3.14).
 
-The output sensitivities of the driven shift model (:mod:`validation.sensitivity_run`) are
+The output sensitivities of the driven shift model (:mod:`gearsym.validation.sensitivity_run`) are
 sampled at the TCU's measurement period, the noise model (3.26) is applied to the outputs (3.31)
 — and, with ``with_wheel_acceleration``, also to the wheel acceleration (3.32) at a larger
 relative error — and the FIM (3.25) is formed per phase of the shift and summed over the whole
@@ -24,16 +24,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from symbolic.defaults import (
+from gearsym.symbolic.defaults import (
     ACCELERATION_ERROR,
     FLOOR_FRACTION,
     GAMMA_MAX,
     SAMPLE_TIME,
     SPEED_ERROR,
 )
-from symbolic.description import GearboxDescription
-from symbolic.fisher import (
+from gearsym.symbolic.description import GearboxDescription
+from gearsym.symbolic.fisher import (
     Elimination,
     FimAnalysis,
     analyse,
@@ -44,14 +43,14 @@ from symbolic.fisher import (
     noise_variances,
     submatrix,
 )
-from validation.sensitivity_run import (
+from gearsym.validation.sensitivity_run import (
     Progress,
     ReferenceData,
     SensitivityRun,
     reference_data,
     run_sensitivities,
 )
-from validation.simulate import Phase
+from gearsym.validation.simulate import Phase
 
 WHEEL_ACCELERATION = "y_domega_C"
 

@@ -17,12 +17,11 @@ from __future__ import annotations
 
 import numpy as np
 import sympy as sp
+from gearsym.symbolic.description import load_description
+from gearsym.symbolic.drivetrain import locked_projection, shift_spec
+from gearsym.symbolic.dynamics import GearboxDynamics, gearbox_dynamics
+from gearsym.symbolic.kinematics import exact
 from scipy.optimize import linprog, lsq_linear
-
-from symbolic.description import load_description
-from symbolic.drivetrain import locked_projection, shift_spec
-from symbolic.dynamics import GearboxDynamics, gearbox_dynamics
-from symbolic.kinematics import exact
 
 #: Printed rows 1–2 of (5.4) (coefficients of d_ss ω2, k_ss φ, d_ss ω_C) and (5.5)
 #: (T_In, T_K38, T_B05), with the number of printed decimals.

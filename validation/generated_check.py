@@ -3,12 +3,12 @@
 :func:`check_tree` runs every check and returns a :class:`TreeReport`:
 
 * every model's C, compiled into one shared library per precision with the strict flags, against
-  SymPy (:func:`validation.c_check.compare_with_sympy`) at ``n_points`` random points, and the
-  emitted CasADi module against SymPy: ≤ 1e-12 in double, ≤ 1e-5 in single;
-* the μ map in C (both precisions) and in CasADi against :class:`symbolic.friction.MuMap`,
+  SymPy (:func:`gearsym.validation.c_check.compare_with_sympy`) at ``n_points`` random points, and
+  the emitted CasADi module against SymPy: ≤ 1e-12 in double, ≤ 1e-5 in single;
+* the μ map in C (both precisions) and in CasADi against :class:`gearsym.symbolic.friction.MuMap`,
   including points outside the grid (clamping) and negative slip;
 * ``main.c`` compiled alone with the strict flags in both precisions, run, exit code 0;
-* with the description, the integration check (:mod:`validation.integration_check`): the
+* with the description, the integration check (:mod:`gearsym.validation.integration_check`): the
   emitted RK4 step converges with order 4, the linearly implicit Euler step with order 1, the
   emitted CVODES integrator matches SciPy's Radau;
 * the ECU rules the compiler can check (no mutable static data, no allocation, no recursion,
@@ -30,12 +30,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from symbolic.codegen import file_names
-from symbolic.description import GearboxDescription
-from symbolic.friction import MuMap
-from symbolic.generate import C_DIR, PYTHON_DIR, EmittedModel, sample_ranges
-from validation import c_check
+from gearsym.symbolic.codegen import file_names
+from gearsym.symbolic.description import GearboxDescription
+from gearsym.symbolic.friction import MuMap
+from gearsym.symbolic.generate import C_DIR, PYTHON_DIR, EmittedModel, sample_ranges
+from gearsym.validation import c_check
 
 CPPCHECK_FLAGS: tuple[str, ...] = (
     "--std=c99",
@@ -137,9 +136,9 @@ def conditioned_error(
 ) -> float:
     """Single-precision error of ``function`` that allows for the function's own conditioning.
 
-    Plain metric (:func:`validation.c_check.mixed_error`): ``e = |c - r| / d``. Where the exact
-    function is ill-conditioned (a cancellation of two nearly equal inputs, e.g. at the ends of
-    the α ramp of the friction model, where |z| ≈ z_ba or z_ss), no float evaluation can meet
+    Plain metric (:func:`gearsym.validation.c_check.mixed_error`): ``e = |c - r| / d``. Where the
+    exact function is ill-conditioned (a cancellation of two nearly equal inputs, e.g. at the ends
+    of the α ramp of the friction model, where |z| ≈ z_ba or z_ss), no float evaluation can meet
     1e-5: rounding any intermediate moves the result by κ ε. This metric measures that spread
     ``s`` directly: the largest change of the exact (double) reference when every input moves by
     :data:`PERTURBATION_ULPS` float ulps, over ``n_perturbations`` random perturbations, and
@@ -450,8 +449,8 @@ def check_tree(
     ``models`` and ``mu_map`` are what the files were generated from. Build products go to
     ``build_dir``, never into ``root``. ``tools=False`` skips cppcheck and the cross compiler.
     With ``description`` (the gearbox of ``models``) the integration check runs too
-    (:mod:`validation.integration_check`: RK4 order 4, linearly implicit Euler order 1, CVODES,
-    on the 2-3 shift or else the first shift model).
+    (:mod:`gearsym.validation.integration_check`: RK4 order 4, linearly implicit Euler order 1,
+    CVODES, on the 2-3 shift or else the first shift model).
     """
     say = progress or (lambda message: None)
     report = TreeReport()
@@ -503,7 +502,7 @@ def _integration(
     d: GearboxDescription, models: Sequence[EmittedModel], root: Path, build_dir: Path
 ) -> tuple[list[str], list[str]]:
     """Report lines and failures of the integration check on the example's shift."""
-    from validation.integration_check import integration_check
+    from gearsym.validation.integration_check import integration_check
 
     shifts = [m.shift.name for m in models if m.shift is not None]
     if not shifts:

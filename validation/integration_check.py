@@ -17,14 +17,14 @@ ctypes; the CasADi module imported from its file):
 3. **CVODES** (the emitted ``held_input_simulator()``: the emitted ``integrator(h)`` chained over
    the held samples) on the same problem as 1, against the same Radau reference.
 
-And, when a reference simulation is available (:func:`validation.simulate.simulate`), a
+And, when a reference simulation is available (:func:`gearsym.validation.simulate.simulate`), a
 **replay**: the emitted ``gearsym_shift_2_3_rk4_step`` (element torques as inputs) driven through
 the speed phase of the simulated shift by the recorded engine and element torques (held at each
 step's midpoint), compared with the recorded speeds; this measures the shift model (2.55)–(2.58)
 plus the step against the full reference model with friction states.
 
 :func:`integration_check` runs 1–3 (and 4 with ``replay=True``) and returns an
-:class:`IntegrationReport`; ``python -m validation.integration_check`` prints it.
+:class:`IntegrationReport`; ``python -m gearsym.validation.integration_check`` prints it.
 """
 
 from __future__ import annotations
@@ -39,13 +39,12 @@ from typing import Any
 
 import numpy as np
 import sympy as sp
+from gearsym.symbolic.codegen import file_names
+from gearsym.symbolic.description import GearboxDescription, load_description
+from gearsym.symbolic.drivetrain import full_model, shift_model
+from gearsym.symbolic.model import Model
+from gearsym.validation import c_check
 from scipy.integrate import solve_ivp
-
-from symbolic.codegen import file_names
-from symbolic.description import GearboxDescription, load_description
-from symbolic.drivetrain import full_model, shift_model
-from symbolic.model import Model
-from validation import c_check
 
 REPO = Path(__file__).resolve().parents[1]
 GENERATED = REPO / "generated"
@@ -173,7 +172,7 @@ def smooth_inputs(model: Model, t_ramp: float = T_END) -> Callable[[float], np.n
 
 def initial_state(d: GearboxDescription, model: Model, gear: str, speed: float) -> np.ndarray:
     """Every shaft state at the speeds of ``gear`` at vehicle speed ``speed`` [m/s]."""
-    from symbolic.ratios import gear_motions, stationary_ratios
+    from gearsym.symbolic.ratios import gear_motions, stationary_ratios
 
     r_dyn = float(d.vehicle["r_dyn"].value)
     i_d = float(d.drivetrain["i_D"].value)
@@ -387,7 +386,7 @@ def replay_reference(
 ) -> ReplayReport:
     """Drive the emitted ``shift_<a>_<b>`` (torque inputs) through the speed phase of the
     reference simulation with its recorded torques; compare with its recorded states."""
-    from validation.simulate import simulate
+    from gearsym.validation.simulate import simulate
 
     result = simulate(d, check_models=False)
     phase = next(p for p in result.phases if p.name == "speed phase")

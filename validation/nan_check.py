@@ -12,7 +12,7 @@ allocated with its exact size, so ASan sees any write past it. A sanitizer repor
 exit fails the run.
 
 What the driver prints is judged against rules derived from IEEE 754 and the model's own
-expressions (:func:`validation.c_check.reference_matrices`), never from the emitted code:
+expressions (:func:`gearsym.validation.c_check.reference_matrices`), never from the emitted code:
 
 * NaN contract, expression functions: with one NaN argument entry (nominal base point), every
   output entry whose expression is NaN-strict in that entry (:func:`nan_strict_symbols`) is NaN;
@@ -41,11 +41,10 @@ from types import ModuleType
 
 import numpy as np
 import sympy as sp
-
-from symbolic.codegen import _float_repr, file_names, has_implicit_step
-from symbolic.friction import MuMap
-from symbolic.model import Model
-from validation import c_check
+from gearsym.symbolic.codegen import _float_repr, file_names, has_implicit_step
+from gearsym.symbolic.friction import MuMap
+from gearsym.symbolic.model import Model
+from gearsym.validation import c_check
 
 SANITIZE_FLAGS: tuple[str, ...] = (
     "-fsanitize=address,undefined",

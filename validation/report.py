@@ -1,7 +1,7 @@
 """Write a simulation's results: time series (CSV), phases, energy audit, checks and plots.
 
-Commands write through :class:`symbolic.output_dir.OutputDir` (a staging folder swapped in only
-when complete), so a failure leaves no half-written output.
+Commands write through :class:`gearsym.symbolic.output_dir.OutputDir` (a staging folder swapped in
+only when complete), so a failure leaves no half-written output.
 """
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ import json
 from pathlib import Path
 from typing import Any
 
-from symbolic.description import GearboxDescription
-from symbolic.output_dir import OutputDir
-from validation.simulate import SimulationResult
+from gearsym.symbolic.description import GearboxDescription
+from gearsym.symbolic.output_dir import OutputDir
+from gearsym.validation.simulate import SimulationResult
 
 
 def summary(result: SimulationResult) -> dict[str, Any]:

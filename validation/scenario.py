@@ -32,12 +32,11 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
-
-from symbolic.defaults import RECORD_SAMPLE_TIME as SAMPLE_TIME
-from symbolic.description import GearboxDescription
-from symbolic.drivetrain import ShiftSpec, shift_spec
-from symbolic.errors import GearsymError
-from symbolic.input_files import parse_toml, read_text, shown, unknown_key_reason
+from gearsym.symbolic.defaults import RECORD_SAMPLE_TIME as SAMPLE_TIME
+from gearsym.symbolic.description import GearboxDescription
+from gearsym.symbolic.drivetrain import ShiftSpec, shift_spec
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.input_files import parse_toml, read_text, shown, unknown_key_reason
 
 DEFAULT_SCENARIO = "scenario_2_3.toml"
 

@@ -1,8 +1,8 @@
 """Stage 4b: sensitivities along the reference shift (thesis 3.2–3.4, Figures 3.4–3.8).
 
 The 2↔3 shift model (2.55)–(2.58) is driven open-loop by the signals the reference simulation
-(:mod:`validation.simulate`) recorded, from the recorded initial state, and integrated together
-with its sensitivity ODE (3.7) (:mod:`symbolic.sensitivity`).
+(:mod:`gearsym.validation.simulate`) recorded, from the recorded initial state, and integrated
+together with its sensitivity ODE (3.7) (:mod:`gearsym.symbolic.sensitivity`).
 
 How the recorded element torques drive the shift model (the *driven* shift model): each
 swapping element's torque is the recorded transmitted torque T_e (sign of 2.36), split in two
@@ -36,26 +36,25 @@ from typing import Any
 
 import numpy as np
 import sympy as sp
-
-from symbolic import naming
-from symbolic.defaults import SLIDING_MODES, SLIDING_PHASES
-from symbolic.description import GearboxDescription
-from symbolic.drivetrain import (
+from gearsym.symbolic import naming
+from gearsym.symbolic.defaults import SLIDING_MODES, SLIDING_PHASES
+from gearsym.symbolic.description import GearboxDescription
+from gearsym.symbolic.drivetrain import (
     ShiftSpec,
     element_short_name,
     power_on_slip_signs,
     shift_model,
     shift_spec,
 )
-from symbolic.errors import GearsymError
-from symbolic.model import Model, Variable
-from symbolic.numeric import to_casadi
-from symbolic.sensitivity import (
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.model import Model, Variable
+from gearsym.symbolic.numeric import to_casadi
+from gearsym.symbolic.sensitivity import (
     SensitivityEquations,
     sensitivity_equations,
     stationary_initial_sensitivity,
 )
-from validation.simulate import Phase
+from gearsym.validation.simulate import Phase
 
 #: Reference scale of parameters whose nominal value is zero, for the normalisation (3.3) and
 #: the normalised scatter (3.27): the road grade ζ is 0 on a level road, so a 5 % grade
@@ -100,11 +99,12 @@ def reference_data(
     scenario: Any = None,
     progress: Progress | None = None,
 ) -> ReferenceData:
-    """Run the reference simulation (:func:`validation.simulate.simulate`) and keep its record.
+    """Run the reference simulation (:func:`gearsym.validation.simulate.simulate`) and keep its
+    record.
 
-    ``scenario`` is a :class:`validation.scenario.Scenario` (default: the built-in one).
+    ``scenario`` is a :class:`gearsym.validation.scenario.Scenario` (default: the built-in one).
     """
-    from validation.simulate import simulate
+    from gearsym.validation.simulate import simulate
 
     kwargs: dict[str, Any] = {}
     if progress is not None:
@@ -115,14 +115,15 @@ def reference_data(
 
 
 def reference_from_result(result: Any) -> ReferenceData:
-    """The record of a :class:`validation.simulate.SimulationResult` (t, signals, phases)."""
+    """The record of a :class:`gearsym.validation.simulate.SimulationResult` (t, signals,
+    phases)."""
     shift = getattr(getattr(result, "scenario", None), "shift", None)
     return ReferenceData(
         t=np.asarray(result.t, dtype=float),
         signals={k: np.asarray(v, dtype=float) for k, v in result.signals.items()},
         phases=tuple(result.phases),
         shift=shift.name if shift is not None else "2-3",
-        source="validation.simulate",
+        source="gearsym.validation.simulate",
     )
 
 
@@ -444,7 +445,7 @@ def initial_sensitivities(
 ) -> np.ndarray:
     """S(t0), n × m: zero (``"zero"``: x(t0) known independently of p), or consistent with the
     quasi-static start of the reference (``"stationary"``: φ solves φ̈ = 0, the speeds are
-    given; :func:`symbolic.sensitivity.stationary_initial_sensitivity`)."""
+    given; :func:`gearsym.symbolic.sensitivity.stationary_initial_sensitivity`)."""
     n, m = len(eqs.model.states), len(eqs.parameters)
     if initial == "zero":
         return np.zeros((n, m))
@@ -506,7 +507,7 @@ def casadi_sensitivities(
     inputs linear in time (as :class:`Interpolated`), chained with ``mapaccum``, and the
     Jacobian with respect to the parameters by forward-mode AD through the integrators.
 
-    Independent of :mod:`symbolic.sensitivity`: it uses only ``model.rhs``. Returns
+    Independent of :mod:`gearsym.symbolic.sensitivity`: it uses only ``model.rhs``. Returns
     (x (N, n), S (N, n, m)) with S(t0) = 0.
     """
     import casadi as ca

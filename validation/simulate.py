@@ -1,6 +1,6 @@
 """Reference simulation of a shift (thesis 3.1), its phases, energy audit and model checks.
 
-The reference model (:mod:`symbolic.reference`) is the full gearbox (2.39) with the elastic
+The reference model (:mod:`gearsym.symbolic.reference`) is the full gearbox (2.39) with the elastic
 drivetrain (2.42–2.53) and one elasto-plastic friction state per pressed element (2.66)–(2.70).
 It is integrated with SciPy's Radau (stiff, implicit, order 5) and the analytic Jacobian from
 SymPy, restarting at every breakpoint of the scenario's piecewise-linear inputs. μ comes from the
@@ -28,23 +28,22 @@ from typing import Any
 
 import numpy as np
 import sympy as sp
-from scipy.integrate import solve_ivp
-from scipy.interpolate import CubicHermiteSpline, RectBivariateSpline
-
-from symbolic import naming
-from symbolic.description import GearboxDescription
-from symbolic.drivetrain import (
+from gearsym.symbolic import naming
+from gearsym.symbolic.description import GearboxDescription
+from gearsym.symbolic.drivetrain import (
     drivetrain_model,
     element_short_name,
     quantity,
     shift_model,
 )
-from symbolic.errors import GearsymError
-from symbolic.friction import DEFAULT_MU_MAP, T_SS_MIN, MuMap
-from symbolic.model import Model
-from symbolic.numeric import bilinear, casadi_function, integrate_linear_inputs, to_casadi
-from symbolic.reference import ReferenceModel, reference_model
-from validation.scenario import SAMPLE_TIME, Scenario, load_scenario
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.friction import DEFAULT_MU_MAP, T_SS_MIN, MuMap
+from gearsym.symbolic.model import Model
+from gearsym.symbolic.numeric import bilinear, casadi_function, integrate_linear_inputs, to_casadi
+from gearsym.symbolic.reference import ReferenceModel, reference_model
+from gearsym.validation.scenario import SAMPLE_TIME, Scenario, load_scenario
+from scipy.integrate import solve_ivp
+from scipy.interpolate import CubicHermiteSpline, RectBivariateSpline
 
 #: Progress callback: (fraction done in [0, 1], message).
 Progress = Callable[[float, str], None]
@@ -391,7 +390,7 @@ def _sliding_bristles(
 
 def _gear_speeds(d: GearboxDescription, gear: str, omega_out: float) -> dict[str, float]:
     """Every shaft's speed in a gear at the given output speed (kinematics only)."""
-    from symbolic.drivetrain import drivetrain_parts
+    from gearsym.symbolic.drivetrain import drivetrain_parts
 
     parts = drivetrain_parts(d, locked=tuple(d.gear(gear).closed), keep=(d.output_shaft,))
     out = parts.speeds[0]
@@ -744,7 +743,7 @@ def detect_phases(
     ratio = signals[naming.RATIO]
     r_from = d.gear(spec.from_gear)
     r_to = d.gear(spec.to_gear)
-    from symbolic.ratios import gear_ratio
+    from gearsym.symbolic.ratios import gear_ratio
 
     ratio_from = float(gear_ratio(d, r_from).ratio)
     ratio_to = float(gear_ratio(d, r_to).ratio)
