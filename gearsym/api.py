@@ -1,0 +1,124 @@
+"""The notebook API: one object per gearbox, thin calls into the library.
+
+>>> import gearsym
+>>> box = gearsym.load()                      # the built-in thesis gearbox (or a TOML path)
+>>> box.ratios()["2"]                         # Table 2.1
+3.2432...
+>>> model = box.shift_model("2-3")            # (2.55)-(2.58), the IR every analysis consumes
+>>> result = box.simulate()                   # reference simulation (thesis 3.1)
+>>> study = box.fim(result=result)            # Fisher information per phase (3.25)
+>>> tree = box.generate()                     # emitted C and CasADi, in memory
+>>> box.generate("out/code")                  # written through the one output writer
+
+Everything here is what the command line does, without printing: the CLI modules parse and
+print, this module calls, the library computes. Heavy modules are imported on first use, so
+``import gearsym`` stays light.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+__all__ = ["Gearbox", "load"]
+
+
+def load(path: str | Path | None = None) -> Gearbox:
+    """The gearbox described by the TOML file ``path`` (default: the built-in one). Bad input
+    raises :class:`gearsym.symbolic.errors.GearsymError` (one line: file, key, reason)."""
+    from gearsym.symbolic.description import load_description
+
+    return Gearbox(load_description(None if path is None else str(path)))
+
+
+@dataclass(frozen=True)
+class Gearbox:
+    """A checked gearbox description and the analyses of it."""
+
+    description: Any  # gearsym.symbolic.description.GearboxDescription
+
+    @property
+    def name(self) -> str:
+        return str(self.description.name)
+
+    def ratios(self) -> dict[str, float | None]:
+        """ω_in/ω_out of every gear (None for a neutral), derived from the teeth (Table 2.1)."""
+        from gearsym.symbolic.ratios import ratio_table
+
+        return {
+            r.gear: (None if r.ratio is None else float(r.ratio))
+            for r in ratio_table(self.description)
+        }
+
+    def full_model(self, with_wheel_acceleration: bool = False) -> Any:
+        """The full model (2.53): every element torque an input."""
+        from gearsym.symbolic.drivetrain import full_model
+
+        return full_model(self.description, with_wheel_acceleration=with_wheel_acceleration)
+
+    def shift_model(
+        self, shift: str, friction_inputs: bool = False, with_wheel_acceleration: bool = False
+    ) -> Any:
+        """The reduced model of a shift (2.55)-(2.58), e.g. ``"2-3"``; with
+        ``friction_inputs`` the element torques are μ·F_N (3.14) with F_N as inputs."""
+        from gearsym.symbolic.drivetrain import shift_model
+
+        return shift_model(
+            self.description,
+            shift,
+            with_wheel_acceleration=with_wheel_acceleration,
+            friction_inputs=friction_inputs,
+        )
+
+    def scenario(self, path: str | Path | None = None) -> Any:
+        """A shift scenario (default: the built-in 2-3 power-on upshift)."""
+        from gearsym.validation.scenario import load_scenario
+
+        return load_scenario(self.description, path)
+
+    def simulate(self, scenario: Any = None, **options: Any) -> Any:
+        """Reference simulation (thesis 3.1): ``scenario`` a path or a loaded scenario;
+        ``options`` go to :func:`gearsym.validation.simulate.simulate` (``method``, ``rtol``,
+        ``sample_time``, ``check_models``, ``progress``)."""
+        from gearsym.validation.simulate import simulate
+
+        if scenario is None or isinstance(scenario, str | Path):
+            scenario = self.scenario(scenario)
+        return simulate(self.description, scenario, **options)
+
+    def sensitivities(
+        self, parameters: list[str] | None = None, result: Any = None, **options: Any
+    ) -> Any:
+        """Sensitivities (3.5)-(3.7) along the reference shift (``result`` reuses a
+        simulation; default parameters: the thesis' set (3.2) for the shift)."""
+        from gearsym.validation.sensitivity_run import reference_from_result, run_sensitivities
+
+        data = reference_from_result(result) if result is not None else None
+        return run_sensitivities(self.description, parameters, data=data, **options)
+
+    def fim(self, parameters: list[str] | None = None, result: Any = None, **options: Any) -> Any:
+        """Fisher information (3.25) per phase; by default each phase counts only what it
+        reveals itself (``restart=False``: the thesis' continuous view, labelled)."""
+        from gearsym.validation.fisher import fim_study
+        from gearsym.validation.sensitivity_run import reference_from_result
+
+        data = reference_from_result(result) if result is not None else None
+        return fim_study(self.description, parameters, data=data, **options)
+
+    def generate(self, out: str | Path | None = None) -> Any:
+        """The emitted C and CasADi tree (``GeneratedTree``: files by relative path, models).
+        With ``out``, also written there through the one output writer (atomic; never over a
+        folder gearsym did not write)."""
+        from gearsym.symbolic.generate import generate_tree
+        from gearsym.symbolic.output_dir import OutputDir
+
+        tree = generate_tree(self.description)
+        if out is not None:
+            with OutputDir(out, "generate") as staged:
+                for relative, text in sorted(tree.files.items()):
+                    path = staged.path / relative
+                    path.parent.mkdir(parents=True, exist_ok=True)
+                    path.write_text(text, encoding="utf-8", newline="\n")
+                staged.commit()
+        return tree
