@@ -348,10 +348,7 @@ def summary_lines(study: FimStudy) -> list[str]:
 def plot_scatter(study: FimStudy, out_dir: Path) -> list[Path]:
     """Bar charts like Figures 3.9–3.14: normalised scatter γ_j of each parameter combination,
     with and without ω̇_C as a measured output, the limit γ_max dashed (log scale)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from gearsym.validation.figures import save, subplots
 
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = []
@@ -359,15 +356,13 @@ def plot_scatter(study: FimStudy, out_dir: Path) -> list[Path]:
         first = window.results[0]
         combos = [first.full] + list(first.combinations)
         for c, analysis in enumerate(combos):
-            fig, ax = plt.subplots(figsize=(6, 3.6))
+            fig, ax = subplots(1, 1, (6, 3.6), {"left": 0.12, "bottom": 0.1, "top": 0.9})
             width = 0.8 / len(window.results)
             positions = np.arange(len(analysis.names))
             for r, result in enumerate(window.results):
                 chosen = result.full if c == 0 else result.combinations[c - 1]
                 values = np.where(np.isfinite(chosen.gamma), chosen.gamma, np.nan)
-                label = (
-                    r"with $\dot\omega_C$" if len(result.outputs) > 3 else r"without $\dot\omega_C$"
-                )
+                label = "with dω_C/dt" if len(result.outputs) > 3 else "without dω_C/dt"
                 bars = ax.bar(
                     positions + (r - (len(window.results) - 1) / 2) * width,
                     values,
@@ -383,9 +378,7 @@ def plot_scatter(study: FimStudy, out_dir: Path) -> list[Path]:
                             fontsize=7,
                             rotation=90,
                         )
-            ax.axhline(
-                study.settings["gamma_max"], color="k", ls="--", lw=0.8, label=r"$\gamma_{max}$"
-            )
+            ax.axhline(study.settings["gamma_max"], color="k", ls="--", lw=0.8, label="γ_max")
             ax.set_yscale("log")
             ax.set_xticks(positions, analysis.names)
             ax.set_ylabel("normalised scatter γ (3.27)")
@@ -394,11 +387,8 @@ def plot_scatter(study: FimStudy, out_dir: Path) -> list[Path]:
                 f"{window.name}: {kind} estimation of {', '.join(analysis.names)}", fontsize=9
             )
             ax.legend(fontsize=7)
-            ax.grid(True, axis="y", lw=0.3)
-            fig.tight_layout()
+            ax.grid(False, axis="x")
             slug = window.name.replace(" ", "_")
             path = out_dir / f"fim_{w}_{slug}_{'_'.join(analysis.names)}.png"
-            fig.savefig(path, dpi=120)
-            plt.close(fig)
-            paths.append(path)
+            paths.append(save(fig, path, dpi=120))
     return paths

@@ -79,10 +79,7 @@ def _write_all(
 def plot_shift(d: GearboxDescription, result: SimulationResult, folder: Path) -> list[str]:
     """Figures 3.1–3.3 of the thesis: speeds and twist; accelerations; torques, slips, T_In
     and T_res. Phase boundaries are drawn as vertical lines."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from gearsym.validation.figures import save, subplots
 
     s, t = result.signals, result.t
     spec = result.scenario.shift
@@ -96,7 +93,8 @@ def plot_shift(d: GearboxDescription, result: SimulationResult, folder: Path) ->
             ax.text((p.t_start + p.t_end) / 2, ymax, p.name, ha="center", va="bottom", fontsize=7)
 
     names = []
-    fig, axes = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True)
+    two_rows = {"top": 0.9, "bottom": 0.08, "hspace": 0.12, "left": 0.1}
+    fig, axes = subplots(2, 1, (8, 6.5), two_rows, sharex=True)
     for key in measured:
         axes[0].plot(t, s[key], label=f"ω_{key.removeprefix('omega_')}")
     axes[0].plot(t, s["omega_C"], label="ω_C (wheel)")
@@ -107,12 +105,10 @@ def plot_shift(d: GearboxDescription, result: SimulationResult, folder: Path) ->
     axes[1].set_ylabel("side-shaft twist φ / rad")
     axes[1].set_xlabel("t / s")
     fig.suptitle(f"{result.scenario.name}: speeds and side-shaft twist (cf. thesis Fig. 3.1)")
-    fig.tight_layout()
-    fig.savefig(folder / "fig_3_1_speeds.png", dpi=110)
-    plt.close(fig)
+    save(fig, folder / "fig_3_1_speeds.png")
     names.append("fig_3_1_speeds.png")
 
-    fig, ax = plt.subplots(figsize=(8, 4.5))
+    fig, ax = subplots(1, 1, (8, 4.5), {"top": 0.88, "bottom": 0.11, "left": 0.1})
     for key in [f"d{m}" for m in measured] + ["domega_C"]:
         if key in s:
             ax.plot(t, s[key], label=f"dω_{key.removeprefix('domega_')}/dt")
@@ -121,12 +117,10 @@ def plot_shift(d: GearboxDescription, result: SimulationResult, folder: Path) ->
     ax.legend(fontsize=8, ncol=2)
     phases(ax)
     ax.set_title("accelerations (cf. thesis Fig. 3.2)")
-    fig.tight_layout()
-    fig.savefig(folder / "fig_3_2_accelerations.png", dpi=110)
-    plt.close(fig)
+    save(fig, folder / "fig_3_2_accelerations.png")
     names.append("fig_3_2_accelerations.png")
 
-    fig, axes = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True)
+    fig, axes = subplots(2, 1, (8, 6.5), two_rows, sharex=True)
     for e in (spec.off_going, spec.on_coming):
         axes[0].plot(t, s[f"T_{e}"], label=f"T_{e}")
     axes[0].plot(t, s["T_In"], label="T_In", color="k")
@@ -140,9 +134,7 @@ def plot_shift(d: GearboxDescription, result: SimulationResult, folder: Path) ->
     axes[1].set_xlabel("t / s")
     axes[1].legend(fontsize=8)
     fig.suptitle("transmitted torques, slip speeds, T_In and T_res (cf. thesis Fig. 3.3)")
-    fig.tight_layout()
-    fig.savefig(folder / "fig_3_3_torques.png", dpi=110)
-    plt.close(fig)
+    save(fig, folder / "fig_3_3_torques.png")
     names.append("fig_3_3_torques.png")
     return names
 

@@ -701,45 +701,45 @@ def phase_of(phases: Sequence[Phase], t: float) -> str:
     return ""
 
 
+# plain Unicode labels: mathtext parsing and rendering was a large share of the plotting time
 STATE_LABELS = {
-    "omega_1": r"$\omega_1$",
-    "omega_2": r"$\omega_2$",
-    "phi": r"$\varphi$",
-    "omega_C": r"$\omega_C$",
+    "omega_1": "ω₁",
+    "omega_2": "ω₂",
+    "phi": "φ",
+    "omega_C": "ω_C",
 }
 PARAMETER_LABELS = {
-    "m_veh": r"$m_\mathrm{veh}$",
-    "k_ss": r"$k_\mathrm{ss}$",
-    "d_ss": r"$d_\mathrm{ss}$",
-    "mu_38": r"$\mu_{38}$",
-    "mu_05": r"$\mu_{05}$",
-    "zeta": r"$\zeta$",
+    "m_veh": "m_veh",
+    "k_ss": "k_ss",
+    "d_ss": "d_ss",
+    "mu_38": "μ₃₈",
+    "mu_05": "μ₀₅",
+    "zeta": "ζ",
 }
 
 
 def plot_sensitivities(run: SensitivityRun, out_dir: Path) -> list[Path]:
     """One PNG per parameter like Figures 3.4–3.8: normalised sensitivities S_N (3.3) of every
     state (left) and their time derivatives (right), phases marked."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from gearsym.validation.figures import save, subplots
 
     out_dir.mkdir(parents=True, exist_ok=True)
     tr = run.trajectory
     norm, rate = run.normalised, run.normalised_rate
     paths = []
+    margins = {"left": 0.09, "right": 0.98, "bottom": 0.07, "top": 0.88, "hspace": 0.15}
     for j, p in enumerate(tr.parameter_names):
-        fig, axes = plt.subplots(len(tr.state_names), 2, figsize=(10, 8), sharex=True)
+        fig, axes = subplots(
+            len(tr.state_names), 2, (10, 8), margins | {"wspace": 0.28}, sharex=True, squeeze=False
+        )
         for i, x in enumerate(tr.state_names):
             label = STATE_LABELS.get(x, x)
             for col, (data, what) in enumerate(
-                ((norm[:, i, j], r"$S_N$"), (rate[:, i, j], r"$\dot S_N$ in 1/s"))
+                ((norm[:, i, j], "S_N"), (rate[:, i, j], "dS_N/dt in 1/s"))
             ):
                 ax = axes[i, col]
                 ax.plot(tr.t, data, lw=1.0)
                 ax.set_ylabel(f"{what} {label}")
-                ax.grid(True, lw=0.3)
                 for phase in run.phases[1:]:
                     ax.axvline(phase.t_start, color="0.5", lw=0.6, ls="--")
         for col in range(2):
@@ -758,9 +758,5 @@ def plot_sensitivities(run: SensitivityRun, out_dir: Path) -> list[Path]:
             f"{PARAMETER_LABELS.get(p, p)} (p0 = {run.scales[j]:g})",
             fontsize=10,
         )
-        fig.tight_layout()
-        path = out_dir / f"sensitivity_{p}.png"
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        paths.append(path)
+        paths.append(save(fig, out_dir / f"sensitivity_{p}.png", dpi=120))
     return paths
