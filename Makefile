@@ -1,18 +1,32 @@
 # Quick start: `make run` (main job on the built-in gearbox) and `make test` (lint + tests).
-# Both create .venv and install gearsym with pinned dependencies on first use.
+# Both create .venv and install gearsym with pinned dependencies on first use: every package
+# of the tree at the version in requirements.lock (`make lock` re-resolves it from the pins in
+# pyproject.toml).
 PYTHON ?= python3.11
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test lint format bench fuzz clean
+PIP    := pip==26.3
 
-$(STAMP): pyproject.toml
+.PHONY: run test lint format bench fuzz lock clean
+
+$(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null || { echo "make: $(PYTHON) not found (need Python 3.11+; set PYTHON=...)"; exit 2; }
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[dev]'
+	$(BIN)/pip install --quiet '$(PIP)'
+	$(BIN)/pip install --quiet -r requirements.lock
+	$(BIN)/pip install --quiet --no-deps -e .
 	@touch $(STAMP)
+
+# Re-resolve the whole dependency tree from pyproject.toml into requirements.lock.
+lock:
+	rm -rf .lock-venv
+	$(PYTHON) -m venv .lock-venv
+	.lock-venv/bin/pip install --quiet '$(PIP)'
+	.lock-venv/bin/pip install --quiet -e '.[dev]'
+	.lock-venv/bin/pip freeze --exclude-editable > requirements.lock
+	rm -rf .lock-venv
 
 run: $(STAMP)
 	$(BIN)/gearsym run
@@ -36,4 +50,4 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/run_all.py
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache
+	rm -rf $(VENV) .lock-venv build *.egg-info .pytest_cache .ruff_cache
