@@ -48,7 +48,7 @@ from gearsym.symbolic.drivetrain import (
 )
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.model import Model, Variable
-from gearsym.symbolic.numeric import to_casadi
+from gearsym.symbolic.numeric import casadi_function, to_casadi
 from gearsym.symbolic.sensitivity import (
     SensitivityEquations,
     sensitivity_equations,
@@ -285,32 +285,59 @@ def nominal_scales(names: Sequence[str], values: Mapping[str, float]) -> np.ndar
     return np.array(scales)
 
 
-def _floats(expr: sp.Expr) -> sp.Expr:
-    """Replace exact rationals by doubles (lambdified code then needs no big-integer math)."""
-    reps = {r: sp.Float(r, 17) for r in expr.atoms(sp.Rational) if not r.is_Integer}
-    return expr.xreplace(reps)
-
-
 class CompiledModel:
-    """Lambdified f(x, u, p) and h(x, u, p) of a model (NumPy, common subexpressions)."""
+    """f(x, u, p) and h(x, u, p) of a model as CasADi functions (one translation through
+    :func:`gearsym.symbolic.numeric.casadi_function`), and the fixed-step integrator built on
+    them."""
 
     def __init__(self, model: Model) -> None:
         self.model = model
-        args = [model.state_symbols, model.input_symbols, model.parameter_symbols]
-        self._f = sp.lambdify(args, [_floats(e) for e in model.rhs], modules="math", cse=True)
-        self._h = sp.lambdify(
-            args, [_floats(e) for e in model.output_expressions], modules="math", cse=True
-        )
+        groups = [
+            ("x", model.state_symbols),
+            ("u", model.input_symbols),
+            ("p", model.parameter_symbols),
+        ]
+        self._f = casadi_function("f", groups, [("xdot", model.rhs)])
+        self._h = casadi_function("h", groups, [("y", model.output_expressions)])
         self.parameter_names = [v.name for v in model.parameters]
+        self._step: Any = None
 
     def parameters(self, values: Mapping[str, float]) -> list[float]:
         return [float(values[n]) for n in self.parameter_names]
 
     def f(self, x: Sequence[float], u: Sequence[float], p: Sequence[float]) -> np.ndarray:
-        return np.array(self._f(x, u, p), dtype=float)
+        return np.asarray(self._f(x, u, p).full(), dtype=float).ravel()
 
     def h(self, x: Sequence[float], u: Sequence[float], p: Sequence[float]) -> np.ndarray:
-        return np.array(self._h(x, u, p), dtype=float)
+        return np.asarray(self._h(x, u, p).full(), dtype=float).ravel()
+
+    def f_many(self, x: np.ndarray, u: np.ndarray, p: Sequence[float]) -> np.ndarray:
+        """f at N points (x: N × n, u: N × nu): N × n."""
+        out = self._f.map(len(x))(x.T, u.T, np.asarray(p, dtype=float))
+        return np.asarray(out.full(), dtype=float).T
+
+    def h_many(self, x: np.ndarray, u: np.ndarray, p: Sequence[float]) -> np.ndarray:
+        out = self._h.map(len(x))(x.T, u.T, np.asarray(p, dtype=float))
+        return np.asarray(out.full(), dtype=float).T
+
+    def rk8_step(self) -> Any:
+        """One step of the 8th-order Dormand–Prince method (SciPy's public ``DOP853``
+        tableau) with u linear over the step: (x, u_start, u_end, h, p) → x_next."""
+        if self._step is None:
+            import casadi as ca
+            from scipy.integrate import DOP853
+
+            a, b, c = DOP853.A, DOP853.B, DOP853.C
+            n, nu, npar = self._f.size1_in(0), self._f.size1_in(1), self._f.size1_in(2)
+            x, ua, ub = ca.SX.sym("x", n), ca.SX.sym("ua", nu), ca.SX.sym("ub", nu)
+            h, p = ca.SX.sym("h"), ca.SX.sym("p", npar)
+            stages: list[Any] = []
+            for i in range(len(b)):
+                xi = x + h * sum((float(a[i, j]) * stages[j] for j in range(i)), ca.SX(n, 1))
+                stages.append(self._f(xi, ua + float(c[i]) * (ub - ua), p))
+            x_next = x + h * sum((float(b[i]) * stages[i] for i in range(len(b))), ca.SX(n, 1))
+            self._step = ca.Function("rk8_step", [x, ua, ub, h, p], [x_next])
+        return self._step
 
 
 class Interpolated:
@@ -329,13 +356,10 @@ class Interpolated:
             return self.u[-1]
         return self.u[k] + (t - self.t[k]) * self._slope[k]
 
-
-def _dop853_tableau() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    # The 8th-order Dormand–Prince tableau (Hairer, Nørsett, Wanner) as SciPy ships it.
-    from scipy.integrate._ivp import dop853_coefficients as c
-
-    n = c.N_STAGES
-    return c.A[:n, :n], c.B, c.C[:n]
+    def many(self, times: np.ndarray) -> np.ndarray:
+        """u at many times (N × nu), the same interpolation, vectorised."""
+        columns = [np.interp(times, self.t, self.u[:, k]) for k in range(self.u.shape[1])]
+        return np.column_stack(columns) if columns else np.zeros((len(times), 0))
 
 
 def integrate(
@@ -353,30 +377,33 @@ def integrate(
     the piecewise-linear inputs are smooth inside every step, so the method keeps its order
     (an adaptive solver stepping across the input kinks loses it). Applied to the augmented
     system [x; S] the steps are the exact derivative of the same steps applied to x, so finite
-    differences of :func:`integrate` converge to the integrated sensitivities.
+    differences of :func:`integrate` converge to the integrated sensitivities. The steps run
+    in CasADi (one step function, chained with ``mapaccum``), not in a Python loop.
     """
-    a_matrix, b, c = _dop853_tableau()
     p = compiled.parameters(values)
-    f = compiled._f
     t_eval = np.asarray(t_eval, dtype=float)
     nodes = inputs.t[(inputs.t > t_eval[0]) & (inputs.t < t_eval[-1])]
     grid = np.union1d(t_eval, nodes)
     wanted = np.searchsorted(grid, t_eval)
-    out = np.empty((len(grid), len(x0)))
-    x = np.asarray(x0, dtype=float).copy()
-    out[0] = x
-    stages = np.empty((len(b), len(x)))
+    starts, widths, ends = [], [], np.zeros(len(grid), dtype=int)
     for k in range(len(grid) - 1):
         t0, t1 = grid[k], grid[k + 1]
         steps = max(1, int(np.ceil((t1 - t0) / max_step - 1e-9)))
         h = (t1 - t0) / steps
-        for s in range(steps):
-            t = t0 + s * h
-            for i in range(len(b)):
-                xi = x + h * (a_matrix[i, :i] @ stages[:i]) if i else x
-                stages[i] = f(xi, inputs(t + c[i] * h), p)
-            x = x + h * (b @ stages)
-        out[k + 1] = x
+        starts.extend(t0 + s * h for s in range(steps))
+        widths.extend([h] * steps)
+        ends[k + 1] = len(starts)
+    x0 = np.asarray(x0, dtype=float)
+    out = np.empty((len(grid), len(x0)))
+    out[0] = x0
+    if starts:
+        t_start, h = np.array(starts), np.array(widths)
+        chain = compiled.rk8_step().mapaccum("rk8_chain", len(t_start))
+        states = chain(
+            x0, inputs.many(t_start).T, inputs.many(t_start + h).T, h[None, :], np.asarray(p)
+        )
+        states = np.asarray(states.full(), dtype=float).T  # after each step
+        out[1:] = states[ends[1:] - 1]
     if not np.all(np.isfinite(out[wanted])):
         raise RuntimeError("integration diverged (non-finite state)")
     return out[wanted]
@@ -415,8 +442,9 @@ def integrate_sensitivities(
     z0 = np.concatenate([x0, s0.T.reshape(-1)])
     z = integrate(compiled, inputs, z0, values, t_eval, max_step)
     p = compiled.parameters(values)
-    zdot = np.array([compiled.f(zk, inputs(tk), p) for tk, zk in zip(t_eval, z, strict=True)])
-    out = np.array([compiled.h(zk, inputs(tk), p) for tk, zk in zip(t_eval, z, strict=True)])
+    u_eval = inputs.many(np.asarray(t_eval, dtype=float))
+    zdot = compiled.f_many(z, u_eval, p)
+    out = compiled.h_many(z, u_eval, p)
     ny = len(eqs.model.outputs)
 
     def columns(a: np.ndarray, rows: int) -> np.ndarray:

@@ -463,9 +463,7 @@ def simulate(
         states, stats = _integrate_scipy(
             compiled, inputs, y0, grid, breakpoints, rtol, atol, method, analytic_jacobian, report
         )
-    rates = np.array(
-        [compiled.f(y[:n], inputs(float(t), y[:n])) for t, y in zip(grid, states, strict=True)]
-    )
+    rates = compiled.f.many(states[:, :n], inputs.many(grid, states[:, :n]))
     dense = CubicHermiteSpline(grid, states, rates, axis=0)
 
     def state_at(t: float) -> np.ndarray:
