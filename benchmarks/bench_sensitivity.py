@@ -70,7 +70,7 @@ def main() -> int:
     t_peer, _ = timed(peer, repeat=1)
     ours = t_derive + t_integrate
     met = ours <= t_peer
-    print(f"  {'derive ∂f/∂x, ∂f/∂p, [x; S] model, lambdify':<48}{t_derive:7.2f} s")
+    print(f"  {'derive ∂f/∂x, ∂f/∂p, [x; S] model, CasADi functions':<48}{t_derive:7.2f} s")
     label = f"integrate [x; S] (24 states), {len(data.t)} samples"
     print(f"  {label:<48}{t_integrate:7.2f} s")
     print(
