@@ -387,26 +387,36 @@ def test_broken_files_are_one_line_errors(attack: int, encoding: str) -> None:
         assert_contract(status, stdout, stderr, allow=(0, 1, 2))
 
 
+@contextlib.contextmanager
+def writing_command(
+    text: str, file_name: str, argv: list[str], out_name: str
+) -> Iterator[tuple[int, Path, Path]]:
+    """Write ``text`` to ``file_name`` in a fresh folder and run ``gearsym ARGV`` (``{file}``
+    and ``{out}`` filled in): the error contract holds, nothing outside ``--out`` changed, no
+    staging folder or lock is left, and ``--out`` exists exactly when the command succeeded.
+    Yields (exit code, ``--out``, the folder) for further checks."""
+    with workdir() as root:
+        path = root / file_name
+        path.write_text(text, encoding="utf-8")
+        before = _snapshot(root)
+        out = root / out_name
+        status, stdout, stderr = run_cli([a.format(file=path, out=out) for a in argv])
+        assert_contract(status, stdout, stderr)
+        assert _snapshot(root, skip=out) == before
+        assert [p.name for p in root.iterdir() if p.name.startswith(".")] == []
+        assert out.exists() == (status == 0)
+        yield status, out, root
+
+
 @SLOW
 @given(data=st.data())
 def test_mutated_scenarios_keep_the_error_contract(data: st.DataObject) -> None:
-    tree = _mutate(SCENARIO_BASE, data)
-    text = _dump(tree)
+    text = _dump(_mutate(SCENARIO_BASE, data))
     if text is None:
         return
-    with workdir() as root:
-        scenario = root / "scenario.toml"
-        scenario.write_text(text, encoding="utf-8")
-        before = _snapshot(root)
-        out = root / "sim"
-        status, stdout, stderr = run_cli(
-            ["simulate", "--scenario", str(scenario), "--out", str(out), "--no-plots"]
-        )
-        assert_contract(status, stdout, stderr)
-        assert _snapshot(root, skip=out) == before
-        leftovers = [p.name for p in root.iterdir() if p.name.startswith(".")]
-        assert leftovers == []
-        assert out.exists() == (status == 0)
+    argv = ["simulate", "--scenario", "{file}", "--out", "{out}", "--no-plots"]
+    with writing_command(text, "scenario.toml", argv, "sim"):
+        pass
 
 
 def _strict_compile(c_dir: Path, build: Path) -> None:
@@ -426,18 +436,11 @@ def _strict_compile(c_dir: Path, build: Path) -> None:
 @SLOW
 @given(data=st.data())
 def test_changed_descriptions_generate_compilable_code_or_one_line(data: st.DataObject) -> None:
-    tree = _plausible_change(BASES["thesis"], data)
-    text = _dump(tree)
+    text = _dump(_plausible_change(BASES["thesis"], data))
     if text is None:
         return
-    with workdir() as root:
-        config = root / "box.toml"
-        config.write_text(text, encoding="utf-8")
-        before = _snapshot(root)
-        out = root / "gen"
-        status, stdout, stderr = run_cli(["generate", str(config), "--out", str(out)])
-        assert_contract(status, stdout, stderr)
-        assert _snapshot(root, skip=out) == before
+    argv = ["generate", "{file}", "--out", "{out}"]
+    with writing_command(text, "box.toml", argv, "gen") as (status, out, root):
         if status == 0:
             build = root / "build"
             build.mkdir()
