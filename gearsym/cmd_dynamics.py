@@ -31,14 +31,36 @@ def _variables(variables: Any) -> list[dict[str, Any]]:
     ]
 
 
-def model_dict(d: Any, shift: str | None, friction_inputs: bool, wheel: bool) -> dict[str, Any]:
-    """The model as data: variables, right-hand side (SymPy-parsable strings) and, for a shift,
-    the numeric linear form A_ex, B_ex (5.1)–(5.5) at the defaults."""
-    from gearsym.symbolic.drivetrain import full_model, linear_shift_form, shift_model
+def model_dict(
+    d: Any, shift: str | None, friction_inputs: bool, wheel: bool, gear: str | None = None
+) -> dict[str, Any]:
+    """The model as data: variables, right-hand side (SymPy-parsable strings) and the numeric
+    linear form A_ex, B_ex (5.1)–(5.5) at the defaults, with the inputs of (5.3) the mode has
+    (full model, a shift, or a gear with all its elements locked)."""
+    from gearsym.symbolic.drivetrain import (
+        drivetrain_model,
+        full_linear_form,
+        full_model,
+        gear_linear_form,
+        shift_linear_form,
+        shift_model,
+    )
 
-    if shift is None:
+    if gear is not None:
+        form = gear_linear_form(d, gear)  # checks the gear name first
+        model = drivetrain_model(
+            d,
+            form.mode,
+            locked=tuple(d.gear(gear).closed),
+            torque_elements=(),
+            keep=(d.output_shaft,),
+            with_wheel_acceleration=wheel,
+        )
+    elif shift is None:
+        form = full_linear_form(d)
         model = full_model(d, with_wheel_acceleration=wheel)
     else:
+        form = shift_linear_form(d, shift)
         model = shift_model(
             d, shift, with_wheel_acceleration=wheel, friction_inputs=friction_inputs
         )
@@ -57,20 +79,15 @@ def model_dict(d: Any, shift: str | None, friction_inputs: bool, wheel: bool) ->
             v.name: str(e) for v, e in zip(model.outputs, model.output_expressions, strict=True)
         },
     }
-    if shift is not None:
-        a, b, x, u = linear_shift_form(d, shift)
-        defaults = {v.symbol: v.default for v in model.parameters if v.default is not None} | {
-            v.symbol: v.default for v in shift_model(d, shift).parameters if v.default is not None
-        }
-        a_num = a.subs(defaults)
-        b_num = b.subs(defaults)
-        data["linear_form"] = {
-            "equations": "5.1-5.5",
-            "states": x,
-            "inputs": u,
-            "A": [[float(a_num[i, j]) for j in range(a.cols)] for i in range(a.rows)],
-            "B": [[float(b_num[i, j]) for j in range(b.cols)] for i in range(b.rows)],
-        }
+    a, b = form.at_defaults()
+    data["linear_form"] = {
+        "equations": "5.1-5.5",
+        "mode": form.mode,
+        "states": form.states,
+        "inputs": form.inputs,
+        "A": a,
+        "B": b,
+    }
     return data
 
 
@@ -79,7 +96,12 @@ def cmd_model(args: argparse.Namespace) -> int:
     import sympy as sp
 
     d = _load(args.config)
-    data = model_dict(d, args.shift, args.friction_inputs, args.with_wheel_acceleration)
+    gear = getattr(args, "gear", None)
+    if gear is not None and args.shift is not None:
+        from gearsym.symbolic.errors import GearsymError
+
+        raise GearsymError("model", "--gear", "give --shift or --gear, not both")
+    data = model_dict(d, args.shift, args.friction_inputs, args.with_wheel_acceleration, gear)
     if args.json:
         json.dump(data, sys.stdout, indent=2)
         sys.stdout.write("\n")
@@ -175,11 +197,16 @@ def add_parsers(
     p = command(
         "model",
         cmd_model,
-        "Print the drivetrain model of a shift (2.55-2.58) or the full model (2.53): states, "
+        "Print the drivetrain model of a shift (2.55-2.58), a gear or the full model (2.53): "
+        "states, "
         "inputs, parameters with defaults, right-hand side, and A, B of (5.1) at the defaults.",
     )
     config(p)
     p.add_argument("--shift", help="e.g. 2-3 (default: the full model, every element a torque)")
+    p.add_argument(
+        "--gear",
+        help="e.g. 3: the gear with all its elements locked, inputs T_In, T_res*, zeta (5.3)",
+    )
     p.add_argument(
         "--friction-inputs",
         action="store_true",

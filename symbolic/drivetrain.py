@@ -467,3 +467,90 @@ def linear_shift_form(
     u = [parts.torque_symbols[k] for k in (naming.INPUT, spec.off_going, spec.on_coming)]
     u += [t_res_star, p["zeta"]]
     return rhs.jacobian(x), rhs.jacobian(u), [str(s) for s in x], [str(s) for s in u]
+
+
+@dataclass(frozen=True)
+class LinearForm:
+    """ẋ = A x + B u (5.1) of one mode, with the mode's inputs in the order of (5.3)."""
+
+    mode: str
+    A: sp.Matrix
+    B: sp.Matrix
+    states: list[str]
+    inputs: list[str]
+    parameters: tuple[Variable, ...]
+
+    def at_defaults(self) -> tuple[list[list[float]], list[list[float]]]:
+        """A and B as nested lists of floats at the parameters' defaults."""
+        values = {v.symbol: v.default for v in self.parameters if v.default is not None}
+        a, b = self.A.xreplace(values), self.B.xreplace(values)
+        return (
+            [[float(a[i, j]) for j in range(a.cols)] for i in range(a.rows)],
+            [[float(b[i, j]) for j in range(b.cols)] for i in range(b.rows)],
+        )
+
+
+def _linear_form(
+    d: GearboxDescription,
+    mode: str,
+    locked: tuple[str, ...],
+    torque_elements: tuple[str, ...],
+    keep: tuple[str, ...] | None,
+) -> LinearForm:
+    """(5.1)–(5.3) of a mode: rolling and aerodynamic resistance become the input T_res* (5.2),
+    the grade term r_dyn m g sin ζ is linearised at ζ = 0 as (5.5) prints it. Everything else is
+    linear already (the gearbox (2.39), the twist (2.44) and the side-shaft law (2.47)).
+
+    Inputs in the order of (5.3), u = [T_In, T_res*, T_<element>…, ζ], where each element that
+    acts as a torque in this mode keeps its place in the description (the thesis' order K81,
+    K38, B08, B05, B06, K27): the full model has all of them (nine inputs for the built-in
+    gearbox), a shift model the off-going and on-coming element, a gear none (its elements are
+    locked constraints, the others open, 2.54).
+    """
+    parts = drivetrain_parts(d, locked=locked, torque_elements=torque_elements, keep=keep)
+    p = {v.name: v.symbol for v in parts.parameters}
+    t_res_star = sp.Symbol(naming.RESISTANCE_INPUT)
+    wheel = (
+        2 * parts.side_shaft_torque - t_res_star - parts.grade_lever * p["m_veh"] * p["zeta"]
+    ) / parts.wheel_inertia  # (5.2), sin ζ ≈ ζ
+    rhs = sp.Matrix([*parts.gearbox_rhs, parts.phi_dot, wheel])
+    x = [*parts.speeds, sp.Symbol(naming.TWIST), sp.Symbol(naming.WHEEL_SPEED)]
+    order = [e.name for e in d.shift_elements if e.name in parts.torque_elements]
+    u = [parts.torque_symbols[naming.INPUT], t_res_star]
+    u += [parts.torque_symbols[e] for e in order] + [p["zeta"]]
+    return LinearForm(
+        mode=mode,
+        A=rhs.jacobian(x),
+        B=rhs.jacobian(u),
+        states=[str(s) for s in x],
+        inputs=[str(s) for s in u],
+        parameters=parts.parameters,
+    )
+
+
+def full_linear_form(d: GearboxDescription) -> LinearForm:
+    """A_ex, B_ex (5.1) of the full model (2.53): nothing locked, every element an input,
+    the nine inputs of (5.3) for the built-in gearbox."""
+    elements = tuple(e.name for e in d.shift_elements)
+    return _linear_form(d, naming.FULL_MODEL, (), elements, None)
+
+
+def gear_linear_form(d: GearboxDescription, gear: str) -> LinearForm:
+    """(5.1) of a gear: all its elements locked (one gearbox speed left, that of the output
+    shaft), the others open; inputs [T_In, T_res*, ζ]."""
+    gears = {g.name: g for g in d.gears}
+    if gear not in gears:
+        raise GearsymError(d.file, "gear", f"unknown gear {gear!r} (known: {', '.join(gears)})")
+    g = gears[gear]
+    if g.neutral:
+        raise GearsymError(d.file, "gear", f"gear {gear!r} is a neutral: it has no drive path")
+    return _linear_form(d, f"gear_{gear}", tuple(g.closed), (), (d.output_shaft,))
+
+
+def shift_linear_form(d: GearboxDescription, shift: str) -> LinearForm:
+    """(5.1) of a shift model (2.55–2.58): the shared elements locked; inputs [T_In, T_res*,
+    the two swapping elements' torques in description order, ζ]. Same A as
+    :func:`linear_shift_form`, B with its columns in the order of (5.3)."""
+    spec = shift_spec(d, shift)
+    name = naming.shift_model_name(spec.from_gear, spec.to_gear)
+    return _linear_form(d, name, spec.locked, (spec.off_going, spec.on_coming), None)

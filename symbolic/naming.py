@@ -140,6 +140,12 @@ DRIVETRAIN_OUTPUT_TORQUE = "T_out"  # 2 T_ss / i_D (2.52), a column beside the s
 ROAD_TORQUE = "T_res"
 RATIO = "ratio"
 VEHICLE_SPEED = "v_vehicle"
+#: Road grade ζ (2.49c): the drivetrain parameter, and the timeseries.csv column of ζ(t) (the
+#: same quantity, so the same name).
+GRADE = "zeta"
+#: Input of the driven shift model: ζ(t) − ζ0, the recorded grade's deviation from the
+#: parameter ζ0 (validation/sensitivity_run.py), so that ∂/∂ζ is a constant offset.
+GRADE_DEVIATION = "zeta_dev"
 ENERGY_TERMS = ("W_in", "W_friction", "W_damper", "W_road")
 
 # ---------------------------------------------------------------------------------------------
@@ -315,6 +321,7 @@ def check_names(d: GearboxDescription) -> None:
         (ROAD_TORQUE, "road resistance torque column T_res (2.48)"),
         (RATIO, "ratio column"),
         (VEHICLE_SPEED, "vehicle speed column"),
+        (GRADE_DEVIATION, "grade deviation input zeta(t) - zeta0"),
         *((term, f"energy column {term}") for term in ENERGY_TERMS),
         *((key, f"drivetrain parameter {key}") for key in (*DESCRIPTIONS, *ROLLING_KEY.values())),
     ]

@@ -19,6 +19,15 @@ A scenario is a TOML file::
     time = [0.0, 0.5, 0.75]
     value = [1.0e6, 1.0e6, 0.0]
 
+    [grade]                     # optional: road grade ζ(t) (2.49), piecewise linear in time
+    unit = "rad"
+    time = [0.0, 0.4, 0.41]
+    value = [0.0, 0.0, 0.05]
+
+Without ``[grade]`` ζ is the description's constant parameter ``vehicle.zeta``; with it ζ is an
+input of the reference simulation, like T_In and the pressures ((2.53) and (5.3) list ζ among
+the inputs).
+
 Bad files raise :class:`GearsymError` naming the file, the key and the reason.
 """
 
@@ -46,6 +55,10 @@ DEFAULT_SCENARIO = "scenario_2_3.toml"
 T_END_MAX = 10.0  # s
 
 POINTS_MAX = 1000  # points per piecewise-linear profile
+
+#: Largest |ζ| of a grade profile: 0.5 rad is a 55 % grade, beyond the steepest public roads
+#: (about 35 %); a larger value is a unit slip (degrees or percent given as radians).
+GRADE_MAX = 0.5  # rad
 
 
 @dataclass(frozen=True)
@@ -82,6 +95,8 @@ class Scenario:
     engine: Profile
     e_machine: Profile
     pressure: dict[str, Profile]
+    #: ζ(t) (2.49) from ``[grade]``, or None: ζ is then the description's constant parameter.
+    grade: Profile | None = None
 
     def input_torque(self, t: float) -> float:
         return self.engine(t) + self.e_machine(t)
@@ -89,7 +104,8 @@ class Scenario:
     def breakpoints(self) -> list[float]:
         """Times where an input changes slope: the integrator restarts there."""
         times = {0.0, self.t_end}
-        for profile in (self.engine, self.e_machine, *self.pressure.values()):
+        grade = () if self.grade is None else (self.grade,)
+        for profile in (self.engine, self.e_machine, *self.pressure.values(), *grade):
             times.update(float(t) for t in profile.time if 0 < t < self.t_end)
         return sorted(times)
 
@@ -112,9 +128,10 @@ def load_scenario(d: GearboxDescription, path: str | Path | None = None) -> Scen
         if unknown:
             raise fail(f"{key}.{unknown[0]}", unknown_key_reason(unknown[0], known))
 
-    unknown = sorted(set(data) - {"scenario", "input_torque", "pressure"})
+    known_tables = ("scenario", "input_torque", "pressure", "grade")
+    unknown = sorted(set(data) - set(known_tables))
     if unknown:
-        known = ("scenario", "input_torque", "pressure")
+        known = known_tables
         raise fail(unknown[0], unknown_key_reason(unknown[0], known, "table"))
     head = data.get("scenario")
     if not isinstance(head, dict):
@@ -184,6 +201,28 @@ def load_scenario(d: GearboxDescription, path: str | Path | None = None) -> Scen
         pressures[name] = Profile(t, values)
     for name in element_names:
         pressures.setdefault(name, Profile(np.array([0.0]), np.array([0.0])))
+
+    grade = None
+    if "grade" in data:
+        entry = data["grade"]
+        if not isinstance(entry, dict):
+            raise fail("grade", 'expected a table [grade] with unit = "rad", time, value')
+        only(entry, "grade", ("unit", "time", "value"))
+        if entry.get("unit") != "rad":
+            raise fail("grade.unit", f"expected 'rad', got {shown(entry.get('unit'))}")
+        t = _series(fail, "grade.time", entry.get("time"))
+        _increasing(fail, "grade.time", t)
+        values = _series(fail, "grade.value", entry.get("value"))
+        if len(values) != len(t):
+            raise fail("grade.value", f"has {len(values)} values for {len(t)} times")
+        worst = float(np.max(np.abs(values)))
+        if worst > GRADE_MAX:
+            raise fail(
+                "grade.value",
+                f"|zeta| must be at most {GRADE_MAX:g} rad (a 55 % grade; the steepest roads "
+                f"are about 35 %: degrees or percent?), got {worst:g} rad",
+            )
+        grade = Profile(t, values)
     return Scenario(
         name=title if title is not None else spec.name,
         file=file,
@@ -193,6 +232,7 @@ def load_scenario(d: GearboxDescription, path: str | Path | None = None) -> Scen
         engine=Profile(times, engine),
         e_machine=Profile(times, e_machine),
         pressure=pressures,
+        grade=grade,
     )
 
 

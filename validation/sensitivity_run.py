@@ -20,6 +20,19 @@ Sliding is either ``"detected"`` from the record (the element is pressed and tra
 condition) or taken from the ``"phases"`` as the thesis assumes in 3.1 (both swapping elements
 slide from the start of the torque phase to the end of the speed phase).
 
+The road grade: the reference simulation records ζ(t) (the scenario's ``[grade]`` profile, or
+the description's constant ζ0). The driven model keeps ζ as a *parameter* and gets the recorded
+deviation Δζ(t) = ζ_rec(t) − ζ0 as a further input ``zeta_dev``: its road load (2.49) sees
+ζ + Δζ(t), which is ζ_rec(t) at the nominal ζ = ζ0, and ∂/∂ζ is the sensitivity to a constant
+offset of the whole grade profile. That keeps (3.7), Ṡ = ∂f/∂x S + ∂f/∂p, correct: p must be
+constant in time for S = ∂x/∂p to be a derivative with respect to a finite set of numbers, and
+a constant offset of an otherwise recorded (known) profile is exactly what the FIM (3.25) can
+ask about. Making ζ an input instead would drop it from the parameters (inputs are known), so
+the FIM could no longer tell how well the grade is estimable; and evaluating ∂f/∂ζ at the
+constant ζ0 while the reference drove ζ(t) would linearise at the wrong point. Without a
+profile Δζ ≡ 0 and nothing changes. ``--set zeta=…`` shifts the whole profile by the same
+offset.
+
 Also here, as independent checks of the sensitivities (tests, benchmark): central finite
 differences of the integrated model, and CasADi forward-mode derivatives through a CVODES
 integrator of a CasADi SX build of the same right-hand side.
@@ -150,7 +163,9 @@ def driven_shift_model(
     d: GearboxDescription, shift: str = "2-3", with_wheel_acceleration: bool = False
 ) -> DrivenShift:
     """ẋ = f(x, p) + B(p) u of the shift model (2.55–2.58, 3.5) with
-    u = [T_In, F_N,off, F_N,on, T_off, T_on]: element torque = k_sign 2 N r μ F_N + T_stick."""
+    u = [T_In, F_N,off, F_N,on, T_off, T_on, Δζ]: element torque = k_sign 2 N r μ F_N + T_stick,
+    and the road load (2.49) at the grade ζ + Δζ(t) (see the module docstring: ζ stays a
+    parameter, a constant offset of the recorded profile)."""
     spec = shift_spec(d, shift)
     friction = shift_model(d, shift, with_wheel_acceleration, friction_inputs=True)
     torque = shift_model(d, shift, with_wheel_acceleration, friction_inputs=False)
@@ -174,10 +189,18 @@ def driven_shift_model(
         assert element.n_disc is not None and element.r_m is not None
         gain[e] = float(signs[e] * 2 * element.n_disc * element.r_m.value)
     short = {e: element_short_name(d, e) for e in elements}
+    (zeta,) = (v.symbol for v in friction.parameters if v.name == naming.GRADE)
+    deviation = Variable(
+        naming.GRADE_DEVIATION,
+        sp.Symbol(naming.GRADE_DEVIATION, real=True),
+        "rad",
+        "recorded grade minus the parameter's nominal value, zeta_rec(t) - zeta0 (2.49)",
+    )
+    rhs = rhs.xreplace({zeta: zeta + deviation.symbol})
     model = Model(
         name=f"{friction.name.removesuffix('_mu')}_driven",
         states=friction.states,
-        inputs=tuple(friction.inputs) + tuple(stick),
+        inputs=(*friction.inputs, *stick, deviation),
         parameters=friction.parameters,
         outputs=friction.outputs,
         rhs=rhs,
@@ -245,6 +268,14 @@ def driving_inputs(
         mu0 = values[driven.mu[e]]
         columns[driven.normal_force[e]] = np.where(slide, torque / (driven.gain[e] * mu0), 0.0)
         columns[driven.stick_torque[e]] = np.where(slide, 0.0, torque)
+    # Δζ = ζ_rec(t) − ζ0 with ζ0 the description's value, the one the reference used when it
+    # had no profile (a record without the ζ column: a level road at ζ0, Δζ = 0)
+    zeta0 = driven.model.variable(naming.GRADE).default
+    assert zeta0 is not None
+    recorded = data.signals.get(naming.GRADE)
+    columns[naming.GRADE_DEVIATION] = (
+        np.zeros(len(data.t)) if recorded is None else recorded - float(zeta0)
+    )
     return np.column_stack([columns[v.name] for v in driven.model.inputs])
 
 

@@ -219,7 +219,11 @@ class _Function:
 class _Compiled:
     """Right-hand side, Jacobian and diagnostics of the augmented reference model, as CasADi
     functions (one translation of the SymPy expressions; CasADi differentiates, so no SymPy
-    Jacobian of the friction model's Max and Piecewise has to be simplified)."""
+    Jacobian of the friction model's Max and Piecewise has to be simplified).
+
+    The road grade ζ, a parameter of the reference model, is the last entry of u here: (2.53)
+    and (5.3) treat it as an input, and a scenario may give ζ(t) (``[grade]``); without one
+    :class:`_Inputs` feeds the description's constant."""
 
     def __init__(self, ref: ReferenceModel, d: GearboxDescription, elements: Sequence[str]):
         import casadi as ca
@@ -229,10 +233,13 @@ class _Compiled:
         self.n = len(model.states)
         self.elements = tuple(elements)
         self.x = ca.SX.sym("x", self.n)
-        self.u = ca.SX.sym("u", len(model.inputs))
+        self.u = ca.SX.sym("u", len(model.inputs) + 1)  # + ζ
         mapping: dict[Any, Any] = {s: self.x[i] for i, s in enumerate(model.state_symbols)}
         mapping.update({s: self.u[i] for i, s in enumerate(model.input_symbols)})
         mapping.update({s: float(defaults[s]) for s in model.parameter_symbols})
+        (zeta,) = (s for s in model.parameter_symbols if s.name == naming.GRADE)
+        mapping[zeta] = self.u[len(model.inputs)]
+        self.zeta_default = float(defaults[zeta])
 
         def sx(exprs: Any) -> Any:
             return ca.vertcat(*[to_casadi(e, mapping) for e in exprs])
@@ -261,7 +268,7 @@ class _Compiled:
             "energies", [ref.kinetic_energy, ref.spring_energy, ref.bristle_energy]
         )
         self.side_shaft = x_only("side_shaft", [ref.side_shaft_torque], "scalar")
-        self.road = x_only("road", [ref.road_torque], "scalar")
+        self.road = xu("road", [ref.road_torque], "scalar")  # depends on ζ (2.49)
 
 
 def _all_slips(d: GearboxDescription, ref: ReferenceModel) -> dict[Any, sp.Expr]:
@@ -270,7 +277,8 @@ def _all_slips(d: GearboxDescription, ref: ReferenceModel) -> dict[Any, sp.Expr]
 
 
 class _Inputs:
-    """u(t, x): T_In from the scenario, pressures, μ from the map at the current slip."""
+    """u(t, x): T_In from the scenario, pressures, μ from the map at the current slip, and ζ
+    (the scenario's ``[grade]`` profile, or the description's constant)."""
 
     def __init__(
         self,
@@ -297,20 +305,26 @@ class _Inputs:
     def pressures(self, t: float) -> np.ndarray:
         return np.array([self.scenario.pressure[e](t) for e in self.elements])
 
+    def grade(self, t: float) -> float:
+        """ζ(t) (2.49): the scenario's profile, or the description's constant ζ."""
+        profile = self.scenario.grade
+        return self.compiled.zeta_default if profile is None else profile(t)
+
     def mu(self, p: np.ndarray, slips: np.ndarray) -> np.ndarray:
         return self._mu.ev(np.clip(p, *self._p_range), np.clip(np.abs(slips), *self._dw_range))
 
     def __call__(self, t: float, x: np.ndarray) -> list[float]:
         p = self.pressures(t)
         mu = self.mu(p, np.asarray(self.compiled.slips(x), dtype=float))
-        return [self.scenario.input_torque(t), *p, *mu]
+        return [self.scenario.input_torque(t), *p, *mu, self.grade(t)]
 
     def many(self, times: np.ndarray, states: np.ndarray) -> np.ndarray:
         """u at N times and states (N × n): N × inputs."""
         torque = np.array([self.scenario.input_torque(float(t)) for t in times])
         p = np.array([self.pressures(float(t)) for t in times]).reshape(len(times), -1)
         mu = self.mu(p, self.compiled.slips.many(states))
-        return np.column_stack([torque, p, mu])
+        zeta = np.array([self.grade(float(t)) for t in times])
+        return np.column_stack([torque, p, mu, zeta])
 
 
 # ----------------------------------------------------------------------------- initial state
@@ -558,7 +572,7 @@ def _integrate_cvodes(
     report: Progress,
 ) -> tuple[np.ndarray, dict[str, float]]:
     """CVODES (BDF, CasADi's exact Jacobian) segment by segment. Inside a segment every
-    scenario input is linear in time, so T_In and the pressures enter as a + b (t − t0) with
+    scenario input is linear in time, so T_In, the pressures and ζ enter as a + b (t − t0) with
     (a, b) per segment, and μ as the μ map's bilinear interpolation at the pressure and the
     current |slip| (as :class:`_Inputs`). The states are scaled by atol/rtol so that one scalar
     tolerance means the per-state ``atol``."""
@@ -569,9 +583,10 @@ def _integrate_cvodes(
     scale = atol / rtol
     xi = ca.SX.sym("xi", size)
     t = ca.SX.sym("t")
-    coefficients = ca.SX.sym("c", 2 * (1 + ne) + 1)  # a (1+ne), b (1+ne), t0
-    a, b, t0 = coefficients[: 1 + ne], coefficients[1 + ne : 2 * (1 + ne)], coefficients[-1]
-    driven = a + b * (t - t0)  # T_In and the pressures
+    nd = 2 + ne  # T_In, the pressures, ζ
+    coefficients = ca.SX.sym("c", 2 * nd + 1)  # a (nd), b (nd), t0
+    a, b, t0 = coefficients[:nd], coefficients[nd : 2 * nd], coefficients[-1]
+    driven = a + b * (t - t0)  # T_In, the pressures and ζ
     x = xi[:n] * scale[:n]
     slip = ca.substitute(compiled.slips_sx, compiled.x, x)
     p_grid, dw_grid = inputs.map_grid
@@ -579,7 +594,7 @@ def _integrate_cvodes(
         bilinear(driven[1 + k], ca.fabs(slip[k]), p_grid, dw_grid, inputs.map_plane)
         for k in range(ne)
     ]
-    u = ca.vertcat(driven, *mu)
+    u = ca.vertcat(driven[: 1 + ne], *mu, driven[1 + ne])
     rhs = ca.substitute(compiled.rhs_sx, ca.vertcat(compiled.x, compiled.u), ca.vertcat(x, u))
     dae = {"x": xi, "t": t, "p": coefficients, "ode": rhs / scale}
     options = {"abstol": rtol, "reltol": rtol, "max_num_steps": 200000}
@@ -594,8 +609,8 @@ def _integrate_cvodes(
         tout = [float(v) for v in grid[inside]]
         if not tout or tout[-1] < tb:
             tout.append(float(tb))
-        ua = np.array([scenario.input_torque(ta), *inputs.pressures(ta)])
-        ub = np.array([scenario.input_torque(tb), *inputs.pressures(tb)])
+        ua = np.array([scenario.input_torque(ta), *inputs.pressures(ta), inputs.grade(ta)])
+        ub = np.array([scenario.input_torque(tb), *inputs.pressures(tb), inputs.grade(tb)])
         c = np.concatenate([ua, (ub - ua) / (tb - ta), [ta]])
         step = ca.integrator("segment", "cvodes", dae, float(ta), tout, options)
         try:
@@ -681,7 +696,8 @@ def _signals(
     t_ss = compiled.side_shaft.many(x)[:, 0]
     put(naming.SIDE_SHAFT_TORQUE, t_ss)
     put(naming.DRIVETRAIN_OUTPUT_TORQUE, 2 * t_ss / quantity(d, "drivetrain", "i_D").value)
-    put(naming.ROAD_TORQUE, compiled.road.many(x)[:, 0])
+    put(naming.ROAD_TORQUE, compiled.road.many(x, u)[:, 0])
+    put(naming.GRADE, u[:, -1])
     w_in, w_out = out[naming.speed(d.input_shaft)], out[naming.speed(d.output_shaft)]
     with np.errstate(divide="ignore", invalid="ignore"):
         put(naming.RATIO, np.where(w_out != 0, w_in / np.where(w_out != 0, w_out, 1.0), math.nan))
@@ -869,15 +885,20 @@ def check_reduced_models(
         if phase.t_end - phase.t_start <= 0:
             continue
         params = model.parameter_defaults()
+        # ζ(t) as recorded (the scenario's grade profile, or the constant): a further input
+        (zeta,) = (s for s in params if s.name == naming.GRADE)
+        del params[zeta]
         rhs = model.rhs.xreplace({k: sp.Float(v) for k, v in params.items()})
         f = casadi_function(
-            "reduced", [("x", model.state_symbols), ("u", model.input_symbols)], [("xdot", rhs)]
+            "reduced",
+            [("x", model.state_symbols), ("u", (*model.input_symbols, zeta))],
+            [("xdot", rhs)],
         )
         # every sample of the phase: the recorded inputs are linear between samples (T_In
         # exactly, its breakpoints are samples; the element torques to the sampling's accuracy)
         inside = np.flatnonzero((grid >= phase.t_start) & (grid <= phase.t_end))
         times = grid[inside]
-        u = np.column_stack([signals[name][inside] for name in input_signals])
+        u = np.column_stack([signals[name][inside] for name in (*input_signals, naming.GRADE)])
         reference = np.column_stack([reader(v.name)[inside] for v in model.states])
         reduced = integrate_linear_inputs(f, reference[0], times, u)
         errors = np.max(np.abs(reduced - reference), axis=0)
