@@ -3,27 +3,18 @@
 The shift model (2.55–2.58) with the clutch torques written as μ times the known normal force
 (2.69) is augmented with the estimated parameters as random-walk states (4.1), default
 ``p = [m_veh, μ38, μ05, ζ]``; its outputs are the measured speeds (3.31), optionally with the
-wheel acceleration (3.32). The engine (:mod:`gearsym.symbolic.observability`) differentiates the
-outputs along the dynamics (4.4), takes the Jacobian ``Q`` (4.7) and decides its generic rank
-exactly ((4.12); a full-rank verdict carries a witness, a deficient one an error bound).
-
-The thesis claims (4.12): rank ``Q_123 = 8`` "for all operating points and inputs". This command
-checks that claim instead of assuming it: besides the generic verdict it looks for the sets where
-the rank drops — inputs held at zero or held constant (alone and in combinations) and the zero
-sets of the factors of the witness minor — and confirms each by an exact rank at a point on the
-set, with ``Q`` up to the same derivative order as the generic verdict (``y, y', y''`` is the
-thesis' ``Q_123``). For every confirmed drop it then tells a drop of ``Q_123`` only from a loss
-of local observability: when the set fixes drift-free variables (parameters, inputs held
-constant) and the unobservable variables then no longer occur in ``f`` and ``h``, their
-columns of ``Q`` vanish at every order (exact); otherwise derivatives are added up to
-``y^(n-1)`` (4.4), (4.13), one order at a time ("restored by y^(k)" or "persists up to").
+wheel acceleration (3.32). The library (:mod:`gearsym.symbolic.observability`) differentiates
+the outputs along the dynamics (4.4), decides the generic rank of ``Q`` (4.7) exactly ((4.12); a
+full-rank verdict carries a witness, a deficient one an error bound) and searches the sets where
+the rank drops (:func:`~gearsym.symbolic.observability.find_rank_drops`), following each drop to
+higher orders (4.13). This module parses the options, builds the shift model, calls the
+library and prints the report; it does no analysis of its own.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
-import itertools
 import json
 import re
 import sys
@@ -40,88 +31,18 @@ if TYPE_CHECKING:
 
     from gearsym.symbolic.description import GearboxDescription
     from gearsym.symbolic.model import Model
-    from gearsym.symbolic.observability import ObservabilityResult, PartialResult, RankDropReport
+    from gearsym.symbolic.observability import ObservabilityResult, PartialResult, RankDrop
 
 #: The shift of thesis chapter 3 and 4 and its parameter vector p of (4.1).
 from gearsym.symbolic.defaults import DEFAULT_SHIFT
 from gearsym.symbolic.defaults import OBSERVABILITY_PARAMETERS as DEFAULT_PARAMETERS
 
-#: Input-constant combinations are tested for every subset up to this many inputs; beyond, only
-#: single inputs and all inputs together.
-_MAX_SUBSET_INPUTS = 4
-#: Growth of the Lie-derivative cost per derivative order (generic inputs, 2↔3 model: ~4x).
-_GROWTH = 4.0
 _DERIVATIVE = re.compile(r"^(?P<input>.+)__d(?P<k>[0-9]+)$")
 
 
 # ---------------------------------------------------------------------------------------------
 # Results
 # ---------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class RankDrop:
-    """One tested set where the rank of ``Q`` (4.7) may fall below the generic rank.
-
-    ``confirmed`` means the exact rank at a point on the set (``point``) is ``rank`` < the
-    generic rank, with ``Q`` up to the generic verdict's derivative order; that it is the
-    generic rank on the whole set holds with error probability at most
-    ``error_probability_bound``. ``every_order`` states why the drop holds at every
-    derivative order (exact, see ``_DropFinder._absent``), if that was shown. Otherwise
-    ``rank_by_order`` is the rank on the set by derivative order, up to ``y^(n-1)`` (4.4) or as
-    far as the time allowed (``note``): ``restored_at_order`` is the first order reaching the
-    generic rank (a drop of the truncated ``Q`` only, (4.13)), ``None`` if none did.
-    ``physical`` is false when a condition puts a positive quantity (mass, μ) at a value <= 0.
-    """
-
-    label: str
-    origin: str
-    conditions: dict[str, str]
-    input_models: dict[str, str]
-    factor: str | None
-    confirmed: bool
-    decided: bool
-    rank: int | None
-    unobservable: tuple[str, ...] = ()
-    directions: tuple[dict[str, str], ...] = ()
-    point: dict[str, str] = field(default_factory=dict)
-    error_probability_bound: float = 0.0
-    physical: bool = True
-    rank_by_order: tuple[int, ...] = ()
-    restored_at_order: int | None = None
-    every_order: str = ""
-    note: str = ""
-
-    @property
-    def persists(self) -> bool:
-        """The drop survives every derivative order checked (``every_order``: all orders)."""
-        if not self.confirmed:
-            return False
-        return bool(self.every_order) or (
-            bool(self.rank_by_order) and self.restored_at_order is None
-        )
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "label": self.label,
-            "origin": self.origin,
-            "conditions": dict(self.conditions),
-            "input_models": dict(self.input_models),
-            "factor": self.factor,
-            "confirmed": self.confirmed,
-            "decided": self.decided,
-            "rank": self.rank,
-            "unobservable": list(self.unobservable),
-            "unobservable_directions": [dict(v) for v in self.directions],
-            "point": dict(self.point),
-            "error_probability_bound": self.error_probability_bound,
-            "physical": self.physical,
-            "rank_by_order": list(self.rank_by_order),
-            "restored_at_order": self.restored_at_order,
-            "persists": self.persists,
-            "every_order": self.every_order,
-            "note": self.note,
-        }
 
 
 @dataclass(frozen=True)
@@ -143,6 +64,18 @@ class ObservabilityReport:
     @property
     def confirmed_drops(self) -> tuple[RankDrop, ...]:
         return tuple(d for d in self.drops if d.confirmed)
+
+    def label(self, drop: RankDrop) -> str:
+        """The drop's label; an input held at zero says which element that opens."""
+        if drop.origin != "input-held-zero" or len(drop.conditions) != 1:
+            return drop.label
+        (name,) = drop.conditions
+        text = next((v.description for v in self.model.inputs if v.name == name), "")
+        text = re.sub(r"\s*\([0-9.]+\)$", "", text)  # "normal force on B05 (2.69)"
+        return drop.label + (f" [{text}: element open]" if "normal force" in text else "")
+
+    def _drop_dict(self, drop: RankDrop) -> dict[str, Any]:
+        return {**drop.to_dict(), "label": self.label(drop)}
 
     def to_dict(self) -> dict[str, Any]:
         r = self.result
@@ -170,8 +103,8 @@ class ObservabilityReport:
             "generic_parameters": list(r.generic_parameters),
             "seed": r.seed,
             "drop_search": self.drop_search,
-            "rank_drops": [d.to_dict() for d in self.drops if d.confirmed],
-            "not_dropping": [d.to_dict() for d in self.drops if not d.confirmed],
+            "rank_drops": [self._drop_dict(d) for d in self.drops if d.confirmed],
+            "not_dropping": [self._drop_dict(d) for d in self.drops if not d.confirmed],
             "implied_not_tested": list(self.implied),
             "notes": list(self.notes),
             "result": r.to_dict(),
@@ -374,355 +307,8 @@ def parse_parameters(d: GearboxDescription, model: Model, items: Sequence[str]) 
 # ---------------------------------------------------------------------------------------------
 
 
-def _physical(model: Model, conditions: Mapping[str, str]) -> bool:
-    """False when a condition puts a quantity declared positive at a number <= 0."""
-    import sympy as sp
-
-    symbols = {v.name: v.symbol for v in (*model.states, *model.inputs, *model.parameters)}
-    for name, value in conditions.items():
-        sym = symbols.get(name)
-        if sym is None or not sym.is_positive:
-            continue
-        try:
-            number = sp.sympify(value, locals={k: sp.Symbol(k) for k in symbols})
-        except Exception:  # anything unparsable is no number, hence no range violation
-            continue
-        if number.is_number and bool(number <= 0):
-            return False
-    return True
-
-
-def _describe(factor: str) -> str:
-    """``(N terms in a, b, c)`` for a long polynomial given as text."""
-    import sympy as sp
-
-    names = sorted(set(re.findall(r"[A-Za-z_][A-Za-z_0-9]*", factor)) - {"sin", "cos"})
-    # names such as zeta must stay symbols (sympify would read the Riemann zeta function)
-    expr = sp.sympify(factor, locals={n: sp.Symbol(n) for n in names})
-    return f"({len(sp.Add.make_args(sp.expand(expr)))} terms in {', '.join(names)})"
-
-
 def _short(text: str, limit: int = 90) -> str:
     return text if len(text) <= limit else f"{text[: limit - 1]}… ({len(text)} characters)"
-
-
-class _DropFinder:
-    """Tests candidate sets against the generic verdict, reusing one engine per input model
-    set (its Lie derivatives are cached, (4.4)), and checks each drop up to ``y^(n-1)``."""
-
-    def __init__(
-        self,
-        model: Model,
-        result: ObservabilityResult,
-        seed: int,
-        time_budget: float | None,
-        higher_order_seconds: float,
-    ) -> None:
-        import random
-
-        self.model = model
-        self.result = result
-        self.rng = random.Random(seed)
-        self.time_budget = time_budget
-        self.higher_order_seconds = higher_order_seconds
-        self.anchors: dict[tuple[tuple[str, str], ...], ObservabilityResult] = {}
-        #: label of a drop repaired by higher orders -> the full-rank result that repairs it
-        self.restoring: dict[str, ObservabilityResult] = {}
-        self.top_order = max(result.max_order, result.n_unknowns - 1)
-        self.descriptions = {v.name: v.description for v in model.inputs}
-
-    def _anchor(self, models: Mapping[str, str]) -> ObservabilityResult:
-        from gearsym.symbolic.observability import rank_under_conditions
-
-        merged = {**self.result.input_models, **models}
-        key = tuple(sorted(merged.items()))
-        if merged == self.result.input_models:
-            return self.result
-        if key not in self.anchors:
-            report = rank_under_conditions(
-                self.result,
-                {},
-                models,
-                max_order=self.result.max_order,
-                seed=self.rng.randrange(2**63),
-                time_budget=self.time_budget,
-            )
-            self.anchors[key] = report.result
-        return self.anchors[key]
-
-    def _rank(
-        self, conditions: Mapping[str, str], models: Mapping[str, str], max_order: int
-    ) -> RankDropReport:
-        from gearsym.symbolic.observability import InputModel, rank_under_conditions
-
-        if max_order <= self.result.max_order:
-            # Up to the orders already derived, an input model is a point restriction on the
-            # generic Lie derivatives (4.4): with u^(k) = 0 for k > K the generic h_k reduce
-            # to those of the restricted model, and Q (4.7) differentiates by the unknowns
-            # only, so the restricted Q is the generic Q at u^(k) = 0. That reuses them.
-            derivatives = dict(conditions)
-            for name, spec in models.items():
-                top = InputModel.parse(spec).max_derivative
-                if top is not None:
-                    for k in range(top + 1, max_order + 1):
-                        derivatives.setdefault(f"{name}__d{k}", "0")
-            return rank_under_conditions(
-                self.result,
-                derivatives,
-                max_order=max_order,
-                seed=self.rng.randrange(2**63),
-                time_budget=self.time_budget,
-            )
-        return rank_under_conditions(
-            self._anchor(models),
-            conditions,
-            max_order=max_order,
-            seed=self.rng.randrange(2**63),
-            time_budget=self.time_budget,
-        )
-
-    def check(
-        self,
-        label: str,
-        origin: str,
-        conditions: Mapping[str, str],
-        models: Mapping[str, str],
-        factor: str | None = None,
-        report: RankDropReport | None = None,
-        note: str = "",
-    ) -> RankDrop:
-        """Rank on the set (``report`` if already computed against the generic verdict)."""
-        from gearsym.symbolic.observability import BudgetExceeded, SamplingError
-
-        base = RankDrop(
-            label=label,
-            origin=origin,
-            conditions=dict(conditions),
-            input_models=dict(models),
-            factor=factor,
-            confirmed=False,
-            decided=False,
-            rank=None,
-            physical=_physical(self.model, conditions),
-        )
-        t0 = time.perf_counter()
-        if report is None:
-            if note:
-                return dataclasses.replace(base, note=f"not decided: {note}")
-            try:
-                report = self._rank(conditions, models, self.result.max_order)
-            except (BudgetExceeded, SamplingError) as exc:
-                return dataclasses.replace(base, note=f"not decided: {exc}")
-        check_seconds = time.perf_counter() - t0
-        rank = report.rank
-        drop = dataclasses.replace(
-            base,
-            decided=True,
-            rank=rank,
-            confirmed=rank < self.result.rank,
-            unobservable=report.unobservable,
-            directions=report.result.unobservable_directions,
-            point=dict(report.point),
-            error_probability_bound=report.error_probability_bound,
-        )
-        if not drop.confirmed:
-            return drop
-        proof = self._absent(conditions, models, drop.unobservable, rank)
-        if proof:
-            return dataclasses.replace(
-                drop, rank_by_order=report.result.rank_by_order, every_order=proof
-            )
-        # Add derivative orders one at a time up to y^(n-1) (4.4): does the drop survive (4.13)?
-        # Generic-input Lie derivatives grow about fourfold per order, so stop when the next
-        # order would overrun this check's share of time, and say how far it got.
-        by_order = report.result.rank_by_order
-        order, spent, last, note = self.result.max_order, 0.0, check_seconds, ""
-        while order < self.top_order and by_order[-1] < self.result.rank:
-            if spent + _GROWTH * last > self.higher_order_seconds:
-                note = (
-                    f"checked up to {_order_label(order)}; the next order would exceed "
-                    f"{self.higher_order_seconds:g} s"
-                )
-                break
-            order += 1
-            t0 = time.perf_counter()
-            try:
-                deeper = self._rank(conditions, models, order)
-            except (BudgetExceeded, SamplingError) as exc:
-                note = f"orders above {_order_label(order - 1)} not checked: {exc}"
-                break
-            last = time.perf_counter() - t0
-            spent += last
-            by_order = deeper.result.rank_by_order
-        restored = next((k for k, r in enumerate(by_order) if r >= self.result.rank), None)
-        if restored is not None and restored > self.result.max_order:
-            self.restoring[label] = deeper.result
-        return dataclasses.replace(
-            drop, rank_by_order=by_order, restored_at_order=restored, note=note
-        )
-
-    def _absent(
-        self,
-        conditions: Mapping[str, str],
-        models: Mapping[str, str],
-        unobservable: Sequence[str],
-        rank: int,
-    ) -> str:
-        """Why the drop holds at *every* derivative order, or ``""`` if that is not shown.
-
-        If every condition fixes a variable without drift (a parameter, or an input held
-        constant) at a number, substituting it commutes with the Lie derivatives (4.4): they
-        are those of the system with the value substituted. A variable that then no longer
-        occurs in f or h has a zero column of ``Q`` at every order; if the rank equals ``n``
-        minus the number of such variables it cannot grow either.
-        """
-        import sympy as sp
-
-        from gearsym.symbolic.observability import exact_rational
-
-        model = self.model
-        params = {v.name: v.symbol for v in model.parameters}
-        inputs = {v.name: v.symbol for v in model.inputs}
-        effective = {**self.result.input_models, **models}
-        subs: dict[sp.Symbol, sp.Expr] = {
-            params[k]: sp.sympify(v) for k, v in self.result.substituted_parameters.items()
-        }
-        for name, value in {**self.result.conditions, **conditions}.items():
-            try:
-                number = exact_rational(value)
-            except (TypeError, ValueError):
-                return ""
-            if name in params:
-                subs[params[name]] = number
-            elif name in inputs and effective.get(name) == "constant":
-                subs[inputs[name]] = number
-            else:
-                return ""
-        exprs = [*model.rhs, *model.output_expressions]
-        free: set[sp.Basic] = set()
-        for e in exprs:
-            free |= sp.sympify(e).xreplace(subs).free_symbols
-        symbols = {v.name: v.symbol for v in (*model.states, *model.parameters)}
-        absent = [n for n in unobservable if symbols[n] not in free]
-        if (
-            not absent
-            or len(absent) != len(unobservable)
-            or rank != len(self.result.unknowns) - len(absent)
-        ):
-            return ""
-        held = ", ".join(f"{k} = {v}" for k, v in {**self.result.conditions, **conditions}.items())
-        verb, noun = ("does", "its column") if len(absent) == 1 else ("do", "their columns")
-        return (
-            f"{', '.join(absent)} {verb} not occur in f or h with {held}: {noun} of Q "
-            f"{'is' if len(absent) == 1 else 'are'} zero at every order"
-        )
-
-    def input_label(self, name: str) -> str:
-        text = self.descriptions.get(name, "")
-        text = re.sub(r"\s*\([0-9.]+\)$", "", text)
-        return f"{name} held at 0" + (f" [{text}: element open]" if "normal force" in text else "")
-
-
-def _key(conditions: Mapping[str, str], models: Mapping[str, str]) -> tuple[Any, ...]:
-    return (tuple(sorted(conditions.items())), tuple(sorted(models.items())))
-
-
-def find_rank_drops(
-    model: Model,
-    result: ObservabilityResult,
-    *,
-    factor_minor: bool = True,
-    seed: int | None = None,
-    time_budget: float | None = None,
-    higher_order_seconds: float = 1.0,
-) -> tuple[list[RankDrop], list[str], list[str]]:
-    """Where does the rank of ``Q`` fall below the generic rank (check of (4.12))?
-
-    Candidates: every input held at zero (a clutch that is not pressed); every set of inputs
-    held constant (supersets of a set that already drops are implied — holding more inputs
-    constant only specialises ``Q`` — and are not tested); and, with ``factor_minor``, the
-    zero sets of the factors of the witness minor and the coordinate hyperplanes on which it
-    vanishes (:func:`gearsym.symbolic.observability.propose_rank_drop_conditions`). Each confirmed
-    drop is then re-ranked with one more derivative order at a time up to ``y^(n-1)`` (4.4),
-    spending about ``higher_order_seconds`` on it. Returns (tested candidates, implied sets
-    not tested, notes).
-    """
-    import random
-
-    from gearsym.symbolic.observability import propose_rank_drop_conditions
-
-    seed = random.SystemRandom().randrange(2**63) if seed is None else seed
-    finder = _DropFinder(model, result, seed, time_budget, higher_order_seconds)
-    inputs = list(result.inputs)
-    drops: list[RankDrop] = []
-    implied: list[str] = []
-    notes: list[str] = []
-    for name in inputs:
-        label = finder.input_label(name)
-        drops.append(finder.check(label, "input-held-zero", {name: "0"}, {name: "constant"}))
-    free = [n for n in inputs if result.input_models.get(n) != "constant"]
-    if len(free) <= _MAX_SUBSET_INPUTS:
-        subsets = [c for k in range(1, len(free) + 1) for c in itertools.combinations(free, k)]
-    else:
-        subsets = [(n,) for n in free] + [tuple(free)]
-    dropping: list[set[str]] = []
-    for subset in subsets:
-        if len(subset) == len(inputs) and len(inputs) > 1:
-            label = "all inputs constant"
-        else:
-            label = f"{' and '.join(subset)} constant"
-        if any(s <= set(subset) for s in dropping):
-            implied.append(label)
-            continue
-        drop = finder.check(label, "input-constant", {}, dict.fromkeys(subset, "constant"))
-        drops.append(drop)
-        if drop.confirmed:
-            dropping.append(set(subset))
-    parents = [d for d in drops if d.confirmed and d.label in finder.restoring]
-    if factor_minor and result.witness is not None:
-        search = propose_rank_drop_conditions(
-            result, try_constant_inputs=False, seed=finder.rng.randrange(2**63)
-        )
-        notes.extend(search.notes)
-        tested = {_key(d.conditions, {**result.input_models, **d.input_models}) for d in drops}
-        for cand in search.candidates:
-            if _key(cand.conditions, result.input_models) in tested:
-                continue  # e.g. F_N05 = 0 with F_N05 already constant: "held at 0" above
-            label = ", ".join(f"{k} = {v}" for k, v in cand.conditions.items())
-            if len(label) > 90 and cand.factor is not None and len(cand.conditions) == 1:
-                (var,) = cand.conditions
-                label = f"{var} = root of the witness-minor factor {_describe(cand.factor)}"
-            origin = (
-                "witness-minor factor" if cand.origin == "minor-factor" else "witness-minor zero"
-            )
-            drops.append(
-                finder.check(
-                    label, origin, cand.conditions, {}, cand.factor, cand.report, cand.note
-                )
-            )
-    # Inside a set of constant inputs whose drop higher orders repair, the repairing minor may
-    # vanish on a coordinate hyperplane (e.g. a level road, zeta = 0): test those subsets too.
-    for parent in parents:
-        nested = propose_rank_drop_conditions(
-            finder.restoring[parent.label],
-            symbolic_ops_limit=0,  # coordinate hyperplanes only: cheap
-            try_constant_inputs=False,
-            seed=finder.rng.randrange(2**63),
-        )
-        for cand in nested.confirmed:
-            conditions = {**parent.conditions, **cand.conditions}
-            label = f"{parent.label}, {', '.join(f'{k} = {v}' for k, v in cand.conditions.items())}"
-            if any(
-                d is not parent
-                and d.confirmed
-                and d.conditions.items() <= conditions.items()
-                and d.input_models.items() <= parent.input_models.items()
-                for d in drops
-            ):
-                implied.append(label)  # inside another set that already drops
-                continue
-            drops.append(finder.check(label, "input-constant", conditions, parent.input_models))
-    return drops, implied, notes
 
 
 def analyze_shift(
@@ -760,6 +346,7 @@ def analyze_shift(
         BudgetExceeded,
         ObservabilityError,
         analyze_observability,
+        find_rank_drops,
     )
 
     started = time.perf_counter()
@@ -820,21 +407,21 @@ def analyze_shift(
     except (KeyError, ValueError) as exc:
         _fail(d, "--at" if conds else "--params", str(exc).strip("'\""))
     analysis_seconds = time.perf_counter() - started - model_seconds
-    drops: list[RankDrop] = []
-    implied: list[str] = []
+    drops: tuple[RankDrop, ...] = ()
+    implied: tuple[str, ...] = ()
     notes: list[str] = []
     if clash:
         notes.append(f"conditions on estimated parameters {clash} restrict the point only")
     if drop_search:
-        drops, implied, found = find_rank_drops(
-            model,
+        search = find_rank_drops(
             result,
-            factor_minor=factor_minor,
+            witness_minor=factor_minor,
             seed=None if seed is None else seed + 1,
             time_budget=time_budget,
             higher_order_seconds=higher_order_seconds,
         )
-        notes.extend(found)
+        drops, implied = search.candidates, search.implied
+        notes.extend(search.notes)
     total = time.perf_counter() - started
     return ObservabilityReport(
         gearbox=d.name,
@@ -845,8 +432,8 @@ def analyze_shift(
         output_expressions={
             v.name: str(e) for v, e in zip(model.outputs, model.output_expressions, strict=True)
         },
-        drops=tuple(drops),
-        implied=tuple(implied),
+        drops=drops,
+        implied=implied,
         notes=tuple(notes),
         drop_search=drop_search,
         timings={
@@ -878,13 +465,11 @@ def _order_label(k: int) -> str:
     return "y" if k == 0 else f"y^({k})"
 
 
-def _drop_lines(drop: RankDrop, n: int) -> list[str]:
+def _drop_lines(drop: RankDrop, label: str, n: int) -> list[str]:
     flag = "" if drop.physical else "  [outside the physical range]"
-    lines = [f"{drop.label}{flag}"]
-    if drop.factor is not None and drop.factor not in drop.label:
+    lines = [f"{_short(label, 160)}{flag}"]
+    if drop.factor is not None and drop.factor not in label:
         lines.append(f"    witness-minor factor: {_short(drop.factor)}")
-    if drop.label != _short(drop.label, 160):
-        lines[0] = _short(drop.label, 160) + flag
     lines.append(
         f"    rank {drop.rank} of {n}; not observable: {', '.join(drop.unobservable) or '—'}"
         f"; error bound {drop.error_probability_bound:.1e}"
@@ -974,18 +559,18 @@ def print_report(report: ObservabilityReport, out: TextIO | None = None) -> None
         if not confirmed:
             say("  no tested set lowers the rank")
         for i, drop in enumerate(confirmed, start=1):
-            lines = _drop_lines(drop, n)
+            lines = _drop_lines(drop, report.label(drop), n)
             say(f"  {i}. {lines[0]}")
             for line in lines[1:]:
                 say(f"  {line}")
-        kept = [d.label for d in report.drops if d.decided and not d.confirmed]
+        kept = [report.label(d) for d in report.drops if d.decided and not d.confirmed]
         if kept:
             say(f"  rank stays {r.rank}: {'; '.join(_short(k, 60) for k in kept)}")
         if report.implied:
             say(f"  inside a set that already drops, not tested: {'; '.join(report.implied)}")
         for drop in report.drops:
             if not drop.decided:
-                say(f"  not decided: {drop.label}: {drop.note}")
+                say(f"  not decided: {report.label(drop)}: {drop.note}")
         for note in report.notes:
             say(f"  note: {_short(note, 160)}")
     t = report.timings
@@ -1175,7 +760,7 @@ def print_observability_summary(
         else:
             fate = f"persists up to {_order_label(len(drop.rank_by_order) - 1)}"
         print(
-            f"    {drop.label}: rank {drop.rank}, not observable "
+            f"    {report.label(drop)}: rank {drop.rank}, not observable "
             f"{', '.join(drop.unobservable)} ({fate})",
             file=out,
         )

@@ -27,6 +27,7 @@ from gearsym.symbolic.observability import (
     analyze_observability,
     augment,
     exact_rational,
+    find_rank_drops,
     observability_matrix,
     propose_rank_drop_conditions,
     rank_under_conditions,
@@ -677,6 +678,48 @@ def test_conditions_accept_expressions_and_reject_singular_sets():
         rank_under_conditions(mm_base, {"Km": "-x"}, seed=56)  # Km + x = 0: singular
 
 
+def test_drop_search_on_the_affine_model_matches_the_hand_derivation():
+    # x' = a + b u, y = x: Q with y, y', y'' has rows (1, 0, 0), (0, 1, u), (0, 0, u'), generic
+    # rank 3, and its only maximal minor is u'. By hand:
+    # * u held at 0: f = a, so b leaves f and h and its column of Q is zero at every order:
+    #   rank 2, only b unobservable.
+    # * u constant: y' = a + b u, y'' = 0: rank 2, kernel (x: 0, a: -u, b: 1).
+    # * u' = 0 at the instant (the minor's zero set): the y'' row vanishes, same kernel; y''' =
+    #   b u'' would restore it, but n - 1 = 2 is the highest order (4.4) a drop is followed to.
+    baseline = analyze_observability(AFFINE, ["a", "b"], seed=61)
+    search = find_rank_drops(baseline, seed=62)
+    by_label = {c.label: c for c in search.candidates}
+    assert set(by_label) == {"u held at 0", "u constant", "u__d1 = 0"}
+    assert all(c.confirmed and c.rank == 2 and c.physical for c in search.candidates)
+    held = by_label["u held at 0"]
+    assert held.origin == "input-held-zero" and held.unobservable == ("b",)
+    assert held.every_order.startswith("b does not occur in f or h with u = 0") and held.persists
+    for label in ("u constant", "u__d1 = 0"):
+        drop = by_label[label]
+        assert set(drop.unobservable) == {"a", "b"} and drop.rank_by_order == (1, 2, 2)
+        assert drop.persists and drop.restored_at_order is None and not drop.every_order
+        (direction,) = drop.directions
+        assert set(direction) == {"a", "b"}
+        assert Fraction(direction["a"]) == -Fraction(drop.point["u"]) * Fraction(direction["b"])
+    assert by_label["u__d1 = 0"].origin == "witness-minor factor"
+    assert by_label["u__d1 = 0"].factor == "u__d1"
+    assert not search.implied
+    json.dumps(search.to_dict())
+
+
+def test_session_computes_the_lie_derivatives_of_an_input_model_set_once():
+    # Re-ranking on sets with the same input models reuses one engine's derivative blocks.
+    baseline = analyze_observability(AFFINE, ["a", "b"], seed=63)
+    first = rank_under_conditions(baseline, {}, {"u": "constant"}, seed=64)
+    engine = baseline.session.engine(first.result.ranked.input_models)
+    blocks = list(engine.blocks)
+    assert len(blocks) == 3  # y, y', y''
+    rank_under_conditions(baseline, {"u": 0}, {"u": "constant"}, seed=65)
+    assert baseline.session.engine(first.result.ranked.input_models) is engine
+    assert all(a is b for a, b in zip(engine.blocks, blocks, strict=True))
+    assert baseline.session.engine() is not engine  # the generic model has its own
+
+
 def test_angle_condition_and_deficient_witness():
     # The sin/cos path: y = x, x' = a sin z + b cos z with a, b, z unknown constants. Only
     # a sin z + b cos z is seen (y' constant, y'' = 0): rank 2 of 4, x observable; at z = 0
@@ -719,10 +762,10 @@ def shift23_result(shift23):
     return analyze_observability(shift23, P_DEFAULT, substitute_defaults=True, seed=501)
 
 
-def naive_q(model: Model, estimate, order: int, constant=()) -> tuple[sp.Matrix, list]:
-    """Q (4.7) the textbook way, independent of the engine: full SymPy Jacobians of the
-    stacked Lie derivatives (4.4), input derivatives u^(k) as symbols (zero for inputs in
-    ``constant``), non-estimated parameters at their defaults (typed decimals)."""
+def textbook_q(model: Model, estimate, order: int, constant=()) -> tuple[sp.Matrix, list]:
+    """q (4.4) the textbook way, independent of the engine: whole-expression SymPy Jacobians,
+    L_f h = (dh/dx) f plus the input terms, input derivatives u^(k) as symbols (zero for inputs
+    in ``constant``), non-estimated parameters at their defaults (typed decimals)."""
     params = {v.name: v for v in model.parameters}
     subs = {
         v.symbol: sp.Rational(repr(v.default))
@@ -743,7 +786,13 @@ def naive_q(model: Model, estimate, order: int, constant=()) -> tuple[sp.Matrix,
                 for j in range(order):
                     nxt += prev.diff(ds[j]) * ds[j + 1]
         blocks.append(nxt)
-    return sp.Matrix.vstack(*blocks).jacobian(x), x
+    return sp.Matrix.vstack(*blocks), x
+
+
+def naive_q(model: Model, estimate, order: int, constant=()) -> tuple[sp.Matrix, list]:
+    """Q (4.7) the textbook way: the Jacobian of :func:`textbook_q` by the augmented state."""
+    q, x = textbook_q(model, estimate, order, constant)
+    return q.jacobian(x), x
 
 
 def naive_rank_at_random_point(q: sp.Matrix, seed: int, fixed=None) -> int:
@@ -803,6 +852,27 @@ def test_real_2_3_generic_rank_8_as_claimed_in_4_12(shift23, shift23_result):
     q, _ = naive_q(shift23, P_DEFAULT, 2)
     assert q.shape == (9, 8)
     assert naive_rank_at_random_point(q, seed=502) == 8
+
+
+@pytest.mark.parametrize(
+    ("order", "constant"), [(3, ()), (4, ("T_In", "F_N38", "F_N05"))], ids=["generic", "constant"]
+)
+def test_real_2_3_symengine_lie_derivatives_equal_the_sympy_textbook(shift23, order, constant):
+    # The engine computes q (4.4) and Q (4.7) in SymEngine, reusing each Jacobian row for the
+    # next Lie derivative; the textbook SymPy route (whole-expression Jacobians, no reuse) must
+    # give the same rational functions: every difference cancels to exactly zero.
+    om = observability_matrix(
+        shift23,
+        P_DEFAULT,
+        order=order,
+        substitute_defaults=True,
+        input_models=dict.fromkeys(constant, "constant"),
+    )
+    q, x = textbook_q(shift23, P_DEFAULT, order, constant=constant)
+    q = q.xreplace({s: sp.Symbol(s.name, real=True) for s in q.free_symbols if "__d" in s.name})
+    assert om.q.shape == q.shape == (3 * (order + 1), 1)
+    assert all(sp.cancel(e) == 0 for e in om.q - q)
+    assert all(sp.cancel(e) == 0 for e in om.Q - q.jacobian(x))
 
 
 def test_real_2_3_input_torque_excitation_cannot_matter_for_q123(shift23):
@@ -1006,7 +1076,7 @@ def test_linear_form_5_1_kalman_rank(thesis_gearbox, measured, overrides, expect
 
 
 def test_factor_polynomial_splits_exactly():
-    from gearsym.symbolic.observability import _drop_constant_lines, _factor_polynomial
+    from gearsym.symbolic.observability.minor import drop_constant_lines, factor_polynomial
     from sympy.polys.rings import ring
 
     r, x, y, z, w = ring("x,y,z,w", sp.ZZ)
@@ -1015,7 +1085,7 @@ def test_factor_polynomial_splits_exactly():
     for f in parts:
         p *= f
     notes: list[str] = []
-    factors = _factor_polynomial(p, 400, notes)
+    factors = factor_polynomial(p, 400, notes)
     product = r(1)
     for f, k in factors:
         product *= f**k
@@ -1026,7 +1096,7 @@ def test_factor_polynomial_splits_exactly():
     # expansion along constant lines keeps the determinant up to a nonzero constant
     a, b, c = sp.symbols("a b c")
     m = sp.Matrix([[a, 2, b], [0, 3, 0], [c, 1, a * b]]).tolist()
-    reduced = _drop_constant_lines(m)
+    reduced = drop_constant_lines(m)
     assert sp.Matrix(reduced).det() * 3 == sp.Matrix(m).det()
 
 
