@@ -7,6 +7,8 @@
 >>> model = box.shift_model("2-3")            # (2.55)-(2.58), the IR every analysis consumes
 >>> result = box.simulate()                   # reference simulation (thesis 3.1)
 >>> study = box.fim(result=result)            # Fisher information per phase (3.25)
+>>> box.observability("2-3").result.rank      # (4.12): rank 8, proved by a witness minor
+8
 >>> tree = box.generate()                     # emitted C and CasADi, in memory
 >>> box.generate("out/code")                  # written through the one output writer
 
@@ -105,6 +107,14 @@ class Gearbox:
 
         data = reference_from_result(result) if result is not None else None
         return fim_study(self.description, parameters, data=data, **options)
+
+    def observability(self, shift: str = "2-3", **options: Any) -> Any:
+        """Observability of the augmented shift model (4.1)-(4.12): generic rank of Q with its
+        witness, and where the rank drops (``options`` as ``gearsym observability``: params,
+        input_models, conditions, max_order, drop_search, seed, ...)."""
+        from gearsym.cmd_observability import analyze_shift
+
+        return analyze_shift(self.description, shift, **options)
 
     def generate(self, out: str | Path | None = None) -> Any:
         """The emitted C and CasADi tree (``GeneratedTree``: files by relative path, models).

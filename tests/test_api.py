@@ -62,3 +62,10 @@ def test_import_gearsym_stays_light() -> None:
     code = f"import sys, gearsym; print(sorted(m for m in {heavy} if m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_observability_through_the_api() -> None:
+    """(4.12): generic rank 8 of Q_123 for the 2-3 shift, every state and parameter observable."""
+    report = gearsym.load().observability("2-3", drop_search=False, seed=0)
+    assert report.result.rank == report.result.n_unknowns == 8
+    assert report.result.unobservable == () or not report.result.unobservable
