@@ -62,7 +62,6 @@ import sympy as sp
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.input_files import parse_toml, read_text
 from numpy.typing import ArrayLike
-from scipy.interpolate import RegularGridInterpolator
 
 Num = float | np.ndarray
 """Numeric result: a NumPy scalar (``np.float64`` is a ``float``) or an array."""
@@ -431,6 +430,10 @@ class MuMap:
             _fail(origin, "mu.values", f"implausible mu > 1 (max {table.max():g}); percent?")
         self.grid: tuple[np.ndarray, ...] = tuple(grid)
         self.table: np.ndarray = table
+        # imported here: loading SciPy costs half a second that `gearsym generate` (which only
+        # prints the map's table) need not pay
+        from scipy.interpolate import RegularGridInterpolator
+
         self._interp = RegularGridInterpolator(self.grid, table, method="linear")
 
     @classmethod

@@ -8,6 +8,7 @@ precision with the strict flags and loaded once per module (fixture ``built``).
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import os
 import re
@@ -217,13 +218,14 @@ def test_smart_jacobian_differentiates_only_where_the_variable_occurs() -> None:
     f = table["rhs"].expressions[0]
     wrt = [*table.states, *table.inputs, *table.parameters]
     calls: list[tuple[sp.Basic, sp.Symbol]] = []
-    original = codegen._partial
+    original = codegen.jacobian._partial
 
     def recording_partial(expr: sp.Basic, symbol: sp.Symbol) -> sp.Basic:
         calls.append((expr, symbol))
         return original(expr, symbol)
 
-    with mock.patch.object(codegen, "_partial", recording_partial):
+    codegen.clear_jacobian_cache()  # the table above computed (and cached) this Jacobian
+    with mock.patch.object(codegen.jacobian, "_partial", recording_partial):
         jac = codegen.smart_jacobian(f, wrt)
     assert calls and all(symbol in expr.free_symbols for expr, symbol in calls)
     assert len(calls) < f.shape[0] * len(wrt)  # a dense Jacobian would need one per entry
@@ -319,9 +321,15 @@ def test_names_and_bounds_are_checked() -> None:
 _FIELDS = ("states", "inputs", "parameters", "outputs", "rhs", "output_expressions")
 
 
-def test_render_uses_strict_undefined() -> None:
-    with pytest.raises(jinja2.UndefinedError):
-        codegen.render("c_header.h.j2")
+def test_render_takes_a_typed_view_and_uses_strict_undefined() -> None:
+    @dataclasses.dataclass(frozen=True)
+    class Incomplete:
+        model_name: str
+
+    with pytest.raises(jinja2.UndefinedError):  # the header needs far more than a name
+        codegen.render("c_header.h.j2", Incomplete("m"))
+    with pytest.raises(TypeError, match="dataclass view"):
+        codegen.render("c_header.h.j2", {"model_name": "m"})
 
 
 # ---------------------------------------------------------------------------------------------

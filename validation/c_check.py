@@ -38,7 +38,13 @@ from typing import Any
 
 import numpy as np
 import sympy as sp
-from gearsym.symbolic.codegen import FunctionSpec, build_function_table, emit_all, file_names
+from gearsym.symbolic.codegen import (
+    CodegenConfig,
+    FunctionSpec,
+    build_function_table,
+    emit_all,
+    file_names,
+)
 from gearsym.symbolic.model import Model
 
 STRICT_FLAGS: tuple[str, ...] = (
@@ -207,10 +213,16 @@ class CFunctions:
     for the matrix.
     """
 
-    def __init__(self, lib_path: Path, model: Model, single: bool = False) -> None:
+    def __init__(
+        self,
+        lib_path: Path,
+        model: Model,
+        single: bool = False,
+        config: CodegenConfig | Bounds | None = None,
+    ) -> None:
         self.model = model
         self.single = single
-        self.table = build_function_table(model)
+        self.table = build_function_table(model, config)
         self.real = ctypes.c_float if single else ctypes.c_double
         self.dtype = np.float32 if single else np.float64
         self._lib = ctypes.CDLL(str(lib_path))
@@ -318,9 +330,15 @@ class CFunctions:
         return int(status), int(index.value)
 
 
-def load_functions(lib_path: Path, model: Model, single: bool = False) -> CFunctions:
-    """Load a library built by :func:`compile_shared` for ``model``."""
-    return CFunctions(lib_path, model, single)
+def load_functions(
+    lib_path: Path,
+    model: Model,
+    single: bool = False,
+    config: CodegenConfig | Bounds | None = None,
+) -> CFunctions:
+    """Load a library built by :func:`compile_shared` for ``model``, emitted with ``config``
+    (which decides the functions it holds)."""
+    return CFunctions(lib_path, model, single, config)
 
 
 def load_casadi_module(path: Path) -> ModuleType:
@@ -605,20 +623,23 @@ def compare_casadi_with_sympy(
     return report
 
 
-def build(model: Model, out_dir: Path, bounds: Bounds | None = None) -> dict[str, Any]:
-    """Emit, compile (double and single, strict flags) and load everything for ``model``.
+def build(
+    model: Model, out_dir: Path, config: CodegenConfig | Bounds | None = None
+) -> dict[str, Any]:
+    """Emit with ``config`` (or a bare bounds mapping), compile (double and single, strict
+    flags) and load everything for ``model``.
 
     Returns ``{"files": {name: text}, "double": CFunctions, "single": CFunctions,
     "casadi": module}``.
     """
-    files = emit_all(model, bounds)
+    files = emit_all(model, config)
     c_files = {k: v for k, v in files.items() if k.endswith((".c", ".h"))}
     lib_double = compile_shared(c_files, out_dir, single=False)
     lib_single = compile_shared(c_files, out_dir, single=True)
     write_files(files, out_dir)
     return {
         "files": files,
-        "double": load_functions(lib_double, model, single=False),
-        "single": load_functions(lib_single, model, single=True),
+        "double": load_functions(lib_double, model, single=False, config=config),
+        "single": load_functions(lib_single, model, single=True, config=config),
         "casadi": load_casadi_module(out_dir / file_names(model)["casadi"]),
     }

@@ -100,7 +100,7 @@ def compare_models(
         say(f"validating {m.model.name} at {n_points} points")
         ranges = sample_ranges(m.model)
         for single in (False, True):
-            lib = c_check.load_functions(libs[single], m.model, single=single)
+            lib = c_check.load_functions(libs[single], m.model, single=single, config=m.config)
             report = c_check.compare_with_sympy(m.model, lib, n_points, seed + k, m.bounds, ranges)
             report.target = f"{m.model.name}: {report.target}"
             if single:

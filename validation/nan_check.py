@@ -41,7 +41,7 @@ from types import ModuleType
 
 import numpy as np
 import sympy as sp
-from gearsym.symbolic.codegen import _float_repr, file_names, has_implicit_step
+from gearsym.symbolic.codegen import INTEGRATORS, CodegenConfig, file_names, float_repr
 from gearsym.symbolic.friction import MuMap
 from gearsym.symbolic.model import Model
 from gearsym.validation import c_check
@@ -76,11 +76,17 @@ Bounds = Mapping[str, tuple[float | None, float | None]]
 
 @dataclass(frozen=True)
 class CheckedModel:
-    """A model, the parameter bounds its params_validate enforces and its sampling ranges."""
+    """A model, the parameter bounds its params_validate enforces, its sampling ranges and the
+    integrator steps it was emitted with."""
 
     model: Model
     bounds: Bounds
     ranges: Mapping[str, tuple[float, float]]
+    integrators: tuple[str, ...] = INTEGRATORS
+
+    @property
+    def config(self) -> CodegenConfig:
+        return CodegenConfig(bounds=self.bounds, integrators=self.integrators)
 
 
 @dataclass
@@ -316,17 +322,7 @@ static void run_{name}(int b, int target, int code)
     }}
 {param_loads}
     h = v[{n} - 1];
-{expression_calls}
-    out = buffer({nx});
-    {prefix}rk4_step(x, u, p, h, out);
-    calls++;
-    if (full) {{
-        printf("E {name} %d %d %d rk4_step", b, target, code);
-        classes(out, {nx});
-        putchar('\n');
-    }}
-    free(out);
-{implicit_call}
+{expression_calls}{rk4_call}{implicit_call}
     {prefix}params_default(defaults);
     status = {prefix}params_validate(p, &bad);
     calls += 2;
@@ -346,6 +342,17 @@ _EXPRESSION_CALL = r"""    out = buffer({size});
     if (full) {{
         printf("E {name} %d %d %d {fn}", b, target, code);
         classes(out, {size});
+        putchar('\n');
+    }}
+    free(out);
+"""
+
+_RK4_CALL = r"""    out = buffer({nx});
+    {prefix}rk4_step(x, u, p, h, out);
+    calls++;
+    if (full) {{
+        printf("E {name} %d %d %d rk4_step", b, target, code);
+        classes(out, {nx});
         putchar('\n');
     }}
     free(out);
@@ -393,7 +400,7 @@ static void run_mu_map(void)
 
 
 def _literal(value: float) -> str:
-    return f"GEARSYM_LIT({_float_repr(float(value))})"
+    return f"GEARSYM_LIT({float_repr(float(value))})"
 
 
 def driver_source(models: Sequence[CheckedModel], mu_map_base: Sequence[float] | None) -> str:
@@ -425,10 +432,13 @@ def driver_source(models: Sequence[CheckedModel], mu_map_base: Sequence[float] |
             _EXPRESSION_CALL.format(prefix=prefix, fn=fn, size=size, name=name)
             for fn, size in sizes.items()
         )
+        rk4 = ""
+        if m.config.rk4_step:
+            rk4 = _RK4_CALL.format(prefix=prefix, nx=nx, name=name)
         implicit = ""
-        if has_implicit_step(model):
+        if m.config.implicit_step:
             implicit = _IMPLICIT_CALL.format(
-                prefix=prefix, nx=nx, name=name, sentinel=_float_repr(SENTINEL)
+                prefix=prefix, nx=nx, name=name, sentinel=float_repr(SENTINEL)
             )
         parts.append(
             _MODEL_TEMPLATE.format(
@@ -440,6 +450,7 @@ def driver_source(models: Sequence[CheckedModel], mu_map_base: Sequence[float] |
                 prefix=prefix,
                 param_loads=loads,
                 expression_calls=expression_calls,
+                rk4_call=rk4,
                 implicit_call=implicit,
             )
         )
