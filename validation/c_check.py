@@ -21,6 +21,11 @@ what is measured is the error of the emitted code, not the rounding of its input
 Reference: the model's own expressions through ``sympy.lambdify`` (numpy, vectorised; or mpmath
 at 30 digits), with Jacobians taken by ``Matrix.jacobian`` independently of the emitter's
 ``smart_jacobian``.
+
+The sparse Jacobians ``jac_*_sparse`` are checked at the same points: their values are placed by
+the compressed-column pattern read from the compiled library's ``const`` arrays, every other
+entry set to 0, and the resulting matrix is compared with the dense reference like any other
+output, so a value in the wrong place and a nonzero left out of the pattern both fail.
 """
 
 from __future__ import annotations
@@ -41,6 +46,7 @@ import sympy as sp
 from gearsym.symbolic.codegen import (
     CodegenConfig,
     FunctionSpec,
+    SparsityPattern,
     build_function_table,
     emit_all,
     file_names,
@@ -230,6 +236,7 @@ class CFunctions:
         fields = [(v.name, self.real) for v in model.parameters] or [("reserved_", self.real)]
         self.Params = type("Params", (ctypes.Structure,), {"_fields_": fields})
         self._functions: dict[str, Any] = {}
+        self._positions: dict[str, tuple[int, np.ndarray]] = {}
         self.specs: dict[str, FunctionSpec] = {}
         real_p = ctypes.POINTER(self.real)
         for spec in self.table:
@@ -313,6 +320,27 @@ class CFunctions:
             self._ptr(xb), self._ptr(ub), ctypes.byref(params), self.real(h), self._ptr(out)
         )
         return int(status or 0), out[:nx].astype(np.float64)
+
+    def pattern(self, jacobian: str) -> SparsityPattern:
+        """The compressed-column pattern of ``jacobian`` (``"jac_x"``, ...) as compiled: read
+        from the library's ``<prefix><jacobian>_colptr`` and ``_rowind`` arrays."""
+        ncol = self.table[jacobian].outputs[0].shape[1]
+        colptr = (ctypes.c_int * (ncol + 1)).in_dll(self._lib, f"{self.prefix}{jacobian}_colptr")
+        nnz = colptr[ncol]
+        rowind = (ctypes.c_int * max(nnz, 1)).in_dll(self._lib, f"{self.prefix}{jacobian}_rowind")
+        rows = self.table[jacobian].outputs[0].shape[0]
+        return SparsityPattern(rows, ncol, tuple(colptr), tuple(rowind[:nnz]))
+
+    def evaluate_sparse(self, jacobian: str, x: Any, u: Any, p: Any) -> np.ndarray:
+        """``<jacobian>_sparse`` spread by the compiled pattern into the flat column-major
+        matrix (zeros elsewhere), comparable with the dense reference."""
+        if jacobian not in self._positions:
+            pattern = self.pattern(jacobian)
+            self._positions[jacobian] = (pattern.size, np.array(pattern.positions(), dtype=int))
+        size, positions = self._positions[jacobian]
+        dense = np.zeros(size)
+        dense[positions] = self.evaluate(f"{jacobian}_sparse", x, u, p)
+        return dense
 
     def params_default(self) -> np.ndarray:
         """Values written by ``params_default``, model order."""
@@ -403,9 +431,24 @@ def sample_points(
     return draw(model.states, False), draw(model.inputs, False), draw(model.parameters, True)
 
 
+_MATRIX_CACHE: dict[int, tuple[Model, tuple[list[sp.Symbol], dict[str, sp.Matrix]]]] = {}
+
+
 def reference_matrices(model: Model) -> tuple[list[sp.Symbol], dict[str, sp.Matrix]]:
     """The reference expressions of every expression function, over real dummies, with
-    Jacobians from ``Matrix.jacobian`` and Dirac deltas dropped (derivative almost everywhere)."""
+    Jacobians from ``Matrix.jacobian`` and Dirac deltas dropped (derivative almost everywhere).
+    Remembered per model object (the NaN rules and the pattern check both need them)."""
+    cached = _MATRIX_CACHE.get(id(model))
+    if cached is not None and cached[0] is model:
+        return cached[1]
+    if len(_MATRIX_CACHE) > 64:
+        _MATRIX_CACHE.clear()
+    result = _reference_matrices(model)
+    _MATRIX_CACHE[id(model)] = (model, result)
+    return result
+
+
+def _reference_matrices(model: Model) -> tuple[list[sp.Symbol], dict[str, sp.Matrix]]:
     variables = [*model.states, *model.inputs, *model.parameters]
     # Plain real symbols with positional names (not Dummy): lambdify then needs no renaming pass,
     # which dominated the reference's cost.
@@ -544,10 +587,11 @@ def _report(
     reference: Mapping[str, np.ndarray],
     floor: float,
 ) -> ComparisonReport:
+    """Errors of every computed function; ``<jac>_sparse`` against the reference of ``<jac>``."""
     n = next(iter(reference.values())).shape[0]
     report = ComparisonReport(target, n, floor)
-    for name in EXPR_FUNCTIONS:
-        per_point = mixed_error(computed[name], reference[name], floor)
+    for name in computed:
+        per_point = mixed_error(computed[name], reference[name.removesuffix("_sparse")], floor)
         report.max_error[name] = float(per_point.max(initial=0.0))
         report.worst_point[name] = int(per_point.argmax()) if per_point.size else -1
     return report
@@ -574,6 +618,11 @@ def compare_with_sympy(
     for name in EXPR_FUNCTIONS:
         computed[name] = np.array(
             [lib.evaluate(name, X[k], U[k], P[k]) for k in range(n_points)]
+        ).reshape(n_points, -1)
+    for spec in lib.table.sparse_rows():  # the same points, spread by the compiled pattern
+        jacobian = spec.name.removesuffix("_sparse")
+        computed[spec.name] = np.array(
+            [lib.evaluate_sparse(jacobian, X[k], U[k], P[k]) for k in range(n_points)]
         ).reshape(n_points, -1)
     precision = _precision(lib.single)
     report = _report(f"C {precision}", computed, reference, floor or FLOOR[precision])
@@ -615,6 +664,7 @@ def compare_casadi_with_sympy(
     X, U, P = sample_points(model, n_points, seed, bounds, ranges)
     reference = evaluate_reference(model, np.hstack([X, U, P]), backend)
     values = casadi_values(module, X, U, P)
+    values = {name: values[name] for name in EXPR_FUNCTIONS}
     report = _report("CasADi", values, reference, floor or FLOOR["double"])
     defaults = np.array([np.nan if v.default is None else v.default for v in model.parameters])
     emitted = np.array(module.PARAMETER_DEFAULTS, dtype=np.float64)

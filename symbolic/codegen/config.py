@@ -62,7 +62,7 @@ class Sparsity:
     entry inline, zeros included.
     """
 
-    layout: Literal["sparse", "dense"] = "dense"
+    layout: Literal["sparse", "dense"] = "sparse"
 
     def __post_init__(self) -> None:
         if self.layout not in ("sparse", "dense"):

@@ -4,14 +4,34 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import sympy as sp
 from gearsym.symbolic.codegen.config import CodegenConfig
 from gearsym.symbolic.codegen.expressions import is_inline_power
-from gearsym.symbolic.codegen.table import FunctionSpec
 from sympy.logic.boolalg import Boolean
 
-__all__ = ["CseForm", "boolean_definitions", "cse_function", "flatten_column_major"]
+if TYPE_CHECKING:
+    from gearsym.symbolic.codegen.table import FunctionSpec
+
+__all__ = ["CseForm", "boolean_definitions", "cse_function", "cse_of", "flatten_column_major"]
+
+
+@lru_cache(maxsize=256)
+def cse_of(
+    exprs: tuple[sp.Basic, ...], optimizations: str | None = None
+) -> tuple[tuple[tuple[sp.Symbol, sp.Basic], ...], tuple[sp.Basic, ...]]:
+    """:func:`sympy.cse` of ``exprs`` with temporaries ``_cse0, _cse1, ...``, remembered.
+
+    The right-hand side of a model is CSE'd twice otherwise: for its own function and as the
+    graph its Jacobians are differentiated over (:mod:`gearsym.symbolic.codegen.jacobian`).
+    Temporaries carry no assumptions while every model symbol is real, so a temporary can never
+    be equal to a model symbol, whatever the names.
+    """
+    generator = sp.numbered_symbols("_cse", cls=sp.Symbol)
+    replacements, reduced = sp.cse(list(exprs), symbols=generator, optimizations=optimizations)
+    return tuple(replacements), tuple(reduced)
 
 
 @dataclass(frozen=True)
@@ -47,11 +67,9 @@ def cse_function(spec: FunctionSpec, config: CodegenConfig | None = None) -> Cse
     """
     config = config or CodegenConfig()
     max_power = config.precision.max_inline_power
-    flat = [e for m in spec.expressions for e in flatten_column_major(m)]
-    # Temporaries carry no assumptions while every model symbol is real, so a temporary can never
-    # be equal to a model symbol, whatever the names.
-    generator = sp.numbered_symbols("_cse", cls=sp.Symbol)
-    replacements, reduced = sp.cse(flat, symbols=generator, optimizations=config.cse_optimizations)
+    flat = tuple(e for m in spec.expressions for e in flatten_column_major(m))
+    replacements, reduced = cse_of(flat, config.cse_optimizations)
+    generator = sp.numbered_symbols("_hoisted", cls=sp.Symbol)  # renamed below, like the rest
 
     hoisted: list[tuple[sp.Symbol, sp.Basic]] = []
     memo: dict[sp.Basic, sp.Symbol] = {}

@@ -18,6 +18,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import sympy as sp
+from gearsym.symbolic.codegen.cse import cse_of
+from gearsym.symbolic.sympy_utils import derivative
 from sympy.logic.boolalg import Boolean
 
 __all__ = ["SparsityPattern", "clear_jacobian_cache", "jacobian_blocks", "smart_jacobian"]
@@ -83,10 +85,13 @@ def jacobian_blocks(
 def _forward_mode(column: list[sp.Basic], wrt: list[sp.Symbol]) -> list[dict[sp.Symbol, sp.Basic]]:
     """Per entry of ``column``, its nonzero partial derivatives by variable of ``wrt``."""
     wrt_set = set(wrt)
-    # Dummies are unique, so they cannot clash with model symbols; they are substituted away
-    # before returning, so their (process-dependent) indices never reach the output.
-    temporaries = (sp.Dummy(f"j{k}", real=True) for k in itertools.count())
-    replacements, reduced = sp.cse(column, symbols=temporaries, optimizations=None)
+    # The same CSE as the right-hand side's own function (remembered), its temporaries made real
+    # Dummies: real so that d|t|/dt = sign(t); unique, so they cannot clash with model symbols.
+    # They are substituted away before returning, so their indices never reach the output.
+    plain_replacements, plain_reduced = cse_of(tuple(column), None)
+    dummy = {s: sp.Dummy(f"j{k}", real=True) for k, (s, _) in enumerate(plain_replacements)}
+    replacements = [(dummy[s], e.xreplace(dummy)) for s, e in plain_replacements]
+    reduced = [e.xreplace(dummy) for e in plain_reduced]
 
     full: dict[sp.Symbol, sp.Basic] = {}  # temporary -> its expression in model symbols
     grad: dict[sp.Symbol, dict[sp.Symbol, sp.Basic]] = {}  # temporary -> nonzero derivatives
@@ -118,7 +123,7 @@ def _forward_mode(column: list[sp.Basic], wrt: list[sp.Symbol]) -> list[dict[sp.
 
 def _partial(expr: sp.Basic, symbol: sp.Symbol) -> sp.Basic:
     """The one place that differentiates (only ever called with a symbol ``expr`` contains)."""
-    return _drop_distributions(expr.diff(symbol))
+    return _drop_distributions(derivative(expr, symbol))
 
 
 def _drop_distributions(expr: sp.Expr) -> sp.Expr:

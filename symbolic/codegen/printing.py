@@ -8,6 +8,7 @@ Emitters use a printer only through :meth:`SharedPrinting.code` and its ``used_*
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from functools import lru_cache
 from typing import Any
 
 import sympy as sp
@@ -70,6 +71,13 @@ def wrap(text: str, width: int = 92) -> list[str]:
     return lines
 
 
+@lru_cache(maxsize=4096)
+def _decimal_text(value: sp.Rational, digits: int) -> str:
+    """``value`` correctly rounded to ``digits`` significant digits (both printers print the
+    same large rationals, each many times: the conversion is worth remembering)."""
+    return str(sp.Float(value, digits))
+
+
 class SharedPrinting:
     """Printing rules common to the C and the CasADi printer (mixed into both)."""
 
@@ -91,6 +99,12 @@ class SharedPrinting:
     def code(self, expr: sp.Basic) -> str:
         """The source text of ``expr`` (the printers' one public entry point)."""
         return self._print(expr)  # type: ignore[attr-defined]  # the SymPy printer's
+
+    def _as_ordered_terms(self, expr: sp.Basic, order: str | None = None) -> list[sp.Basic]:
+        # The terms of a sum in SymPy's own canonical order (a structural comparison, independent
+        # of hashing): deterministic like as_ordered_terms(), whose monomial ordering was a
+        # quarter of the printing time.
+        return list(expr.args)
 
     def _print_Symbol(self, expr: sp.Symbol) -> str:
         return self._symbol_map.get(expr, expr.name)
@@ -129,7 +143,7 @@ class SharedPrinting:
         else:
             # Larger integers would be rounded (or overflow float) as literals: print the
             # quotient itself with enough digits to be correctly rounded in float and double.
-            text = self._decimal(str(sp.Float(abs(expr), self._precision.decimal_digits)))
+            text = self._decimal(_decimal_text(abs(expr), self._precision.decimal_digits))
         return ("-" if expr < 0 else "") + text
 
     _print_Half = _print_Rational

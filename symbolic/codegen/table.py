@@ -356,8 +356,13 @@ def build_function_table(
     xs = tuple(real[v.symbol] for v in model.states)
     us = tuple(real[v.symbol] for v in model.inputs)
     ps = tuple(real[v.symbol] for v in model.parameters)
-    f = sp.ImmutableMatrix(model.rhs.xreplace(real))
-    h = sp.ImmutableMatrix(model.output_expressions.xreplace(real))
+    # only the symbols that change: xreplace rebuilds every expression above a replaced symbol,
+    # even one replaced by itself
+    changed = {old: new for old, new in real.items() if old != new}
+    f = sp.ImmutableMatrix(model.rhs.xreplace(changed) if changed else model.rhs)
+    h = sp.ImmutableMatrix(
+        model.output_expressions.xreplace(changed) if changed else model.output_expressions
+    )
     jac = dict(zip("xup", jacobian_blocks(f, (xs, us, ps)), strict=True))
     patterns = {var: SparsityPattern.of(matrix) for var, matrix in jac.items()}
     sizes = {

@@ -179,11 +179,6 @@ def _spread(spec: FunctionSpec, pattern: SparsityPattern) -> Spread:
     )
 
 
-def _sympy_count_ops(form: CseForm) -> int:
-    exprs = [e for _, e in form.temporaries] + [e for m in form.outputs for e in m]
-    return int(sum(sp.count_ops(e) for e in exprs))
-
-
 def _function_views(
     table: FunctionTable, forms: Mapping[str, CseForm]
 ) -> tuple[list[CFunctionView], set[str], set[str]]:
@@ -220,10 +215,7 @@ def _function_views(
                 [a.name for a in spec.args if a.name not in used]
                 + [o.name for o in spec.outputs if o.size == 0]
             )
-            op_text = (
-                f"Operations: {ops.format()}; {len(form.temporaries)} temporaries "
-                f"(sympy.count_ops of the CSE'd form: {_sympy_count_ops(form)})."
-            )
+            op_text = f"Operations: {ops.format()}; {len(form.temporaries)} temporaries."
         elif spec.kind == "spread":
             assert spec.source is not None and spec.pattern is not None
             extra["spread"] = _spread(spec, spec.pattern)
