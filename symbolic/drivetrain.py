@@ -103,7 +103,10 @@ def element_slip_in_gear(d: GearboxDescription, gear: str, element: str) -> sp.E
     motion_out = speeds[d.output_shaft]
     e = d.element(element)
     slip = (speeds[e.a] if e.a is not None else 0) - speeds[e.b]
-    return sp.nsimplify(slip / motion_out)
+    ratio = sp.sympify(slip / motion_out)
+    # a rational (numeric teeth) is exact already; nsimplify would spend ~10 ms searching for
+    # another closed form of it
+    return ratio if ratio.is_Rational else sp.nsimplify(ratio)
 
 
 def power_on_slip_signs(d: GearboxDescription, spec: ShiftSpec) -> dict[str, int]:

@@ -55,14 +55,13 @@ Regularisations of the shift element (2.67)-(2.69), needed by a simulator:
 from __future__ import annotations
 
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 import numpy as np
 import sympy as sp
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.input_files import parse_toml, read_text
 from numpy.typing import ArrayLike
-from scipy.interpolate import RegularGridInterpolator
 
 Num = float | np.ndarray
 """Numeric result: a NumPy scalar (``np.float64`` is a ``float``) or an array."""
@@ -431,7 +430,15 @@ class MuMap:
             _fail(origin, "mu.values", f"implausible mu > 1 (max {table.max():g}); percent?")
         self.grid: tuple[np.ndarray, ...] = tuple(grid)
         self.table: np.ndarray = table
-        self._interp = RegularGridInterpolator(self.grid, table, method="linear")
+        self._interp: Any = None  # built on first call: `gearsym generate` only prints the table
+
+    def _interpolator(self) -> Any:
+        if self._interp is None:
+            # imported on use: loading SciPy costs half a second
+            from scipy.interpolate import RegularGridInterpolator
+
+            self._interp = RegularGridInterpolator(self.grid, self.table, method="linear")
+        return self._interp
 
     @classmethod
     def from_toml(cls, path: str | Path = DEFAULT_MU_MAP) -> MuMap:
@@ -465,7 +472,7 @@ class MuMap:
         )
         shape = pts[0].shape
         clamped = [np.clip(x, g[0], g[-1]).ravel() for x, g in zip(pts, self.grid, strict=True)]
-        return _out(self._interp(np.stack(clamped, axis=-1)).reshape(shape))
+        return _out(self._interpolator()(np.stack(clamped, axis=-1)).reshape(shape))
 
     @staticmethod
     def symbolic(p_n: Sym, t_oil: Sym, dw: Sym) -> sp.Expr:

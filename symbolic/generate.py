@@ -24,19 +24,19 @@ import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import sympy as sp
 from gearsym.symbolic import naming
 from gearsym.symbolic.codegen import (
-    Bounds,
-    _comment_text,
-    _float_repr,
-    build_function_table,
+    INTEGRATORS,
+    CodegenConfig,
     emit_all,
     file_names,
+    float_repr,
+    function_names,
     render,
 )
+from gearsym.symbolic.codegen.mu_map import mu_map_files
 from gearsym.symbolic.description import GearboxDescription, Quantity
 from gearsym.symbolic.drivetrain import (
     ShiftSpec,
@@ -121,13 +121,20 @@ _PARAMETER_RANGES = {"n_disc": (2.0, 8.0), "r_m": (0.05, 0.12)}
 
 @dataclass(frozen=True)
 class EmittedModel:
-    """One emitted model: the model, the ranges its ``params_validate`` enforces, and what it is."""
+    """One emitted model: the model, the ranges its ``params_validate`` enforces, its integrator
+    steps, and what it is."""
 
     model: Model
     bounds: dict[str, tuple[float | None, float | None]]
     role: str  # "full", "shift", "shift_mu", "sensitivity" or "shift_element"
     summary: str
     shift: ShiftSpec | None = None
+    integrators: tuple[str, ...] = INTEGRATORS
+
+    @property
+    def config(self) -> CodegenConfig:
+        """The emitters' decisions for this model (bounds, integrator steps)."""
+        return CodegenConfig(bounds=self.bounds, integrators=self.integrators)
 
 
 @dataclass(frozen=True)
@@ -212,7 +219,7 @@ def shift_element_model(d: GearboxDescription) -> Model:
     sigma1 = friction_value("sigma1", 150.0)
     z_ba = friction_value("z_ba_ratio", 0.6)
     elements = ", ".join(
-        f"{e.name} (n_disc {e.n_disc}, r_m {_float_repr(e.r_m.value)} m)"
+        f"{e.name} (n_disc {e.n_disc}, r_m {float_repr(e.r_m.value)} m)"
         for e in d.shift_elements
         if e.n_disc is not None and e.r_m is not None
     )
@@ -298,7 +305,11 @@ def gearbox_models(
             s = sensitivity_model(m, parameters)
             s = dataclasses.replace(s, metadata={**s.metadata, "integrators": "rk4"})
             what = f"shift {spec.name}: sensitivities to {', '.join(parameters)} (3.7)"
-            models.append(EmittedModel(s, _bounds(d, s), "sensitivity", what, spec))
+            # RK4 only: (3.7) is not stiff, and an implicit 24 x 24 solve does not belong on an
+            # ECU's stack
+            models.append(
+                EmittedModel(s, _bounds(d, s), "sensitivity", what, spec, integrators=("rk4",))
+            )
     if friction:
         say("building the shift-element friction model (2.66-2.70)")
         m = shift_element_model(d)
@@ -367,52 +378,6 @@ def mu_map_origin(file_name: str, data: bytes, label: str = "") -> str:
     return f"{label + ' ' if label else ''}{name} (SHA-256 {digest})"
 
 
-def _docstring_text(text: str) -> str:
-    """Text safe inside a triple-quoted Python docstring: one line, no backslash, no quote."""
-    return " ".join(str(text).split()).replace("\\", "/").replace('"', "'")
-
-
-def _c_literals(values: Sequence[float], per_line: int) -> list[str]:
-    items = [f"GEARSYM_LIT({_float_repr(float(v))})" for v in values]
-    return [", ".join(items[i : i + per_line]) for i in range(0, len(items), per_line)]
-
-
-def _py_tuple(values: Sequence[float], per_line: int = 7) -> list[str]:
-    items = [_float_repr(float(v)) for v in values]
-    return [", ".join(items[i : i + per_line]) + "," for i in range(0, len(items), per_line)]
-
-
-def mu_map_files(mu_map: MuMap) -> dict[str, str]:
-    """``gearsym_mu_map.{h,c}`` and ``gearsym_mu_map_casadi.py`` for ``mu_map``."""
-    p_n, t_oil, dw = mu_map.grid
-    flat = mu_map.table.reshape(-1)  # C order: [i][j][k] at (i*NT + j)*ND + k
-    context = {
-        "origin": _comment_text(mu_map.origin),  # C comments
-        "py_origin": _docstring_text(mu_map.origin),
-        "origin_repr": repr(mu_map.origin),
-        "axes": [
-            {"name": "p_N", "macro": "P_N", "unit": "Pa", "values": _c_literals(p_n, 6)},
-            {"name": "T_oil", "macro": "T_OIL", "unit": "degC", "values": _c_literals(t_oil, 6)},
-            {"name": "dw", "macro": "DW", "unit": "rad/s", "values": _c_literals(dw, 6)},
-        ],
-        "sizes": (len(p_n), len(t_oil), len(dw)),
-        "c_values": _c_literals(flat, len(dw)),
-        "py_axes": {"P_N": _py_tuple(p_n), "T_OIL": _py_tuple(t_oil), "DW": _py_tuple(dw)},
-        "py_values": _py_tuple(flat, len(dw)),
-        "range_text": (
-            f"p_N [{_float_repr(p_n[0])}, {_float_repr(p_n[-1])}] Pa, "
-            f"T_oil [{_float_repr(t_oil[0])}, {_float_repr(t_oil[-1])}] degC, "
-            f"|dw| [{_float_repr(dw[0])}, {_float_repr(dw[-1])}] rad/s"
-        ),
-    }
-    names = naming.model_file_names(naming.MU_MAP)
-    return {
-        f"{C_DIR}/{names['header']}": render("c_mu_map.h.j2", **context),
-        f"{C_DIR}/{names['source']}": render("c_mu_map.c.j2", **context),
-        f"{PYTHON_DIR}/{names['casadi']}": render("casadi_mu_map.py.j2", **context),
-    }
-
-
 # ---------------------------------------------------------------------------------------------
 # Example and index
 # ---------------------------------------------------------------------------------------------
@@ -429,7 +394,54 @@ def _example_shift(models: Sequence[EmittedModel]) -> EmittedModel:
     return (with_mu or preferred)[0]
 
 
-def _example_context(d: GearboxDescription, models: Sequence[EmittedModel]) -> dict[str, Any]:
+@dataclass(frozen=True)
+class ExampleInput:
+    name: str  # input variable
+    code: str  # C expression of its value
+    what: str
+
+
+@dataclass(frozen=True)
+class ExampleElement:
+    """The shift element whose friction model main.c runs."""
+
+    name: str
+    n_disc: str
+    r_m: str
+    area: str
+
+
+@dataclass(frozen=True)
+class ExampleView:
+    """What ``c_example_main.c.j2`` prints (and the README's build line)."""
+
+    gearbox: str
+    shift: str
+    from_gear: str
+    to_gear: str
+    ratio_to: str
+    omega_in: str
+    omega_out: str
+    shift_model: str
+    shift_macro: str
+    shift_header: str
+    shift_states: tuple[str, ...]
+    x0: tuple[str, ...]
+    inputs: tuple[ExampleInput, ...]
+    mu_settings: tuple[tuple[str, str], ...]  # (mu parameter, which element)
+    t_oil: str
+    apply_pressure: str
+    slip: str
+    speed: str
+    full_model: str
+    full_macro: str
+    full_header: str
+    element: ExampleElement | None
+    element_header: str | None
+    c_files: tuple[str, ...]
+
+
+def _example_view(d: GearboxDescription, models: Sequence[EmittedModel]) -> ExampleView:
     from gearsym.symbolic.ratios import gear_ratio
 
     shift = _example_shift(models)
@@ -438,7 +450,6 @@ def _example_context(d: GearboxDescription, models: Sequence[EmittedModel]) -> d
     full = next(m for m in models if m.role == "full")
     element = next((m for m in models if m.role == "shift_element"), None)
     sm = shift.model
-    macro = naming.macro_prefix(sm.name)
     ratio = float(gear_ratio(d, d.gear(spec.from_gear)).ratio)
     ratio_to = float(gear_ratio(d, d.gear(spec.to_gear)).ratio)
     i_d = float(d.drivetrain["i_D"].value)
@@ -451,7 +462,6 @@ def _example_context(d: GearboxDescription, models: Sequence[EmittedModel]) -> d
         naming.speed(d.output_shaft): omega_out,
         naming.WHEEL_SPEED: omega_c,
     }
-    x0 = [_float_repr(round(initial.get(v.name, 0.0), 6)) for v in sm.states]
     apply_pressure = 5.0e5  # Pa
     slip = 20.0  # rad/s
     t_oil = float(d.friction["T_oil"].value) if "T_oil" in d.friction else 80.0
@@ -459,95 +469,113 @@ def _example_context(d: GearboxDescription, models: Sequence[EmittedModel]) -> d
     mu_settings = []
     for v in sm.inputs:
         if v.name == naming.INPUT_TORQUE:
-            inputs.append((v.name, "GEARSYM_LIT(150.0)", "engine torque"))
+            inputs.append(ExampleInput(v.name, "GEARSYM_LIT(150.0)", "engine torque"))
     if shift.role == "shift_mu":
         for elem_name, role in ((spec.off_going, "off-going"), (spec.on_coming, "on-coming")):
             e = d.element(elem_name)
             short = element_short_name(d, elem_name)
+            force = naming.normal_force(short)
             if role == "off-going":
-                force = naming.normal_force(short)
-                inputs.append((force, "GEARSYM_LIT(0.0)", f"{role} {e.name} released"))
+                inputs.append(ExampleInput(force, "GEARSYM_LIT(0.0)", f"{role} {e.name} released"))
             else:
                 assert e.a_piston is not None
-                area = f"GEARSYM_LIT({_float_repr(e.a_piston.value)})"
-                force = naming.normal_force(short)
-                inputs.append((force, f"P_APPLY * {area}", f"{role} {e.name}: p_N A"))
+                area = f"GEARSYM_LIT({float_repr(e.a_piston.value)})"
+                inputs.append(ExampleInput(force, f"P_APPLY * {area}", f"{role} {e.name}: p_N A"))
             mu_settings.append((naming.friction_coefficient(short), f"{role} {e.name}"))
     else:
         # Sliding torque of the on-coming element with the sign of its slip (2.70).
         sign = power_on_slip_signs(d, spec)[spec.on_coming]
         off, on = naming.torque(spec.off_going), naming.torque(spec.on_coming)
-        inputs.append((off, "GEARSYM_LIT(0.0)", "off-going element open"))
-        inputs.append((on, f"GEARSYM_LIT({300.0 * sign})", "on-coming element sliding"))
+        inputs.append(ExampleInput(off, "GEARSYM_LIT(0.0)", "off-going element open"))
+        inputs.append(ExampleInput(on, f"GEARSYM_LIT({300.0 * sign})", "on-coming element sliding"))
     element_view = None
     if element is not None:
         e = d.element(spec.on_coming)
-        element_view = {
-            "name": e.name,
-            "n_disc": _float_repr(float(e.n_disc or 0)),
-            "r_m": _float_repr(e.r_m.value if e.r_m else 0.0),
-            "area": _float_repr(e.a_piston.value if e.a_piston else 0.0),
-        }
+        element_view = ExampleElement(
+            name=e.name,
+            n_disc=float_repr(float(e.n_disc or 0)),
+            r_m=float_repr(e.r_m.value if e.r_m else 0.0),
+            area=float_repr(e.a_piston.value if e.a_piston else 0.0),
+        )
     c_files = [file_names(sm)["source"], "gearsym_mu_map.c", file_names(full.model)["source"]]
     if element is not None:
         c_files.insert(2, file_names(element.model)["source"])
-    return {
-        "gearbox": d.name,
-        "shift": spec.name,
-        "from_gear": spec.from_gear,
-        "to_gear": spec.to_gear,
-        "ratio_to": _float_repr(round(ratio_to, 12)),
-        "omega_in": naming.speed(d.input_shaft),
-        "omega_out": naming.speed(d.output_shaft),
-        "shift_model": sm.name,
-        "shift_macro": macro,
-        "shift_header": file_names(sm)["header"],
-        "shift_states": [v.name for v in sm.states],
-        "x0": x0,
-        "inputs": inputs,
-        "mu_settings": mu_settings,
-        "t_oil": _float_repr(t_oil),
-        "apply_pressure": _float_repr(apply_pressure),
-        "slip": _float_repr(slip),
-        "speed": _float_repr(speed),
-        "full_model": full.model.name,
-        "full_macro": naming.macro_prefix(full.model.name),
-        "full_header": file_names(full.model)["header"],
-        "element": element_view,
-        "element_header": file_names(element.model)["header"] if element else None,
-        "c_files": c_files,
-    }
+    return ExampleView(
+        gearbox=d.name,
+        shift=spec.name,
+        from_gear=spec.from_gear,
+        to_gear=spec.to_gear,
+        ratio_to=float_repr(round(ratio_to, 12)),
+        omega_in=naming.speed(d.input_shaft),
+        omega_out=naming.speed(d.output_shaft),
+        shift_model=sm.name,
+        shift_macro=naming.macro_prefix(sm.name),
+        shift_header=file_names(sm)["header"],
+        shift_states=tuple(v.name for v in sm.states),
+        x0=tuple(float_repr(round(initial.get(v.name, 0.0), 6)) for v in sm.states),
+        inputs=tuple(inputs),
+        mu_settings=tuple(mu_settings),
+        t_oil=float_repr(t_oil),
+        apply_pressure=float_repr(apply_pressure),
+        slip=float_repr(slip),
+        speed=float_repr(speed),
+        full_model=full.model.name,
+        full_macro=naming.macro_prefix(full.model.name),
+        full_header=file_names(full.model)["header"],
+        element=element_view,
+        element_header=file_names(element.model)["header"] if element else None,
+        c_files=tuple(c_files),
+    )
+
+
+@dataclass(frozen=True)
+class ReadmeRow:
+    name: str
+    summary: str
+    sizes: str  # "NX / NU / NP / NY"
+    states: str
+    inputs: str
+    c: str  # the C files
+    python: str  # the CasADi module
+
+
+@dataclass(frozen=True)
+class ReadmeView:
+    gearbox: str
+    title: str
+    models: tuple[ReadmeRow, ...]
+    functions: tuple[str, ...]
+    example: ExampleView
+    mu_map_origin: str  # mu_map_origin() leaves only [A-Za-z0-9._+-] and spaces: Markdown-safe
 
 
 def _readme(
-    d: GearboxDescription, models: Sequence[EmittedModel], example: dict, mu_map: MuMap
+    d: GearboxDescription, models: Sequence[EmittedModel], example: ExampleView, mu_map: MuMap
 ) -> str:
     rows = []
     for m in models:
         names = file_names(m.model)
         rows.append(
-            {
-                "name": m.model.name,
-                "summary": m.summary,
-                "sizes": f"{len(m.model.states)} / {len(m.model.inputs)} / "
+            ReadmeRow(
+                name=m.model.name,
+                summary=m.summary,
+                sizes=f"{len(m.model.states)} / {len(m.model.inputs)} / "
                 f"{len(m.model.parameters)} / {len(m.model.outputs)}",
-                "states": ", ".join(v.name for v in m.model.states),
-                "inputs": ", ".join(v.name for v in m.model.inputs),
-                "c": f"{C_DIR}/{names['header']}, {C_DIR}/{names['source']}",
-                "python": f"{PYTHON_DIR}/{names['casadi']}",
-            }
+                states=", ".join(v.name for v in m.model.states),
+                inputs=", ".join(v.name for v in m.model.inputs),
+                c=f"{C_DIR}/{names['header']}, {C_DIR}/{names['source']}",
+                python=f"{PYTHON_DIR}/{names['casadi']}",
+            )
         )
-    functions = [spec.name for spec in build_function_table(models[0].model)]
-    return render(
-        "generated_readme.md.j2",
+    view = ReadmeView(
         gearbox=d.name,
         title=d.title,
-        models=rows,
-        functions=functions,
+        models=tuple(rows),
+        functions=tuple(function_names(models[0].config)),
         example=example,
-        # mu_map_origin() leaves only [A-Za-z0-9._+-] and spaces: no Markdown escaping needed
         mu_map_origin=mu_map.origin,
     )
+    return render("generated_readme.md.j2", view)
 
 
 def generate_tree(
@@ -559,15 +587,14 @@ def generate_tree(
     files: dict[str, str] = {}
     for m in models:
         say(f"emitting {m.model.name}")
-        bounds: Bounds = m.bounds
-        for name, text in emit_all(m.model, bounds).items():
+        for name, text in emit_all(m.model, m.config).items():
             folder = PYTHON_DIR if name.endswith(".py") else C_DIR
             files[f"{folder}/{name}"] = text
     say("emitting the mu map and the example")
     mu_map = load_mu_map(d)
     files.update(mu_map_files(mu_map))
-    example = _example_context(d, models)
-    files[f"{C_DIR}/main.c"] = render("c_example_main.c.j2", **example)
+    example = _example_view(d, models)
+    files[f"{C_DIR}/main.c"] = render("c_example_main.c.j2", example)
     files["README.md"] = _readme(d, models, example, mu_map)
     files[MANIFEST] = manifest_text({k: v.encode("utf-8") for k, v in files.items()}, "generate")
-    return GeneratedTree(files, tuple(models), mu_map, tuple(example["c_files"]))
+    return GeneratedTree(files, tuple(models), mu_map, example.c_files)

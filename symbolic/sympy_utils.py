@@ -20,6 +20,61 @@ def exact_nullspace(matrix: sp.Matrix) -> list[sp.Matrix]:
     return [basis[i, :].T for i in range(basis.rows)]
 
 
+#: Functions of one argument whose derivative is ``fdiff(1)`` times that of the argument.
+_CHAIN_RULE_FUNCTIONS = frozenset(
+    (sp.sin, sp.cos, sp.tan, sp.exp, sp.log, sp.sinh, sp.cosh, sp.tanh, sp.asin, sp.acos, sp.atan)
+)
+
+
+def derivative(expr: sp.Basic, symbol: sp.Symbol) -> sp.Basic:
+    """``d expr / d symbol``, the same expression as ``expr.diff(symbol)``, faster.
+
+    Applies the sum, product, constant-power and chain rules itself to the node types the
+    derivation produces, building the same canonical expressions as SymPy's ``diff`` (which
+    applies the same rules through ``_eval_derivative``) without its per-node ``Derivative``
+    dispatch: that dispatch was most of the time ``gearsym generate`` spent differentiating.
+    Every other node (Abs, sign, Piecewise, Min, Max, ...) goes to ``diff`` itself.
+    """
+    return _derivative(sp.sympify(expr), symbol, {}) or sp.S.Zero
+
+
+def _derivative(
+    expr: sp.Basic, symbol: sp.Symbol, memo: dict[sp.Basic, sp.Basic | None]
+) -> sp.Basic | None:
+    """:func:`derivative`, ``None`` where it is zero; ``memo`` holds the visited nodes."""
+    if expr in memo:
+        return memo[expr]
+    result: sp.Basic | None
+    if expr == symbol:
+        result = sp.S.One
+    elif expr.is_Atom:
+        result = None
+    elif expr.is_Add:
+        parts = [_derivative(a, symbol, memo) for a in expr.args]
+        nonzero = [d for d in parts if d is not None]
+        result = sp.Add(*nonzero) if nonzero else None
+    elif expr.is_Mul:
+        args = list(expr.args)
+        terms = []
+        for i, arg in enumerate(args):
+            d = _derivative(arg, symbol, memo)
+            if d is not None:
+                terms.append(sp.Mul(*args[:i], d, *args[i + 1 :]))
+        result = sp.Add(*terms) if terms else None
+    elif expr.is_Pow and not expr.exp.has(symbol):
+        d = _derivative(expr.base, symbol, memo)
+        result = None if d is None else expr * expr.exp * d / expr.base
+    elif expr.func in _CHAIN_RULE_FUNCTIONS:
+        d = _derivative(expr.args[0], symbol, memo)
+        result = None if d is None else expr.fdiff(1) * d
+    else:
+        result = expr.diff(symbol) if expr.has(symbol) else None
+    if result is not None and result == 0:
+        result = None
+    memo[expr] = result
+    return result
+
+
 def smart_jacobian(
     exprs: Sequence[sp.Expr],
     variables: Sequence[sp.Symbol],
@@ -36,5 +91,5 @@ def smart_jacobian(
     for i, e in enumerate(exprs):
         e = sp.sympify(e)
         free = e.free_symbols if free_symbols is None else free_symbols[i]
-        rows.append([e.diff(v) if v in free else sp.S.Zero for v in variables])
+        rows.append([derivative(e, v) if v in free else sp.S.Zero for v in variables])
     return sp.Matrix(len(rows), len(variables), lambda i, j: rows[i][j])

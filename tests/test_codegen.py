@@ -8,6 +8,7 @@ precision with the strict flags and loaded once per module (fixture ``built``).
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import os
 import re
@@ -197,8 +198,11 @@ def test_function_table_rows_and_shapes() -> None:
     assert [f.name for f in table] == [
         "rhs",
         "outputs",
+        "jac_x_sparse",
         "jac_x",
+        "jac_u_sparse",
         "jac_u",
+        "jac_p_sparse",
         "jac_p",
         "rk4_step",
         "linearly_implicit_euler_step",
@@ -207,6 +211,16 @@ def test_function_table_rows_and_shapes() -> None:
     ]
     assert table["jac_p"].outputs[0].shape == (3, 12)
     assert table["jac_u"].expressions[0].shape == (3, 2)
+    pattern = table["jac_p"].pattern
+    assert table["jac_p_sparse"].outputs[0].shape == (pattern.nnz, 1)
+    assert table["jac_p"].kind == "spread" and table["jac_p"].source == "jac_p_sparse"
+    # the config decides the rows: dense layout, explicit step only
+    config = codegen.CodegenConfig(
+        FRICTION_BOUNDS, integrators=("rk4",), sparsity=codegen.Sparsity("dense")
+    )
+    names = [f.name for f in codegen.build_function_table(friction_model(), config)]
+    assert names == ["rhs", "outputs", "jac_x", "jac_u", "jac_p", "rk4_step", *names[-2:]]
+    assert names == codegen.function_names(config)
     assert [a.name for a in table["rk4_step"].args] == ["x", "u", "p", "h"]
     assert table["linearly_implicit_euler_step"].returns == "int"
     assert table.prefix == "gearsym_friction_"
@@ -217,13 +231,14 @@ def test_smart_jacobian_differentiates_only_where_the_variable_occurs() -> None:
     f = table["rhs"].expressions[0]
     wrt = [*table.states, *table.inputs, *table.parameters]
     calls: list[tuple[sp.Basic, sp.Symbol]] = []
-    original = codegen._partial
+    original = codegen.jacobian._partial
 
     def recording_partial(expr: sp.Basic, symbol: sp.Symbol) -> sp.Basic:
         calls.append((expr, symbol))
         return original(expr, symbol)
 
-    with mock.patch.object(codegen, "_partial", recording_partial):
+    codegen.clear_jacobian_cache()  # the table above computed (and cached) this Jacobian
+    with mock.patch.object(codegen.jacobian, "_partial", recording_partial):
         jac = codegen.smart_jacobian(f, wrt)
     assert calls and all(symbol in expr.free_symbols for expr, symbol in calls)
     assert len(calls) < f.shape[0] * len(wrt)  # a dense Jacobian would need one per entry
@@ -241,7 +256,7 @@ def test_smart_jacobian_differentiates_only_where_the_variable_occurs() -> None:
 
 
 def test_cse_is_one_pass_with_sequential_temporaries() -> None:
-    form = codegen.cse_function(codegen.build_function_table(friction_model())["jac_x"])
+    form = codegen.cse_function(codegen.build_function_table(friction_model())["jac_x_sparse"])
     names = [s.name for s, _ in form.temporaries]
     assert names == [f"t{k}" for k in range(len(names))]
     # The compound cube base (v + theta/3) is computed once and multiplied out.
@@ -319,9 +334,15 @@ def test_names_and_bounds_are_checked() -> None:
 _FIELDS = ("states", "inputs", "parameters", "outputs", "rhs", "output_expressions")
 
 
-def test_render_uses_strict_undefined() -> None:
-    with pytest.raises(jinja2.UndefinedError):
-        codegen.render("c_header.h.j2")
+def test_render_takes_a_typed_view_and_uses_strict_undefined() -> None:
+    @dataclasses.dataclass(frozen=True)
+    class Incomplete:
+        model_name: str
+
+    with pytest.raises(jinja2.UndefinedError):  # the header needs far more than a name
+        codegen.render("c_header.h.j2", Incomplete("m"))
+    with pytest.raises(TypeError, match="dataclass view"):
+        codegen.render("c_header.h.j2", {"model_name": "m"})
 
 
 # ---------------------------------------------------------------------------------------------
@@ -415,10 +436,55 @@ def test_header_api_and_op_counts(built: dict[str, Any]) -> None:
     assert "typedef double gearsym_real;" in header and "v##f" in header
     assert "comment-closer must be escaped" in header and "*/ comment" not in header
     prototypes = re.findall(r"^(?:void|int) gearsym_pendulum_(\w+)\(", header, re.MULTILINE)
-    assert len(prototypes) == 9
+    assert len(prototypes) == 12 and "jac_x_sparse" in prototypes
     docs = re.findall(r"/\*\*(.*?)\*/", header, re.DOTALL)
-    assert len(docs) == 9 and all("Operations" in d for d in docs)
+    assert len(docs) == 12 and all("Operations" in d for d in docs)
     assert re.search(r"Operations: \d+ add, \d+ mul, \d+ div, 1 call \(sin 1\)", header)
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_sparse_jacobians_hold_the_structural_nonzeros(built: dict[str, Any], name: str) -> None:
+    """The compiled pattern of every jac_*_sparse is the set of entries of SymPy's own
+    Matrix.jacobian that are not identically 0 (Dirac deltas dropped), the values spread by it
+    equal the dense jac_* bit for bit and SymPy at random points, and the header's NNZ macro
+    matches. The four models cover every way the dense function is filled: spread (most),
+    every entry nonzero (coverage: d/dk), no nonzero (coverage has no inputs)."""
+    entry = built[name]
+    model = entry["model"]
+    _, reference = c_check.reference_matrices(model)
+    header = entry["files"][f"gearsym_{name}.h"]
+    source = entry["files"][f"gearsym_{name}.c"]
+    X, U, P = c_check.sample_points(model, 50, seed=11, bounds=entry["bounds"])
+    # exact in float too, so the single build's error is that of its code, not of its inputs
+    X, U, P = (a.astype(np.float32).astype(np.float64) for a in (X, U, P))
+    values = c_check.evaluate_reference(model, np.hstack([X, U, P]))
+    for jacobian in ("jac_x", "jac_u", "jac_p"):
+        matrix = reference[jacobian]
+        expected = [
+            i + j * matrix.rows
+            for j in range(matrix.cols)
+            for i in range(matrix.rows)
+            if matrix[i, j] != 0
+        ]
+        for precision in ("double", "single"):
+            lib = entry[precision]
+            pattern = lib.pattern(jacobian)
+            assert pattern.positions() == expected, (name, jacobian)
+            macro = f"#define GEARSYM_{name.upper()}_{jacobian.upper()}_NNZ {len(expected)} "
+            assert macro in header
+            computed = []
+            for k in range(len(X)):
+                spread = lib.evaluate_sparse(jacobian, X[k], U[k], P[k])
+                np.testing.assert_array_equal(spread, lib.evaluate(jacobian, X[k], U[k], P[k]))
+                computed.append(spread)
+            error = c_check.mixed_error(
+                np.array(computed).reshape(len(X), -1), values[jacobian], c_check.FLOOR[precision]
+            )
+            assert error.max(initial=0.0) <= c_check.TOLERANCE[precision], (name, jacobian)
+    if name == "coverage":
+        assert "the compressed-column order is the dense one" in source  # d/dk: 2 of 2 nonzero
+        assert "#define GEARSYM_COVERAGE_JAC_U_NNZ 0 " in header  # no inputs
+        assert "gearsym_coverage_jac_u_rowind[1] = {\n    0,\n};" in source
 
 
 def test_edge_models_compile_strictly(tmp_path: Path) -> None:

@@ -33,7 +33,8 @@ GENERATED = REPO / "generated"
 def checked() -> tuple[list[nan_check.CheckedModel], Any]:
     d = load_description(None)
     models = [
-        nan_check.CheckedModel(m.model, m.bounds, sample_ranges(m.model)) for m in gearbox_models(d)
+        nan_check.CheckedModel(m.model, m.bounds, sample_ranges(m.model), m.integrators)
+        for m in gearbox_models(d)
     ]
     return models, load_mu_map(d)
 

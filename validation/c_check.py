@@ -21,6 +21,11 @@ what is measured is the error of the emitted code, not the rounding of its input
 Reference: the model's own expressions through ``sympy.lambdify`` (numpy, vectorised; or mpmath
 at 30 digits), with Jacobians taken by ``Matrix.jacobian`` independently of the emitter's
 ``smart_jacobian``.
+
+The sparse Jacobians ``jac_*_sparse`` are checked at the same points: their values are placed by
+the compressed-column pattern read from the compiled library's ``const`` arrays, every other
+entry set to 0, and the resulting matrix is compared with the dense reference like any other
+output, so a value in the wrong place and a nonzero left out of the pattern both fail.
 """
 
 from __future__ import annotations
@@ -38,7 +43,14 @@ from typing import Any
 
 import numpy as np
 import sympy as sp
-from gearsym.symbolic.codegen import FunctionSpec, build_function_table, emit_all, file_names
+from gearsym.symbolic.codegen import (
+    CodegenConfig,
+    FunctionSpec,
+    SparsityPattern,
+    build_function_table,
+    emit_all,
+    file_names,
+)
 from gearsym.symbolic.model import Model
 
 STRICT_FLAGS: tuple[str, ...] = (
@@ -207,10 +219,16 @@ class CFunctions:
     for the matrix.
     """
 
-    def __init__(self, lib_path: Path, model: Model, single: bool = False) -> None:
+    def __init__(
+        self,
+        lib_path: Path,
+        model: Model,
+        single: bool = False,
+        config: CodegenConfig | Bounds | None = None,
+    ) -> None:
         self.model = model
         self.single = single
-        self.table = build_function_table(model)
+        self.table = build_function_table(model, config)
         self.real = ctypes.c_float if single else ctypes.c_double
         self.dtype = np.float32 if single else np.float64
         self._lib = ctypes.CDLL(str(lib_path))
@@ -218,6 +236,7 @@ class CFunctions:
         fields = [(v.name, self.real) for v in model.parameters] or [("reserved_", self.real)]
         self.Params = type("Params", (ctypes.Structure,), {"_fields_": fields})
         self._functions: dict[str, Any] = {}
+        self._positions: dict[str, tuple[int, np.ndarray]] = {}
         self.specs: dict[str, FunctionSpec] = {}
         real_p = ctypes.POINTER(self.real)
         for spec in self.table:
@@ -302,6 +321,27 @@ class CFunctions:
         )
         return int(status or 0), out[:nx].astype(np.float64)
 
+    def pattern(self, jacobian: str) -> SparsityPattern:
+        """The compressed-column pattern of ``jacobian`` (``"jac_x"``, ...) as compiled: read
+        from the library's ``<prefix><jacobian>_colptr`` and ``_rowind`` arrays."""
+        ncol = self.table[jacobian].outputs[0].shape[1]
+        colptr = (ctypes.c_int * (ncol + 1)).in_dll(self._lib, f"{self.prefix}{jacobian}_colptr")
+        nnz = colptr[ncol]
+        rowind = (ctypes.c_int * max(nnz, 1)).in_dll(self._lib, f"{self.prefix}{jacobian}_rowind")
+        rows = self.table[jacobian].outputs[0].shape[0]
+        return SparsityPattern(rows, ncol, tuple(colptr), tuple(rowind[:nnz]))
+
+    def evaluate_sparse(self, jacobian: str, x: Any, u: Any, p: Any) -> np.ndarray:
+        """``<jacobian>_sparse`` spread by the compiled pattern into the flat column-major
+        matrix (zeros elsewhere), comparable with the dense reference."""
+        if jacobian not in self._positions:
+            pattern = self.pattern(jacobian)
+            self._positions[jacobian] = (pattern.size, np.array(pattern.positions(), dtype=int))
+        size, positions = self._positions[jacobian]
+        dense = np.zeros(size)
+        dense[positions] = self.evaluate(f"{jacobian}_sparse", x, u, p)
+        return dense
+
     def params_default(self) -> np.ndarray:
         """Values written by ``params_default``, model order."""
         params = self.Params()
@@ -318,9 +358,15 @@ class CFunctions:
         return int(status), int(index.value)
 
 
-def load_functions(lib_path: Path, model: Model, single: bool = False) -> CFunctions:
-    """Load a library built by :func:`compile_shared` for ``model``."""
-    return CFunctions(lib_path, model, single)
+def load_functions(
+    lib_path: Path,
+    model: Model,
+    single: bool = False,
+    config: CodegenConfig | Bounds | None = None,
+) -> CFunctions:
+    """Load a library built by :func:`compile_shared` for ``model``, emitted with ``config``
+    (which decides the functions it holds)."""
+    return CFunctions(lib_path, model, single, config)
 
 
 def load_casadi_module(path: Path) -> ModuleType:
@@ -385,9 +431,24 @@ def sample_points(
     return draw(model.states, False), draw(model.inputs, False), draw(model.parameters, True)
 
 
+_MATRIX_CACHE: dict[int, tuple[Model, tuple[list[sp.Symbol], dict[str, sp.Matrix]]]] = {}
+
+
 def reference_matrices(model: Model) -> tuple[list[sp.Symbol], dict[str, sp.Matrix]]:
     """The reference expressions of every expression function, over real dummies, with
-    Jacobians from ``Matrix.jacobian`` and Dirac deltas dropped (derivative almost everywhere)."""
+    Jacobians from ``Matrix.jacobian`` and Dirac deltas dropped (derivative almost everywhere).
+    Remembered per model object (the NaN rules and the pattern check both need them)."""
+    cached = _MATRIX_CACHE.get(id(model))
+    if cached is not None and cached[0] is model:
+        return cached[1]
+    if len(_MATRIX_CACHE) > 64:
+        _MATRIX_CACHE.clear()
+    result = _reference_matrices(model)
+    _MATRIX_CACHE[id(model)] = (model, result)
+    return result
+
+
+def _reference_matrices(model: Model) -> tuple[list[sp.Symbol], dict[str, sp.Matrix]]:
     variables = [*model.states, *model.inputs, *model.parameters]
     # Plain real symbols with positional names (not Dummy): lambdify then needs no renaming pass,
     # which dominated the reference's cost.
@@ -526,10 +587,11 @@ def _report(
     reference: Mapping[str, np.ndarray],
     floor: float,
 ) -> ComparisonReport:
+    """Errors of every computed function; ``<jac>_sparse`` against the reference of ``<jac>``."""
     n = next(iter(reference.values())).shape[0]
     report = ComparisonReport(target, n, floor)
-    for name in EXPR_FUNCTIONS:
-        per_point = mixed_error(computed[name], reference[name], floor)
+    for name in computed:
+        per_point = mixed_error(computed[name], reference[name.removesuffix("_sparse")], floor)
         report.max_error[name] = float(per_point.max(initial=0.0))
         report.worst_point[name] = int(per_point.argmax()) if per_point.size else -1
     return report
@@ -556,6 +618,11 @@ def compare_with_sympy(
     for name in EXPR_FUNCTIONS:
         computed[name] = np.array(
             [lib.evaluate(name, X[k], U[k], P[k]) for k in range(n_points)]
+        ).reshape(n_points, -1)
+    for spec in lib.table.sparse_rows():  # the same points, spread by the compiled pattern
+        jacobian = spec.name.removesuffix("_sparse")
+        computed[spec.name] = np.array(
+            [lib.evaluate_sparse(jacobian, X[k], U[k], P[k]) for k in range(n_points)]
         ).reshape(n_points, -1)
     precision = _precision(lib.single)
     report = _report(f"C {precision}", computed, reference, floor or FLOOR[precision])
@@ -597,6 +664,7 @@ def compare_casadi_with_sympy(
     X, U, P = sample_points(model, n_points, seed, bounds, ranges)
     reference = evaluate_reference(model, np.hstack([X, U, P]), backend)
     values = casadi_values(module, X, U, P)
+    values = {name: values[name] for name in EXPR_FUNCTIONS}
     report = _report("CasADi", values, reference, floor or FLOOR["double"])
     defaults = np.array([np.nan if v.default is None else v.default for v in model.parameters])
     emitted = np.array(module.PARAMETER_DEFAULTS, dtype=np.float64)
@@ -605,20 +673,23 @@ def compare_casadi_with_sympy(
     return report
 
 
-def build(model: Model, out_dir: Path, bounds: Bounds | None = None) -> dict[str, Any]:
-    """Emit, compile (double and single, strict flags) and load everything for ``model``.
+def build(
+    model: Model, out_dir: Path, config: CodegenConfig | Bounds | None = None
+) -> dict[str, Any]:
+    """Emit with ``config`` (or a bare bounds mapping), compile (double and single, strict
+    flags) and load everything for ``model``.
 
     Returns ``{"files": {name: text}, "double": CFunctions, "single": CFunctions,
     "casadi": module}``.
     """
-    files = emit_all(model, bounds)
+    files = emit_all(model, config)
     c_files = {k: v for k, v in files.items() if k.endswith((".c", ".h"))}
     lib_double = compile_shared(c_files, out_dir, single=False)
     lib_single = compile_shared(c_files, out_dir, single=True)
     write_files(files, out_dir)
     return {
         "files": files,
-        "double": load_functions(lib_double, model, single=False),
-        "single": load_functions(lib_single, model, single=True),
+        "double": load_functions(lib_double, model, single=False, config=config),
+        "single": load_functions(lib_single, model, single=True, config=config),
         "casadi": load_casadi_module(out_dir / file_names(model)["casadi"]),
     }

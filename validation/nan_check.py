@@ -3,7 +3,8 @@
 :func:`run` compiles the emitted sources of some models (and the μ map) with a generated driver,
 ``-fsanitize=address,undefined -fno-sanitize-recover=all``, in double and single precision, and
 runs it. The driver calls every function of every model (rhs, outputs, jac_x, jac_u, jac_p,
-rk4_step, linearly_implicit_euler_step if emitted, params_default, params_validate) at three
+jac_*_sparse, rk4_step, linearly_implicit_euler_step, as emitted, params_default,
+params_validate) at three
 base points (a nominal one; every state, input and parameter at the low end of its range or
 bound and h = 1e-6; all at the high end and h = 0.1). From each base point it sets every
 argument entry (x, u, p, h) in turn, and then all of them at once, to each of NaN, +-inf, +-0,
@@ -16,6 +17,9 @@ expressions (:func:`gearsym.validation.c_check.reference_matrices`), never from 
 
 * NaN contract, expression functions: with one NaN argument entry (nominal base point), every
   output entry whose expression is NaN-strict in that entry (:func:`nan_strict_symbols`) is NaN;
+  entry k of a sparse Jacobian ``jac_*_sparse`` is judged by the reference entry its
+  compressed-column pattern places it at, and the pattern must hold every reference entry that
+  is not identically 0 (:func:`pattern_problems`);
 * ``rk4_step``: every x_next entry that a NaN reaches through the four stages
   (:func:`rk4_nan_entries`) is NaN; all of them for a NaN h;
 * ``linearly_implicit_euler_step``: NaN or +-inf in x, u or h, or NaN in a parameter that f or
@@ -41,7 +45,14 @@ from types import ModuleType
 
 import numpy as np
 import sympy as sp
-from gearsym.symbolic.codegen import _float_repr, file_names, has_implicit_step
+from gearsym.symbolic.codegen import (
+    INTEGRATORS,
+    CodegenConfig,
+    SparsityPattern,
+    build_function_table,
+    file_names,
+    float_repr,
+)
 from gearsym.symbolic.friction import MuMap
 from gearsym.symbolic.model import Model
 from gearsym.validation import c_check
@@ -76,11 +87,22 @@ Bounds = Mapping[str, tuple[float | None, float | None]]
 
 @dataclass(frozen=True)
 class CheckedModel:
-    """A model, the parameter bounds its params_validate enforces and its sampling ranges."""
+    """A model, the parameter bounds its params_validate enforces, its sampling ranges and the
+    integrator steps it was emitted with."""
 
     model: Model
     bounds: Bounds
     ranges: Mapping[str, tuple[float, float]]
+    integrators: tuple[str, ...] = INTEGRATORS
+
+    @property
+    def config(self) -> CodegenConfig:
+        return CodegenConfig(bounds=self.bounds, integrators=self.integrators)
+
+    def sparse_patterns(self) -> dict[str, SparsityPattern]:
+        """The pattern of every ``jac_*_sparse`` function emitted for the model."""
+        table = build_function_table(self.model, self.config)
+        return {spec.name: spec.pattern for spec in table.sparse_rows() if spec.pattern}
 
 
 @dataclass
@@ -127,9 +149,12 @@ def nan_strict_symbols(expr: sp.Basic, memo: dict[sp.Basic, frozenset] | None = 
     return found
 
 
-def strict_entries(model: Model) -> dict[str, list[frozenset[int]]]:
+def strict_entries(
+    model: Model, patterns: Mapping[str, SparsityPattern] | None = None
+) -> dict[str, list[frozenset[int]]]:
     """Per expression function, per output entry (column-major): the argument indices (x, u, p
-    in order) its reference expression is NaN-strict in."""
+    in order) its reference expression is NaN-strict in. ``patterns`` adds the sparse Jacobians
+    (``jac_x_sparse``: ...), entry k taken from where the pattern places it."""
     variables, matrices = c_check.reference_matrices(model)
     index = {s: k for k, s in enumerate(variables)}
     memo: dict[sp.Basic, frozenset] = {}
@@ -141,7 +166,32 @@ def strict_entries(model: Model) -> dict[str, list[frozenset[int]]]:
             for j in range(cols)
             for i in range(rows)
         ]
+    for name, pattern in (patterns or {}).items():
+        dense = result[name.removesuffix("_sparse")]
+        result[name] = [dense[k] for k in pattern.positions()]
     return result
+
+
+def pattern_problems(model: Model, patterns: Mapping[str, SparsityPattern]) -> list[str]:
+    """Reference entries that are not identically 0 but lie outside their sparse pattern (the
+    emitted dense Jacobian would hold a 0 there)."""
+    _, matrices = c_check.reference_matrices(model)
+    problems = []
+    for name, pattern in patterns.items():
+        matrix = matrices[name.removesuffix("_sparse")]
+        if matrix.shape != (pattern.nrow, pattern.ncol):
+            problems.append(f"{model.name} {name}: pattern shape differs from {matrix.shape}")
+            continue
+        inside = set(pattern.positions())
+        missing = [
+            (i, j)
+            for j in range(pattern.ncol)
+            for i in range(pattern.nrow)
+            if i + j * pattern.nrow not in inside and matrix[i, j] != 0
+        ]
+        if missing:
+            problems.append(f"{model.name} {name}: nonzero entries {missing} outside the pattern")
+    return problems
 
 
 def rk4_nan_entries(rhs_strict: Sequence[frozenset[int]], nx: int, target: int) -> set[int]:
@@ -316,17 +366,7 @@ static void run_{name}(int b, int target, int code)
     }}
 {param_loads}
     h = v[{n} - 1];
-{expression_calls}
-    out = buffer({nx});
-    {prefix}rk4_step(x, u, p, h, out);
-    calls++;
-    if (full) {{
-        printf("E {name} %d %d %d rk4_step", b, target, code);
-        classes(out, {nx});
-        putchar('\n');
-    }}
-    free(out);
-{implicit_call}
+{expression_calls}{rk4_call}{implicit_call}
     {prefix}params_default(defaults);
     status = {prefix}params_validate(p, &bad);
     calls += 2;
@@ -346,6 +386,17 @@ _EXPRESSION_CALL = r"""    out = buffer({size});
     if (full) {{
         printf("E {name} %d %d %d {fn}", b, target, code);
         classes(out, {size});
+        putchar('\n');
+    }}
+    free(out);
+"""
+
+_RK4_CALL = r"""    out = buffer({nx});
+    {prefix}rk4_step(x, u, p, h, out);
+    calls++;
+    if (full) {{
+        printf("E {name} %d %d %d rk4_step", b, target, code);
+        classes(out, {nx});
         putchar('\n');
     }}
     free(out);
@@ -393,7 +444,7 @@ static void run_mu_map(void)
 
 
 def _literal(value: float) -> str:
-    return f"GEARSYM_LIT({_float_repr(float(value))})"
+    return f"GEARSYM_LIT({float_repr(float(value))})"
 
 
 def driver_source(models: Sequence[CheckedModel], mu_map_base: Sequence[float] | None) -> str:
@@ -420,15 +471,19 @@ def driver_source(models: Sequence[CheckedModel], mu_map_base: Sequence[float] |
             "jac_x": nx * nx,
             "jac_u": nx * nu,
             "jac_p": nx * len(model.parameters),
+            **{name: pattern.nnz for name, pattern in m.sparse_patterns().items()},
         }
         expression_calls = "".join(
             _EXPRESSION_CALL.format(prefix=prefix, fn=fn, size=size, name=name)
             for fn, size in sizes.items()
         )
+        rk4 = ""
+        if m.config.rk4_step:
+            rk4 = _RK4_CALL.format(prefix=prefix, nx=nx, name=name)
         implicit = ""
-        if has_implicit_step(model):
+        if m.config.implicit_step:
             implicit = _IMPLICIT_CALL.format(
-                prefix=prefix, nx=nx, name=name, sentinel=_float_repr(SENTINEL)
+                prefix=prefix, nx=nx, name=name, sentinel=float_repr(SENTINEL)
             )
         parts.append(
             _MODEL_TEMPLATE.format(
@@ -440,6 +495,7 @@ def driver_source(models: Sequence[CheckedModel], mu_map_base: Sequence[float] |
                 prefix=prefix,
                 param_loads=loads,
                 expression_calls=expression_calls,
+                rk4_call=rk4,
                 implicit_call=implicit,
             )
         )
@@ -529,7 +585,10 @@ def run(
     mu_map_table = None if mu_map is None else mu_map.table
     mu_map_base = None if mu_map is None else [float(np.mean(a[[0, -1]])) for a in mu_map.grid]
     driver = driver_source(models, mu_map_base)
-    strict = {m.model.name: strict_entries(m.model) for m in models}
+    patterns = {m.model.name: m.sparse_patterns() for m in models}
+    strict = {m.model.name: strict_entries(m.model, patterns[m.model.name]) for m in models}
+    for m in models:
+        report.failures += pattern_problems(m.model, patterns[m.model.name])
     for single in (False, True):
         tag = "single" if single else "double"
         exe = build_driver(sources, driver, build_dir, single, compiler)

@@ -41,12 +41,38 @@
 #endif
 #endif
 
+/* Compressed-column pattern of jac_x (see the header). */
+const int gearsym_full_jac_x_colptr[GEARSYM_FULL_NX + 1] = {
+    0, 0, 6, 6, 6, 11, 17,
+};
+const int gearsym_full_jac_x_rowind[GEARSYM_FULL_JAC_X_NNZ] = {
+    0, 1, 2, 3, 4, 5, 0, 1, 2, 3, 5, 0, 1, 2, 3, 4,
+    5,
+};
+
+/* Compressed-column pattern of jac_u (see the header). */
+const int gearsym_full_jac_u_colptr[GEARSYM_FULL_NU + 1] = {
+    0, 4, 8, 12, 16, 20, 24, 28,
+};
+const int gearsym_full_jac_u_rowind[GEARSYM_FULL_JAC_U_NNZ] = {
+    0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3,
+    0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3,
+};
+
+/* Compressed-column pattern of jac_p (see the header). */
+const int gearsym_full_jac_p_colptr[GEARSYM_FULL_NP + 1] = {
+    0, 1, 6, 11, 12, 13, 14, 15, 16, 17,
+};
+const int gearsym_full_jac_p_rowind[GEARSYM_FULL_JAC_P_NNZ] = {
+    5, 0, 1, 2, 3, 5, 0, 1, 2, 3, 5, 5, 5, 5, 5, 5,
+    5,
+};
+
 /**
  * State derivative xdot = f(x, u, p). States: omega_1 [rad/s], omega_2 [rad/s], omega_3
  * [rad/s], omega_8 [rad/s], phi [rad], omega_C [rad/s]. Inputs: T_In [N*m], T_K81 [N*m], T_K38
  * [N*m], T_B08 [N*m], T_B05 [N*m], T_B06 [N*m], T_K27 [N*m].
- * Operations: 42 add, 61 mul, 1 div, 2 calls (cos 1, sin 1); 4 temporaries (sympy.count_ops of
- * the CSE'd form: 151).
+ * Operations: 42 add, 61 mul, 1 div, 2 calls (cos 1, sin 1); 4 temporaries.
  */
 void gearsym_full_rhs(
     const gearsym_real *restrict x,
@@ -57,20 +83,19 @@ void gearsym_full_rhs(
     const gearsym_real t0 = x[1]*p->d_ss;
     const gearsym_real t1 = x[5]*p->d_ss;
     const gearsym_real t2 = x[4]*p->k_ss;
-    const gearsym_real t3 = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1] - x[5];
-    xdot[0] = GEARSYM_LIT(0.192589385116585746269)*u[4] - GEARSYM_LIT(0.0835622403269647048986)*u[5] + GEARSYM_LIT(8.87774902248273298948)*u[3] + GEARSYM_LIT(26.9568803049972995567)*u[0] + GEARSYM_LIT(37.3348426453910815596)*u[6] + GEARSYM_LIT(8.39854665908710837025)*u[2] + GEARSYM_LIT(18.0791312825145665672)*u[1] - GEARSYM_LIT(0.0295135896771103588236)*t0 + GEARSYM_LIT(0.0728690529127854759354)*t1 - GEARSYM_LIT(0.0728690529127854759354)*t2;
-    xdot[1] = GEARSYM_LIT(2.96951802197559710477)*u[4] + GEARSYM_LIT(11.3769610464280542068)*u[5] + GEARSYM_LIT(1.67334073176692164879)*u[3] + GEARSYM_LIT(0.0899568458208336700422)*u[0] - GEARSYM_LIT(9.27282854371149923506)*u[6] - GEARSYM_LIT(0.499920243380314102558)*u[2] - GEARSYM_LIT(1.58338388594608797875)*u[1] - GEARSYM_LIT(2.80157747874364742481)*t0 + GEARSYM_LIT(6.91709479501806549186)*t1 - GEARSYM_LIT(6.91709479501806549186)*t2;
-    xdot[2] = GEARSYM_LIT(15.8186966349485431992)*u[4] - GEARSYM_LIT(2.01877416044759217035)*u[5] + GEARSYM_LIT(8.91392785187186918403)*u[3] + GEARSYM_LIT(0.479202363395624619234)*u[0] - GEARSYM_LIT(6.08156611842418536193)*u[6] - GEARSYM_LIT(2.66308761663673731059)*u[2] - GEARSYM_LIT(8.43472548847624456480)*u[1] + GEARSYM_LIT(1.76043821397102936521)*x[5]*p->d_ss - GEARSYM_LIT(0.713016692576358592633)*t0 - GEARSYM_LIT(1.76043821397102936521)*t2;
-    xdot[3] = GEARSYM_LIT(19.1493337105732538323)*u[4] - GEARSYM_LIT(1.55439087599070556571)*u[5] + GEARSYM_LIT(11.0307981015269006487)*u[3] + GEARSYM_LIT(8.87774902248273298948)*u[0] + GEARSYM_LIT(7.19010503258522261261)*u[6] + GEARSYM_LIT(2.11687024965503146463)*u[2] - GEARSYM_LIT(2.15304907904416765919)*u[1] - GEARSYM_LIT(0.548999815375105466979)*t0 + GEARSYM_LIT(1.35548054416113539797)*t1 - GEARSYM_LIT(1.35548054416113539797)*t2;
+    const gearsym_real t3 = -x[5] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
+    xdot[0] = -GEARSYM_LIT(0.0835622403269647048986)*u[5] - GEARSYM_LIT(0.0728690529127854759354)*t2 - GEARSYM_LIT(0.0295135896771103588236)*t0 + GEARSYM_LIT(0.0728690529127854759354)*t1 + GEARSYM_LIT(0.192589385116585746269)*u[4] + GEARSYM_LIT(8.39854665908710837025)*u[2] + GEARSYM_LIT(8.87774902248273298948)*u[3] + GEARSYM_LIT(37.3348426453910815596)*u[6] + GEARSYM_LIT(18.0791312825145665672)*u[1] + GEARSYM_LIT(26.9568803049972995567)*u[0];
+    xdot[1] = -GEARSYM_LIT(9.27282854371149923506)*u[6] - GEARSYM_LIT(6.91709479501806549186)*t2 - GEARSYM_LIT(2.80157747874364742481)*t0 - GEARSYM_LIT(1.58338388594608797875)*u[1] - GEARSYM_LIT(0.499920243380314102558)*u[2] + GEARSYM_LIT(0.0899568458208336700422)*u[0] + GEARSYM_LIT(1.67334073176692164879)*u[3] + GEARSYM_LIT(2.96951802197559710477)*u[4] + GEARSYM_LIT(6.91709479501806549186)*t1 + GEARSYM_LIT(11.3769610464280542068)*u[5];
+    xdot[2] = -GEARSYM_LIT(6.08156611842418536193)*u[6] - GEARSYM_LIT(8.43472548847624456480)*u[1] - GEARSYM_LIT(2.66308761663673731059)*u[2] - GEARSYM_LIT(2.01877416044759217035)*u[5] - GEARSYM_LIT(1.76043821397102936521)*t2 - GEARSYM_LIT(0.713016692576358592633)*t0 + GEARSYM_LIT(0.479202363395624619234)*u[0] + GEARSYM_LIT(8.91392785187186918403)*u[3] + GEARSYM_LIT(15.8186966349485431992)*u[4] + GEARSYM_LIT(1.76043821397102936521)*x[5]*p->d_ss;
+    xdot[3] = -GEARSYM_LIT(2.15304907904416765919)*u[1] - GEARSYM_LIT(1.55439087599070556571)*u[5] - GEARSYM_LIT(1.35548054416113539797)*t2 - GEARSYM_LIT(0.548999815375105466979)*t0 + GEARSYM_LIT(1.35548054416113539797)*t1 + GEARSYM_LIT(2.11687024965503146463)*u[2] + GEARSYM_LIT(7.19010503258522261261)*u[6] + GEARSYM_LIT(8.87774902248273298948)*u[0] + GEARSYM_LIT(11.0307981015269006487)*u[3] + GEARSYM_LIT(19.1493337105732538323)*u[4];
     xdot[4] = t3;
-    xdot[5] = (-GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[5]*x[5]) + GEARSYM_LIT(2.0)*t3*p->d_ss - GEARSYM_LIT(1.05990859890000000000)*x[5]*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta) + GEARSYM_LIT(2.0)*x[4]*p->k_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*p->m_veh*GEARSYM_SIN(p->zeta))/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
+    xdot[5] = (GEARSYM_LIT(2.0)*t3*p->d_ss + GEARSYM_LIT(2.0)*x[4]*p->k_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*p->m_veh*GEARSYM_SIN(p->zeta) - GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[5]*x[5]) - GEARSYM_LIT(1.05990859890000000000)*x[5]*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta))/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
 }
 
 /**
  * Outputs y = h(x, u, p): y_omega_1 [rad/s], y_omega_2 [rad/s], y_omega_8 [rad/s], y_omega_C
  * [rad/s].
- * Operations: 0 add, 0 mul, 0 div, 0 calls; 0 temporaries (sympy.count_ops of the CSE'd form:
- * 0).
+ * Operations: 0 add, 0 mul, 0 div, 0 calls; 0 temporaries.
  */
 void gearsym_full_outputs(
     const gearsym_real *restrict x,
@@ -87,128 +112,168 @@ void gearsym_full_outputs(
 }
 
 /**
- * Jacobian of the state derivative with respect to x (states), d xdot / d x (6 x 6), dense
- * column-major: jac_x[i + j*6] = d xdot_i / d x_j.
- * Operations: 3 add, 26 mul, 1 div, 1 call (cos 1); 2 temporaries (sympy.count_ops of the
- * CSE'd form: 58).
+ * Structural nonzeros of d xdot / d x (6 x 6, 17 of 36 entries) in compressed-column order:
+ * jac_x_nz[k] is entry (i, j) with i = gearsym_full_jac_x_rowind[k] and
+ * gearsym_full_jac_x_colptr[j] <= k < gearsym_full_jac_x_colptr[j+1] (GEARSYM_FULL_JAC_X_NNZ
+ * values).
+ * Operations: 3 add, 26 mul, 1 div, 1 call (cos 1); 2 temporaries.
  */
-void gearsym_full_jac_x(
+void gearsym_full_jac_x_sparse(
     const gearsym_real *restrict x,
     const gearsym_real *restrict u,
     const gearsym_full_params *restrict p,
-    gearsym_real *restrict jac_x)
+    gearsym_real *restrict jac_x_nz)
 {
     const gearsym_real t0 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh));
     const gearsym_real t1 = t0*p->d_ss;
     (void)u;
-    jac_x[0] = GEARSYM_LIT(0.0);
-    jac_x[1] = GEARSYM_LIT(0.0);
-    jac_x[2] = GEARSYM_LIT(0.0);
-    jac_x[3] = GEARSYM_LIT(0.0);
-    jac_x[4] = GEARSYM_LIT(0.0);
-    jac_x[5] = GEARSYM_LIT(0.0);
-    jac_x[6] = -GEARSYM_LIT(0.0295135896771103588236)*p->d_ss;
-    jac_x[7] = -GEARSYM_LIT(2.80157747874364742481)*p->d_ss;
-    jac_x[8] = -GEARSYM_LIT(0.713016692576358592633)*p->d_ss;
-    jac_x[9] = -GEARSYM_LIT(0.548999815375105466979)*p->d_ss;
-    jac_x[10] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
-    jac_x[11] = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t1;
-    jac_x[12] = GEARSYM_LIT(0.0);
-    jac_x[13] = GEARSYM_LIT(0.0);
-    jac_x[14] = GEARSYM_LIT(0.0);
-    jac_x[15] = GEARSYM_LIT(0.0);
-    jac_x[16] = GEARSYM_LIT(0.0);
-    jac_x[17] = GEARSYM_LIT(0.0);
-    jac_x[18] = GEARSYM_LIT(0.0);
-    jac_x[19] = GEARSYM_LIT(0.0);
-    jac_x[20] = GEARSYM_LIT(0.0);
-    jac_x[21] = GEARSYM_LIT(0.0);
-    jac_x[22] = GEARSYM_LIT(0.0);
-    jac_x[23] = GEARSYM_LIT(0.0);
-    jac_x[24] = -GEARSYM_LIT(0.0728690529127854759354)*p->k_ss;
-    jac_x[25] = -GEARSYM_LIT(6.91709479501806549186)*p->k_ss;
-    jac_x[26] = -GEARSYM_LIT(1.76043821397102936521)*p->k_ss;
-    jac_x[27] = -GEARSYM_LIT(1.35548054416113539797)*p->k_ss;
-    jac_x[28] = GEARSYM_LIT(0.0);
-    jac_x[29] = GEARSYM_LIT(2.0)*t0*p->k_ss;
-    jac_x[30] = GEARSYM_LIT(0.0728690529127854759354)*p->d_ss;
-    jac_x[31] = GEARSYM_LIT(6.91709479501806549186)*p->d_ss;
-    jac_x[32] = GEARSYM_LIT(1.76043821397102936521)*p->d_ss;
-    jac_x[33] = GEARSYM_LIT(1.35548054416113539797)*p->d_ss;
-    jac_x[34] = -GEARSYM_LIT(1.0);
-    jac_x[35] = t0*(-GEARSYM_LIT(0.0355139609030000000000)*x[5]*p->A_front*p->c_W*p->rho_air - GEARSYM_LIT(1.05990859890000000000)*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta)) - GEARSYM_LIT(2.0)*t1;
+    jac_x_nz[0] = -GEARSYM_LIT(0.0295135896771103588236)*p->d_ss;
+    jac_x_nz[1] = -GEARSYM_LIT(2.80157747874364742481)*p->d_ss;
+    jac_x_nz[2] = -GEARSYM_LIT(0.713016692576358592633)*p->d_ss;
+    jac_x_nz[3] = -GEARSYM_LIT(0.548999815375105466979)*p->d_ss;
+    jac_x_nz[4] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
+    jac_x_nz[5] = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t1;
+    jac_x_nz[6] = -GEARSYM_LIT(0.0728690529127854759354)*p->k_ss;
+    jac_x_nz[7] = -GEARSYM_LIT(6.91709479501806549186)*p->k_ss;
+    jac_x_nz[8] = -GEARSYM_LIT(1.76043821397102936521)*p->k_ss;
+    jac_x_nz[9] = -GEARSYM_LIT(1.35548054416113539797)*p->k_ss;
+    jac_x_nz[10] = GEARSYM_LIT(2.0)*t0*p->k_ss;
+    jac_x_nz[11] = GEARSYM_LIT(0.0728690529127854759354)*p->d_ss;
+    jac_x_nz[12] = GEARSYM_LIT(6.91709479501806549186)*p->d_ss;
+    jac_x_nz[13] = GEARSYM_LIT(1.76043821397102936521)*p->d_ss;
+    jac_x_nz[14] = GEARSYM_LIT(1.35548054416113539797)*p->d_ss;
+    jac_x_nz[15] = -GEARSYM_LIT(1.0);
+    jac_x_nz[16] = -GEARSYM_LIT(2.0)*t1 + t0*(-GEARSYM_LIT(1.05990859890000000000)*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta) - GEARSYM_LIT(0.0355139609030000000000)*x[5]*p->A_front*p->c_W*p->rho_air);
+}
+
+/**
+ * Jacobian of the state derivative with respect to x (states), d xdot / d x (6 x 6), dense
+ * column-major: jac_x[i + j*6] = d xdot_i / d x_j.
+ * Computes jac_x_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_x_sparse (3 add, 26 mul, 1 div, 1 call (cos 1)); the
+ * spreading moves values only.
+ */
+void gearsym_full_jac_x(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_full_params *p,
+    gearsym_real *jac_x)
+{
+    int i;
+    int j;
+    int k = GEARSYM_FULL_JAC_X_NNZ - 1;
+
+    gearsym_full_jac_x_sparse(x, u, p, jac_x);
+    /*
+     * Spread in place, last value first. Value k belongs at i + j*rows >= k (the values are in
+     * column-major order), so each value is read before its slot is written, and a slot set to
+     * 0 lies above every value still unread.
+     */
+    for (j = GEARSYM_FULL_NX - 1; j >= 0; --j) {
+        for (i = GEARSYM_FULL_NX - 1; i >= 0; --i) {
+            if (k >= gearsym_full_jac_x_colptr[j] && gearsym_full_jac_x_rowind[k] == i) {
+                jac_x[i + j * GEARSYM_FULL_NX] = jac_x[k];
+                --k;
+            } else {
+                jac_x[i + j * GEARSYM_FULL_NX] = GEARSYM_LIT(0.0);
+            }
+        }
+    }
+}
+
+/**
+ * Structural nonzeros of d xdot / d u (6 x 7, 28 of 42 entries) in compressed-column order:
+ * jac_u_nz[k] is entry (i, j) with i = gearsym_full_jac_u_rowind[k] and
+ * gearsym_full_jac_u_colptr[j] <= k < gearsym_full_jac_u_colptr[j+1] (GEARSYM_FULL_JAC_U_NNZ
+ * values).
+ * Operations: 0 add, 0 mul, 0 div, 0 calls; 0 temporaries.
+ */
+void gearsym_full_jac_u_sparse(
+    const gearsym_real *restrict x,
+    const gearsym_real *restrict u,
+    const gearsym_full_params *restrict p,
+    gearsym_real *restrict jac_u_nz)
+{
+    (void)x;
+    (void)u;
+    (void)p;
+    jac_u_nz[0] = GEARSYM_LIT(26.9568803049972995567);
+    jac_u_nz[1] = GEARSYM_LIT(0.0899568458208336700422);
+    jac_u_nz[2] = GEARSYM_LIT(0.479202363395624619234);
+    jac_u_nz[3] = GEARSYM_LIT(8.87774902248273298948);
+    jac_u_nz[4] = GEARSYM_LIT(18.0791312825145665672);
+    jac_u_nz[5] = -GEARSYM_LIT(1.58338388594608797875);
+    jac_u_nz[6] = -GEARSYM_LIT(8.43472548847624456480);
+    jac_u_nz[7] = -GEARSYM_LIT(2.15304907904416765919);
+    jac_u_nz[8] = GEARSYM_LIT(8.39854665908710837025);
+    jac_u_nz[9] = -GEARSYM_LIT(0.499920243380314102558);
+    jac_u_nz[10] = -GEARSYM_LIT(2.66308761663673731059);
+    jac_u_nz[11] = GEARSYM_LIT(2.11687024965503146463);
+    jac_u_nz[12] = GEARSYM_LIT(8.87774902248273298948);
+    jac_u_nz[13] = GEARSYM_LIT(1.67334073176692164879);
+    jac_u_nz[14] = GEARSYM_LIT(8.91392785187186918403);
+    jac_u_nz[15] = GEARSYM_LIT(11.0307981015269006487);
+    jac_u_nz[16] = GEARSYM_LIT(0.192589385116585746269);
+    jac_u_nz[17] = GEARSYM_LIT(2.96951802197559710477);
+    jac_u_nz[18] = GEARSYM_LIT(15.8186966349485431992);
+    jac_u_nz[19] = GEARSYM_LIT(19.1493337105732538323);
+    jac_u_nz[20] = -GEARSYM_LIT(0.0835622403269647048986);
+    jac_u_nz[21] = GEARSYM_LIT(11.3769610464280542068);
+    jac_u_nz[22] = -GEARSYM_LIT(2.01877416044759217035);
+    jac_u_nz[23] = -GEARSYM_LIT(1.55439087599070556571);
+    jac_u_nz[24] = GEARSYM_LIT(37.3348426453910815596);
+    jac_u_nz[25] = -GEARSYM_LIT(9.27282854371149923506);
+    jac_u_nz[26] = -GEARSYM_LIT(6.08156611842418536193);
+    jac_u_nz[27] = GEARSYM_LIT(7.19010503258522261261);
 }
 
 /**
  * Jacobian of the state derivative with respect to u (inputs), d xdot / d u (6 x 7), dense
  * column-major: jac_u[i + j*6] = d xdot_i / d u_j.
- * Operations: 0 add, 0 mul, 0 div, 0 calls; 0 temporaries (sympy.count_ops of the CSE'd form:
- * 38).
+ * Computes jac_u_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_u_sparse (0 add, 0 mul, 0 div, 0 calls); the spreading
+ * moves values only.
  */
 void gearsym_full_jac_u(
-    const gearsym_real *restrict x,
-    const gearsym_real *restrict u,
-    const gearsym_full_params *restrict p,
-    gearsym_real *restrict jac_u)
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_full_params *p,
+    gearsym_real *jac_u)
 {
-    (void)x;
-    (void)u;
-    (void)p;
-    jac_u[0] = GEARSYM_LIT(26.9568803049972995567);
-    jac_u[1] = GEARSYM_LIT(0.0899568458208336700422);
-    jac_u[2] = GEARSYM_LIT(0.479202363395624619234);
-    jac_u[3] = GEARSYM_LIT(8.87774902248273298948);
-    jac_u[4] = GEARSYM_LIT(0.0);
-    jac_u[5] = GEARSYM_LIT(0.0);
-    jac_u[6] = GEARSYM_LIT(18.0791312825145665672);
-    jac_u[7] = -GEARSYM_LIT(1.58338388594608797875);
-    jac_u[8] = -GEARSYM_LIT(8.43472548847624456480);
-    jac_u[9] = -GEARSYM_LIT(2.15304907904416765919);
-    jac_u[10] = GEARSYM_LIT(0.0);
-    jac_u[11] = GEARSYM_LIT(0.0);
-    jac_u[12] = GEARSYM_LIT(8.39854665908710837025);
-    jac_u[13] = -GEARSYM_LIT(0.499920243380314102558);
-    jac_u[14] = -GEARSYM_LIT(2.66308761663673731059);
-    jac_u[15] = GEARSYM_LIT(2.11687024965503146463);
-    jac_u[16] = GEARSYM_LIT(0.0);
-    jac_u[17] = GEARSYM_LIT(0.0);
-    jac_u[18] = GEARSYM_LIT(8.87774902248273298948);
-    jac_u[19] = GEARSYM_LIT(1.67334073176692164879);
-    jac_u[20] = GEARSYM_LIT(8.91392785187186918403);
-    jac_u[21] = GEARSYM_LIT(11.0307981015269006487);
-    jac_u[22] = GEARSYM_LIT(0.0);
-    jac_u[23] = GEARSYM_LIT(0.0);
-    jac_u[24] = GEARSYM_LIT(0.192589385116585746269);
-    jac_u[25] = GEARSYM_LIT(2.96951802197559710477);
-    jac_u[26] = GEARSYM_LIT(15.8186966349485431992);
-    jac_u[27] = GEARSYM_LIT(19.1493337105732538323);
-    jac_u[28] = GEARSYM_LIT(0.0);
-    jac_u[29] = GEARSYM_LIT(0.0);
-    jac_u[30] = -GEARSYM_LIT(0.0835622403269647048986);
-    jac_u[31] = GEARSYM_LIT(11.3769610464280542068);
-    jac_u[32] = -GEARSYM_LIT(2.01877416044759217035);
-    jac_u[33] = -GEARSYM_LIT(1.55439087599070556571);
-    jac_u[34] = GEARSYM_LIT(0.0);
-    jac_u[35] = GEARSYM_LIT(0.0);
-    jac_u[36] = GEARSYM_LIT(37.3348426453910815596);
-    jac_u[37] = -GEARSYM_LIT(9.27282854371149923506);
-    jac_u[38] = -GEARSYM_LIT(6.08156611842418536193);
-    jac_u[39] = GEARSYM_LIT(7.19010503258522261261);
-    jac_u[40] = GEARSYM_LIT(0.0);
-    jac_u[41] = GEARSYM_LIT(0.0);
+    int i;
+    int j;
+    int k = GEARSYM_FULL_JAC_U_NNZ - 1;
+
+    gearsym_full_jac_u_sparse(x, u, p, jac_u);
+    /*
+     * Spread in place, last value first. Value k belongs at i + j*rows >= k (the values are in
+     * column-major order), so each value is read before its slot is written, and a slot set to
+     * 0 lies above every value still unread.
+     */
+    for (j = GEARSYM_FULL_NU - 1; j >= 0; --j) {
+        for (i = GEARSYM_FULL_NX - 1; i >= 0; --i) {
+            if (k >= gearsym_full_jac_u_colptr[j] && gearsym_full_jac_u_rowind[k] == i) {
+                jac_u[i + j * GEARSYM_FULL_NX] = jac_u[k];
+                --k;
+            } else {
+                jac_u[i + j * GEARSYM_FULL_NX] = GEARSYM_LIT(0.0);
+            }
+        }
+    }
 }
 
 /**
- * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
- * xdot / d p (6 x 9), dense column-major: jac_p[i + j*6] = d xdot_i / d p_j.
- * Operations: 13 add, 49 mul, 2 div, 2 calls (cos 1, sin 1); 13 temporaries (sympy.count_ops
- * of the CSE'd form: 96).
+ * Structural nonzeros of d xdot / d p (6 x 9, 17 of 54 entries) in compressed-column order:
+ * jac_p_nz[k] is entry (i, j) with i = gearsym_full_jac_p_rowind[k] and
+ * gearsym_full_jac_p_colptr[j] <= k < gearsym_full_jac_p_colptr[j+1] (GEARSYM_FULL_JAC_P_NNZ
+ * values).
+ * Operations: 13 add, 49 mul, 2 div, 2 calls (cos 1, sin 1); 13 temporaries.
  */
-void gearsym_full_jac_p(
+void gearsym_full_jac_p_sparse(
     const gearsym_real *restrict x,
     const gearsym_real *restrict u,
     const gearsym_full_params *restrict p,
-    gearsym_real *restrict jac_p)
+    gearsym_real *restrict jac_p_nz)
 {
     const gearsym_real t0 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
     const gearsym_real t1 = (GEARSYM_LIT(1.0)/t0);
@@ -220,64 +285,62 @@ void gearsym_full_jac_p(
     const gearsym_real t7 = t4*p->m_veh;
     const gearsym_real t8 = (x[5]*x[5]);
     const gearsym_real t9 = GEARSYM_LIT(0.0177569804515000000000)*t8*p->A_front*p->c_W;
-    const gearsym_real t10 = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1] - x[5];
-    const gearsym_real t11 = (GEARSYM_LIT(2.0)*t10*p->d_ss + GEARSYM_LIT(2.0)*x[4]*p->k_ss - t3*p->m_veh - t9*p->rho_air - t6*t7)/(t0*t0);
+    const gearsym_real t10 = -x[5] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
+    const gearsym_real t11 = (-t3*p->m_veh - t6*t7 - t9*p->rho_air + GEARSYM_LIT(2.0)*t10*p->d_ss + GEARSYM_LIT(2.0)*x[4]*p->k_ss)/(t0*t0);
     const gearsym_real t12 = GEARSYM_LIT(0.0177569804515000000000)*t1*t8*p->rho_air;
     (void)u;
-    jac_p[0] = GEARSYM_LIT(0.0);
-    jac_p[1] = GEARSYM_LIT(0.0);
-    jac_p[2] = GEARSYM_LIT(0.0);
-    jac_p[3] = GEARSYM_LIT(0.0);
-    jac_p[4] = GEARSYM_LIT(0.0);
-    jac_p[5] = t1*(-t3 - t4*t6) - GEARSYM_LIT(0.108043690000000000000)*t11;
-    jac_p[6] = -GEARSYM_LIT(0.0728690529127854759354)*x[4];
-    jac_p[7] = -GEARSYM_LIT(6.91709479501806549186)*x[4];
-    jac_p[8] = -GEARSYM_LIT(1.76043821397102936521)*x[4];
-    jac_p[9] = -GEARSYM_LIT(1.35548054416113539797)*x[4];
-    jac_p[10] = GEARSYM_LIT(0.0);
-    jac_p[11] = GEARSYM_LIT(2.0)*t1*x[4];
-    jac_p[12] = -GEARSYM_LIT(0.0295135896771103588236)*x[1] + GEARSYM_LIT(0.0728690529127854759354)*x[5];
-    jac_p[13] = -GEARSYM_LIT(2.80157747874364742481)*x[1] + GEARSYM_LIT(6.91709479501806549186)*x[5];
-    jac_p[14] = -GEARSYM_LIT(0.713016692576358592633)*x[1] + GEARSYM_LIT(1.76043821397102936521)*x[5];
-    jac_p[15] = -GEARSYM_LIT(0.548999815375105466979)*x[1] + GEARSYM_LIT(1.35548054416113539797)*x[5];
-    jac_p[16] = GEARSYM_LIT(0.0);
-    jac_p[17] = GEARSYM_LIT(2.0)*t1*t10;
-    jac_p[18] = GEARSYM_LIT(0.0);
-    jac_p[19] = GEARSYM_LIT(0.0);
-    jac_p[20] = GEARSYM_LIT(0.0);
-    jac_p[21] = GEARSYM_LIT(0.0);
-    jac_p[22] = GEARSYM_LIT(0.0);
-    jac_p[23] = t1*(t2*t6*p->m_veh - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t7);
-    jac_p[24] = GEARSYM_LIT(0.0);
-    jac_p[25] = GEARSYM_LIT(0.0);
-    jac_p[26] = GEARSYM_LIT(0.0);
-    jac_p[27] = GEARSYM_LIT(0.0);
-    jac_p[28] = GEARSYM_LIT(0.0);
-    jac_p[29] = -t11;
-    jac_p[30] = GEARSYM_LIT(0.0);
-    jac_p[31] = GEARSYM_LIT(0.0);
-    jac_p[32] = GEARSYM_LIT(0.0);
-    jac_p[33] = GEARSYM_LIT(0.0);
-    jac_p[34] = GEARSYM_LIT(0.0);
-    jac_p[35] = -t1*t9;
-    jac_p[36] = GEARSYM_LIT(0.0);
-    jac_p[37] = GEARSYM_LIT(0.0);
-    jac_p[38] = GEARSYM_LIT(0.0);
-    jac_p[39] = GEARSYM_LIT(0.0);
-    jac_p[40] = GEARSYM_LIT(0.0);
-    jac_p[41] = -t12*p->A_front;
-    jac_p[42] = GEARSYM_LIT(0.0);
-    jac_p[43] = GEARSYM_LIT(0.0);
-    jac_p[44] = GEARSYM_LIT(0.0);
-    jac_p[45] = GEARSYM_LIT(0.0);
-    jac_p[46] = GEARSYM_LIT(0.0);
-    jac_p[47] = -t12*p->c_W;
-    jac_p[48] = GEARSYM_LIT(0.0);
-    jac_p[49] = GEARSYM_LIT(0.0);
-    jac_p[50] = GEARSYM_LIT(0.0);
-    jac_p[51] = GEARSYM_LIT(0.0);
-    jac_p[52] = GEARSYM_LIT(0.0);
-    jac_p[53] = -t1*t5*t7;
+    jac_p_nz[0] = -GEARSYM_LIT(0.108043690000000000000)*t11 + t1*(-t3 - t4*t6);
+    jac_p_nz[1] = -GEARSYM_LIT(0.0728690529127854759354)*x[4];
+    jac_p_nz[2] = -GEARSYM_LIT(6.91709479501806549186)*x[4];
+    jac_p_nz[3] = -GEARSYM_LIT(1.76043821397102936521)*x[4];
+    jac_p_nz[4] = -GEARSYM_LIT(1.35548054416113539797)*x[4];
+    jac_p_nz[5] = GEARSYM_LIT(2.0)*t1*x[4];
+    jac_p_nz[6] = -GEARSYM_LIT(0.0295135896771103588236)*x[1] + GEARSYM_LIT(0.0728690529127854759354)*x[5];
+    jac_p_nz[7] = -GEARSYM_LIT(2.80157747874364742481)*x[1] + GEARSYM_LIT(6.91709479501806549186)*x[5];
+    jac_p_nz[8] = -GEARSYM_LIT(0.713016692576358592633)*x[1] + GEARSYM_LIT(1.76043821397102936521)*x[5];
+    jac_p_nz[9] = -GEARSYM_LIT(0.548999815375105466979)*x[1] + GEARSYM_LIT(1.35548054416113539797)*x[5];
+    jac_p_nz[10] = GEARSYM_LIT(2.0)*t1*t10;
+    jac_p_nz[11] = t1*(-(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t7 + t2*t6*p->m_veh);
+    jac_p_nz[12] = -t11;
+    jac_p_nz[13] = -t1*t9;
+    jac_p_nz[14] = -t12*p->A_front;
+    jac_p_nz[15] = -t12*p->c_W;
+    jac_p_nz[16] = -t1*t5*t7;
+}
+
+/**
+ * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
+ * xdot / d p (6 x 9), dense column-major: jac_p[i + j*6] = d xdot_i / d p_j.
+ * Computes jac_p_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_p_sparse (13 add, 49 mul, 2 div, 2 calls (cos 1, sin
+ * 1)); the spreading moves values only.
+ */
+void gearsym_full_jac_p(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_full_params *p,
+    gearsym_real *jac_p)
+{
+    int i;
+    int j;
+    int k = GEARSYM_FULL_JAC_P_NNZ - 1;
+
+    gearsym_full_jac_p_sparse(x, u, p, jac_p);
+    /*
+     * Spread in place, last value first. Value k belongs at i + j*rows >= k (the values are in
+     * column-major order), so each value is read before its slot is written, and a slot set to
+     * 0 lies above every value still unread.
+     */
+    for (j = GEARSYM_FULL_NP - 1; j >= 0; --j) {
+        for (i = GEARSYM_FULL_NX - 1; i >= 0; --i) {
+            if (k >= gearsym_full_jac_p_colptr[j] && gearsym_full_jac_p_rowind[k] == i) {
+                jac_p[i + j * GEARSYM_FULL_NX] = jac_p[k];
+                --k;
+            } else {
+                jac_p[i + j * GEARSYM_FULL_NX] = GEARSYM_LIT(0.0);
+            }
+        }
+    }
 }
 
 /**

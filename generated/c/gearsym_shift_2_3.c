@@ -41,11 +41,34 @@
 #endif
 #endif
 
+/* Compressed-column pattern of jac_x (see the header). */
+const int gearsym_shift_2_3_jac_x_colptr[GEARSYM_SHIFT_2_3_NX + 1] = {
+    0, 0, 4, 7, 11,
+};
+const int gearsym_shift_2_3_jac_x_rowind[GEARSYM_SHIFT_2_3_JAC_X_NNZ] = {
+    0, 1, 2, 3, 0, 1, 3, 0, 1, 2, 3,
+};
+
+/* Compressed-column pattern of jac_u (see the header). */
+const int gearsym_shift_2_3_jac_u_colptr[GEARSYM_SHIFT_2_3_NU + 1] = {
+    0, 2, 4, 6,
+};
+const int gearsym_shift_2_3_jac_u_rowind[GEARSYM_SHIFT_2_3_JAC_U_NNZ] = {
+    0, 1, 0, 1, 0, 1,
+};
+
+/* Compressed-column pattern of jac_p (see the header). */
+const int gearsym_shift_2_3_jac_p_colptr[GEARSYM_SHIFT_2_3_NP + 1] = {
+    0, 1, 4, 7, 8, 9, 10, 11, 12, 13,
+};
+const int gearsym_shift_2_3_jac_p_rowind[GEARSYM_SHIFT_2_3_JAC_P_NNZ] = {
+    3, 0, 1, 3, 0, 1, 3, 3, 3, 3, 3, 3, 3,
+};
+
 /**
  * State derivative xdot = f(x, u, p). States: omega_1 [rad/s], omega_2 [rad/s], phi [rad],
  * omega_C [rad/s]. Inputs: T_In [N*m], T_K38 [N*m], T_B05 [N*m].
- * Operations: 16 add, 32 mul, 1 div, 2 calls (cos 1, sin 1); 4 temporaries (sympy.count_ops of
- * the CSE'd form: 68).
+ * Operations: 16 add, 32 mul, 1 div, 2 calls (cos 1, sin 1); 4 temporaries.
  */
 void gearsym_shift_2_3_rhs(
     const gearsym_real *restrict x,
@@ -56,17 +79,16 @@ void gearsym_shift_2_3_rhs(
     const gearsym_real t0 = x[1]*p->d_ss;
     const gearsym_real t1 = x[3]*p->d_ss;
     const gearsym_real t2 = x[2]*p->k_ss;
-    const gearsym_real t3 = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1] - x[3];
-    xdot[0] = GEARSYM_LIT(17.0201028515756499522)*u[2] + GEARSYM_LIT(10.6883443030696865936)*u[0] + GEARSYM_LIT(2.78597376134262387781)*u[1] - GEARSYM_LIT(0.799402834226086530854)*t0 + GEARSYM_LIT(1.97372559770420764468)*t1 - GEARSYM_LIT(1.97372559770420764468)*t2;
-    xdot[1] = GEARSYM_LIT(2.40597677423938190485)*u[2] + GEARSYM_LIT(2.43656425036584433736)*u[0] - GEARSYM_LIT(0.0134584894956434703021)*u[1] - GEARSYM_LIT(0.247843999698803434174)*t0 + GEARSYM_LIT(0.611926835256345678975)*t1 - GEARSYM_LIT(0.611926835256345678975)*t2;
+    const gearsym_real t3 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
+    xdot[0] = -GEARSYM_LIT(1.97372559770420764468)*t2 - GEARSYM_LIT(0.799402834226086530854)*t0 + GEARSYM_LIT(1.97372559770420764468)*t1 + GEARSYM_LIT(2.78597376134262387781)*u[1] + GEARSYM_LIT(10.6883443030696865936)*u[0] + GEARSYM_LIT(17.0201028515756499522)*u[2];
+    xdot[1] = -GEARSYM_LIT(0.611926835256345678975)*t2 - GEARSYM_LIT(0.247843999698803434174)*t0 - GEARSYM_LIT(0.0134584894956434703021)*u[1] + GEARSYM_LIT(0.611926835256345678975)*t1 + GEARSYM_LIT(2.40597677423938190485)*u[2] + GEARSYM_LIT(2.43656425036584433736)*u[0];
     xdot[2] = t3;
-    xdot[3] = (-GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[3]*x[3]) + GEARSYM_LIT(2.0)*t3*p->d_ss - GEARSYM_LIT(1.05990859890000000000)*x[3]*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta) + GEARSYM_LIT(2.0)*x[2]*p->k_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*p->m_veh*GEARSYM_SIN(p->zeta))/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
+    xdot[3] = (GEARSYM_LIT(2.0)*t3*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*p->m_veh*GEARSYM_SIN(p->zeta) - GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[3]*x[3]) - GEARSYM_LIT(1.05990859890000000000)*x[3]*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta))/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
 }
 
 /**
  * Outputs y = h(x, u, p): y_omega_1 [rad/s], y_omega_2 [rad/s], y_omega_C [rad/s].
- * Operations: 0 add, 0 mul, 0 div, 0 calls; 0 temporaries (sympy.count_ops of the CSE'd form:
- * 0).
+ * Operations: 0 add, 0 mul, 0 div, 0 calls; 0 temporaries.
  */
 void gearsym_shift_2_3_outputs(
     const gearsym_real *restrict x,
@@ -82,78 +104,140 @@ void gearsym_shift_2_3_outputs(
 }
 
 /**
- * Jacobian of the state derivative with respect to x (states), d xdot / d x (4 x 4), dense
- * column-major: jac_x[i + j*4] = d xdot_i / d x_j.
- * Operations: 3 add, 20 mul, 1 div, 1 call (cos 1); 2 temporaries (sympy.count_ops of the
- * CSE'd form: 42).
+ * Structural nonzeros of d xdot / d x (4 x 4, 11 of 16 entries) in compressed-column order:
+ * jac_x_nz[k] is entry (i, j) with i = gearsym_shift_2_3_jac_x_rowind[k] and
+ * gearsym_shift_2_3_jac_x_colptr[j] <= k < gearsym_shift_2_3_jac_x_colptr[j+1]
+ * (GEARSYM_SHIFT_2_3_JAC_X_NNZ values).
+ * Operations: 3 add, 20 mul, 1 div, 1 call (cos 1); 2 temporaries.
  */
-void gearsym_shift_2_3_jac_x(
+void gearsym_shift_2_3_jac_x_sparse(
     const gearsym_real *restrict x,
     const gearsym_real *restrict u,
     const gearsym_shift_2_3_params *restrict p,
-    gearsym_real *restrict jac_x)
+    gearsym_real *restrict jac_x_nz)
 {
     const gearsym_real t0 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh));
     const gearsym_real t1 = t0*p->d_ss;
     (void)u;
-    jac_x[0] = GEARSYM_LIT(0.0);
-    jac_x[1] = GEARSYM_LIT(0.0);
-    jac_x[2] = GEARSYM_LIT(0.0);
-    jac_x[3] = GEARSYM_LIT(0.0);
-    jac_x[4] = -GEARSYM_LIT(0.799402834226086530854)*p->d_ss;
-    jac_x[5] = -GEARSYM_LIT(0.247843999698803434174)*p->d_ss;
-    jac_x[6] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
-    jac_x[7] = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t1;
-    jac_x[8] = -GEARSYM_LIT(1.97372559770420764468)*p->k_ss;
-    jac_x[9] = -GEARSYM_LIT(0.611926835256345678975)*p->k_ss;
-    jac_x[10] = GEARSYM_LIT(0.0);
-    jac_x[11] = GEARSYM_LIT(2.0)*t0*p->k_ss;
-    jac_x[12] = GEARSYM_LIT(1.97372559770420764468)*p->d_ss;
-    jac_x[13] = GEARSYM_LIT(0.611926835256345678975)*p->d_ss;
-    jac_x[14] = -GEARSYM_LIT(1.0);
-    jac_x[15] = t0*(-GEARSYM_LIT(0.0355139609030000000000)*x[3]*p->A_front*p->c_W*p->rho_air - GEARSYM_LIT(1.05990859890000000000)*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta)) - GEARSYM_LIT(2.0)*t1;
+    jac_x_nz[0] = -GEARSYM_LIT(0.799402834226086530854)*p->d_ss;
+    jac_x_nz[1] = -GEARSYM_LIT(0.247843999698803434174)*p->d_ss;
+    jac_x_nz[2] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
+    jac_x_nz[3] = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t1;
+    jac_x_nz[4] = -GEARSYM_LIT(1.97372559770420764468)*p->k_ss;
+    jac_x_nz[5] = -GEARSYM_LIT(0.611926835256345678975)*p->k_ss;
+    jac_x_nz[6] = GEARSYM_LIT(2.0)*t0*p->k_ss;
+    jac_x_nz[7] = GEARSYM_LIT(1.97372559770420764468)*p->d_ss;
+    jac_x_nz[8] = GEARSYM_LIT(0.611926835256345678975)*p->d_ss;
+    jac_x_nz[9] = -GEARSYM_LIT(1.0);
+    jac_x_nz[10] = -GEARSYM_LIT(2.0)*t1 + t0*(-GEARSYM_LIT(1.05990859890000000000)*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta) - GEARSYM_LIT(0.0355139609030000000000)*x[3]*p->A_front*p->c_W*p->rho_air);
+}
+
+/**
+ * Jacobian of the state derivative with respect to x (states), d xdot / d x (4 x 4), dense
+ * column-major: jac_x[i + j*4] = d xdot_i / d x_j.
+ * Computes jac_x_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_x_sparse (3 add, 20 mul, 1 div, 1 call (cos 1)); the
+ * spreading moves values only.
+ */
+void gearsym_shift_2_3_jac_x(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_2_3_params *p,
+    gearsym_real *jac_x)
+{
+    int i;
+    int j;
+    int k = GEARSYM_SHIFT_2_3_JAC_X_NNZ - 1;
+
+    gearsym_shift_2_3_jac_x_sparse(x, u, p, jac_x);
+    /*
+     * Spread in place, last value first. Value k belongs at i + j*rows >= k (the values are in
+     * column-major order), so each value is read before its slot is written, and a slot set to
+     * 0 lies above every value still unread.
+     */
+    for (j = GEARSYM_SHIFT_2_3_NX - 1; j >= 0; --j) {
+        for (i = GEARSYM_SHIFT_2_3_NX - 1; i >= 0; --i) {
+            if (k >= gearsym_shift_2_3_jac_x_colptr[j] && gearsym_shift_2_3_jac_x_rowind[k] == i) {
+                jac_x[i + j * GEARSYM_SHIFT_2_3_NX] = jac_x[k];
+                --k;
+            } else {
+                jac_x[i + j * GEARSYM_SHIFT_2_3_NX] = GEARSYM_LIT(0.0);
+            }
+        }
+    }
+}
+
+/**
+ * Structural nonzeros of d xdot / d u (4 x 3, 6 of 12 entries) in compressed-column order:
+ * jac_u_nz[k] is entry (i, j) with i = gearsym_shift_2_3_jac_u_rowind[k] and
+ * gearsym_shift_2_3_jac_u_colptr[j] <= k < gearsym_shift_2_3_jac_u_colptr[j+1]
+ * (GEARSYM_SHIFT_2_3_JAC_U_NNZ values).
+ * Operations: 0 add, 0 mul, 0 div, 0 calls; 0 temporaries.
+ */
+void gearsym_shift_2_3_jac_u_sparse(
+    const gearsym_real *restrict x,
+    const gearsym_real *restrict u,
+    const gearsym_shift_2_3_params *restrict p,
+    gearsym_real *restrict jac_u_nz)
+{
+    (void)x;
+    (void)u;
+    (void)p;
+    jac_u_nz[0] = GEARSYM_LIT(10.6883443030696865936);
+    jac_u_nz[1] = GEARSYM_LIT(2.43656425036584433736);
+    jac_u_nz[2] = GEARSYM_LIT(2.78597376134262387781);
+    jac_u_nz[3] = -GEARSYM_LIT(0.0134584894956434703021);
+    jac_u_nz[4] = GEARSYM_LIT(17.0201028515756499522);
+    jac_u_nz[5] = GEARSYM_LIT(2.40597677423938190485);
 }
 
 /**
  * Jacobian of the state derivative with respect to u (inputs), d xdot / d u (4 x 3), dense
  * column-major: jac_u[i + j*4] = d xdot_i / d u_j.
- * Operations: 0 add, 0 mul, 0 div, 0 calls; 0 temporaries (sympy.count_ops of the CSE'd form:
- * 7).
+ * Computes jac_u_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_u_sparse (0 add, 0 mul, 0 div, 0 calls); the spreading
+ * moves values only.
  */
 void gearsym_shift_2_3_jac_u(
-    const gearsym_real *restrict x,
-    const gearsym_real *restrict u,
-    const gearsym_shift_2_3_params *restrict p,
-    gearsym_real *restrict jac_u)
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_2_3_params *p,
+    gearsym_real *jac_u)
 {
-    (void)x;
-    (void)u;
-    (void)p;
-    jac_u[0] = GEARSYM_LIT(10.6883443030696865936);
-    jac_u[1] = GEARSYM_LIT(2.43656425036584433736);
-    jac_u[2] = GEARSYM_LIT(0.0);
-    jac_u[3] = GEARSYM_LIT(0.0);
-    jac_u[4] = GEARSYM_LIT(2.78597376134262387781);
-    jac_u[5] = -GEARSYM_LIT(0.0134584894956434703021);
-    jac_u[6] = GEARSYM_LIT(0.0);
-    jac_u[7] = GEARSYM_LIT(0.0);
-    jac_u[8] = GEARSYM_LIT(17.0201028515756499522);
-    jac_u[9] = GEARSYM_LIT(2.40597677423938190485);
-    jac_u[10] = GEARSYM_LIT(0.0);
-    jac_u[11] = GEARSYM_LIT(0.0);
+    int i;
+    int j;
+    int k = GEARSYM_SHIFT_2_3_JAC_U_NNZ - 1;
+
+    gearsym_shift_2_3_jac_u_sparse(x, u, p, jac_u);
+    /*
+     * Spread in place, last value first. Value k belongs at i + j*rows >= k (the values are in
+     * column-major order), so each value is read before its slot is written, and a slot set to
+     * 0 lies above every value still unread.
+     */
+    for (j = GEARSYM_SHIFT_2_3_NU - 1; j >= 0; --j) {
+        for (i = GEARSYM_SHIFT_2_3_NX - 1; i >= 0; --i) {
+            if (k >= gearsym_shift_2_3_jac_u_colptr[j] && gearsym_shift_2_3_jac_u_rowind[k] == i) {
+                jac_u[i + j * GEARSYM_SHIFT_2_3_NX] = jac_u[k];
+                --k;
+            } else {
+                jac_u[i + j * GEARSYM_SHIFT_2_3_NX] = GEARSYM_LIT(0.0);
+            }
+        }
+    }
 }
 
 /**
- * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
- * xdot / d p (4 x 9), dense column-major: jac_p[i + j*4] = d xdot_i / d p_j.
- * Operations: 11 add, 43 mul, 2 div, 2 calls (cos 1, sin 1); 13 temporaries (sympy.count_ops
- * of the CSE'd form: 80).
+ * Structural nonzeros of d xdot / d p (4 x 9, 13 of 36 entries) in compressed-column order:
+ * jac_p_nz[k] is entry (i, j) with i = gearsym_shift_2_3_jac_p_rowind[k] and
+ * gearsym_shift_2_3_jac_p_colptr[j] <= k < gearsym_shift_2_3_jac_p_colptr[j+1]
+ * (GEARSYM_SHIFT_2_3_JAC_P_NNZ values).
+ * Operations: 11 add, 43 mul, 2 div, 2 calls (cos 1, sin 1); 13 temporaries.
  */
-void gearsym_shift_2_3_jac_p(
+void gearsym_shift_2_3_jac_p_sparse(
     const gearsym_real *restrict x,
     const gearsym_real *restrict u,
     const gearsym_shift_2_3_params *restrict p,
-    gearsym_real *restrict jac_p)
+    gearsym_real *restrict jac_p_nz)
 {
     const gearsym_real t0 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
     const gearsym_real t1 = (GEARSYM_LIT(1.0)/t0);
@@ -165,46 +249,58 @@ void gearsym_shift_2_3_jac_p(
     const gearsym_real t7 = t4*p->m_veh;
     const gearsym_real t8 = (x[3]*x[3]);
     const gearsym_real t9 = GEARSYM_LIT(0.0177569804515000000000)*t8*p->A_front*p->c_W;
-    const gearsym_real t10 = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1] - x[3];
-    const gearsym_real t11 = (GEARSYM_LIT(2.0)*t10*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss - t3*p->m_veh - t9*p->rho_air - t6*t7)/(t0*t0);
+    const gearsym_real t10 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
+    const gearsym_real t11 = (-t3*p->m_veh - t6*t7 - t9*p->rho_air + GEARSYM_LIT(2.0)*t10*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss)/(t0*t0);
     const gearsym_real t12 = GEARSYM_LIT(0.0177569804515000000000)*t1*t8*p->rho_air;
     (void)u;
-    jac_p[0] = GEARSYM_LIT(0.0);
-    jac_p[1] = GEARSYM_LIT(0.0);
-    jac_p[2] = GEARSYM_LIT(0.0);
-    jac_p[3] = t1*(-t3 - t4*t6) - GEARSYM_LIT(0.108043690000000000000)*t11;
-    jac_p[4] = -GEARSYM_LIT(1.97372559770420764468)*x[2];
-    jac_p[5] = -GEARSYM_LIT(0.611926835256345678975)*x[2];
-    jac_p[6] = GEARSYM_LIT(0.0);
-    jac_p[7] = GEARSYM_LIT(2.0)*t1*x[2];
-    jac_p[8] = -GEARSYM_LIT(0.799402834226086530854)*x[1] + GEARSYM_LIT(1.97372559770420764468)*x[3];
-    jac_p[9] = -GEARSYM_LIT(0.247843999698803434174)*x[1] + GEARSYM_LIT(0.611926835256345678975)*x[3];
-    jac_p[10] = GEARSYM_LIT(0.0);
-    jac_p[11] = GEARSYM_LIT(2.0)*t1*t10;
-    jac_p[12] = GEARSYM_LIT(0.0);
-    jac_p[13] = GEARSYM_LIT(0.0);
-    jac_p[14] = GEARSYM_LIT(0.0);
-    jac_p[15] = t1*(t2*t6*p->m_veh - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t7);
-    jac_p[16] = GEARSYM_LIT(0.0);
-    jac_p[17] = GEARSYM_LIT(0.0);
-    jac_p[18] = GEARSYM_LIT(0.0);
-    jac_p[19] = -t11;
-    jac_p[20] = GEARSYM_LIT(0.0);
-    jac_p[21] = GEARSYM_LIT(0.0);
-    jac_p[22] = GEARSYM_LIT(0.0);
-    jac_p[23] = -t1*t9;
-    jac_p[24] = GEARSYM_LIT(0.0);
-    jac_p[25] = GEARSYM_LIT(0.0);
-    jac_p[26] = GEARSYM_LIT(0.0);
-    jac_p[27] = -t12*p->A_front;
-    jac_p[28] = GEARSYM_LIT(0.0);
-    jac_p[29] = GEARSYM_LIT(0.0);
-    jac_p[30] = GEARSYM_LIT(0.0);
-    jac_p[31] = -t12*p->c_W;
-    jac_p[32] = GEARSYM_LIT(0.0);
-    jac_p[33] = GEARSYM_LIT(0.0);
-    jac_p[34] = GEARSYM_LIT(0.0);
-    jac_p[35] = -t1*t5*t7;
+    jac_p_nz[0] = -GEARSYM_LIT(0.108043690000000000000)*t11 + t1*(-t3 - t4*t6);
+    jac_p_nz[1] = -GEARSYM_LIT(1.97372559770420764468)*x[2];
+    jac_p_nz[2] = -GEARSYM_LIT(0.611926835256345678975)*x[2];
+    jac_p_nz[3] = GEARSYM_LIT(2.0)*t1*x[2];
+    jac_p_nz[4] = -GEARSYM_LIT(0.799402834226086530854)*x[1] + GEARSYM_LIT(1.97372559770420764468)*x[3];
+    jac_p_nz[5] = -GEARSYM_LIT(0.247843999698803434174)*x[1] + GEARSYM_LIT(0.611926835256345678975)*x[3];
+    jac_p_nz[6] = GEARSYM_LIT(2.0)*t1*t10;
+    jac_p_nz[7] = t1*(-(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t7 + t2*t6*p->m_veh);
+    jac_p_nz[8] = -t11;
+    jac_p_nz[9] = -t1*t9;
+    jac_p_nz[10] = -t12*p->A_front;
+    jac_p_nz[11] = -t12*p->c_W;
+    jac_p_nz[12] = -t1*t5*t7;
+}
+
+/**
+ * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
+ * xdot / d p (4 x 9), dense column-major: jac_p[i + j*4] = d xdot_i / d p_j.
+ * Computes jac_p_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_p_sparse (11 add, 43 mul, 2 div, 2 calls (cos 1, sin
+ * 1)); the spreading moves values only.
+ */
+void gearsym_shift_2_3_jac_p(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_2_3_params *p,
+    gearsym_real *jac_p)
+{
+    int i;
+    int j;
+    int k = GEARSYM_SHIFT_2_3_JAC_P_NNZ - 1;
+
+    gearsym_shift_2_3_jac_p_sparse(x, u, p, jac_p);
+    /*
+     * Spread in place, last value first. Value k belongs at i + j*rows >= k (the values are in
+     * column-major order), so each value is read before its slot is written, and a slot set to
+     * 0 lies above every value still unread.
+     */
+    for (j = GEARSYM_SHIFT_2_3_NP - 1; j >= 0; --j) {
+        for (i = GEARSYM_SHIFT_2_3_NX - 1; i >= 0; --i) {
+            if (k >= gearsym_shift_2_3_jac_p_colptr[j] && gearsym_shift_2_3_jac_p_rowind[k] == i) {
+                jac_p[i + j * GEARSYM_SHIFT_2_3_NX] = jac_p[k];
+                --k;
+            } else {
+                jac_p[i + j * GEARSYM_SHIFT_2_3_NX] = GEARSYM_LIT(0.0);
+            }
+        }
+    }
 }
 
 /**

@@ -27,6 +27,41 @@
 #endif
 #endif
 
+/* Compressed-column pattern of jac_x (see the header). */
+const int gearsym_shift_3_4_mu_sens_jac_x_colptr[GEARSYM_SHIFT_3_4_MU_SENS_NX + 1] = {
+    0, 0, 8, 15, 26, 26, 30, 33, 37, 37, 41, 44, 48, 48, 52, 55,
+    59, 59, 63, 66, 70, 70, 74, 77, 81,
+};
+const int gearsym_shift_3_4_mu_sens_jac_x_rowind[GEARSYM_SHIFT_3_4_MU_SENS_JAC_X_NNZ] = {
+    0, 1, 2, 3, 7, 12, 13, 15, 0, 1, 3, 7, 8, 9, 11, 0,
+    1, 2, 3, 7, 11, 12, 13, 15, 19, 23, 4, 5, 6, 7, 4, 5,
+    7, 4, 5, 6, 7, 8, 9, 10, 11, 8, 9, 11, 8, 9, 10, 11,
+    12, 13, 14, 15, 12, 13, 15, 12, 13, 14, 15, 16, 17, 18, 19, 16,
+    17, 19, 16, 17, 18, 19, 20, 21, 22, 23, 20, 21, 23, 20, 21, 22,
+    23,
+};
+
+/* Compressed-column pattern of jac_u (see the header). */
+const int gearsym_shift_3_4_mu_sens_jac_u_colptr[GEARSYM_SHIFT_3_4_MU_SENS_NU + 1] = {
+    0, 2, 6, 8,
+};
+const int gearsym_shift_3_4_mu_sens_jac_u_rowind[GEARSYM_SHIFT_3_4_MU_SENS_JAC_U_NNZ] = {
+    0, 1, 0, 1, 16, 17, 0, 1,
+};
+
+/* Compressed-column pattern of jac_p (see the header). */
+const int gearsym_shift_3_4_mu_sens_jac_p_colptr[GEARSYM_SHIFT_3_4_MU_SENS_NP + 1] = {
+    0, 6, 24, 42, 48, 54, 60, 66, 72, 78, 80, 82,
+};
+const int gearsym_shift_3_4_mu_sens_jac_p_rowind[GEARSYM_SHIFT_3_4_MU_SENS_JAC_P_NNZ] = {
+    3, 7, 11, 15, 19, 23, 0, 1, 3, 4, 5, 7, 8, 9, 11, 12,
+    13, 15, 16, 17, 19, 20, 21, 23, 0, 1, 3, 4, 5, 7, 8, 9,
+    11, 12, 13, 15, 16, 17, 19, 20, 21, 23, 3, 7, 11, 15, 19, 23,
+    3, 7, 11, 15, 19, 23, 3, 7, 11, 15, 19, 23, 3, 7, 11, 15,
+    19, 23, 3, 7, 11, 15, 19, 23, 3, 7, 11, 15, 19, 23, 0, 1,
+    0, 1,
+};
+
 /**
  * State derivative xdot = f(x, u, p). States: omega_1 [rad/s], omega_2 [rad/s], phi [rad],
  * omega_C [rad/s], S_omega_1__m_veh [(rad/s)/(kg)], S_omega_2__m_veh [(rad/s)/(kg)],
@@ -38,8 +73,7 @@
  * [rad], S_omega_C__mu_81 [rad/s], S_omega_1__zeta [(rad/s)/(rad)], S_omega_2__zeta
  * [(rad/s)/(rad)], S_phi__zeta [(rad)/(rad)], S_omega_C__zeta [(rad/s)/(rad)]. Inputs: T_In
  * [N*m], F_N81 [N], F_N27 [N].
- * Operations: 69 add, 131 mul, 2 div, 2 calls (cos 1, sin 1); 31 temporaries (sympy.count_ops
- * of the CSE'd form: 265).
+ * Operations: 69 add, 131 mul, 2 div, 2 calls (cos 1, sin 1); 31 temporaries.
  */
 void gearsym_shift_3_4_mu_sens_rhs(
     const gearsym_real *restrict x,
@@ -54,7 +88,7 @@ void gearsym_shift_3_4_mu_sens_rhs(
     const gearsym_real t4 = GEARSYM_LIT(0.951713998030246129056)*u[1];
     const gearsym_real t5 = GEARSYM_LIT(0.218550094764656887746)*x[1];
     const gearsym_real t6 = GEARSYM_LIT(0.539600183973937855846)*x[2];
-    const gearsym_real t7 = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1] - x[3];
+    const gearsym_real t7 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
     const gearsym_real t8 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
     const gearsym_real t9 = (GEARSYM_LIT(1.0)/t8);
     const gearsym_real t10 = GEARSYM_SIN(p->zeta);
@@ -64,12 +98,12 @@ void gearsym_shift_3_4_mu_sens_rhs(
     const gearsym_real t14 = GEARSYM_LIT(1.05990859890000000000)*p->f_roll;
     const gearsym_real t15 = t14*x[3];
     const gearsym_real t16 = p->A_front*p->c_W*p->rho_air;
-    const gearsym_real t17 = GEARSYM_LIT(2.0)*t7*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss - t11*p->m_veh - GEARSYM_LIT(0.0177569804515000000000)*t16*(x[3]*x[3]) - t13*t15;
+    const gearsym_real t17 = -t11*p->m_veh - t13*t15 + GEARSYM_LIT(2.0)*t7*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss - GEARSYM_LIT(0.0177569804515000000000)*t16*(x[3]*x[3]);
     const gearsym_real t18 = x[5]*p->d_ss;
     const gearsym_real t19 = x[6]*p->k_ss;
     const gearsym_real t20 = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t9;
     const gearsym_real t21 = GEARSYM_LIT(2.0)*t9;
-    const gearsym_real t22 = t9*(-GEARSYM_LIT(2.0)*p->d_ss - GEARSYM_LIT(0.0355139609030000000000)*t16*x[3] - t13*t14);
+    const gearsym_real t22 = t9*(-GEARSYM_LIT(2.0)*p->d_ss - t13*t14 - GEARSYM_LIT(0.0355139609030000000000)*t16*x[3]);
     const gearsym_real t23 = x[9]*p->d_ss;
     const gearsym_real t24 = x[10]*p->k_ss;
     const gearsym_real t25 = x[13]*p->d_ss;
@@ -78,30 +112,30 @@ void gearsym_shift_3_4_mu_sens_rhs(
     const gearsym_real t28 = x[18]*p->k_ss;
     const gearsym_real t29 = x[21]*p->d_ss;
     const gearsym_real t30 = x[22]*p->k_ss;
-    xdot[0] = GEARSYM_LIT(26.9558975103255347413)*u[0] + GEARSYM_LIT(0.104731230854449551240)*x[3]*p->d_ss - t2*p->d_ss - t3*p->k_ss - t1*p->mu_81 - GEARSYM_LIT(29.8542491137247809292)*t0;
-    xdot[1] = GEARSYM_LIT(0.129290704489817971006)*u[0] + GEARSYM_LIT(0.539600183973937855846)*x[3]*p->d_ss - t5*p->d_ss - t6*p->k_ss + t4*p->mu_81 + GEARSYM_LIT(1.07188736788946289785)*t0;
+    xdot[0] = -GEARSYM_LIT(29.8542491137247809292)*t0 + GEARSYM_LIT(26.9558975103255347413)*u[0] - t1*p->mu_81 - t2*p->d_ss - t3*p->k_ss + GEARSYM_LIT(0.104731230854449551240)*x[3]*p->d_ss;
+    xdot[1] = GEARSYM_LIT(0.129290704489817971006)*u[0] + GEARSYM_LIT(1.07188736788946289785)*t0 + t4*p->mu_81 - t5*p->d_ss - t6*p->k_ss + GEARSYM_LIT(0.539600183973937855846)*x[3]*p->d_ss;
     xdot[2] = t7;
     xdot[3] = t17*t9;
-    xdot[4] = GEARSYM_LIT(0.104731230854449551240)*x[7]*p->d_ss - GEARSYM_LIT(0.0424184815125352576915)*t18 - GEARSYM_LIT(0.104731230854449551240)*t19;
-    xdot[5] = GEARSYM_LIT(0.539600183973937855846)*x[7]*p->d_ss - GEARSYM_LIT(0.218550094764656887746)*t18 - GEARSYM_LIT(0.539600183973937855846)*t19;
-    xdot[6] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[5] - x[7];
-    xdot[7] = t22*x[7] - GEARSYM_LIT(0.108043690000000000000)*t17/(t8*t8) + t18*t20 + t19*t21 + t9*(-t11 - t12*t15);
-    xdot[8] = GEARSYM_LIT(0.104731230854449551240)*x[11]*p->d_ss - GEARSYM_LIT(0.0424184815125352576915)*t23 - GEARSYM_LIT(0.104731230854449551240)*t24 - t3;
-    xdot[9] = GEARSYM_LIT(0.539600183973937855846)*x[11]*p->d_ss - GEARSYM_LIT(0.218550094764656887746)*t23 - GEARSYM_LIT(0.539600183973937855846)*t24 - t6;
-    xdot[10] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[9] - x[11];
-    xdot[11] = t22*x[11] + GEARSYM_LIT(2.0)*t9*x[2] + t20*t23 + t21*t24;
-    xdot[12] = GEARSYM_LIT(0.104731230854449551240)*x[15]*p->d_ss + GEARSYM_LIT(0.104731230854449551240)*x[3] - t2 - GEARSYM_LIT(0.0424184815125352576915)*t25 - GEARSYM_LIT(0.104731230854449551240)*t26;
-    xdot[13] = GEARSYM_LIT(0.539600183973937855846)*x[15]*p->d_ss + GEARSYM_LIT(0.539600183973937855846)*x[3] - GEARSYM_LIT(0.218550094764656887746)*t25 - GEARSYM_LIT(0.539600183973937855846)*t26 - t5;
-    xdot[14] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[13] - x[15];
-    xdot[15] = t22*x[15] + t20*t25 + t21*t26 + t9*((GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*x[1] - GEARSYM_LIT(2.0)*x[3]);
-    xdot[16] = GEARSYM_LIT(0.104731230854449551240)*x[19]*p->d_ss - t1 - GEARSYM_LIT(0.0424184815125352576915)*t27 - GEARSYM_LIT(0.104731230854449551240)*t28;
-    xdot[17] = GEARSYM_LIT(0.539600183973937855846)*x[19]*p->d_ss - GEARSYM_LIT(0.218550094764656887746)*t27 - GEARSYM_LIT(0.539600183973937855846)*t28 + t4;
-    xdot[18] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[17] - x[19];
-    xdot[19] = t22*x[19] + t20*t27 + t21*t28;
-    xdot[20] = GEARSYM_LIT(0.104731230854449551240)*x[23]*p->d_ss - GEARSYM_LIT(0.0424184815125352576915)*t29 - GEARSYM_LIT(0.104731230854449551240)*t30;
-    xdot[21] = GEARSYM_LIT(0.539600183973937855846)*x[23]*p->d_ss - GEARSYM_LIT(0.218550094764656887746)*t29 - GEARSYM_LIT(0.539600183973937855846)*t30;
-    xdot[22] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[21] - x[23];
-    xdot[23] = t22*x[23] + t20*t29 + t21*t30 + t9*(t10*t15*p->m_veh - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t13);
+    xdot[4] = -GEARSYM_LIT(0.0424184815125352576915)*t18 - GEARSYM_LIT(0.104731230854449551240)*t19 + GEARSYM_LIT(0.104731230854449551240)*x[7]*p->d_ss;
+    xdot[5] = -GEARSYM_LIT(0.539600183973937855846)*t19 - GEARSYM_LIT(0.218550094764656887746)*t18 + GEARSYM_LIT(0.539600183973937855846)*x[7]*p->d_ss;
+    xdot[6] = -x[7] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[5];
+    xdot[7] = t18*t20 + t19*t21 + t22*x[7] + t9*(-t11 - t12*t15) - GEARSYM_LIT(0.108043690000000000000)*t17/(t8*t8);
+    xdot[8] = -t3 - GEARSYM_LIT(0.0424184815125352576915)*t23 - GEARSYM_LIT(0.104731230854449551240)*t24 + GEARSYM_LIT(0.104731230854449551240)*x[11]*p->d_ss;
+    xdot[9] = -t6 - GEARSYM_LIT(0.539600183973937855846)*t24 - GEARSYM_LIT(0.218550094764656887746)*t23 + GEARSYM_LIT(0.539600183973937855846)*x[11]*p->d_ss;
+    xdot[10] = -x[11] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[9];
+    xdot[11] = t20*t23 + t21*t24 + t22*x[11] + GEARSYM_LIT(2.0)*t9*x[2];
+    xdot[12] = -t2 - GEARSYM_LIT(0.0424184815125352576915)*t25 - GEARSYM_LIT(0.104731230854449551240)*t26 + GEARSYM_LIT(0.104731230854449551240)*x[3] + GEARSYM_LIT(0.104731230854449551240)*x[15]*p->d_ss;
+    xdot[13] = -t5 - GEARSYM_LIT(0.539600183973937855846)*t26 - GEARSYM_LIT(0.218550094764656887746)*t25 + GEARSYM_LIT(0.539600183973937855846)*x[3] + GEARSYM_LIT(0.539600183973937855846)*x[15]*p->d_ss;
+    xdot[14] = -x[15] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[13];
+    xdot[15] = t20*t25 + t21*t26 + t22*x[15] + t9*(-GEARSYM_LIT(2.0)*x[3] + (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*x[1]);
+    xdot[16] = -t1 - GEARSYM_LIT(0.0424184815125352576915)*t27 - GEARSYM_LIT(0.104731230854449551240)*t28 + GEARSYM_LIT(0.104731230854449551240)*x[19]*p->d_ss;
+    xdot[17] = t4 - GEARSYM_LIT(0.539600183973937855846)*t28 - GEARSYM_LIT(0.218550094764656887746)*t27 + GEARSYM_LIT(0.539600183973937855846)*x[19]*p->d_ss;
+    xdot[18] = -x[19] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[17];
+    xdot[19] = t20*t27 + t21*t28 + t22*x[19];
+    xdot[20] = -GEARSYM_LIT(0.0424184815125352576915)*t29 - GEARSYM_LIT(0.104731230854449551240)*t30 + GEARSYM_LIT(0.104731230854449551240)*x[23]*p->d_ss;
+    xdot[21] = -GEARSYM_LIT(0.539600183973937855846)*t30 - GEARSYM_LIT(0.218550094764656887746)*t29 + GEARSYM_LIT(0.539600183973937855846)*x[23]*p->d_ss;
+    xdot[22] = -x[23] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[21];
+    xdot[23] = t20*t29 + t21*t30 + t22*x[23] + t9*(-(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t13 + t10*t15*p->m_veh);
 }
 
 /**
@@ -115,8 +149,7 @@ void gearsym_shift_3_4_mu_sens_rhs(
  * [rad/s], dy_y_omega_2__mu_81 [rad/s], dy_y_omega_8__mu_81 [rad/s], dy_y_omega_C__mu_81
  * [rad/s], dy_y_omega_1__zeta [(rad/s)/(rad)], dy_y_omega_2__zeta [(rad/s)/(rad)],
  * dy_y_omega_8__zeta [(rad/s)/(rad)], dy_y_omega_C__zeta [(rad/s)/(rad)].
- * Operations: 6 add, 12 mul, 0 div, 0 calls; 0 temporaries (sympy.count_ops of the CSE'd form:
- * 30).
+ * Operations: 6 add, 12 mul, 0 div, 0 calls; 0 temporaries.
  */
 void gearsym_shift_3_4_mu_sens_outputs(
     const gearsym_real *restrict x,
@@ -153,16 +186,17 @@ void gearsym_shift_3_4_mu_sens_outputs(
 }
 
 /**
- * Jacobian of the state derivative with respect to x (states), d xdot / d x (24 x 24), dense
- * column-major: jac_x[i + j*24] = d xdot_i / d x_j.
- * Operations: 7 add, 38 mul, 2 div, 2 calls (cos 1, sin 1); 18 temporaries (sympy.count_ops of
- * the CSE'd form: 96).
+ * Structural nonzeros of d xdot / d x (24 x 24, 81 of 576 entries) in compressed-column order:
+ * jac_x_nz[k] is entry (i, j) with i = gearsym_shift_3_4_mu_sens_jac_x_rowind[k] and
+ * gearsym_shift_3_4_mu_sens_jac_x_colptr[j] <= k < gearsym_shift_3_4_mu_sens_jac_x_colptr[j+1]
+ * (GEARSYM_SHIFT_3_4_MU_SENS_JAC_X_NNZ values).
+ * Operations: 7 add, 38 mul, 2 div, 2 calls (cos 1, sin 1); 18 temporaries.
  */
-void gearsym_shift_3_4_mu_sens_jac_x(
+void gearsym_shift_3_4_mu_sens_jac_x_sparse(
     const gearsym_real *restrict x,
     const gearsym_real *restrict u,
     const gearsym_shift_3_4_mu_sens_params *restrict p,
-    gearsym_real *restrict jac_x)
+    gearsym_real *restrict jac_x_nz)
 {
     const gearsym_real t0 = -GEARSYM_LIT(0.0424184815125352576915)*p->d_ss;
     const gearsym_real t1 = -GEARSYM_LIT(0.218550094764656887746)*p->d_ss;
@@ -183,683 +217,196 @@ void gearsym_shift_3_4_mu_sens_jac_x(
     const gearsym_real t16 = t15*t3;
     const gearsym_real t17 = t14*t3;
     (void)u;
-    jac_x[0] = GEARSYM_LIT(0.0);
-    jac_x[1] = GEARSYM_LIT(0.0);
-    jac_x[2] = GEARSYM_LIT(0.0);
-    jac_x[3] = GEARSYM_LIT(0.0);
-    jac_x[4] = GEARSYM_LIT(0.0);
-    jac_x[5] = GEARSYM_LIT(0.0);
-    jac_x[6] = GEARSYM_LIT(0.0);
-    jac_x[7] = GEARSYM_LIT(0.0);
-    jac_x[8] = GEARSYM_LIT(0.0);
-    jac_x[9] = GEARSYM_LIT(0.0);
-    jac_x[10] = GEARSYM_LIT(0.0);
-    jac_x[11] = GEARSYM_LIT(0.0);
-    jac_x[12] = GEARSYM_LIT(0.0);
-    jac_x[13] = GEARSYM_LIT(0.0);
-    jac_x[14] = GEARSYM_LIT(0.0);
-    jac_x[15] = GEARSYM_LIT(0.0);
-    jac_x[16] = GEARSYM_LIT(0.0);
-    jac_x[17] = GEARSYM_LIT(0.0);
-    jac_x[18] = GEARSYM_LIT(0.0);
-    jac_x[19] = GEARSYM_LIT(0.0);
-    jac_x[20] = GEARSYM_LIT(0.0);
-    jac_x[21] = GEARSYM_LIT(0.0);
-    jac_x[22] = GEARSYM_LIT(0.0);
-    jac_x[23] = GEARSYM_LIT(0.0);
-    jac_x[24] = t0;
-    jac_x[25] = t1;
-    jac_x[26] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
-    jac_x[27] = t5;
-    jac_x[28] = GEARSYM_LIT(0.0);
-    jac_x[29] = GEARSYM_LIT(0.0);
-    jac_x[30] = GEARSYM_LIT(0.0);
-    jac_x[31] = -GEARSYM_LIT(0.0875202025111381125962)*t6*p->d_ss;
-    jac_x[32] = GEARSYM_LIT(0.0);
-    jac_x[33] = GEARSYM_LIT(0.0);
-    jac_x[34] = GEARSYM_LIT(0.0);
-    jac_x[35] = GEARSYM_LIT(0.0);
-    jac_x[36] = -GEARSYM_LIT(0.0424184815125352576915);
-    jac_x[37] = -GEARSYM_LIT(0.218550094764656887746);
-    jac_x[38] = GEARSYM_LIT(0.0);
-    jac_x[39] = t4;
-    jac_x[40] = GEARSYM_LIT(0.0);
-    jac_x[41] = GEARSYM_LIT(0.0);
-    jac_x[42] = GEARSYM_LIT(0.0);
-    jac_x[43] = GEARSYM_LIT(0.0);
-    jac_x[44] = GEARSYM_LIT(0.0);
-    jac_x[45] = GEARSYM_LIT(0.0);
-    jac_x[46] = GEARSYM_LIT(0.0);
-    jac_x[47] = GEARSYM_LIT(0.0);
-    jac_x[48] = t7;
-    jac_x[49] = t8;
-    jac_x[50] = GEARSYM_LIT(0.0);
-    jac_x[51] = t10;
-    jac_x[52] = GEARSYM_LIT(0.0);
-    jac_x[53] = GEARSYM_LIT(0.0);
-    jac_x[54] = GEARSYM_LIT(0.0);
-    jac_x[55] = -GEARSYM_LIT(0.216087380000000000000)*t6*p->k_ss;
-    jac_x[56] = -GEARSYM_LIT(0.104731230854449551240);
-    jac_x[57] = -GEARSYM_LIT(0.539600183973937855846);
-    jac_x[58] = GEARSYM_LIT(0.0);
-    jac_x[59] = t9;
-    jac_x[60] = GEARSYM_LIT(0.0);
-    jac_x[61] = GEARSYM_LIT(0.0);
-    jac_x[62] = GEARSYM_LIT(0.0);
-    jac_x[63] = GEARSYM_LIT(0.0);
-    jac_x[64] = GEARSYM_LIT(0.0);
-    jac_x[65] = GEARSYM_LIT(0.0);
-    jac_x[66] = GEARSYM_LIT(0.0);
-    jac_x[67] = GEARSYM_LIT(0.0);
-    jac_x[68] = GEARSYM_LIT(0.0);
-    jac_x[69] = GEARSYM_LIT(0.0);
-    jac_x[70] = GEARSYM_LIT(0.0);
-    jac_x[71] = GEARSYM_LIT(0.0);
-    jac_x[72] = t11;
-    jac_x[73] = t12;
-    jac_x[74] = -GEARSYM_LIT(1.0);
-    jac_x[75] = t16;
-    jac_x[76] = GEARSYM_LIT(0.0);
-    jac_x[77] = GEARSYM_LIT(0.0);
-    jac_x[78] = GEARSYM_LIT(0.0);
-    jac_x[79] = -t17*x[7] - t13*t3 - GEARSYM_LIT(0.108043690000000000000)*t15*t6;
-    jac_x[80] = GEARSYM_LIT(0.0);
-    jac_x[81] = GEARSYM_LIT(0.0);
-    jac_x[82] = GEARSYM_LIT(0.0);
-    jac_x[83] = -t17*x[11];
-    jac_x[84] = GEARSYM_LIT(0.104731230854449551240);
-    jac_x[85] = GEARSYM_LIT(0.539600183973937855846);
-    jac_x[86] = GEARSYM_LIT(0.0);
-    jac_x[87] = -t17*x[15] - t9;
-    jac_x[88] = GEARSYM_LIT(0.0);
-    jac_x[89] = GEARSYM_LIT(0.0);
-    jac_x[90] = GEARSYM_LIT(0.0);
-    jac_x[91] = -t17*x[19];
-    jac_x[92] = GEARSYM_LIT(0.0);
-    jac_x[93] = GEARSYM_LIT(0.0);
-    jac_x[94] = GEARSYM_LIT(0.0);
-    jac_x[95] = -t17*x[23] + GEARSYM_LIT(1.05990859890000000000)*t3*p->f_roll*p->m_veh*GEARSYM_SIN(p->zeta);
-    jac_x[96] = GEARSYM_LIT(0.0);
-    jac_x[97] = GEARSYM_LIT(0.0);
-    jac_x[98] = GEARSYM_LIT(0.0);
-    jac_x[99] = GEARSYM_LIT(0.0);
-    jac_x[100] = GEARSYM_LIT(0.0);
-    jac_x[101] = GEARSYM_LIT(0.0);
-    jac_x[102] = GEARSYM_LIT(0.0);
-    jac_x[103] = GEARSYM_LIT(0.0);
-    jac_x[104] = GEARSYM_LIT(0.0);
-    jac_x[105] = GEARSYM_LIT(0.0);
-    jac_x[106] = GEARSYM_LIT(0.0);
-    jac_x[107] = GEARSYM_LIT(0.0);
-    jac_x[108] = GEARSYM_LIT(0.0);
-    jac_x[109] = GEARSYM_LIT(0.0);
-    jac_x[110] = GEARSYM_LIT(0.0);
-    jac_x[111] = GEARSYM_LIT(0.0);
-    jac_x[112] = GEARSYM_LIT(0.0);
-    jac_x[113] = GEARSYM_LIT(0.0);
-    jac_x[114] = GEARSYM_LIT(0.0);
-    jac_x[115] = GEARSYM_LIT(0.0);
-    jac_x[116] = GEARSYM_LIT(0.0);
-    jac_x[117] = GEARSYM_LIT(0.0);
-    jac_x[118] = GEARSYM_LIT(0.0);
-    jac_x[119] = GEARSYM_LIT(0.0);
-    jac_x[120] = GEARSYM_LIT(0.0);
-    jac_x[121] = GEARSYM_LIT(0.0);
-    jac_x[122] = GEARSYM_LIT(0.0);
-    jac_x[123] = GEARSYM_LIT(0.0);
-    jac_x[124] = t0;
-    jac_x[125] = t1;
-    jac_x[126] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
-    jac_x[127] = t5;
-    jac_x[128] = GEARSYM_LIT(0.0);
-    jac_x[129] = GEARSYM_LIT(0.0);
-    jac_x[130] = GEARSYM_LIT(0.0);
-    jac_x[131] = GEARSYM_LIT(0.0);
-    jac_x[132] = GEARSYM_LIT(0.0);
-    jac_x[133] = GEARSYM_LIT(0.0);
-    jac_x[134] = GEARSYM_LIT(0.0);
-    jac_x[135] = GEARSYM_LIT(0.0);
-    jac_x[136] = GEARSYM_LIT(0.0);
-    jac_x[137] = GEARSYM_LIT(0.0);
-    jac_x[138] = GEARSYM_LIT(0.0);
-    jac_x[139] = GEARSYM_LIT(0.0);
-    jac_x[140] = GEARSYM_LIT(0.0);
-    jac_x[141] = GEARSYM_LIT(0.0);
-    jac_x[142] = GEARSYM_LIT(0.0);
-    jac_x[143] = GEARSYM_LIT(0.0);
-    jac_x[144] = GEARSYM_LIT(0.0);
-    jac_x[145] = GEARSYM_LIT(0.0);
-    jac_x[146] = GEARSYM_LIT(0.0);
-    jac_x[147] = GEARSYM_LIT(0.0);
-    jac_x[148] = t7;
-    jac_x[149] = t8;
-    jac_x[150] = GEARSYM_LIT(0.0);
-    jac_x[151] = t10;
-    jac_x[152] = GEARSYM_LIT(0.0);
-    jac_x[153] = GEARSYM_LIT(0.0);
-    jac_x[154] = GEARSYM_LIT(0.0);
-    jac_x[155] = GEARSYM_LIT(0.0);
-    jac_x[156] = GEARSYM_LIT(0.0);
-    jac_x[157] = GEARSYM_LIT(0.0);
-    jac_x[158] = GEARSYM_LIT(0.0);
-    jac_x[159] = GEARSYM_LIT(0.0);
-    jac_x[160] = GEARSYM_LIT(0.0);
-    jac_x[161] = GEARSYM_LIT(0.0);
-    jac_x[162] = GEARSYM_LIT(0.0);
-    jac_x[163] = GEARSYM_LIT(0.0);
-    jac_x[164] = GEARSYM_LIT(0.0);
-    jac_x[165] = GEARSYM_LIT(0.0);
-    jac_x[166] = GEARSYM_LIT(0.0);
-    jac_x[167] = GEARSYM_LIT(0.0);
-    jac_x[168] = GEARSYM_LIT(0.0);
-    jac_x[169] = GEARSYM_LIT(0.0);
-    jac_x[170] = GEARSYM_LIT(0.0);
-    jac_x[171] = GEARSYM_LIT(0.0);
-    jac_x[172] = t11;
-    jac_x[173] = t12;
-    jac_x[174] = -GEARSYM_LIT(1.0);
-    jac_x[175] = t16;
-    jac_x[176] = GEARSYM_LIT(0.0);
-    jac_x[177] = GEARSYM_LIT(0.0);
-    jac_x[178] = GEARSYM_LIT(0.0);
-    jac_x[179] = GEARSYM_LIT(0.0);
-    jac_x[180] = GEARSYM_LIT(0.0);
-    jac_x[181] = GEARSYM_LIT(0.0);
-    jac_x[182] = GEARSYM_LIT(0.0);
-    jac_x[183] = GEARSYM_LIT(0.0);
-    jac_x[184] = GEARSYM_LIT(0.0);
-    jac_x[185] = GEARSYM_LIT(0.0);
-    jac_x[186] = GEARSYM_LIT(0.0);
-    jac_x[187] = GEARSYM_LIT(0.0);
-    jac_x[188] = GEARSYM_LIT(0.0);
-    jac_x[189] = GEARSYM_LIT(0.0);
-    jac_x[190] = GEARSYM_LIT(0.0);
-    jac_x[191] = GEARSYM_LIT(0.0);
-    jac_x[192] = GEARSYM_LIT(0.0);
-    jac_x[193] = GEARSYM_LIT(0.0);
-    jac_x[194] = GEARSYM_LIT(0.0);
-    jac_x[195] = GEARSYM_LIT(0.0);
-    jac_x[196] = GEARSYM_LIT(0.0);
-    jac_x[197] = GEARSYM_LIT(0.0);
-    jac_x[198] = GEARSYM_LIT(0.0);
-    jac_x[199] = GEARSYM_LIT(0.0);
-    jac_x[200] = GEARSYM_LIT(0.0);
-    jac_x[201] = GEARSYM_LIT(0.0);
-    jac_x[202] = GEARSYM_LIT(0.0);
-    jac_x[203] = GEARSYM_LIT(0.0);
-    jac_x[204] = GEARSYM_LIT(0.0);
-    jac_x[205] = GEARSYM_LIT(0.0);
-    jac_x[206] = GEARSYM_LIT(0.0);
-    jac_x[207] = GEARSYM_LIT(0.0);
-    jac_x[208] = GEARSYM_LIT(0.0);
-    jac_x[209] = GEARSYM_LIT(0.0);
-    jac_x[210] = GEARSYM_LIT(0.0);
-    jac_x[211] = GEARSYM_LIT(0.0);
-    jac_x[212] = GEARSYM_LIT(0.0);
-    jac_x[213] = GEARSYM_LIT(0.0);
-    jac_x[214] = GEARSYM_LIT(0.0);
-    jac_x[215] = GEARSYM_LIT(0.0);
-    jac_x[216] = GEARSYM_LIT(0.0);
-    jac_x[217] = GEARSYM_LIT(0.0);
-    jac_x[218] = GEARSYM_LIT(0.0);
-    jac_x[219] = GEARSYM_LIT(0.0);
-    jac_x[220] = GEARSYM_LIT(0.0);
-    jac_x[221] = GEARSYM_LIT(0.0);
-    jac_x[222] = GEARSYM_LIT(0.0);
-    jac_x[223] = GEARSYM_LIT(0.0);
-    jac_x[224] = t0;
-    jac_x[225] = t1;
-    jac_x[226] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
-    jac_x[227] = t5;
-    jac_x[228] = GEARSYM_LIT(0.0);
-    jac_x[229] = GEARSYM_LIT(0.0);
-    jac_x[230] = GEARSYM_LIT(0.0);
-    jac_x[231] = GEARSYM_LIT(0.0);
-    jac_x[232] = GEARSYM_LIT(0.0);
-    jac_x[233] = GEARSYM_LIT(0.0);
-    jac_x[234] = GEARSYM_LIT(0.0);
-    jac_x[235] = GEARSYM_LIT(0.0);
-    jac_x[236] = GEARSYM_LIT(0.0);
-    jac_x[237] = GEARSYM_LIT(0.0);
-    jac_x[238] = GEARSYM_LIT(0.0);
-    jac_x[239] = GEARSYM_LIT(0.0);
-    jac_x[240] = GEARSYM_LIT(0.0);
-    jac_x[241] = GEARSYM_LIT(0.0);
-    jac_x[242] = GEARSYM_LIT(0.0);
-    jac_x[243] = GEARSYM_LIT(0.0);
-    jac_x[244] = GEARSYM_LIT(0.0);
-    jac_x[245] = GEARSYM_LIT(0.0);
-    jac_x[246] = GEARSYM_LIT(0.0);
-    jac_x[247] = GEARSYM_LIT(0.0);
-    jac_x[248] = t7;
-    jac_x[249] = t8;
-    jac_x[250] = GEARSYM_LIT(0.0);
-    jac_x[251] = t10;
-    jac_x[252] = GEARSYM_LIT(0.0);
-    jac_x[253] = GEARSYM_LIT(0.0);
-    jac_x[254] = GEARSYM_LIT(0.0);
-    jac_x[255] = GEARSYM_LIT(0.0);
-    jac_x[256] = GEARSYM_LIT(0.0);
-    jac_x[257] = GEARSYM_LIT(0.0);
-    jac_x[258] = GEARSYM_LIT(0.0);
-    jac_x[259] = GEARSYM_LIT(0.0);
-    jac_x[260] = GEARSYM_LIT(0.0);
-    jac_x[261] = GEARSYM_LIT(0.0);
-    jac_x[262] = GEARSYM_LIT(0.0);
-    jac_x[263] = GEARSYM_LIT(0.0);
-    jac_x[264] = GEARSYM_LIT(0.0);
-    jac_x[265] = GEARSYM_LIT(0.0);
-    jac_x[266] = GEARSYM_LIT(0.0);
-    jac_x[267] = GEARSYM_LIT(0.0);
-    jac_x[268] = GEARSYM_LIT(0.0);
-    jac_x[269] = GEARSYM_LIT(0.0);
-    jac_x[270] = GEARSYM_LIT(0.0);
-    jac_x[271] = GEARSYM_LIT(0.0);
-    jac_x[272] = t11;
-    jac_x[273] = t12;
-    jac_x[274] = -GEARSYM_LIT(1.0);
-    jac_x[275] = t16;
-    jac_x[276] = GEARSYM_LIT(0.0);
-    jac_x[277] = GEARSYM_LIT(0.0);
-    jac_x[278] = GEARSYM_LIT(0.0);
-    jac_x[279] = GEARSYM_LIT(0.0);
-    jac_x[280] = GEARSYM_LIT(0.0);
-    jac_x[281] = GEARSYM_LIT(0.0);
-    jac_x[282] = GEARSYM_LIT(0.0);
-    jac_x[283] = GEARSYM_LIT(0.0);
-    jac_x[284] = GEARSYM_LIT(0.0);
-    jac_x[285] = GEARSYM_LIT(0.0);
-    jac_x[286] = GEARSYM_LIT(0.0);
-    jac_x[287] = GEARSYM_LIT(0.0);
-    jac_x[288] = GEARSYM_LIT(0.0);
-    jac_x[289] = GEARSYM_LIT(0.0);
-    jac_x[290] = GEARSYM_LIT(0.0);
-    jac_x[291] = GEARSYM_LIT(0.0);
-    jac_x[292] = GEARSYM_LIT(0.0);
-    jac_x[293] = GEARSYM_LIT(0.0);
-    jac_x[294] = GEARSYM_LIT(0.0);
-    jac_x[295] = GEARSYM_LIT(0.0);
-    jac_x[296] = GEARSYM_LIT(0.0);
-    jac_x[297] = GEARSYM_LIT(0.0);
-    jac_x[298] = GEARSYM_LIT(0.0);
-    jac_x[299] = GEARSYM_LIT(0.0);
-    jac_x[300] = GEARSYM_LIT(0.0);
-    jac_x[301] = GEARSYM_LIT(0.0);
-    jac_x[302] = GEARSYM_LIT(0.0);
-    jac_x[303] = GEARSYM_LIT(0.0);
-    jac_x[304] = GEARSYM_LIT(0.0);
-    jac_x[305] = GEARSYM_LIT(0.0);
-    jac_x[306] = GEARSYM_LIT(0.0);
-    jac_x[307] = GEARSYM_LIT(0.0);
-    jac_x[308] = GEARSYM_LIT(0.0);
-    jac_x[309] = GEARSYM_LIT(0.0);
-    jac_x[310] = GEARSYM_LIT(0.0);
-    jac_x[311] = GEARSYM_LIT(0.0);
-    jac_x[312] = GEARSYM_LIT(0.0);
-    jac_x[313] = GEARSYM_LIT(0.0);
-    jac_x[314] = GEARSYM_LIT(0.0);
-    jac_x[315] = GEARSYM_LIT(0.0);
-    jac_x[316] = GEARSYM_LIT(0.0);
-    jac_x[317] = GEARSYM_LIT(0.0);
-    jac_x[318] = GEARSYM_LIT(0.0);
-    jac_x[319] = GEARSYM_LIT(0.0);
-    jac_x[320] = GEARSYM_LIT(0.0);
-    jac_x[321] = GEARSYM_LIT(0.0);
-    jac_x[322] = GEARSYM_LIT(0.0);
-    jac_x[323] = GEARSYM_LIT(0.0);
-    jac_x[324] = t0;
-    jac_x[325] = t1;
-    jac_x[326] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
-    jac_x[327] = t5;
-    jac_x[328] = GEARSYM_LIT(0.0);
-    jac_x[329] = GEARSYM_LIT(0.0);
-    jac_x[330] = GEARSYM_LIT(0.0);
-    jac_x[331] = GEARSYM_LIT(0.0);
-    jac_x[332] = GEARSYM_LIT(0.0);
-    jac_x[333] = GEARSYM_LIT(0.0);
-    jac_x[334] = GEARSYM_LIT(0.0);
-    jac_x[335] = GEARSYM_LIT(0.0);
-    jac_x[336] = GEARSYM_LIT(0.0);
-    jac_x[337] = GEARSYM_LIT(0.0);
-    jac_x[338] = GEARSYM_LIT(0.0);
-    jac_x[339] = GEARSYM_LIT(0.0);
-    jac_x[340] = GEARSYM_LIT(0.0);
-    jac_x[341] = GEARSYM_LIT(0.0);
-    jac_x[342] = GEARSYM_LIT(0.0);
-    jac_x[343] = GEARSYM_LIT(0.0);
-    jac_x[344] = GEARSYM_LIT(0.0);
-    jac_x[345] = GEARSYM_LIT(0.0);
-    jac_x[346] = GEARSYM_LIT(0.0);
-    jac_x[347] = GEARSYM_LIT(0.0);
-    jac_x[348] = t7;
-    jac_x[349] = t8;
-    jac_x[350] = GEARSYM_LIT(0.0);
-    jac_x[351] = t10;
-    jac_x[352] = GEARSYM_LIT(0.0);
-    jac_x[353] = GEARSYM_LIT(0.0);
-    jac_x[354] = GEARSYM_LIT(0.0);
-    jac_x[355] = GEARSYM_LIT(0.0);
-    jac_x[356] = GEARSYM_LIT(0.0);
-    jac_x[357] = GEARSYM_LIT(0.0);
-    jac_x[358] = GEARSYM_LIT(0.0);
-    jac_x[359] = GEARSYM_LIT(0.0);
-    jac_x[360] = GEARSYM_LIT(0.0);
-    jac_x[361] = GEARSYM_LIT(0.0);
-    jac_x[362] = GEARSYM_LIT(0.0);
-    jac_x[363] = GEARSYM_LIT(0.0);
-    jac_x[364] = GEARSYM_LIT(0.0);
-    jac_x[365] = GEARSYM_LIT(0.0);
-    jac_x[366] = GEARSYM_LIT(0.0);
-    jac_x[367] = GEARSYM_LIT(0.0);
-    jac_x[368] = GEARSYM_LIT(0.0);
-    jac_x[369] = GEARSYM_LIT(0.0);
-    jac_x[370] = GEARSYM_LIT(0.0);
-    jac_x[371] = GEARSYM_LIT(0.0);
-    jac_x[372] = t11;
-    jac_x[373] = t12;
-    jac_x[374] = -GEARSYM_LIT(1.0);
-    jac_x[375] = t16;
-    jac_x[376] = GEARSYM_LIT(0.0);
-    jac_x[377] = GEARSYM_LIT(0.0);
-    jac_x[378] = GEARSYM_LIT(0.0);
-    jac_x[379] = GEARSYM_LIT(0.0);
-    jac_x[380] = GEARSYM_LIT(0.0);
-    jac_x[381] = GEARSYM_LIT(0.0);
-    jac_x[382] = GEARSYM_LIT(0.0);
-    jac_x[383] = GEARSYM_LIT(0.0);
-    jac_x[384] = GEARSYM_LIT(0.0);
-    jac_x[385] = GEARSYM_LIT(0.0);
-    jac_x[386] = GEARSYM_LIT(0.0);
-    jac_x[387] = GEARSYM_LIT(0.0);
-    jac_x[388] = GEARSYM_LIT(0.0);
-    jac_x[389] = GEARSYM_LIT(0.0);
-    jac_x[390] = GEARSYM_LIT(0.0);
-    jac_x[391] = GEARSYM_LIT(0.0);
-    jac_x[392] = GEARSYM_LIT(0.0);
-    jac_x[393] = GEARSYM_LIT(0.0);
-    jac_x[394] = GEARSYM_LIT(0.0);
-    jac_x[395] = GEARSYM_LIT(0.0);
-    jac_x[396] = GEARSYM_LIT(0.0);
-    jac_x[397] = GEARSYM_LIT(0.0);
-    jac_x[398] = GEARSYM_LIT(0.0);
-    jac_x[399] = GEARSYM_LIT(0.0);
-    jac_x[400] = GEARSYM_LIT(0.0);
-    jac_x[401] = GEARSYM_LIT(0.0);
-    jac_x[402] = GEARSYM_LIT(0.0);
-    jac_x[403] = GEARSYM_LIT(0.0);
-    jac_x[404] = GEARSYM_LIT(0.0);
-    jac_x[405] = GEARSYM_LIT(0.0);
-    jac_x[406] = GEARSYM_LIT(0.0);
-    jac_x[407] = GEARSYM_LIT(0.0);
-    jac_x[408] = GEARSYM_LIT(0.0);
-    jac_x[409] = GEARSYM_LIT(0.0);
-    jac_x[410] = GEARSYM_LIT(0.0);
-    jac_x[411] = GEARSYM_LIT(0.0);
-    jac_x[412] = GEARSYM_LIT(0.0);
-    jac_x[413] = GEARSYM_LIT(0.0);
-    jac_x[414] = GEARSYM_LIT(0.0);
-    jac_x[415] = GEARSYM_LIT(0.0);
-    jac_x[416] = GEARSYM_LIT(0.0);
-    jac_x[417] = GEARSYM_LIT(0.0);
-    jac_x[418] = GEARSYM_LIT(0.0);
-    jac_x[419] = GEARSYM_LIT(0.0);
-    jac_x[420] = GEARSYM_LIT(0.0);
-    jac_x[421] = GEARSYM_LIT(0.0);
-    jac_x[422] = GEARSYM_LIT(0.0);
-    jac_x[423] = GEARSYM_LIT(0.0);
-    jac_x[424] = t0;
-    jac_x[425] = t1;
-    jac_x[426] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
-    jac_x[427] = t5;
-    jac_x[428] = GEARSYM_LIT(0.0);
-    jac_x[429] = GEARSYM_LIT(0.0);
-    jac_x[430] = GEARSYM_LIT(0.0);
-    jac_x[431] = GEARSYM_LIT(0.0);
-    jac_x[432] = GEARSYM_LIT(0.0);
-    jac_x[433] = GEARSYM_LIT(0.0);
-    jac_x[434] = GEARSYM_LIT(0.0);
-    jac_x[435] = GEARSYM_LIT(0.0);
-    jac_x[436] = GEARSYM_LIT(0.0);
-    jac_x[437] = GEARSYM_LIT(0.0);
-    jac_x[438] = GEARSYM_LIT(0.0);
-    jac_x[439] = GEARSYM_LIT(0.0);
-    jac_x[440] = GEARSYM_LIT(0.0);
-    jac_x[441] = GEARSYM_LIT(0.0);
-    jac_x[442] = GEARSYM_LIT(0.0);
-    jac_x[443] = GEARSYM_LIT(0.0);
-    jac_x[444] = GEARSYM_LIT(0.0);
-    jac_x[445] = GEARSYM_LIT(0.0);
-    jac_x[446] = GEARSYM_LIT(0.0);
-    jac_x[447] = GEARSYM_LIT(0.0);
-    jac_x[448] = t7;
-    jac_x[449] = t8;
-    jac_x[450] = GEARSYM_LIT(0.0);
-    jac_x[451] = t10;
-    jac_x[452] = GEARSYM_LIT(0.0);
-    jac_x[453] = GEARSYM_LIT(0.0);
-    jac_x[454] = GEARSYM_LIT(0.0);
-    jac_x[455] = GEARSYM_LIT(0.0);
-    jac_x[456] = GEARSYM_LIT(0.0);
-    jac_x[457] = GEARSYM_LIT(0.0);
-    jac_x[458] = GEARSYM_LIT(0.0);
-    jac_x[459] = GEARSYM_LIT(0.0);
-    jac_x[460] = GEARSYM_LIT(0.0);
-    jac_x[461] = GEARSYM_LIT(0.0);
-    jac_x[462] = GEARSYM_LIT(0.0);
-    jac_x[463] = GEARSYM_LIT(0.0);
-    jac_x[464] = GEARSYM_LIT(0.0);
-    jac_x[465] = GEARSYM_LIT(0.0);
-    jac_x[466] = GEARSYM_LIT(0.0);
-    jac_x[467] = GEARSYM_LIT(0.0);
-    jac_x[468] = GEARSYM_LIT(0.0);
-    jac_x[469] = GEARSYM_LIT(0.0);
-    jac_x[470] = GEARSYM_LIT(0.0);
-    jac_x[471] = GEARSYM_LIT(0.0);
-    jac_x[472] = t11;
-    jac_x[473] = t12;
-    jac_x[474] = -GEARSYM_LIT(1.0);
-    jac_x[475] = t16;
-    jac_x[476] = GEARSYM_LIT(0.0);
-    jac_x[477] = GEARSYM_LIT(0.0);
-    jac_x[478] = GEARSYM_LIT(0.0);
-    jac_x[479] = GEARSYM_LIT(0.0);
-    jac_x[480] = GEARSYM_LIT(0.0);
-    jac_x[481] = GEARSYM_LIT(0.0);
-    jac_x[482] = GEARSYM_LIT(0.0);
-    jac_x[483] = GEARSYM_LIT(0.0);
-    jac_x[484] = GEARSYM_LIT(0.0);
-    jac_x[485] = GEARSYM_LIT(0.0);
-    jac_x[486] = GEARSYM_LIT(0.0);
-    jac_x[487] = GEARSYM_LIT(0.0);
-    jac_x[488] = GEARSYM_LIT(0.0);
-    jac_x[489] = GEARSYM_LIT(0.0);
-    jac_x[490] = GEARSYM_LIT(0.0);
-    jac_x[491] = GEARSYM_LIT(0.0);
-    jac_x[492] = GEARSYM_LIT(0.0);
-    jac_x[493] = GEARSYM_LIT(0.0);
-    jac_x[494] = GEARSYM_LIT(0.0);
-    jac_x[495] = GEARSYM_LIT(0.0);
-    jac_x[496] = GEARSYM_LIT(0.0);
-    jac_x[497] = GEARSYM_LIT(0.0);
-    jac_x[498] = GEARSYM_LIT(0.0);
-    jac_x[499] = GEARSYM_LIT(0.0);
-    jac_x[500] = GEARSYM_LIT(0.0);
-    jac_x[501] = GEARSYM_LIT(0.0);
-    jac_x[502] = GEARSYM_LIT(0.0);
-    jac_x[503] = GEARSYM_LIT(0.0);
-    jac_x[504] = GEARSYM_LIT(0.0);
-    jac_x[505] = GEARSYM_LIT(0.0);
-    jac_x[506] = GEARSYM_LIT(0.0);
-    jac_x[507] = GEARSYM_LIT(0.0);
-    jac_x[508] = GEARSYM_LIT(0.0);
-    jac_x[509] = GEARSYM_LIT(0.0);
-    jac_x[510] = GEARSYM_LIT(0.0);
-    jac_x[511] = GEARSYM_LIT(0.0);
-    jac_x[512] = GEARSYM_LIT(0.0);
-    jac_x[513] = GEARSYM_LIT(0.0);
-    jac_x[514] = GEARSYM_LIT(0.0);
-    jac_x[515] = GEARSYM_LIT(0.0);
-    jac_x[516] = GEARSYM_LIT(0.0);
-    jac_x[517] = GEARSYM_LIT(0.0);
-    jac_x[518] = GEARSYM_LIT(0.0);
-    jac_x[519] = GEARSYM_LIT(0.0);
-    jac_x[520] = GEARSYM_LIT(0.0);
-    jac_x[521] = GEARSYM_LIT(0.0);
-    jac_x[522] = GEARSYM_LIT(0.0);
-    jac_x[523] = GEARSYM_LIT(0.0);
-    jac_x[524] = t0;
-    jac_x[525] = t1;
-    jac_x[526] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
-    jac_x[527] = t5;
-    jac_x[528] = GEARSYM_LIT(0.0);
-    jac_x[529] = GEARSYM_LIT(0.0);
-    jac_x[530] = GEARSYM_LIT(0.0);
-    jac_x[531] = GEARSYM_LIT(0.0);
-    jac_x[532] = GEARSYM_LIT(0.0);
-    jac_x[533] = GEARSYM_LIT(0.0);
-    jac_x[534] = GEARSYM_LIT(0.0);
-    jac_x[535] = GEARSYM_LIT(0.0);
-    jac_x[536] = GEARSYM_LIT(0.0);
-    jac_x[537] = GEARSYM_LIT(0.0);
-    jac_x[538] = GEARSYM_LIT(0.0);
-    jac_x[539] = GEARSYM_LIT(0.0);
-    jac_x[540] = GEARSYM_LIT(0.0);
-    jac_x[541] = GEARSYM_LIT(0.0);
-    jac_x[542] = GEARSYM_LIT(0.0);
-    jac_x[543] = GEARSYM_LIT(0.0);
-    jac_x[544] = GEARSYM_LIT(0.0);
-    jac_x[545] = GEARSYM_LIT(0.0);
-    jac_x[546] = GEARSYM_LIT(0.0);
-    jac_x[547] = GEARSYM_LIT(0.0);
-    jac_x[548] = t7;
-    jac_x[549] = t8;
-    jac_x[550] = GEARSYM_LIT(0.0);
-    jac_x[551] = t10;
-    jac_x[552] = GEARSYM_LIT(0.0);
-    jac_x[553] = GEARSYM_LIT(0.0);
-    jac_x[554] = GEARSYM_LIT(0.0);
-    jac_x[555] = GEARSYM_LIT(0.0);
-    jac_x[556] = GEARSYM_LIT(0.0);
-    jac_x[557] = GEARSYM_LIT(0.0);
-    jac_x[558] = GEARSYM_LIT(0.0);
-    jac_x[559] = GEARSYM_LIT(0.0);
-    jac_x[560] = GEARSYM_LIT(0.0);
-    jac_x[561] = GEARSYM_LIT(0.0);
-    jac_x[562] = GEARSYM_LIT(0.0);
-    jac_x[563] = GEARSYM_LIT(0.0);
-    jac_x[564] = GEARSYM_LIT(0.0);
-    jac_x[565] = GEARSYM_LIT(0.0);
-    jac_x[566] = GEARSYM_LIT(0.0);
-    jac_x[567] = GEARSYM_LIT(0.0);
-    jac_x[568] = GEARSYM_LIT(0.0);
-    jac_x[569] = GEARSYM_LIT(0.0);
-    jac_x[570] = GEARSYM_LIT(0.0);
-    jac_x[571] = GEARSYM_LIT(0.0);
-    jac_x[572] = t11;
-    jac_x[573] = t12;
-    jac_x[574] = -GEARSYM_LIT(1.0);
-    jac_x[575] = t16;
+    jac_x_nz[0] = t0;
+    jac_x_nz[1] = t1;
+    jac_x_nz[2] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
+    jac_x_nz[3] = t5;
+    jac_x_nz[4] = -GEARSYM_LIT(0.0875202025111381125962)*t6*p->d_ss;
+    jac_x_nz[5] = -GEARSYM_LIT(0.0424184815125352576915);
+    jac_x_nz[6] = -GEARSYM_LIT(0.218550094764656887746);
+    jac_x_nz[7] = t4;
+    jac_x_nz[8] = t7;
+    jac_x_nz[9] = t8;
+    jac_x_nz[10] = t10;
+    jac_x_nz[11] = -GEARSYM_LIT(0.216087380000000000000)*t6*p->k_ss;
+    jac_x_nz[12] = -GEARSYM_LIT(0.104731230854449551240);
+    jac_x_nz[13] = -GEARSYM_LIT(0.539600183973937855846);
+    jac_x_nz[14] = t9;
+    jac_x_nz[15] = t11;
+    jac_x_nz[16] = t12;
+    jac_x_nz[17] = -GEARSYM_LIT(1.0);
+    jac_x_nz[18] = t16;
+    jac_x_nz[19] = -t13*t3 - t17*x[7] - GEARSYM_LIT(0.108043690000000000000)*t15*t6;
+    jac_x_nz[20] = -t17*x[11];
+    jac_x_nz[21] = GEARSYM_LIT(0.104731230854449551240);
+    jac_x_nz[22] = GEARSYM_LIT(0.539600183973937855846);
+    jac_x_nz[23] = -t9 - t17*x[15];
+    jac_x_nz[24] = -t17*x[19];
+    jac_x_nz[25] = -t17*x[23] + GEARSYM_LIT(1.05990859890000000000)*t3*p->f_roll*p->m_veh*GEARSYM_SIN(p->zeta);
+    jac_x_nz[26] = t0;
+    jac_x_nz[27] = t1;
+    jac_x_nz[28] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
+    jac_x_nz[29] = t5;
+    jac_x_nz[30] = t7;
+    jac_x_nz[31] = t8;
+    jac_x_nz[32] = t10;
+    jac_x_nz[33] = t11;
+    jac_x_nz[34] = t12;
+    jac_x_nz[35] = -GEARSYM_LIT(1.0);
+    jac_x_nz[36] = t16;
+    jac_x_nz[37] = t0;
+    jac_x_nz[38] = t1;
+    jac_x_nz[39] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
+    jac_x_nz[40] = t5;
+    jac_x_nz[41] = t7;
+    jac_x_nz[42] = t8;
+    jac_x_nz[43] = t10;
+    jac_x_nz[44] = t11;
+    jac_x_nz[45] = t12;
+    jac_x_nz[46] = -GEARSYM_LIT(1.0);
+    jac_x_nz[47] = t16;
+    jac_x_nz[48] = t0;
+    jac_x_nz[49] = t1;
+    jac_x_nz[50] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
+    jac_x_nz[51] = t5;
+    jac_x_nz[52] = t7;
+    jac_x_nz[53] = t8;
+    jac_x_nz[54] = t10;
+    jac_x_nz[55] = t11;
+    jac_x_nz[56] = t12;
+    jac_x_nz[57] = -GEARSYM_LIT(1.0);
+    jac_x_nz[58] = t16;
+    jac_x_nz[59] = t0;
+    jac_x_nz[60] = t1;
+    jac_x_nz[61] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
+    jac_x_nz[62] = t5;
+    jac_x_nz[63] = t7;
+    jac_x_nz[64] = t8;
+    jac_x_nz[65] = t10;
+    jac_x_nz[66] = t11;
+    jac_x_nz[67] = t12;
+    jac_x_nz[68] = -GEARSYM_LIT(1.0);
+    jac_x_nz[69] = t16;
+    jac_x_nz[70] = t0;
+    jac_x_nz[71] = t1;
+    jac_x_nz[72] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
+    jac_x_nz[73] = t5;
+    jac_x_nz[74] = t7;
+    jac_x_nz[75] = t8;
+    jac_x_nz[76] = t10;
+    jac_x_nz[77] = t11;
+    jac_x_nz[78] = t12;
+    jac_x_nz[79] = -GEARSYM_LIT(1.0);
+    jac_x_nz[80] = t16;
+}
+
+/**
+ * Jacobian of the state derivative with respect to x (states), d xdot / d x (24 x 24), dense
+ * column-major: jac_x[i + j*24] = d xdot_i / d x_j.
+ * Computes jac_x_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_x_sparse (7 add, 38 mul, 2 div, 2 calls (cos 1, sin
+ * 1)); the spreading moves values only.
+ */
+void gearsym_shift_3_4_mu_sens_jac_x(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_3_4_mu_sens_params *p,
+    gearsym_real *jac_x)
+{
+    int i;
+    int j;
+    int k = GEARSYM_SHIFT_3_4_MU_SENS_JAC_X_NNZ - 1;
+
+    gearsym_shift_3_4_mu_sens_jac_x_sparse(x, u, p, jac_x);
+    /*
+     * Spread in place, last value first. Value k belongs at i + j*rows >= k (the values are in
+     * column-major order), so each value is read before its slot is written, and a slot set to
+     * 0 lies above every value still unread.
+     */
+    for (j = GEARSYM_SHIFT_3_4_MU_SENS_NX - 1; j >= 0; --j) {
+        for (i = GEARSYM_SHIFT_3_4_MU_SENS_NX - 1; i >= 0; --i) {
+            if (k >= gearsym_shift_3_4_mu_sens_jac_x_colptr[j] && gearsym_shift_3_4_mu_sens_jac_x_rowind[k] == i) {
+                jac_x[i + j * GEARSYM_SHIFT_3_4_MU_SENS_NX] = jac_x[k];
+                --k;
+            } else {
+                jac_x[i + j * GEARSYM_SHIFT_3_4_MU_SENS_NX] = GEARSYM_LIT(0.0);
+            }
+        }
+    }
+}
+
+/**
+ * Structural nonzeros of d xdot / d u (24 x 3, 8 of 72 entries) in compressed-column order:
+ * jac_u_nz[k] is entry (i, j) with i = gearsym_shift_3_4_mu_sens_jac_u_rowind[k] and
+ * gearsym_shift_3_4_mu_sens_jac_u_colptr[j] <= k < gearsym_shift_3_4_mu_sens_jac_u_colptr[j+1]
+ * (GEARSYM_SHIFT_3_4_MU_SENS_JAC_U_NNZ values).
+ * Operations: 0 add, 4 mul, 0 div, 0 calls; 0 temporaries.
+ */
+void gearsym_shift_3_4_mu_sens_jac_u_sparse(
+    const gearsym_real *restrict x,
+    const gearsym_real *restrict u,
+    const gearsym_shift_3_4_mu_sens_params *restrict p,
+    gearsym_real *restrict jac_u_nz)
+{
+    (void)x;
+    (void)u;
+    jac_u_nz[0] = GEARSYM_LIT(26.9558975103255347413);
+    jac_u_nz[1] = GEARSYM_LIT(0.129290704489817971006);
+    jac_u_nz[2] = -GEARSYM_LIT(18.5097474646188087562)*p->mu_81;
+    jac_u_nz[3] = GEARSYM_LIT(0.951713998030246129056)*p->mu_81;
+    jac_u_nz[4] = -GEARSYM_LIT(18.5097474646188087562);
+    jac_u_nz[5] = GEARSYM_LIT(0.951713998030246129056);
+    jac_u_nz[6] = -GEARSYM_LIT(29.8542491137247809292)*p->mu_27;
+    jac_u_nz[7] = GEARSYM_LIT(1.07188736788946289785)*p->mu_27;
 }
 
 /**
  * Jacobian of the state derivative with respect to u (inputs), d xdot / d u (24 x 3), dense
  * column-major: jac_u[i + j*24] = d xdot_i / d u_j.
- * Operations: 0 add, 4 mul, 0 div, 0 calls; 0 temporaries (sympy.count_ops of the CSE'd form:
- * 15).
+ * Computes jac_u_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_u_sparse (0 add, 4 mul, 0 div, 0 calls); the spreading
+ * moves values only.
  */
 void gearsym_shift_3_4_mu_sens_jac_u(
-    const gearsym_real *restrict x,
-    const gearsym_real *restrict u,
-    const gearsym_shift_3_4_mu_sens_params *restrict p,
-    gearsym_real *restrict jac_u)
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_3_4_mu_sens_params *p,
+    gearsym_real *jac_u)
 {
-    (void)x;
-    (void)u;
-    jac_u[0] = GEARSYM_LIT(26.9558975103255347413);
-    jac_u[1] = GEARSYM_LIT(0.129290704489817971006);
-    jac_u[2] = GEARSYM_LIT(0.0);
-    jac_u[3] = GEARSYM_LIT(0.0);
-    jac_u[4] = GEARSYM_LIT(0.0);
-    jac_u[5] = GEARSYM_LIT(0.0);
-    jac_u[6] = GEARSYM_LIT(0.0);
-    jac_u[7] = GEARSYM_LIT(0.0);
-    jac_u[8] = GEARSYM_LIT(0.0);
-    jac_u[9] = GEARSYM_LIT(0.0);
-    jac_u[10] = GEARSYM_LIT(0.0);
-    jac_u[11] = GEARSYM_LIT(0.0);
-    jac_u[12] = GEARSYM_LIT(0.0);
-    jac_u[13] = GEARSYM_LIT(0.0);
-    jac_u[14] = GEARSYM_LIT(0.0);
-    jac_u[15] = GEARSYM_LIT(0.0);
-    jac_u[16] = GEARSYM_LIT(0.0);
-    jac_u[17] = GEARSYM_LIT(0.0);
-    jac_u[18] = GEARSYM_LIT(0.0);
-    jac_u[19] = GEARSYM_LIT(0.0);
-    jac_u[20] = GEARSYM_LIT(0.0);
-    jac_u[21] = GEARSYM_LIT(0.0);
-    jac_u[22] = GEARSYM_LIT(0.0);
-    jac_u[23] = GEARSYM_LIT(0.0);
-    jac_u[24] = -GEARSYM_LIT(18.5097474646188087562)*p->mu_81;
-    jac_u[25] = GEARSYM_LIT(0.951713998030246129056)*p->mu_81;
-    jac_u[26] = GEARSYM_LIT(0.0);
-    jac_u[27] = GEARSYM_LIT(0.0);
-    jac_u[28] = GEARSYM_LIT(0.0);
-    jac_u[29] = GEARSYM_LIT(0.0);
-    jac_u[30] = GEARSYM_LIT(0.0);
-    jac_u[31] = GEARSYM_LIT(0.0);
-    jac_u[32] = GEARSYM_LIT(0.0);
-    jac_u[33] = GEARSYM_LIT(0.0);
-    jac_u[34] = GEARSYM_LIT(0.0);
-    jac_u[35] = GEARSYM_LIT(0.0);
-    jac_u[36] = GEARSYM_LIT(0.0);
-    jac_u[37] = GEARSYM_LIT(0.0);
-    jac_u[38] = GEARSYM_LIT(0.0);
-    jac_u[39] = GEARSYM_LIT(0.0);
-    jac_u[40] = -GEARSYM_LIT(18.5097474646188087562);
-    jac_u[41] = GEARSYM_LIT(0.951713998030246129056);
-    jac_u[42] = GEARSYM_LIT(0.0);
-    jac_u[43] = GEARSYM_LIT(0.0);
-    jac_u[44] = GEARSYM_LIT(0.0);
-    jac_u[45] = GEARSYM_LIT(0.0);
-    jac_u[46] = GEARSYM_LIT(0.0);
-    jac_u[47] = GEARSYM_LIT(0.0);
-    jac_u[48] = -GEARSYM_LIT(29.8542491137247809292)*p->mu_27;
-    jac_u[49] = GEARSYM_LIT(1.07188736788946289785)*p->mu_27;
-    jac_u[50] = GEARSYM_LIT(0.0);
-    jac_u[51] = GEARSYM_LIT(0.0);
-    jac_u[52] = GEARSYM_LIT(0.0);
-    jac_u[53] = GEARSYM_LIT(0.0);
-    jac_u[54] = GEARSYM_LIT(0.0);
-    jac_u[55] = GEARSYM_LIT(0.0);
-    jac_u[56] = GEARSYM_LIT(0.0);
-    jac_u[57] = GEARSYM_LIT(0.0);
-    jac_u[58] = GEARSYM_LIT(0.0);
-    jac_u[59] = GEARSYM_LIT(0.0);
-    jac_u[60] = GEARSYM_LIT(0.0);
-    jac_u[61] = GEARSYM_LIT(0.0);
-    jac_u[62] = GEARSYM_LIT(0.0);
-    jac_u[63] = GEARSYM_LIT(0.0);
-    jac_u[64] = GEARSYM_LIT(0.0);
-    jac_u[65] = GEARSYM_LIT(0.0);
-    jac_u[66] = GEARSYM_LIT(0.0);
-    jac_u[67] = GEARSYM_LIT(0.0);
-    jac_u[68] = GEARSYM_LIT(0.0);
-    jac_u[69] = GEARSYM_LIT(0.0);
-    jac_u[70] = GEARSYM_LIT(0.0);
-    jac_u[71] = GEARSYM_LIT(0.0);
+    int i;
+    int j;
+    int k = GEARSYM_SHIFT_3_4_MU_SENS_JAC_U_NNZ - 1;
+
+    gearsym_shift_3_4_mu_sens_jac_u_sparse(x, u, p, jac_u);
+    /*
+     * Spread in place, last value first. Value k belongs at i + j*rows >= k (the values are in
+     * column-major order), so each value is read before its slot is written, and a slot set to
+     * 0 lies above every value still unread.
+     */
+    for (j = GEARSYM_SHIFT_3_4_MU_SENS_NU - 1; j >= 0; --j) {
+        for (i = GEARSYM_SHIFT_3_4_MU_SENS_NX - 1; i >= 0; --i) {
+            if (k >= gearsym_shift_3_4_mu_sens_jac_u_colptr[j] && gearsym_shift_3_4_mu_sens_jac_u_rowind[k] == i) {
+                jac_u[i + j * GEARSYM_SHIFT_3_4_MU_SENS_NX] = jac_u[k];
+                --k;
+            } else {
+                jac_u[i + j * GEARSYM_SHIFT_3_4_MU_SENS_NX] = GEARSYM_LIT(0.0);
+            }
+        }
+    }
 }
 
 /**
- * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
- * xdot / d p (24 x 11), dense column-major: jac_p[i + j*24] = d xdot_i / d p_j.
- * Operations: 75 add, 218 mul, 3 div, 2 calls (cos 1, sin 1); 53 temporaries (sympy.count_ops
- * of the CSE'd form: 406).
+ * Structural nonzeros of d xdot / d p (24 x 11, 82 of 264 entries) in compressed-column order:
+ * jac_p_nz[k] is entry (i, j) with i = gearsym_shift_3_4_mu_sens_jac_p_rowind[k] and
+ * gearsym_shift_3_4_mu_sens_jac_p_colptr[j] <= k < gearsym_shift_3_4_mu_sens_jac_p_colptr[j+1]
+ * (GEARSYM_SHIFT_3_4_MU_SENS_JAC_P_NNZ values).
+ * Operations: 75 add, 218 mul, 3 div, 2 calls (cos 1, sin 1); 53 temporaries.
  */
-void gearsym_shift_3_4_mu_sens_jac_p(
+void gearsym_shift_3_4_mu_sens_jac_p_sparse(
     const gearsym_real *restrict x,
     const gearsym_real *restrict u,
     const gearsym_shift_3_4_mu_sens_params *restrict p,
-    gearsym_real *restrict jac_p)
+    gearsym_real *restrict jac_p_nz)
 {
     const gearsym_real t0 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
     const gearsym_real t1 = (GEARSYM_LIT(1.0)/t0);
@@ -877,7 +424,7 @@ void gearsym_shift_3_4_mu_sens_jac_p(
     const gearsym_real t13 = t12*p->rho_air;
     const gearsym_real t14 = (x[3]*x[3]);
     const gearsym_real t15 = GEARSYM_LIT(0.0177569804515000000000)*t14;
-    const gearsym_real t16 = GEARSYM_LIT(2.0)*p->d_ss*((GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1] - x[3]) + GEARSYM_LIT(2.0)*x[2]*p->k_ss - t10 - t11 - t13*t15;
+    const gearsym_real t16 = -t10 - t11 - t13*t15 + GEARSYM_LIT(2.0)*x[2]*p->k_ss + GEARSYM_LIT(2.0)*p->d_ss*(-x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1]);
     const gearsym_real t17 = t16*t9;
     const gearsym_real t18 = t9*p->d_ss;
     const gearsym_real t19 = GEARSYM_LIT(0.0875202025111381125962)*t18;
@@ -885,16 +432,16 @@ void gearsym_shift_3_4_mu_sens_jac_p(
     const gearsym_real t21 = t20*p->k_ss;
     const gearsym_real t22 = t8*t9;
     const gearsym_real t23 = t9*(-GEARSYM_LIT(2.0)*p->d_ss - t6*p->m_veh - GEARSYM_LIT(0.0355139609030000000000)*t13*x[3]);
-    const gearsym_real t24 = -t1*t6 - GEARSYM_LIT(0.108043690000000000000)*t23;
+    const gearsym_real t24 = -GEARSYM_LIT(0.108043690000000000000)*t23 - t1*t6;
     const gearsym_real t25 = (GEARSYM_LIT(1.0)/(t0*t0*t0));
     const gearsym_real t26 = t20*x[2];
-    const gearsym_real t27 = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*x[1] - GEARSYM_LIT(2.0)*x[3];
+    const gearsym_real t27 = -GEARSYM_LIT(2.0)*x[3] + (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*x[1];
     const gearsym_real t28 = t27*t9;
     const gearsym_real t29 = GEARSYM_LIT(0.108043690000000000000)*t28;
     const gearsym_real t30 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t4;
     const gearsym_real t31 = t1*t30;
     const gearsym_real t32 = GEARSYM_LIT(1.05990859890000000000)*t2*p->f_roll;
-    const gearsym_real t33 = t32*x[3]*p->m_veh - t30*p->m_veh;
+    const gearsym_real t33 = -t30*p->m_veh + t32*x[3]*p->m_veh;
     const gearsym_real t34 = t33*t9;
     const gearsym_real t35 = GEARSYM_LIT(0.108043690000000000000)*t34;
     const gearsym_real t36 = GEARSYM_LIT(2.0)*x[2];
@@ -914,270 +461,123 @@ void gearsym_shift_3_4_mu_sens_jac_p(
     const gearsym_real t50 = t45*t49;
     const gearsym_real t51 = t39*t5;
     const gearsym_real t52 = t40*t5;
-    jac_p[0] = GEARSYM_LIT(0.0);
-    jac_p[1] = GEARSYM_LIT(0.0);
-    jac_p[2] = GEARSYM_LIT(0.0);
-    jac_p[3] = t1*t8 - GEARSYM_LIT(0.108043690000000000000)*t17;
-    jac_p[4] = GEARSYM_LIT(0.0);
-    jac_p[5] = GEARSYM_LIT(0.0);
-    jac_p[6] = GEARSYM_LIT(0.0);
-    jac_p[7] = -t19*x[5] + t24*x[7] - t21*x[6] + GEARSYM_LIT(0.0233468778976322000000)*t16*t25 - GEARSYM_LIT(0.216087380000000000000)*t22;
-    jac_p[8] = GEARSYM_LIT(0.0);
-    jac_p[9] = GEARSYM_LIT(0.0);
-    jac_p[10] = GEARSYM_LIT(0.0);
-    jac_p[11] = -t19*x[9] + t24*x[11] - t21*x[10] - t26;
-    jac_p[12] = GEARSYM_LIT(0.0);
-    jac_p[13] = GEARSYM_LIT(0.0);
-    jac_p[14] = GEARSYM_LIT(0.0);
-    jac_p[15] = -t19*x[13] + t24*x[15] - t21*x[14] - t29;
-    jac_p[16] = GEARSYM_LIT(0.0);
-    jac_p[17] = GEARSYM_LIT(0.0);
-    jac_p[18] = GEARSYM_LIT(0.0);
-    jac_p[19] = -t19*x[17] + t24*x[19] - t21*x[18];
-    jac_p[20] = GEARSYM_LIT(0.0);
-    jac_p[21] = GEARSYM_LIT(0.0);
-    jac_p[22] = GEARSYM_LIT(0.0);
-    jac_p[23] = -t19*x[21] + t24*x[23] - t21*x[22] + GEARSYM_LIT(1.05990859890000000000)*t1*t2*x[3]*p->f_roll - t31 - t35;
-    jac_p[24] = -GEARSYM_LIT(0.104731230854449551240)*x[2];
-    jac_p[25] = -GEARSYM_LIT(0.539600183973937855846)*x[2];
-    jac_p[26] = GEARSYM_LIT(0.0);
-    jac_p[27] = t1*t36;
-    jac_p[28] = -GEARSYM_LIT(0.104731230854449551240)*x[6];
-    jac_p[29] = -GEARSYM_LIT(0.539600183973937855846)*x[6];
-    jac_p[30] = GEARSYM_LIT(0.0);
-    jac_p[31] = t37*x[6] - t26;
-    jac_p[32] = -GEARSYM_LIT(0.104731230854449551240)*x[10];
-    jac_p[33] = -GEARSYM_LIT(0.539600183973937855846)*x[10];
-    jac_p[34] = GEARSYM_LIT(0.0);
-    jac_p[35] = t37*x[10];
-    jac_p[36] = -GEARSYM_LIT(0.104731230854449551240)*x[14];
-    jac_p[37] = -GEARSYM_LIT(0.539600183973937855846)*x[14];
-    jac_p[38] = GEARSYM_LIT(0.0);
-    jac_p[39] = t37*x[14];
-    jac_p[40] = -GEARSYM_LIT(0.104731230854449551240)*x[18];
-    jac_p[41] = -GEARSYM_LIT(0.539600183973937855846)*x[18];
-    jac_p[42] = GEARSYM_LIT(0.0);
-    jac_p[43] = t37*x[18];
-    jac_p[44] = -GEARSYM_LIT(0.104731230854449551240)*x[22];
-    jac_p[45] = -GEARSYM_LIT(0.539600183973937855846)*x[22];
-    jac_p[46] = GEARSYM_LIT(0.0);
-    jac_p[47] = t37*x[22];
-    jac_p[48] = -GEARSYM_LIT(0.0424184815125352576915)*x[1] + GEARSYM_LIT(0.104731230854449551240)*x[3];
-    jac_p[49] = -GEARSYM_LIT(0.218550094764656887746)*x[1] + GEARSYM_LIT(0.539600183973937855846)*x[3];
-    jac_p[50] = GEARSYM_LIT(0.0);
-    jac_p[51] = t1*t27;
-    jac_p[52] = -GEARSYM_LIT(0.0424184815125352576915)*x[5] + GEARSYM_LIT(0.104731230854449551240)*x[7];
-    jac_p[53] = -GEARSYM_LIT(0.218550094764656887746)*x[5] + GEARSYM_LIT(0.539600183973937855846)*x[7];
-    jac_p[54] = GEARSYM_LIT(0.0);
-    jac_p[55] = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t1*x[5] - t37*x[7] - t29;
-    jac_p[56] = -GEARSYM_LIT(0.0424184815125352576915)*x[9] + GEARSYM_LIT(0.104731230854449551240)*x[11];
-    jac_p[57] = -GEARSYM_LIT(0.218550094764656887746)*x[9] + GEARSYM_LIT(0.539600183973937855846)*x[11];
-    jac_p[58] = GEARSYM_LIT(0.0);
-    jac_p[59] = t38*x[9] - t37*x[11];
-    jac_p[60] = -GEARSYM_LIT(0.0424184815125352576915)*x[13] + GEARSYM_LIT(0.104731230854449551240)*x[15];
-    jac_p[61] = -GEARSYM_LIT(0.218550094764656887746)*x[13] + GEARSYM_LIT(0.539600183973937855846)*x[15];
-    jac_p[62] = GEARSYM_LIT(0.0);
-    jac_p[63] = t38*x[13] - t37*x[15];
-    jac_p[64] = -GEARSYM_LIT(0.0424184815125352576915)*x[17] + GEARSYM_LIT(0.104731230854449551240)*x[19];
-    jac_p[65] = -GEARSYM_LIT(0.218550094764656887746)*x[17] + GEARSYM_LIT(0.539600183973937855846)*x[19];
-    jac_p[66] = GEARSYM_LIT(0.0);
-    jac_p[67] = t38*x[17] - t37*x[19];
-    jac_p[68] = -GEARSYM_LIT(0.0424184815125352576915)*x[21] + GEARSYM_LIT(0.104731230854449551240)*x[23];
-    jac_p[69] = -GEARSYM_LIT(0.218550094764656887746)*x[21] + GEARSYM_LIT(0.539600183973937855846)*x[23];
-    jac_p[70] = GEARSYM_LIT(0.0);
-    jac_p[71] = t38*x[21] - t37*x[23];
-    jac_p[72] = GEARSYM_LIT(0.0);
-    jac_p[73] = GEARSYM_LIT(0.0);
-    jac_p[74] = GEARSYM_LIT(0.0);
-    jac_p[75] = t1*t33;
-    jac_p[76] = GEARSYM_LIT(0.0);
-    jac_p[77] = GEARSYM_LIT(0.0);
-    jac_p[78] = GEARSYM_LIT(0.0);
-    jac_p[79] = t41*x[7] - t31 + t32*t39 - t35;
-    jac_p[80] = GEARSYM_LIT(0.0);
-    jac_p[81] = GEARSYM_LIT(0.0);
-    jac_p[82] = GEARSYM_LIT(0.0);
-    jac_p[83] = t41*x[11];
-    jac_p[84] = GEARSYM_LIT(0.0);
-    jac_p[85] = GEARSYM_LIT(0.0);
-    jac_p[86] = GEARSYM_LIT(0.0);
-    jac_p[87] = t41*x[15];
-    jac_p[88] = GEARSYM_LIT(0.0);
-    jac_p[89] = GEARSYM_LIT(0.0);
-    jac_p[90] = GEARSYM_LIT(0.0);
-    jac_p[91] = t41*x[19];
-    jac_p[92] = GEARSYM_LIT(0.0);
-    jac_p[93] = GEARSYM_LIT(0.0);
-    jac_p[94] = GEARSYM_LIT(0.0);
-    jac_p[95] = t41*x[23] + t1*t10 + t1*t11;
-    jac_p[96] = GEARSYM_LIT(0.0);
-    jac_p[97] = GEARSYM_LIT(0.0);
-    jac_p[98] = GEARSYM_LIT(0.0);
-    jac_p[99] = -t17;
-    jac_p[100] = GEARSYM_LIT(0.0);
-    jac_p[101] = GEARSYM_LIT(0.0);
-    jac_p[102] = GEARSYM_LIT(0.0);
-    jac_p[103] = -t42*x[5] - t23*x[7] - t43*x[6] + GEARSYM_LIT(0.216087380000000000000)*t16*t25 - t22;
-    jac_p[104] = GEARSYM_LIT(0.0);
-    jac_p[105] = GEARSYM_LIT(0.0);
-    jac_p[106] = GEARSYM_LIT(0.0);
-    jac_p[107] = -t42*x[9] - t23*x[11] - t43*x[10] - t36*t9;
-    jac_p[108] = GEARSYM_LIT(0.0);
-    jac_p[109] = GEARSYM_LIT(0.0);
-    jac_p[110] = GEARSYM_LIT(0.0);
-    jac_p[111] = -t42*x[13] - t23*x[15] - t43*x[14] - t28;
-    jac_p[112] = GEARSYM_LIT(0.0);
-    jac_p[113] = GEARSYM_LIT(0.0);
-    jac_p[114] = GEARSYM_LIT(0.0);
-    jac_p[115] = -t42*x[17] - t23*x[19] - t43*x[18];
-    jac_p[116] = GEARSYM_LIT(0.0);
-    jac_p[117] = GEARSYM_LIT(0.0);
-    jac_p[118] = GEARSYM_LIT(0.0);
-    jac_p[119] = -t42*x[21] - t23*x[23] - t43*x[22] - t34;
-    jac_p[120] = GEARSYM_LIT(0.0);
-    jac_p[121] = GEARSYM_LIT(0.0);
-    jac_p[122] = GEARSYM_LIT(0.0);
-    jac_p[123] = -t12*t44;
-    jac_p[124] = GEARSYM_LIT(0.0);
-    jac_p[125] = GEARSYM_LIT(0.0);
-    jac_p[126] = GEARSYM_LIT(0.0);
-    jac_p[127] = GEARSYM_LIT(0.00191852969123792603500)*t14*t9*p->A_front*p->c_W - t46*x[7];
-    jac_p[128] = GEARSYM_LIT(0.0);
-    jac_p[129] = GEARSYM_LIT(0.0);
-    jac_p[130] = GEARSYM_LIT(0.0);
-    jac_p[131] = -t46*x[11];
-    jac_p[132] = GEARSYM_LIT(0.0);
-    jac_p[133] = GEARSYM_LIT(0.0);
-    jac_p[134] = GEARSYM_LIT(0.0);
-    jac_p[135] = -t46*x[15];
-    jac_p[136] = GEARSYM_LIT(0.0);
-    jac_p[137] = GEARSYM_LIT(0.0);
-    jac_p[138] = GEARSYM_LIT(0.0);
-    jac_p[139] = -t46*x[19];
-    jac_p[140] = GEARSYM_LIT(0.0);
-    jac_p[141] = GEARSYM_LIT(0.0);
-    jac_p[142] = GEARSYM_LIT(0.0);
-    jac_p[143] = -t46*x[23];
-    jac_p[144] = GEARSYM_LIT(0.0);
-    jac_p[145] = GEARSYM_LIT(0.0);
-    jac_p[146] = GEARSYM_LIT(0.0);
-    jac_p[147] = -t44*t47;
-    jac_p[148] = GEARSYM_LIT(0.0);
-    jac_p[149] = GEARSYM_LIT(0.0);
-    jac_p[150] = GEARSYM_LIT(0.0);
-    jac_p[151] = GEARSYM_LIT(0.00191852969123792603500)*t14*t9*p->A_front*p->rho_air - t48*x[7];
-    jac_p[152] = GEARSYM_LIT(0.0);
-    jac_p[153] = GEARSYM_LIT(0.0);
-    jac_p[154] = GEARSYM_LIT(0.0);
-    jac_p[155] = -t48*x[11];
-    jac_p[156] = GEARSYM_LIT(0.0);
-    jac_p[157] = GEARSYM_LIT(0.0);
-    jac_p[158] = GEARSYM_LIT(0.0);
-    jac_p[159] = -t48*x[15];
-    jac_p[160] = GEARSYM_LIT(0.0);
-    jac_p[161] = GEARSYM_LIT(0.0);
-    jac_p[162] = GEARSYM_LIT(0.0);
-    jac_p[163] = -t48*x[19];
-    jac_p[164] = GEARSYM_LIT(0.0);
-    jac_p[165] = GEARSYM_LIT(0.0);
-    jac_p[166] = GEARSYM_LIT(0.0);
-    jac_p[167] = -t48*x[23];
-    jac_p[168] = GEARSYM_LIT(0.0);
-    jac_p[169] = GEARSYM_LIT(0.0);
-    jac_p[170] = GEARSYM_LIT(0.0);
-    jac_p[171] = -t44*t49;
-    jac_p[172] = GEARSYM_LIT(0.0);
-    jac_p[173] = GEARSYM_LIT(0.0);
-    jac_p[174] = GEARSYM_LIT(0.0);
-    jac_p[175] = -t50*x[7] + GEARSYM_LIT(0.00191852969123792603500)*t14*t9*p->c_W*p->rho_air;
-    jac_p[176] = GEARSYM_LIT(0.0);
-    jac_p[177] = GEARSYM_LIT(0.0);
-    jac_p[178] = GEARSYM_LIT(0.0);
-    jac_p[179] = -t50*x[11];
-    jac_p[180] = GEARSYM_LIT(0.0);
-    jac_p[181] = GEARSYM_LIT(0.0);
-    jac_p[182] = GEARSYM_LIT(0.0);
-    jac_p[183] = -t50*x[15];
-    jac_p[184] = GEARSYM_LIT(0.0);
-    jac_p[185] = GEARSYM_LIT(0.0);
-    jac_p[186] = GEARSYM_LIT(0.0);
-    jac_p[187] = -t50*x[19];
-    jac_p[188] = GEARSYM_LIT(0.0);
-    jac_p[189] = GEARSYM_LIT(0.0);
-    jac_p[190] = GEARSYM_LIT(0.0);
-    jac_p[191] = -t50*x[23];
-    jac_p[192] = GEARSYM_LIT(0.0);
-    jac_p[193] = GEARSYM_LIT(0.0);
-    jac_p[194] = GEARSYM_LIT(0.0);
-    jac_p[195] = -t51*p->m_veh;
-    jac_p[196] = GEARSYM_LIT(0.0);
-    jac_p[197] = GEARSYM_LIT(0.0);
-    jac_p[198] = GEARSYM_LIT(0.0);
-    jac_p[199] = -t52*x[7] + GEARSYM_LIT(0.114516436087885941000)*t4*t9*x[3]*p->m_veh - t51;
-    jac_p[200] = GEARSYM_LIT(0.0);
-    jac_p[201] = GEARSYM_LIT(0.0);
-    jac_p[202] = GEARSYM_LIT(0.0);
-    jac_p[203] = -t52*x[11];
-    jac_p[204] = GEARSYM_LIT(0.0);
-    jac_p[205] = GEARSYM_LIT(0.0);
-    jac_p[206] = GEARSYM_LIT(0.0);
-    jac_p[207] = -t52*x[15];
-    jac_p[208] = GEARSYM_LIT(0.0);
-    jac_p[209] = GEARSYM_LIT(0.0);
-    jac_p[210] = GEARSYM_LIT(0.0);
-    jac_p[211] = -t52*x[19];
-    jac_p[212] = GEARSYM_LIT(0.0);
-    jac_p[213] = GEARSYM_LIT(0.0);
-    jac_p[214] = GEARSYM_LIT(0.0);
-    jac_p[215] = -t52*x[23] + GEARSYM_LIT(1.05990859890000000000)*t1*t2*x[3]*p->m_veh;
-    jac_p[216] = -GEARSYM_LIT(18.5097474646188087562)*u[1];
-    jac_p[217] = GEARSYM_LIT(0.951713998030246129056)*u[1];
-    jac_p[218] = GEARSYM_LIT(0.0);
-    jac_p[219] = GEARSYM_LIT(0.0);
-    jac_p[220] = GEARSYM_LIT(0.0);
-    jac_p[221] = GEARSYM_LIT(0.0);
-    jac_p[222] = GEARSYM_LIT(0.0);
-    jac_p[223] = GEARSYM_LIT(0.0);
-    jac_p[224] = GEARSYM_LIT(0.0);
-    jac_p[225] = GEARSYM_LIT(0.0);
-    jac_p[226] = GEARSYM_LIT(0.0);
-    jac_p[227] = GEARSYM_LIT(0.0);
-    jac_p[228] = GEARSYM_LIT(0.0);
-    jac_p[229] = GEARSYM_LIT(0.0);
-    jac_p[230] = GEARSYM_LIT(0.0);
-    jac_p[231] = GEARSYM_LIT(0.0);
-    jac_p[232] = GEARSYM_LIT(0.0);
-    jac_p[233] = GEARSYM_LIT(0.0);
-    jac_p[234] = GEARSYM_LIT(0.0);
-    jac_p[235] = GEARSYM_LIT(0.0);
-    jac_p[236] = GEARSYM_LIT(0.0);
-    jac_p[237] = GEARSYM_LIT(0.0);
-    jac_p[238] = GEARSYM_LIT(0.0);
-    jac_p[239] = GEARSYM_LIT(0.0);
-    jac_p[240] = -GEARSYM_LIT(29.8542491137247809292)*u[2];
-    jac_p[241] = GEARSYM_LIT(1.07188736788946289785)*u[2];
-    jac_p[242] = GEARSYM_LIT(0.0);
-    jac_p[243] = GEARSYM_LIT(0.0);
-    jac_p[244] = GEARSYM_LIT(0.0);
-    jac_p[245] = GEARSYM_LIT(0.0);
-    jac_p[246] = GEARSYM_LIT(0.0);
-    jac_p[247] = GEARSYM_LIT(0.0);
-    jac_p[248] = GEARSYM_LIT(0.0);
-    jac_p[249] = GEARSYM_LIT(0.0);
-    jac_p[250] = GEARSYM_LIT(0.0);
-    jac_p[251] = GEARSYM_LIT(0.0);
-    jac_p[252] = GEARSYM_LIT(0.0);
-    jac_p[253] = GEARSYM_LIT(0.0);
-    jac_p[254] = GEARSYM_LIT(0.0);
-    jac_p[255] = GEARSYM_LIT(0.0);
-    jac_p[256] = GEARSYM_LIT(0.0);
-    jac_p[257] = GEARSYM_LIT(0.0);
-    jac_p[258] = GEARSYM_LIT(0.0);
-    jac_p[259] = GEARSYM_LIT(0.0);
-    jac_p[260] = GEARSYM_LIT(0.0);
-    jac_p[261] = GEARSYM_LIT(0.0);
-    jac_p[262] = GEARSYM_LIT(0.0);
-    jac_p[263] = GEARSYM_LIT(0.0);
+    jac_p_nz[0] = -GEARSYM_LIT(0.108043690000000000000)*t17 + t1*t8;
+    jac_p_nz[1] = -GEARSYM_LIT(0.216087380000000000000)*t22 + t24*x[7] - t19*x[5] - t21*x[6] + GEARSYM_LIT(0.0233468778976322000000)*t16*t25;
+    jac_p_nz[2] = -t26 + t24*x[11] - t19*x[9] - t21*x[10];
+    jac_p_nz[3] = -t29 + t24*x[15] - t19*x[13] - t21*x[14];
+    jac_p_nz[4] = t24*x[19] - t19*x[17] - t21*x[18];
+    jac_p_nz[5] = -t31 - t35 + t24*x[23] - t19*x[21] - t21*x[22] + GEARSYM_LIT(1.05990859890000000000)*t1*t2*x[3]*p->f_roll;
+    jac_p_nz[6] = -GEARSYM_LIT(0.104731230854449551240)*x[2];
+    jac_p_nz[7] = -GEARSYM_LIT(0.539600183973937855846)*x[2];
+    jac_p_nz[8] = t1*t36;
+    jac_p_nz[9] = -GEARSYM_LIT(0.104731230854449551240)*x[6];
+    jac_p_nz[10] = -GEARSYM_LIT(0.539600183973937855846)*x[6];
+    jac_p_nz[11] = -t26 + t37*x[6];
+    jac_p_nz[12] = -GEARSYM_LIT(0.104731230854449551240)*x[10];
+    jac_p_nz[13] = -GEARSYM_LIT(0.539600183973937855846)*x[10];
+    jac_p_nz[14] = t37*x[10];
+    jac_p_nz[15] = -GEARSYM_LIT(0.104731230854449551240)*x[14];
+    jac_p_nz[16] = -GEARSYM_LIT(0.539600183973937855846)*x[14];
+    jac_p_nz[17] = t37*x[14];
+    jac_p_nz[18] = -GEARSYM_LIT(0.104731230854449551240)*x[18];
+    jac_p_nz[19] = -GEARSYM_LIT(0.539600183973937855846)*x[18];
+    jac_p_nz[20] = t37*x[18];
+    jac_p_nz[21] = -GEARSYM_LIT(0.104731230854449551240)*x[22];
+    jac_p_nz[22] = -GEARSYM_LIT(0.539600183973937855846)*x[22];
+    jac_p_nz[23] = t37*x[22];
+    jac_p_nz[24] = -GEARSYM_LIT(0.0424184815125352576915)*x[1] + GEARSYM_LIT(0.104731230854449551240)*x[3];
+    jac_p_nz[25] = -GEARSYM_LIT(0.218550094764656887746)*x[1] + GEARSYM_LIT(0.539600183973937855846)*x[3];
+    jac_p_nz[26] = t1*t27;
+    jac_p_nz[27] = -GEARSYM_LIT(0.0424184815125352576915)*x[5] + GEARSYM_LIT(0.104731230854449551240)*x[7];
+    jac_p_nz[28] = -GEARSYM_LIT(0.218550094764656887746)*x[5] + GEARSYM_LIT(0.539600183973937855846)*x[7];
+    jac_p_nz[29] = -t29 - t37*x[7] + (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t1*x[5];
+    jac_p_nz[30] = -GEARSYM_LIT(0.0424184815125352576915)*x[9] + GEARSYM_LIT(0.104731230854449551240)*x[11];
+    jac_p_nz[31] = -GEARSYM_LIT(0.218550094764656887746)*x[9] + GEARSYM_LIT(0.539600183973937855846)*x[11];
+    jac_p_nz[32] = t38*x[9] - t37*x[11];
+    jac_p_nz[33] = -GEARSYM_LIT(0.0424184815125352576915)*x[13] + GEARSYM_LIT(0.104731230854449551240)*x[15];
+    jac_p_nz[34] = -GEARSYM_LIT(0.218550094764656887746)*x[13] + GEARSYM_LIT(0.539600183973937855846)*x[15];
+    jac_p_nz[35] = t38*x[13] - t37*x[15];
+    jac_p_nz[36] = -GEARSYM_LIT(0.0424184815125352576915)*x[17] + GEARSYM_LIT(0.104731230854449551240)*x[19];
+    jac_p_nz[37] = -GEARSYM_LIT(0.218550094764656887746)*x[17] + GEARSYM_LIT(0.539600183973937855846)*x[19];
+    jac_p_nz[38] = t38*x[17] - t37*x[19];
+    jac_p_nz[39] = -GEARSYM_LIT(0.0424184815125352576915)*x[21] + GEARSYM_LIT(0.104731230854449551240)*x[23];
+    jac_p_nz[40] = -GEARSYM_LIT(0.218550094764656887746)*x[21] + GEARSYM_LIT(0.539600183973937855846)*x[23];
+    jac_p_nz[41] = t38*x[21] - t37*x[23];
+    jac_p_nz[42] = t1*t33;
+    jac_p_nz[43] = -t31 - t35 + t32*t39 + t41*x[7];
+    jac_p_nz[44] = t41*x[11];
+    jac_p_nz[45] = t41*x[15];
+    jac_p_nz[46] = t41*x[19];
+    jac_p_nz[47] = t1*t10 + t1*t11 + t41*x[23];
+    jac_p_nz[48] = -t17;
+    jac_p_nz[49] = -t22 - t23*x[7] - t42*x[5] - t43*x[6] + GEARSYM_LIT(0.216087380000000000000)*t16*t25;
+    jac_p_nz[50] = -t23*x[11] - t36*t9 - t42*x[9] - t43*x[10];
+    jac_p_nz[51] = -t28 - t23*x[15] - t42*x[13] - t43*x[14];
+    jac_p_nz[52] = -t23*x[19] - t42*x[17] - t43*x[18];
+    jac_p_nz[53] = -t34 - t23*x[23] - t42*x[21] - t43*x[22];
+    jac_p_nz[54] = -t12*t44;
+    jac_p_nz[55] = -t46*x[7] + GEARSYM_LIT(0.00191852969123792603500)*t14*t9*p->A_front*p->c_W;
+    jac_p_nz[56] = -t46*x[11];
+    jac_p_nz[57] = -t46*x[15];
+    jac_p_nz[58] = -t46*x[19];
+    jac_p_nz[59] = -t46*x[23];
+    jac_p_nz[60] = -t44*t47;
+    jac_p_nz[61] = -t48*x[7] + GEARSYM_LIT(0.00191852969123792603500)*t14*t9*p->A_front*p->rho_air;
+    jac_p_nz[62] = -t48*x[11];
+    jac_p_nz[63] = -t48*x[15];
+    jac_p_nz[64] = -t48*x[19];
+    jac_p_nz[65] = -t48*x[23];
+    jac_p_nz[66] = -t44*t49;
+    jac_p_nz[67] = -t50*x[7] + GEARSYM_LIT(0.00191852969123792603500)*t14*t9*p->c_W*p->rho_air;
+    jac_p_nz[68] = -t50*x[11];
+    jac_p_nz[69] = -t50*x[15];
+    jac_p_nz[70] = -t50*x[19];
+    jac_p_nz[71] = -t50*x[23];
+    jac_p_nz[72] = -t51*p->m_veh;
+    jac_p_nz[73] = -t51 - t52*x[7] + GEARSYM_LIT(0.114516436087885941000)*t4*t9*x[3]*p->m_veh;
+    jac_p_nz[74] = -t52*x[11];
+    jac_p_nz[75] = -t52*x[15];
+    jac_p_nz[76] = -t52*x[19];
+    jac_p_nz[77] = -t52*x[23] + GEARSYM_LIT(1.05990859890000000000)*t1*t2*x[3]*p->m_veh;
+    jac_p_nz[78] = -GEARSYM_LIT(18.5097474646188087562)*u[1];
+    jac_p_nz[79] = GEARSYM_LIT(0.951713998030246129056)*u[1];
+    jac_p_nz[80] = -GEARSYM_LIT(29.8542491137247809292)*u[2];
+    jac_p_nz[81] = GEARSYM_LIT(1.07188736788946289785)*u[2];
+}
+
+/**
+ * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
+ * xdot / d p (24 x 11), dense column-major: jac_p[i + j*24] = d xdot_i / d p_j.
+ * Computes jac_p_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_p_sparse (75 add, 218 mul, 3 div, 2 calls (cos 1, sin
+ * 1)); the spreading moves values only.
+ */
+void gearsym_shift_3_4_mu_sens_jac_p(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_3_4_mu_sens_params *p,
+    gearsym_real *jac_p)
+{
+    int i;
+    int j;
+    int k = GEARSYM_SHIFT_3_4_MU_SENS_JAC_P_NNZ - 1;
+
+    gearsym_shift_3_4_mu_sens_jac_p_sparse(x, u, p, jac_p);
+    /*
+     * Spread in place, last value first. Value k belongs at i + j*rows >= k (the values are in
+     * column-major order), so each value is read before its slot is written, and a slot set to
+     * 0 lies above every value still unread.
+     */
+    for (j = GEARSYM_SHIFT_3_4_MU_SENS_NP - 1; j >= 0; --j) {
+        for (i = GEARSYM_SHIFT_3_4_MU_SENS_NX - 1; i >= 0; --i) {
+            if (k >= gearsym_shift_3_4_mu_sens_jac_p_colptr[j] && gearsym_shift_3_4_mu_sens_jac_p_rowind[k] == i) {
+                jac_p[i + j * GEARSYM_SHIFT_3_4_MU_SENS_NX] = jac_p[k];
+                --k;
+            } else {
+                jac_p[i + j * GEARSYM_SHIFT_3_4_MU_SENS_NX] = GEARSYM_LIT(0.0);
+            }
+        }
+    }
 }
 
 /**

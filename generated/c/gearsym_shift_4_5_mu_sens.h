@@ -12,6 +12,7 @@
  * Conventions
  *   x: states (GEARSYM_SHIFT_4_5_MU_SENS_NX), u: inputs (GEARSYM_SHIFT_4_5_MU_SENS_NU), p: parameter struct.
  *   Matrices are dense column-major: entry (i, j) of an r x c matrix is element [i + j*r].
+ *   jac_*_sparse hold only the structural nonzeros, in compressed-column order (pattern below).
  *   gearsym_real is double; define GEARSYM_SINGLE_PRECISION (for this file and the .c) for float.
  *   Output arrays must not alias inputs, except x_next of the step functions, which may alias x.
  *   C99, no dynamic memory, no mutable static data, no recursion; all work arrays on the stack.
@@ -116,6 +117,22 @@ typedef double gearsym_real;
 #define GEARSYM_SHIFT_4_5_MU_SENS_Y_dy_y_omega_C__zeta 23 /* [(rad/s)/(rad)]; output sensitivity dy_omega_C/dzeta (3.25) */
 
 /*
+ * Sparsity of the Jacobians, compressed columns (CasADi's layout): gearsym_shift_4_5_mu_sens_jac_<v>_sparse()
+ * writes the values of column j of d xdot / d <v> to entries colptr[j] .. colptr[j+1]-1, in rows
+ * rowind[k] (increasing), of its output. NNZ counts the structural nonzeros (every other entry
+ * is identically 0); rowind has NNZ entries (a single unused 0 when NNZ is 0).
+ */
+#define GEARSYM_SHIFT_4_5_MU_SENS_JAC_X_NNZ 81 /* of 576 entries (NX x NX) */
+extern const int gearsym_shift_4_5_mu_sens_jac_x_colptr[GEARSYM_SHIFT_4_5_MU_SENS_NX + 1];
+extern const int gearsym_shift_4_5_mu_sens_jac_x_rowind[];
+#define GEARSYM_SHIFT_4_5_MU_SENS_JAC_U_NNZ 8 /* of 72 entries (NX x NU) */
+extern const int gearsym_shift_4_5_mu_sens_jac_u_colptr[GEARSYM_SHIFT_4_5_MU_SENS_NU + 1];
+extern const int gearsym_shift_4_5_mu_sens_jac_u_rowind[];
+#define GEARSYM_SHIFT_4_5_MU_SENS_JAC_P_NNZ 82 /* of 264 entries (NX x NP) */
+extern const int gearsym_shift_4_5_mu_sens_jac_p_colptr[GEARSYM_SHIFT_4_5_MU_SENS_NP + 1];
+extern const int gearsym_shift_4_5_mu_sens_jac_p_rowind[];
+
+/*
  * Model parameters: fill with gearsym_shift_4_5_mu_sens_params_default(),
  * check with gearsym_shift_4_5_mu_sens_params_validate().
  */
@@ -144,8 +161,7 @@ typedef struct gearsym_shift_4_5_mu_sens_params {
  * [rad], S_omega_C__mu_06 [rad/s], S_omega_1__zeta [(rad/s)/(rad)], S_omega_2__zeta
  * [(rad/s)/(rad)], S_phi__zeta [(rad)/(rad)], S_omega_C__zeta [(rad/s)/(rad)]. Inputs: T_In
  * [N*m], F_N06 [N], F_N81 [N].
- * Operations: 69 add, 130 mul, 2 div, 2 calls (cos 1, sin 1); 32 temporaries (sympy.count_ops
- * of the CSE'd form: 264).
+ * Operations: 69 add, 130 mul, 2 div, 2 calls (cos 1, sin 1); 32 temporaries.
  */
 void gearsym_shift_4_5_mu_sens_rhs(
     const gearsym_real *x,
@@ -164,8 +180,7 @@ void gearsym_shift_4_5_mu_sens_rhs(
  * [rad/s], dy_y_omega_2__mu_06 [rad/s], dy_y_omega_8__mu_06 [rad/s], dy_y_omega_C__mu_06
  * [rad/s], dy_y_omega_1__zeta [(rad/s)/(rad)], dy_y_omega_2__zeta [(rad/s)/(rad)],
  * dy_y_omega_8__zeta [(rad/s)/(rad)], dy_y_omega_C__zeta [(rad/s)/(rad)].
- * Operations: 6 add, 12 mul, 0 div, 0 calls; 0 temporaries (sympy.count_ops of the CSE'd form:
- * 30).
+ * Operations: 6 add, 12 mul, 0 div, 0 calls; 0 temporaries.
  */
 void gearsym_shift_4_5_mu_sens_outputs(
     const gearsym_real *x,
@@ -174,10 +189,24 @@ void gearsym_shift_4_5_mu_sens_outputs(
     gearsym_real *y);
 
 /**
+ * Structural nonzeros of d xdot / d x (24 x 24, 81 of 576 entries) in compressed-column order:
+ * jac_x_nz[k] is entry (i, j) with i = gearsym_shift_4_5_mu_sens_jac_x_rowind[k] and
+ * gearsym_shift_4_5_mu_sens_jac_x_colptr[j] <= k < gearsym_shift_4_5_mu_sens_jac_x_colptr[j+1]
+ * (GEARSYM_SHIFT_4_5_MU_SENS_JAC_X_NNZ values).
+ * Operations: 7 add, 38 mul, 2 div, 2 calls (cos 1, sin 1); 18 temporaries.
+ */
+void gearsym_shift_4_5_mu_sens_jac_x_sparse(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_4_5_mu_sens_params *p,
+    gearsym_real *jac_x_nz);
+
+/**
  * Jacobian of the state derivative with respect to x (states), d xdot / d x (24 x 24), dense
  * column-major: jac_x[i + j*24] = d xdot_i / d x_j.
- * Operations: 7 add, 38 mul, 2 div, 2 calls (cos 1, sin 1); 18 temporaries (sympy.count_ops of
- * the CSE'd form: 96).
+ * Computes jac_x_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_x_sparse (7 add, 38 mul, 2 div, 2 calls (cos 1, sin
+ * 1)); the spreading moves values only.
  */
 void gearsym_shift_4_5_mu_sens_jac_x(
     const gearsym_real *x,
@@ -186,10 +215,24 @@ void gearsym_shift_4_5_mu_sens_jac_x(
     gearsym_real *jac_x);
 
 /**
+ * Structural nonzeros of d xdot / d u (24 x 3, 8 of 72 entries) in compressed-column order:
+ * jac_u_nz[k] is entry (i, j) with i = gearsym_shift_4_5_mu_sens_jac_u_rowind[k] and
+ * gearsym_shift_4_5_mu_sens_jac_u_colptr[j] <= k < gearsym_shift_4_5_mu_sens_jac_u_colptr[j+1]
+ * (GEARSYM_SHIFT_4_5_MU_SENS_JAC_U_NNZ values).
+ * Operations: 0 add, 4 mul, 0 div, 0 calls; 0 temporaries.
+ */
+void gearsym_shift_4_5_mu_sens_jac_u_sparse(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_4_5_mu_sens_params *p,
+    gearsym_real *jac_u_nz);
+
+/**
  * Jacobian of the state derivative with respect to u (inputs), d xdot / d u (24 x 3), dense
  * column-major: jac_u[i + j*24] = d xdot_i / d u_j.
- * Operations: 0 add, 4 mul, 0 div, 0 calls; 0 temporaries (sympy.count_ops of the CSE'd form:
- * 12).
+ * Computes jac_u_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_u_sparse (0 add, 4 mul, 0 div, 0 calls); the spreading
+ * moves values only.
  */
 void gearsym_shift_4_5_mu_sens_jac_u(
     const gearsym_real *x,
@@ -198,10 +241,24 @@ void gearsym_shift_4_5_mu_sens_jac_u(
     gearsym_real *jac_u);
 
 /**
+ * Structural nonzeros of d xdot / d p (24 x 11, 82 of 264 entries) in compressed-column order:
+ * jac_p_nz[k] is entry (i, j) with i = gearsym_shift_4_5_mu_sens_jac_p_rowind[k] and
+ * gearsym_shift_4_5_mu_sens_jac_p_colptr[j] <= k < gearsym_shift_4_5_mu_sens_jac_p_colptr[j+1]
+ * (GEARSYM_SHIFT_4_5_MU_SENS_JAC_P_NNZ values).
+ * Operations: 75 add, 218 mul, 3 div, 2 calls (cos 1, sin 1); 53 temporaries.
+ */
+void gearsym_shift_4_5_mu_sens_jac_p_sparse(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_4_5_mu_sens_params *p,
+    gearsym_real *jac_p_nz);
+
+/**
  * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
  * xdot / d p (24 x 11), dense column-major: jac_p[i + j*24] = d xdot_i / d p_j.
- * Operations: 75 add, 218 mul, 3 div, 2 calls (cos 1, sin 1); 53 temporaries (sympy.count_ops
- * of the CSE'd form: 404).
+ * Computes jac_p_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_p_sparse (75 add, 218 mul, 3 div, 2 calls (cos 1, sin
+ * 1)); the spreading moves values only.
  */
 void gearsym_shift_4_5_mu_sens_jac_p(
     const gearsym_real *x,

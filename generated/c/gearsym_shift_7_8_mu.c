@@ -41,11 +41,35 @@
 #endif
 #endif
 
+/* Compressed-column pattern of jac_x (see the header). */
+const int gearsym_shift_7_8_mu_jac_x_colptr[GEARSYM_SHIFT_7_8_MU_NX + 1] = {
+    0, 0, 4, 7, 11,
+};
+const int gearsym_shift_7_8_mu_jac_x_rowind[GEARSYM_SHIFT_7_8_MU_JAC_X_NNZ] = {
+    0, 1, 2, 3, 0, 1, 3, 0, 1, 2, 3,
+};
+
+/* Compressed-column pattern of jac_u (see the header). */
+const int gearsym_shift_7_8_mu_jac_u_colptr[GEARSYM_SHIFT_7_8_MU_NU + 1] = {
+    0, 2, 4, 6,
+};
+const int gearsym_shift_7_8_mu_jac_u_rowind[GEARSYM_SHIFT_7_8_MU_JAC_U_NNZ] = {
+    0, 1, 0, 1, 0, 1,
+};
+
+/* Compressed-column pattern of jac_p (see the header). */
+const int gearsym_shift_7_8_mu_jac_p_colptr[GEARSYM_SHIFT_7_8_MU_NP + 1] = {
+    0, 1, 4, 7, 8, 9, 10, 11, 12, 13, 15, 17,
+};
+const int gearsym_shift_7_8_mu_jac_p_rowind[GEARSYM_SHIFT_7_8_MU_JAC_P_NNZ] = {
+    3, 0, 1, 3, 0, 1, 3, 3, 3, 3, 3, 3, 3, 0, 1, 0,
+    1,
+};
+
 /**
  * State derivative xdot = f(x, u, p). States: omega_1 [rad/s], omega_2 [rad/s], phi [rad],
  * omega_C [rad/s]. Inputs: T_In [N*m], F_N05 [N], F_N08 [N].
- * Operations: 16 add, 35 mul, 1 div, 2 calls (cos 1, sin 1); 5 temporaries (sympy.count_ops of
- * the CSE'd form: 71).
+ * Operations: 16 add, 35 mul, 1 div, 2 calls (cos 1, sin 1); 5 temporaries.
  */
 void gearsym_shift_7_8_mu_rhs(
     const gearsym_real *restrict x,
@@ -57,18 +81,17 @@ void gearsym_shift_7_8_mu_rhs(
     const gearsym_real t1 = u[2]*p->mu_08;
     const gearsym_real t2 = x[1]*p->d_ss;
     const gearsym_real t3 = x[2]*p->k_ss;
-    const gearsym_real t4 = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1] - x[3];
-    xdot[0] = GEARSYM_LIT(4.90365537668097158072)*u[0] + GEARSYM_LIT(4.10944879784706975190)*x[3]*p->d_ss - GEARSYM_LIT(3.43491144536497051936)*t0 - GEARSYM_LIT(4.25127220431330584028)*t1 - GEARSYM_LIT(1.66441830613490066906)*t2 - GEARSYM_LIT(4.10944879784706975190)*t3;
-    xdot[1] = GEARSYM_LIT(5.07311454094220760872)*u[0] + GEARSYM_LIT(5.00422039463903630704)*x[3]*p->d_ss + GEARSYM_LIT(1.81161775721338066950)*t0 - GEARSYM_LIT(2.16518071651915376957)*t1 - GEARSYM_LIT(2.02682073496923301217)*t2 - GEARSYM_LIT(5.00422039463903630704)*t3;
+    const gearsym_real t4 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
+    xdot[0] = -GEARSYM_LIT(1.66441830613490066906)*t2 - GEARSYM_LIT(4.10944879784706975190)*t3 - GEARSYM_LIT(3.43491144536497051936)*t0 - GEARSYM_LIT(4.25127220431330584028)*t1 + GEARSYM_LIT(4.90365537668097158072)*u[0] + GEARSYM_LIT(4.10944879784706975190)*x[3]*p->d_ss;
+    xdot[1] = -GEARSYM_LIT(5.00422039463903630704)*t3 - GEARSYM_LIT(2.02682073496923301217)*t2 - GEARSYM_LIT(2.16518071651915376957)*t1 + GEARSYM_LIT(1.81161775721338066950)*t0 + GEARSYM_LIT(5.07311454094220760872)*u[0] + GEARSYM_LIT(5.00422039463903630704)*x[3]*p->d_ss;
     xdot[2] = t4;
-    xdot[3] = (-GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[3]*x[3]) + GEARSYM_LIT(2.0)*t4*p->d_ss - GEARSYM_LIT(1.05990859890000000000)*x[3]*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta) + GEARSYM_LIT(2.0)*x[2]*p->k_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*p->m_veh*GEARSYM_SIN(p->zeta))/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
+    xdot[3] = (GEARSYM_LIT(2.0)*t4*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*p->m_veh*GEARSYM_SIN(p->zeta) - GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[3]*x[3]) - GEARSYM_LIT(1.05990859890000000000)*x[3]*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta))/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
 }
 
 /**
  * Outputs y = h(x, u, p): y_omega_1 [rad/s], y_omega_2 [rad/s], y_omega_8 [rad/s], y_omega_C
  * [rad/s].
- * Operations: 1 add, 2 mul, 0 div, 0 calls; 0 temporaries (sympy.count_ops of the CSE'd form:
- * 5).
+ * Operations: 1 add, 2 mul, 0 div, 0 calls; 0 temporaries.
  */
 void gearsym_shift_7_8_mu_outputs(
     const gearsym_real *restrict x,
@@ -80,82 +103,144 @@ void gearsym_shift_7_8_mu_outputs(
     (void)p;
     y[0] = x[0];
     y[1] = x[1];
-    y[2] = (GEARSYM_LIT(60.0)/GEARSYM_LIT(17.0))*x[0] - (GEARSYM_LIT(43.0)/GEARSYM_LIT(17.0))*x[1];
+    y[2] = -(GEARSYM_LIT(43.0)/GEARSYM_LIT(17.0))*x[1] + (GEARSYM_LIT(60.0)/GEARSYM_LIT(17.0))*x[0];
     y[3] = x[3];
+}
+
+/**
+ * Structural nonzeros of d xdot / d x (4 x 4, 11 of 16 entries) in compressed-column order:
+ * jac_x_nz[k] is entry (i, j) with i = gearsym_shift_7_8_mu_jac_x_rowind[k] and
+ * gearsym_shift_7_8_mu_jac_x_colptr[j] <= k < gearsym_shift_7_8_mu_jac_x_colptr[j+1]
+ * (GEARSYM_SHIFT_7_8_MU_JAC_X_NNZ values).
+ * Operations: 3 add, 20 mul, 1 div, 1 call (cos 1); 2 temporaries.
+ */
+void gearsym_shift_7_8_mu_jac_x_sparse(
+    const gearsym_real *restrict x,
+    const gearsym_real *restrict u,
+    const gearsym_shift_7_8_mu_params *restrict p,
+    gearsym_real *restrict jac_x_nz)
+{
+    const gearsym_real t0 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh));
+    const gearsym_real t1 = t0*p->d_ss;
+    (void)u;
+    jac_x_nz[0] = -GEARSYM_LIT(1.66441830613490066906)*p->d_ss;
+    jac_x_nz[1] = -GEARSYM_LIT(2.02682073496923301217)*p->d_ss;
+    jac_x_nz[2] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
+    jac_x_nz[3] = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t1;
+    jac_x_nz[4] = -GEARSYM_LIT(4.10944879784706975190)*p->k_ss;
+    jac_x_nz[5] = -GEARSYM_LIT(5.00422039463903630704)*p->k_ss;
+    jac_x_nz[6] = GEARSYM_LIT(2.0)*t0*p->k_ss;
+    jac_x_nz[7] = GEARSYM_LIT(4.10944879784706975190)*p->d_ss;
+    jac_x_nz[8] = GEARSYM_LIT(5.00422039463903630704)*p->d_ss;
+    jac_x_nz[9] = -GEARSYM_LIT(1.0);
+    jac_x_nz[10] = -GEARSYM_LIT(2.0)*t1 + t0*(-GEARSYM_LIT(1.05990859890000000000)*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta) - GEARSYM_LIT(0.0355139609030000000000)*x[3]*p->A_front*p->c_W*p->rho_air);
 }
 
 /**
  * Jacobian of the state derivative with respect to x (states), d xdot / d x (4 x 4), dense
  * column-major: jac_x[i + j*4] = d xdot_i / d x_j.
- * Operations: 3 add, 20 mul, 1 div, 1 call (cos 1); 2 temporaries (sympy.count_ops of the
- * CSE'd form: 42).
+ * Computes jac_x_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_x_sparse (3 add, 20 mul, 1 div, 1 call (cos 1)); the
+ * spreading moves values only.
  */
 void gearsym_shift_7_8_mu_jac_x(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_7_8_mu_params *p,
+    gearsym_real *jac_x)
+{
+    int i;
+    int j;
+    int k = GEARSYM_SHIFT_7_8_MU_JAC_X_NNZ - 1;
+
+    gearsym_shift_7_8_mu_jac_x_sparse(x, u, p, jac_x);
+    /*
+     * Spread in place, last value first. Value k belongs at i + j*rows >= k (the values are in
+     * column-major order), so each value is read before its slot is written, and a slot set to
+     * 0 lies above every value still unread.
+     */
+    for (j = GEARSYM_SHIFT_7_8_MU_NX - 1; j >= 0; --j) {
+        for (i = GEARSYM_SHIFT_7_8_MU_NX - 1; i >= 0; --i) {
+            if (k >= gearsym_shift_7_8_mu_jac_x_colptr[j] && gearsym_shift_7_8_mu_jac_x_rowind[k] == i) {
+                jac_x[i + j * GEARSYM_SHIFT_7_8_MU_NX] = jac_x[k];
+                --k;
+            } else {
+                jac_x[i + j * GEARSYM_SHIFT_7_8_MU_NX] = GEARSYM_LIT(0.0);
+            }
+        }
+    }
+}
+
+/**
+ * Structural nonzeros of d xdot / d u (4 x 3, 6 of 12 entries) in compressed-column order:
+ * jac_u_nz[k] is entry (i, j) with i = gearsym_shift_7_8_mu_jac_u_rowind[k] and
+ * gearsym_shift_7_8_mu_jac_u_colptr[j] <= k < gearsym_shift_7_8_mu_jac_u_colptr[j+1]
+ * (GEARSYM_SHIFT_7_8_MU_JAC_U_NNZ values).
+ * Operations: 0 add, 4 mul, 0 div, 0 calls; 0 temporaries.
+ */
+void gearsym_shift_7_8_mu_jac_u_sparse(
     const gearsym_real *restrict x,
     const gearsym_real *restrict u,
     const gearsym_shift_7_8_mu_params *restrict p,
-    gearsym_real *restrict jac_x)
+    gearsym_real *restrict jac_u_nz)
 {
-    const gearsym_real t0 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh));
-    const gearsym_real t1 = t0*p->d_ss;
+    (void)x;
     (void)u;
-    jac_x[0] = GEARSYM_LIT(0.0);
-    jac_x[1] = GEARSYM_LIT(0.0);
-    jac_x[2] = GEARSYM_LIT(0.0);
-    jac_x[3] = GEARSYM_LIT(0.0);
-    jac_x[4] = -GEARSYM_LIT(1.66441830613490066906)*p->d_ss;
-    jac_x[5] = -GEARSYM_LIT(2.02682073496923301217)*p->d_ss;
-    jac_x[6] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
-    jac_x[7] = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t1;
-    jac_x[8] = -GEARSYM_LIT(4.10944879784706975190)*p->k_ss;
-    jac_x[9] = -GEARSYM_LIT(5.00422039463903630704)*p->k_ss;
-    jac_x[10] = GEARSYM_LIT(0.0);
-    jac_x[11] = GEARSYM_LIT(2.0)*t0*p->k_ss;
-    jac_x[12] = GEARSYM_LIT(4.10944879784706975190)*p->d_ss;
-    jac_x[13] = GEARSYM_LIT(5.00422039463903630704)*p->d_ss;
-    jac_x[14] = -GEARSYM_LIT(1.0);
-    jac_x[15] = t0*(-GEARSYM_LIT(0.0355139609030000000000)*x[3]*p->A_front*p->c_W*p->rho_air - GEARSYM_LIT(1.05990859890000000000)*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta)) - GEARSYM_LIT(2.0)*t1;
+    jac_u_nz[0] = GEARSYM_LIT(4.90365537668097158072);
+    jac_u_nz[1] = GEARSYM_LIT(5.07311454094220760872);
+    jac_u_nz[2] = -GEARSYM_LIT(3.43491144536497051936)*p->mu_05;
+    jac_u_nz[3] = GEARSYM_LIT(1.81161775721338066950)*p->mu_05;
+    jac_u_nz[4] = -GEARSYM_LIT(4.25127220431330584028)*p->mu_08;
+    jac_u_nz[5] = -GEARSYM_LIT(2.16518071651915376957)*p->mu_08;
 }
 
 /**
  * Jacobian of the state derivative with respect to u (inputs), d xdot / d u (4 x 3), dense
  * column-major: jac_u[i + j*4] = d xdot_i / d u_j.
- * Operations: 0 add, 4 mul, 0 div, 0 calls; 0 temporaries (sympy.count_ops of the CSE'd form:
- * 13).
+ * Computes jac_u_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_u_sparse (0 add, 4 mul, 0 div, 0 calls); the spreading
+ * moves values only.
  */
 void gearsym_shift_7_8_mu_jac_u(
-    const gearsym_real *restrict x,
-    const gearsym_real *restrict u,
-    const gearsym_shift_7_8_mu_params *restrict p,
-    gearsym_real *restrict jac_u)
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_7_8_mu_params *p,
+    gearsym_real *jac_u)
 {
-    (void)x;
-    (void)u;
-    jac_u[0] = GEARSYM_LIT(4.90365537668097158072);
-    jac_u[1] = GEARSYM_LIT(5.07311454094220760872);
-    jac_u[2] = GEARSYM_LIT(0.0);
-    jac_u[3] = GEARSYM_LIT(0.0);
-    jac_u[4] = -GEARSYM_LIT(3.43491144536497051936)*p->mu_05;
-    jac_u[5] = GEARSYM_LIT(1.81161775721338066950)*p->mu_05;
-    jac_u[6] = GEARSYM_LIT(0.0);
-    jac_u[7] = GEARSYM_LIT(0.0);
-    jac_u[8] = -GEARSYM_LIT(4.25127220431330584028)*p->mu_08;
-    jac_u[9] = -GEARSYM_LIT(2.16518071651915376957)*p->mu_08;
-    jac_u[10] = GEARSYM_LIT(0.0);
-    jac_u[11] = GEARSYM_LIT(0.0);
+    int i;
+    int j;
+    int k = GEARSYM_SHIFT_7_8_MU_JAC_U_NNZ - 1;
+
+    gearsym_shift_7_8_mu_jac_u_sparse(x, u, p, jac_u);
+    /*
+     * Spread in place, last value first. Value k belongs at i + j*rows >= k (the values are in
+     * column-major order), so each value is read before its slot is written, and a slot set to
+     * 0 lies above every value still unread.
+     */
+    for (j = GEARSYM_SHIFT_7_8_MU_NU - 1; j >= 0; --j) {
+        for (i = GEARSYM_SHIFT_7_8_MU_NX - 1; i >= 0; --i) {
+            if (k >= gearsym_shift_7_8_mu_jac_u_colptr[j] && gearsym_shift_7_8_mu_jac_u_rowind[k] == i) {
+                jac_u[i + j * GEARSYM_SHIFT_7_8_MU_NX] = jac_u[k];
+                --k;
+            } else {
+                jac_u[i + j * GEARSYM_SHIFT_7_8_MU_NX] = GEARSYM_LIT(0.0);
+            }
+        }
+    }
 }
 
 /**
- * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
- * xdot / d p (4 x 11), dense column-major: jac_p[i + j*4] = d xdot_i / d p_j.
- * Operations: 11 add, 47 mul, 2 div, 2 calls (cos 1, sin 1); 13 temporaries (sympy.count_ops
- * of the CSE'd form: 91).
+ * Structural nonzeros of d xdot / d p (4 x 11, 17 of 44 entries) in compressed-column order:
+ * jac_p_nz[k] is entry (i, j) with i = gearsym_shift_7_8_mu_jac_p_rowind[k] and
+ * gearsym_shift_7_8_mu_jac_p_colptr[j] <= k < gearsym_shift_7_8_mu_jac_p_colptr[j+1]
+ * (GEARSYM_SHIFT_7_8_MU_JAC_P_NNZ values).
+ * Operations: 11 add, 47 mul, 2 div, 2 calls (cos 1, sin 1); 13 temporaries.
  */
-void gearsym_shift_7_8_mu_jac_p(
+void gearsym_shift_7_8_mu_jac_p_sparse(
     const gearsym_real *restrict x,
     const gearsym_real *restrict u,
     const gearsym_shift_7_8_mu_params *restrict p,
-    gearsym_real *restrict jac_p)
+    gearsym_real *restrict jac_p_nz)
 {
     const gearsym_real t0 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
     const gearsym_real t1 = (GEARSYM_LIT(1.0)/t0);
@@ -167,53 +252,61 @@ void gearsym_shift_7_8_mu_jac_p(
     const gearsym_real t7 = t4*p->m_veh;
     const gearsym_real t8 = (x[3]*x[3]);
     const gearsym_real t9 = GEARSYM_LIT(0.0177569804515000000000)*t8*p->A_front*p->c_W;
-    const gearsym_real t10 = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1] - x[3];
-    const gearsym_real t11 = (GEARSYM_LIT(2.0)*t10*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss - t3*p->m_veh - t9*p->rho_air - t6*t7)/(t0*t0);
+    const gearsym_real t10 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
+    const gearsym_real t11 = (-t3*p->m_veh - t6*t7 - t9*p->rho_air + GEARSYM_LIT(2.0)*t10*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss)/(t0*t0);
     const gearsym_real t12 = GEARSYM_LIT(0.0177569804515000000000)*t1*t8*p->rho_air;
-    jac_p[0] = GEARSYM_LIT(0.0);
-    jac_p[1] = GEARSYM_LIT(0.0);
-    jac_p[2] = GEARSYM_LIT(0.0);
-    jac_p[3] = t1*(-t3 - t4*t6) - GEARSYM_LIT(0.108043690000000000000)*t11;
-    jac_p[4] = -GEARSYM_LIT(4.10944879784706975190)*x[2];
-    jac_p[5] = -GEARSYM_LIT(5.00422039463903630704)*x[2];
-    jac_p[6] = GEARSYM_LIT(0.0);
-    jac_p[7] = GEARSYM_LIT(2.0)*t1*x[2];
-    jac_p[8] = -GEARSYM_LIT(1.66441830613490066906)*x[1] + GEARSYM_LIT(4.10944879784706975190)*x[3];
-    jac_p[9] = -GEARSYM_LIT(2.02682073496923301217)*x[1] + GEARSYM_LIT(5.00422039463903630704)*x[3];
-    jac_p[10] = GEARSYM_LIT(0.0);
-    jac_p[11] = GEARSYM_LIT(2.0)*t1*t10;
-    jac_p[12] = GEARSYM_LIT(0.0);
-    jac_p[13] = GEARSYM_LIT(0.0);
-    jac_p[14] = GEARSYM_LIT(0.0);
-    jac_p[15] = t1*(t2*t6*p->m_veh - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t7);
-    jac_p[16] = GEARSYM_LIT(0.0);
-    jac_p[17] = GEARSYM_LIT(0.0);
-    jac_p[18] = GEARSYM_LIT(0.0);
-    jac_p[19] = -t11;
-    jac_p[20] = GEARSYM_LIT(0.0);
-    jac_p[21] = GEARSYM_LIT(0.0);
-    jac_p[22] = GEARSYM_LIT(0.0);
-    jac_p[23] = -t1*t9;
-    jac_p[24] = GEARSYM_LIT(0.0);
-    jac_p[25] = GEARSYM_LIT(0.0);
-    jac_p[26] = GEARSYM_LIT(0.0);
-    jac_p[27] = -t12*p->A_front;
-    jac_p[28] = GEARSYM_LIT(0.0);
-    jac_p[29] = GEARSYM_LIT(0.0);
-    jac_p[30] = GEARSYM_LIT(0.0);
-    jac_p[31] = -t12*p->c_W;
-    jac_p[32] = GEARSYM_LIT(0.0);
-    jac_p[33] = GEARSYM_LIT(0.0);
-    jac_p[34] = GEARSYM_LIT(0.0);
-    jac_p[35] = -t1*t5*t7;
-    jac_p[36] = -GEARSYM_LIT(3.43491144536497051936)*u[1];
-    jac_p[37] = GEARSYM_LIT(1.81161775721338066950)*u[1];
-    jac_p[38] = GEARSYM_LIT(0.0);
-    jac_p[39] = GEARSYM_LIT(0.0);
-    jac_p[40] = -GEARSYM_LIT(4.25127220431330584028)*u[2];
-    jac_p[41] = -GEARSYM_LIT(2.16518071651915376957)*u[2];
-    jac_p[42] = GEARSYM_LIT(0.0);
-    jac_p[43] = GEARSYM_LIT(0.0);
+    jac_p_nz[0] = -GEARSYM_LIT(0.108043690000000000000)*t11 + t1*(-t3 - t4*t6);
+    jac_p_nz[1] = -GEARSYM_LIT(4.10944879784706975190)*x[2];
+    jac_p_nz[2] = -GEARSYM_LIT(5.00422039463903630704)*x[2];
+    jac_p_nz[3] = GEARSYM_LIT(2.0)*t1*x[2];
+    jac_p_nz[4] = -GEARSYM_LIT(1.66441830613490066906)*x[1] + GEARSYM_LIT(4.10944879784706975190)*x[3];
+    jac_p_nz[5] = -GEARSYM_LIT(2.02682073496923301217)*x[1] + GEARSYM_LIT(5.00422039463903630704)*x[3];
+    jac_p_nz[6] = GEARSYM_LIT(2.0)*t1*t10;
+    jac_p_nz[7] = t1*(-(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t7 + t2*t6*p->m_veh);
+    jac_p_nz[8] = -t11;
+    jac_p_nz[9] = -t1*t9;
+    jac_p_nz[10] = -t12*p->A_front;
+    jac_p_nz[11] = -t12*p->c_W;
+    jac_p_nz[12] = -t1*t5*t7;
+    jac_p_nz[13] = -GEARSYM_LIT(3.43491144536497051936)*u[1];
+    jac_p_nz[14] = GEARSYM_LIT(1.81161775721338066950)*u[1];
+    jac_p_nz[15] = -GEARSYM_LIT(4.25127220431330584028)*u[2];
+    jac_p_nz[16] = -GEARSYM_LIT(2.16518071651915376957)*u[2];
+}
+
+/**
+ * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
+ * xdot / d p (4 x 11), dense column-major: jac_p[i + j*4] = d xdot_i / d p_j.
+ * Computes jac_p_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_p_sparse (11 add, 47 mul, 2 div, 2 calls (cos 1, sin
+ * 1)); the spreading moves values only.
+ */
+void gearsym_shift_7_8_mu_jac_p(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_7_8_mu_params *p,
+    gearsym_real *jac_p)
+{
+    int i;
+    int j;
+    int k = GEARSYM_SHIFT_7_8_MU_JAC_P_NNZ - 1;
+
+    gearsym_shift_7_8_mu_jac_p_sparse(x, u, p, jac_p);
+    /*
+     * Spread in place, last value first. Value k belongs at i + j*rows >= k (the values are in
+     * column-major order), so each value is read before its slot is written, and a slot set to
+     * 0 lies above every value still unread.
+     */
+    for (j = GEARSYM_SHIFT_7_8_MU_NP - 1; j >= 0; --j) {
+        for (i = GEARSYM_SHIFT_7_8_MU_NX - 1; i >= 0; --i) {
+            if (k >= gearsym_shift_7_8_mu_jac_p_colptr[j] && gearsym_shift_7_8_mu_jac_p_rowind[k] == i) {
+                jac_p[i + j * GEARSYM_SHIFT_7_8_MU_NX] = jac_p[k];
+                --k;
+            } else {
+                jac_p[i + j * GEARSYM_SHIFT_7_8_MU_NX] = GEARSYM_LIT(0.0);
+            }
+        }
+    }
 }
 
 /**

@@ -9,6 +9,7 @@
  * Conventions
  *   x: states (GEARSYM_SHIFT_8_9_MU_NX), u: inputs (GEARSYM_SHIFT_8_9_MU_NU), p: parameter struct.
  *   Matrices are dense column-major: entry (i, j) of an r x c matrix is element [i + j*r].
+ *   jac_*_sparse hold only the structural nonzeros, in compressed-column order (pattern below).
  *   gearsym_real is double; define GEARSYM_SINGLE_PRECISION (for this file and the .c) for float.
  *   Output arrays must not alias inputs, except x_next of the step functions, which may alias x.
  *   C99, no dynamic memory, no mutable static data, no recursion; all work arrays on the stack.
@@ -73,6 +74,22 @@ typedef double gearsym_real;
 #define GEARSYM_SHIFT_8_9_MU_Y_y_omega_C 3 /* [rad/s]; wheel speed */
 
 /*
+ * Sparsity of the Jacobians, compressed columns (CasADi's layout): gearsym_shift_8_9_mu_jac_<v>_sparse()
+ * writes the values of column j of d xdot / d <v> to entries colptr[j] .. colptr[j+1]-1, in rows
+ * rowind[k] (increasing), of its output. NNZ counts the structural nonzeros (every other entry
+ * is identically 0); rowind has NNZ entries (a single unused 0 when NNZ is 0).
+ */
+#define GEARSYM_SHIFT_8_9_MU_JAC_X_NNZ 11 /* of 16 entries (NX x NX) */
+extern const int gearsym_shift_8_9_mu_jac_x_colptr[GEARSYM_SHIFT_8_9_MU_NX + 1];
+extern const int gearsym_shift_8_9_mu_jac_x_rowind[];
+#define GEARSYM_SHIFT_8_9_MU_JAC_U_NNZ 6 /* of 12 entries (NX x NU) */
+extern const int gearsym_shift_8_9_mu_jac_u_colptr[GEARSYM_SHIFT_8_9_MU_NU + 1];
+extern const int gearsym_shift_8_9_mu_jac_u_rowind[];
+#define GEARSYM_SHIFT_8_9_MU_JAC_P_NNZ 17 /* of 44 entries (NX x NP) */
+extern const int gearsym_shift_8_9_mu_jac_p_colptr[GEARSYM_SHIFT_8_9_MU_NP + 1];
+extern const int gearsym_shift_8_9_mu_jac_p_rowind[];
+
+/*
  * Model parameters: fill with gearsym_shift_8_9_mu_params_default(),
  * check with gearsym_shift_8_9_mu_params_validate().
  */
@@ -93,8 +110,7 @@ typedef struct gearsym_shift_8_9_mu_params {
 /**
  * State derivative xdot = f(x, u, p). States: omega_1 [rad/s], omega_2 [rad/s], phi [rad],
  * omega_C [rad/s]. Inputs: T_In [N*m], F_N38 [N], F_N05 [N].
- * Operations: 16 add, 36 mul, 1 div, 2 calls (cos 1, sin 1); 4 temporaries (sympy.count_ops of
- * the CSE'd form: 72).
+ * Operations: 16 add, 36 mul, 1 div, 2 calls (cos 1, sin 1); 4 temporaries.
  */
 void gearsym_shift_8_9_mu_rhs(
     const gearsym_real *x,
@@ -105,8 +121,7 @@ void gearsym_shift_8_9_mu_rhs(
 /**
  * Outputs y = h(x, u, p): y_omega_1 [rad/s], y_omega_2 [rad/s], y_omega_8 [rad/s], y_omega_C
  * [rad/s].
- * Operations: 0 add, 0 mul, 0 div, 0 calls; 0 temporaries (sympy.count_ops of the CSE'd form:
- * 0).
+ * Operations: 0 add, 0 mul, 0 div, 0 calls; 0 temporaries.
  */
 void gearsym_shift_8_9_mu_outputs(
     const gearsym_real *x,
@@ -115,10 +130,24 @@ void gearsym_shift_8_9_mu_outputs(
     gearsym_real *y);
 
 /**
+ * Structural nonzeros of d xdot / d x (4 x 4, 11 of 16 entries) in compressed-column order:
+ * jac_x_nz[k] is entry (i, j) with i = gearsym_shift_8_9_mu_jac_x_rowind[k] and
+ * gearsym_shift_8_9_mu_jac_x_colptr[j] <= k < gearsym_shift_8_9_mu_jac_x_colptr[j+1]
+ * (GEARSYM_SHIFT_8_9_MU_JAC_X_NNZ values).
+ * Operations: 3 add, 20 mul, 1 div, 1 call (cos 1); 2 temporaries.
+ */
+void gearsym_shift_8_9_mu_jac_x_sparse(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_8_9_mu_params *p,
+    gearsym_real *jac_x_nz);
+
+/**
  * Jacobian of the state derivative with respect to x (states), d xdot / d x (4 x 4), dense
  * column-major: jac_x[i + j*4] = d xdot_i / d x_j.
- * Operations: 3 add, 20 mul, 1 div, 1 call (cos 1); 2 temporaries (sympy.count_ops of the
- * CSE'd form: 42).
+ * Computes jac_x_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_x_sparse (3 add, 20 mul, 1 div, 1 call (cos 1)); the
+ * spreading moves values only.
  */
 void gearsym_shift_8_9_mu_jac_x(
     const gearsym_real *x,
@@ -127,10 +156,24 @@ void gearsym_shift_8_9_mu_jac_x(
     gearsym_real *jac_x);
 
 /**
+ * Structural nonzeros of d xdot / d u (4 x 3, 6 of 12 entries) in compressed-column order:
+ * jac_u_nz[k] is entry (i, j) with i = gearsym_shift_8_9_mu_jac_u_rowind[k] and
+ * gearsym_shift_8_9_mu_jac_u_colptr[j] <= k < gearsym_shift_8_9_mu_jac_u_colptr[j+1]
+ * (GEARSYM_SHIFT_8_9_MU_JAC_U_NNZ values).
+ * Operations: 0 add, 4 mul, 0 div, 0 calls; 0 temporaries.
+ */
+void gearsym_shift_8_9_mu_jac_u_sparse(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_8_9_mu_params *p,
+    gearsym_real *jac_u_nz);
+
+/**
  * Jacobian of the state derivative with respect to u (inputs), d xdot / d u (4 x 3), dense
  * column-major: jac_u[i + j*4] = d xdot_i / d u_j.
- * Operations: 0 add, 4 mul, 0 div, 0 calls; 0 temporaries (sympy.count_ops of the CSE'd form:
- * 12).
+ * Computes jac_u_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_u_sparse (0 add, 4 mul, 0 div, 0 calls); the spreading
+ * moves values only.
  */
 void gearsym_shift_8_9_mu_jac_u(
     const gearsym_real *x,
@@ -139,10 +182,24 @@ void gearsym_shift_8_9_mu_jac_u(
     gearsym_real *jac_u);
 
 /**
+ * Structural nonzeros of d xdot / d p (4 x 11, 17 of 44 entries) in compressed-column order:
+ * jac_p_nz[k] is entry (i, j) with i = gearsym_shift_8_9_mu_jac_p_rowind[k] and
+ * gearsym_shift_8_9_mu_jac_p_colptr[j] <= k < gearsym_shift_8_9_mu_jac_p_colptr[j+1]
+ * (GEARSYM_SHIFT_8_9_MU_JAC_P_NNZ values).
+ * Operations: 11 add, 47 mul, 2 div, 2 calls (cos 1, sin 1); 13 temporaries.
+ */
+void gearsym_shift_8_9_mu_jac_p_sparse(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_8_9_mu_params *p,
+    gearsym_real *jac_p_nz);
+
+/**
  * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
  * xdot / d p (4 x 11), dense column-major: jac_p[i + j*4] = d xdot_i / d p_j.
- * Operations: 11 add, 47 mul, 2 div, 2 calls (cos 1, sin 1); 13 temporaries (sympy.count_ops
- * of the CSE'd form: 90).
+ * Computes jac_p_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_p_sparse (11 add, 47 mul, 2 div, 2 calls (cos 1, sin
+ * 1)); the spreading moves values only.
  */
 void gearsym_shift_8_9_mu_jac_p(
     const gearsym_real *x,

@@ -65,10 +65,34 @@ static gearsym_real gearsym_shift_element_heaviside(gearsym_real v, gearsym_real
     return isnan(v) ? v : h0;
 }
 
+/* Compressed-column pattern of jac_x (see the header). */
+const int gearsym_shift_element_jac_x_colptr[GEARSYM_SHIFT_ELEMENT_NX + 1] = {
+    0, 1,
+};
+const int gearsym_shift_element_jac_x_rowind[GEARSYM_SHIFT_ELEMENT_JAC_X_NNZ] = {
+    0,
+};
+
+/* Compressed-column pattern of jac_u (see the header). */
+const int gearsym_shift_element_jac_u_colptr[GEARSYM_SHIFT_ELEMENT_NU + 1] = {
+    0, 1, 2, 3,
+};
+const int gearsym_shift_element_jac_u_rowind[GEARSYM_SHIFT_ELEMENT_JAC_U_NNZ] = {
+    0, 0, 0,
+};
+
+/* Compressed-column pattern of jac_p (see the header). */
+const int gearsym_shift_element_jac_p_colptr[GEARSYM_SHIFT_ELEMENT_NP + 1] = {
+    0, 1, 1, 2, 3, 4, 5,
+};
+const int gearsym_shift_element_jac_p_rowind[GEARSYM_SHIFT_ELEMENT_JAC_P_NNZ] = {
+    0, 0, 0, 0, 0,
+};
+
 /**
  * State derivative xdot = f(x, u, p). States: z [rad]. Inputs: dw [rad/s], F_N [N], mu [1].
  * Operations: 5 add, 16 mul, 3 div, 2 calls (fabs 1, sin 1), 3 select, 7 cmp, 4 logic; 5
- * temporaries (sympy.count_ops of the CSE'd form: 29).
+ * temporaries.
  */
 void gearsym_shift_element_rhs(
     const gearsym_real *restrict x,
@@ -81,13 +105,13 @@ void gearsym_shift_element_rhs(
     const gearsym_real t2 = (GEARSYM_LIT(1.0)/p->sigma0);
     const gearsym_real t3 = t1*t2;
     const gearsym_real t4 = t3*p->z_ba_ratio;
-    xdot[0] = u[0]*(-t0*p->sigma0*((isnan(t0) || isnan(t4) || isnan(u[0]*x[0]) || isnan(t3)) ? ((gearsym_real)NAN) : (((t0 <= t4) || (u[0]*x[0] <= GEARSYM_LIT(0.0))) ? GEARSYM_LIT(0.0) : ((t0 < t3) ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*GEARSYM_SIN(GEARSYM_LIT(3.14159265358979323846)*(t0 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t3 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t4)/(t1*t2 - t4)) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) : GEARSYM_LIT(1.0))))/t1 + GEARSYM_LIT(1.0));
+    xdot[0] = u[0]*(GEARSYM_LIT(1.0) - t0*p->sigma0*((isnan(t0) || isnan(t4) || isnan(u[0]*x[0]) || isnan(t3)) ? ((gearsym_real)NAN) : (((t0 <= t4) || (u[0]*x[0] <= GEARSYM_LIT(0.0))) ? GEARSYM_LIT(0.0) : ((t0 < t3) ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*GEARSYM_SIN(GEARSYM_LIT(3.14159265358979323846)*(t0 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t3 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t4)/(-t4 + t1*t2)) : GEARSYM_LIT(1.0))))/t1);
 }
 
 /**
  * Outputs y = h(x, u, p): T [N*m].
  * Operations: 6 add, 19 mul, 3 div, 3 calls (fabs 1, sign 1, sin 1), 5 select, 10 cmp, 5
- * logic; 5 temporaries (sympy.count_ops of the CSE'd form: 36).
+ * logic; 5 temporaries.
  */
 void gearsym_shift_element_outputs(
     const gearsym_real *restrict x,
@@ -100,20 +124,22 @@ void gearsym_shift_element_outputs(
     const gearsym_real t2 = (GEARSYM_LIT(1.0)/p->sigma0);
     const gearsym_real t3 = t0*t2;
     const gearsym_real t4 = t3*p->z_ba_ratio;
-    y[0] = u[0]*p->sigma1*gearsym_shift_element_max(GEARSYM_LIT(0.0), -t1*p->sigma0*((isnan(t1) || isnan(t4) || isnan(u[0]*x[0]) || isnan(t3)) ? ((gearsym_real)NAN) : (((t1 <= t4) || (u[0]*x[0] <= GEARSYM_LIT(0.0))) ? GEARSYM_LIT(0.0) : ((t1 < t3) ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*GEARSYM_SIN(GEARSYM_LIT(3.14159265358979323846)*(t1 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t3 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t4)/(t0*t2 - t4)) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) : GEARSYM_LIT(1.0))))/t0 + GEARSYM_LIT(1.0)) + ((isnan(t1) || isnan(t3)) ? ((gearsym_real)NAN) : ((t1 > t3) ? t0*gearsym_shift_element_sign(x[0]) : x[0]*p->sigma0));
+    y[0] = u[0]*p->sigma1*gearsym_shift_element_max(GEARSYM_LIT(0.0), GEARSYM_LIT(1.0) - t1*p->sigma0*((isnan(t1) || isnan(t4) || isnan(u[0]*x[0]) || isnan(t3)) ? ((gearsym_real)NAN) : (((t1 <= t4) || (u[0]*x[0] <= GEARSYM_LIT(0.0))) ? GEARSYM_LIT(0.0) : ((t1 < t3) ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*GEARSYM_SIN(GEARSYM_LIT(3.14159265358979323846)*(t1 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t3 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t4)/(-t4 + t0*t2)) : GEARSYM_LIT(1.0))))/t0) + ((isnan(t1) || isnan(t3)) ? ((gearsym_real)NAN) : ((t1 > t3) ? t0*gearsym_shift_element_sign(x[0]) : x[0]*p->sigma0));
 }
 
 /**
- * Jacobian of the state derivative with respect to x (states), d xdot / d x (1 x 1), dense
- * column-major: jac_x[i + j*1] = d xdot_i / d x_j.
+ * Structural nonzeros of d xdot / d x (1 x 1, 1 of 1 entries) in compressed-column order:
+ * jac_x_nz[k] is entry (i, j) with i = gearsym_shift_element_jac_x_rowind[k] and
+ * gearsym_shift_element_jac_x_colptr[j] <= k < gearsym_shift_element_jac_x_colptr[j+1]
+ * (GEARSYM_SHIFT_ELEMENT_JAC_X_NNZ values).
  * Operations: 5 add, 21 mul, 3 div, 4 calls (cos 1, fabs 1, sign 1, sin 1), 6 select, 11 cmp,
- * 7 logic; 10 temporaries (sympy.count_ops of the CSE'd form: 40).
+ * 7 logic; 10 temporaries.
  */
-void gearsym_shift_element_jac_x(
+void gearsym_shift_element_jac_x_sparse(
     const gearsym_real *restrict x,
     const gearsym_real *restrict u,
     const gearsym_shift_element_params *restrict p,
-    gearsym_real *restrict jac_x)
+    gearsym_real *restrict jac_x_nz)
 {
     const gearsym_real t0 = GEARSYM_FABS(x[0]);
     const gearsym_real t1 = (GEARSYM_LIT(1.0)/p->sigma0);
@@ -121,24 +147,43 @@ void gearsym_shift_element_jac_x(
     const gearsym_real t3 = t1*t2;
     const gearsym_real t4 = t3*p->z_ba_ratio;
     const int t5 = ((t0 <= t4) || (u[0]*x[0] <= GEARSYM_LIT(0.0)));
-    const gearsym_real t6 = GEARSYM_LIT(3.14159265358979323846)/(t1*t2 - t4);
+    const gearsym_real t6 = GEARSYM_LIT(3.14159265358979323846)/(-t4 + t1*t2);
     const gearsym_real t7 = t6*(t0 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t3 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t4);
     const int t8 = (t0 < t3);
     const gearsym_real t9 = p->sigma0/t2;
-    jac_x[0] = u[0]*(-t0*t9*((isnan(t0) || isnan(t4) || isnan(u[0]*x[0]) || isnan(t3)) ? ((gearsym_real)NAN) : (t5 ? GEARSYM_LIT(0.0) : (t8 ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t6*GEARSYM_COS(t7) : GEARSYM_LIT(0.0)))) - t9*((isnan(t0) || isnan(t4) || isnan(u[0]*x[0]) || isnan(t3)) ? ((gearsym_real)NAN) : (t5 ? GEARSYM_LIT(0.0) : (t8 ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*GEARSYM_SIN(t7) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) : GEARSYM_LIT(1.0)))))*gearsym_shift_element_sign(x[0]);
+    jac_x_nz[0] = u[0]*(-t9*((isnan(t0) || isnan(t4) || isnan(u[0]*x[0]) || isnan(t3)) ? ((gearsym_real)NAN) : (t5 ? GEARSYM_LIT(0.0) : (t8 ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*GEARSYM_SIN(t7) : GEARSYM_LIT(1.0)))) - t0*t9*((isnan(t0) || isnan(t4) || isnan(u[0]*x[0]) || isnan(t3)) ? ((gearsym_real)NAN) : (t5 ? GEARSYM_LIT(0.0) : (t8 ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t6*GEARSYM_COS(t7) : GEARSYM_LIT(0.0)))))*gearsym_shift_element_sign(x[0]);
 }
 
 /**
- * Jacobian of the state derivative with respect to u (inputs), d xdot / d u (1 x 3), dense
- * column-major: jac_u[i + j*1] = d xdot_i / d u_j.
- * Operations: 12 add, 59 mul, 5 div, 4 calls (Heaviside 1, cos 1, fabs 1, sin 1), 12 select,
- * 19 cmp, 13 logic; 24 temporaries (sympy.count_ops of the CSE'd form: 89).
+ * Jacobian of the state derivative with respect to x (states), d xdot / d x (1 x 1), dense
+ * column-major: jac_x[i + j*1] = d xdot_i / d x_j.
+ * Computes jac_x_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_x_sparse (5 add, 21 mul, 3 div, 4 calls (cos 1, fabs 1,
+ * sign 1, sin 1), 6 select, 11 cmp, 7 logic); the spreading moves values only.
  */
-void gearsym_shift_element_jac_u(
+void gearsym_shift_element_jac_x(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_element_params *p,
+    gearsym_real *jac_x)
+{
+    /* Every entry is a structural nonzero: the compressed-column order is the dense one. */
+    gearsym_shift_element_jac_x_sparse(x, u, p, jac_x);
+}
+
+/**
+ * Structural nonzeros of d xdot / d u (1 x 3, 3 of 3 entries) in compressed-column order:
+ * jac_u_nz[k] is entry (i, j) with i = gearsym_shift_element_jac_u_rowind[k] and
+ * gearsym_shift_element_jac_u_colptr[j] <= k < gearsym_shift_element_jac_u_colptr[j+1]
+ * (GEARSYM_SHIFT_ELEMENT_JAC_U_NNZ values).
+ * Operations: 12 add, 59 mul, 5 div, 4 calls (Heaviside 1, cos 1, fabs 1, sin 1), 12 select,
+ * 19 cmp, 13 logic; 24 temporaries.
+ */
+void gearsym_shift_element_jac_u_sparse(
     const gearsym_real *restrict x,
     const gearsym_real *restrict u,
     const gearsym_shift_element_params *restrict p,
-    gearsym_real *restrict jac_u)
+    gearsym_real *restrict jac_u_nz)
 {
     const gearsym_real t0 = GEARSYM_LIT(2.0)*u[2]*p->n_disc*p->r_m;
     const gearsym_real t1 = t0*u[1];
@@ -150,11 +195,11 @@ void gearsym_shift_element_jac_u(
     const gearsym_real t7 = t6*p->z_ba_ratio;
     const int t8 = ((t3 <= t7) || (u[0]*x[0] <= GEARSYM_LIT(0.0)));
     const gearsym_real t9 = t3 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t6 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t7;
-    const gearsym_real t10 = t2*t5 - t7;
+    const gearsym_real t10 = -t7 + t2*t5;
     const gearsym_real t11 = GEARSYM_LIT(3.14159265358979323846)/t10;
     const gearsym_real t12 = t11*t9;
     const int t13 = (t3 < t6);
-    const gearsym_real t14 = ((isnan(t3) || isnan(t7) || isnan(u[0]*x[0]) || isnan(t6)) ? ((gearsym_real)NAN) : (t8 ? GEARSYM_LIT(0.0) : (t13 ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*GEARSYM_SIN(t12) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) : GEARSYM_LIT(1.0))));
+    const gearsym_real t14 = ((isnan(t3) || isnan(t7) || isnan(u[0]*x[0]) || isnan(t6)) ? ((gearsym_real)NAN) : (t8 ? GEARSYM_LIT(0.0) : (t13 ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*GEARSYM_SIN(t12) : GEARSYM_LIT(1.0))));
     const gearsym_real t15 = GEARSYM_COS(t12);
     const gearsym_real t16 = gearsym_shift_element_heaviside(t1 - p->t_ss_min, (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)));
     const gearsym_real t17 = t16*t4*u[0];
@@ -162,24 +207,43 @@ void gearsym_shift_element_jac_u(
     const gearsym_real t19 = (GEARSYM_LIT(1.0)/(t10*t10));
     const gearsym_real t20 = (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t15;
     const gearsym_real t21 = t17*p->z_ba_ratio*((isnan(t3) || isnan(t7) || isnan(u[0]*x[0]) || isnan(t6)) ? ((gearsym_real)NAN) : (t8 ? GEARSYM_LIT(0.0) : (t13 ? t20*(-(GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t11 + GEARSYM_LIT(3.14159265358979323846)*t19*t9) : GEARSYM_LIT(0.0))));
-    const gearsym_real t22 = t14*t3*p->sigma0/(t2*t2) - t4*p->sigma0*((isnan(t3) || isnan(t7) || isnan(u[0]*x[0]) || isnan(t6)) ? ((gearsym_real)NAN) : (t8 ? GEARSYM_LIT(0.0) : (t13 ? -GEARSYM_LIT(3.14159265358979323846)*t19*t20*t5*t9 : GEARSYM_LIT(0.0))));
+    const gearsym_real t22 = -t4*p->sigma0*((isnan(t3) || isnan(t7) || isnan(u[0]*x[0]) || isnan(t6)) ? ((gearsym_real)NAN) : (t8 ? GEARSYM_LIT(0.0) : (t13 ? -GEARSYM_LIT(3.14159265358979323846)*t19*t20*t5*t9 : GEARSYM_LIT(0.0)))) + t14*t3*p->sigma0/(t2*t2);
     const gearsym_real t23 = GEARSYM_LIT(2.0)*u[1]*p->n_disc*p->r_m;
-    jac_u[0] = -t14*t4*p->sigma0 + GEARSYM_LIT(1.0);
-    jac_u[1] = GEARSYM_LIT(2.0)*t16*t22*u[0]*u[2]*p->n_disc*p->r_m - t0*t18 - t0*t21;
-    jac_u[2] = GEARSYM_LIT(2.0)*t16*t22*u[1]*u[0]*p->n_disc*p->r_m - t18*t23 - t21*t23;
+    jac_u_nz[0] = GEARSYM_LIT(1.0) - t14*t4*p->sigma0;
+    jac_u_nz[1] = -t0*t18 - t0*t21 + GEARSYM_LIT(2.0)*t16*t22*u[0]*u[2]*p->n_disc*p->r_m;
+    jac_u_nz[2] = -t18*t23 - t21*t23 + GEARSYM_LIT(2.0)*t16*t22*u[1]*u[0]*p->n_disc*p->r_m;
 }
 
 /**
- * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
- * xdot / d p (1 x 6), dense column-major: jac_p[i + j*1] = d xdot_i / d p_j.
- * Operations: 16 add, 73 mul, 5 div, 5 calls (Heaviside 2, cos 1, fabs 1, sin 1), 15 select,
- * 23 cmp, 16 logic; 34 temporaries (sympy.count_ops of the CSE'd form: 112).
+ * Jacobian of the state derivative with respect to u (inputs), d xdot / d u (1 x 3), dense
+ * column-major: jac_u[i + j*1] = d xdot_i / d u_j.
+ * Computes jac_u_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_u_sparse (12 add, 59 mul, 5 div, 4 calls (Heaviside 1,
+ * cos 1, fabs 1, sin 1), 12 select, 19 cmp, 13 logic); the spreading moves values only.
  */
-void gearsym_shift_element_jac_p(
+void gearsym_shift_element_jac_u(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_element_params *p,
+    gearsym_real *jac_u)
+{
+    /* Every entry is a structural nonzero: the compressed-column order is the dense one. */
+    gearsym_shift_element_jac_u_sparse(x, u, p, jac_u);
+}
+
+/**
+ * Structural nonzeros of d xdot / d p (1 x 6, 5 of 6 entries) in compressed-column order:
+ * jac_p_nz[k] is entry (i, j) with i = gearsym_shift_element_jac_p_rowind[k] and
+ * gearsym_shift_element_jac_p_colptr[j] <= k < gearsym_shift_element_jac_p_colptr[j+1]
+ * (GEARSYM_SHIFT_ELEMENT_JAC_P_NNZ values).
+ * Operations: 16 add, 73 mul, 5 div, 5 calls (Heaviside 2, cos 1, fabs 1, sin 1), 15 select,
+ * 23 cmp, 16 logic; 34 temporaries.
+ */
+void gearsym_shift_element_jac_p_sparse(
     const gearsym_real *restrict x,
     const gearsym_real *restrict u,
     const gearsym_shift_element_params *restrict p,
-    gearsym_real *restrict jac_p)
+    gearsym_real *restrict jac_p_nz)
 {
     const gearsym_real t0 = GEARSYM_FABS(x[0]);
     const gearsym_real t1 = (GEARSYM_LIT(1.0)/p->sigma0);
@@ -190,11 +254,11 @@ void gearsym_shift_element_jac_p(
     const gearsym_real t6 = t5*p->z_ba_ratio;
     const int t7 = ((t0 <= t6) || (u[0]*x[0] <= GEARSYM_LIT(0.0)));
     const gearsym_real t8 = t0 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t5 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t6;
-    const gearsym_real t9 = t1*t4 - t6;
+    const gearsym_real t9 = -t6 + t1*t4;
     const gearsym_real t10 = GEARSYM_LIT(3.14159265358979323846)/t9;
     const gearsym_real t11 = t10*t8;
     const int t12 = (t0 < t5);
-    const gearsym_real t13 = ((isnan(t0) || isnan(t6) || isnan(u[0]*x[0]) || isnan(t5)) ? ((gearsym_real)NAN) : (t7 ? GEARSYM_LIT(0.0) : (t12 ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*GEARSYM_SIN(t11) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) : GEARSYM_LIT(1.0))));
+    const gearsym_real t13 = ((isnan(t0) || isnan(t6) || isnan(u[0]*x[0]) || isnan(t5)) ? ((gearsym_real)NAN) : (t7 ? GEARSYM_LIT(0.0) : (t12 ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*GEARSYM_SIN(t11) : GEARSYM_LIT(1.0))));
     const gearsym_real t14 = (GEARSYM_LIT(1.0)/t4);
     const gearsym_real t15 = t0*u[0];
     const gearsym_real t16 = t14*t15;
@@ -215,12 +279,46 @@ void gearsym_shift_element_jac_p(
     const gearsym_real t31 = t27*t30;
     const gearsym_real t32 = t28*t30;
     const gearsym_real t33 = GEARSYM_LIT(2.0)*u[1]*u[2]*p->n_disc;
-    jac_p[0] = t1*t24 - t13*t16 + t14*t19*((isnan(t0) || isnan(t6) || isnan(u[0]*x[0]) || isnan(t5)) ? ((gearsym_real)NAN) : (t7 ? GEARSYM_LIT(0.0) : (t12 ? -t22*t4 : GEARSYM_LIT(0.0)))) + t18*t19;
-    jac_p[1] = GEARSYM_LIT(0.0);
-    jac_p[2] = -t23;
-    jac_p[3] = t26*t29*u[0] - t26*t27 - t26*t28;
-    jac_p[4] = GEARSYM_LIT(2.0)*t29*t30*u[1]*u[0]*u[2]*p->r_m - t2*t31 - t2*t32;
-    jac_p[5] = GEARSYM_LIT(2.0)*t29*t30*u[1]*u[0]*u[2]*p->n_disc - t31*t33 - t32*t33;
+    jac_p_nz[0] = t1*t24 + t18*t19 - t13*t16 + t14*t19*((isnan(t0) || isnan(t6) || isnan(u[0]*x[0]) || isnan(t5)) ? ((gearsym_real)NAN) : (t7 ? GEARSYM_LIT(0.0) : (t12 ? -t22*t4 : GEARSYM_LIT(0.0))));
+    jac_p_nz[1] = -t23;
+    jac_p_nz[2] = -t26*t27 - t26*t28 + t26*t29*u[0];
+    jac_p_nz[3] = -t2*t31 - t2*t32 + GEARSYM_LIT(2.0)*t29*t30*u[1]*u[0]*u[2]*p->r_m;
+    jac_p_nz[4] = -t31*t33 - t32*t33 + GEARSYM_LIT(2.0)*t29*t30*u[1]*u[0]*u[2]*p->n_disc;
+}
+
+/**
+ * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
+ * xdot / d p (1 x 6), dense column-major: jac_p[i + j*1] = d xdot_i / d p_j.
+ * Computes jac_p_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_p_sparse (16 add, 73 mul, 5 div, 5 calls (Heaviside 2,
+ * cos 1, fabs 1, sin 1), 15 select, 23 cmp, 16 logic); the spreading moves values only.
+ */
+void gearsym_shift_element_jac_p(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_element_params *p,
+    gearsym_real *jac_p)
+{
+    int i;
+    int j;
+    int k = GEARSYM_SHIFT_ELEMENT_JAC_P_NNZ - 1;
+
+    gearsym_shift_element_jac_p_sparse(x, u, p, jac_p);
+    /*
+     * Spread in place, last value first. Value k belongs at i + j*rows >= k (the values are in
+     * column-major order), so each value is read before its slot is written, and a slot set to
+     * 0 lies above every value still unread.
+     */
+    for (j = GEARSYM_SHIFT_ELEMENT_NP - 1; j >= 0; --j) {
+        for (i = GEARSYM_SHIFT_ELEMENT_NX - 1; i >= 0; --i) {
+            if (k >= gearsym_shift_element_jac_p_colptr[j] && gearsym_shift_element_jac_p_rowind[k] == i) {
+                jac_p[i + j * GEARSYM_SHIFT_ELEMENT_NX] = jac_p[k];
+                --k;
+            } else {
+                jac_p[i + j * GEARSYM_SHIFT_ELEMENT_NX] = GEARSYM_LIT(0.0);
+            }
+        }
+    }
 }
 
 /**

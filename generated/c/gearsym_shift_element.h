@@ -7,6 +7,7 @@
  * Conventions
  *   x: states (GEARSYM_SHIFT_ELEMENT_NX), u: inputs (GEARSYM_SHIFT_ELEMENT_NU), p: parameter struct.
  *   Matrices are dense column-major: entry (i, j) of an r x c matrix is element [i + j*r].
+ *   jac_*_sparse hold only the structural nonzeros, in compressed-column order (pattern below).
  *   gearsym_real is double; define GEARSYM_SINGLE_PRECISION (for this file and the .c) for float.
  *   Output arrays must not alias inputs, except x_next of the step functions, which may alias x.
  *   C99, no dynamic memory, no mutable static data, no recursion; all work arrays on the stack.
@@ -65,6 +66,22 @@ typedef double gearsym_real;
 #define GEARSYM_SHIFT_ELEMENT_Y_T 0 /* [N*m]; element torque T_Cl (2.67) */
 
 /*
+ * Sparsity of the Jacobians, compressed columns (CasADi's layout): gearsym_shift_element_jac_<v>_sparse()
+ * writes the values of column j of d xdot / d <v> to entries colptr[j] .. colptr[j+1]-1, in rows
+ * rowind[k] (increasing), of its output. NNZ counts the structural nonzeros (every other entry
+ * is identically 0); rowind has NNZ entries (a single unused 0 when NNZ is 0).
+ */
+#define GEARSYM_SHIFT_ELEMENT_JAC_X_NNZ 1 /* of 1 entries (NX x NX) */
+extern const int gearsym_shift_element_jac_x_colptr[GEARSYM_SHIFT_ELEMENT_NX + 1];
+extern const int gearsym_shift_element_jac_x_rowind[];
+#define GEARSYM_SHIFT_ELEMENT_JAC_U_NNZ 3 /* of 3 entries (NX x NU) */
+extern const int gearsym_shift_element_jac_u_colptr[GEARSYM_SHIFT_ELEMENT_NU + 1];
+extern const int gearsym_shift_element_jac_u_rowind[];
+#define GEARSYM_SHIFT_ELEMENT_JAC_P_NNZ 5 /* of 6 entries (NX x NP) */
+extern const int gearsym_shift_element_jac_p_colptr[GEARSYM_SHIFT_ELEMENT_NP + 1];
+extern const int gearsym_shift_element_jac_p_rowind[];
+
+/*
  * Model parameters: fill with gearsym_shift_element_params_default(),
  * check with gearsym_shift_element_params_validate().
  */
@@ -80,7 +97,7 @@ typedef struct gearsym_shift_element_params {
 /**
  * State derivative xdot = f(x, u, p). States: z [rad]. Inputs: dw [rad/s], F_N [N], mu [1].
  * Operations: 5 add, 16 mul, 3 div, 2 calls (fabs 1, sin 1), 3 select, 7 cmp, 4 logic; 5
- * temporaries (sympy.count_ops of the CSE'd form: 29).
+ * temporaries.
  */
 void gearsym_shift_element_rhs(
     const gearsym_real *x,
@@ -91,7 +108,7 @@ void gearsym_shift_element_rhs(
 /**
  * Outputs y = h(x, u, p): T [N*m].
  * Operations: 6 add, 19 mul, 3 div, 3 calls (fabs 1, sign 1, sin 1), 5 select, 10 cmp, 5
- * logic; 5 temporaries (sympy.count_ops of the CSE'd form: 36).
+ * logic; 5 temporaries.
  */
 void gearsym_shift_element_outputs(
     const gearsym_real *x,
@@ -100,10 +117,25 @@ void gearsym_shift_element_outputs(
     gearsym_real *y);
 
 /**
+ * Structural nonzeros of d xdot / d x (1 x 1, 1 of 1 entries) in compressed-column order:
+ * jac_x_nz[k] is entry (i, j) with i = gearsym_shift_element_jac_x_rowind[k] and
+ * gearsym_shift_element_jac_x_colptr[j] <= k < gearsym_shift_element_jac_x_colptr[j+1]
+ * (GEARSYM_SHIFT_ELEMENT_JAC_X_NNZ values).
+ * Operations: 5 add, 21 mul, 3 div, 4 calls (cos 1, fabs 1, sign 1, sin 1), 6 select, 11 cmp,
+ * 7 logic; 10 temporaries.
+ */
+void gearsym_shift_element_jac_x_sparse(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_element_params *p,
+    gearsym_real *jac_x_nz);
+
+/**
  * Jacobian of the state derivative with respect to x (states), d xdot / d x (1 x 1), dense
  * column-major: jac_x[i + j*1] = d xdot_i / d x_j.
- * Operations: 5 add, 21 mul, 3 div, 4 calls (cos 1, fabs 1, sign 1, sin 1), 6 select, 11 cmp,
- * 7 logic; 10 temporaries (sympy.count_ops of the CSE'd form: 40).
+ * Computes jac_x_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_x_sparse (5 add, 21 mul, 3 div, 4 calls (cos 1, fabs 1,
+ * sign 1, sin 1), 6 select, 11 cmp, 7 logic); the spreading moves values only.
  */
 void gearsym_shift_element_jac_x(
     const gearsym_real *x,
@@ -112,10 +144,25 @@ void gearsym_shift_element_jac_x(
     gearsym_real *jac_x);
 
 /**
+ * Structural nonzeros of d xdot / d u (1 x 3, 3 of 3 entries) in compressed-column order:
+ * jac_u_nz[k] is entry (i, j) with i = gearsym_shift_element_jac_u_rowind[k] and
+ * gearsym_shift_element_jac_u_colptr[j] <= k < gearsym_shift_element_jac_u_colptr[j+1]
+ * (GEARSYM_SHIFT_ELEMENT_JAC_U_NNZ values).
+ * Operations: 12 add, 59 mul, 5 div, 4 calls (Heaviside 1, cos 1, fabs 1, sin 1), 12 select,
+ * 19 cmp, 13 logic; 24 temporaries.
+ */
+void gearsym_shift_element_jac_u_sparse(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_element_params *p,
+    gearsym_real *jac_u_nz);
+
+/**
  * Jacobian of the state derivative with respect to u (inputs), d xdot / d u (1 x 3), dense
  * column-major: jac_u[i + j*1] = d xdot_i / d u_j.
- * Operations: 12 add, 59 mul, 5 div, 4 calls (Heaviside 1, cos 1, fabs 1, sin 1), 12 select,
- * 19 cmp, 13 logic; 24 temporaries (sympy.count_ops of the CSE'd form: 89).
+ * Computes jac_u_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_u_sparse (12 add, 59 mul, 5 div, 4 calls (Heaviside 1,
+ * cos 1, fabs 1, sin 1), 12 select, 19 cmp, 13 logic); the spreading moves values only.
  */
 void gearsym_shift_element_jac_u(
     const gearsym_real *x,
@@ -124,10 +171,25 @@ void gearsym_shift_element_jac_u(
     gearsym_real *jac_u);
 
 /**
+ * Structural nonzeros of d xdot / d p (1 x 6, 5 of 6 entries) in compressed-column order:
+ * jac_p_nz[k] is entry (i, j) with i = gearsym_shift_element_jac_p_rowind[k] and
+ * gearsym_shift_element_jac_p_colptr[j] <= k < gearsym_shift_element_jac_p_colptr[j+1]
+ * (GEARSYM_SHIFT_ELEMENT_JAC_P_NNZ values).
+ * Operations: 16 add, 73 mul, 5 div, 5 calls (Heaviside 2, cos 1, fabs 1, sin 1), 15 select,
+ * 23 cmp, 16 logic; 34 temporaries.
+ */
+void gearsym_shift_element_jac_p_sparse(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_shift_element_params *p,
+    gearsym_real *jac_p_nz);
+
+/**
  * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
  * xdot / d p (1 x 6), dense column-major: jac_p[i + j*1] = d xdot_i / d p_j.
- * Operations: 16 add, 73 mul, 5 div, 5 calls (Heaviside 2, cos 1, fabs 1, sin 1), 15 select,
- * 23 cmp, 16 logic; 34 temporaries (sympy.count_ops of the CSE'd form: 112).
+ * Computes jac_p_sparse into the first NNZ entries and spreads them in place; every other
+ * entry is 0. Operations: those of jac_p_sparse (16 add, 73 mul, 5 div, 5 calls (Heaviside 2,
+ * cos 1, fabs 1, sin 1), 15 select, 23 cmp, 16 logic); the spreading moves values only.
  */
 void gearsym_shift_element_jac_p(
     const gearsym_real *x,

@@ -30,12 +30,12 @@ def _rhs(x: Any, u: Any, p: Any) -> list[Any]:
     t0 = x[1]*p[2]
     t1 = x[3]*p[2]
     t2 = x[2]*p[1]
-    t3 = (1000.0/2469.0)*x[1] - x[3]
+    t3 = -x[3] + (1000.0/2469.0)*x[1]
     xdot = ca.SX(4, 1)
-    xdot[0, 0] = 17.0201028515756499522*u[2] + 10.6883443030696865936*u[0] + 2.78597376134262387781*u[1] - 0.799402834226086530854*t0 + 1.97372559770420764468*t1 - 1.97372559770420764468*t2
-    xdot[1, 0] = 2.40597677423938190485*u[2] + 2.43656425036584433736*u[0] - 0.0134584894956434703021*u[1] - 0.247843999698803434174*t0 + 0.611926835256345678975*t1 - 0.611926835256345678975*t2
+    xdot[0, 0] = -1.97372559770420764468*t2 - 0.799402834226086530854*t0 + 1.97372559770420764468*t1 + 2.78597376134262387781*u[1] + 10.6883443030696865936*u[0] + 17.0201028515756499522*u[2]
+    xdot[1, 0] = -0.611926835256345678975*t2 - 0.247843999698803434174*t0 - 0.0134584894956434703021*u[1] + 0.611926835256345678975*t1 + 2.40597677423938190485*u[2] + 2.43656425036584433736*u[0]
     xdot[2, 0] = t3
-    xdot[3, 0] = (-0.0177569804515000000000*p[7]*p[6]*p[5]*x[3]**2 + 2.0*t3*p[2] - 1.05990859890000000000*x[3]*p[8]*p[0]*ca.cos(p[3]) + 2.0*x[2]*p[1] - (3224547.0/1000000.0)*p[0]*ca.sin(p[3]))/(p[4] + 0.108043690000000000000*p[0])
+    xdot[3, 0] = (2.0*t3*p[2] + 2.0*x[2]*p[1] - (3224547.0/1000000.0)*p[0]*ca.sin(p[3]) - 0.0177569804515000000000*p[7]*p[6]*p[5]*x[3]**2 - 1.05990859890000000000*x[3]*p[8]*p[0]*ca.cos(p[3]))/(p[4] + 0.108043690000000000000*p[0])
     return [xdot]
 
 
@@ -49,7 +49,7 @@ def _outputs(x: Any, u: Any, p: Any) -> list[Any]:
 
 
 def _jac_x(x: Any, u: Any, p: Any) -> list[Any]:
-    """Jacobian of the state derivative with respect to x (states), d xdot / d x (4 x 4), dense column-major: jac_x[i + j*4] = d xdot_i / d x_j."""
+    """Jacobian of the state derivative with respect to x (states), d xdot / d x (4 x 4), dense column-major: jac_x[i + j*4] = d xdot_i / d x_j. Sparse: the 11 structural nonzeros of the C code's pattern."""
     t0 = (p[4] + 0.108043690000000000000*p[0])**(-1)
     t1 = t0*p[2]
     jac_x = ca.SX(4, 4)
@@ -63,12 +63,12 @@ def _jac_x(x: Any, u: Any, p: Any) -> list[Any]:
     jac_x[0, 3] = 1.97372559770420764468*p[2]
     jac_x[1, 3] = 0.611926835256345678975*p[2]
     jac_x[2, 3] = -1.0
-    jac_x[3, 3] = t0*(-0.0355139609030000000000*x[3]*p[7]*p[6]*p[5] - 1.05990859890000000000*p[8]*p[0]*ca.cos(p[3])) - 2.0*t1
+    jac_x[3, 3] = -2.0*t1 + t0*(-1.05990859890000000000*p[8]*p[0]*ca.cos(p[3]) - 0.0355139609030000000000*x[3]*p[7]*p[6]*p[5])
     return [jac_x]
 
 
 def _jac_u(x: Any, u: Any, p: Any) -> list[Any]:
-    """Jacobian of the state derivative with respect to u (inputs), d xdot / d u (4 x 3), dense column-major: jac_u[i + j*4] = d xdot_i / d u_j."""
+    """Jacobian of the state derivative with respect to u (inputs), d xdot / d u (4 x 3), dense column-major: jac_u[i + j*4] = d xdot_i / d u_j. Sparse: the 6 structural nonzeros of the C code's pattern."""
     jac_u = ca.SX(4, 3)
     jac_u[0, 0] = 10.6883443030696865936
     jac_u[1, 0] = 2.43656425036584433736
@@ -80,7 +80,7 @@ def _jac_u(x: Any, u: Any, p: Any) -> list[Any]:
 
 
 def _jac_p(x: Any, u: Any, p: Any) -> list[Any]:
-    """Jacobian of the state derivative with respect to p (parameters, in struct field order), d xdot / d p (4 x 9), dense column-major: jac_p[i + j*4] = d xdot_i / d p_j."""
+    """Jacobian of the state derivative with respect to p (parameters, in struct field order), d xdot / d p (4 x 9), dense column-major: jac_p[i + j*4] = d xdot_i / d p_j. Sparse: the 13 structural nonzeros of the C code's pattern."""
     t0 = p[4] + 0.108043690000000000000*p[0]
     t1 = t0**(-1)
     t2 = ca.sin(p[3])
@@ -91,18 +91,18 @@ def _jac_p(x: Any, u: Any, p: Any) -> list[Any]:
     t7 = t4*p[0]
     t8 = x[3]**2
     t9 = 0.0177569804515000000000*t8*p[7]*p[6]
-    t10 = (1000.0/2469.0)*x[1] - x[3]
-    t11 = (2.0*t10*p[2] + 2.0*x[2]*p[1] - t3*p[0] - t9*p[5] - t6*t7)/t0**2
+    t10 = -x[3] + (1000.0/2469.0)*x[1]
+    t11 = (-t3*p[0] - t6*t7 - t9*p[5] + 2.0*t10*p[2] + 2.0*x[2]*p[1])/t0**2
     t12 = 0.0177569804515000000000*t1*t8*p[5]
     jac_p = ca.SX(4, 9)
-    jac_p[3, 0] = t1*(-t3 - t4*t6) - 0.108043690000000000000*t11
+    jac_p[3, 0] = -0.108043690000000000000*t11 + t1*(-t3 - t4*t6)
     jac_p[0, 1] = -1.97372559770420764468*x[2]
     jac_p[1, 1] = -0.611926835256345678975*x[2]
     jac_p[3, 1] = 2.0*t1*x[2]
     jac_p[0, 2] = -0.799402834226086530854*x[1] + 1.97372559770420764468*x[3]
     jac_p[1, 2] = -0.247843999698803434174*x[1] + 0.611926835256345678975*x[3]
     jac_p[3, 2] = 2.0*t1*t10
-    jac_p[3, 3] = t1*(t2*t6*p[0] - (3224547.0/1000000.0)*t7)
+    jac_p[3, 3] = t1*(-(3224547.0/1000000.0)*t7 + t2*t6*p[0])
     jac_p[3, 4] = -t11
     jac_p[3, 5] = -t1*t9
     jac_p[3, 6] = -t12*p[7]

@@ -32,12 +32,12 @@ def _rhs(x: Any, u: Any, p: Any) -> list[Any]:
     t2 = x[1]*p[2]
     t3 = x[3]*p[2]
     t4 = x[2]*p[1]
-    t5 = (1000.0/2469.0)*x[1] - x[3]
+    t5 = -x[3] + (1000.0/2469.0)*x[1]
     xdot = ca.SX(4, 1)
-    xdot[0, 0] = 4.55838742437608803876*u[0] + 7.92262272467218783468*t0 + 1.93527419763802894491*t1 - 1.75611480518437338205*t2 + 4.33584745400021788027*t3 - 4.33584745400021788027*t4
-    xdot[1, 0] = 5.35260368196326897319*u[0] + 11.9423224304450387529*t0 + 3.31461828523869922006*t1 - 2.34250042328900292650*t2 + 5.78363354510054822552*t3 - 5.78363354510054822552*t4
+    xdot[0, 0] = -1.75611480518437338205*t2 - 4.33584745400021788027*t4 + 1.93527419763802894491*t1 + 4.33584745400021788027*t3 + 4.55838742437608803876*u[0] + 7.92262272467218783468*t0
+    xdot[1, 0] = -5.78363354510054822552*t4 - 2.34250042328900292650*t2 + 3.31461828523869922006*t1 + 5.35260368196326897319*u[0] + 5.78363354510054822552*t3 + 11.9423224304450387529*t0
     xdot[2, 0] = t5
-    xdot[3, 0] = (-0.0177569804515000000000*p[7]*p[6]*p[5]*x[3]**2 + 2.0*t5*p[2] - 1.05990859890000000000*x[3]*p[8]*p[0]*ca.cos(p[3]) + 2.0*x[2]*p[1] - (3224547.0/1000000.0)*p[0]*ca.sin(p[3]))/(p[4] + 0.108043690000000000000*p[0])
+    xdot[3, 0] = (2.0*t5*p[2] + 2.0*x[2]*p[1] - (3224547.0/1000000.0)*p[0]*ca.sin(p[3]) - 0.0177569804515000000000*p[7]*p[6]*p[5]*x[3]**2 - 1.05990859890000000000*x[3]*p[8]*p[0]*ca.cos(p[3]))/(p[4] + 0.108043690000000000000*p[0])
     return [xdot]
 
 
@@ -46,13 +46,13 @@ def _outputs(x: Any, u: Any, p: Any) -> list[Any]:
     y = ca.SX(4, 1)
     y[0, 0] = x[0]
     y[1, 0] = x[1]
-    y[2, 0] = (3649.0/1836.0)*x[0] - (52675.0/44064.0)*x[1]
+    y[2, 0] = -(52675.0/44064.0)*x[1] + (3649.0/1836.0)*x[0]
     y[3, 0] = x[3]
     return [y]
 
 
 def _jac_x(x: Any, u: Any, p: Any) -> list[Any]:
-    """Jacobian of the state derivative with respect to x (states), d xdot / d x (4 x 4), dense column-major: jac_x[i + j*4] = d xdot_i / d x_j."""
+    """Jacobian of the state derivative with respect to x (states), d xdot / d x (4 x 4), dense column-major: jac_x[i + j*4] = d xdot_i / d x_j. Sparse: the 11 structural nonzeros of the C code's pattern."""
     t0 = (p[4] + 0.108043690000000000000*p[0])**(-1)
     t1 = t0*p[2]
     jac_x = ca.SX(4, 4)
@@ -66,12 +66,12 @@ def _jac_x(x: Any, u: Any, p: Any) -> list[Any]:
     jac_x[0, 3] = 4.33584745400021788027*p[2]
     jac_x[1, 3] = 5.78363354510054822552*p[2]
     jac_x[2, 3] = -1.0
-    jac_x[3, 3] = t0*(-0.0355139609030000000000*x[3]*p[7]*p[6]*p[5] - 1.05990859890000000000*p[8]*p[0]*ca.cos(p[3])) - 2.0*t1
+    jac_x[3, 3] = -2.0*t1 + t0*(-1.05990859890000000000*p[8]*p[0]*ca.cos(p[3]) - 0.0355139609030000000000*x[3]*p[7]*p[6]*p[5])
     return [jac_x]
 
 
 def _jac_u(x: Any, u: Any, p: Any) -> list[Any]:
-    """Jacobian of the state derivative with respect to u (inputs), d xdot / d u (4 x 3), dense column-major: jac_u[i + j*4] = d xdot_i / d u_j."""
+    """Jacobian of the state derivative with respect to u (inputs), d xdot / d u (4 x 3), dense column-major: jac_u[i + j*4] = d xdot_i / d u_j. Sparse: the 6 structural nonzeros of the C code's pattern."""
     jac_u = ca.SX(4, 3)
     jac_u[0, 0] = 4.55838742437608803876
     jac_u[1, 0] = 5.35260368196326897319
@@ -83,7 +83,7 @@ def _jac_u(x: Any, u: Any, p: Any) -> list[Any]:
 
 
 def _jac_p(x: Any, u: Any, p: Any) -> list[Any]:
-    """Jacobian of the state derivative with respect to p (parameters, in struct field order), d xdot / d p (4 x 11), dense column-major: jac_p[i + j*4] = d xdot_i / d p_j."""
+    """Jacobian of the state derivative with respect to p (parameters, in struct field order), d xdot / d p (4 x 11), dense column-major: jac_p[i + j*4] = d xdot_i / d p_j. Sparse: the 17 structural nonzeros of the C code's pattern."""
     t0 = p[4] + 0.108043690000000000000*p[0]
     t1 = t0**(-1)
     t2 = ca.sin(p[3])
@@ -94,18 +94,18 @@ def _jac_p(x: Any, u: Any, p: Any) -> list[Any]:
     t7 = t4*p[0]
     t8 = x[3]**2
     t9 = 0.0177569804515000000000*t8*p[7]*p[6]
-    t10 = (1000.0/2469.0)*x[1] - x[3]
-    t11 = (2.0*t10*p[2] + 2.0*x[2]*p[1] - t3*p[0] - t9*p[5] - t6*t7)/t0**2
+    t10 = -x[3] + (1000.0/2469.0)*x[1]
+    t11 = (-t3*p[0] - t6*t7 - t9*p[5] + 2.0*t10*p[2] + 2.0*x[2]*p[1])/t0**2
     t12 = 0.0177569804515000000000*t1*t8*p[5]
     jac_p = ca.SX(4, 11)
-    jac_p[3, 0] = t1*(-t3 - t4*t6) - 0.108043690000000000000*t11
+    jac_p[3, 0] = -0.108043690000000000000*t11 + t1*(-t3 - t4*t6)
     jac_p[0, 1] = -4.33584745400021788027*x[2]
     jac_p[1, 1] = -5.78363354510054822552*x[2]
     jac_p[3, 1] = 2.0*t1*x[2]
     jac_p[0, 2] = -1.75611480518437338205*x[1] + 4.33584745400021788027*x[3]
     jac_p[1, 2] = -2.34250042328900292650*x[1] + 5.78363354510054822552*x[3]
     jac_p[3, 2] = 2.0*t1*t10
-    jac_p[3, 3] = t1*(t2*t6*p[0] - (3224547.0/1000000.0)*t7)
+    jac_p[3, 3] = t1*(-(3224547.0/1000000.0)*t7 + t2*t6*p[0])
     jac_p[3, 4] = -t11
     jac_p[3, 5] = -t1*t9
     jac_p[3, 6] = -t12*p[7]

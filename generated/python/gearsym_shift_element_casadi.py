@@ -52,7 +52,7 @@ def _rhs(x: Any, u: Any, p: Any) -> list[Any]:
     t3 = t1*t2
     t4 = t3*p[2]
     xdot = ca.SX(1, 1)
-    xdot[0, 0] = u[0]*(-t0*p[0]*_nan_guard((t0, t4, u[0]*x[0], t3), ca.if_else(ca.logic_or((t0 <= t4), (u[0]*x[0] <= 0.0)), 0.0, ca.if_else((t0 < t3), (1.0/2.0)*ca.sin(3.14159265358979323846*(t0 - (1.0/2.0)*t3 - (1.0/2.0)*t4)/(t1*t2 - t4)) + (1.0/2.0), 1.0)))/t1 + 1.0)
+    xdot[0, 0] = u[0]*(1.0 - t0*p[0]*_nan_guard((t0, t4, u[0]*x[0], t3), ca.if_else(ca.logic_or((t0 <= t4), (u[0]*x[0] <= 0.0)), 0.0, ca.if_else((t0 < t3), (1.0/2.0) + (1.0/2.0)*ca.sin(3.14159265358979323846*(t0 - (1.0/2.0)*t3 - (1.0/2.0)*t4)/(-t4 + t1*t2)), 1.0)))/t1)
     return [xdot]
 
 
@@ -64,29 +64,29 @@ def _outputs(x: Any, u: Any, p: Any) -> list[Any]:
     t3 = t0*t2
     t4 = t3*p[2]
     y = ca.SX(1, 1)
-    y[0, 0] = u[0]*p[1]*_max(0.0, -t1*p[0]*_nan_guard((t1, t4, u[0]*x[0], t3), ca.if_else(ca.logic_or((t1 <= t4), (u[0]*x[0] <= 0.0)), 0.0, ca.if_else((t1 < t3), (1.0/2.0)*ca.sin(3.14159265358979323846*(t1 - (1.0/2.0)*t3 - (1.0/2.0)*t4)/(t0*t2 - t4)) + (1.0/2.0), 1.0)))/t0 + 1.0) + _nan_guard((t1, t3), ca.if_else((t1 > t3), t0*ca.sign(x[0]), x[0]*p[0]))
+    y[0, 0] = u[0]*p[1]*_max(0.0, 1.0 - t1*p[0]*_nan_guard((t1, t4, u[0]*x[0], t3), ca.if_else(ca.logic_or((t1 <= t4), (u[0]*x[0] <= 0.0)), 0.0, ca.if_else((t1 < t3), (1.0/2.0) + (1.0/2.0)*ca.sin(3.14159265358979323846*(t1 - (1.0/2.0)*t3 - (1.0/2.0)*t4)/(-t4 + t0*t2)), 1.0)))/t0) + _nan_guard((t1, t3), ca.if_else((t1 > t3), t0*ca.sign(x[0]), x[0]*p[0]))
     return [y]
 
 
 def _jac_x(x: Any, u: Any, p: Any) -> list[Any]:
-    """Jacobian of the state derivative with respect to x (states), d xdot / d x (1 x 1), dense column-major: jac_x[i + j*1] = d xdot_i / d x_j."""
+    """Jacobian of the state derivative with respect to x (states), d xdot / d x (1 x 1), dense column-major: jac_x[i + j*1] = d xdot_i / d x_j. Sparse: the 1 structural nonzeros of the C code's pattern."""
     t0 = ca.fabs(x[0])
     t1 = p[0]**(-1)
     t2 = _max(p[3], 2.0*u[1]*u[2]*p[4]*p[5])
     t3 = t1*t2
     t4 = t3*p[2]
     t5 = ca.logic_or((t0 <= t4), (u[0]*x[0] <= 0.0))
-    t6 = 3.14159265358979323846/(t1*t2 - t4)
+    t6 = 3.14159265358979323846/(-t4 + t1*t2)
     t7 = t6*(t0 - (1.0/2.0)*t3 - (1.0/2.0)*t4)
     t8 = (t0 < t3)
     t9 = p[0]/t2
     jac_x = ca.SX(1, 1)
-    jac_x[0, 0] = u[0]*(-t0*t9*_nan_guard((t0, t4, u[0]*x[0], t3), ca.if_else(t5, 0.0, ca.if_else(t8, (1.0/2.0)*t6*ca.cos(t7), 0.0))) - t9*_nan_guard((t0, t4, u[0]*x[0], t3), ca.if_else(t5, 0.0, ca.if_else(t8, (1.0/2.0)*ca.sin(t7) + (1.0/2.0), 1.0))))*ca.sign(x[0])
+    jac_x[0, 0] = u[0]*(-t9*_nan_guard((t0, t4, u[0]*x[0], t3), ca.if_else(t5, 0.0, ca.if_else(t8, (1.0/2.0) + (1.0/2.0)*ca.sin(t7), 1.0))) - t0*t9*_nan_guard((t0, t4, u[0]*x[0], t3), ca.if_else(t5, 0.0, ca.if_else(t8, (1.0/2.0)*t6*ca.cos(t7), 0.0))))*ca.sign(x[0])
     return [jac_x]
 
 
 def _jac_u(x: Any, u: Any, p: Any) -> list[Any]:
-    """Jacobian of the state derivative with respect to u (inputs), d xdot / d u (1 x 3), dense column-major: jac_u[i + j*1] = d xdot_i / d u_j."""
+    """Jacobian of the state derivative with respect to u (inputs), d xdot / d u (1 x 3), dense column-major: jac_u[i + j*1] = d xdot_i / d u_j. Sparse: the 3 structural nonzeros of the C code's pattern."""
     t0 = 2.0*u[2]*p[4]*p[5]
     t1 = t0*u[1]
     t2 = _max(t1, p[3])
@@ -97,11 +97,11 @@ def _jac_u(x: Any, u: Any, p: Any) -> list[Any]:
     t7 = t6*p[2]
     t8 = ca.logic_or((t3 <= t7), (u[0]*x[0] <= 0.0))
     t9 = t3 - (1.0/2.0)*t6 - (1.0/2.0)*t7
-    t10 = t2*t5 - t7
+    t10 = -t7 + t2*t5
     t11 = 3.14159265358979323846/t10
     t12 = t11*t9
     t13 = (t3 < t6)
-    t14 = _nan_guard((t3, t7, u[0]*x[0], t6), ca.if_else(t8, 0.0, ca.if_else(t13, (1.0/2.0)*ca.sin(t12) + (1.0/2.0), 1.0)))
+    t14 = _nan_guard((t3, t7, u[0]*x[0], t6), ca.if_else(t8, 0.0, ca.if_else(t13, (1.0/2.0) + (1.0/2.0)*ca.sin(t12), 1.0)))
     t15 = ca.cos(t12)
     t16 = _nan_guard((t1 - p[3],), ca.if_else(t1 - p[3] > 0, 1.0, ca.if_else(t1 - p[3] < 0, 0.0, (1.0/2.0))))
     t17 = t16*t4*u[0]
@@ -109,17 +109,17 @@ def _jac_u(x: Any, u: Any, p: Any) -> list[Any]:
     t19 = t10**(-2)
     t20 = (1.0/2.0)*t15
     t21 = t17*p[2]*_nan_guard((t3, t7, u[0]*x[0], t6), ca.if_else(t8, 0.0, ca.if_else(t13, t20*(-(1.0/2.0)*t11 + 3.14159265358979323846*t19*t9), 0.0)))
-    t22 = t14*t3*p[0]/t2**2 - t4*p[0]*_nan_guard((t3, t7, u[0]*x[0], t6), ca.if_else(t8, 0.0, ca.if_else(t13, -3.14159265358979323846*t19*t20*t5*t9, 0.0)))
+    t22 = -t4*p[0]*_nan_guard((t3, t7, u[0]*x[0], t6), ca.if_else(t8, 0.0, ca.if_else(t13, -3.14159265358979323846*t19*t20*t5*t9, 0.0))) + t14*t3*p[0]/t2**2
     t23 = 2.0*u[1]*p[4]*p[5]
     jac_u = ca.SX(1, 3)
-    jac_u[0, 0] = -t14*t4*p[0] + 1.0
-    jac_u[0, 1] = 2.0*t16*t22*u[0]*u[2]*p[4]*p[5] - t0*t18 - t0*t21
-    jac_u[0, 2] = 2.0*t16*t22*u[1]*u[0]*p[4]*p[5] - t18*t23 - t21*t23
+    jac_u[0, 0] = 1.0 - t14*t4*p[0]
+    jac_u[0, 1] = -t0*t18 - t0*t21 + 2.0*t16*t22*u[0]*u[2]*p[4]*p[5]
+    jac_u[0, 2] = -t18*t23 - t21*t23 + 2.0*t16*t22*u[1]*u[0]*p[4]*p[5]
     return [jac_u]
 
 
 def _jac_p(x: Any, u: Any, p: Any) -> list[Any]:
-    """Jacobian of the state derivative with respect to p (parameters, in struct field order), d xdot / d p (1 x 6), dense column-major: jac_p[i + j*1] = d xdot_i / d p_j."""
+    """Jacobian of the state derivative with respect to p (parameters, in struct field order), d xdot / d p (1 x 6), dense column-major: jac_p[i + j*1] = d xdot_i / d p_j. Sparse: the 5 structural nonzeros of the C code's pattern."""
     t0 = ca.fabs(x[0])
     t1 = p[0]**(-1)
     t2 = 2.0*u[1]*u[2]*p[5]
@@ -129,11 +129,11 @@ def _jac_p(x: Any, u: Any, p: Any) -> list[Any]:
     t6 = t5*p[2]
     t7 = ca.logic_or((t0 <= t6), (u[0]*x[0] <= 0.0))
     t8 = t0 - (1.0/2.0)*t5 - (1.0/2.0)*t6
-    t9 = t1*t4 - t6
+    t9 = -t6 + t1*t4
     t10 = 3.14159265358979323846/t9
     t11 = t10*t8
     t12 = (t0 < t5)
-    t13 = _nan_guard((t0, t6, u[0]*x[0], t5), ca.if_else(t7, 0.0, ca.if_else(t12, (1.0/2.0)*ca.sin(t11) + (1.0/2.0), 1.0)))
+    t13 = _nan_guard((t0, t6, u[0]*x[0], t5), ca.if_else(t7, 0.0, ca.if_else(t12, (1.0/2.0) + (1.0/2.0)*ca.sin(t11), 1.0)))
     t14 = t4**(-1)
     t15 = t0*u[0]
     t16 = t14*t15
@@ -155,11 +155,11 @@ def _jac_p(x: Any, u: Any, p: Any) -> list[Any]:
     t32 = t28*t30
     t33 = 2.0*u[1]*u[2]*p[4]
     jac_p = ca.SX(1, 6)
-    jac_p[0, 0] = t1*t24 - t13*t16 + t14*t19*_nan_guard((t0, t6, u[0]*x[0], t5), ca.if_else(t7, 0.0, ca.if_else(t12, -t22*t4, 0.0))) + t18*t19
+    jac_p[0, 0] = t1*t24 + t18*t19 - t13*t16 + t14*t19*_nan_guard((t0, t6, u[0]*x[0], t5), ca.if_else(t7, 0.0, ca.if_else(t12, -t22*t4, 0.0)))
     jac_p[0, 2] = -t23
-    jac_p[0, 3] = t26*t29*u[0] - t26*t27 - t26*t28
-    jac_p[0, 4] = 2.0*t29*t30*u[1]*u[0]*u[2]*p[5] - t2*t31 - t2*t32
-    jac_p[0, 5] = 2.0*t29*t30*u[1]*u[0]*u[2]*p[4] - t31*t33 - t32*t33
+    jac_p[0, 3] = -t26*t27 - t26*t28 + t26*t29*u[0]
+    jac_p[0, 4] = -t2*t31 - t2*t32 + 2.0*t29*t30*u[1]*u[0]*u[2]*p[5]
+    jac_p[0, 5] = -t31*t33 - t32*t33 + 2.0*t29*t30*u[1]*u[0]*u[2]*p[4]
     return [jac_p]
 
 _BUILDERS = {

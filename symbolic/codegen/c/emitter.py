@@ -1,0 +1,292 @@
+"""The C99 emitter: a function table and its CSE'd forms in, ``gearsym_<model>.{h,c}`` out."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import sympy as sp
+from gearsym.symbolic.codegen.c.printer import GearsymCPrinter
+from gearsym.symbolic.codegen.cse import CseForm, boolean_definitions, flatten_column_major
+from gearsym.symbolic.codegen.jacobian import SparsityPattern
+from gearsym.symbolic.codegen.ops import (
+    OpCount,
+    count_operations,
+    implicit_step_ops,
+    rk4_step_ops,
+)
+from gearsym.symbolic.codegen.printing import comment_text, wrap
+from gearsym.symbolic.codegen.render import render
+from gearsym.symbolic.codegen.table import Arg, FunctionSpec, FunctionTable, Output, file_names
+from gearsym.symbolic.codegen.views import ModelView, model_view
+from sympy.logic.boolalg import Boolean
+
+__all__ = [
+    "CFunctionView",
+    "CModuleView",
+    "PatternView",
+    "emit_c_files",
+]
+
+#: C99 math functions of two arguments (their override macros take two parameters).
+_BINARY_FUNCTIONS = ("atan2", "pow", "fmin", "fmax", "hypot")
+
+
+@dataclass(frozen=True)
+class Temporary:
+    ctype: str  # "gearsym_real", or "int" for a shared condition
+    name: str
+    code: str
+
+
+@dataclass(frozen=True)
+class Assignment:
+    target: str
+    code: str
+
+
+@dataclass(frozen=True)
+class ParamDefault:
+    field: str
+    code: str
+
+
+@dataclass(frozen=True)
+class ParamCheck:
+    index: int
+    field: str
+    lower: str | None  # printed bound, None if unbounded
+    upper: str | None
+
+
+@dataclass(frozen=True)
+class Spread:
+    """How a dense Jacobian is filled from its sparse function."""
+
+    source: str  # the sparse function (without prefix)
+    target: str  # the output array
+    rows: str  # size macro suffixes: "NX", and "NX", "NU" or "NP"
+    cols: str
+    nnz_macro: str  # e.g. "JAC_X_NNZ"
+    pattern: str  # e.g. "jac_x": the arrays <prefix>jac_x_colptr, _rowind
+    mode: str  # "zero" (no nonzero), "copy" (every entry a nonzero) or "spread"
+
+
+@dataclass(frozen=True)
+class MathMacro:
+    macro: str  # GEARSYM_<macro>
+    fn: str  # the C99 double function (the float build appends f)
+    binary: bool
+
+
+@dataclass(frozen=True)
+class PatternView:
+    """The compressed-column pattern of one Jacobian, as the header and source print it."""
+
+    name: str  # "jac_x"
+    macro: str  # "JAC_X"
+    rows: str  # size macro suffix of the rows, "NX"
+    cols: str  # of the columns
+    nnz: int
+    size: int
+    colptr: tuple[str, ...]  # lines of comma-separated integers
+    rowind: tuple[str, ...]  # ("0",) when there is no nonzero (C has no empty arrays)
+
+
+@dataclass(frozen=True)
+class CFunctionView:
+    """One function as the C templates print it (fields beyond ``doc`` belong to one kind)."""
+
+    name: str
+    kind: str
+    returns: str
+    args: tuple[Arg, ...]
+    outputs: tuple[Output, ...]
+    doc: tuple[str, ...]
+    temporaries: tuple[Temporary, ...] = ()
+    assignments: tuple[Assignment, ...] = ()
+    unused: tuple[str, ...] = ()
+    defaults: tuple[ParamDefault, ...] = ()
+    checks: tuple[ParamCheck, ...] = ()
+    spread: Spread | None = None
+
+
+@dataclass(frozen=True)
+class CModuleView(ModelView):
+    """Everything ``c_header.h.j2`` and ``c_source.c.j2`` print for one model."""
+
+    functions: tuple[CFunctionView, ...]
+    math_macros: tuple[MathMacro, ...]
+    helpers: tuple[str, ...]
+    implicit_step: bool
+    patterns: tuple[PatternView, ...]
+
+
+def _symbol_map(spec: FunctionSpec) -> dict[sp.Symbol, str]:
+    mapping = {}
+    for arg in spec.args:
+        for i, symbol in enumerate(arg.symbols):
+            if arg.kind == "params":
+                mapping[symbol] = f"{arg.name}->{arg.fields[i]}"
+            else:
+                mapping[symbol] = f"{arg.name}[{i}]"
+    return mapping
+
+
+def _used_args(spec: FunctionSpec, form: CseForm) -> set[str]:
+    free: set[sp.Basic] = set()
+    for _, expr in form.temporaries:
+        free |= expr.free_symbols
+    for matrix in form.outputs:
+        free |= matrix.free_symbols
+    return {arg.name for arg in spec.args if any(s in free for s in arg.symbols)}
+
+
+_SIZE_MACROS = {"x": "NX", "u": "NU", "p": "NP"}
+
+
+def _lines(values: tuple[int, ...], per_line: int = 16) -> tuple[str, ...]:
+    items = [str(v) for v in values] or ["0"]
+    return tuple(", ".join(items[i : i + per_line]) for i in range(0, len(items), per_line))
+
+
+def _pattern_view(spec: FunctionSpec) -> PatternView:
+    pattern = spec.pattern
+    assert pattern is not None and spec.source is not None
+    return PatternView(
+        name=spec.name,
+        macro=spec.name.upper(),
+        rows="NX",
+        cols=_SIZE_MACROS[spec.name[-1]],
+        nnz=pattern.nnz,
+        size=pattern.size,
+        colptr=_lines(pattern.colptr),
+        rowind=_lines(pattern.rowind),
+    )
+
+
+def _spread(spec: FunctionSpec, pattern: SparsityPattern) -> Spread:
+    assert spec.source is not None
+    mode = "zero" if pattern.nnz == 0 else ("copy" if pattern.dense else "spread")
+    return Spread(
+        source=spec.source,
+        target=spec.outputs[0].name,
+        rows="NX",
+        cols=_SIZE_MACROS[spec.name[-1]],
+        nnz_macro=f"{spec.name.upper()}_NNZ",
+        pattern=spec.name,
+        mode=mode,
+    )
+
+
+def _function_views(
+    table: FunctionTable, forms: Mapping[str, CseForm]
+) -> tuple[list[CFunctionView], set[str], set[str]]:
+    """The views of every function, and the math macros and helpers their code uses."""
+    used_macros: set[str] = set()
+    used_helpers: set[str] = set()
+    views = []
+    counts: dict[str, OpCount] = {}
+    precision = table.config.precision
+    nx = len(table.states)
+    for spec in table:
+        conditions = boolean_definitions(forms[spec.name]) if spec.name in forms else {}
+        printer = GearsymCPrinter(_symbol_map(spec), table.prefix, conditions, precision)
+        extra: dict = {}
+        if spec.kind == "expr":
+            form = forms[spec.name]
+            ops = count_operations(form, table.config)
+            counts[spec.name] = ops
+            extra["temporaries"] = tuple(
+                Temporary(
+                    "int" if isinstance(expr, Boolean) else "gearsym_real",
+                    printer.code(symbol),
+                    printer.code(expr),
+                )
+                for symbol, expr in form.temporaries
+            )
+            extra["assignments"] = tuple(
+                Assignment(f"{out.name}[{k}]", printer.code(expr))
+                for out, matrix in zip(spec.outputs, form.outputs, strict=True)
+                for k, expr in enumerate(flatten_column_major(matrix))
+            )
+            used = _used_args(spec, form)
+            extra["unused"] = tuple(
+                [a.name for a in spec.args if a.name not in used]
+                + [o.name for o in spec.outputs if o.size == 0]
+            )
+            op_text = f"Operations: {ops.format()}; {len(form.temporaries)} temporaries."
+        elif spec.kind == "spread":
+            assert spec.source is not None and spec.pattern is not None
+            extra["spread"] = _spread(spec, spec.pattern)
+            op_text = (
+                f"Computes {spec.source} into the first NNZ entries and spreads them in place; "
+                f"every other entry is 0. Operations: those of {spec.source} "
+                f"({counts[spec.source].format()}); the spreading moves values only."
+            )
+        elif spec.kind == "rk4":
+            own = rk4_step_ops(nx)
+            total = counts["rhs"].scaled(4) + own
+            op_text = f"Operations: {total.format()} (4 rhs calls + {own.format()})."
+        elif spec.kind == "linearly_implicit_euler":
+            used_macros.add("fabs")
+            own = implicit_step_ops(nx, len(table.inputs))
+            jac_ops = counts.get("jac_x_sparse", counts.get("jac_x"))
+            assert jac_ops is not None
+            total = counts["rhs"] + jac_ops + own
+            op_text = (
+                f"Operations (at most): {total.format()} (rhs + jac_x + {own.format()} for "
+                "the checks, forming I - h J, its LU factors, the solve and ||(I - h J)^-1||)."
+            )
+        elif spec.kind == "params_default":
+            (defaults,) = spec.expressions
+            extra["defaults"] = tuple(
+                ParamDefault(v.name, printer.code(d))
+                for v, d in zip(table.model.parameters, defaults, strict=True)
+            )
+            op_text = "Operations: none (stores only)."
+        elif spec.kind == "params_validate":
+            (limits,) = spec.expressions
+            checks = []
+            for j, v in enumerate(table.model.parameters):
+                lo, hi = limits[0, j], limits[1, j]
+                checks.append(
+                    ParamCheck(
+                        j,
+                        v.name,
+                        None if lo == sp.S.NegativeInfinity else printer.code(lo),
+                        None if hi == sp.S.Infinity else printer.code(hi),
+                    )
+                )
+            extra["checks"] = tuple(checks)
+            n_cmp = sum((c.lower is not None) + (c.upper is not None) for c in checks)
+            op_text = f"Operations: {len(checks)} isfinite, {n_cmp} cmp."
+        else:  # pragma: no cover - the table only has the kinds above
+            raise ValueError(f"unknown function kind {spec.kind!r}")
+        used_macros |= printer.used_macros
+        used_helpers |= printer.used_helpers
+        doc = tuple(wrap(comment_text(spec.doc)) + wrap(comment_text(op_text)))
+        views.append(
+            CFunctionView(spec.name, spec.kind, spec.returns, spec.args, spec.outputs, doc, **extra)
+        )
+    return views, used_macros, used_helpers
+
+
+def emit_c_files(table: FunctionTable, forms: Mapping[str, CseForm]) -> dict[str, str]:
+    """``{"gearsym_<name>.h": ..., "gearsym_<name>.c": ...}`` of one model."""
+    functions, used_macros, used_helpers = _function_views(table, forms)
+    view = CModuleView(
+        **vars(model_view(table)),
+        functions=tuple(functions),
+        math_macros=tuple(
+            MathMacro(m.upper(), m, m in _BINARY_FUNCTIONS) for m in sorted(used_macros)
+        ),
+        helpers=tuple(sorted(used_helpers)),
+        implicit_step=any(f.kind == "linearly_implicit_euler" for f in functions),
+        patterns=tuple(_pattern_view(s) for s in table if s.kind == "spread"),
+    )
+    names = file_names(table.model)
+    return {
+        names["header"]: render("c_header.h.j2", view),
+        names["source"]: render("c_source.c.j2", view),
+    }
