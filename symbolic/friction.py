@@ -54,14 +54,19 @@ Regularisations of the shift element (2.67)-(2.69), needed by a simulator:
 
 from __future__ import annotations
 
+import hashlib
+import re
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 import sympy as sp
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.input_files import parse_toml, read_text
 from numpy.typing import ArrayLike
+
+if TYPE_CHECKING:
+    from gearsym.symbolic.description import GearboxDescription
 
 Num = float | np.ndarray
 """Numeric result: a NumPy scalar (``np.float64`` is a ``float``) or an array."""
@@ -528,3 +533,42 @@ __all__ = [
     "viscous_num",
     "viscous_sym",
 ]
+
+
+def load_mu_map(d: GearboxDescription) -> MuMap:  # the one μ-map loader
+    """The μ map the description names (``friction.mu_map``: "built-in" or a path relative to
+    the description file); a bad map is a one-line :class:`GearsymError`.
+
+    Its ``origin``, which the emitted files print, is :func:`mu_map_origin`: the file's name
+    reduced to safe characters and the SHA-256 of its bytes, never a path.
+    """
+    if d.mu_map == "built-in":
+        path = DEFAULT_MU_MAP
+        label = "built-in"
+    else:
+        base = Path(d.file).parent if not d.file.startswith("<") else Path.cwd()
+        path = base / d.mu_map
+        label = ""
+        if not path.is_file():
+            raise GearsymError(d.file, "friction.mu_map", f"no such file: {d.mu_map}")
+    try:
+        data = path.read_bytes()
+        mu_map = MuMap.from_toml(path)
+    except OSError as err:
+        raise GearsymError(d.file, "friction.mu_map", f"cannot read: {err.strerror}") from None
+    except ValueError as err:
+        raise GearsymError(d.file, "friction.mu_map", str(err)) from None
+    mu_map.origin = mu_map_origin(path.name, data, label)
+    return mu_map
+
+
+_UNSAFE_NAME_CHARACTERS = re.compile(r"[^A-Za-z0-9._+-]")
+
+
+def mu_map_origin(file_name: str, data: bytes, label: str = "") -> str:
+    """``"[label ]<name> (SHA-256 <hex>)"``: the map's file name with every character outside
+    ``[A-Za-z0-9._+-]`` replaced by ``_`` (so it needs no escaping in a C comment, a Python
+    docstring or Markdown, and holds no directory), and the digest that identifies the data."""
+    name = _UNSAFE_NAME_CHARACTERS.sub("_", Path(file_name).name) or "_"
+    digest = hashlib.sha256(data).hexdigest()
+    return f"{label + ' ' if label else ''}{name} (SHA-256 {digest})"

@@ -19,11 +19,8 @@ Nothing in the output depends on the time, the machine, absolute paths or ``PYTH
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import sympy as sp
 from gearsym.symbolic import naming
@@ -47,7 +44,13 @@ from gearsym.symbolic.drivetrain import (
     shift_model,
 )
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.friction import DEFAULT_MU_MAP, T_SS_MIN, MuMap, shift_element_sym
+from gearsym.symbolic.friction import (
+    T_SS_MIN,
+    MuMap,
+    load_mu_map,
+    mu_map_origin,
+    shift_element_sym,
+)
 from gearsym.symbolic.model import Model, Variable
 from gearsym.symbolic.output_dir import MANIFEST, manifest_marker, manifest_text
 from gearsym.symbolic.sensitivity import sensitivity_model
@@ -337,45 +340,6 @@ def sample_ranges(model: Model) -> dict[str, tuple[float, float]]:
 # ---------------------------------------------------------------------------------------------
 # The μ map
 # ---------------------------------------------------------------------------------------------
-
-
-def load_mu_map(d: GearboxDescription) -> MuMap:
-    """The μ map the description names (``friction.mu_map``: "built-in" or a path relative to
-    the description file); a bad map is a one-line :class:`GearsymError`.
-
-    Its ``origin``, which the emitted files print, is :func:`mu_map_origin`: the file's name
-    reduced to safe characters and the SHA-256 of its bytes, never a path.
-    """
-    if d.mu_map == "built-in":
-        path = DEFAULT_MU_MAP
-        label = "built-in"
-    else:
-        base = Path(d.file).parent if not d.file.startswith("<") else Path.cwd()
-        path = base / d.mu_map
-        label = ""
-        if not path.is_file():
-            raise GearsymError(d.file, "friction.mu_map", f"no such file: {d.mu_map}")
-    try:
-        data = path.read_bytes()
-        mu_map = MuMap.from_toml(path)
-    except OSError as err:
-        raise GearsymError(d.file, "friction.mu_map", f"cannot read: {err.strerror}") from None
-    except ValueError as err:
-        raise GearsymError(d.file, "friction.mu_map", str(err)) from None
-    mu_map.origin = mu_map_origin(path.name, data, label)
-    return mu_map
-
-
-_UNSAFE_NAME_CHARACTERS = re.compile(r"[^A-Za-z0-9._+-]")
-
-
-def mu_map_origin(file_name: str, data: bytes, label: str = "") -> str:
-    """``"[label ]<name> (SHA-256 <hex>)"``: the map's file name with every character outside
-    ``[A-Za-z0-9._+-]`` replaced by ``_`` (so it needs no escaping in a C comment, a Python
-    docstring or Markdown, and holds no directory), and the digest that identifies the data."""
-    name = _UNSAFE_NAME_CHARACTERS.sub("_", Path(file_name).name) or "_"
-    digest = hashlib.sha256(data).hexdigest()
-    return f"{label + ' ' if label else ''}{name} (SHA-256 {digest})"
 
 
 # ---------------------------------------------------------------------------------------------

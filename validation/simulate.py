@@ -37,7 +37,7 @@ from gearsym.symbolic.drivetrain import (
     shift_model,
 )
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.friction import DEFAULT_MU_MAP, T_SS_MIN, MuMap
+from gearsym.symbolic.friction import T_SS_MIN, MuMap, load_mu_map
 from gearsym.symbolic.model import Model
 from gearsym.symbolic.numeric import bilinear, casadi_function, integrate_linear_inputs, to_casadi
 from gearsym.symbolic.reference import ReferenceModel, reference_model
@@ -175,23 +175,6 @@ class SimulationResult:
 
 
 # ----------------------------------------------------------------------------- numerics
-
-
-def mu_map_of(d: GearboxDescription) -> MuMap:
-    """The description's μ map (2.69): the built-in one or a file relative to the description."""
-    from pathlib import Path
-
-    if d.mu_map == "built-in":
-        return MuMap.from_toml(DEFAULT_MU_MAP)
-    path = Path(d.mu_map)
-    if not path.is_absolute():
-        path = Path(d.file).parent / path
-    if not path.is_file():
-        raise GearsymError(d.file, "friction.mu_map", f"no such file {str(path)!r}")
-    try:
-        return MuMap.from_toml(path)
-    except ValueError as err:
-        raise GearsymError(d.file, "friction.mu_map", str(err)) from None
 
 
 class _Function:
@@ -460,7 +443,7 @@ def simulate(
     ref = reference_model(d, elements)
     compiled = _Compiled(ref, d, elements)
     t_oil = quantity(d, "friction", "T_oil").value
-    inputs = _Inputs(scenario, elements, mu_map_of(d), t_oil, compiled)
+    inputs = _Inputs(scenario, elements, load_mu_map(d), t_oil, compiled)
     x0 = quasi_static_state(d, ref, inputs, compiled)
     n = compiled.n
     names = tuple(v.name for v in ref.model.states)
