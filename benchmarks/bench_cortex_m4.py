@@ -3,13 +3,15 @@
 Every emitted source of the built-in gearbox is cross-compiled as a TCU team would
 (``arm-none-eabi-gcc -mcpu=cortex-m4 -mfpu=fpv4-sp-d16 -mfloat-abi=hard -mthumb
 -DGEARSYM_SINGLE_PRECISION -O2``, plus ``-ffunction-sections`` so that ``arm-none-eabi-size -A``
-reports every function). Reported: the code of each model's nine functions and of the whole set.
+reports every function). Reported: the code of each model's functions and of the whole set.
 
 Peer, same flags and the same compiler in the same run: ``casadi.CodeGenerator`` C (with
 ``casadi_real`` float) of the same five expression functions (rhs, outputs, jac_x, jac_u, jac_p)
 of the emitted CasADi module. Compared: the code that evaluates them (gearsym: the five functions
 and their helpers; CasADi: its evaluation functions, wrappers and helpers, without the API
-boilerplate (name, sparsity, work-size queries) and sparsity tables it also emits). Target:
+boilerplate (name, sparsity, work-size queries) and sparsity tables it also emits; gearsym's
+five are rhs, outputs and the three Jacobians, i.e. their sparse functions, which hold the
+expressions, and the dense ones, which spread them, without the pattern tables). Target:
 gearsym no larger for every model of the gearbox. The sensitivity systems (3.7) are reported
 without a target: their second-derivative Jacobians compile about 20 % larger than CasADi's
 (SymPy's CSE finds less sharing there than CasADi's expression graph), which the README states.
@@ -35,6 +37,8 @@ FLAGS = (
     "-ffunction-sections",
     "-fdata-sections",
 )
+#: The sparse Jacobians hold the expression code; the dense ones spread their values.
+SPARSE = ("jac_x_sparse", "jac_u_sparse", "jac_p_sparse")
 _BOILERPLATE = re.compile(
     r"_(checkout|release|incref|decref|n_in|n_out|default_in|name_in|name_out|sparsity_in|"
     r"sparsity_out|work|work_bytes|casadi_version|casadi_int_size|casadi_real_size)$"
@@ -87,7 +91,7 @@ def main() -> int:
                 v
                 for k, v in secs.items()
                 if k.startswith(prefix)
-                and k[len(prefix) :] in (*EXPR_FUNCTIONS, "sign", "heaviside")
+                and k[len(prefix) :] in (*EXPR_FUNCTIONS, *SPARSE, "sign", "heaviside")
             )
             module = casadi_module(out, name)
             peer_source = casadi_c(module, EXPR_FUNCTIONS, out / "peer", f"cas_{name}", "float")

@@ -263,6 +263,32 @@ def test_cse_is_one_pass_with_sequential_temporaries() -> None:
     assert _cube_base() in [e for _, e in form.temporaries]
 
 
+def test_shared_products_save_multiplications_and_keep_values() -> None:
+    """A constant-symbol pair that three products share is computed once (SymPy's cse never
+    shares a constant); every output keeps its value and sign, and the count drops by 2."""
+    a, b, c, d, x = sp.symbols("a b c d x", real=True)
+    outputs = [3 * a * c + b, -3 * a * d - b, 3 * a * x, sp.sin(x) * b]
+    temps, shared = codegen.cse.share_products([], list(outputs))
+    assert [e for _, e in temps] == [3 * a]
+    definitions = dict(temps)
+    assert [o.xreplace(definitions) for o in shared] == outputs
+    before = codegen.count_operations(codegen.CseForm((), (sp.ImmutableMatrix(outputs),)))
+    after = codegen.count_operations(codegen.CseForm(tuple(temps), (sp.ImmutableMatrix(shared),)))
+    assert (before.mul, after.mul) == (7, 5) and before.add == after.add
+
+
+def test_calls_are_computed_first_unless_conditional() -> None:
+    """sin(x), used unconditionally, becomes the first temporary; exp(x) inside a piecewise
+    branch stays there (evaluated only when its branch is taken)."""
+    a, b, x = sp.symbols("a b x", real=True)
+    t0 = sp.Symbol("_t0")
+    branch = sp.Piecewise((sp.exp(x), x > 0), (0, True))
+    temps, outputs = codegen.cse.schedule_calls([(t0, a + b)], [t0 * sp.sin(x) + branch], 8)
+    assert [e for _, e in temps] == [sp.sin(x), a + b]
+    assert outputs[0].xreplace(dict(temps)) == (a + b) * sp.sin(x) + branch
+    assert outputs[0].has(sp.exp(x)) and not outputs[0].has(sp.sin(x))
+
+
 def _cube_base() -> sp.Expr:
     v, th = sp.Symbol("v", real=True), sp.Symbol("theta", real=True)
     return v + th / 3

@@ -72,7 +72,7 @@ const int gearsym_full_jac_p_rowind[GEARSYM_FULL_JAC_P_NNZ] = {
  * State derivative xdot = f(x, u, p). States: omega_1 [rad/s], omega_2 [rad/s], omega_3
  * [rad/s], omega_8 [rad/s], phi [rad], omega_C [rad/s]. Inputs: T_In [N*m], T_K81 [N*m], T_K38
  * [N*m], T_B08 [N*m], T_B05 [N*m], T_B06 [N*m], T_K27 [N*m].
- * Operations: 42 add, 61 mul, 1 div, 2 calls (cos 1, sin 1); 4 temporaries.
+ * Operations: 42 add, 59 mul, 1 div, 2 calls (cos 1, sin 1); 6 temporaries.
  */
 void gearsym_full_rhs(
     const gearsym_real *restrict x,
@@ -80,16 +80,18 @@ void gearsym_full_rhs(
     const gearsym_full_params *restrict p,
     gearsym_real *restrict xdot)
 {
-    const gearsym_real t0 = x[1]*p->d_ss;
-    const gearsym_real t1 = x[5]*p->d_ss;
-    const gearsym_real t2 = x[4]*p->k_ss;
-    const gearsym_real t3 = -x[5] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
-    xdot[0] = -GEARSYM_LIT(0.0835622403269647048986)*u[5] - GEARSYM_LIT(0.0728690529127854759354)*t2 - GEARSYM_LIT(0.0295135896771103588236)*t0 + GEARSYM_LIT(0.0728690529127854759354)*t1 + GEARSYM_LIT(0.192589385116585746269)*u[4] + GEARSYM_LIT(8.39854665908710837025)*u[2] + GEARSYM_LIT(8.87774902248273298948)*u[3] + GEARSYM_LIT(37.3348426453910815596)*u[6] + GEARSYM_LIT(18.0791312825145665672)*u[1] + GEARSYM_LIT(26.9568803049972995567)*u[0];
-    xdot[1] = -GEARSYM_LIT(9.27282854371149923506)*u[6] - GEARSYM_LIT(6.91709479501806549186)*t2 - GEARSYM_LIT(2.80157747874364742481)*t0 - GEARSYM_LIT(1.58338388594608797875)*u[1] - GEARSYM_LIT(0.499920243380314102558)*u[2] + GEARSYM_LIT(0.0899568458208336700422)*u[0] + GEARSYM_LIT(1.67334073176692164879)*u[3] + GEARSYM_LIT(2.96951802197559710477)*u[4] + GEARSYM_LIT(6.91709479501806549186)*t1 + GEARSYM_LIT(11.3769610464280542068)*u[5];
-    xdot[2] = -GEARSYM_LIT(6.08156611842418536193)*u[6] - GEARSYM_LIT(8.43472548847624456480)*u[1] - GEARSYM_LIT(2.66308761663673731059)*u[2] - GEARSYM_LIT(2.01877416044759217035)*u[5] - GEARSYM_LIT(1.76043821397102936521)*t2 - GEARSYM_LIT(0.713016692576358592633)*t0 + GEARSYM_LIT(0.479202363395624619234)*u[0] + GEARSYM_LIT(8.91392785187186918403)*u[3] + GEARSYM_LIT(15.8186966349485431992)*u[4] + GEARSYM_LIT(1.76043821397102936521)*x[5]*p->d_ss;
-    xdot[3] = -GEARSYM_LIT(2.15304907904416765919)*u[1] - GEARSYM_LIT(1.55439087599070556571)*u[5] - GEARSYM_LIT(1.35548054416113539797)*t2 - GEARSYM_LIT(0.548999815375105466979)*t0 + GEARSYM_LIT(1.35548054416113539797)*t1 + GEARSYM_LIT(2.11687024965503146463)*u[2] + GEARSYM_LIT(7.19010503258522261261)*u[6] + GEARSYM_LIT(8.87774902248273298948)*u[0] + GEARSYM_LIT(11.0307981015269006487)*u[3] + GEARSYM_LIT(19.1493337105732538323)*u[4];
-    xdot[4] = t3;
-    xdot[5] = (GEARSYM_LIT(2.0)*t3*p->d_ss + GEARSYM_LIT(2.0)*x[4]*p->k_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*p->m_veh*GEARSYM_SIN(p->zeta) - GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[5]*x[5]) - GEARSYM_LIT(1.05990859890000000000)*x[5]*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta))/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
+    const gearsym_real t0 = GEARSYM_SIN(p->zeta);
+    const gearsym_real t1 = GEARSYM_COS(p->zeta);
+    const gearsym_real t2 = x[5]*p->d_ss;
+    const gearsym_real t3 = x[4]*p->k_ss;
+    const gearsym_real t4 = x[1]*p->d_ss;
+    const gearsym_real t5 = -x[5] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
+    xdot[0] = -GEARSYM_LIT(0.0835622403269647048986)*u[5] - GEARSYM_LIT(0.0728690529127854759354)*t3 - GEARSYM_LIT(0.0295135896771103588236)*t4 + GEARSYM_LIT(0.0728690529127854759354)*t2 + GEARSYM_LIT(0.192589385116585746269)*u[4] + GEARSYM_LIT(8.39854665908710837025)*u[2] + GEARSYM_LIT(8.87774902248273298948)*u[3] + GEARSYM_LIT(37.3348426453910815596)*u[6] + GEARSYM_LIT(18.0791312825145665672)*u[1] + GEARSYM_LIT(26.9568803049972995567)*u[0];
+    xdot[1] = -GEARSYM_LIT(9.27282854371149923506)*u[6] - GEARSYM_LIT(6.91709479501806549186)*t3 - GEARSYM_LIT(2.80157747874364742481)*t4 - GEARSYM_LIT(1.58338388594608797875)*u[1] - GEARSYM_LIT(0.499920243380314102558)*u[2] + GEARSYM_LIT(0.0899568458208336700422)*u[0] + GEARSYM_LIT(1.67334073176692164879)*u[3] + GEARSYM_LIT(2.96951802197559710477)*u[4] + GEARSYM_LIT(6.91709479501806549186)*t2 + GEARSYM_LIT(11.3769610464280542068)*u[5];
+    xdot[2] = -GEARSYM_LIT(6.08156611842418536193)*u[6] - GEARSYM_LIT(8.43472548847624456480)*u[1] - GEARSYM_LIT(2.66308761663673731059)*u[2] - GEARSYM_LIT(2.01877416044759217035)*u[5] - GEARSYM_LIT(1.76043821397102936521)*t3 - GEARSYM_LIT(0.713016692576358592633)*t4 + GEARSYM_LIT(0.479202363395624619234)*u[0] + GEARSYM_LIT(1.76043821397102936521)*t2 + GEARSYM_LIT(8.91392785187186918403)*u[3] + GEARSYM_LIT(15.8186966349485431992)*u[4];
+    xdot[3] = -GEARSYM_LIT(2.15304907904416765919)*u[1] - GEARSYM_LIT(1.55439087599070556571)*u[5] - GEARSYM_LIT(1.35548054416113539797)*t3 - GEARSYM_LIT(0.548999815375105466979)*t4 + GEARSYM_LIT(1.35548054416113539797)*t2 + GEARSYM_LIT(2.11687024965503146463)*u[2] + GEARSYM_LIT(7.19010503258522261261)*u[6] + GEARSYM_LIT(8.87774902248273298948)*u[0] + GEARSYM_LIT(11.0307981015269006487)*u[3] + GEARSYM_LIT(19.1493337105732538323)*u[4];
+    xdot[4] = t5;
+    xdot[5] = (GEARSYM_LIT(2.0)*t3 + GEARSYM_LIT(2.0)*t5*p->d_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*p->m_veh - GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[5]*x[5]) - GEARSYM_LIT(1.05990859890000000000)*t1*x[5]*p->f_roll*p->m_veh)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
 }
 
 /**
@@ -116,7 +118,7 @@ void gearsym_full_outputs(
  * jac_x_nz[k] is entry (i, j) with i = gearsym_full_jac_x_rowind[k] and
  * gearsym_full_jac_x_colptr[j] <= k < gearsym_full_jac_x_colptr[j+1] (GEARSYM_FULL_JAC_X_NNZ
  * values).
- * Operations: 3 add, 26 mul, 1 div, 1 call (cos 1); 2 temporaries.
+ * Operations: 3 add, 26 mul, 1 div, 1 call (cos 1); 3 temporaries.
  */
 void gearsym_full_jac_x_sparse(
     const gearsym_real *restrict x,
@@ -124,26 +126,27 @@ void gearsym_full_jac_x_sparse(
     const gearsym_full_params *restrict p,
     gearsym_real *restrict jac_x_nz)
 {
-    const gearsym_real t0 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh));
-    const gearsym_real t1 = t0*p->d_ss;
+    const gearsym_real t0 = GEARSYM_COS(p->zeta);
+    const gearsym_real t1 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh));
+    const gearsym_real t2 = t1*p->d_ss;
     (void)u;
     jac_x_nz[0] = -GEARSYM_LIT(0.0295135896771103588236)*p->d_ss;
     jac_x_nz[1] = -GEARSYM_LIT(2.80157747874364742481)*p->d_ss;
     jac_x_nz[2] = -GEARSYM_LIT(0.713016692576358592633)*p->d_ss;
     jac_x_nz[3] = -GEARSYM_LIT(0.548999815375105466979)*p->d_ss;
     jac_x_nz[4] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
-    jac_x_nz[5] = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t1;
+    jac_x_nz[5] = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t2;
     jac_x_nz[6] = -GEARSYM_LIT(0.0728690529127854759354)*p->k_ss;
     jac_x_nz[7] = -GEARSYM_LIT(6.91709479501806549186)*p->k_ss;
     jac_x_nz[8] = -GEARSYM_LIT(1.76043821397102936521)*p->k_ss;
     jac_x_nz[9] = -GEARSYM_LIT(1.35548054416113539797)*p->k_ss;
-    jac_x_nz[10] = GEARSYM_LIT(2.0)*t0*p->k_ss;
+    jac_x_nz[10] = GEARSYM_LIT(2.0)*t1*p->k_ss;
     jac_x_nz[11] = GEARSYM_LIT(0.0728690529127854759354)*p->d_ss;
     jac_x_nz[12] = GEARSYM_LIT(6.91709479501806549186)*p->d_ss;
     jac_x_nz[13] = GEARSYM_LIT(1.76043821397102936521)*p->d_ss;
     jac_x_nz[14] = GEARSYM_LIT(1.35548054416113539797)*p->d_ss;
     jac_x_nz[15] = -GEARSYM_LIT(1.0);
-    jac_x_nz[16] = -GEARSYM_LIT(2.0)*t1 + t0*(-GEARSYM_LIT(1.05990859890000000000)*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta) - GEARSYM_LIT(0.0355139609030000000000)*x[5]*p->A_front*p->c_W*p->rho_air);
+    jac_x_nz[16] = -GEARSYM_LIT(2.0)*t2 + t1*(-GEARSYM_LIT(1.05990859890000000000)*t0*p->f_roll*p->m_veh - GEARSYM_LIT(0.0355139609030000000000)*x[5]*p->A_front*p->c_W*p->rho_air);
 }
 
 /**
@@ -267,7 +270,7 @@ void gearsym_full_jac_u(
  * jac_p_nz[k] is entry (i, j) with i = gearsym_full_jac_p_rowind[k] and
  * gearsym_full_jac_p_colptr[j] <= k < gearsym_full_jac_p_colptr[j+1] (GEARSYM_FULL_JAC_P_NNZ
  * values).
- * Operations: 13 add, 49 mul, 2 div, 2 calls (cos 1, sin 1); 13 temporaries.
+ * Operations: 13 add, 47 mul, 2 div, 2 calls (cos 1, sin 1); 15 temporaries.
  */
 void gearsym_full_jac_p_sparse(
     const gearsym_real *restrict x,
@@ -275,44 +278,46 @@ void gearsym_full_jac_p_sparse(
     const gearsym_full_params *restrict p,
     gearsym_real *restrict jac_p_nz)
 {
-    const gearsym_real t0 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
-    const gearsym_real t1 = (GEARSYM_LIT(1.0)/t0);
-    const gearsym_real t2 = GEARSYM_SIN(p->zeta);
-    const gearsym_real t3 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t2;
-    const gearsym_real t4 = GEARSYM_COS(p->zeta);
-    const gearsym_real t5 = GEARSYM_LIT(1.05990859890000000000)*x[5];
-    const gearsym_real t6 = t5*p->f_roll;
-    const gearsym_real t7 = t4*p->m_veh;
-    const gearsym_real t8 = (x[5]*x[5]);
-    const gearsym_real t9 = GEARSYM_LIT(0.0177569804515000000000)*t8*p->A_front*p->c_W;
-    const gearsym_real t10 = -x[5] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
-    const gearsym_real t11 = (-t3*p->m_veh - t6*t7 - t9*p->rho_air + GEARSYM_LIT(2.0)*t10*p->d_ss + GEARSYM_LIT(2.0)*x[4]*p->k_ss)/(t0*t0);
-    const gearsym_real t12 = GEARSYM_LIT(0.0177569804515000000000)*t1*t8*p->rho_air;
+    const gearsym_real t0 = GEARSYM_SIN(p->zeta);
+    const gearsym_real t1 = GEARSYM_COS(p->zeta);
+    const gearsym_real t2 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
+    const gearsym_real t3 = (GEARSYM_LIT(1.0)/t2);
+    const gearsym_real t4 = GEARSYM_LIT(2.0)*t3;
+    const gearsym_real t5 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0;
+    const gearsym_real t6 = GEARSYM_LIT(1.05990859890000000000)*x[5];
+    const gearsym_real t7 = t6*p->f_roll;
+    const gearsym_real t8 = t1*p->m_veh;
+    const gearsym_real t9 = (x[5]*x[5]);
+    const gearsym_real t10 = GEARSYM_LIT(0.0177569804515000000000)*t9;
+    const gearsym_real t11 = t10*p->A_front*p->c_W;
+    const gearsym_real t12 = -x[5] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
+    const gearsym_real t13 = (-t11*p->rho_air - t5*p->m_veh - t7*t8 + GEARSYM_LIT(2.0)*t12*p->d_ss + GEARSYM_LIT(2.0)*x[4]*p->k_ss)/(t2*t2);
+    const gearsym_real t14 = t10*t3*p->rho_air;
     (void)u;
-    jac_p_nz[0] = -GEARSYM_LIT(0.108043690000000000000)*t11 + t1*(-t3 - t4*t6);
+    jac_p_nz[0] = -GEARSYM_LIT(0.108043690000000000000)*t13 + t3*(-t5 - t1*t7);
     jac_p_nz[1] = -GEARSYM_LIT(0.0728690529127854759354)*x[4];
     jac_p_nz[2] = -GEARSYM_LIT(6.91709479501806549186)*x[4];
     jac_p_nz[3] = -GEARSYM_LIT(1.76043821397102936521)*x[4];
     jac_p_nz[4] = -GEARSYM_LIT(1.35548054416113539797)*x[4];
-    jac_p_nz[5] = GEARSYM_LIT(2.0)*t1*x[4];
+    jac_p_nz[5] = t4*x[4];
     jac_p_nz[6] = -GEARSYM_LIT(0.0295135896771103588236)*x[1] + GEARSYM_LIT(0.0728690529127854759354)*x[5];
     jac_p_nz[7] = -GEARSYM_LIT(2.80157747874364742481)*x[1] + GEARSYM_LIT(6.91709479501806549186)*x[5];
     jac_p_nz[8] = -GEARSYM_LIT(0.713016692576358592633)*x[1] + GEARSYM_LIT(1.76043821397102936521)*x[5];
     jac_p_nz[9] = -GEARSYM_LIT(0.548999815375105466979)*x[1] + GEARSYM_LIT(1.35548054416113539797)*x[5];
-    jac_p_nz[10] = GEARSYM_LIT(2.0)*t1*t10;
-    jac_p_nz[11] = t1*(-(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t7 + t2*t6*p->m_veh);
-    jac_p_nz[12] = -t11;
-    jac_p_nz[13] = -t1*t9;
-    jac_p_nz[14] = -t12*p->A_front;
-    jac_p_nz[15] = -t12*p->c_W;
-    jac_p_nz[16] = -t1*t5*t7;
+    jac_p_nz[10] = t12*t4;
+    jac_p_nz[11] = t3*(-(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t8 + t0*t7*p->m_veh);
+    jac_p_nz[12] = -t13;
+    jac_p_nz[13] = -t11*t3;
+    jac_p_nz[14] = -t14*p->A_front;
+    jac_p_nz[15] = -t14*p->c_W;
+    jac_p_nz[16] = -t3*t6*t8;
 }
 
 /**
  * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
  * xdot / d p (6 x 9), dense column-major: jac_p[i + j*6] = d xdot_i / d p_j.
  * Computes jac_p_sparse into the first NNZ entries and spreads them in place; every other
- * entry is 0. Operations: those of jac_p_sparse (13 add, 49 mul, 2 div, 2 calls (cos 1, sin
+ * entry is 0. Operations: those of jac_p_sparse (13 add, 47 mul, 2 div, 2 calls (cos 1, sin
  * 1)); the spreading moves values only.
  */
 void gearsym_full_jac_p(
@@ -346,7 +351,7 @@ void gearsym_full_jac_p(
 /**
  * One classical explicit Runge-Kutta step (order 4) of size h, u held constant over the step.
  * x_next may alias x (in-place stepping).
- * Operations: 210 add, 276 mul, 4 div, 8 calls (cos 4, sin 4) (4 rhs calls + 42 add, 32 mul, 0
+ * Operations: 210 add, 268 mul, 4 div, 8 calls (cos 4, sin 4) (4 rhs calls + 42 add, 32 mul, 0
  * div, 0 calls).
  */
 void gearsym_full_rk4_step(
@@ -460,7 +465,7 @@ static void gearsym_full_lu_solve(const gearsym_real *a, const int *perm, gearsy
  * shows up there); ERR_SINGULAR if I - h df/dx is singular to working precision: a zero pivot,
  * or 1/||(I - h df/dx)^-1|| (its distance to singularity) not above NX eps max_i(1 + sum_j |h
  * df_i/dx_j|), in the inf-norm. On error x_next is untouched. x_next may alias x.
- * Operations (at most): 394 add, 397 mul, 59 div, 96 calls (cos 2, fabs 93, sin 1), 102 cmp
+ * Operations (at most): 394 add, 395 mul, 59 div, 96 calls (cos 2, fabs 93, sin 1), 102 cmp
  * (rhs + jac_x + 349 add, 310 mul, 57 div, 93 calls (fabs 93), 102 cmp for the checks, forming
  * I - h J, its LU factors, the solve and ||(I - h J)^-1||).
  */

@@ -115,7 +115,7 @@ typedef struct gearsym_full_params {
  * State derivative xdot = f(x, u, p). States: omega_1 [rad/s], omega_2 [rad/s], omega_3
  * [rad/s], omega_8 [rad/s], phi [rad], omega_C [rad/s]. Inputs: T_In [N*m], T_K81 [N*m], T_K38
  * [N*m], T_B08 [N*m], T_B05 [N*m], T_B06 [N*m], T_K27 [N*m].
- * Operations: 42 add, 61 mul, 1 div, 2 calls (cos 1, sin 1); 4 temporaries.
+ * Operations: 42 add, 59 mul, 1 div, 2 calls (cos 1, sin 1); 6 temporaries.
  */
 void gearsym_full_rhs(
     const gearsym_real *x,
@@ -139,7 +139,7 @@ void gearsym_full_outputs(
  * jac_x_nz[k] is entry (i, j) with i = gearsym_full_jac_x_rowind[k] and
  * gearsym_full_jac_x_colptr[j] <= k < gearsym_full_jac_x_colptr[j+1] (GEARSYM_FULL_JAC_X_NNZ
  * values).
- * Operations: 3 add, 26 mul, 1 div, 1 call (cos 1); 2 temporaries.
+ * Operations: 3 add, 26 mul, 1 div, 1 call (cos 1); 3 temporaries.
  */
 void gearsym_full_jac_x_sparse(
     const gearsym_real *x,
@@ -191,7 +191,7 @@ void gearsym_full_jac_u(
  * jac_p_nz[k] is entry (i, j) with i = gearsym_full_jac_p_rowind[k] and
  * gearsym_full_jac_p_colptr[j] <= k < gearsym_full_jac_p_colptr[j+1] (GEARSYM_FULL_JAC_P_NNZ
  * values).
- * Operations: 13 add, 49 mul, 2 div, 2 calls (cos 1, sin 1); 13 temporaries.
+ * Operations: 13 add, 47 mul, 2 div, 2 calls (cos 1, sin 1); 15 temporaries.
  */
 void gearsym_full_jac_p_sparse(
     const gearsym_real *x,
@@ -203,7 +203,7 @@ void gearsym_full_jac_p_sparse(
  * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
  * xdot / d p (6 x 9), dense column-major: jac_p[i + j*6] = d xdot_i / d p_j.
  * Computes jac_p_sparse into the first NNZ entries and spreads them in place; every other
- * entry is 0. Operations: those of jac_p_sparse (13 add, 49 mul, 2 div, 2 calls (cos 1, sin
+ * entry is 0. Operations: those of jac_p_sparse (13 add, 47 mul, 2 div, 2 calls (cos 1, sin
  * 1)); the spreading moves values only.
  */
 void gearsym_full_jac_p(
@@ -215,7 +215,7 @@ void gearsym_full_jac_p(
 /**
  * One classical explicit Runge-Kutta step (order 4) of size h, u held constant over the step.
  * x_next may alias x (in-place stepping).
- * Operations: 210 add, 276 mul, 4 div, 8 calls (cos 4, sin 4) (4 rhs calls + 42 add, 32 mul, 0
+ * Operations: 210 add, 268 mul, 4 div, 8 calls (cos 4, sin 4) (4 rhs calls + 42 add, 32 mul, 0
  * div, 0 calls).
  */
 void gearsym_full_rk4_step(
@@ -233,7 +233,7 @@ void gearsym_full_rk4_step(
  * shows up there); ERR_SINGULAR if I - h df/dx is singular to working precision: a zero pivot,
  * or 1/||(I - h df/dx)^-1|| (its distance to singularity) not above NX eps max_i(1 + sum_j |h
  * df_i/dx_j|), in the inf-norm. On error x_next is untouched. x_next may alias x.
- * Operations (at most): 394 add, 397 mul, 59 div, 96 calls (cos 2, fabs 93, sin 1), 102 cmp
+ * Operations (at most): 394 add, 395 mul, 59 div, 96 calls (cos 2, fabs 93, sin 1), 102 cmp
  * (rhs + jac_x + 349 add, 310 mul, 57 div, 93 calls (fabs 93), 102 cmp for the checks, forming
  * I - h J, its LU factors, the solve and ||(I - h J)^-1||).
  */

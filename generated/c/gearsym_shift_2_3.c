@@ -68,7 +68,7 @@ const int gearsym_shift_2_3_jac_p_rowind[GEARSYM_SHIFT_2_3_JAC_P_NNZ] = {
 /**
  * State derivative xdot = f(x, u, p). States: omega_1 [rad/s], omega_2 [rad/s], phi [rad],
  * omega_C [rad/s]. Inputs: T_In [N*m], T_K38 [N*m], T_B05 [N*m].
- * Operations: 16 add, 32 mul, 1 div, 2 calls (cos 1, sin 1); 4 temporaries.
+ * Operations: 16 add, 31 mul, 1 div, 2 calls (cos 1, sin 1); 6 temporaries.
  */
 void gearsym_shift_2_3_rhs(
     const gearsym_real *restrict x,
@@ -76,14 +76,16 @@ void gearsym_shift_2_3_rhs(
     const gearsym_shift_2_3_params *restrict p,
     gearsym_real *restrict xdot)
 {
-    const gearsym_real t0 = x[1]*p->d_ss;
-    const gearsym_real t1 = x[3]*p->d_ss;
+    const gearsym_real t0 = GEARSYM_SIN(p->zeta);
+    const gearsym_real t1 = GEARSYM_COS(p->zeta);
     const gearsym_real t2 = x[2]*p->k_ss;
-    const gearsym_real t3 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
-    xdot[0] = -GEARSYM_LIT(1.97372559770420764468)*t2 - GEARSYM_LIT(0.799402834226086530854)*t0 + GEARSYM_LIT(1.97372559770420764468)*t1 + GEARSYM_LIT(2.78597376134262387781)*u[1] + GEARSYM_LIT(10.6883443030696865936)*u[0] + GEARSYM_LIT(17.0201028515756499522)*u[2];
-    xdot[1] = -GEARSYM_LIT(0.611926835256345678975)*t2 - GEARSYM_LIT(0.247843999698803434174)*t0 - GEARSYM_LIT(0.0134584894956434703021)*u[1] + GEARSYM_LIT(0.611926835256345678975)*t1 + GEARSYM_LIT(2.40597677423938190485)*u[2] + GEARSYM_LIT(2.43656425036584433736)*u[0];
-    xdot[2] = t3;
-    xdot[3] = (GEARSYM_LIT(2.0)*t3*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*p->m_veh*GEARSYM_SIN(p->zeta) - GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[3]*x[3]) - GEARSYM_LIT(1.05990859890000000000)*x[3]*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta))/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
+    const gearsym_real t3 = x[1]*p->d_ss;
+    const gearsym_real t4 = x[3]*p->d_ss;
+    const gearsym_real t5 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
+    xdot[0] = -GEARSYM_LIT(1.97372559770420764468)*t2 - GEARSYM_LIT(0.799402834226086530854)*t3 + GEARSYM_LIT(1.97372559770420764468)*t4 + GEARSYM_LIT(2.78597376134262387781)*u[1] + GEARSYM_LIT(10.6883443030696865936)*u[0] + GEARSYM_LIT(17.0201028515756499522)*u[2];
+    xdot[1] = -GEARSYM_LIT(0.611926835256345678975)*t2 - GEARSYM_LIT(0.247843999698803434174)*t3 - GEARSYM_LIT(0.0134584894956434703021)*u[1] + GEARSYM_LIT(0.611926835256345678975)*t4 + GEARSYM_LIT(2.40597677423938190485)*u[2] + GEARSYM_LIT(2.43656425036584433736)*u[0];
+    xdot[2] = t5;
+    xdot[3] = (GEARSYM_LIT(2.0)*t2 + GEARSYM_LIT(2.0)*t5*p->d_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*p->m_veh - GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[3]*x[3]) - GEARSYM_LIT(1.05990859890000000000)*t1*x[3]*p->f_roll*p->m_veh)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
 }
 
 /**
@@ -108,7 +110,7 @@ void gearsym_shift_2_3_outputs(
  * jac_x_nz[k] is entry (i, j) with i = gearsym_shift_2_3_jac_x_rowind[k] and
  * gearsym_shift_2_3_jac_x_colptr[j] <= k < gearsym_shift_2_3_jac_x_colptr[j+1]
  * (GEARSYM_SHIFT_2_3_JAC_X_NNZ values).
- * Operations: 3 add, 20 mul, 1 div, 1 call (cos 1); 2 temporaries.
+ * Operations: 3 add, 20 mul, 1 div, 1 call (cos 1); 3 temporaries.
  */
 void gearsym_shift_2_3_jac_x_sparse(
     const gearsym_real *restrict x,
@@ -116,20 +118,21 @@ void gearsym_shift_2_3_jac_x_sparse(
     const gearsym_shift_2_3_params *restrict p,
     gearsym_real *restrict jac_x_nz)
 {
-    const gearsym_real t0 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh));
-    const gearsym_real t1 = t0*p->d_ss;
+    const gearsym_real t0 = GEARSYM_COS(p->zeta);
+    const gearsym_real t1 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh));
+    const gearsym_real t2 = t1*p->d_ss;
     (void)u;
     jac_x_nz[0] = -GEARSYM_LIT(0.799402834226086530854)*p->d_ss;
     jac_x_nz[1] = -GEARSYM_LIT(0.247843999698803434174)*p->d_ss;
     jac_x_nz[2] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
-    jac_x_nz[3] = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t1;
+    jac_x_nz[3] = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t2;
     jac_x_nz[4] = -GEARSYM_LIT(1.97372559770420764468)*p->k_ss;
     jac_x_nz[5] = -GEARSYM_LIT(0.611926835256345678975)*p->k_ss;
-    jac_x_nz[6] = GEARSYM_LIT(2.0)*t0*p->k_ss;
+    jac_x_nz[6] = GEARSYM_LIT(2.0)*t1*p->k_ss;
     jac_x_nz[7] = GEARSYM_LIT(1.97372559770420764468)*p->d_ss;
     jac_x_nz[8] = GEARSYM_LIT(0.611926835256345678975)*p->d_ss;
     jac_x_nz[9] = -GEARSYM_LIT(1.0);
-    jac_x_nz[10] = -GEARSYM_LIT(2.0)*t1 + t0*(-GEARSYM_LIT(1.05990859890000000000)*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta) - GEARSYM_LIT(0.0355139609030000000000)*x[3]*p->A_front*p->c_W*p->rho_air);
+    jac_x_nz[10] = -GEARSYM_LIT(2.0)*t2 + t1*(-GEARSYM_LIT(1.05990859890000000000)*t0*p->f_roll*p->m_veh - GEARSYM_LIT(0.0355139609030000000000)*x[3]*p->A_front*p->c_W*p->rho_air);
 }
 
 /**
@@ -231,7 +234,7 @@ void gearsym_shift_2_3_jac_u(
  * jac_p_nz[k] is entry (i, j) with i = gearsym_shift_2_3_jac_p_rowind[k] and
  * gearsym_shift_2_3_jac_p_colptr[j] <= k < gearsym_shift_2_3_jac_p_colptr[j+1]
  * (GEARSYM_SHIFT_2_3_JAC_P_NNZ values).
- * Operations: 11 add, 43 mul, 2 div, 2 calls (cos 1, sin 1); 13 temporaries.
+ * Operations: 11 add, 41 mul, 2 div, 2 calls (cos 1, sin 1); 15 temporaries.
  */
 void gearsym_shift_2_3_jac_p_sparse(
     const gearsym_real *restrict x,
@@ -239,40 +242,42 @@ void gearsym_shift_2_3_jac_p_sparse(
     const gearsym_shift_2_3_params *restrict p,
     gearsym_real *restrict jac_p_nz)
 {
-    const gearsym_real t0 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
-    const gearsym_real t1 = (GEARSYM_LIT(1.0)/t0);
-    const gearsym_real t2 = GEARSYM_SIN(p->zeta);
-    const gearsym_real t3 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t2;
-    const gearsym_real t4 = GEARSYM_COS(p->zeta);
-    const gearsym_real t5 = GEARSYM_LIT(1.05990859890000000000)*x[3];
-    const gearsym_real t6 = t5*p->f_roll;
-    const gearsym_real t7 = t4*p->m_veh;
-    const gearsym_real t8 = (x[3]*x[3]);
-    const gearsym_real t9 = GEARSYM_LIT(0.0177569804515000000000)*t8*p->A_front*p->c_W;
-    const gearsym_real t10 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
-    const gearsym_real t11 = (-t3*p->m_veh - t6*t7 - t9*p->rho_air + GEARSYM_LIT(2.0)*t10*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss)/(t0*t0);
-    const gearsym_real t12 = GEARSYM_LIT(0.0177569804515000000000)*t1*t8*p->rho_air;
+    const gearsym_real t0 = GEARSYM_SIN(p->zeta);
+    const gearsym_real t1 = GEARSYM_COS(p->zeta);
+    const gearsym_real t2 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
+    const gearsym_real t3 = (GEARSYM_LIT(1.0)/t2);
+    const gearsym_real t4 = GEARSYM_LIT(2.0)*t3;
+    const gearsym_real t5 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0;
+    const gearsym_real t6 = GEARSYM_LIT(1.05990859890000000000)*x[3];
+    const gearsym_real t7 = t6*p->f_roll;
+    const gearsym_real t8 = t1*p->m_veh;
+    const gearsym_real t9 = (x[3]*x[3]);
+    const gearsym_real t10 = GEARSYM_LIT(0.0177569804515000000000)*t9;
+    const gearsym_real t11 = t10*p->A_front*p->c_W;
+    const gearsym_real t12 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
+    const gearsym_real t13 = (-t11*p->rho_air - t5*p->m_veh - t7*t8 + GEARSYM_LIT(2.0)*t12*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss)/(t2*t2);
+    const gearsym_real t14 = t10*t3*p->rho_air;
     (void)u;
-    jac_p_nz[0] = -GEARSYM_LIT(0.108043690000000000000)*t11 + t1*(-t3 - t4*t6);
+    jac_p_nz[0] = -GEARSYM_LIT(0.108043690000000000000)*t13 + t3*(-t5 - t1*t7);
     jac_p_nz[1] = -GEARSYM_LIT(1.97372559770420764468)*x[2];
     jac_p_nz[2] = -GEARSYM_LIT(0.611926835256345678975)*x[2];
-    jac_p_nz[3] = GEARSYM_LIT(2.0)*t1*x[2];
+    jac_p_nz[3] = t4*x[2];
     jac_p_nz[4] = -GEARSYM_LIT(0.799402834226086530854)*x[1] + GEARSYM_LIT(1.97372559770420764468)*x[3];
     jac_p_nz[5] = -GEARSYM_LIT(0.247843999698803434174)*x[1] + GEARSYM_LIT(0.611926835256345678975)*x[3];
-    jac_p_nz[6] = GEARSYM_LIT(2.0)*t1*t10;
-    jac_p_nz[7] = t1*(-(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t7 + t2*t6*p->m_veh);
-    jac_p_nz[8] = -t11;
-    jac_p_nz[9] = -t1*t9;
-    jac_p_nz[10] = -t12*p->A_front;
-    jac_p_nz[11] = -t12*p->c_W;
-    jac_p_nz[12] = -t1*t5*t7;
+    jac_p_nz[6] = t12*t4;
+    jac_p_nz[7] = t3*(-(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t8 + t0*t7*p->m_veh);
+    jac_p_nz[8] = -t13;
+    jac_p_nz[9] = -t11*t3;
+    jac_p_nz[10] = -t14*p->A_front;
+    jac_p_nz[11] = -t14*p->c_W;
+    jac_p_nz[12] = -t3*t6*t8;
 }
 
 /**
  * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
  * xdot / d p (4 x 9), dense column-major: jac_p[i + j*4] = d xdot_i / d p_j.
  * Computes jac_p_sparse into the first NNZ entries and spreads them in place; every other
- * entry is 0. Operations: those of jac_p_sparse (11 add, 43 mul, 2 div, 2 calls (cos 1, sin
+ * entry is 0. Operations: those of jac_p_sparse (11 add, 41 mul, 2 div, 2 calls (cos 1, sin
  * 1)); the spreading moves values only.
  */
 void gearsym_shift_2_3_jac_p(
@@ -306,7 +311,7 @@ void gearsym_shift_2_3_jac_p(
 /**
  * One classical explicit Runge-Kutta step (order 4) of size h, u held constant over the step.
  * x_next may alias x (in-place stepping).
- * Operations: 92 add, 150 mul, 4 div, 8 calls (cos 4, sin 4) (4 rhs calls + 28 add, 22 mul, 0
+ * Operations: 92 add, 146 mul, 4 div, 8 calls (cos 4, sin 4) (4 rhs calls + 28 add, 22 mul, 0
  * div, 0 calls).
  */
 void gearsym_shift_2_3_rk4_step(
@@ -420,7 +425,7 @@ static void gearsym_shift_2_3_lu_solve(const gearsym_real *a, const int *perm, g
  * shows up there); ERR_SINGULAR if I - h df/dx is singular to working precision: a zero pivot,
  * or 1/||(I - h df/dx)^-1|| (its distance to singularity) not above NX eps max_i(1 + sum_j |h
  * df_i/dx_j|), in the inf-norm. On error x_next is untouched. x_next may alias x.
- * Operations (at most): 133 add, 149 mul, 28 div, 45 calls (cos 2, fabs 42, sin 1), 55 cmp
+ * Operations (at most): 133 add, 148 mul, 28 div, 45 calls (cos 2, fabs 42, sin 1), 55 cmp
  * (rhs + jac_x + 114 add, 97 mul, 26 div, 42 calls (fabs 42), 55 cmp for the checks, forming I
  * - h J, its LU factors, the solve and ||(I - h J)^-1||).
  */

@@ -69,7 +69,7 @@ const int gearsym_shift_2_3_mu_jac_p_rowind[GEARSYM_SHIFT_2_3_MU_JAC_P_NNZ] = {
 /**
  * State derivative xdot = f(x, u, p). States: omega_1 [rad/s], omega_2 [rad/s], phi [rad],
  * omega_C [rad/s]. Inputs: T_In [N*m], F_N38 [N], F_N05 [N].
- * Operations: 16 add, 36 mul, 1 div, 2 calls (cos 1, sin 1); 4 temporaries.
+ * Operations: 16 add, 33 mul, 1 div, 2 calls (cos 1, sin 1); 8 temporaries.
  */
 void gearsym_shift_2_3_mu_rhs(
     const gearsym_real *restrict x,
@@ -77,14 +77,18 @@ void gearsym_shift_2_3_mu_rhs(
     const gearsym_shift_2_3_mu_params *restrict p,
     gearsym_real *restrict xdot)
 {
-    const gearsym_real t0 = u[2]*p->mu_05;
-    const gearsym_real t1 = x[1]*p->d_ss;
-    const gearsym_real t2 = x[2]*p->k_ss;
-    const gearsym_real t3 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
-    xdot[0] = -GEARSYM_LIT(15.3180925664180849570)*t0 - GEARSYM_LIT(1.97372559770420764468)*t2 - GEARSYM_LIT(0.799402834226086530854)*t1 + GEARSYM_LIT(10.6883443030696865936)*u[0] - GEARSYM_LIT(2.22877900907409910225)*u[1]*p->mu_38 + GEARSYM_LIT(1.97372559770420764468)*x[3]*p->d_ss;
-    xdot[1] = -GEARSYM_LIT(2.16537909681544371437)*t0 - GEARSYM_LIT(0.611926835256345678975)*t2 - GEARSYM_LIT(0.247843999698803434174)*t1 + GEARSYM_LIT(2.43656425036584433736)*u[0] + GEARSYM_LIT(0.0107667915965147762417)*u[1]*p->mu_38 + GEARSYM_LIT(0.611926835256345678975)*x[3]*p->d_ss;
-    xdot[2] = t3;
-    xdot[3] = (GEARSYM_LIT(2.0)*t3*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*p->m_veh*GEARSYM_SIN(p->zeta) - GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[3]*x[3]) - GEARSYM_LIT(1.05990859890000000000)*x[3]*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta))/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
+    const gearsym_real t0 = GEARSYM_SIN(p->zeta);
+    const gearsym_real t1 = GEARSYM_COS(p->zeta);
+    const gearsym_real t2 = u[1]*p->mu_38;
+    const gearsym_real t3 = x[3]*p->d_ss;
+    const gearsym_real t4 = x[2]*p->k_ss;
+    const gearsym_real t5 = u[2]*p->mu_05;
+    const gearsym_real t6 = x[1]*p->d_ss;
+    const gearsym_real t7 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
+    xdot[0] = -GEARSYM_LIT(15.3180925664180849570)*t5 - GEARSYM_LIT(2.22877900907409910225)*t2 - GEARSYM_LIT(1.97372559770420764468)*t4 - GEARSYM_LIT(0.799402834226086530854)*t6 + GEARSYM_LIT(1.97372559770420764468)*t3 + GEARSYM_LIT(10.6883443030696865936)*u[0];
+    xdot[1] = -GEARSYM_LIT(2.16537909681544371437)*t5 - GEARSYM_LIT(0.611926835256345678975)*t4 - GEARSYM_LIT(0.247843999698803434174)*t6 + GEARSYM_LIT(0.0107667915965147762417)*t2 + GEARSYM_LIT(0.611926835256345678975)*t3 + GEARSYM_LIT(2.43656425036584433736)*u[0];
+    xdot[2] = t7;
+    xdot[3] = (GEARSYM_LIT(2.0)*t4 + GEARSYM_LIT(2.0)*t7*p->d_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*p->m_veh - GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[3]*x[3]) - GEARSYM_LIT(1.05990859890000000000)*t1*x[3]*p->f_roll*p->m_veh)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
 }
 
 /**
@@ -109,7 +113,7 @@ void gearsym_shift_2_3_mu_outputs(
  * jac_x_nz[k] is entry (i, j) with i = gearsym_shift_2_3_mu_jac_x_rowind[k] and
  * gearsym_shift_2_3_mu_jac_x_colptr[j] <= k < gearsym_shift_2_3_mu_jac_x_colptr[j+1]
  * (GEARSYM_SHIFT_2_3_MU_JAC_X_NNZ values).
- * Operations: 3 add, 20 mul, 1 div, 1 call (cos 1); 2 temporaries.
+ * Operations: 3 add, 20 mul, 1 div, 1 call (cos 1); 3 temporaries.
  */
 void gearsym_shift_2_3_mu_jac_x_sparse(
     const gearsym_real *restrict x,
@@ -117,20 +121,21 @@ void gearsym_shift_2_3_mu_jac_x_sparse(
     const gearsym_shift_2_3_mu_params *restrict p,
     gearsym_real *restrict jac_x_nz)
 {
-    const gearsym_real t0 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh));
-    const gearsym_real t1 = t0*p->d_ss;
+    const gearsym_real t0 = GEARSYM_COS(p->zeta);
+    const gearsym_real t1 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh));
+    const gearsym_real t2 = t1*p->d_ss;
     (void)u;
     jac_x_nz[0] = -GEARSYM_LIT(0.799402834226086530854)*p->d_ss;
     jac_x_nz[1] = -GEARSYM_LIT(0.247843999698803434174)*p->d_ss;
     jac_x_nz[2] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
-    jac_x_nz[3] = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t1;
+    jac_x_nz[3] = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t2;
     jac_x_nz[4] = -GEARSYM_LIT(1.97372559770420764468)*p->k_ss;
     jac_x_nz[5] = -GEARSYM_LIT(0.611926835256345678975)*p->k_ss;
-    jac_x_nz[6] = GEARSYM_LIT(2.0)*t0*p->k_ss;
+    jac_x_nz[6] = GEARSYM_LIT(2.0)*t1*p->k_ss;
     jac_x_nz[7] = GEARSYM_LIT(1.97372559770420764468)*p->d_ss;
     jac_x_nz[8] = GEARSYM_LIT(0.611926835256345678975)*p->d_ss;
     jac_x_nz[9] = -GEARSYM_LIT(1.0);
-    jac_x_nz[10] = -GEARSYM_LIT(2.0)*t1 + t0*(-GEARSYM_LIT(1.05990859890000000000)*p->f_roll*p->m_veh*GEARSYM_COS(p->zeta) - GEARSYM_LIT(0.0355139609030000000000)*x[3]*p->A_front*p->c_W*p->rho_air);
+    jac_x_nz[10] = -GEARSYM_LIT(2.0)*t2 + t1*(-GEARSYM_LIT(1.05990859890000000000)*t0*p->f_roll*p->m_veh - GEARSYM_LIT(0.0355139609030000000000)*x[3]*p->A_front*p->c_W*p->rho_air);
 }
 
 /**
@@ -231,7 +236,7 @@ void gearsym_shift_2_3_mu_jac_u(
  * jac_p_nz[k] is entry (i, j) with i = gearsym_shift_2_3_mu_jac_p_rowind[k] and
  * gearsym_shift_2_3_mu_jac_p_colptr[j] <= k < gearsym_shift_2_3_mu_jac_p_colptr[j+1]
  * (GEARSYM_SHIFT_2_3_MU_JAC_P_NNZ values).
- * Operations: 11 add, 47 mul, 2 div, 2 calls (cos 1, sin 1); 13 temporaries.
+ * Operations: 11 add, 45 mul, 2 div, 2 calls (cos 1, sin 1); 15 temporaries.
  */
 void gearsym_shift_2_3_mu_jac_p_sparse(
     const gearsym_real *restrict x,
@@ -239,32 +244,34 @@ void gearsym_shift_2_3_mu_jac_p_sparse(
     const gearsym_shift_2_3_mu_params *restrict p,
     gearsym_real *restrict jac_p_nz)
 {
-    const gearsym_real t0 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
-    const gearsym_real t1 = (GEARSYM_LIT(1.0)/t0);
-    const gearsym_real t2 = GEARSYM_SIN(p->zeta);
-    const gearsym_real t3 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t2;
-    const gearsym_real t4 = GEARSYM_COS(p->zeta);
-    const gearsym_real t5 = GEARSYM_LIT(1.05990859890000000000)*x[3];
-    const gearsym_real t6 = t5*p->f_roll;
-    const gearsym_real t7 = t4*p->m_veh;
-    const gearsym_real t8 = (x[3]*x[3]);
-    const gearsym_real t9 = GEARSYM_LIT(0.0177569804515000000000)*t8*p->A_front*p->c_W;
-    const gearsym_real t10 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
-    const gearsym_real t11 = (-t3*p->m_veh - t6*t7 - t9*p->rho_air + GEARSYM_LIT(2.0)*t10*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss)/(t0*t0);
-    const gearsym_real t12 = GEARSYM_LIT(0.0177569804515000000000)*t1*t8*p->rho_air;
-    jac_p_nz[0] = -GEARSYM_LIT(0.108043690000000000000)*t11 + t1*(-t3 - t4*t6);
+    const gearsym_real t0 = GEARSYM_SIN(p->zeta);
+    const gearsym_real t1 = GEARSYM_COS(p->zeta);
+    const gearsym_real t2 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
+    const gearsym_real t3 = (GEARSYM_LIT(1.0)/t2);
+    const gearsym_real t4 = GEARSYM_LIT(2.0)*t3;
+    const gearsym_real t5 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0;
+    const gearsym_real t6 = GEARSYM_LIT(1.05990859890000000000)*x[3];
+    const gearsym_real t7 = t6*p->f_roll;
+    const gearsym_real t8 = t1*p->m_veh;
+    const gearsym_real t9 = (x[3]*x[3]);
+    const gearsym_real t10 = GEARSYM_LIT(0.0177569804515000000000)*t9;
+    const gearsym_real t11 = t10*p->A_front*p->c_W;
+    const gearsym_real t12 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
+    const gearsym_real t13 = (-t11*p->rho_air - t5*p->m_veh - t7*t8 + GEARSYM_LIT(2.0)*t12*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss)/(t2*t2);
+    const gearsym_real t14 = t10*t3*p->rho_air;
+    jac_p_nz[0] = -GEARSYM_LIT(0.108043690000000000000)*t13 + t3*(-t5 - t1*t7);
     jac_p_nz[1] = -GEARSYM_LIT(1.97372559770420764468)*x[2];
     jac_p_nz[2] = -GEARSYM_LIT(0.611926835256345678975)*x[2];
-    jac_p_nz[3] = GEARSYM_LIT(2.0)*t1*x[2];
+    jac_p_nz[3] = t4*x[2];
     jac_p_nz[4] = -GEARSYM_LIT(0.799402834226086530854)*x[1] + GEARSYM_LIT(1.97372559770420764468)*x[3];
     jac_p_nz[5] = -GEARSYM_LIT(0.247843999698803434174)*x[1] + GEARSYM_LIT(0.611926835256345678975)*x[3];
-    jac_p_nz[6] = GEARSYM_LIT(2.0)*t1*t10;
-    jac_p_nz[7] = t1*(-(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t7 + t2*t6*p->m_veh);
-    jac_p_nz[8] = -t11;
-    jac_p_nz[9] = -t1*t9;
-    jac_p_nz[10] = -t12*p->A_front;
-    jac_p_nz[11] = -t12*p->c_W;
-    jac_p_nz[12] = -t1*t5*t7;
+    jac_p_nz[6] = t12*t4;
+    jac_p_nz[7] = t3*(-(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t8 + t0*t7*p->m_veh);
+    jac_p_nz[8] = -t13;
+    jac_p_nz[9] = -t11*t3;
+    jac_p_nz[10] = -t14*p->A_front;
+    jac_p_nz[11] = -t14*p->c_W;
+    jac_p_nz[12] = -t3*t6*t8;
     jac_p_nz[13] = -GEARSYM_LIT(2.22877900907409910225)*u[1];
     jac_p_nz[14] = GEARSYM_LIT(0.0107667915965147762417)*u[1];
     jac_p_nz[15] = -GEARSYM_LIT(15.3180925664180849570)*u[2];
@@ -275,7 +282,7 @@ void gearsym_shift_2_3_mu_jac_p_sparse(
  * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
  * xdot / d p (4 x 11), dense column-major: jac_p[i + j*4] = d xdot_i / d p_j.
  * Computes jac_p_sparse into the first NNZ entries and spreads them in place; every other
- * entry is 0. Operations: those of jac_p_sparse (11 add, 47 mul, 2 div, 2 calls (cos 1, sin
+ * entry is 0. Operations: those of jac_p_sparse (11 add, 45 mul, 2 div, 2 calls (cos 1, sin
  * 1)); the spreading moves values only.
  */
 void gearsym_shift_2_3_mu_jac_p(
@@ -309,7 +316,7 @@ void gearsym_shift_2_3_mu_jac_p(
 /**
  * One classical explicit Runge-Kutta step (order 4) of size h, u held constant over the step.
  * x_next may alias x (in-place stepping).
- * Operations: 92 add, 166 mul, 4 div, 8 calls (cos 4, sin 4) (4 rhs calls + 28 add, 22 mul, 0
+ * Operations: 92 add, 154 mul, 4 div, 8 calls (cos 4, sin 4) (4 rhs calls + 28 add, 22 mul, 0
  * div, 0 calls).
  */
 void gearsym_shift_2_3_mu_rk4_step(
@@ -423,7 +430,7 @@ static void gearsym_shift_2_3_mu_lu_solve(const gearsym_real *a, const int *perm
  * shows up there); ERR_SINGULAR if I - h df/dx is singular to working precision: a zero pivot,
  * or 1/||(I - h df/dx)^-1|| (its distance to singularity) not above NX eps max_i(1 + sum_j |h
  * df_i/dx_j|), in the inf-norm. On error x_next is untouched. x_next may alias x.
- * Operations (at most): 133 add, 153 mul, 28 div, 45 calls (cos 2, fabs 42, sin 1), 55 cmp
+ * Operations (at most): 133 add, 150 mul, 28 div, 45 calls (cos 2, fabs 42, sin 1), 55 cmp
  * (rhs + jac_x + 114 add, 97 mul, 26 div, 42 calls (fabs 42), 55 cmp for the checks, forming I
  * - h J, its LU factors, the solve and ||(I - h J)^-1||).
  */

@@ -109,7 +109,7 @@ typedef struct gearsym_shift_2_3_mu_params {
 /**
  * State derivative xdot = f(x, u, p). States: omega_1 [rad/s], omega_2 [rad/s], phi [rad],
  * omega_C [rad/s]. Inputs: T_In [N*m], F_N38 [N], F_N05 [N].
- * Operations: 16 add, 36 mul, 1 div, 2 calls (cos 1, sin 1); 4 temporaries.
+ * Operations: 16 add, 33 mul, 1 div, 2 calls (cos 1, sin 1); 8 temporaries.
  */
 void gearsym_shift_2_3_mu_rhs(
     const gearsym_real *x,
@@ -132,7 +132,7 @@ void gearsym_shift_2_3_mu_outputs(
  * jac_x_nz[k] is entry (i, j) with i = gearsym_shift_2_3_mu_jac_x_rowind[k] and
  * gearsym_shift_2_3_mu_jac_x_colptr[j] <= k < gearsym_shift_2_3_mu_jac_x_colptr[j+1]
  * (GEARSYM_SHIFT_2_3_MU_JAC_X_NNZ values).
- * Operations: 3 add, 20 mul, 1 div, 1 call (cos 1); 2 temporaries.
+ * Operations: 3 add, 20 mul, 1 div, 1 call (cos 1); 3 temporaries.
  */
 void gearsym_shift_2_3_mu_jac_x_sparse(
     const gearsym_real *x,
@@ -184,7 +184,7 @@ void gearsym_shift_2_3_mu_jac_u(
  * jac_p_nz[k] is entry (i, j) with i = gearsym_shift_2_3_mu_jac_p_rowind[k] and
  * gearsym_shift_2_3_mu_jac_p_colptr[j] <= k < gearsym_shift_2_3_mu_jac_p_colptr[j+1]
  * (GEARSYM_SHIFT_2_3_MU_JAC_P_NNZ values).
- * Operations: 11 add, 47 mul, 2 div, 2 calls (cos 1, sin 1); 13 temporaries.
+ * Operations: 11 add, 45 mul, 2 div, 2 calls (cos 1, sin 1); 15 temporaries.
  */
 void gearsym_shift_2_3_mu_jac_p_sparse(
     const gearsym_real *x,
@@ -196,7 +196,7 @@ void gearsym_shift_2_3_mu_jac_p_sparse(
  * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
  * xdot / d p (4 x 11), dense column-major: jac_p[i + j*4] = d xdot_i / d p_j.
  * Computes jac_p_sparse into the first NNZ entries and spreads them in place; every other
- * entry is 0. Operations: those of jac_p_sparse (11 add, 47 mul, 2 div, 2 calls (cos 1, sin
+ * entry is 0. Operations: those of jac_p_sparse (11 add, 45 mul, 2 div, 2 calls (cos 1, sin
  * 1)); the spreading moves values only.
  */
 void gearsym_shift_2_3_mu_jac_p(
@@ -208,7 +208,7 @@ void gearsym_shift_2_3_mu_jac_p(
 /**
  * One classical explicit Runge-Kutta step (order 4) of size h, u held constant over the step.
  * x_next may alias x (in-place stepping).
- * Operations: 92 add, 166 mul, 4 div, 8 calls (cos 4, sin 4) (4 rhs calls + 28 add, 22 mul, 0
+ * Operations: 92 add, 154 mul, 4 div, 8 calls (cos 4, sin 4) (4 rhs calls + 28 add, 22 mul, 0
  * div, 0 calls).
  */
 void gearsym_shift_2_3_mu_rk4_step(
@@ -226,7 +226,7 @@ void gearsym_shift_2_3_mu_rk4_step(
  * shows up there); ERR_SINGULAR if I - h df/dx is singular to working precision: a zero pivot,
  * or 1/||(I - h df/dx)^-1|| (its distance to singularity) not above NX eps max_i(1 + sum_j |h
  * df_i/dx_j|), in the inf-norm. On error x_next is untouched. x_next may alias x.
- * Operations (at most): 133 add, 153 mul, 28 div, 45 calls (cos 2, fabs 42, sin 1), 55 cmp
+ * Operations (at most): 133 add, 150 mul, 28 div, 45 calls (cos 2, fabs 42, sin 1), 55 cmp
  * (rhs + jac_x + 114 add, 97 mul, 26 div, 42 calls (fabs 42), 55 cmp for the checks, forming I
  * - h J, its LU factors, the solve and ||(I - h J)^-1||).
  */

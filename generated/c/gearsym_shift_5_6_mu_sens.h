@@ -155,7 +155,7 @@ typedef struct gearsym_shift_5_6_mu_sens_params {
  * [rad], S_omega_C__mu_05 [rad/s], S_omega_1__zeta [(rad/s)/(rad)], S_omega_2__zeta
  * [(rad/s)/(rad)], S_phi__zeta [(rad)/(rad)], S_omega_C__zeta [(rad/s)/(rad)]. Inputs: T_In
  * [N*m], F_N05 [N], F_N38 [N].
- * Operations: 69 add, 130 mul, 2 div, 2 calls (cos 1, sin 1); 32 temporaries.
+ * Operations: 69 add, 120 mul, 2 div, 2 calls (cos 1, sin 1); 35 temporaries.
  */
 void gearsym_shift_5_6_mu_sens_rhs(
     const gearsym_real *x,
@@ -185,7 +185,7 @@ void gearsym_shift_5_6_mu_sens_outputs(
  * jac_x_nz[k] is entry (i, j) with i = gearsym_shift_5_6_mu_sens_jac_x_rowind[k] and
  * gearsym_shift_5_6_mu_sens_jac_x_colptr[j] <= k < gearsym_shift_5_6_mu_sens_jac_x_colptr[j+1]
  * (GEARSYM_SHIFT_5_6_MU_SENS_JAC_X_NNZ values).
- * Operations: 7 add, 38 mul, 2 div, 2 calls (cos 1, sin 1); 18 temporaries.
+ * Operations: 7 add, 37 mul, 2 div, 2 calls (cos 1, sin 1); 21 temporaries.
  */
 void gearsym_shift_5_6_mu_sens_jac_x_sparse(
     const gearsym_real *x,
@@ -197,7 +197,7 @@ void gearsym_shift_5_6_mu_sens_jac_x_sparse(
  * Jacobian of the state derivative with respect to x (states), d xdot / d x (24 x 24), dense
  * column-major: jac_x[i + j*24] = d xdot_i / d x_j.
  * Computes jac_x_sparse into the first NNZ entries and spreads them in place; every other
- * entry is 0. Operations: those of jac_x_sparse (7 add, 38 mul, 2 div, 2 calls (cos 1, sin
+ * entry is 0. Operations: those of jac_x_sparse (7 add, 37 mul, 2 div, 2 calls (cos 1, sin
  * 1)); the spreading moves values only.
  */
 void gearsym_shift_5_6_mu_sens_jac_x(
@@ -237,7 +237,7 @@ void gearsym_shift_5_6_mu_sens_jac_u(
  * jac_p_nz[k] is entry (i, j) with i = gearsym_shift_5_6_mu_sens_jac_p_rowind[k] and
  * gearsym_shift_5_6_mu_sens_jac_p_colptr[j] <= k < gearsym_shift_5_6_mu_sens_jac_p_colptr[j+1]
  * (GEARSYM_SHIFT_5_6_MU_SENS_JAC_P_NNZ values).
- * Operations: 75 add, 218 mul, 3 div, 2 calls (cos 1, sin 1); 53 temporaries.
+ * Operations: 75 add, 202 mul, 3 div, 2 calls (cos 1, sin 1); 62 temporaries.
  */
 void gearsym_shift_5_6_mu_sens_jac_p_sparse(
     const gearsym_real *x,
@@ -249,7 +249,7 @@ void gearsym_shift_5_6_mu_sens_jac_p_sparse(
  * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
  * xdot / d p (24 x 11), dense column-major: jac_p[i + j*24] = d xdot_i / d p_j.
  * Computes jac_p_sparse into the first NNZ entries and spreads them in place; every other
- * entry is 0. Operations: those of jac_p_sparse (75 add, 218 mul, 3 div, 2 calls (cos 1, sin
+ * entry is 0. Operations: those of jac_p_sparse (75 add, 202 mul, 3 div, 2 calls (cos 1, sin
  * 1)); the spreading moves values only.
  */
 void gearsym_shift_5_6_mu_sens_jac_p(
@@ -261,7 +261,7 @@ void gearsym_shift_5_6_mu_sens_jac_p(
 /**
  * One classical explicit Runge-Kutta step (order 4) of size h, u held constant over the step.
  * x_next may alias x (in-place stepping).
- * Operations: 444 add, 642 mul, 8 div, 8 calls (cos 4, sin 4) (4 rhs calls + 168 add, 122 mul,
+ * Operations: 444 add, 602 mul, 8 div, 8 calls (cos 4, sin 4) (4 rhs calls + 168 add, 122 mul,
  * 0 div, 0 calls).
  */
 void gearsym_shift_5_6_mu_sens_rk4_step(

@@ -73,7 +73,7 @@ const int gearsym_shift_8_9_mu_sens_jac_p_rowind[GEARSYM_SHIFT_8_9_MU_SENS_JAC_P
  * [rad], S_omega_C__mu_38 [rad/s], S_omega_1__zeta [(rad/s)/(rad)], S_omega_2__zeta
  * [(rad/s)/(rad)], S_phi__zeta [(rad)/(rad)], S_omega_C__zeta [(rad/s)/(rad)]. Inputs: T_In
  * [N*m], F_N38 [N], F_N05 [N].
- * Operations: 69 add, 132 mul, 2 div, 2 calls (cos 1, sin 1); 30 temporaries.
+ * Operations: 69 add, 120 mul, 2 div, 2 calls (cos 1, sin 1); 35 temporaries.
  */
 void gearsym_shift_8_9_mu_sens_rhs(
     const gearsym_real *restrict x,
@@ -81,60 +81,65 @@ void gearsym_shift_8_9_mu_sens_rhs(
     const gearsym_shift_8_9_mu_sens_params *restrict p,
     gearsym_real *restrict xdot)
 {
-    const gearsym_real t0 = u[2]*p->mu_05;
-    const gearsym_real t1 = GEARSYM_LIT(1.40313626287409145619)*x[1];
-    const gearsym_real t2 = GEARSYM_LIT(3.46434343303613180533)*x[2];
-    const gearsym_real t3 = GEARSYM_LIT(2.12191621977067744665)*x[1];
-    const gearsym_real t4 = GEARSYM_LIT(5.23901114661380261579)*x[2];
-    const gearsym_real t5 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
-    const gearsym_real t6 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
-    const gearsym_real t7 = (GEARSYM_LIT(1.0)/t6);
-    const gearsym_real t8 = GEARSYM_SIN(p->zeta);
-    const gearsym_real t9 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t8;
-    const gearsym_real t10 = GEARSYM_COS(p->zeta);
-    const gearsym_real t11 = t10*p->m_veh;
-    const gearsym_real t12 = GEARSYM_LIT(1.05990859890000000000)*p->f_roll;
-    const gearsym_real t13 = t12*x[3];
-    const gearsym_real t14 = p->A_front*p->c_W*p->rho_air;
-    const gearsym_real t15 = -t11*t13 - t9*p->m_veh + GEARSYM_LIT(2.0)*t5*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss - GEARSYM_LIT(0.0177569804515000000000)*t14*(x[3]*x[3]);
-    const gearsym_real t16 = x[5]*p->d_ss;
-    const gearsym_real t17 = x[6]*p->k_ss;
-    const gearsym_real t18 = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t7;
-    const gearsym_real t19 = GEARSYM_LIT(2.0)*t7;
-    const gearsym_real t20 = t7*(-GEARSYM_LIT(2.0)*p->d_ss - t11*t12 - GEARSYM_LIT(0.0355139609030000000000)*t14*x[3]);
-    const gearsym_real t21 = x[9]*p->d_ss;
-    const gearsym_real t22 = x[10]*p->k_ss;
-    const gearsym_real t23 = x[13]*p->d_ss;
-    const gearsym_real t24 = x[14]*p->k_ss;
-    const gearsym_real t25 = x[17]*p->d_ss;
-    const gearsym_real t26 = x[19]*p->d_ss;
-    const gearsym_real t27 = x[18]*p->k_ss;
-    const gearsym_real t28 = x[21]*p->d_ss;
-    const gearsym_real t29 = x[22]*p->k_ss;
-    xdot[0] = -GEARSYM_LIT(3.39589781264432030130)*t0 + GEARSYM_LIT(2.96714704224089417744)*u[0] - t1*p->d_ss - t2*p->k_ss + GEARSYM_LIT(0.276265980852698919638)*u[1]*p->mu_38 + GEARSYM_LIT(3.46434343303613180533)*x[3]*p->d_ss;
-    xdot[1] = -GEARSYM_LIT(3.32580544704322010438)*t0 + GEARSYM_LIT(4.27673196808310471369)*u[0] - t3*p->d_ss - t4*p->k_ss + GEARSYM_LIT(1.01181788782529450984)*u[1]*p->mu_38 + GEARSYM_LIT(5.23901114661380261579)*x[3]*p->d_ss;
-    xdot[2] = t5;
-    xdot[3] = t15*t7;
-    xdot[4] = -GEARSYM_LIT(3.46434343303613180533)*t17 - GEARSYM_LIT(1.40313626287409145619)*t16 + GEARSYM_LIT(3.46434343303613180533)*x[7]*p->d_ss;
-    xdot[5] = -GEARSYM_LIT(5.23901114661380261579)*t17 - GEARSYM_LIT(2.12191621977067744665)*t16 + GEARSYM_LIT(5.23901114661380261579)*x[7]*p->d_ss;
+    const gearsym_real t0 = GEARSYM_SIN(p->zeta);
+    const gearsym_real t1 = GEARSYM_COS(p->zeta);
+    const gearsym_real t2 = GEARSYM_LIT(3.46434343303613180533)*p->d_ss;
+    const gearsym_real t3 = GEARSYM_LIT(5.23901114661380261579)*p->d_ss;
+    const gearsym_real t4 = GEARSYM_LIT(0.276265980852698919638)*u[1];
+    const gearsym_real t5 = GEARSYM_LIT(1.01181788782529450984)*u[1];
+    const gearsym_real t6 = GEARSYM_LIT(2.0)*p->d_ss;
+    const gearsym_real t7 = u[2]*p->mu_05;
+    const gearsym_real t8 = GEARSYM_LIT(1.40313626287409145619)*x[1];
+    const gearsym_real t9 = GEARSYM_LIT(3.46434343303613180533)*x[2];
+    const gearsym_real t10 = GEARSYM_LIT(2.12191621977067744665)*x[1];
+    const gearsym_real t11 = GEARSYM_LIT(5.23901114661380261579)*x[2];
+    const gearsym_real t12 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
+    const gearsym_real t13 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
+    const gearsym_real t14 = (GEARSYM_LIT(1.0)/t13);
+    const gearsym_real t15 = GEARSYM_LIT(2.0)*t14;
+    const gearsym_real t16 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0;
+    const gearsym_real t17 = t1*p->m_veh;
+    const gearsym_real t18 = GEARSYM_LIT(1.05990859890000000000)*p->f_roll;
+    const gearsym_real t19 = t18*x[3];
+    const gearsym_real t20 = p->A_front*p->c_W*p->rho_air;
+    const gearsym_real t21 = t12*t6 - t16*p->m_veh - t17*t19 + GEARSYM_LIT(2.0)*x[2]*p->k_ss - GEARSYM_LIT(0.0177569804515000000000)*t20*(x[3]*x[3]);
+    const gearsym_real t22 = x[5]*p->d_ss;
+    const gearsym_real t23 = x[6]*p->k_ss;
+    const gearsym_real t24 = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t14;
+    const gearsym_real t25 = t14*(-t6 - t17*t18 - GEARSYM_LIT(0.0355139609030000000000)*t20*x[3]);
+    const gearsym_real t26 = x[9]*p->d_ss;
+    const gearsym_real t27 = x[10]*p->k_ss;
+    const gearsym_real t28 = x[13]*p->d_ss;
+    const gearsym_real t29 = x[14]*p->k_ss;
+    const gearsym_real t30 = x[17]*p->d_ss;
+    const gearsym_real t31 = x[19]*p->d_ss;
+    const gearsym_real t32 = x[18]*p->k_ss;
+    const gearsym_real t33 = x[21]*p->d_ss;
+    const gearsym_real t34 = x[22]*p->k_ss;
+    xdot[0] = -GEARSYM_LIT(3.39589781264432030130)*t7 + GEARSYM_LIT(2.96714704224089417744)*u[0] + t2*x[3] + t4*p->mu_38 - t8*p->d_ss - t9*p->k_ss;
+    xdot[1] = -GEARSYM_LIT(3.32580544704322010438)*t7 + GEARSYM_LIT(4.27673196808310471369)*u[0] + t3*x[3] + t5*p->mu_38 - t10*p->d_ss - t11*p->k_ss;
+    xdot[2] = t12;
+    xdot[3] = t14*t21;
+    xdot[4] = -GEARSYM_LIT(3.46434343303613180533)*t23 - GEARSYM_LIT(1.40313626287409145619)*t22 + t2*x[7];
+    xdot[5] = -GEARSYM_LIT(5.23901114661380261579)*t23 - GEARSYM_LIT(2.12191621977067744665)*t22 + t3*x[7];
     xdot[6] = -x[7] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[5];
-    xdot[7] = t16*t18 + t17*t19 + t20*x[7] + t7*(-t9 - t10*t13) - GEARSYM_LIT(0.108043690000000000000)*t15/(t6*t6);
-    xdot[8] = -t2 - GEARSYM_LIT(3.46434343303613180533)*t22 - GEARSYM_LIT(1.40313626287409145619)*t21 + GEARSYM_LIT(3.46434343303613180533)*x[11]*p->d_ss;
-    xdot[9] = -t4 - GEARSYM_LIT(5.23901114661380261579)*t22 - GEARSYM_LIT(2.12191621977067744665)*t21 + GEARSYM_LIT(5.23901114661380261579)*x[11]*p->d_ss;
+    xdot[7] = t14*(-t16 - t1*t19) + t15*t23 + t22*t24 + t25*x[7] - GEARSYM_LIT(0.108043690000000000000)*t21/(t13*t13);
+    xdot[8] = -t9 - GEARSYM_LIT(3.46434343303613180533)*t27 - GEARSYM_LIT(1.40313626287409145619)*t26 + t2*x[11];
+    xdot[9] = -t11 - GEARSYM_LIT(5.23901114661380261579)*t27 - GEARSYM_LIT(2.12191621977067744665)*t26 + t3*x[11];
     xdot[10] = -x[11] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[9];
-    xdot[11] = t18*t21 + t19*t22 + t20*x[11] + GEARSYM_LIT(2.0)*t7*x[2];
-    xdot[12] = -t1 - GEARSYM_LIT(3.46434343303613180533)*t24 - GEARSYM_LIT(1.40313626287409145619)*t23 + GEARSYM_LIT(3.46434343303613180533)*x[3] + GEARSYM_LIT(3.46434343303613180533)*x[15]*p->d_ss;
-    xdot[13] = -t3 - GEARSYM_LIT(5.23901114661380261579)*t24 - GEARSYM_LIT(2.12191621977067744665)*t23 + GEARSYM_LIT(5.23901114661380261579)*x[3] + GEARSYM_LIT(5.23901114661380261579)*x[15]*p->d_ss;
+    xdot[11] = t15*t27 + t15*x[2] + t24*t26 + t25*x[11];
+    xdot[12] = -t8 - GEARSYM_LIT(3.46434343303613180533)*t29 - GEARSYM_LIT(1.40313626287409145619)*t28 + GEARSYM_LIT(3.46434343303613180533)*x[3] + t2*x[15];
+    xdot[13] = -t10 - GEARSYM_LIT(5.23901114661380261579)*t29 - GEARSYM_LIT(2.12191621977067744665)*t28 + GEARSYM_LIT(5.23901114661380261579)*x[3] + t3*x[15];
     xdot[14] = -x[15] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[13];
-    xdot[15] = t18*t23 + t19*t24 + t20*x[15] + t7*(-GEARSYM_LIT(2.0)*x[3] + (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*x[1]);
-    xdot[16] = -GEARSYM_LIT(3.46434343303613180533)*t27 - GEARSYM_LIT(1.40313626287409145619)*t25 + GEARSYM_LIT(0.276265980852698919638)*u[1] + GEARSYM_LIT(3.46434343303613180533)*t26;
-    xdot[17] = -GEARSYM_LIT(5.23901114661380261579)*t27 - GEARSYM_LIT(2.12191621977067744665)*t25 + GEARSYM_LIT(1.01181788782529450984)*u[1] + GEARSYM_LIT(5.23901114661380261579)*t26;
+    xdot[15] = t14*(-GEARSYM_LIT(2.0)*x[3] + (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*x[1]) + t15*t29 + t24*t28 + t25*x[15];
+    xdot[16] = t4 - GEARSYM_LIT(3.46434343303613180533)*t32 - GEARSYM_LIT(1.40313626287409145619)*t30 + GEARSYM_LIT(3.46434343303613180533)*t31;
+    xdot[17] = t5 - GEARSYM_LIT(5.23901114661380261579)*t32 - GEARSYM_LIT(2.12191621977067744665)*t30 + GEARSYM_LIT(5.23901114661380261579)*t31;
     xdot[18] = -x[19] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[17];
-    xdot[19] = t18*t25 + t19*t27 + t20*x[19];
-    xdot[20] = -GEARSYM_LIT(3.46434343303613180533)*t29 - GEARSYM_LIT(1.40313626287409145619)*t28 + GEARSYM_LIT(3.46434343303613180533)*x[23]*p->d_ss;
-    xdot[21] = -GEARSYM_LIT(5.23901114661380261579)*t29 - GEARSYM_LIT(2.12191621977067744665)*t28 + GEARSYM_LIT(5.23901114661380261579)*x[23]*p->d_ss;
+    xdot[19] = t15*t32 + t24*t30 + t25*x[19];
+    xdot[20] = -GEARSYM_LIT(3.46434343303613180533)*t34 - GEARSYM_LIT(1.40313626287409145619)*t33 + t2*x[23];
+    xdot[21] = -GEARSYM_LIT(5.23901114661380261579)*t34 - GEARSYM_LIT(2.12191621977067744665)*t33 + t3*x[23];
     xdot[22] = -x[23] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[21];
-    xdot[23] = t18*t28 + t19*t29 + t20*x[23] + t7*(-(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t11 + t13*t8*p->m_veh);
+    xdot[23] = t14*(-(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t17 + t0*t19*p->m_veh) + t15*t34 + t24*t33 + t25*x[23];
 }
 
 /**
@@ -189,7 +194,7 @@ void gearsym_shift_8_9_mu_sens_outputs(
  * jac_x_nz[k] is entry (i, j) with i = gearsym_shift_8_9_mu_sens_jac_x_rowind[k] and
  * gearsym_shift_8_9_mu_sens_jac_x_colptr[j] <= k < gearsym_shift_8_9_mu_sens_jac_x_colptr[j+1]
  * (GEARSYM_SHIFT_8_9_MU_SENS_JAC_X_NNZ values).
- * Operations: 7 add, 38 mul, 2 div, 2 calls (cos 1, sin 1); 18 temporaries.
+ * Operations: 7 add, 37 mul, 2 div, 2 calls (cos 1, sin 1); 21 temporaries.
  */
 void gearsym_shift_8_9_mu_sens_jac_x_sparse(
     const gearsym_real *restrict x,
@@ -197,113 +202,116 @@ void gearsym_shift_8_9_mu_sens_jac_x_sparse(
     const gearsym_shift_8_9_mu_sens_params *restrict p,
     gearsym_real *restrict jac_x_nz)
 {
-    const gearsym_real t0 = -GEARSYM_LIT(1.40313626287409145619)*p->d_ss;
-    const gearsym_real t1 = -GEARSYM_LIT(2.12191621977067744665)*p->d_ss;
-    const gearsym_real t2 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
-    const gearsym_real t3 = (GEARSYM_LIT(1.0)/t2);
-    const gearsym_real t4 = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t3;
-    const gearsym_real t5 = t4*p->d_ss;
-    const gearsym_real t6 = (GEARSYM_LIT(1.0)/(t2*t2));
-    const gearsym_real t7 = -GEARSYM_LIT(3.46434343303613180533)*p->k_ss;
-    const gearsym_real t8 = -GEARSYM_LIT(5.23901114661380261579)*p->k_ss;
-    const gearsym_real t9 = GEARSYM_LIT(2.0)*t3;
-    const gearsym_real t10 = t9*p->k_ss;
-    const gearsym_real t11 = GEARSYM_LIT(3.46434343303613180533)*p->d_ss;
-    const gearsym_real t12 = GEARSYM_LIT(5.23901114661380261579)*p->d_ss;
-    const gearsym_real t13 = GEARSYM_LIT(1.05990859890000000000)*p->f_roll*GEARSYM_COS(p->zeta);
-    const gearsym_real t14 = GEARSYM_LIT(0.0355139609030000000000)*p->A_front*p->c_W*p->rho_air;
-    const gearsym_real t15 = -GEARSYM_LIT(2.0)*p->d_ss - t13*p->m_veh - t14*x[3];
-    const gearsym_real t16 = t15*t3;
-    const gearsym_real t17 = t14*t3;
+    const gearsym_real t0 = GEARSYM_COS(p->zeta);
+    const gearsym_real t1 = GEARSYM_SIN(p->zeta);
+    const gearsym_real t2 = GEARSYM_LIT(1.05990859890000000000)*p->f_roll;
+    const gearsym_real t3 = -GEARSYM_LIT(1.40313626287409145619)*p->d_ss;
+    const gearsym_real t4 = -GEARSYM_LIT(2.12191621977067744665)*p->d_ss;
+    const gearsym_real t5 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
+    const gearsym_real t6 = (GEARSYM_LIT(1.0)/t5);
+    const gearsym_real t7 = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t6;
+    const gearsym_real t8 = t7*p->d_ss;
+    const gearsym_real t9 = (GEARSYM_LIT(1.0)/(t5*t5));
+    const gearsym_real t10 = -GEARSYM_LIT(3.46434343303613180533)*p->k_ss;
+    const gearsym_real t11 = -GEARSYM_LIT(5.23901114661380261579)*p->k_ss;
+    const gearsym_real t12 = GEARSYM_LIT(2.0)*t6;
+    const gearsym_real t13 = t12*p->k_ss;
+    const gearsym_real t14 = GEARSYM_LIT(3.46434343303613180533)*p->d_ss;
+    const gearsym_real t15 = GEARSYM_LIT(5.23901114661380261579)*p->d_ss;
+    const gearsym_real t16 = t0*t2;
+    const gearsym_real t17 = GEARSYM_LIT(0.0355139609030000000000)*p->A_front*p->c_W*p->rho_air;
+    const gearsym_real t18 = -GEARSYM_LIT(2.0)*p->d_ss - t16*p->m_veh - t17*x[3];
+    const gearsym_real t19 = t18*t6;
+    const gearsym_real t20 = t17*t6;
     (void)u;
-    jac_x_nz[0] = t0;
-    jac_x_nz[1] = t1;
+    jac_x_nz[0] = t3;
+    jac_x_nz[1] = t4;
     jac_x_nz[2] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
-    jac_x_nz[3] = t5;
-    jac_x_nz[4] = -GEARSYM_LIT(0.0875202025111381125962)*t6*p->d_ss;
+    jac_x_nz[3] = t8;
+    jac_x_nz[4] = -GEARSYM_LIT(0.0875202025111381125962)*t9*p->d_ss;
     jac_x_nz[5] = -GEARSYM_LIT(1.40313626287409145619);
     jac_x_nz[6] = -GEARSYM_LIT(2.12191621977067744665);
-    jac_x_nz[7] = t4;
-    jac_x_nz[8] = t7;
-    jac_x_nz[9] = t8;
-    jac_x_nz[10] = t10;
-    jac_x_nz[11] = -GEARSYM_LIT(0.216087380000000000000)*t6*p->k_ss;
+    jac_x_nz[7] = t7;
+    jac_x_nz[8] = t10;
+    jac_x_nz[9] = t11;
+    jac_x_nz[10] = t13;
+    jac_x_nz[11] = -GEARSYM_LIT(0.216087380000000000000)*t9*p->k_ss;
     jac_x_nz[12] = -GEARSYM_LIT(3.46434343303613180533);
     jac_x_nz[13] = -GEARSYM_LIT(5.23901114661380261579);
-    jac_x_nz[14] = t9;
-    jac_x_nz[15] = t11;
-    jac_x_nz[16] = t12;
+    jac_x_nz[14] = t12;
+    jac_x_nz[15] = t14;
+    jac_x_nz[16] = t15;
     jac_x_nz[17] = -GEARSYM_LIT(1.0);
-    jac_x_nz[18] = t16;
-    jac_x_nz[19] = -t13*t3 - t17*x[7] - GEARSYM_LIT(0.108043690000000000000)*t15*t6;
-    jac_x_nz[20] = -t17*x[11];
+    jac_x_nz[18] = t19;
+    jac_x_nz[19] = -t16*t6 - t20*x[7] - GEARSYM_LIT(0.108043690000000000000)*t18*t9;
+    jac_x_nz[20] = -t20*x[11];
     jac_x_nz[21] = GEARSYM_LIT(3.46434343303613180533);
     jac_x_nz[22] = GEARSYM_LIT(5.23901114661380261579);
-    jac_x_nz[23] = -t9 - t17*x[15];
-    jac_x_nz[24] = -t17*x[19];
-    jac_x_nz[25] = -t17*x[23] + GEARSYM_LIT(1.05990859890000000000)*t3*p->f_roll*p->m_veh*GEARSYM_SIN(p->zeta);
-    jac_x_nz[26] = t0;
-    jac_x_nz[27] = t1;
+    jac_x_nz[23] = -t12 - t20*x[15];
+    jac_x_nz[24] = -t20*x[19];
+    jac_x_nz[25] = -t20*x[23] + t1*t2*t6*p->m_veh;
+    jac_x_nz[26] = t3;
+    jac_x_nz[27] = t4;
     jac_x_nz[28] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
-    jac_x_nz[29] = t5;
-    jac_x_nz[30] = t7;
-    jac_x_nz[31] = t8;
-    jac_x_nz[32] = t10;
-    jac_x_nz[33] = t11;
-    jac_x_nz[34] = t12;
+    jac_x_nz[29] = t8;
+    jac_x_nz[30] = t10;
+    jac_x_nz[31] = t11;
+    jac_x_nz[32] = t13;
+    jac_x_nz[33] = t14;
+    jac_x_nz[34] = t15;
     jac_x_nz[35] = -GEARSYM_LIT(1.0);
-    jac_x_nz[36] = t16;
-    jac_x_nz[37] = t0;
-    jac_x_nz[38] = t1;
+    jac_x_nz[36] = t19;
+    jac_x_nz[37] = t3;
+    jac_x_nz[38] = t4;
     jac_x_nz[39] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
-    jac_x_nz[40] = t5;
-    jac_x_nz[41] = t7;
-    jac_x_nz[42] = t8;
-    jac_x_nz[43] = t10;
-    jac_x_nz[44] = t11;
-    jac_x_nz[45] = t12;
+    jac_x_nz[40] = t8;
+    jac_x_nz[41] = t10;
+    jac_x_nz[42] = t11;
+    jac_x_nz[43] = t13;
+    jac_x_nz[44] = t14;
+    jac_x_nz[45] = t15;
     jac_x_nz[46] = -GEARSYM_LIT(1.0);
-    jac_x_nz[47] = t16;
-    jac_x_nz[48] = t0;
-    jac_x_nz[49] = t1;
+    jac_x_nz[47] = t19;
+    jac_x_nz[48] = t3;
+    jac_x_nz[49] = t4;
     jac_x_nz[50] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
-    jac_x_nz[51] = t5;
-    jac_x_nz[52] = t7;
-    jac_x_nz[53] = t8;
-    jac_x_nz[54] = t10;
-    jac_x_nz[55] = t11;
-    jac_x_nz[56] = t12;
+    jac_x_nz[51] = t8;
+    jac_x_nz[52] = t10;
+    jac_x_nz[53] = t11;
+    jac_x_nz[54] = t13;
+    jac_x_nz[55] = t14;
+    jac_x_nz[56] = t15;
     jac_x_nz[57] = -GEARSYM_LIT(1.0);
-    jac_x_nz[58] = t16;
-    jac_x_nz[59] = t0;
-    jac_x_nz[60] = t1;
+    jac_x_nz[58] = t19;
+    jac_x_nz[59] = t3;
+    jac_x_nz[60] = t4;
     jac_x_nz[61] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
-    jac_x_nz[62] = t5;
-    jac_x_nz[63] = t7;
-    jac_x_nz[64] = t8;
-    jac_x_nz[65] = t10;
-    jac_x_nz[66] = t11;
-    jac_x_nz[67] = t12;
+    jac_x_nz[62] = t8;
+    jac_x_nz[63] = t10;
+    jac_x_nz[64] = t11;
+    jac_x_nz[65] = t13;
+    jac_x_nz[66] = t14;
+    jac_x_nz[67] = t15;
     jac_x_nz[68] = -GEARSYM_LIT(1.0);
-    jac_x_nz[69] = t16;
-    jac_x_nz[70] = t0;
-    jac_x_nz[71] = t1;
+    jac_x_nz[69] = t19;
+    jac_x_nz[70] = t3;
+    jac_x_nz[71] = t4;
     jac_x_nz[72] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
-    jac_x_nz[73] = t5;
-    jac_x_nz[74] = t7;
-    jac_x_nz[75] = t8;
-    jac_x_nz[76] = t10;
-    jac_x_nz[77] = t11;
-    jac_x_nz[78] = t12;
+    jac_x_nz[73] = t8;
+    jac_x_nz[74] = t10;
+    jac_x_nz[75] = t11;
+    jac_x_nz[76] = t13;
+    jac_x_nz[77] = t14;
+    jac_x_nz[78] = t15;
     jac_x_nz[79] = -GEARSYM_LIT(1.0);
-    jac_x_nz[80] = t16;
+    jac_x_nz[80] = t19;
 }
 
 /**
  * Jacobian of the state derivative with respect to x (states), d xdot / d x (24 x 24), dense
  * column-major: jac_x[i + j*24] = d xdot_i / d x_j.
  * Computes jac_x_sparse into the first NNZ entries and spreads them in place; every other
- * entry is 0. Operations: those of jac_x_sparse (7 add, 38 mul, 2 div, 2 calls (cos 1, sin
+ * entry is 0. Operations: those of jac_x_sparse (7 add, 37 mul, 2 div, 2 calls (cos 1, sin
  * 1)); the spreading moves values only.
  */
 void gearsym_shift_8_9_mu_sens_jac_x(
@@ -399,7 +407,7 @@ void gearsym_shift_8_9_mu_sens_jac_u(
  * jac_p_nz[k] is entry (i, j) with i = gearsym_shift_8_9_mu_sens_jac_p_rowind[k] and
  * gearsym_shift_8_9_mu_sens_jac_p_colptr[j] <= k < gearsym_shift_8_9_mu_sens_jac_p_colptr[j+1]
  * (GEARSYM_SHIFT_8_9_MU_SENS_JAC_P_NNZ values).
- * Operations: 75 add, 218 mul, 3 div, 2 calls (cos 1, sin 1); 53 temporaries.
+ * Operations: 75 add, 202 mul, 3 div, 2 calls (cos 1, sin 1); 62 temporaries.
  */
 void gearsym_shift_8_9_mu_sens_jac_p_sparse(
     const gearsym_real *restrict x,
@@ -407,137 +415,146 @@ void gearsym_shift_8_9_mu_sens_jac_p_sparse(
     const gearsym_shift_8_9_mu_sens_params *restrict p,
     gearsym_real *restrict jac_p_nz)
 {
-    const gearsym_real t0 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
-    const gearsym_real t1 = (GEARSYM_LIT(1.0)/t0);
-    const gearsym_real t2 = GEARSYM_SIN(p->zeta);
-    const gearsym_real t3 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t2;
-    const gearsym_real t4 = GEARSYM_COS(p->zeta);
-    const gearsym_real t5 = GEARSYM_LIT(1.05990859890000000000)*t4;
-    const gearsym_real t6 = t5*p->f_roll;
-    const gearsym_real t7 = t6*x[3];
-    const gearsym_real t8 = -t3 - t7;
-    const gearsym_real t9 = (GEARSYM_LIT(1.0)/(t0*t0));
-    const gearsym_real t10 = t3*p->m_veh;
-    const gearsym_real t11 = t7*p->m_veh;
-    const gearsym_real t12 = p->A_front*p->c_W;
-    const gearsym_real t13 = t12*p->rho_air;
-    const gearsym_real t14 = (x[3]*x[3]);
-    const gearsym_real t15 = GEARSYM_LIT(0.0177569804515000000000)*t14;
-    const gearsym_real t16 = -t10 - t11 - t13*t15 + GEARSYM_LIT(2.0)*x[2]*p->k_ss + GEARSYM_LIT(2.0)*p->d_ss*(-x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1]);
-    const gearsym_real t17 = t16*t9;
-    const gearsym_real t18 = t9*p->d_ss;
-    const gearsym_real t19 = GEARSYM_LIT(0.0875202025111381125962)*t18;
-    const gearsym_real t20 = GEARSYM_LIT(0.216087380000000000000)*t9;
-    const gearsym_real t21 = t20*p->k_ss;
-    const gearsym_real t22 = t8*t9;
-    const gearsym_real t23 = t9*(-GEARSYM_LIT(2.0)*p->d_ss - t6*p->m_veh - GEARSYM_LIT(0.0355139609030000000000)*t13*x[3]);
-    const gearsym_real t24 = -GEARSYM_LIT(0.108043690000000000000)*t23 - t1*t6;
-    const gearsym_real t25 = (GEARSYM_LIT(1.0)/(t0*t0*t0));
-    const gearsym_real t26 = t20*x[2];
-    const gearsym_real t27 = -GEARSYM_LIT(2.0)*x[3] + (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*x[1];
-    const gearsym_real t28 = t27*t9;
-    const gearsym_real t29 = GEARSYM_LIT(0.108043690000000000000)*t28;
-    const gearsym_real t30 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t4;
-    const gearsym_real t31 = t1*t30;
-    const gearsym_real t32 = GEARSYM_LIT(1.05990859890000000000)*t2*p->f_roll;
-    const gearsym_real t33 = -t30*p->m_veh + t32*x[3]*p->m_veh;
-    const gearsym_real t34 = t33*t9;
-    const gearsym_real t35 = GEARSYM_LIT(0.108043690000000000000)*t34;
-    const gearsym_real t36 = GEARSYM_LIT(2.0)*x[2];
-    const gearsym_real t37 = GEARSYM_LIT(2.0)*t1;
-    const gearsym_real t38 = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t1;
-    const gearsym_real t39 = t1*x[3];
-    const gearsym_real t40 = t1*p->m_veh;
-    const gearsym_real t41 = t32*t40;
-    const gearsym_real t42 = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t18;
-    const gearsym_real t43 = GEARSYM_LIT(2.0)*t9*p->k_ss;
-    const gearsym_real t44 = t1*t15;
-    const gearsym_real t45 = GEARSYM_LIT(0.0355139609030000000000)*t39;
-    const gearsym_real t46 = t12*t45;
-    const gearsym_real t47 = p->A_front*p->rho_air;
-    const gearsym_real t48 = t45*t47;
-    const gearsym_real t49 = p->c_W*p->rho_air;
-    const gearsym_real t50 = t45*t49;
-    const gearsym_real t51 = t39*t5;
-    const gearsym_real t52 = t40*t5;
-    jac_p_nz[0] = -GEARSYM_LIT(0.108043690000000000000)*t17 + t1*t8;
-    jac_p_nz[1] = -GEARSYM_LIT(0.216087380000000000000)*t22 + t24*x[7] - t19*x[5] - t21*x[6] + GEARSYM_LIT(0.0233468778976322000000)*t16*t25;
-    jac_p_nz[2] = -t26 + t24*x[11] - t19*x[9] - t21*x[10];
-    jac_p_nz[3] = -t29 + t24*x[15] - t19*x[13] - t21*x[14];
-    jac_p_nz[4] = t24*x[19] - t19*x[17] - t21*x[18];
-    jac_p_nz[5] = -t31 - t35 + t24*x[23] - t19*x[21] - t21*x[22] + GEARSYM_LIT(1.05990859890000000000)*t1*t2*x[3]*p->f_roll;
+    const gearsym_real t0 = GEARSYM_SIN(p->zeta);
+    const gearsym_real t1 = GEARSYM_COS(p->zeta);
+    const gearsym_real t2 = GEARSYM_LIT(2.0)*p->d_ss;
+    const gearsym_real t3 = GEARSYM_LIT(2.0)*p->k_ss;
+    const gearsym_real t4 = p->c_W*p->rho_air;
+    const gearsym_real t5 = x[3]*p->m_veh;
+    const gearsym_real t6 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh;
+    const gearsym_real t7 = (GEARSYM_LIT(1.0)/t6);
+    const gearsym_real t8 = t7*x[3];
+    const gearsym_real t9 = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t7;
+    const gearsym_real t10 = GEARSYM_LIT(1.05990859890000000000)*t0;
+    const gearsym_real t11 = t10*t8;
+    const gearsym_real t12 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0;
+    const gearsym_real t13 = GEARSYM_LIT(1.05990859890000000000)*t1;
+    const gearsym_real t14 = t13*p->f_roll;
+    const gearsym_real t15 = t14*x[3];
+    const gearsym_real t16 = -t12 - t15;
+    const gearsym_real t17 = (GEARSYM_LIT(1.0)/(t6*t6));
+    const gearsym_real t18 = t12*p->m_veh;
+    const gearsym_real t19 = t15*p->m_veh;
+    const gearsym_real t20 = p->A_front*p->c_W;
+    const gearsym_real t21 = t20*p->rho_air;
+    const gearsym_real t22 = (x[3]*x[3]);
+    const gearsym_real t23 = GEARSYM_LIT(0.00191852969123792603500)*t22;
+    const gearsym_real t24 = t17*t23;
+    const gearsym_real t25 = t24*p->A_front;
+    const gearsym_real t26 = GEARSYM_LIT(0.0177569804515000000000)*t22;
+    const gearsym_real t27 = -t18 - t19 + t2*(-x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1]) + t3*x[2] - t21*t26;
+    const gearsym_real t28 = t17*t27;
+    const gearsym_real t29 = t17*p->d_ss;
+    const gearsym_real t30 = GEARSYM_LIT(0.0875202025111381125962)*t29;
+    const gearsym_real t31 = GEARSYM_LIT(0.216087380000000000000)*t17;
+    const gearsym_real t32 = t31*p->k_ss;
+    const gearsym_real t33 = t16*t17;
+    const gearsym_real t34 = t17*(-t2 - t14*p->m_veh - GEARSYM_LIT(0.0355139609030000000000)*t21*x[3]);
+    const gearsym_real t35 = -GEARSYM_LIT(0.108043690000000000000)*t34 - t14*t7;
+    const gearsym_real t36 = (GEARSYM_LIT(1.0)/(t6*t6*t6));
+    const gearsym_real t37 = t27*t36;
+    const gearsym_real t38 = t31*x[2];
+    const gearsym_real t39 = -GEARSYM_LIT(2.0)*x[3] + (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*x[1];
+    const gearsym_real t40 = t17*t39;
+    const gearsym_real t41 = GEARSYM_LIT(0.108043690000000000000)*t40;
+    const gearsym_real t42 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t1;
+    const gearsym_real t43 = t42*t7;
+    const gearsym_real t44 = t10*p->f_roll;
+    const gearsym_real t45 = t44*t5 - t42*p->m_veh;
+    const gearsym_real t46 = t17*t45;
+    const gearsym_real t47 = GEARSYM_LIT(0.108043690000000000000)*t46;
+    const gearsym_real t48 = GEARSYM_LIT(2.0)*x[2];
+    const gearsym_real t49 = GEARSYM_LIT(2.0)*t7;
+    const gearsym_real t50 = t7*p->m_veh;
+    const gearsym_real t51 = t44*t50;
+    const gearsym_real t52 = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t29;
+    const gearsym_real t53 = t17*t3;
+    const gearsym_real t54 = t26*t7;
+    const gearsym_real t55 = GEARSYM_LIT(0.0355139609030000000000)*t8;
+    const gearsym_real t56 = t20*t55;
+    const gearsym_real t57 = p->A_front*p->rho_air;
+    const gearsym_real t58 = t55*t57;
+    const gearsym_real t59 = t4*t55;
+    const gearsym_real t60 = t13*t8;
+    const gearsym_real t61 = t13*t50;
+    jac_p_nz[0] = -GEARSYM_LIT(0.108043690000000000000)*t28 + t16*t7;
+    jac_p_nz[1] = -GEARSYM_LIT(0.216087380000000000000)*t33 + GEARSYM_LIT(0.0233468778976322000000)*t37 + t35*x[7] - t30*x[5] - t32*x[6];
+    jac_p_nz[2] = -t38 + t35*x[11] - t30*x[9] - t32*x[10];
+    jac_p_nz[3] = -t41 + t35*x[15] - t30*x[13] - t32*x[14];
+    jac_p_nz[4] = t35*x[19] - t30*x[17] - t32*x[18];
+    jac_p_nz[5] = -t43 - t47 + t11*p->f_roll + t35*x[23] - t30*x[21] - t32*x[22];
     jac_p_nz[6] = -GEARSYM_LIT(3.46434343303613180533)*x[2];
     jac_p_nz[7] = -GEARSYM_LIT(5.23901114661380261579)*x[2];
-    jac_p_nz[8] = t1*t36;
+    jac_p_nz[8] = t48*t7;
     jac_p_nz[9] = -GEARSYM_LIT(3.46434343303613180533)*x[6];
     jac_p_nz[10] = -GEARSYM_LIT(5.23901114661380261579)*x[6];
-    jac_p_nz[11] = -t26 + t37*x[6];
+    jac_p_nz[11] = -t38 + t49*x[6];
     jac_p_nz[12] = -GEARSYM_LIT(3.46434343303613180533)*x[10];
     jac_p_nz[13] = -GEARSYM_LIT(5.23901114661380261579)*x[10];
-    jac_p_nz[14] = t37*x[10];
+    jac_p_nz[14] = t49*x[10];
     jac_p_nz[15] = -GEARSYM_LIT(3.46434343303613180533)*x[14];
     jac_p_nz[16] = -GEARSYM_LIT(5.23901114661380261579)*x[14];
-    jac_p_nz[17] = t37*x[14];
+    jac_p_nz[17] = t49*x[14];
     jac_p_nz[18] = -GEARSYM_LIT(3.46434343303613180533)*x[18];
     jac_p_nz[19] = -GEARSYM_LIT(5.23901114661380261579)*x[18];
-    jac_p_nz[20] = t37*x[18];
+    jac_p_nz[20] = t49*x[18];
     jac_p_nz[21] = -GEARSYM_LIT(3.46434343303613180533)*x[22];
     jac_p_nz[22] = -GEARSYM_LIT(5.23901114661380261579)*x[22];
-    jac_p_nz[23] = t37*x[22];
+    jac_p_nz[23] = t49*x[22];
     jac_p_nz[24] = -GEARSYM_LIT(1.40313626287409145619)*x[1] + GEARSYM_LIT(3.46434343303613180533)*x[3];
     jac_p_nz[25] = -GEARSYM_LIT(2.12191621977067744665)*x[1] + GEARSYM_LIT(5.23901114661380261579)*x[3];
-    jac_p_nz[26] = t1*t27;
+    jac_p_nz[26] = t39*t7;
     jac_p_nz[27] = -GEARSYM_LIT(1.40313626287409145619)*x[5] + GEARSYM_LIT(3.46434343303613180533)*x[7];
     jac_p_nz[28] = -GEARSYM_LIT(2.12191621977067744665)*x[5] + GEARSYM_LIT(5.23901114661380261579)*x[7];
-    jac_p_nz[29] = -t29 - t37*x[7] + (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t1*x[5];
+    jac_p_nz[29] = -t41 + t9*x[5] - t49*x[7];
     jac_p_nz[30] = -GEARSYM_LIT(1.40313626287409145619)*x[9] + GEARSYM_LIT(3.46434343303613180533)*x[11];
     jac_p_nz[31] = -GEARSYM_LIT(2.12191621977067744665)*x[9] + GEARSYM_LIT(5.23901114661380261579)*x[11];
-    jac_p_nz[32] = t38*x[9] - t37*x[11];
+    jac_p_nz[32] = t9*x[9] - t49*x[11];
     jac_p_nz[33] = -GEARSYM_LIT(1.40313626287409145619)*x[13] + GEARSYM_LIT(3.46434343303613180533)*x[15];
     jac_p_nz[34] = -GEARSYM_LIT(2.12191621977067744665)*x[13] + GEARSYM_LIT(5.23901114661380261579)*x[15];
-    jac_p_nz[35] = t38*x[13] - t37*x[15];
+    jac_p_nz[35] = t9*x[13] - t49*x[15];
     jac_p_nz[36] = -GEARSYM_LIT(1.40313626287409145619)*x[17] + GEARSYM_LIT(3.46434343303613180533)*x[19];
     jac_p_nz[37] = -GEARSYM_LIT(2.12191621977067744665)*x[17] + GEARSYM_LIT(5.23901114661380261579)*x[19];
-    jac_p_nz[38] = t38*x[17] - t37*x[19];
+    jac_p_nz[38] = t9*x[17] - t49*x[19];
     jac_p_nz[39] = -GEARSYM_LIT(1.40313626287409145619)*x[21] + GEARSYM_LIT(3.46434343303613180533)*x[23];
     jac_p_nz[40] = -GEARSYM_LIT(2.12191621977067744665)*x[21] + GEARSYM_LIT(5.23901114661380261579)*x[23];
-    jac_p_nz[41] = t38*x[21] - t37*x[23];
-    jac_p_nz[42] = t1*t33;
-    jac_p_nz[43] = -t31 - t35 + t32*t39 + t41*x[7];
-    jac_p_nz[44] = t41*x[11];
-    jac_p_nz[45] = t41*x[15];
-    jac_p_nz[46] = t41*x[19];
-    jac_p_nz[47] = t1*t10 + t1*t11 + t41*x[23];
-    jac_p_nz[48] = -t17;
-    jac_p_nz[49] = -t22 - t23*x[7] - t42*x[5] - t43*x[6] + GEARSYM_LIT(0.216087380000000000000)*t16*t25;
-    jac_p_nz[50] = -t23*x[11] - t36*t9 - t42*x[9] - t43*x[10];
-    jac_p_nz[51] = -t28 - t23*x[15] - t42*x[13] - t43*x[14];
-    jac_p_nz[52] = -t23*x[19] - t42*x[17] - t43*x[18];
-    jac_p_nz[53] = -t34 - t23*x[23] - t42*x[21] - t43*x[22];
-    jac_p_nz[54] = -t12*t44;
-    jac_p_nz[55] = -t46*x[7] + GEARSYM_LIT(0.00191852969123792603500)*t14*t9*p->A_front*p->c_W;
-    jac_p_nz[56] = -t46*x[11];
-    jac_p_nz[57] = -t46*x[15];
-    jac_p_nz[58] = -t46*x[19];
-    jac_p_nz[59] = -t46*x[23];
-    jac_p_nz[60] = -t44*t47;
-    jac_p_nz[61] = -t48*x[7] + GEARSYM_LIT(0.00191852969123792603500)*t14*t9*p->A_front*p->rho_air;
-    jac_p_nz[62] = -t48*x[11];
-    jac_p_nz[63] = -t48*x[15];
-    jac_p_nz[64] = -t48*x[19];
-    jac_p_nz[65] = -t48*x[23];
-    jac_p_nz[66] = -t44*t49;
-    jac_p_nz[67] = -t50*x[7] + GEARSYM_LIT(0.00191852969123792603500)*t14*t9*p->c_W*p->rho_air;
-    jac_p_nz[68] = -t50*x[11];
-    jac_p_nz[69] = -t50*x[15];
-    jac_p_nz[70] = -t50*x[19];
-    jac_p_nz[71] = -t50*x[23];
-    jac_p_nz[72] = -t51*p->m_veh;
-    jac_p_nz[73] = -t51 - t52*x[7] + GEARSYM_LIT(0.114516436087885941000)*t4*t9*x[3]*p->m_veh;
-    jac_p_nz[74] = -t52*x[11];
-    jac_p_nz[75] = -t52*x[15];
-    jac_p_nz[76] = -t52*x[19];
-    jac_p_nz[77] = -t52*x[23] + GEARSYM_LIT(1.05990859890000000000)*t1*t2*x[3]*p->m_veh;
+    jac_p_nz[41] = t9*x[21] - t49*x[23];
+    jac_p_nz[42] = t45*t7;
+    jac_p_nz[43] = -t43 - t47 + t44*t8 + t51*x[7];
+    jac_p_nz[44] = t51*x[11];
+    jac_p_nz[45] = t51*x[15];
+    jac_p_nz[46] = t51*x[19];
+    jac_p_nz[47] = t18*t7 + t19*t7 + t51*x[23];
+    jac_p_nz[48] = -t28;
+    jac_p_nz[49] = -t33 + GEARSYM_LIT(0.216087380000000000000)*t37 - t34*x[7] - t52*x[5] - t53*x[6];
+    jac_p_nz[50] = -t17*t48 - t34*x[11] - t52*x[9] - t53*x[10];
+    jac_p_nz[51] = -t40 - t34*x[15] - t52*x[13] - t53*x[14];
+    jac_p_nz[52] = -t34*x[19] - t52*x[17] - t53*x[18];
+    jac_p_nz[53] = -t46 - t34*x[23] - t52*x[21] - t53*x[22];
+    jac_p_nz[54] = -t20*t54;
+    jac_p_nz[55] = t25*p->c_W - t56*x[7];
+    jac_p_nz[56] = -t56*x[11];
+    jac_p_nz[57] = -t56*x[15];
+    jac_p_nz[58] = -t56*x[19];
+    jac_p_nz[59] = -t56*x[23];
+    jac_p_nz[60] = -t54*t57;
+    jac_p_nz[61] = t25*p->rho_air - t58*x[7];
+    jac_p_nz[62] = -t58*x[11];
+    jac_p_nz[63] = -t58*x[15];
+    jac_p_nz[64] = -t58*x[19];
+    jac_p_nz[65] = -t58*x[23];
+    jac_p_nz[66] = -t4*t54;
+    jac_p_nz[67] = t24*t4 - t59*x[7];
+    jac_p_nz[68] = -t59*x[11];
+    jac_p_nz[69] = -t59*x[15];
+    jac_p_nz[70] = -t59*x[19];
+    jac_p_nz[71] = -t59*x[23];
+    jac_p_nz[72] = -t60*p->m_veh;
+    jac_p_nz[73] = -t60 - t61*x[7] + GEARSYM_LIT(0.114516436087885941000)*t1*t17*t5;
+    jac_p_nz[74] = -t61*x[11];
+    jac_p_nz[75] = -t61*x[15];
+    jac_p_nz[76] = -t61*x[19];
+    jac_p_nz[77] = t11*p->m_veh - t61*x[23];
     jac_p_nz[78] = GEARSYM_LIT(0.276265980852698919638)*u[1];
     jac_p_nz[79] = GEARSYM_LIT(1.01181788782529450984)*u[1];
     jac_p_nz[80] = -GEARSYM_LIT(3.39589781264432030130)*u[2];
@@ -548,7 +565,7 @@ void gearsym_shift_8_9_mu_sens_jac_p_sparse(
  * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
  * xdot / d p (24 x 11), dense column-major: jac_p[i + j*24] = d xdot_i / d p_j.
  * Computes jac_p_sparse into the first NNZ entries and spreads them in place; every other
- * entry is 0. Operations: those of jac_p_sparse (75 add, 218 mul, 3 div, 2 calls (cos 1, sin
+ * entry is 0. Operations: those of jac_p_sparse (75 add, 202 mul, 3 div, 2 calls (cos 1, sin
  * 1)); the spreading moves values only.
  */
 void gearsym_shift_8_9_mu_sens_jac_p(
@@ -582,7 +599,7 @@ void gearsym_shift_8_9_mu_sens_jac_p(
 /**
  * One classical explicit Runge-Kutta step (order 4) of size h, u held constant over the step.
  * x_next may alias x (in-place stepping).
- * Operations: 444 add, 650 mul, 8 div, 8 calls (cos 4, sin 4) (4 rhs calls + 168 add, 122 mul,
+ * Operations: 444 add, 602 mul, 8 div, 8 calls (cos 4, sin 4) (4 rhs calls + 168 add, 122 mul,
  * 0 div, 0 calls).
  */
 void gearsym_shift_8_9_mu_sens_rk4_step(

@@ -176,8 +176,8 @@ void gearsym_shift_element_jac_x(
  * jac_u_nz[k] is entry (i, j) with i = gearsym_shift_element_jac_u_rowind[k] and
  * gearsym_shift_element_jac_u_colptr[j] <= k < gearsym_shift_element_jac_u_colptr[j+1]
  * (GEARSYM_SHIFT_ELEMENT_JAC_U_NNZ values).
- * Operations: 12 add, 59 mul, 5 div, 4 calls (Heaviside 1, cos 1, fabs 1, sin 1), 12 select,
- * 19 cmp, 13 logic; 24 temporaries.
+ * Operations: 12 add, 46 mul, 5 div, 4 calls (Heaviside 1, cos 1, fabs 1, sin 1), 12 select,
+ * 19 cmp, 13 logic; 31 temporaries.
  */
 void gearsym_shift_element_jac_u_sparse(
     const gearsym_real *restrict x,
@@ -185,40 +185,47 @@ void gearsym_shift_element_jac_u_sparse(
     const gearsym_shift_element_params *restrict p,
     gearsym_real *restrict jac_u_nz)
 {
-    const gearsym_real t0 = GEARSYM_LIT(2.0)*u[2]*p->n_disc*p->r_m;
-    const gearsym_real t1 = t0*u[1];
-    const gearsym_real t2 = gearsym_shift_element_max(t1, p->t_ss_min);
-    const gearsym_real t3 = GEARSYM_FABS(x[0]);
-    const gearsym_real t4 = t3/t2;
-    const gearsym_real t5 = (GEARSYM_LIT(1.0)/p->sigma0);
-    const gearsym_real t6 = t2*t5;
-    const gearsym_real t7 = t6*p->z_ba_ratio;
-    const int t8 = ((t3 <= t7) || (u[0]*x[0] <= GEARSYM_LIT(0.0)));
-    const gearsym_real t9 = t3 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t6 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t7;
-    const gearsym_real t10 = -t7 + t2*t5;
-    const gearsym_real t11 = GEARSYM_LIT(3.14159265358979323846)/t10;
-    const gearsym_real t12 = t11*t9;
-    const int t13 = (t3 < t6);
-    const gearsym_real t14 = ((isnan(t3) || isnan(t7) || isnan(u[0]*x[0]) || isnan(t6)) ? ((gearsym_real)NAN) : (t8 ? GEARSYM_LIT(0.0) : (t13 ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*GEARSYM_SIN(t12) : GEARSYM_LIT(1.0))));
-    const gearsym_real t15 = GEARSYM_COS(t12);
-    const gearsym_real t16 = gearsym_shift_element_heaviside(t1 - p->t_ss_min, (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)));
-    const gearsym_real t17 = t16*t4*u[0];
-    const gearsym_real t18 = t17*((isnan(t3) || isnan(t7) || isnan(u[0]*x[0]) || isnan(t6)) ? ((gearsym_real)NAN) : (t8 ? GEARSYM_LIT(0.0) : (t13 ? -(GEARSYM_LIT(1.0)/GEARSYM_LIT(4.0))*t11*t15 : GEARSYM_LIT(0.0))));
-    const gearsym_real t19 = (GEARSYM_LIT(1.0)/(t10*t10));
-    const gearsym_real t20 = (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t15;
-    const gearsym_real t21 = t17*p->z_ba_ratio*((isnan(t3) || isnan(t7) || isnan(u[0]*x[0]) || isnan(t6)) ? ((gearsym_real)NAN) : (t8 ? GEARSYM_LIT(0.0) : (t13 ? t20*(-(GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t11 + GEARSYM_LIT(3.14159265358979323846)*t19*t9) : GEARSYM_LIT(0.0))));
-    const gearsym_real t22 = -t4*p->sigma0*((isnan(t3) || isnan(t7) || isnan(u[0]*x[0]) || isnan(t6)) ? ((gearsym_real)NAN) : (t8 ? GEARSYM_LIT(0.0) : (t13 ? -GEARSYM_LIT(3.14159265358979323846)*t19*t20*t5*t9 : GEARSYM_LIT(0.0)))) + t14*t3*p->sigma0/(t2*t2);
-    const gearsym_real t23 = GEARSYM_LIT(2.0)*u[1]*p->n_disc*p->r_m;
-    jac_u_nz[0] = GEARSYM_LIT(1.0) - t14*t4*p->sigma0;
-    jac_u_nz[1] = -t0*t18 - t0*t21 + GEARSYM_LIT(2.0)*t16*t22*u[0]*u[2]*p->n_disc*p->r_m;
-    jac_u_nz[2] = -t18*t23 - t21*t23 + GEARSYM_LIT(2.0)*t16*t22*u[1]*u[0]*p->n_disc*p->r_m;
+    const gearsym_real t0 = GEARSYM_LIT(2.0)*p->n_disc;
+    const gearsym_real t1 = t0*p->r_m;
+    const gearsym_real t2 = t1*u[1];
+    const gearsym_real t3 = t1*u[2];
+    const gearsym_real t4 = t3*u[1];
+    const gearsym_real t5 = gearsym_shift_element_max(t4, p->t_ss_min);
+    const gearsym_real t6 = GEARSYM_FABS(x[0]);
+    const gearsym_real t7 = t6/t5;
+    const gearsym_real t8 = (GEARSYM_LIT(1.0)/p->sigma0);
+    const gearsym_real t9 = t5*t8;
+    const gearsym_real t10 = t9*p->z_ba_ratio;
+    const int t11 = ((t6 <= t10) || (u[0]*x[0] <= GEARSYM_LIT(0.0)));
+    const gearsym_real t12 = t6 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t10 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t9;
+    const gearsym_real t13 = -t10 + t5*t8;
+    const gearsym_real t14 = GEARSYM_LIT(3.14159265358979323846)/t13;
+    const gearsym_real t15 = t12*t14;
+    const gearsym_real t16 = GEARSYM_SIN(t15);
+    const gearsym_real t17 = GEARSYM_COS(t15);
+    const int t18 = (t6 < t9);
+    const gearsym_real t19 = ((isnan(t6) || isnan(t10) || isnan(u[0]*x[0]) || isnan(t9)) ? ((gearsym_real)NAN) : (t11 ? GEARSYM_LIT(0.0) : (t18 ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t16 : GEARSYM_LIT(1.0))));
+    const gearsym_real t20 = t19*p->sigma0;
+    const gearsym_real t21 = gearsym_shift_element_heaviside(t4 - p->t_ss_min, (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)));
+    const gearsym_real t22 = t21*u[0];
+    const gearsym_real t23 = t22*t7;
+    const gearsym_real t24 = t23*((isnan(t6) || isnan(t10) || isnan(u[0]*x[0]) || isnan(t9)) ? ((gearsym_real)NAN) : (t11 ? GEARSYM_LIT(0.0) : (t18 ? -(GEARSYM_LIT(1.0)/GEARSYM_LIT(4.0))*t14*t17 : GEARSYM_LIT(0.0))));
+    const gearsym_real t25 = (GEARSYM_LIT(1.0)/(t13*t13));
+    const gearsym_real t26 = t12*t25;
+    const gearsym_real t27 = (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t17;
+    const gearsym_real t28 = t23*p->z_ba_ratio*((isnan(t6) || isnan(t10) || isnan(u[0]*x[0]) || isnan(t9)) ? ((gearsym_real)NAN) : (t11 ? GEARSYM_LIT(0.0) : (t18 ? t27*(-(GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t14 + GEARSYM_LIT(3.14159265358979323846)*t26) : GEARSYM_LIT(0.0))));
+    const gearsym_real t29 = t20*t6/(t5*t5) - t7*p->sigma0*((isnan(t6) || isnan(t10) || isnan(u[0]*x[0]) || isnan(t9)) ? ((gearsym_real)NAN) : (t11 ? GEARSYM_LIT(0.0) : (t18 ? -GEARSYM_LIT(3.14159265358979323846)*t26*t27*t8 : GEARSYM_LIT(0.0))));
+    const gearsym_real t30 = t22*t29;
+    jac_u_nz[0] = GEARSYM_LIT(1.0) - t20*t7;
+    jac_u_nz[1] = t3*t30 - t24*t3 - t28*t3;
+    jac_u_nz[2] = t2*t30 - t2*t24 - t2*t28;
 }
 
 /**
  * Jacobian of the state derivative with respect to u (inputs), d xdot / d u (1 x 3), dense
  * column-major: jac_u[i + j*1] = d xdot_i / d u_j.
  * Computes jac_u_sparse into the first NNZ entries and spreads them in place; every other
- * entry is 0. Operations: those of jac_u_sparse (12 add, 59 mul, 5 div, 4 calls (Heaviside 1,
+ * entry is 0. Operations: those of jac_u_sparse (12 add, 46 mul, 5 div, 4 calls (Heaviside 1,
  * cos 1, fabs 1, sin 1), 12 select, 19 cmp, 13 logic); the spreading moves values only.
  */
 void gearsym_shift_element_jac_u(
@@ -236,8 +243,8 @@ void gearsym_shift_element_jac_u(
  * jac_p_nz[k] is entry (i, j) with i = gearsym_shift_element_jac_p_rowind[k] and
  * gearsym_shift_element_jac_p_colptr[j] <= k < gearsym_shift_element_jac_p_colptr[j+1]
  * (GEARSYM_SHIFT_ELEMENT_JAC_P_NNZ values).
- * Operations: 16 add, 73 mul, 5 div, 5 calls (Heaviside 2, cos 1, fabs 1, sin 1), 15 select,
- * 23 cmp, 16 logic; 34 temporaries.
+ * Operations: 16 add, 61 mul, 5 div, 5 calls (Heaviside 2, cos 1, fabs 1, sin 1), 15 select,
+ * 23 cmp, 16 logic; 42 temporaries.
  */
 void gearsym_shift_element_jac_p_sparse(
     const gearsym_real *restrict x,
@@ -245,52 +252,60 @@ void gearsym_shift_element_jac_p_sparse(
     const gearsym_shift_element_params *restrict p,
     gearsym_real *restrict jac_p_nz)
 {
-    const gearsym_real t0 = GEARSYM_FABS(x[0]);
-    const gearsym_real t1 = (GEARSYM_LIT(1.0)/p->sigma0);
-    const gearsym_real t2 = GEARSYM_LIT(2.0)*u[1]*u[2]*p->r_m;
-    const gearsym_real t3 = t2*p->n_disc;
-    const gearsym_real t4 = gearsym_shift_element_max(t3, p->t_ss_min);
-    const gearsym_real t5 = t1*t4;
-    const gearsym_real t6 = t5*p->z_ba_ratio;
-    const int t7 = ((t0 <= t6) || (u[0]*x[0] <= GEARSYM_LIT(0.0)));
-    const gearsym_real t8 = t0 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t5 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t6;
-    const gearsym_real t9 = -t6 + t1*t4;
-    const gearsym_real t10 = GEARSYM_LIT(3.14159265358979323846)/t9;
-    const gearsym_real t11 = t10*t8;
-    const int t12 = (t0 < t5);
-    const gearsym_real t13 = ((isnan(t0) || isnan(t6) || isnan(u[0]*x[0]) || isnan(t5)) ? ((gearsym_real)NAN) : (t7 ? GEARSYM_LIT(0.0) : (t12 ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*GEARSYM_SIN(t11) : GEARSYM_LIT(1.0))));
-    const gearsym_real t14 = (GEARSYM_LIT(1.0)/t4);
-    const gearsym_real t15 = t0*u[0];
-    const gearsym_real t16 = t14*t15;
-    const gearsym_real t17 = GEARSYM_COS(t11);
-    const gearsym_real t18 = ((isnan(t0) || isnan(t6) || isnan(u[0]*x[0]) || isnan(t5)) ? ((gearsym_real)NAN) : (t7 ? GEARSYM_LIT(0.0) : (t12 ? -(GEARSYM_LIT(1.0)/GEARSYM_LIT(4.0))*t10*t17 : GEARSYM_LIT(0.0))));
-    const gearsym_real t19 = t1*t15;
-    const gearsym_real t20 = (GEARSYM_LIT(1.0)/(t9*t9));
-    const gearsym_real t21 = (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t17;
-    const gearsym_real t22 = GEARSYM_LIT(3.14159265358979323846)*t20*t21*t8;
-    const gearsym_real t23 = t15*((isnan(t0) || isnan(t6) || isnan(u[0]*x[0]) || isnan(t5)) ? ((gearsym_real)NAN) : (t7 ? GEARSYM_LIT(0.0) : (t12 ? t21*(-(GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t10 + GEARSYM_LIT(3.14159265358979323846)*t20*t8) : GEARSYM_LIT(0.0))));
-    const gearsym_real t24 = t23*p->z_ba_ratio;
-    const gearsym_real t25 = t3 - p->t_ss_min;
-    const gearsym_real t26 = gearsym_shift_element_heaviside(-t25, (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)));
-    const gearsym_real t27 = t16*t18;
-    const gearsym_real t28 = t14*t24;
-    const gearsym_real t29 = t0*t13*p->sigma0/(t4*t4) - t0*t14*p->sigma0*((isnan(t0) || isnan(t6) || isnan(u[0]*x[0]) || isnan(t5)) ? ((gearsym_real)NAN) : (t7 ? GEARSYM_LIT(0.0) : (t12 ? -t1*t22 : GEARSYM_LIT(0.0))));
-    const gearsym_real t30 = gearsym_shift_element_heaviside(t25, (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)));
-    const gearsym_real t31 = t27*t30;
-    const gearsym_real t32 = t28*t30;
-    const gearsym_real t33 = GEARSYM_LIT(2.0)*u[1]*u[2]*p->n_disc;
-    jac_p_nz[0] = t1*t24 + t18*t19 - t13*t16 + t14*t19*((isnan(t0) || isnan(t6) || isnan(u[0]*x[0]) || isnan(t5)) ? ((gearsym_real)NAN) : (t7 ? GEARSYM_LIT(0.0) : (t12 ? -t22*t4 : GEARSYM_LIT(0.0))));
-    jac_p_nz[1] = -t23;
-    jac_p_nz[2] = -t26*t27 - t26*t28 + t26*t29*u[0];
-    jac_p_nz[3] = -t2*t31 - t2*t32 + GEARSYM_LIT(2.0)*t29*t30*u[1]*u[0]*u[2]*p->r_m;
-    jac_p_nz[4] = -t31*t33 - t32*t33 + GEARSYM_LIT(2.0)*t29*t30*u[1]*u[0]*u[2]*p->n_disc;
+    const gearsym_real t0 = GEARSYM_LIT(2.0)*u[1];
+    const gearsym_real t1 = t0*u[2];
+    const gearsym_real t2 = GEARSYM_FABS(x[0]);
+    const gearsym_real t3 = t2*p->sigma0;
+    const gearsym_real t4 = (GEARSYM_LIT(1.0)/p->sigma0);
+    const gearsym_real t5 = t1*p->r_m;
+    const gearsym_real t6 = t5*p->n_disc;
+    const gearsym_real t7 = gearsym_shift_element_max(t6, p->t_ss_min);
+    const gearsym_real t8 = t4*t7;
+    const gearsym_real t9 = t8*p->z_ba_ratio;
+    const int t10 = ((t2 <= t9) || (u[0]*x[0] <= GEARSYM_LIT(0.0)));
+    const gearsym_real t11 = t2 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t8 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t9;
+    const gearsym_real t12 = -t9 + t4*t7;
+    const gearsym_real t13 = GEARSYM_LIT(3.14159265358979323846)/t12;
+    const gearsym_real t14 = t11*t13;
+    const gearsym_real t15 = GEARSYM_SIN(t14);
+    const gearsym_real t16 = GEARSYM_COS(t14);
+    const int t17 = (t2 < t8);
+    const gearsym_real t18 = ((isnan(t2) || isnan(t9) || isnan(u[0]*x[0]) || isnan(t8)) ? ((gearsym_real)NAN) : (t10 ? GEARSYM_LIT(0.0) : (t17 ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t15 : GEARSYM_LIT(1.0))));
+    const gearsym_real t19 = ((isnan(t2) || isnan(t9) || isnan(u[0]*x[0]) || isnan(t8)) ? ((gearsym_real)NAN) : (t10 ? GEARSYM_LIT(0.0) : (t17 ? -(GEARSYM_LIT(1.0)/GEARSYM_LIT(4.0))*t13*t16 : GEARSYM_LIT(0.0))));
+    const gearsym_real t20 = (GEARSYM_LIT(1.0)/t7);
+    const gearsym_real t21 = t2*u[0];
+    const gearsym_real t22 = t20*t21;
+    const gearsym_real t23 = t21*t4;
+    const gearsym_real t24 = (GEARSYM_LIT(1.0)/(t12*t12));
+    const gearsym_real t25 = t11*t24;
+    const gearsym_real t26 = (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t16;
+    const gearsym_real t27 = GEARSYM_LIT(3.14159265358979323846)*t25*t26;
+    const gearsym_real t28 = t21*((isnan(t2) || isnan(t9) || isnan(u[0]*x[0]) || isnan(t8)) ? ((gearsym_real)NAN) : (t10 ? GEARSYM_LIT(0.0) : (t17 ? t26*(-(GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t13 + GEARSYM_LIT(3.14159265358979323846)*t25) : GEARSYM_LIT(0.0))));
+    const gearsym_real t29 = t28*p->z_ba_ratio;
+    const gearsym_real t30 = t6 - p->t_ss_min;
+    const gearsym_real t31 = gearsym_shift_element_heaviside(-t30, (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)));
+    const gearsym_real t32 = t19*t22;
+    const gearsym_real t33 = t20*t29;
+    const gearsym_real t34 = t18*t3/(t7*t7) - t20*t3*((isnan(t2) || isnan(t9) || isnan(u[0]*x[0]) || isnan(t8)) ? ((gearsym_real)NAN) : (t10 ? GEARSYM_LIT(0.0) : (t17 ? -t27*t4 : GEARSYM_LIT(0.0))));
+    const gearsym_real t35 = t34*u[0];
+    const gearsym_real t36 = gearsym_shift_element_heaviside(t30, (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)));
+    const gearsym_real t37 = t1*t36;
+    const gearsym_real t38 = t35*t37;
+    const gearsym_real t39 = t32*t36;
+    const gearsym_real t40 = t33*t36;
+    const gearsym_real t41 = t1*p->n_disc;
+    jac_p_nz[0] = t19*t23 + t29*t4 - t18*t22 + t20*t23*((isnan(t2) || isnan(t9) || isnan(u[0]*x[0]) || isnan(t8)) ? ((gearsym_real)NAN) : (t10 ? GEARSYM_LIT(0.0) : (t17 ? -t27*t7 : GEARSYM_LIT(0.0))));
+    jac_p_nz[1] = -t28;
+    jac_p_nz[2] = t31*t35 - t31*t32 - t31*t33;
+    jac_p_nz[3] = t38*p->r_m - t39*t5 - t40*t5;
+    jac_p_nz[4] = t38*p->n_disc - t39*t41 - t40*t41;
 }
 
 /**
  * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
  * xdot / d p (1 x 6), dense column-major: jac_p[i + j*1] = d xdot_i / d p_j.
  * Computes jac_p_sparse into the first NNZ entries and spreads them in place; every other
- * entry is 0. Operations: those of jac_p_sparse (16 add, 73 mul, 5 div, 5 calls (Heaviside 2,
+ * entry is 0. Operations: those of jac_p_sparse (16 add, 61 mul, 5 div, 5 calls (Heaviside 2,
  * cos 1, fabs 1, sin 1), 15 select, 23 cmp, 16 logic); the spreading moves values only.
  */
 void gearsym_shift_element_jac_p(

@@ -148,8 +148,8 @@ void gearsym_shift_element_jac_x(
  * jac_u_nz[k] is entry (i, j) with i = gearsym_shift_element_jac_u_rowind[k] and
  * gearsym_shift_element_jac_u_colptr[j] <= k < gearsym_shift_element_jac_u_colptr[j+1]
  * (GEARSYM_SHIFT_ELEMENT_JAC_U_NNZ values).
- * Operations: 12 add, 59 mul, 5 div, 4 calls (Heaviside 1, cos 1, fabs 1, sin 1), 12 select,
- * 19 cmp, 13 logic; 24 temporaries.
+ * Operations: 12 add, 46 mul, 5 div, 4 calls (Heaviside 1, cos 1, fabs 1, sin 1), 12 select,
+ * 19 cmp, 13 logic; 31 temporaries.
  */
 void gearsym_shift_element_jac_u_sparse(
     const gearsym_real *x,
@@ -161,7 +161,7 @@ void gearsym_shift_element_jac_u_sparse(
  * Jacobian of the state derivative with respect to u (inputs), d xdot / d u (1 x 3), dense
  * column-major: jac_u[i + j*1] = d xdot_i / d u_j.
  * Computes jac_u_sparse into the first NNZ entries and spreads them in place; every other
- * entry is 0. Operations: those of jac_u_sparse (12 add, 59 mul, 5 div, 4 calls (Heaviside 1,
+ * entry is 0. Operations: those of jac_u_sparse (12 add, 46 mul, 5 div, 4 calls (Heaviside 1,
  * cos 1, fabs 1, sin 1), 12 select, 19 cmp, 13 logic); the spreading moves values only.
  */
 void gearsym_shift_element_jac_u(
@@ -175,8 +175,8 @@ void gearsym_shift_element_jac_u(
  * jac_p_nz[k] is entry (i, j) with i = gearsym_shift_element_jac_p_rowind[k] and
  * gearsym_shift_element_jac_p_colptr[j] <= k < gearsym_shift_element_jac_p_colptr[j+1]
  * (GEARSYM_SHIFT_ELEMENT_JAC_P_NNZ values).
- * Operations: 16 add, 73 mul, 5 div, 5 calls (Heaviside 2, cos 1, fabs 1, sin 1), 15 select,
- * 23 cmp, 16 logic; 34 temporaries.
+ * Operations: 16 add, 61 mul, 5 div, 5 calls (Heaviside 2, cos 1, fabs 1, sin 1), 15 select,
+ * 23 cmp, 16 logic; 42 temporaries.
  */
 void gearsym_shift_element_jac_p_sparse(
     const gearsym_real *x,
@@ -188,7 +188,7 @@ void gearsym_shift_element_jac_p_sparse(
  * Jacobian of the state derivative with respect to p (parameters, in struct field order), d
  * xdot / d p (1 x 6), dense column-major: jac_p[i + j*1] = d xdot_i / d p_j.
  * Computes jac_p_sparse into the first NNZ entries and spreads them in place; every other
- * entry is 0. Operations: those of jac_p_sparse (16 add, 73 mul, 5 div, 5 calls (Heaviside 2,
+ * entry is 0. Operations: those of jac_p_sparse (16 add, 61 mul, 5 div, 5 calls (Heaviside 2,
  * cos 1, fabs 1, sin 1), 15 select, 23 cmp, 16 logic); the spreading moves values only.
  */
 void gearsym_shift_element_jac_p(

@@ -28,7 +28,9 @@ Conventions of the emitted code (also written into the generated header):
   float build has ``f`` literals and ``sinf``-style calls and never promotes to double;
 * the pointer parameters of the expression functions (rhs, outputs, Jacobians) are ``restrict``
   in their definitions (outputs never alias inputs there), so the compiler keeps inputs in
-  registers across the stores; the header declarations omit it (the function type is the same);
+  registers across the stores; the header declarations omit it (the function type is the same;
+  ``CodegenConfig.restrict_pointers`` turns it off);
+* math-library calls come first in a function, so that few values live across them;
 * rationals are exact constant quotients when numerator and denominator are exact in float
   (at most 2**24), else 21-digit decimals (never a float literal out of range);
 * NaN is never hidden: ``Min``/``Max`` print as helpers that return NaN for a NaN argument
@@ -53,6 +55,7 @@ from gearsym.symbolic.codegen.cse import CseForm, cse_function
 from gearsym.symbolic.codegen.emit import cse_forms, emit_all, emit_c, emit_casadi
 from gearsym.symbolic.codegen.jacobian import (
     SparsityPattern,
+    clear_caches,
     clear_jacobian_cache,
     jacobian_blocks,
     smart_jacobian,
@@ -88,6 +91,7 @@ __all__ = [
     "SparsityPattern",
     "as_config",
     "build_function_table",
+    "clear_caches",
     "clear_jacobian_cache",
     "comment_text",
     "count_operations",

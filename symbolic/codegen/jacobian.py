@@ -32,8 +32,14 @@ _CACHE: OrderedDict[tuple, tuple[sp.ImmutableMatrix, ...]] = OrderedDict()
 
 
 def clear_jacobian_cache() -> None:
-    """Forget every cached Jacobian (benchmarks measuring a cold start call this)."""
+    """Forget every cached Jacobian."""
     _CACHE.clear()
+
+
+def clear_caches() -> None:
+    """Forget every remembered Jacobian and CSE (benchmarks measuring a cold start)."""
+    _CACHE.clear()
+    cse_of.cache_clear()
 
 
 def smart_jacobian(exprs: sp.MatrixBase, wrt: Sequence[sp.Symbol]) -> sp.ImmutableMatrix:

@@ -7,7 +7,12 @@ from dataclasses import dataclass
 
 import sympy as sp
 from gearsym.symbolic.codegen.c.printer import GearsymCPrinter
-from gearsym.symbolic.codegen.cse import CseForm, boolean_definitions, flatten_column_major
+from gearsym.symbolic.codegen.cse import (
+    CseForm,
+    boolean_definitions,
+    flatten_column_major,
+    is_condition,
+)
 from gearsym.symbolic.codegen.jacobian import SparsityPattern
 from gearsym.symbolic.codegen.ops import (
     OpCount,
@@ -19,7 +24,6 @@ from gearsym.symbolic.codegen.printing import comment_text, wrap
 from gearsym.symbolic.codegen.render import render
 from gearsym.symbolic.codegen.table import Arg, FunctionSpec, FunctionTable, Output, file_names
 from gearsym.symbolic.codegen.views import ModelView, model_view
-from sympy.logic.boolalg import Boolean
 
 __all__ = [
     "CFunctionView",
@@ -120,6 +124,7 @@ class CModuleView(ModelView):
     helpers: tuple[str, ...]
     implicit_step: bool
     patterns: tuple[PatternView, ...]
+    restrict_pointers: bool  # expression functions' pointers restrict in their definitions
 
 
 def _symbol_map(spec: FunctionSpec) -> dict[sp.Symbol, str]:
@@ -199,7 +204,7 @@ def _function_views(
             counts[spec.name] = ops
             extra["temporaries"] = tuple(
                 Temporary(
-                    "int" if isinstance(expr, Boolean) else "gearsym_real",
+                    "int" if is_condition(expr) else "gearsym_real",
                     printer.code(symbol),
                     printer.code(expr),
                 )
@@ -284,6 +289,7 @@ def emit_c_files(table: FunctionTable, forms: Mapping[str, CseForm]) -> dict[str
         helpers=tuple(sorted(used_helpers)),
         implicit_step=any(f.kind == "linearly_implicit_euler" for f in functions),
         patterns=tuple(_pattern_view(s) for s in table if s.kind == "spread"),
+        restrict_pointers=table.config.restrict_pointers,
     )
     names = file_names(table.model)
     return {
