@@ -125,10 +125,10 @@ def test_refuses_a_gearsym_directory_with_a_users_file_or_a_changed_file(tmp_pat
 def test_refuses_the_current_directory_its_ancestors_and_root(
     tmp_path: Path, monkeypatch: Any
 ) -> None:
-    work = tmp_path / "work"
+    work = tmp_path / "here"
     work.mkdir()
     monkeypatch.chdir(work)
-    for out in (".", "..", str(work), "../work/.", "/"):
+    for out in (".", "..", str(work), "../here/.", "/"):
         message = _error(lambda out=out: OutputDir(out, "simulate"))
         assert "current directory" in message or "root" in message, message
     assert _error(lambda: OutputDir("", "simulate")).endswith("must name a directory")
