@@ -47,13 +47,7 @@ def cmd_ratios(args: argparse.Namespace) -> int:
     d = _load(args.config)
     table = ratio_table(d)
     places = d.ratio_decimals
-    differ = [
-        r.gear
-        for r in table
-        if not r.neutral
-        and r.expected is not None
-        and r.rounded(places) != round(r.expected, places)
-    ]
+    differ = _differing_gears(d, table)
     source = f" ({d.gear_table_source})" if d.gear_table_source else ""
     if args.json:
         _emit_json({r.gear: (None if r.ratio is None else float(r.ratio)) for r in table})
@@ -67,6 +61,25 @@ def cmd_ratios(args: argparse.Namespace) -> int:
             )
             return 1
         return 0
+    return print_ratio_table(d, table, differ)
+
+
+def _differing_gears(d: Any, table: Sequence[Any]) -> list[str]:
+    places = d.ratio_decimals
+    return [
+        r.gear
+        for r in table
+        if not r.neutral
+        and r.expected is not None
+        and r.rounded(places) != round(r.expected, places)
+    ]
+
+
+def print_ratio_table(d: Any, table: Sequence[Any], differ: Sequence[str] | None = None) -> int:
+    """Print the gear table; 1 when a derived ratio differs from the expected one, else 0."""
+    places = d.ratio_decimals
+    differ = _differing_gears(d, table) if differ is None else differ
+    source = f" ({d.gear_table_source})" if d.gear_table_source else ""
     print(f"Gear ratios ω_{d.input_shaft}/ω_{d.output_shaft} of {d.title}")
     print(f"{'gear':>5}  {'closed':<20} {'derived':>10} {'expected':>10}  ok")
     for r in table:
@@ -295,8 +308,9 @@ def cmd_run(args: argparse.Namespace) -> int:
             f"B̃ {dyn.input_matrix.rows}×{dyn.input_matrix.cols}"
         )
         print()
-        status = cmd_ratios(argparse.Namespace(config=args.config, json=False))
-        ratios = {r.gear: (None if r.ratio is None else float(r.ratio)) for r in ratio_table(d)}
+        table = ratio_table(d)  # once: printed and written
+        status = print_ratio_table(d, table)
+        ratios = {r.gear: (None if r.ratio is None else float(r.ratio)) for r in table}
         (out.path / "ratios.json").write_text(json.dumps(ratios, indent=2) + "\n")
         from gearsym.cmd_observability import print_observability_summary
 
