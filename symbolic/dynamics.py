@@ -85,10 +85,33 @@ class GearboxDynamics:
         return self.mass_matrix.LUsolve(self.input_matrix)
 
 
+#: The dynamics last derived, by description object and options: `gearsym generate` derives 19
+#: drivetrain models of one gearbox, each from the same free gearbox (0.3 s of repeats). The
+#: description object is kept with its entry, so its id cannot be reused meanwhile.
+_DERIVED: dict[tuple[int, bool, bool], tuple[GearboxDescription, GearboxDynamics]] = {}
+
+
 def gearbox_dynamics(
     d: GearboxDescription, symbolic_teeth: bool = False, symbolic_inertias: bool = False
 ) -> GearboxDynamics:
-    """Derive kinematics, mass matrix and input matrix of the free gearbox (2.26–2.39)."""
+    """Derive kinematics, mass matrix and input matrix of the free gearbox (2.26–2.39).
+
+    Remembered per description object (descriptions are immutable; callers build new matrices
+    from the result and never assign into it)."""
+    key = (id(d), symbolic_teeth, symbolic_inertias)
+    derived = _DERIVED.get(key)
+    if derived is not None and derived[0] is d:
+        return derived[1]
+    if len(_DERIVED) >= 8:
+        _DERIVED.clear()
+    result = _derive(d, symbolic_teeth, symbolic_inertias)
+    _DERIVED[key] = (d, result)
+    return result
+
+
+def _derive(
+    d: GearboxDescription, symbolic_teeth: bool, symbolic_inertias: bool
+) -> GearboxDynamics:
     sym = gearbox_symbols(d, symbolic_teeth=symbolic_teeth, symbolic_inertias=symbolic_inertias)
     kin = kinematics(d, sym)
     m = mass_matrix(d, sym, kin)

@@ -120,10 +120,12 @@ def sensitivity_equations(
     chosen = select_parameters(model, parameters, file)
     x = model.state_symbols
     p = [v.symbol for v in chosen]
-    jac_x = smart_jacobian(model.rhs, x)
-    jac_p = smart_jacobian(model.rhs, p)
-    h_x = smart_jacobian(model.output_expressions, x)
-    h_p = smart_jacobian(model.output_expressions, p)
+    # by_rules: the same expressions as diff, without SymPy's per-node dispatch (generate
+    # derives eight of these systems)
+    jac_x = smart_jacobian(model.rhs, x, by_rules=True)
+    jac_p = smart_jacobian(model.rhs, p, by_rules=True)
+    h_x = smart_jacobian(model.output_expressions, x, by_rules=True)
+    h_p = smart_jacobian(model.output_expressions, p, by_rules=True)
     n, m = len(x), len(p)
 
     s_vars = [

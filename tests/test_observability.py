@@ -143,6 +143,7 @@ def test_smart_jacobian_matches_sympy_and_skips_absent_variables(monkeypatch):
     exprs = [x**2 * y, sp.sin(z) + x, y / (1 + z)]
     expected = sp.Matrix(exprs).jacobian([x, y, z])
     assert smart_jacobian(exprs, [x, y, z]) == expected
+    assert smart_jacobian(exprs, [x, y, z], by_rules=True) == expected
     from gearsym.symbolic import sympy_utils
 
     calls = []
@@ -153,7 +154,7 @@ def test_smart_jacobian_matches_sympy_and_skips_absent_variables(monkeypatch):
         return original(expr, symbol)
 
     monkeypatch.setattr(sympy_utils, "derivative", counting)
-    smart_jacobian(exprs, [x, y, z])
+    smart_jacobian(exprs, [x, y, z], by_rules=True)
     # 9 entries, 3 of them structurally zero (x^2 y has no z, sin z + x no y, y/(1+z) no x)
     assert len(calls) == 6
 

@@ -3,7 +3,6 @@
  * base_model: shift_6_7_mu
  * equations: 3.5-3.7 (sensitivity ODE) on 2.42-2.58
  * gearbox: thesis_9speed
- * integrators: rk4
  * locked: K38 K27
  * rolling_resistance: thesis
  * sensitivity_parameters: m_veh k_ss d_ss mu_81 zeta

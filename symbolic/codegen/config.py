@@ -85,10 +85,11 @@ class CodegenConfig:
     Piecewise/sign/exp, 4-state linear), ``None`` gave 303 operations in 0.12 s and ``"basic"``
     327 in 0.27 s, hence ``None``. ``restrict_pointers`` qualifies the pointers of the
     expression functions ``restrict`` in their definitions (outputs never alias inputs there):
-    measured with gcc 12 on x86-64 it makes 4 of the 6 functions of
-    ``benchmarks/bench_codegen_speed.py`` faster at ``-O2`` (up to 10 %) and none slower, but
-    at ``-O3 -march=native`` it lets the SLP vectorizer pack the stores of the right-hand sides
-    of the 2-3 shift and its sensitivity system, which then run 15 % and 30 % slower.
+    measured with gcc 12 on x86-64 it makes all 6 functions of
+    ``benchmarks/bench_codegen_speed.py`` 2-13 % faster at ``-O2``, but at
+    ``-O3 -march=native`` it lets the SLP vectorizer pack the stores of the right-hand sides of
+    the 2-3 shift and its sensitivity system, which then run 14 % and 32 % slower (README,
+    Benchmarks).
     """
 
     bounds: Bounds = field(default_factory=dict)

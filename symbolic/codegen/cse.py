@@ -294,9 +294,14 @@ def cse_function(spec: FunctionSpec, config: CodegenConfig | None = None) -> Cse
     hoisted: list[tuple[sp.Symbol, sp.Basic]] = []
     memo: dict[sp.Basic, sp.Symbol] = {}
 
+    done: dict[sp.Basic, sp.Basic] = {}  # shared subtrees are rewritten once
+
     def hoist(expr: sp.Basic) -> sp.Basic:
         if expr.is_Atom or not expr.args:
             return expr
+        if expr in done:
+            return done[expr]
+        original = expr
         new_args = tuple(hoist(a) for a in expr.args)
         if new_args != expr.args:
             expr = expr.func(*new_args)
@@ -305,7 +310,8 @@ def cse_function(spec: FunctionSpec, config: CodegenConfig | None = None) -> Cse
             if base not in memo:
                 memo[base] = next(generator)
                 hoisted.append((memo[base], base))
-            return sp.Pow(memo[base], expr.exp, evaluate=False)
+            expr = sp.Pow(memo[base], expr.exp, evaluate=False)
+        done[original] = expr
         return expr
 
     temporaries: list[tuple[sp.Symbol, sp.Basic]] = []

@@ -9,6 +9,7 @@ operation count describes the printed code.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
+from functools import lru_cache
 
 import sympy as sp
 from sympy.logic.boolalg import BooleanAtom
@@ -62,23 +63,27 @@ HELPER_FUNCTIONS = ("sign", "Heaviside", "Min", "Max")
 HELPER_COUNT_NAMES = {"Min": "min", "Max": "max"}
 
 
-def split_mul(expr: sp.Mul) -> tuple[bool, sp.Number, list[sp.Basic], list[sp.Basic]]:
-    """``expr = (-1 if negative) * coeff * prod(numerator) / prod(denominator)``."""
+@lru_cache(maxsize=16384)
+def split_mul(expr: sp.Mul) -> tuple[bool, sp.Number, tuple[sp.Basic, ...], tuple[sp.Basic, ...]]:
+    """``expr = (-1 if negative) * coeff * prod(numerator) / prod(denominator)``.
+
+    Remembered: both printers and the operation count split every product. Signs are read
+    from the numbers directly (``is_negative`` would run SymPy's assumption system on each)."""
     coeff, factors = expr.as_coeff_mul()
-    negative = bool(coeff.is_negative)
+    negative = bool(coeff.p < 0) if coeff.is_Rational else float(coeff) < 0
     if negative:
         coeff = -coeff
     numerator: list[sp.Basic] = []
     denominator: list[sp.Basic] = []
     for factor in factors:
-        if factor.is_Pow and factor.exp.is_Rational and factor.exp.is_negative:
+        if factor.is_Pow and factor.exp.is_Rational and factor.exp.p < 0:
             exp = -factor.exp
             denominator.append(
                 factor.base if exp == 1 else sp.Pow(factor.base, exp, evaluate=False)
             )
         else:
             numerator.append(factor)
-    return negative, coeff, numerator, denominator
+    return negative, coeff, tuple(numerator), tuple(denominator)
 
 
 def is_inline_power(expr: sp.Basic, max_inline_power: int) -> bool:

@@ -103,9 +103,16 @@ def _forward_mode(column: list[sp.Basic], wrt: list[sp.Symbol]) -> list[dict[sp.
     grad: dict[sp.Symbol, dict[sp.Symbol, sp.Basic]] = {}  # temporary -> nonzero derivatives
     conditions: dict[sp.Symbol, sp.Basic] = {}  # boolean temporaries are not differentiable
 
+    keys: dict[sp.Basic, tuple] = {}  # sort keys, computed once per symbol
+
+    def key(symbol: sp.Basic) -> tuple:
+        if symbol not in keys:
+            keys[symbol] = sp.default_sort_key(symbol)
+        return keys[symbol]
+
     def gradient(expr: sp.Basic) -> dict[sp.Symbol, sp.Basic]:
         terms: dict[sp.Symbol, list[sp.Basic]] = {}
-        for symbol in sorted(expr.free_symbols, key=sp.default_sort_key):
+        for symbol in sorted(expr.free_symbols, key=key):
             if symbol in grad and grad[symbol]:
                 partial = _partial(expr, symbol).xreplace(full)
                 if partial != 0:

@@ -51,9 +51,10 @@ _ASCII_REPLACEMENTS = {
 def comment_text(text: str) -> str:
     """Text safe inside a C block comment: ASCII only (ECU toolchains), no comment delimiters."""
     text = " ".join(str(text).split())
-    text = "".join(
-        c if ord(c) < 128 else _ASCII_REPLACEMENTS.get(c, f"<U+{ord(c):04X}>") for c in text
-    )
+    if not text.isascii():
+        text = "".join(
+            c if ord(c) < 128 else _ASCII_REPLACEMENTS.get(c, f"<U+{ord(c):04X}>") for c in text
+        )
     return text.replace("*/", "* /").replace("/*", "/ *")
 
 
