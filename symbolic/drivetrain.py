@@ -32,6 +32,7 @@ from gearsym.symbolic.dynamics import GearboxDynamics, gearbox_dynamics
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.kinematics import exact
 from gearsym.symbolic.model import Model, Variable
+from gearsym.symbolic.sympy_utils import smart_jacobian
 
 #: Vehicle and drivetrain values that are parameters of every drivetrain model (symbols with
 #: defaults). Geometry (teeth, inertias, i_D, r_dyn) is hardware and enters as exact numbers.
@@ -225,6 +226,13 @@ class DrivetrainParts:
     friction: dict[str, tuple[sp.Expr, Variable, Variable]]
 
 
+#: The parts last derived, by description object and normalised arguments: a model and its
+#: linear form (5.1) share one derivation (`gearsym model` prints both; generate derives each
+#: mode's model for several functions). The description is kept with its entry so its id cannot
+#: be reused meanwhile; the cached parts are immutable (ImmutableMatrix, frozen dataclass).
+_PARTS: dict[tuple[object, ...], tuple[GearboxDescription, DrivetrainParts]] = {}
+
+
 def drivetrain_parts(
     d: GearboxDescription,
     locked: tuple[str, ...] = (),
@@ -232,13 +240,35 @@ def drivetrain_parts(
     keep: tuple[str, ...] | None = None,
     slip_signs: dict[str, int] | None = None,
 ) -> DrivetrainParts:
-    """Derive gearbox + elastic drivetrain (2.42–2.58); see :func:`drivetrain_model`."""
-    dyn = gearbox_dynamics(d)
-    sym = dyn.symbols
+    """Derive gearbox + elastic drivetrain (2.42–2.58); see :func:`drivetrain_model`.
+
+    Remembered per description object and arguments (descriptions are immutable)."""
+    locked = tuple(locked)
     if torque_elements is None:
         torque_elements = tuple(e.name for e in d.shift_elements if e.name not in locked)
     if keep is None:
         keep = d.coordinates if not locked else (d.input_shaft, d.output_shaft)
+    signs = None if slip_signs is None else tuple(sorted(slip_signs.items()))
+    key = (id(d), locked, tuple(torque_elements), tuple(keep), signs)
+    derived = _PARTS.get(key)
+    if derived is not None and derived[0] is d:
+        return derived[1]
+    if len(_PARTS) >= 64:
+        _PARTS.clear()
+    parts = _derive_parts(d, locked, tuple(torque_elements), tuple(keep), slip_signs)
+    _PARTS[key] = (d, parts)
+    return parts
+
+
+def _derive_parts(
+    d: GearboxDescription,
+    locked: tuple[str, ...],
+    torque_elements: tuple[str, ...],
+    keep: tuple[str, ...],
+    slip_signs: dict[str, int] | None,
+) -> DrivetrainParts:
+    dyn = gearbox_dynamics(d)
+    sym = dyn.symbols
     projection = locked_projection(d, dyn, locked, keep)
 
     i_d = exact(quantity(d, "drivetrain", "i_D").value)
@@ -311,7 +341,9 @@ def drivetrain_parts(
     generalized += dyn.input_matrix[:, column[naming.OUTPUT_TORQUE]] * t_out
     for e in torque_elements:
         generalized += dyn.input_matrix[:, column[naming.torque(e)]] * torque[e]
-    gearbox_rhs = (reduced_mass.inv() * (projection.T * generalized)).applyfunc(sp.expand)
+    gearbox_rhs = sp.ImmutableMatrix(
+        (reduced_mass.inv() * (projection.T * generalized)).applyfunc(sp.expand)
+    )
     return DrivetrainParts(
         keep=tuple(keep),
         torque_elements=tuple(torque_elements),
@@ -523,8 +555,8 @@ def _linear_form(
     u += [parts.torque_symbols[e] for e in order] + [p["zeta"]]
     return LinearForm(
         mode=mode,
-        A=rhs.jacobian(x),
-        B=rhs.jacobian(u),
+        A=smart_jacobian(rhs, x, by_rules=True),
+        B=smart_jacobian(rhs, u, by_rules=True),
         states=[str(s) for s in x],
         inputs=[str(s) for s in u],
         parameters=parts.parameters,
