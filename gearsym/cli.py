@@ -7,6 +7,8 @@ Bad input prints one line ``gearsym: <file>: <key>: <reason>`` and exits with co
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import sys
 import time
@@ -14,7 +16,7 @@ from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
 from gearsym.interrupts import Terminated, check, sigterm_raises
-from gearsym.options import number
+from gearsym.options import cacheable, number
 from gearsym.symbolic.description import PLANET_COUNT_MAX, TEETH_MAX
 from gearsym.symbolic.errors import GearsymError
 
@@ -353,6 +355,33 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"gearsym: {where}: {message} (see {self.prog} --help)\n")
 
 
+def _cached_run(args: argparse.Namespace) -> int | None:
+    """Replay a remembered output, or run the command and remember it; ``None`` when the
+    cache does not apply (off, or the description cannot be read)."""
+    from gearsym import command_cache
+
+    root = command_cache.cache_root()
+    if root is None or args.no_cache:
+        return None
+    skip = ("handler", "cacheable", "config", "no_cache")
+    options = {k: v for k, v in vars(args).items() if k not in skip}
+    key = command_cache.entry_key(args.command, options, args.config)
+    if key is None:
+        return None
+    hit = command_cache.lookup(root, key)
+    if hit is None:
+        out, err = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            status = int(args.handler(args))
+        hit = (out.getvalue(), err.getvalue(), status)
+        if status in (0, 1):
+            command_cache.store(root, key, args.command, *hit)
+    stdout, stderr, status = hit
+    sys.stdout.write(stdout)
+    sys.stderr.write(stderr)
+    return status
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="gearsym",
@@ -387,6 +416,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = command("ratios", cmd_ratios, "Derive every gear's ratio ω_in/ω_out (Table 2.1).")
     config(p)
+    cacheable(p)
     p.add_argument("--json", action="store_true", help="gear → ratio (null for neutral)")
 
     p = command(
@@ -452,6 +482,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         with sigterm_raises():
+            if getattr(args, "cacheable", False):
+                status = _cached_run(args)
+                if status is not None:
+                    return status
             return int(args.handler(args))
     except GearsymError as err:
         print(f"gearsym: {err}", file=sys.stderr)

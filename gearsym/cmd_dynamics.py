@@ -10,6 +10,7 @@ from collections.abc import Callable
 from typing import Any
 
 from gearsym.interrupts import check
+from gearsym.options import cacheable
 
 
 def _load(path: str | None) -> Any:
@@ -214,6 +215,7 @@ def add_parsers(
     )
     p.add_argument("--with-wheel-acceleration", action="store_true", help="add the output (3.32)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
+    cacheable(p)
 
     p = command(
         "simulate",
