@@ -10,6 +10,7 @@ import argparse
 import contextlib
 import io
 import json
+import os
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -471,6 +472,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_generate_parser(command, config)
 
+    from gearsym.cmd_estimate import add_estimate_parser
+
+    add_estimate_parser(command, config)
+
     from gearsym.cmd_analysis import register as add_analysis_parsers
 
     add_analysis_parsers(command, config)
@@ -490,6 +495,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except GearsymError as err:
         print(f"gearsym: {err}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # `gearsym ... | head`: the reader left; say nothing more
+        sys.stdout = open(os.devnull, "w")  # noqa: SIM115 (interpreter shutdown flushes it)
+        return 0
     except KeyboardInterrupt:
         print("gearsym: interrupted; nothing was written", file=sys.stderr)
         return 130

@@ -58,9 +58,7 @@ def code_fingerprint() -> str:
     digest = hashlib.sha256(f"format {FORMAT}\n".encode())
     for package in (gearsym, gearsym.symbolic):
         root = Path(package.__file__).parent
-        files = sorted(
-            p for p in root.rglob("*") if p.suffix in _SOURCE_SUFFIXES and p.is_file()
-        )
+        files = sorted(p for p in root.rglob("*") if p.suffix in _SOURCE_SUFFIXES and p.is_file())
         for path in files:
             digest.update(f"{package.__name__}/{path.relative_to(root).as_posix()}\n".encode())
             digest.update(hashlib.sha256(path.read_bytes()).digest())

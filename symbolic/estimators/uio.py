@@ -19,18 +19,23 @@ Columns of E that are linear combinations of others (T_res* and ζ in (5.5) both
 only) are not separately estimable: only their combination is. They are reported and dropped
 before the rank tests.
 
-Design (Chen, Patton & Zhang 1996, in discrete time for the TCU): with the zero-order-hold
-discretisation A_d = e^{A h}, Γ = ∫₀ʰ e^{A τ} dτ, B_d = Γ B_known, E_d = Γ E (exact for inputs
-held over a sample),
+Design (Chen, Patton & Zhang 1996, in discrete time for the TCU): with A_d = e^{A h},
+Γ = ∫₀ʰ e^{A τ} dτ, E_d = Γ E (exact for an unknown input held over a sample) and the known
+inputs either held (zero-order hold, B_d = Γ B_known, B_1 = 0) or linear between samples
+(first-order hold, exact for the ramps of a shift: B_d = Γ B_known,
+B_1 = ∫₀ʰ e^{A (h − τ)} τ/h dτ B_known, applied to u_{k+1} − u_k, both known at step k+1),
 
-    z_{k+1} = F z_k + T B_d u_k + K y_k,   x̂_k = z_k + H y_k,
+    z_{k+1} = F z_k + T (B_d u_k + B_1 (u_{k+1} − u_k)) + K y_k,   x̂_k = z_k + H y_k,
 
-with H = E_d (C E_d)⁺ (so (I − H C) E_d = 0), T = I − H C, A₁ = T A_d, F = A₁ − K₁ C and
-K = K₁ + F H. The estimation error then obeys e_{k+1} = F e_k whatever d is; K₁ is the
-steady-state gain of the discrete Riccati equation of (A₁, C) (identity weights on the states,
-``measurement_weight`` on the outputs), which makes F stable exactly when (A₁, C) is
-detectable. The unknown input follows from the next measurement:
-d̂_k = (C E_d)⁺ (y_{k+1} − C A_d x̂_k − C B_d u_k).
+with H = E_d L, where L is the left inverse of C E_d weighted by the inverse output weights
+(L C E_d = I, so (I − H C) E_d = 0; noisier outputs count less), T = I − H C, A₁ = T A_d,
+F = A₁ − K₁ C and K = K₁ + F H. The estimation error then obeys e_{k+1} = F e_k whatever d
+is; K₁ is the steady-state gain of the discrete Riccati equation of (A₁, C) with the state
+weight ``process_weight``·I and the output weight ``measurement_weight`` (a scalar times I, or
+one variance per output: a Kalman predictor's covariances, their ratio trades convergence
+speed against noise), which makes F stable exactly when (A₁, C) is detectable. The unknown
+input follows from the next measurement:
+d̂_k = L (y_{k+1} − C A_d x̂_k − C B_d u_k − C B_1 (u_{k+1} − u_k)).
 """
 
 from __future__ import annotations
@@ -286,11 +291,15 @@ class UioDesign:
     states: tuple[str, ...]
     outputs: tuple[str, ...]
     sample_time: float
+    hold: str
     Ad: np.ndarray = field(repr=False)
     Bd: np.ndarray = field(repr=False)
+    B1: np.ndarray = field(repr=False)
     Ed: np.ndarray = field(repr=False)
     C: np.ndarray = field(repr=False)
     H: np.ndarray = field(repr=False)
+    #: (C E_d)⁻ with L C E_d = I, weighted by the output weights; d̂ = L (residual).
+    left_inverse: np.ndarray = field(repr=False)
     T: np.ndarray = field(repr=False)
     F: np.ndarray = field(repr=False)
     K: np.ndarray = field(repr=False)
@@ -313,18 +322,19 @@ class UioDesign:
         self, y: np.ndarray, u: np.ndarray, x0_guess: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """Estimates x̂_k (N × n) and d̂_k (N−1 × q) from the samples y_k (N × p) and the known
-        inputs u_k (N × m, held over each sample)."""
+        inputs u_k (N × m; held over each sample or linear between samples, as designed)."""
         import numpy as np
 
         y, u = np.asarray(y, float), np.asarray(u, float)
         z = self.initial(y[0], x0_guess)
         x_hat = np.empty((len(y), len(self.states)))
+        du = np.diff(u, axis=0)
         for k in range(len(y)):
             x_hat[k] = z + self.H @ y[k]
-            z = self.F @ z + self.T @ (self.Bd @ u[k]) + self.K @ y[k]
-        ce_pinv = np.linalg.pinv(self.C @ self.Ed)
-        predicted = (self.C @ (self.Ad @ x_hat[:-1].T + self.Bd @ u[:-1].T)).T
-        d_hat = (ce_pinv @ (y[1:] - predicted).T).T
+            if k + 1 < len(y):
+                z = self.F @ z + self.T @ (self.Bd @ u[k] + self.B1 @ du[k]) + self.K @ y[k]
+        predicted = (self.C @ (self.Ad @ x_hat[:-1].T + self.Bd @ u[:-1].T + self.B1 @ du.T)).T
+        d_hat = (self.left_inverse @ (y[1:] - predicted).T).T
         return x_hat, d_hat
 
 
@@ -333,8 +343,10 @@ def design_uio(
     unknown: Sequence[str],
     sample_time: float,
     parameters: Mapping[str, float] | None = None,
-    measurement_weight: float = 1.0,
+    measurement_weight: float | Sequence[float] = 1.0,
+    process_weight: float = 1.0,
     existence: UioExistence | None = None,
+    hold: str = "foh",
 ) -> UioDesign:
     """Design the discrete-time UIO of ``mode`` for ``unknown`` inputs at ``sample_time``.
 
@@ -360,24 +372,37 @@ def design_uio(
     known = [
         j for j, name in enumerate(mode.form.inputs) if name not in chosen and name not in dropped
     ]
+    if hold not in ("zoh", "foh"):
+        raise GearsymError("uio", "hold", f"must be zoh or foh, got {hold!r}")
     n = a.shape[0]
-    # zero-order hold: expm of the augmented matrix [[A, I], [0, 0]] h gives e^{Ah} and Γ
-    block = np.zeros((2 * n, 2 * n))
-    block[:n, :n], block[:n, n:] = a, np.eye(n)
+    # expm of [[A, I, 0], [0, 0, I/h], [0, 0, 0]] h holds e^{Ah}, Γ = ∫₀ʰ e^{Aτ} dτ and
+    # Λ = ∫₀ʰ e^{A(h−τ)} τ/h dτ (Van Loan's block form of the hold integrals)
+    block = np.zeros((3 * n, 3 * n))
+    block[:n, :n], block[:n, n : 2 * n] = a, np.eye(n)
+    block[n : 2 * n, 2 * n :] = np.eye(n) / sample_time
     phi = expm(block * sample_time)
-    ad, gamma = phi[:n, :n], phi[:n, n:]
+    ad, gamma, lam = phi[:n, :n], phi[:n, n : 2 * n], phi[:n, 2 * n :]
     bd, ed = gamma @ b[:, known], gamma @ b[:, unknown_cols]
+    b1 = lam @ b[:, known] if hold == "foh" else np.zeros_like(bd)
+    weights = np.broadcast_to(np.asarray(measurement_weight, dtype=float), (c.shape[0],))
+    if np.any(~np.isfinite(weights)) or np.any(weights <= 0):
+        raise GearsymError("uio", "measurement_weight", "must be positive and finite")
+    r_matrix = np.diag(weights)
+    # decoupling with the noise-weighted left inverse of C E_d (minimum-variance among all H
+    # with (I - H C) E_d = 0; the plain pseudo-inverse when all weights are equal)
     ce = c @ ed
-    h = ed @ np.linalg.pinv(ce)
+    w = np.diag(1.0 / weights)
+    left_inverse = np.linalg.solve(ce.T @ w @ ce, ce.T @ w)
+    h = ed @ left_inverse
     t = np.eye(n) - h @ c
     a1 = t @ ad
     try:
-        riccati = solve_discrete_are(a1.T, c.T, np.eye(n), measurement_weight * np.eye(c.shape[0]))
+        riccati = solve_discrete_are(a1.T, c.T, process_weight * np.eye(n), r_matrix)
     except (np.linalg.LinAlgError, ValueError) as err:
         raise GearsymError(
             "uio", mode.phase, f"no stabilising gain for (T A_d, C): {err}"
         ) from None
-    k1 = a1 @ riccati @ c.T @ np.linalg.inv(c @ riccati @ c.T + measurement_weight * np.eye(len(c)))
+    k1 = a1 @ riccati @ c.T @ np.linalg.inv(c @ riccati @ c.T + r_matrix)
     f = a1 - k1 @ c
     return UioDesign(
         phase=mode.phase,
@@ -386,11 +411,14 @@ def design_uio(
         states=tuple(mode.form.states),
         outputs=mode.outputs,
         sample_time=float(sample_time),
+        hold=hold,
         Ad=ad,
         Bd=bd,
+        B1=b1,
         Ed=ed,
         C=c,
         H=h,
+        left_inverse=left_inverse,
         T=t,
         F=f,
         K=k1 + f @ h,
