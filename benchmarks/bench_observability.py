@@ -33,8 +33,8 @@ import time
 from collections.abc import Callable
 
 import sympy as sp
-from gearsym.symbolic.description import load_description
 from gearsym.symbolic.drivetrain import shift_model
+from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.observability import analyze_observability
 from sympy.polys.domains import QQ
 from sympy.polys.matrices import DomainMatrix

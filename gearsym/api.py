@@ -29,7 +29,7 @@ __all__ = ["Gearbox", "load"]
 def load(path: str | Path | None = None) -> Gearbox:
     """The gearbox described by the TOML file ``path`` (default: the built-in one). Bad input
     raises :class:`gearsym.symbolic.errors.GearsymError` (one line: file, key, reason)."""
-    from gearsym.symbolic.description import load_description
+    from gearsym.symbolic.loader import load_description
 
     return Gearbox(load_description(None if path is None else str(path)))
 

@@ -20,7 +20,7 @@ from gearsym.symbolic.errors import GearsymError
 
 
 def _load(path: str | None) -> Any:
-    from gearsym.symbolic.description import load_description
+    from gearsym.symbolic.loader import load_description
 
     return load_description(path)
 

@@ -19,7 +19,7 @@ from gearsym.symbolic.output_dir import OutputDir
 
 
 def _load(path: str | None) -> Any:
-    from gearsym.symbolic.description import load_description
+    from gearsym.symbolic.loader import load_description
 
     return load_description(path)
 

@@ -13,7 +13,7 @@ from gearsym.interrupts import check
 
 
 def _load(path: str | None) -> Any:
-    from gearsym.symbolic.description import load_description
+    from gearsym.symbolic.loader import load_description
 
     return load_description(path)
 

@@ -68,8 +68,8 @@ def write_files(files: dict[str, str], root: Path) -> None:
 
 def cmd_generate(args: argparse.Namespace) -> int:
     """Generate, optionally check, and move the result into place."""
-    from gearsym.symbolic.description import load_description
     from gearsym.symbolic.generate import check_generatable, generate_tree
+    from gearsym.symbolic.loader import load_description
 
     shown = args.out
     if args.points < 1:

@@ -603,7 +603,7 @@ def _partial_dict(partial: PartialResult) -> dict[str, Any]:
 
 def cmd_observability(args: argparse.Namespace) -> int:
     """``gearsym observability``: verdict (4.12), per-variable observability, rank drops."""
-    from gearsym.symbolic.description import load_description
+    from gearsym.symbolic.loader import load_description
 
     d = load_description(args.config)
     try:
