@@ -15,20 +15,21 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import re
 import sys
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, NoReturn, TextIO
 
+from gearsym.commands import add_command, emit_json, load
 from gearsym.options import number
 from gearsym.symbolic.errors import GearsymError
 
 if TYPE_CHECKING:
     import sympy as sp
 
+    from gearsym.commands import Subparsers
     from gearsym.symbolic.description import GearboxDescription
     from gearsym.symbolic.model import Model
     from gearsym.symbolic.observability import ObservabilityResult, PartialResult, RankDrop
@@ -603,9 +604,7 @@ def _partial_dict(partial: PartialResult) -> dict[str, Any]:
 
 def cmd_observability(args: argparse.Namespace) -> int:
     """``gearsym observability``: verdict (4.12), per-variable observability, rank drops."""
-    from gearsym.symbolic.loader import load_description
-
-    d = load_description(args.config)
+    d = load(args.config)
     try:
         report = analyze_shift(
             d,
@@ -627,31 +626,27 @@ def cmd_observability(args: argparse.Namespace) -> int:
         partial = getattr(err, "partial", None)
         if partial is not None:
             if args.json:
-                json.dump(_partial_dict(partial), sys.stdout, indent=2)
-                sys.stdout.write("\n")
+                emit_json(_partial_dict(partial))
             else:
                 print(f"partial result (sound): {_partial_text(partial)}; {partial.reason}")
             sys.stdout.flush()
         raise
     if args.json:
-        json.dump(report.to_dict(), sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        emit_json(report.to_dict())
     else:
         print_report(report)
     return 0
 
 
-def add_observability_parser(
-    command: Callable[[str, Callable[[argparse.Namespace], int], str], Any],
-    config: Callable[[argparse.ArgumentParser], None],
-) -> argparse.ArgumentParser:
-    """Register ``gearsym observability`` with the ``command``/``config`` helpers of cli.py."""
-    p = command(
+def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
+    """Register ``observability``."""
+    p = add_command(
+        subparsers,
         "observability",
         cmd_observability,
         "Lie-derivative observability of a shift model (thesis 4.1-4.13) and where its rank drops.",
+        common,
     )
-    config(p)
     p.add_argument("--shift", default=DEFAULT_SHIFT, help="FROM-TO gears (default 2-3)")
     p.add_argument(
         "--params",
@@ -717,7 +712,6 @@ def add_observability_parser(
         help="operations per derivative order",
     )
     p.add_argument("--json", action="store_true", help="machine-readable report")
-    return p
 
 
 def print_observability_summary(

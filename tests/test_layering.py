@@ -7,7 +7,14 @@ import ast
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-FACE = ("gearsym.cli", "gearsym.cmd_", "gearsym.api", "gearsym.interrupts", "gearsym.options")
+FACE = (
+    "gearsym.cli",
+    "gearsym.cmd_",
+    "gearsym.commands",
+    "gearsym.api",
+    "gearsym.interrupts",
+    "gearsym.options",
+)
 
 
 def _imports(path: Path) -> list[str]:
