@@ -72,7 +72,7 @@ def ours_level_road(d) -> int:
 
 
 def ours_report(d) -> int:
-    from gearsym.cmd_observability import analyze_shift
+    from gearsym.symbolic.observability import analyze_shift
 
     return len(analyze_shift(d, "2-3", seed=1).confirmed_drops)
 

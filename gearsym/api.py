@@ -112,7 +112,7 @@ class Gearbox:
         """Observability of the augmented shift model (4.1)-(4.12): generic rank of Q with its
         witness, and where the rank drops (``options`` as ``gearsym observability``: params,
         input_models, conditions, max_order, drop_search, seed, ...)."""
-        from gearsym.cmd_observability import analyze_shift
+        from gearsym.symbolic.observability import analyze_shift
 
         return analyze_shift(self.description, shift, **options)
 
