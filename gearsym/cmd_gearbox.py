@@ -121,6 +121,8 @@ def _counts(text: str) -> tuple[int, ...]:
 
 
 def cmd_fit_teeth(args: argparse.Namespace) -> int:
+    """Tooth counts that reproduce every ratio of the gear table (Table 2.1) within the
+    tolerance; exit code 1 when no candidate in the ranges does."""
     from gearsym.symbolic.teeth import ToothRanges, fit_teeth
 
     d = load(args.config)
@@ -190,6 +192,7 @@ def _matrix_json(m: Any) -> list[list[str]]:
 
 
 def cmd_show(args: argparse.Namespace) -> int:
+    """One derived quantity, (2.22)–(2.41), as text, LaTeX or JSON."""
     import sympy as sp
 
     from gearsym.symbolic.dynamics import gearbox_dynamics
@@ -259,6 +262,7 @@ def cmd_show(args: argparse.Namespace) -> int:
 
 
 def cmd_default_config(args: argparse.Namespace) -> int:
+    """The built-in description (the thesis' 9-speed gearbox) on stdout."""
     from gearsym.symbolic.description import default_config_text
 
     sys.stdout.write(default_config_text())
