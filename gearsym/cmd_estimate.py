@@ -10,13 +10,16 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from gearsym.commands import add_command, load
 from gearsym.interrupts import check
 from gearsym.options import number
 
-__all__ = ["add_estimate_parser", "cmd_estimate"]
+if TYPE_CHECKING:
+    from gearsym.commands import Subparsers
+
+__all__ = ["cmd_estimate", "register"]
 
 FILTERS = ("uio",)
 
@@ -28,11 +31,10 @@ def _say(message: str) -> None:
 
 def cmd_estimate(args: argparse.Namespace) -> int:
     """Run the chosen estimator on the scenario's reference shift; print, or write with --out."""
-    from gearsym.symbolic.description import load_description
     from gearsym.symbolic.errors import GearsymError
     from gearsym.validation.scenario import load_scenario
 
-    d = load_description(args.config)
+    d = load(args.config)
     scenario = load_scenario(d, args.scenario)
     unknown = [u.strip() for u in args.unknown.split(",") if u.strip()]
     if not unknown:
@@ -91,18 +93,16 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_estimate_parser(
-    command: Callable[..., argparse.ArgumentParser],
-    config: Callable[[argparse.ArgumentParser], None],
-) -> None:
-    """Register ``estimate`` with the main parser."""
-    p = command(
+def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
+    """Register ``estimate``."""
+    p = add_command(
+        subparsers,
         "estimate",
         cmd_estimate,
         "Run an estimator of thesis chapter 4 on the reference shift: today the unknown input "
         "observer (4.4), its existence per phase and its errors against the reference.",
+        common,
     )
-    config(p)
     p.add_argument("--scenario", help="scenario TOML (default: the built-in 2-3 power-on upshift)")
     p.add_argument("--filter", choices=FILTERS, default="uio", help="the estimator (default uio)")
     p.add_argument(

@@ -482,26 +482,24 @@ def shift_model(
 def linear_shift_form(
     d: GearboxDescription, shift: str
 ) -> tuple[sp.Matrix, sp.Matrix, list[str], list[str]]:
-    """A_ex, B_ex of the linear form (5.1)–(5.3) of a shift model.
+    """A_ex, B_ex of the linear form (5.1)–(5.3) of a shift model in the column order of the
+    printed (5.4), (5.5): inputs [T_In, T_off, T_on, T_res*, ζ], the off-going element first.
 
-    Rolling and aerodynamic resistance become the input T_res* (5.2); the grade term
-    r_dyn m g sin ζ is linearised at ζ = 0, as (5.5) prints it. Returns (A, B, state names,
-    input names) with inputs [T_In, T_off, T_on, T_res*, ζ].
+    A view of :func:`shift_linear_form` (one derivation: T_res* (5.2), sin ζ ≈ ζ as (5.5)
+    prints it), whose B keeps the order of (5.3) instead. Returns (A, B, state names, input
+    names).
     """
     spec = shift_spec(d, shift)
-    parts = drivetrain_parts(
-        d, locked=spec.locked, torque_elements=(spec.off_going, spec.on_coming)
-    )
-    p = {v.name: v.symbol for v in parts.parameters}
-    t_res_star = sp.Symbol(naming.RESISTANCE_INPUT)
-    wheel = (
-        2 * parts.side_shaft_torque - t_res_star - parts.grade_lever * p["m_veh"] * p["zeta"]
-    ) / parts.wheel_inertia  # (5.2), sin ζ ≈ ζ
-    rhs = sp.Matrix([*parts.gearbox_rhs, parts.phi_dot, wheel])
-    x = [*parts.speeds, sp.Symbol(naming.TWIST), sp.Symbol(naming.WHEEL_SPEED)]
-    u = [parts.torque_symbols[k] for k in (naming.INPUT, spec.off_going, spec.on_coming)]
-    u += [t_res_star, p["zeta"]]
-    return rhs.jacobian(x), rhs.jacobian(u), [str(s) for s in x], [str(s) for s in u]
+    form = shift_linear_form(d, shift)
+    inputs = [
+        naming.INPUT_TORQUE,
+        naming.torque(spec.off_going),
+        naming.torque(spec.on_coming),
+        naming.RESISTANCE_INPUT,
+        form.inputs[-1],  # ζ, the grade
+    ]
+    columns = [form.inputs.index(name) for name in inputs]
+    return form.A, form.B.extract(list(range(form.B.rows)), columns), form.states, inputs
 
 
 @dataclass(frozen=True)
@@ -584,8 +582,8 @@ def gear_linear_form(d: GearboxDescription, gear: str) -> LinearForm:
 
 def shift_linear_form(d: GearboxDescription, shift: str) -> LinearForm:
     """(5.1) of a shift model (2.55–2.58): the shared elements locked; inputs [T_In, T_res*,
-    the two swapping elements' torques in description order, ζ]. Same A as
-    :func:`linear_shift_form`, B with its columns in the order of (5.3)."""
+    the two swapping elements' torques in description order, ζ]
+    (:func:`linear_shift_form` gives B in the column order of the printed (5.5))."""
     spec = shift_spec(d, shift)
     name = naming.shift_model_name(spec.from_gear, spec.to_gear)
     return _linear_form(d, name, spec.locked, (spec.off_going, spec.on_coming), None)

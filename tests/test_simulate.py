@@ -16,8 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sympy as sp
-from gearsym.symbolic.description import default_config_text, load_description
+from gearsym.symbolic.description import default_config_text
 from gearsym.symbolic.drivetrain import power_on_slip_signs, shift_model, shift_spec
+from gearsym.symbolic.loader import load_description
 from gearsym.validation.scenario import default_scenario_path, load_scenario
 from gearsym.validation.simulate import simulate
 

@@ -13,11 +13,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import sympy as sp
-from gearsym.symbolic.description import load_description
 from gearsym.symbolic.drivetrain import LinearForm
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.estimators import design_uio, linear_modes, uio_existence
 from gearsym.symbolic.estimators.uio import LinearMode
+from gearsym.symbolic.loader import load_description
 from scipy.signal import cont2discrete
 
 
