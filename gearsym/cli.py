@@ -444,6 +444,10 @@ def build_parser() -> argparse.ArgumentParser:
     from gearsym.cmd_analysis import register as add_analysis_parsers
 
     add_analysis_parsers(command, config)
+
+    from gearsym.cmd_draw import register as add_draw_parser
+
+    add_draw_parser(command, config)
     return parser
 
 

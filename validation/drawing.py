@@ -275,8 +275,8 @@ def lever_diagram(
             elements.append(ElementLink(e.name, e.kind, e.shafts, (a.x, a.y), (b.x, b.y)))
         else:
             node = diagram.node(e.b)
-            # Ground below the lever's foot, a little to the left: brakes hold a node.
-            ground = (node.x - 0.6, -0.9)
+            # The housing just left of the node it holds (node labels sit above the line).
+            ground = (node.x - 0.7, node.y)
             elements.append(ElementLink(e.name, e.kind, e.shafts, (node.x, node.y), ground))
     return LeverDiagram(
         gearbox=d.name,
@@ -507,7 +507,8 @@ def stick_diagram(d: GearboxDescription) -> StickDiagram:
     attach[d.output_shaft].append(right)
     spans = {s: (min(xs), max(xs)) for s, xs in attach.items() if xs}
     for s, (a, _) in spans.items():
-        labels.append(Label(f"{s}", a - 0.15, levels[s], "right"))
+        if s != d.input_shaft:  # the input's name is on its arrow
+            labels.append(Label(f"{s}", a - 0.15, levels[s], "right"))
     labels.append(Label(f"in ({d.input_shaft})", -0.9, levels[d.input_shaft] + 0.25, "center"))
     labels.append(Label(f"out ({d.output_shaft})", right + 0.9, levels[d.output_shaft] + 0.25))
     return StickDiagram(
