@@ -140,3 +140,13 @@ def test_help_does_not_import_matplotlib():
     )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert result.stdout.split() == ["False", "False"], result.stderr
+
+
+def test_the_readme_picture_is_what_the_command_draws(tmp_path):
+    committed = Path(__file__).resolve().parents[1] / "docs" / "speed_plan_gear_2.svg"
+    fresh = tmp_path / "plan.svg"
+    result = gearsym("draw", "--what", "speeds", "--gear", "2", "--out", str(fresh))
+    assert result.returncode == 0, result.stderr
+    assert fresh.read_bytes() == committed.read_bytes(), (
+        "regenerate: gearsym draw --what speeds --gear 2 --out docs/speed_plan_gear_2.svg"
+    )

@@ -110,10 +110,11 @@ def _draw_levers(
     start = diagram.node(diagram.input_shaft)
     end = diagram.node(diagram.output_shaft)
     arrow = {"arrowstyle": "-|>", "color": "k", "lw": 1.2}
-    ax.annotate("", xy=(start.x, start.y), xytext=(start.x - 0.9, start.y + 0.45), arrowprops=arrow)
-    ax.text(start.x - 0.95, start.y + 0.5, "in", ha="right", va="bottom", weight="bold")
-    ax.annotate("", xy=(end.x + 0.9, end.y + 0.45), xytext=(end.x, end.y), arrowprops=arrow)
-    ax.text(end.x + 0.95, end.y + 0.5, "out", ha="left", va="bottom", weight="bold")
+    # From below: above a node is its label, right of it its speed arrow and value.
+    ax.annotate("", xy=(start.x, start.y), xytext=(start.x - 0.9, start.y - 0.5), arrowprops=arrow)
+    ax.text(start.x - 0.95, start.y - 0.55, "in", ha="right", va="top", weight="bold")
+    ax.annotate("", xy=(end.x + 0.9, end.y - 0.5), xytext=(end.x, end.y), arrowprops=arrow)
+    ax.text(end.x + 0.95, end.y - 0.55, "out", ha="left", va="top", weight="bold")
 
 
 def _draw_speeds(ax: Any, diagram: LeverDiagram, plan: SpeedPlan, decimals: int) -> None:
@@ -153,10 +154,12 @@ def _draw_speeds(ax: Any, diagram: LeverDiagram, plan: SpeedPlan, decimals: int)
         )
 
 
-def _finish(ax: Any) -> None:
+def _finish(ax: Any, levers: bool = False) -> None:
     ax.set_aspect("equal")
     ax.axis("off")
     ax.margins(0.04)
+    if levers:  # room for the set names above and the grounds below (texts do not count)
+        ax.set_ylim(-1.0, LEVER_HEIGHT + 0.9)
 
 
 def _extent(diagram: LeverDiagram, columns: dict[str, tuple[float, float]] | None) -> float:
@@ -171,7 +174,7 @@ def lever_figure(d: GearboxDescription) -> Any:
     width = _extent(diagram, None)
     fig, ax = subplots(1, 1, (max(4.0, 0.9 * width), 4.2), _MARGINS)
     _draw_levers(ax, diagram, None)
-    _finish(ax)
+    _finish(ax, levers=True)
     fig.suptitle(f"{d.title}: lever analogy (node spacing ∝ teeth)")
     return fig
 
@@ -205,7 +208,7 @@ def speeds_figure(d: GearboxDescription, plans: list[SpeedPlan]) -> Any:
             if plan.expected is not None:
                 read += f" (table {plan.expected:.{d.ratio_decimals}f})"
         ax.set_title(f"gear {plan.gear}: {closed} closed\n{read}", fontsize=8)
-        _finish(ax)
+        _finish(ax, levers=True)
     for ax in list(axes.flat)[len(plans) :]:
         ax.axis("off")
     what = "speed plan" if len(plans) == 1 else "speed plans of every gear"
