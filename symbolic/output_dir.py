@@ -531,7 +531,7 @@ class OutputFile(OutputDir):
 
     def __init__(self, target: str | Path, command: str, *, shown: str | None = None) -> None:
         if str(target).strip() == "":
-            raise GearsymError(shown if shown is not None else str(target), "--out", "is empty")
+            raise GearsymError("command line", "--out", "is empty; name a .svg or .png file")
         super().__init__(target, command, shown=shown)
         if self.target.suffix.lower() not in SIGNED_SUFFIXES:
             raise self._error(
