@@ -19,6 +19,7 @@ from typing import NoReturn
 
 from gearsym import (
     cmd_analysis,
+    cmd_draw,
     cmd_dynamics,
     cmd_estimate,
     cmd_gearbox,
@@ -39,6 +40,7 @@ COMMAND_MODULES = (
     cmd_generate,
     cmd_analysis,
     cmd_estimate,
+    cmd_draw,
 )
 
 
