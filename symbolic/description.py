@@ -68,6 +68,9 @@ SECTION_UNITS: dict[str, dict[str, str]] = {
         "A_front": "m^2",
         "f_roll": "s/m",
         "f_R": "1",
+        "f_R0": "1",
+        "f_R1": "s/m",
+        "f_R2": "s^2/m^2",
         "zeta": "rad",
     },
     "friction": {
@@ -80,9 +83,10 @@ SECTION_UNITS: dict[str, dict[str, str]] = {
 }
 
 #: Quantities that may be zero or negative (everything else must be positive).
-SIGNED_QUANTITIES = {"zeta", "T_oil", "z_ba_ratio"}
+#: The polynomial's coefficients may be zero (a term left out) or of either sign (a fit).
+SIGNED_QUANTITIES = {"zeta", "T_oil", "z_ba_ratio", "f_R0", "f_R1", "f_R2"}
 
-ROLLING_RESISTANCE_FORMS = ("thesis", "textbook")
+ROLLING_RESISTANCE_FORMS = ("thesis", "textbook", "polynomial")
 
 DEFAULT_CONFIG_NAME = "thesis_9speed.toml"
 
@@ -478,7 +482,8 @@ def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
             rolling = r.string("rolling_resistance", required=False, default="thesis")
             if rolling not in ROLLING_RESISTANCE_FORMS:
                 raise r.fail(
-                    "rolling_resistance", f"expected 'thesis' or 'textbook', got {shown(rolling)}"
+                    "rolling_resistance",
+                    f"expected 'thesis', 'textbook' or 'polynomial', got {shown(rolling)}",
                 )
         if section == "friction":
             mu_map = r.string("mu_map", required=False, default="built-in")

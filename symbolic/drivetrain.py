@@ -37,7 +37,10 @@ from gearsym.symbolic.sympy_utils import smart_jacobian
 #: Vehicle and drivetrain values that are parameters of every drivetrain model (symbols with
 #: defaults). Geometry (teeth, inertias, i_D, r_dyn) is hardware and enters as exact numbers.
 PARAMETER_KEYS = ("m_veh", "k_ss", "d_ss", "zeta", "I_wheel", "rho_air", "c_W", "A_front")
-ROLLING_KEY = {"thesis": "f_roll", "textbook": "f_R"}
+#: The parameters of each rolling-resistance form (2.49a): the thesis' printed form, the
+#: textbook form, and a speed-dependent coefficient f_Roll(v) = f_R0 + f_R1 v + f_R2 v² that
+#: contains both (f_R1 = f_roll, or f_R0 = f_R, the rest zero).
+ROLLING_KEYS = {"thesis": ("f_roll",), "textbook": ("f_R",), "polynomial": ("f_R0", "f_R1", "f_R2")}
 
 DESCRIPTIONS = {
     "m_veh": "vehicle mass",
@@ -50,7 +53,13 @@ DESCRIPTIONS = {
     "A_front": "frontal area (2.49b)",
     "f_roll": "rolling-resistance factor of the thesis' form F_r = v f_roll cos(zeta) m g (2.49a)",
     "f_R": "rolling-resistance coefficient, F_r = f_R cos(zeta) m g",
+    "f_R0": "rolling resistance f_Roll(v) = f_R0 + f_R1 v + f_R2 v^2, constant part (2.49a)",
+    "f_R1": "rolling resistance f_Roll(v), coefficient of v (2.49a)",
+    "f_R2": "rolling resistance f_Roll(v), coefficient of v^2 (2.49a)",
 }
+
+#: Parameters that may be zero or negative (real symbols, not positive ones).
+SIGNED_PARAMETERS = ("zeta", "f_R0", "f_R1", "f_R2")
 
 
 @dataclass(frozen=True)
@@ -156,12 +165,13 @@ def drivetrain_parameters(d: GearboxDescription) -> tuple[Variable, ...]:
     section = {
         k: "drivetrain" if k in ("k_ss", "d_ss", "I_wheel") else "vehicle" for k in PARAMETER_KEYS
     }
-    keys = list(PARAMETER_KEYS) + [ROLLING_KEY[d.rolling_resistance]]
-    section[ROLLING_KEY[d.rolling_resistance]] = "vehicle"
+    rolling = ROLLING_KEYS[d.rolling_resistance]
+    keys = list(PARAMETER_KEYS) + list(rolling)
+    section |= {key: "vehicle" for key in rolling}
     result = []
     for key in keys:
         q = quantity(d, section[key], key)
-        positive = key != "zeta"
+        positive = key not in SIGNED_PARAMETERS
         result.append(
             Variable(
                 name=key,
@@ -299,8 +309,11 @@ def _derive_parts(
     zeta, m_veh = p["zeta"], p["m_veh"]
     if d.rolling_resistance == "thesis":
         f_r = v * p["f_roll"] * sp.cos(zeta) * m_veh * g  # (2.49a) as printed
-    else:
+    elif d.rolling_resistance == "textbook":
         f_r = p["f_R"] * sp.cos(zeta) * m_veh * g  # textbook form, forward motion
+    else:  # f_Roll(v) as a polynomial in v (forward motion)
+        f_roll_v = p["f_R0"] + p["f_R1"] * v + p["f_R2"] * v**2
+        f_r = f_roll_v * sp.cos(zeta) * m_veh * g
     f_ad = sp.Rational(1, 2) * v**2 * p["rho_air"] * p["c_W"] * p["A_front"]  # (2.49b)
     f_g = sp.sin(zeta) * m_veh * g  # (2.49c)
 

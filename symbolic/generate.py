@@ -86,6 +86,9 @@ PARAMETER_BOUNDS: dict[str, tuple[float | None, float | None]] = {
     "A_front": (0.1, 20.0),
     "f_roll": (0.0, 0.1),
     "f_R": (0.0, 0.1),
+    "f_R0": (-0.05, 0.1),  # f_Roll(v) = f_R0 + f_R1 v + f_R2 v^2: a fit may dip below zero
+    "f_R1": (-0.01, 0.01),
+    "f_R2": (-1.0e-3, 1.0e-3),
     "sigma0": (1.0, 1.0e9),
     "sigma1": (0.0, 1.0e6),
     "z_ba_ratio": (0.0, 0.99),

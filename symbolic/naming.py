@@ -295,7 +295,7 @@ def check_names(d: GearboxDescription) -> None:
     (no function or macro suffix of one model starts like another's), so the model names
     stand for them.
     """
-    from gearsym.symbolic.drivetrain import DESCRIPTIONS, ROLLING_KEY, shift_spec
+    from gearsym.symbolic.drivetrain import DESCRIPTIONS, ROLLING_KEYS, shift_spec
 
     f = d.file
     names = _Space(
@@ -324,7 +324,10 @@ def check_names(d: GearboxDescription) -> None:
         (VEHICLE_SPEED, "vehicle speed column"),
         (GRADE_DEVIATION, "grade deviation input zeta(t) - zeta0"),
         *((term, f"energy column {term}") for term in ENERGY_TERMS),
-        *((key, f"drivetrain parameter {key}") for key in (*DESCRIPTIONS, *ROLLING_KEY.values())),
+        *(
+            (key, f"drivetrain parameter {key}")
+            for key in (*DESCRIPTIONS, *(k for ks in ROLLING_KEYS.values() for k in ks))
+        ),
     ]
     for name, what in builtin:
         names.add(name, what, None)

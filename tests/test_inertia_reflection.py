@@ -6,8 +6,8 @@ differential cage J_D at ω_out / i_D, so their kinetic energy ½ (J_cs + J_D / 
 J_cs + J_D / i_D² to the inertia seen at the output shaft. Hand check: in a gear (one gearbox
 DOF, the output speed), with the side shaft relaxed (φ = 0, speeds 0), a unit input torque
 accelerates the output at ω̇_out = i / J_red (i the gear's ratio, the torque reaching the output
-shaft), so J_red = i / ω̇_out. Changing J_cs by a and J_D by b (0.25 and 2 kg·m² here) must change J_red by exactly
-a + b / i_D², whatever the gear.
+shaft), so J_red = i / ω̇_out. Changing J_cs by a and J_D by b (0.25 and 2 kg·m² here) must
+change J_red by exactly a + b / i_D², whatever the gear.
 """
 
 from __future__ import annotations
