@@ -103,6 +103,11 @@ class HybridResult:
     scenario: Scenario
     values: dict[str, float]
     stats: dict[str, float] = field(default_factory=dict)
+    #: ∂(signal)/∂p of the states and shaft speeds, signals × samples × parameters
+    parameters: tuple[str, ...] = ()
+    sensitivities: dict[str, np.ndarray] = field(default_factory=dict)
+    #: ∂τ/∂p of every event (zero for the switches at breakpoints), events × parameters
+    event_time_sensitivities: np.ndarray | None = None
 
 
 class CompiledMode:
@@ -163,7 +168,10 @@ class CompiledMode:
         self.continuous = [
             g for g in hybrid.guards_from(mode.name) if g.kind in (BREAK_AWAY, LOCK_UP)
         ]
-        self.guard = [function("g", [g.expression]) for g in self.continuous]
+        self.guard_sx = [to_casadi(g.expression, mapping) for g in self.continuous]
+        self.guard = [ca.Function("g", [self.x, self.u, self.p], [g]) for g in self.guard_sx]
+        self._augmented: dict[tuple[int, ...], Any] = {}
+        self._gradients: dict[int, Any] = {}
         self.condition = {
             id(g): function("c", [g.condition]) for g in self.continuous if g.condition is not None
         }
@@ -181,6 +189,33 @@ class CompiledMode:
 
     def rhs(self, x: np.ndarray, u: np.ndarray, p: np.ndarray) -> np.ndarray:
         return np.asarray(self.f(x, u, p).full(), dtype=float).ravel()
+
+    def augmented(self, indices: tuple[int, ...]) -> Any:
+        """(y, u, p) → ẏ of y = [x; S_1; …; S_m] (S_j = ∂x/∂p_j of the parameters at
+        ``indices``): ẋ = f, Ṡ = ∂f/∂x S + ∂f/∂p (3.7), by CasADi's AD of the mode's f."""
+        if indices not in self._augmented:
+            import casadi as ca
+
+            sensitivities = ca.SX.sym("S", self.n, len(indices))
+            f_x = ca.jacobian(self.rhs_sx, self.x)
+            f_p = ca.horzcat(*[ca.jacobian(self.rhs_sx, self.p[k]) for k in indices])
+            y = ca.vertcat(self.x, ca.vec(sensitivities))
+            out = ca.vertcat(self.rhs_sx, ca.vec(f_x @ sensitivities + f_p))
+            self._augmented[indices] = ca.Function("augmented", [y, self.u, self.p], [out])
+        return self._augmented[indices]
+
+    def guard_gradient(self, k: int) -> Any:
+        """(x, u, p) → (∂g/∂x, ∂g/∂u, ∂g/∂p) of the k-th continuous guard."""
+        if k not in self._gradients:
+            import casadi as ca
+
+            g = self.guard_sx[k]
+            self._gradients[k] = ca.Function(
+                "dg",
+                [self.x, self.u, self.p],
+                [ca.jacobian(g, self.x), ca.jacobian(g, self.u), ca.jacobian(g, self.p)],
+            )
+        return self._gradients[k]
 
     def value(self, function: Any, x: np.ndarray, u: np.ndarray, p: np.ndarray) -> np.ndarray:
         return np.asarray(function(x, u, p).full(), dtype=float).ravel()
@@ -286,7 +321,7 @@ class HybridSimulator:
     def switch(
         self, guard: Guard, t: float, x: np.ndarray, p: np.ndarray
     ) -> tuple[str, np.ndarray]:
-        """Target mode and mapped state after ``guard`` fired at (t, x)."""
+        """Target mode and state map (x⁺ = A x⁻) after ``guard`` fired at (t, x)."""
         target = guard.target
         if guard.condition is not None:
             compiled = self.modes[guard.source]
@@ -294,14 +329,14 @@ class HybridSimulator:
             if value < 0:
                 assert guard.otherwise is not None
                 target = guard.otherwise
-        matrix = np.array(self.hybrid.maps[(guard.source, target)].matrix, dtype=float)
-        return target, matrix @ x
+        return target, np.array(self.hybrid.maps[(guard.source, target)].matrix, dtype=float)
 
     def normal_force_switches(
         self, mode: str, t: float, t_next: float, x: np.ndarray, p: np.ndarray
     ) -> list[tuple[Guard, str, np.ndarray]]:
         """Opening and engagement at a breakpoint t: the element's F_N on the next segment (its
-        midpoint) is zero for an element that is not open, or positive for an open one."""
+        midpoint) is zero for an element that is not open, or positive for an open one.
+        Returns (guard, target, map matrix) in order."""
         switches = []
         middle = (t + t_next) / 2
         forces = self.normal_forces(middle)
@@ -316,17 +351,19 @@ class HybridSimulator:
             (guard,) = [
                 g for g in self.hybrid.guards_from(mode) if g.element == e and g.kind == kind
             ]
+            target = guard.target
             if kind == ENGAGEMENT:
                 slip = self.modes[mode].value(self.modes[mode].slips, x, self.inputs(t), p)[k]
-                target = guard.target if slip >= 0 else guard.otherwise
-                assert target is not None
-            else:
-                target = guard.target
+                target = guard.target if slip >= 0 else str(guard.otherwise)
             matrix = np.array(self.hybrid.maps[(mode, target)].matrix, dtype=float)
             x = matrix @ x
-            switches.append((guard, target, x))
+            switches.append((guard, target, matrix))
             mode = target
         return switches
+
+    def input_slope(self, ta: float, tb: float) -> np.ndarray:
+        """du/dt inside the segment [ta, tb], where every profile is linear."""
+        return (self.inputs(tb) - self.inputs(ta)) / (tb - ta)
 
     # ------------------------------------------------------------------ integration
 
@@ -337,44 +374,65 @@ class HybridSimulator:
         atol: float = 1e-10,
         sample_time: float = SAMPLE_TIME,
         x0: np.ndarray | None = None,
+        parameters: Sequence[str] = (),
     ) -> HybridResult:
         """Integrate through the scenario from the quasi-static from-gear (or ``x0`` in the
-        from-gear's coordinates); see the module docstring."""
+        from-gear's coordinates); see the module docstring.
+
+        With ``parameters`` the sensitivities S = ∂x/∂p ride along: (3.7) inside each mode, and
+        at each switch the jump of hybrid sensitivity analysis (Hiskens & Pai 2000; Galán,
+        Feehery & Barton 1999),
+
+            S⁺ = A S⁻ + (A f⁻ − f⁺) ∂τ/∂p,   ∂τ/∂p = −(∂g/∂x S⁻ + ∂g/∂p) / (∂g/∂x f⁻ + ∂g/∂u u̇),
+
+        A the (constant, linear) state map, f∓ the source and target right-hand sides at the
+        event, g the guard; ∂g/∂u u̇ is there because the guards depend on time through T_In and
+        F_N. Switches at breakpoints happen at fixed times (∂τ/∂p = 0): S⁺ = A S⁻. S(0) = 0:
+        the initial state is taken as known (the thesis' view, (3.7) from t = 0).
+        """
         values = self.values(overrides)
         p = self.parameter_vector(values)
+        unknown = [name for name in parameters if name not in self.parameter_names]
+        if unknown:
+            raise GearsymError(self.d.file, "params", f"unknown parameters {unknown}")
+        indices = tuple(self.parameter_names.index(name) for name in parameters)
+        m = len(indices)
         scenario = self.scenario
         mode = self.hybrid.from_mode
         x = self.initial_state(p) if x0 is None else np.asarray(x0, dtype=float)
+        sens = np.zeros((len(x), m))
         breakpoints = scenario.breakpoints()
         events: list[Event] = []
+        tau_p: list[np.ndarray] = []
         pieces: list[Piece] = []
         nfev = 0
         for ta, tb in zip(breakpoints[:-1], breakpoints[1:], strict=True):
-            for guard, target, x_new in self.normal_force_switches(mode, ta, tb, x, p):
+            for guard, target, matrix in self.normal_force_switches(mode, ta, tb, x, p):
                 events.append(Event(ta, guard.kind, guard.element, mode, target))
-                mode, x = target, x_new
+                tau_p.append(np.zeros(m))
+                mode, x, sens = target, matrix @ x, matrix @ sens
             t = ta
             while t < tb:
                 compiled = self.modes[mode]
-
-                def fun(time: float, y: np.ndarray, c: CompiledMode = compiled) -> np.ndarray:
-                    return c.rhs(y, self.inputs(time), p)
-
+                n = compiled.n
+                fun = self._right_hand_side(compiled, indices, p)
                 functions = []
                 for guard, g in zip(compiled.continuous, compiled.guard, strict=True):
 
                     def event(
                         time: float, y: np.ndarray, c: CompiledMode = compiled, g: Any = g
                     ) -> float:
-                        return float(c.value(g, y, self.inputs(time), p)[0])
+                        return float(c.value(g, y[: c.n], self.inputs(time), p)[0])
 
                     event.terminal = True  # type: ignore[attr-defined]
                     event.direction = guard.direction  # type: ignore[attr-defined]
                     functions.append(event)
+                # S rides in the same error control as x (its columns in units of x per unit p)
+                y0 = np.concatenate([x, sens.T.ravel()])
                 sol = solve_ivp(
                     fun,
                     (t, tb),
-                    x,
+                    y0,
                     method="DOP853",
                     rtol=rtol,
                     atol=atol,
@@ -389,14 +447,32 @@ class HybridSimulator:
                         f"{sol.message}",
                     )
                 nfev += sol.nfev
-                pieces.append(Piece(mode, t, float(sol.t[-1]), sol.sol, x.copy()))
-                x, t = sol.y[:, -1], float(sol.t[-1])
+                pieces.append(Piece(mode, t, float(sol.t[-1]), sol.sol, y0.copy()))
+                t = float(sol.t[-1])
                 if sol.status != 1:
+                    x, sens = sol.y[:n, -1], sol.y[n:, -1].reshape(m, n).T
                     break
-                fired = [k for k, times in enumerate(sol.t_events) if len(times)]
-                guard = compiled.continuous[fired[0]]
-                target, x = self.switch(guard, t, sol.y_events[fired[0]][0], p)
+                k = next(k for k, times in enumerate(sol.t_events) if len(times))
+                y_event = sol.y_events[k][0]
+                x, sens = y_event[:n], y_event[n:].reshape(m, n).T
+                guard = compiled.continuous[k]
+                target, matrix = self.switch(guard, t, x, p)
+                x_plus = matrix @ x
+                dtau = np.zeros(m)
+                if m:
+                    u = self.inputs(t)
+                    f_minus = compiled.rhs(x, u, p)
+                    f_plus = self.modes[target].rhs(x_plus, u, p)
+                    g_x, g_u, g_p = (
+                        np.asarray(v.full(), dtype=float)
+                        for v in compiled.guard_gradient(k)(x, u, p)
+                    )
+                    rate = float((g_x @ f_minus + g_u @ self.input_slope(ta, tb))[0])
+                    dtau = -(g_x @ sens + g_p[:, list(indices)]).ravel() / rate
+                    sens = matrix @ sens + np.outer(matrix @ f_minus - f_plus, dtau)
+                x = x_plus
                 events.append(Event(t, guard.kind, guard.element, mode, target))
+                tau_p.append(dtau)
                 mode = target
                 if len(events) > EVENTS_MAX:
                     raise GearsymError(
@@ -406,7 +482,7 @@ class HybridSimulator:
                         f"{guard.kind} of {guard.element})",
                     )
         grid = np.unique(np.concatenate([np.arange(0.0, scenario.t_end, sample_time), breakpoints]))
-        signals, modes = self._sample(pieces, grid, p)
+        signals, modes, sensitivities = self._sample(pieces, grid, p, m)
         return HybridResult(
             t=grid,
             signals=signals,
@@ -417,7 +493,21 @@ class HybridSimulator:
             scenario=scenario,
             values=values,
             stats={"nfev": float(nfev), "events": float(len(events))},
+            parameters=tuple(parameters),
+            sensitivities=sensitivities,
+            event_time_sensitivities=np.array(tau_p).reshape(len(events), m),
         )
+
+    def _right_hand_side(
+        self, compiled: CompiledMode, indices: tuple[int, ...], p: np.ndarray
+    ) -> Any:
+        """(t, y) → ẏ for solve_ivp: the mode's f, or the augmented [f; ∂f/∂x S + ∂f/∂p]."""
+        if not indices:
+            return lambda time, y: compiled.rhs(y, self.inputs(time), p)
+        augmented = compiled.augmented(indices)
+        return lambda time, y: np.asarray(
+            augmented(y, self.inputs(time), p).full(), dtype=float
+        ).ravel()
 
     def shaft_speeds(self, mode: str) -> Any:
         """CasADi function x → every shaft's speed in ``mode`` (ẏ = P z, then s(y), 2.29)."""
@@ -436,13 +526,14 @@ class HybridSimulator:
         return self._speeds[mode]
 
     def _sample(
-        self, pieces: Sequence[Piece], grid: np.ndarray, p: np.ndarray
-    ) -> tuple[dict[str, np.ndarray], tuple[str, ...]]:
-        """Every signal at the grid; a sample at a switch takes the later piece."""
+        self, pieces: Sequence[Piece], grid: np.ndarray, p: np.ndarray, m: int = 0
+    ) -> tuple[dict[str, np.ndarray], tuple[str, ...], dict[str, np.ndarray]]:
+        """Every signal (and its sensitivities, samples × parameters) at the grid; a sample at a
+        switch takes the later piece."""
         shafts = [s.name for s in self.d.shafts]
-        signals = {naming.speed(s): np.zeros(len(grid)) for s in shafts}
-        signals[naming.TWIST] = np.zeros(len(grid))
-        signals[naming.WHEEL_SPEED] = np.zeros(len(grid))
+        keys = [naming.speed(s) for s in shafts] + [naming.TWIST, naming.WHEEL_SPEED]
+        signals = {k: np.zeros(len(grid)) for k in keys}
+        sensitivities = {k: np.zeros((len(grid), m)) for k in keys} if m else {}
         for e in self.hybrid.elements:
             signals[naming.slip_column(e)] = np.zeros(len(grid))
             signals[naming.torque(e)] = np.zeros(len(grid))
@@ -455,14 +546,26 @@ class HybridSimulator:
             if index.size == 0:
                 continue
             compiled = self.modes[piece.mode]
-            x = piece.state(grid[index])
+            n = compiled.n
+            y = piece.state(grid[index])
+            x = y[:, :n]
             u = np.array([self.inputs(float(t)) for t in grid[index]])
-            speeds = np.asarray(self.shaft_speeds(piece.mode).map(len(x))(x.T).full()).T
+            speeds_of = self.shaft_speeds(piece.mode).map(len(x))
+            speeds = np.asarray(speeds_of(x.T).full()).T
+            names = [v.name for v in compiled.mode.model.states]
             for j, s in enumerate(shafts):
                 signals[naming.speed(s)][index] = speeds[:, j]
-            names = [v.name for v in compiled.mode.model.states]
             signals[naming.TWIST][index] = x[:, names.index(naming.TWIST)]
             signals[naming.WHEEL_SPEED][index] = x[:, names.index(naming.WHEEL_SPEED)]
+            for col in range(m):
+                # the shaft speeds are linear in x (ẏ = P z): their sensitivities are the same
+                # map applied to S
+                s_col = y[:, n + col * n : n + (col + 1) * n]
+                d_speeds = np.asarray(speeds_of(s_col.T).full()).T
+                for j, s in enumerate(shafts):
+                    sensitivities[naming.speed(s)][index, col] = d_speeds[:, j]
+                for key in (naming.TWIST, naming.WHEEL_SPEED):
+                    sensitivities[key][index, col] = s_col[:, names.index(key)]
             slips = compiled.many(compiled.slips, x, u, p)
             torques = compiled.many(compiled.torques, x, u, p)
             for j, e in enumerate(self.hybrid.elements):
@@ -470,7 +573,7 @@ class HybridSimulator:
                 signals[naming.torque(e)][index] = torques[:, j]
             for i in index:
                 modes[i] = piece.mode
-        return signals, tuple(modes)
+        return signals, tuple(modes), sensitivities
 
 
 def simulate_hybrid(
