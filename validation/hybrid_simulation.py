@@ -186,19 +186,31 @@ class CompiledMode:
                 self.torque_exprs.append(sp.Integer(0))
         self.torques = function("torques", self.torque_exprs)
         self.slips = function("slips", [mode.slip[e] for e in hybrid.elements])
+        # μ as the mode uses it (the map's value scaled by the parameter, or the parameter)
+        self.mu = ca.Function(
+            "mu",
+            [self.x, self.u, self.p],
+            [ca.vertcat(*[mapping[hybrid.friction_coefficient[e]] for e in hybrid.elements])],
+        )
 
     def rhs(self, x: np.ndarray, u: np.ndarray, p: np.ndarray) -> np.ndarray:
         return np.asarray(self.f(x, u, p).full(), dtype=float).ravel()
 
-    def augmented(self, indices: tuple[int, ...]) -> Any:
+    def augmented(self, indices: tuple[int | None, ...]) -> Any:
         """(y, u, p) → ẏ of y = [x; S_1; …; S_m] (S_j = ∂x/∂p_j of the parameters at
-        ``indices``): ẋ = f, Ṡ = ∂f/∂x S + ∂f/∂p (3.7), by CasADi's AD of the mode's f."""
+        ``indices``): ẋ = f, Ṡ = ∂f/∂x S + ∂f/∂p (3.7), by CasADi's AD of the mode's f. An
+        index None is an initial state taken as a parameter: no ∂f/∂p term."""
         if indices not in self._augmented:
             import casadi as ca
 
             sensitivities = ca.SX.sym("S", self.n, len(indices))
             f_x = ca.jacobian(self.rhs_sx, self.x)
-            f_p = ca.horzcat(*[ca.jacobian(self.rhs_sx, self.p[k]) for k in indices])
+            f_p = ca.horzcat(
+                *[
+                    ca.jacobian(self.rhs_sx, self.p[k]) if k is not None else ca.SX(self.n, 1)
+                    for k in indices
+                ]
+            )
             y = ca.vertcat(self.x, ca.vec(sensitivities))
             out = ca.vertcat(self.rhs_sx, ca.vec(f_x @ sensitivities + f_p))
             self._augmented[indices] = ca.Function("augmented", [y, self.u, self.p], [out])
@@ -316,6 +328,37 @@ class HybridSimulator:
         x[phi] = -a0 * 1e-2 / (a1 - a0)
         return x
 
+    def initial_sensitivity(self, p: np.ndarray, parameters: Sequence[str]) -> np.ndarray:
+        """S(0) = ∂x(0)/∂p of :meth:`initial_state`: the speeds are given by the vehicle speed
+        (S = 0), the twist solves c(φ, p) = d(φ̇)/dt = 0, so ∂φ/∂p = −(∂c/∂p)/(∂c/∂φ) (as
+        :func:`gearsym.symbolic.sensitivity.stationary_initial_sensitivity` does for the
+        shift model)."""
+        import casadi as ca
+
+        mode = self.modes[self.hybrid.from_mode]
+        names = [v.name for v in mode.mode.model.states]
+        i_d = quantity(self.d, "drivetrain", "i_D").value
+        out = next(
+            k
+            for k, name in enumerate(names)
+            if name.startswith("omega_") and name != naming.WHEEL_SPEED
+        )
+        condition = mode.rhs_sx[out] / i_d - mode.rhs_sx[names.index(naming.WHEEL_SPEED)]
+        phi = names.index(naming.TWIST)
+        gradient = ca.Function(
+            "dc",
+            [mode.x, mode.u, mode.p],
+            [ca.jacobian(condition, mode.x[phi]), ca.jacobian(condition, mode.p)],
+        )
+        c_phi, c_p = (
+            np.asarray(v.full(), dtype=float)
+            for v in gradient(self.initial_state(p), self.inputs(0.0), p)
+        )
+        columns = [self.parameter_names.index(n) for n in parameters]
+        result = np.zeros((mode.n, len(columns)))
+        result[phi] = -c_p[0, columns] / c_phi[0, 0]
+        return result
+
     # ------------------------------------------------------------------ switching
 
     def switch(
@@ -375,6 +418,11 @@ class HybridSimulator:
         sample_time: float = SAMPLE_TIME,
         x0: np.ndarray | None = None,
         parameters: Sequence[str] = (),
+        t_start: float = 0.0,
+        mode: str | None = None,
+        s0: np.ndarray | None = None,
+        state_columns: Sequence[str] = (),
+        t_eval: np.ndarray | None = None,
     ) -> HybridResult:
         """Integrate through the scenario from the quasi-static from-gear (or ``x0`` in the
         from-gear's coordinates); see the module docstring.
@@ -387,21 +435,35 @@ class HybridSimulator:
 
         A the (constant, linear) state map, f∓ the source and target right-hand sides at the
         event, g the guard; ∂g/∂u u̇ is there because the guards depend on time through T_In and
-        F_N. Switches at breakpoints happen at fixed times (∂τ/∂p = 0): S⁺ = A S⁻. S(0) = 0:
-        the initial state is taken as known (the thesis' view, (3.7) from t = 0).
+        F_N. Switches at breakpoints happen at fixed times (∂τ/∂p = 0): S⁺ = A S⁻. S(t0) is
+        ``s0`` (states × parameters; default 0: the initial state known and independent of p,
+        (3.7) from t = 0 as the thesis does).
+
+        A restart inside the shift: ``t_start``, ``mode`` and ``x0`` in that mode's
+        coordinates. ``state_columns`` names states of that mode whose initial values are
+        further parameters (columns ∂x/∂x_s(t0), starting as unit vectors, without ∂f/∂p): the
+        nuisance parameters of the Fisher information. ``t_eval``: the sample times (default:
+        every ``sample_time`` and the breakpoints).
         """
         values = self.values(overrides)
         p = self.parameter_vector(values)
         unknown = [name for name in parameters if name not in self.parameter_names]
         if unknown:
             raise GearsymError(self.d.file, "params", f"unknown parameters {unknown}")
-        indices = tuple(self.parameter_names.index(name) for name in parameters)
-        m = len(indices)
         scenario = self.scenario
-        mode = self.hybrid.from_mode
+        mode = self.hybrid.from_mode if mode is None else mode
         x = self.initial_state(p) if x0 is None else np.asarray(x0, dtype=float)
+        names = [v.name for v in self.hybrid.modes[mode].model.states]
+        indices: tuple[int | None, ...] = tuple(
+            self.parameter_names.index(name) for name in parameters
+        ) + (None,) * len(state_columns)
+        m = len(indices)
         sens = np.zeros((len(x), m))
-        breakpoints = scenario.breakpoints()
+        if s0 is not None:
+            sens[:, : len(parameters)] = s0
+        for k, name in enumerate(state_columns):
+            sens[names.index(name), len(parameters) + k] = 1.0
+        breakpoints = [t_start] + [b for b in scenario.breakpoints() if b > t_start]
         events: list[Event] = []
         tau_p: list[np.ndarray] = []
         pieces: list[Piece] = []
@@ -468,7 +530,10 @@ class HybridSimulator:
                         for v in compiled.guard_gradient(k)(x, u, p)
                     )
                     rate = float((g_x @ f_minus + g_u @ self.input_slope(ta, tb))[0])
-                    dtau = -(g_x @ sens + g_p[:, list(indices)]).ravel() / rate
+                    g_theta = np.array([g_p[0, i] if i is not None else 0.0 for i in indices])[
+                        None, :
+                    ]
+                    dtau = -(g_x @ sens + g_theta).ravel() / rate
                     sens = matrix @ sens + np.outer(matrix @ f_minus - f_plus, dtau)
                 x = x_plus
                 events.append(Event(t, guard.kind, guard.element, mode, target))
@@ -481,7 +546,13 @@ class HybridSimulator:
                         f"more than {EVENTS_MAX} mode switches by t = {t:.6g} s (chattering "
                         f"{guard.kind} of {guard.element})",
                     )
-        grid = np.unique(np.concatenate([np.arange(0.0, scenario.t_end, sample_time), breakpoints]))
+        if t_eval is None:
+            grid = np.unique(
+                np.concatenate([np.arange(0.0, scenario.t_end, sample_time), breakpoints])
+            )
+            grid = grid[grid >= t_start]
+        else:
+            grid = np.asarray(t_eval, dtype=float)
         signals, modes, sensitivities = self._sample(pieces, grid, p, m)
         return HybridResult(
             t=grid,
@@ -493,7 +564,7 @@ class HybridSimulator:
             scenario=scenario,
             values=values,
             stats={"nfev": float(nfev), "events": float(len(events))},
-            parameters=tuple(parameters),
+            parameters=(*parameters, *(f"{name}(t0)" for name in state_columns)),
             sensitivities=sensitivities,
             event_time_sensitivities=np.array(tau_p).reshape(len(events), m),
         )
@@ -535,8 +606,13 @@ class HybridSimulator:
         signals = {k: np.zeros(len(grid)) for k in keys}
         sensitivities = {k: np.zeros((len(grid), m)) for k in keys} if m else {}
         for e in self.hybrid.elements:
-            signals[naming.slip_column(e)] = np.zeros(len(grid))
-            signals[naming.torque(e)] = np.zeros(len(grid))
+            for key in (
+                naming.slip_column(e),
+                naming.torque(e),
+                str(self.hybrid.normal_force[e]),
+                str(self.hybrid.friction_coefficient[e]),
+            ):
+                signals[key] = np.zeros(len(grid))
         modes = [""] * len(grid)
         owner = np.full(len(grid), -1)
         for k, piece in enumerate(pieces):
@@ -568,11 +644,17 @@ class HybridSimulator:
                     sensitivities[key][index, col] = s_col[:, names.index(key)]
             slips = compiled.many(compiled.slips, x, u, p)
             torques = compiled.many(compiled.torques, x, u, p)
+            mu = compiled.many(compiled.mu, x, u, p)
             for j, e in enumerate(self.hybrid.elements):
                 signals[naming.slip_column(e)][index] = slips[:, j]
                 signals[naming.torque(e)][index] = torques[:, j]
+                signals[str(self.hybrid.normal_force[e])][index] = u[:, 1 + j]
+                signals[str(self.hybrid.friction_coefficient[e])][index] = mu[:, j]
             for i in index:
                 modes[i] = piece.mode
+        w_in = signals[naming.speed(self.d.input_shaft)]
+        w_out = signals[naming.speed(self.d.output_shaft)]
+        signals[naming.RATIO] = w_in / np.where(w_out != 0, w_out, np.nan)
         return signals, tuple(modes), sensitivities
 
 
