@@ -15,6 +15,9 @@ Expected values from physics and independent methods:
 from __future__ import annotations
 
 import dataclasses
+import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -167,3 +170,27 @@ def test_the_views_are_labelled(description, simulator, nuisance):
     assert VIEWS["nuisance"] in format_text(nuisance)
     assert VIEWS["continuous"] in format_text(continuous)
     assert np.isfinite(gamma(continuous, "speed phase", "mu_38"))
+
+
+def gearsym(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "gearsym", *args], capture_output=True, text=True, timeout=300
+    )
+
+
+def test_fim_hybrid_command(tmp_path):
+    """``gearsym fim --hybrid``: the per-phase verdicts with φ unknown, as JSON and as files
+    written through the output folder; ``--known-initial-state`` without ``--hybrid`` is a
+    one-line error naming the option."""
+    out = tmp_path / "fim"
+    done = gearsym("fim", "--hybrid", "--json", "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    data = json.loads(done.stdout)
+    assert data["view"] == "nuisance" and data["nuisance"] == ["phi"]
+    windows = {w["name"]: w for w in data["windows"]}
+    assert windows["gear 3"]["gamma"]["mu_38"] == "inf"
+    assert windows["speed phase"]["gamma"]["mu_38"] == "inf"
+    assert sorted(p.name for p in out.iterdir()) == ["MANIFEST", "fim.json", "fim.txt"]
+    refused = gearsym("fim", "--known-initial-state")
+    assert refused.returncode == 2
+    assert refused.stderr.strip() == "gearsym: fim: --known-initial-state: applies to --hybrid only"

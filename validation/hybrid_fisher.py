@@ -54,6 +54,14 @@ VIEWS = {
 #: Relative tolerance of the events and states (the FIM needs S to a few digits only).
 RTOL = 1e-10
 
+#: Eigenvalues of F_N below this fraction of the largest are null directions. Where a parameter
+#: has no influence its sensitivities are exact zeros here (the mode's equations do not contain
+#: it), so its eigenvalue sits at double-precision rounding (≤ 1e-20 relative, measured); the
+#: general default 1e-10 of gearsym.symbolic.fisher would also call a merely weak direction null
+#: (2e-12 relative: μ38 during the 1 ms K38 still slides in gear 2 of the 3-2 downshift) and
+#: then mark m_veh and ζ, which have components of 1e-4 in it, as not identifiable as well.
+RANK_TOLERANCE = 1e-14
+
 
 @dataclass(frozen=True)
 class HybridWindow:
@@ -197,7 +205,7 @@ def hybrid_fim(
                 samples=len(index),
                 fim=reduced,
                 full_fim=full,
-                analysis=analyse(reduced, parameters, scales, gamma_max),
+                analysis=analyse(reduced, parameters, scales, gamma_max, RANK_TOLERANCE),
             )
         )
     return HybridFimStudy(
