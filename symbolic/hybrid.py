@@ -337,7 +337,7 @@ def hybrid_shift(d: GearboxDescription, shift: str) -> HybridShift:
         projection = locked_projection(d, dyn, locked, keep)
         modes[name] = Mode(name, status, model, keep, projection, slip, reaction, capacity)
 
-    mass = _mass(d, dyn)
+    mass = drivetrain_mass(d, dyn)
     maps: dict[tuple[str, str], StateMap] = {}
     guards: list[Guard] = []
 
@@ -420,7 +420,7 @@ def hybrid_shift(d: GearboxDescription, shift: str) -> HybridShift:
     )
 
 
-def _mass(d: GearboxDescription, dyn: GearboxDynamics) -> sp.Matrix:
+def drivetrain_mass(d: GearboxDescription, dyn: GearboxDynamics) -> sp.Matrix:
     """M of (2.34) with the output-side inertias of (2.51) (as drivetrain_parts adds them)."""
     i_d = exact(quantity(d, "drivetrain", "i_D").value)
     extra = exact(quantity(d, "drivetrain", "J_cs").value)

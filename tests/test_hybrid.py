@@ -139,9 +139,9 @@ def test_lock_up_at_zero_slip_is_a_change_of_coordinates(hybrid, description):
     """On the guard surface (slip 0) the map moves no shaft: P⁺ z⁺ = P⁻ z⁻; at non-zero slip the
     kinetic energy falls by exactly ½ Δẏᵀ M Δẏ (plastic impact) and never rises."""
     from gearsym.symbolic.dynamics import gearbox_dynamics
-    from gearsym.symbolic.hybrid import _mass
+    from gearsym.symbolic.hybrid import drivetrain_mass
 
-    mass = _mass(description, gearbox_dynamics(description))
+    mass = drivetrain_mass(description, gearbox_dynamics(description))
     checked = 0
     for guard in hybrid.guards:
         if guard.kind != LOCK_UP or guard.condition is None:
