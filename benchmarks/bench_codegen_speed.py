@@ -47,8 +47,8 @@ from codegen_peers import (
     write_tree,
 )
 from gearsym.symbolic.codegen import build_function_table
-from gearsym.symbolic.description import load_description
 from gearsym.symbolic.generate import sample_ranges, sensitivity_parameters
+from gearsym.symbolic.loader import load_description
 from gearsym.validation.c_check import sample_points
 
 #: ``-ffp-contract``: g++ (the SymForce peer) contracts a*b + c into FMA instructions by

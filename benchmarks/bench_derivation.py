@@ -13,9 +13,9 @@ import sys
 import time
 
 import sympy as sp
-from gearsym.symbolic.description import load_description
 from gearsym.symbolic.dynamics import gearbox_dynamics
 from gearsym.symbolic.kinematics import gearbox_symbols, willis_constraints
+from gearsym.symbolic.loader import load_description
 
 
 def ours(d, symbolic_teeth: bool):

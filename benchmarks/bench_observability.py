@@ -33,8 +33,8 @@ import time
 from collections.abc import Callable
 
 import sympy as sp
-from gearsym.symbolic.description import load_description
 from gearsym.symbolic.drivetrain import shift_model
+from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.observability import analyze_observability
 from sympy.polys.domains import QQ
 from sympy.polys.matrices import DomainMatrix
@@ -72,7 +72,7 @@ def ours_level_road(d) -> int:
 
 
 def ours_report(d) -> int:
-    from gearsym.cmd_observability import analyze_shift
+    from gearsym.symbolic.observability import analyze_shift
 
     return len(analyze_shift(d, "2-3", seed=1).confirmed_drops)
 

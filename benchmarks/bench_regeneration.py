@@ -33,8 +33,8 @@ from pathlib import Path
 
 import sympy as sp
 from codegen_peers import REPO, run
-from gearsym.symbolic.description import load_description
 from gearsym.symbolic.generate import gearbox_models
+from gearsym.symbolic.loader import load_description
 from gearsym.validation.c_check import STRICT_FLAGS
 
 TARGET_S = 10.0

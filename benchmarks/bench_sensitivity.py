@@ -14,7 +14,7 @@ import sys
 import time
 
 import sympy as sp
-from gearsym.symbolic.description import load_description
+from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.sensitivity import sensitivity_equations
 from gearsym.validation.sensitivity_run import (
     CompiledModel,

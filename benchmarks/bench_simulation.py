@@ -16,8 +16,8 @@ import sys
 import time
 
 import sympy as sp
-from gearsym.symbolic.description import load_description
 from gearsym.symbolic.drivetrain import adjacent_shifts, full_model, shift_model
+from gearsym.symbolic.loader import load_description
 from gearsym.validation.simulate import simulate
 
 

@@ -27,8 +27,8 @@ from typing import Any
 import casadi as ca
 import sympy as sp
 from gearsym.symbolic.codegen import build_function_table, count_operations, cse_function
-from gearsym.symbolic.description import load_description
 from gearsym.symbolic.generate import generate_tree
+from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.model import Model
 from gearsym.symbolic.numeric import to_casadi
 

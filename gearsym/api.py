@@ -29,7 +29,7 @@ __all__ = ["Gearbox", "load"]
 def load(path: str | Path | None = None) -> Gearbox:
     """The gearbox described by the TOML file ``path`` (default: the built-in one). Bad input
     raises :class:`gearsym.symbolic.errors.GearsymError` (one line: file, key, reason)."""
-    from gearsym.symbolic.description import load_description
+    from gearsym.symbolic.loader import load_description
 
     return Gearbox(load_description(None if path is None else str(path)))
 
@@ -112,7 +112,7 @@ class Gearbox:
         """Observability of the augmented shift model (4.1)-(4.12): generic rank of Q with its
         witness, and where the rank drops (``options`` as ``gearsym observability``: params,
         input_models, conditions, max_order, drop_search, seed, ...)."""
-        from gearsym.cmd_observability import analyze_shift
+        from gearsym.symbolic.observability import analyze_shift
 
         return analyze_shift(self.description, shift, **options)
 

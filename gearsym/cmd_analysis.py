@@ -7,26 +7,18 @@ import argparse
 import contextlib
 import json
 import math
-import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from gearsym.commands import add_command, emit_json, load, progress
 from gearsym.interrupts import check
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.output_dir import OutputDir
 
-
-def _load(path: str | None) -> Any:
-    from gearsym.symbolic.description import load_description
-
-    return load_description(path)
-
-
-def _say(message: str) -> None:
-    check()
-    print(f"  … {message}", file=sys.stderr, flush=True)
+if TYPE_CHECKING:
+    from gearsym.commands import Subparsers
 
 
 def _parameter_list(values: Sequence[str] | None) -> list[str] | None:
@@ -60,7 +52,7 @@ def _prepare(args: argparse.Namespace, wheel: bool) -> tuple[Any, list[str] | No
         thesis_parameters,
     )
 
-    d = _load(args.config)
+    d = load(args.config)
     names = _parameter_list(args.params)
     overrides = _overrides(d, args.set)  # before the slow derivation below
     scenario = None
@@ -81,9 +73,9 @@ def _reference(d: Any, scenario: Any) -> Any:
     from gearsym.validation.sensitivity_run import reference_data
 
     start = time.perf_counter()
-    _say("simulating the reference shift (gearsym.validation.simulate)")
+    progress("simulating the reference shift (gearsym.validation.simulate)")
     data = reference_data(d, scenario)
-    _say(f"reference simulated in {time.perf_counter() - start:.1f} s")
+    progress(f"reference simulated in {time.perf_counter() - start:.1f} s")
     return data
 
 
@@ -111,11 +103,11 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
             overrides=overrides,
             mode=args.sliding,
             initial=args.initial,
-            progress=_say,
+            progress=progress,
         )
         write_csv(run, out.path / "sensitivities.csv")
         if not args.no_plots:
-            _say("plotting")
+            progress("plotting")
             plot_sensitivities(run, out.path)
         paths = out.commit()
     tr = run.trajectory
@@ -133,7 +125,7 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
         for j, p in enumerate(tr.parameter_names)
     }
     if args.json:
-        json.dump(
+        emit_json(
             {
                 "parameters": list(tr.parameter_names),
                 "nominal": dict(zip(tr.parameter_names, map(float, run.scales), strict=True)),
@@ -145,11 +137,8 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
                 "sliding": args.sliding,
                 "timings_s": run.timings,
                 "files": [str(p) for p in paths],
-            },
-            sys.stdout,
-            indent=2,
+            }
         )
-        sys.stdout.write("\n")
         return 0
     print(
         f"Sensitivities of the {data.shift} shift model driven by the reference "
@@ -200,7 +189,7 @@ def cmd_fim(args: argparse.Namespace) -> int:
             mode=args.sliding,
             restart=not args.carry_over,
             overrides=overrides,
-            progress=_say,
+            progress=progress,
         )
         paths: list[Path] = []
         if out is not None:
@@ -209,8 +198,7 @@ def cmd_fim(args: argparse.Namespace) -> int:
     if args.json:
         data_out = study_json(study)
         data_out["files"] = [str(p) for p in paths]
-        json.dump(data_out, sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        emit_json(data_out)
         return 0
     print(format_text(study))
     if paths:
@@ -370,11 +358,8 @@ def _common(p: argparse.ArgumentParser) -> None:
     )
 
 
-def register(
-    command: Callable[..., argparse.ArgumentParser],
-    config: Callable[[argparse.ArgumentParser], None],
-) -> None:
-    """Register ``sensitivity`` and ``fim`` with the main parser."""
+def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
+    """Register ``sensitivity`` and ``fim``."""
     from gearsym.options import number
     from gearsym.symbolic.defaults import (
         ACCELERATION_ERROR,
@@ -384,13 +369,14 @@ def register(
         SPEED_ERROR,
     )
 
-    p = command(
+    p = add_command(
+        subparsers,
         "sensitivity",
         cmd_sensitivity,
         "Parameter sensitivities (3.2-3.7) of the shift model along the reference shift: "
         "sensitivities.csv and one PNG per parameter (Figures 3.4-3.8).",
+        common,
     )
-    config(p)
     _common(p)
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument(
@@ -402,13 +388,14 @@ def register(
     p.add_argument("--no-plots", action="store_true", help="CSV only")
     p.add_argument("--json", action="store_true", help="machine-readable summary")
 
-    p = command(
+    p = add_command(
+        subparsers,
         "fim",
         cmd_fim,
         "Fisher information per shift phase (3.16-3.32): Cramér-Rao bounds, normalised "
         "scatter, eigen-analysis and parameter elimination.",
+        common,
     )
-    config(p)
     _common(p)
     p.add_argument(
         "--with-wheel-acceleration",

@@ -3,19 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
-from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from gearsym.commands import add_command, emit_json, load
 from gearsym.interrupts import check
+from gearsym.options import cacheable
 
-
-def _load(path: str | None) -> Any:
-    from gearsym.symbolic.description import load_description
-
-    return load_description(path)
+if TYPE_CHECKING:
+    from gearsym.commands import Subparsers
 
 
 def _variables(variables: Any) -> list[dict[str, Any]]:
@@ -95,7 +92,7 @@ def cmd_model(args: argparse.Namespace) -> int:
     """Print a shift model (or the full model): variables, rhs, and A, B at the defaults."""
     import sympy as sp
 
-    d = _load(args.config)
+    d = load(args.config)
     gear = getattr(args, "gear", None)
     if gear is not None and args.shift is not None:
         from gearsym.symbolic.errors import GearsymError
@@ -103,8 +100,7 @@ def cmd_model(args: argparse.Namespace) -> int:
         raise GearsymError("model", "--gear", "give --shift or --gear, not both")
     data = model_dict(d, args.shift, args.friction_inputs, args.with_wheel_acceleration, gear)
     if args.json:
-        json.dump(data, sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        emit_json(data)
         return 0
     print(f"model {data['name']} of {d.title}  (thesis {data['equations']})")
     for group in ("states", "inputs", "parameters", "outputs"):
@@ -174,34 +170,31 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from gearsym.validation.report import format_summary, summary, write_results
     from gearsym.validation.scenario import load_scenario
 
-    d = _load(args.config)
+    d = load(args.config)
     scenario = load_scenario(d, args.scenario)
     with OutputDir(args.out, "simulate", before_commit=check) as out:
         result = simulate_with_progress(d, scenario)
         write_results(d, result, out.path, plots=not args.no_plots)
         paths = out.commit()
     if args.json:
-        json.dump({**summary(result), "files": [str(p) for p in paths]}, sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        emit_json({**summary(result), "files": [str(p) for p in paths]})
     else:
         print(format_summary(result))
         print(f"  wrote {len(paths)} files to {args.out}: {', '.join(p.name for p in paths)}")
     return 0
 
 
-def add_parsers(
-    command: Callable[..., argparse.ArgumentParser],
-    config: Callable[[argparse.ArgumentParser], None],
-) -> None:
-    """Register ``model`` and ``simulate`` with the main parser."""
-    p = command(
+def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
+    """Register ``model`` and ``simulate``."""
+    p = add_command(
+        subparsers,
         "model",
         cmd_model,
         "Print the drivetrain model of a shift (2.55-2.58), a gear or the full model (2.53): "
         "states, "
         "inputs, parameters with defaults, right-hand side, and A, B of (5.1) at the defaults.",
+        common,
     )
-    config(p)
     p.add_argument("--shift", help="e.g. 2-3 (default: the full model, every element a torque)")
     p.add_argument(
         "--gear",
@@ -214,14 +207,16 @@ def add_parsers(
     )
     p.add_argument("--with-wheel-acceleration", action="store_true", help="add the output (3.32)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
+    cacheable(p)
 
-    p = command(
+    p = add_command(
+        subparsers,
         "simulate",
         cmd_simulate,
         "Reference simulation of a shift (thesis 3.1): writes timeseries.csv, phases.csv, "
         "summary.json (phases, energy audit, model checks) and Figures 3.1-3.3 as PNG.",
+        common,
     )
-    config(p)
     p.add_argument("--scenario", help="scenario TOML (default: the built-in 2-3 power-on upshift)")
     p.add_argument(
         "--out",
@@ -232,4 +227,4 @@ def add_parsers(
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
 
 
-__all__ = ["add_parsers", "cmd_model", "cmd_simulate", "model_dict"]
+__all__ = ["cmd_model", "cmd_simulate", "model_dict", "register", "simulate_with_progress"]

@@ -13,29 +13,32 @@ stays as it was and the exit code is 1. Progress goes to stderr, the summary to 
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
+from gearsym.commands import add_command, load, progress
 from gearsym.interrupts import check
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.output_dir import OutputDir
 
-__all__ = ["add_generate_parser", "cmd_generate", "write_files"]
+if TYPE_CHECKING:
+    from gearsym.commands import Subparsers
+
+__all__ = ["cmd_generate", "register", "write_files"]
 
 
-def add_generate_parser(command: Callable[..., Any], config: Callable[..., None]) -> None:
-    """Register ``gearsym generate`` (``command`` and ``config`` are the CLI's helpers)."""
-    p = command(
+def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
+    """Register ``generate``."""
+    p = add_command(
+        subparsers,
         "generate",
         cmd_generate,
         "Emit C (TCU) and CasADi code for the full model, every shift model, the friction "
         "model and the mu map.",
+        common,
     )
-    config(p)
     p.add_argument("--out", required=True, metavar="DIR", help="output directory (replaced)")
     p.add_argument(
         "--check",
@@ -52,11 +55,6 @@ def add_generate_parser(command: Callable[..., Any], config: Callable[..., None]
     )
 
 
-def _progress(message: str) -> None:
-    check()
-    print(f"  … {message}", file=sys.stderr, flush=True)
-
-
 def write_files(files: dict[str, str], root: Path) -> None:
     """Write every file below ``root`` (``\\n`` line ends on every platform)."""
     for relative in sorted(files):
@@ -68,18 +66,17 @@ def write_files(files: dict[str, str], root: Path) -> None:
 
 def cmd_generate(args: argparse.Namespace) -> int:
     """Generate, optionally check, and move the result into place."""
-    from gearsym.symbolic.description import load_description
     from gearsym.symbolic.generate import check_generatable, generate_tree
 
     shown = args.out
     if args.points < 1:
         raise GearsymError(shown, "--points", f"must be positive, got {args.points}")
     start = time.perf_counter()
-    d = load_description(args.config)
+    d = load(args.config)
     check_generatable(d)
     with OutputDir(args.out, "generate", before_commit=check) as out:
-        _progress(f"generating code for {d.name}")
-        tree = generate_tree(d, progress=_progress)
+        progress(f"generating code for {d.name}")
+        tree = generate_tree(d, progress=progress)
         write_files(tree.files, out.path)
         if args.check:
             from gearsym.validation.generated_check import check_tree
@@ -91,7 +88,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
                     tree.mu_map,
                     Path(build),
                     args.points,
-                    _progress,
+                    progress,
                     description=d,
                 )
             for line in report.summary():

@@ -1,4 +1,4 @@
-"""Numeric command-line options, checked in one place.
+"""Command-line options shared by several commands: numbers checked in one place, the cache flag.
 
 Every numeric option of every command is parsed by :func:`number`, so ``nan``, ``inf``, a
 negative count or a zero tolerance is a usage error (exit code 2, one line) before any work
@@ -11,7 +11,7 @@ import argparse
 import math
 from collections.abc import Callable
 
-__all__ = ["number"]
+__all__ = ["cacheable", "number"]
 
 
 def number(
@@ -42,3 +42,14 @@ def number(
 
     parse.__name__ = kind.__name__  # argparse names the type in some messages
     return parse
+
+
+def cacheable(p: argparse.ArgumentParser) -> None:
+    """Mark an inspection command whose output may be remembered (:mod:`gearsym.command_cache`)
+    and give it ``--no-cache``."""
+    p.set_defaults(cacheable=True)
+    p.add_argument(
+        "--no-cache",
+        action="store_true",
+        help="derive afresh; do not read or write the output cache (also GEARSYM_NO_CACHE=1)",
+    )

@@ -3,8 +3,11 @@
 A TOML file describes shafts, planetary sets (with tooth counts), shift elements, the gear table,
 inertias and (for later stages) drivetrain and vehicle values. This module parses and checks it
 and returns an immutable :class:`GearboxDescription`; it knows nothing about any particular
-gearbox. Every physical value is written ``{ value = ..., unit = "...", source = "..." }`` so
-that the file itself says where each number comes from.
+gearbox. It imports nothing of the derivation: checking the gear table against the teeth
+(Table 2.1) needs :mod:`gearsym.symbolic.ratios`, so the one loader that does both is
+:func:`gearsym.symbolic.loader.load_description`. Every physical value is written
+``{ value = ..., unit = "...", source = "..." }`` so that the file itself says where each number
+comes from.
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.input_files import parse_toml, read_text, shown, unknown_key_reason
+from gearsym.symbolic.input_files import parse_toml, shown, unknown_key_reason
 
 #: Names end up in C identifiers, always behind a prefix (``omega_<shaft>``, ``T_<element>``,
 #: ``shift_<gear>_<gear>``), so they may hold letters, digits and underscores only; a leading
@@ -619,22 +622,3 @@ def _no_duplicates(file: str, key: str, names: Any, plain: bool = False) -> None
             also = "" if first == n else f" (as {first!r}; names must differ in more than case)"
             raise GearsymError(file, where, f"name {n!r} is used twice{also}")
         seen[n.casefold()] = n
-
-
-def load_description(path: str | Path | None = None) -> GearboxDescription:
-    """Load a description file, or the built-in default when ``path`` is None.
-
-    Checks the structure (this module) and that every gear leaves the degrees of freedom it
-    claims (via :func:`gearsym.symbolic.ratios.check_gear_table`).
-    """
-    from gearsym.symbolic.ratios import check_gear_table
-
-    if path is None:
-        text = default_config_text()
-        file = f"<built-in {DEFAULT_CONFIG_NAME}>"
-    else:
-        file = str(path)
-        text = read_text(path, file)
-    description = parse_description(text, file)
-    check_gear_table(description)
-    return description

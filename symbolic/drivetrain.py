@@ -32,6 +32,7 @@ from gearsym.symbolic.dynamics import GearboxDynamics, gearbox_dynamics
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.kinematics import exact
 from gearsym.symbolic.model import Model, Variable
+from gearsym.symbolic.sympy_utils import smart_jacobian
 
 #: Vehicle and drivetrain values that are parameters of every drivetrain model (symbols with
 #: defaults). Geometry (teeth, inertias, i_D, r_dyn) is hardware and enters as exact numbers.
@@ -225,6 +226,13 @@ class DrivetrainParts:
     friction: dict[str, tuple[sp.Expr, Variable, Variable]]
 
 
+#: The parts last derived, by description object and normalised arguments: a model and its
+#: linear form (5.1) share one derivation (`gearsym model` prints both; generate derives each
+#: mode's model for several functions). The description is kept with its entry so its id cannot
+#: be reused meanwhile; the cached parts are immutable (ImmutableMatrix, frozen dataclass).
+_PARTS: dict[tuple[object, ...], tuple[GearboxDescription, DrivetrainParts]] = {}
+
+
 def drivetrain_parts(
     d: GearboxDescription,
     locked: tuple[str, ...] = (),
@@ -232,13 +240,35 @@ def drivetrain_parts(
     keep: tuple[str, ...] | None = None,
     slip_signs: dict[str, int] | None = None,
 ) -> DrivetrainParts:
-    """Derive gearbox + elastic drivetrain (2.42–2.58); see :func:`drivetrain_model`."""
-    dyn = gearbox_dynamics(d)
-    sym = dyn.symbols
+    """Derive gearbox + elastic drivetrain (2.42–2.58); see :func:`drivetrain_model`.
+
+    Remembered per description object and arguments (descriptions are immutable)."""
+    locked = tuple(locked)
     if torque_elements is None:
         torque_elements = tuple(e.name for e in d.shift_elements if e.name not in locked)
     if keep is None:
         keep = d.coordinates if not locked else (d.input_shaft, d.output_shaft)
+    signs = None if slip_signs is None else tuple(sorted(slip_signs.items()))
+    key = (id(d), locked, tuple(torque_elements), tuple(keep), signs)
+    derived = _PARTS.get(key)
+    if derived is not None and derived[0] is d:
+        return derived[1]
+    if len(_PARTS) >= 64:
+        _PARTS.clear()
+    parts = _derive_parts(d, locked, tuple(torque_elements), tuple(keep), slip_signs)
+    _PARTS[key] = (d, parts)
+    return parts
+
+
+def _derive_parts(
+    d: GearboxDescription,
+    locked: tuple[str, ...],
+    torque_elements: tuple[str, ...],
+    keep: tuple[str, ...],
+    slip_signs: dict[str, int] | None,
+) -> DrivetrainParts:
+    dyn = gearbox_dynamics(d)
+    sym = dyn.symbols
     projection = locked_projection(d, dyn, locked, keep)
 
     i_d = exact(quantity(d, "drivetrain", "i_D").value)
@@ -311,7 +341,9 @@ def drivetrain_parts(
     generalized += dyn.input_matrix[:, column[naming.OUTPUT_TORQUE]] * t_out
     for e in torque_elements:
         generalized += dyn.input_matrix[:, column[naming.torque(e)]] * torque[e]
-    gearbox_rhs = (reduced_mass.inv() * (projection.T * generalized)).applyfunc(sp.expand)
+    gearbox_rhs = sp.ImmutableMatrix(
+        (reduced_mass.inv() * (projection.T * generalized)).applyfunc(sp.expand)
+    )
     return DrivetrainParts(
         keep=tuple(keep),
         torque_elements=tuple(torque_elements),
@@ -450,26 +482,24 @@ def shift_model(
 def linear_shift_form(
     d: GearboxDescription, shift: str
 ) -> tuple[sp.Matrix, sp.Matrix, list[str], list[str]]:
-    """A_ex, B_ex of the linear form (5.1)–(5.3) of a shift model.
+    """A_ex, B_ex of the linear form (5.1)–(5.3) of a shift model in the column order of the
+    printed (5.4), (5.5): inputs [T_In, T_off, T_on, T_res*, ζ], the off-going element first.
 
-    Rolling and aerodynamic resistance become the input T_res* (5.2); the grade term
-    r_dyn m g sin ζ is linearised at ζ = 0, as (5.5) prints it. Returns (A, B, state names,
-    input names) with inputs [T_In, T_off, T_on, T_res*, ζ].
+    A view of :func:`shift_linear_form` (one derivation: T_res* (5.2), sin ζ ≈ ζ as (5.5)
+    prints it), whose B keeps the order of (5.3) instead. Returns (A, B, state names, input
+    names).
     """
     spec = shift_spec(d, shift)
-    parts = drivetrain_parts(
-        d, locked=spec.locked, torque_elements=(spec.off_going, spec.on_coming)
-    )
-    p = {v.name: v.symbol for v in parts.parameters}
-    t_res_star = sp.Symbol(naming.RESISTANCE_INPUT)
-    wheel = (
-        2 * parts.side_shaft_torque - t_res_star - parts.grade_lever * p["m_veh"] * p["zeta"]
-    ) / parts.wheel_inertia  # (5.2), sin ζ ≈ ζ
-    rhs = sp.Matrix([*parts.gearbox_rhs, parts.phi_dot, wheel])
-    x = [*parts.speeds, sp.Symbol(naming.TWIST), sp.Symbol(naming.WHEEL_SPEED)]
-    u = [parts.torque_symbols[k] for k in (naming.INPUT, spec.off_going, spec.on_coming)]
-    u += [t_res_star, p["zeta"]]
-    return rhs.jacobian(x), rhs.jacobian(u), [str(s) for s in x], [str(s) for s in u]
+    form = shift_linear_form(d, shift)
+    inputs = [
+        naming.INPUT_TORQUE,
+        naming.torque(spec.off_going),
+        naming.torque(spec.on_coming),
+        naming.RESISTANCE_INPUT,
+        form.inputs[-1],  # ζ, the grade
+    ]
+    columns = [form.inputs.index(name) for name in inputs]
+    return form.A, form.B.extract(list(range(form.B.rows)), columns), form.states, inputs
 
 
 @dataclass(frozen=True)
@@ -523,8 +553,8 @@ def _linear_form(
     u += [parts.torque_symbols[e] for e in order] + [p["zeta"]]
     return LinearForm(
         mode=mode,
-        A=rhs.jacobian(x),
-        B=rhs.jacobian(u),
+        A=smart_jacobian(rhs, x, by_rules=True),
+        B=smart_jacobian(rhs, u, by_rules=True),
         states=[str(s) for s in x],
         inputs=[str(s) for s in u],
         parameters=parts.parameters,
@@ -552,8 +582,8 @@ def gear_linear_form(d: GearboxDescription, gear: str) -> LinearForm:
 
 def shift_linear_form(d: GearboxDescription, shift: str) -> LinearForm:
     """(5.1) of a shift model (2.55–2.58): the shared elements locked; inputs [T_In, T_res*,
-    the two swapping elements' torques in description order, ζ]. Same A as
-    :func:`linear_shift_form`, B with its columns in the order of (5.3)."""
+    the two swapping elements' torques in description order, ζ]
+    (:func:`linear_shift_form` gives B in the column order of the printed (5.5))."""
     spec = shift_spec(d, shift)
     name = naming.shift_model_name(spec.from_gear, spec.to_gear)
     return _linear_form(d, name, spec.locked, (spec.off_going, spec.on_coming), None)

@@ -308,6 +308,7 @@ def check_names(d: GearboxDescription) -> None:
         (INPUT_TORQUE, "input torque T_In (engine + e-machine)"),
         (OUTPUT_TORQUE, "gearbox output torque T_Out (2.38)"),
         (TWIST, "side-shaft twist phi (2.43)"),
+        (derivative(TWIST), "side-shaft twist rate column dphi (2.44)"),
         (WHEEL_SPEED, "wheel speed omega_C (2.44)"),
         (measured(WHEEL_SPEED), "measured wheel speed"),
         (measured(derivative(WHEEL_SPEED)), "measured wheel acceleration"),

@@ -16,6 +16,14 @@ staging directory in only when everything is written. The rules:
 * Staging directories of a killed run (``.DIR.gearsym-staging-*``) are removed by the next
   run on the same ``DIR``; an old ``DIR`` left aside by a run killed between its two renames
   (``.DIR.gearsym-old-*``) is put back.
+
+A command that writes one picture (``gearsym draw --out FILE.svg``) goes through
+:class:`OutputFile`, with the same rules for a single file. A lone file has no ``MANIFEST``
+beside it, so it carries its own proof of origin: a signature that holds the SHA-256 of the
+rest of the file (an SVG: a closing XML comment; a PNG: a ``tEXt`` chunk before ``IEND``).
+``FILE`` is replaced only if it does not exist or its signature matches its content: a user's
+file, or a gearsym picture edited since, is refused. The file is written next to ``FILE``
+(``.FILE.gearsym-staging-*``) and renamed over it in one atomic step, under the same lock.
 """
 
 from __future__ import annotations
@@ -35,7 +43,12 @@ from gearsym.symbolic.errors import GearsymError
 
 __all__ = [
     "MANIFEST",
+    "SIGNED_SUFFIXES",
     "OutputDir",
+    "OutputFile",
+    "foreign_file",
+    "sign_file",
+    "signed_by_gearsym",
     "foreign_content",
     "manifest_marker",
     "manifest_text",
@@ -411,3 +424,180 @@ class OutputDir:
     ) -> None:
         if not self.committed:
             self.discard()
+
+
+# ----------------------------------------------------------------------------- single files
+
+#: Formats :class:`OutputFile` can sign (lower-case suffixes).
+SIGNED_SUFFIXES = (".svg", ".png")
+_PNG_HEADER = b"\x89PNG\r\n\x1a\n"
+_PNG_KEYWORD = b"gearsym"
+_SVG_SIGNATURE = re.compile(
+    rb"<!-- gearsym ([a-z][a-z-]*) output: do not edit, regenerate with gearsym \1; "
+    rb"sha256 ([0-9a-f]{64}) of everything before this comment -->\n"
+)
+
+
+def _png_chunk(kind: bytes, data: bytes) -> bytes:
+    import zlib
+
+    return len(data).to_bytes(4, "big") + kind + data + zlib.crc32(kind + data).to_bytes(4, "big")
+
+
+def _png_chunks(data: bytes) -> list[tuple[int, int, bytes]] | None:
+    """``(start, end, type)`` of every chunk of a PNG, or ``None`` if it is not one."""
+    if not data.startswith(_PNG_HEADER):
+        return None
+    chunks, at = [], len(_PNG_HEADER)
+    while at + 12 <= len(data):
+        length = int.from_bytes(data[at : at + 4], "big")
+        end = at + 12 + length
+        if end > len(data):
+            return None
+        chunks.append((at, end, data[at + 4 : at + 8]))
+        at = end
+    return chunks if at == len(data) and chunks and chunks[-1][2] == b"IEND" else None
+
+
+def sign_file(data: bytes, suffix: str, command: str) -> bytes:
+    """``data`` with gearsym's signature: the SHA-256 of ``data`` in a comment (SVG) or a
+    ``tEXt`` chunk before ``IEND`` (PNG); the picture itself is unchanged."""
+    manifest_marker(command)  # validates the name
+    digest = hashlib.sha256(data).hexdigest()
+    if suffix.lower() == ".svg":
+        comment = (
+            f"<!-- gearsym {command} output: do not edit, regenerate with gearsym {command}; "
+            f"sha256 {digest} of everything before this comment -->\n"
+        )
+        return data + comment.encode("ascii")
+    if suffix.lower() == ".png":
+        chunks = _png_chunks(data)
+        if chunks is None:
+            raise ValueError("not a PNG")
+        iend = chunks[-1][0]
+        text = _PNG_KEYWORD + b"\0" + f"{command} sha256 {digest}".encode("ascii")
+        return data[:iend] + _png_chunk(b"tEXt", text) + data[iend:]
+    raise ValueError(f"cannot sign a {suffix!r} file")
+
+
+def signed_by_gearsym(data: bytes, suffix: str) -> bool:
+    """True if ``data`` carries a gearsym signature that matches its content."""
+    if suffix.lower() == ".svg":
+        at = data.rfind(b"<!-- gearsym ")
+        match = _SVG_SIGNATURE.fullmatch(data[at:]) if at >= 0 else None
+        return match is not None and hashlib.sha256(data[:at]).hexdigest().encode() == match[2]
+    if suffix.lower() == ".png":
+        chunks = _png_chunks(data)
+        if chunks is None or len(chunks) < 2 or chunks[-2][2] != b"tEXt":
+            return False
+        start, end, _ = chunks[-2]
+        keyword, _, text = data[start + 8 : end - 4].partition(b"\0")
+        match = re.fullmatch(rb"[a-z][a-z-]* sha256 ([0-9a-f]{64})", text)
+        if keyword != _PNG_KEYWORD or match is None:
+            return False
+        return hashlib.sha256(data[:start] + data[end:]).hexdigest().encode() == match[1]
+    return False
+
+
+def foreign_file(target: Path) -> str | None:
+    """Why the file ``target`` must not be replaced, or ``None`` if gearsym may replace it."""
+    if target.is_symlink():
+        return "is a symlink"
+    if not target.exists():
+        return None
+    if not target.is_file():
+        return "exists and is not a plain file"
+    try:
+        if target.stat().st_size > 256 << 20:
+            return "exists and was not written by gearsym (too large to be a gearsym picture)"
+        data = target.read_bytes()
+    except OSError as err:
+        return f"cannot be read ({err.strerror})"
+    if not signed_by_gearsym(data, target.suffix):
+        return "exists and was not written by gearsym (no gearsym signature, or changed since)"
+    return None
+
+
+class OutputFile(OutputDir):
+    """Write one signed file ``target`` atomically, with the rules of :class:`OutputDir`::
+
+        with OutputFile(args.out, "draw") as out:
+            data = render(...)
+            path = out.commit(data)   # signed, renamed over target
+
+    The suffix must be one of :data:`SIGNED_SUFFIXES`. Leaving the block without
+    :meth:`commit` leaves ``target`` as it was.
+    """
+
+    def __init__(self, target: str | Path, command: str, *, shown: str | None = None) -> None:
+        if str(target).strip() == "":
+            raise GearsymError("command line", "--out", "is empty; name a .svg or .png file")
+        super().__init__(target, command, shown=shown)
+        if self.target.suffix.lower() not in SIGNED_SUFFIXES:
+            raise self._error(
+                f"unsupported file type {self.target.suffix or '(none)'!r}; "
+                f"expected {' or '.join(SIGNED_SUFFIXES)}"
+            )
+
+    def _check(self) -> None:
+        try:
+            reason = foreign_file(self.target)
+        except OSError as err:
+            raise self._error(f"cannot be inspected ({err.strerror})") from None
+        if reason is not None:
+            raise self._error(f"{reason}; not replacing it")
+
+    def open(self) -> OutputFile:
+        """Check ``target``, create its folder, take the lock, remove files of killed runs."""
+        self._check()
+        self._make_parents(self.target.parent)
+        try:
+            self._lock()
+            prefix = f".{self.target.name}.{_STAGING}"
+            for leftover in self.target.parent.iterdir():
+                if leftover.name.startswith(prefix) and leftover.is_file():
+                    leftover.unlink(missing_ok=True)  # under the lock: a killed run's
+            self._check()
+        except BaseException:
+            self.discard()
+            raise
+        self._opened = True
+        return self
+
+    @property
+    def path(self) -> Path:
+        raise RuntimeError("OutputFile has no staging directory; pass the bytes to commit()")
+
+    def commit(self, data: bytes) -> Path:  # type: ignore[override]
+        """Sign ``data``, write it next to ``target`` and rename it over ``target``."""
+        if not getattr(self, "_opened", False):
+            raise RuntimeError("OutputFile is not open")
+        signed = sign_file(data, self.target.suffix, self.command)
+        fd, temporary = tempfile.mkstemp(
+            prefix=f".{self.target.name}.{_STAGING}{os.getpid()}-", dir=self.target.parent
+        )
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(signed)
+            os.chmod(temporary, 0o666 & ~_umask())  # mkstemp's 0600 would outlive the rename
+            self._check()  # again, at the moment of replacement
+            os.replace(temporary, self.target)
+        except OSError as err:
+            Path(temporary).unlink(missing_ok=True)
+            raise self._error(f"cannot be written ({err.strerror})") from None
+        except BaseException:
+            Path(temporary).unlink(missing_ok=True)
+            raise
+        self.committed = True
+        self._created_parents.clear()
+        self._unlock()
+        return self.target
+
+    def discard(self) -> None:
+        """Release the lock; remove the folders this object created (nothing was written)."""
+        self._opened = False
+        self._unlock()
+        self._remove_created_parents()
+
+    def __enter__(self) -> OutputFile:
+        return self.open()

@@ -135,3 +135,73 @@ def test_malformed_toml_names_line_and_column(tmp_path):
     result = gearsym("ratios", str(path))
     assert result.returncode == 2
     assert "line 2, column 8" in result.stderr
+
+
+# ----------------------------------------------------------------------------- the command set
+
+
+def _subcommands() -> dict:
+    import argparse
+
+    from gearsym.cli import build_parser
+
+    parser = build_parser()
+    (action,) = (a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return {"": parser, **action.choices}
+
+
+def test_every_command_module_registers_through_the_one_protocol():
+    """Each ``gearsym/cmd_*.py`` is in the CLI's loop and has ``register(subparsers, common)``
+    (a new command module that is not listed would silently have no commands)."""
+    import inspect
+
+    from gearsym import cli
+
+    files = sorted(p.stem for p in (Path(cli.__file__).parent).glob("cmd_*.py"))
+    assert sorted(m.__name__.rsplit(".", 1)[1] for m in cli.COMMAND_MODULES) == files
+    for module in cli.COMMAND_MODULES:
+        assert list(inspect.signature(module.register).parameters) == ["subparsers", "common"]
+
+
+def test_every_subcommand_has_a_handler_and_is_listed_in_help():
+    commands = _subcommands()
+    top = commands.pop("")
+    listed = top.format_help()
+    assert len(commands) >= 11
+    for name, sub in commands.items():
+        assert callable(sub.get_default("func")), f"{name}: no handler (set_defaults(func=...))"
+        assert f"    {name} " in listed or f"    {name}\n" in listed, f"{name} not in --help"
+        assert sub.format_help().startswith(f"usage: gearsym {name}")
+
+
+HEAVY = ("numpy", "scipy", "casadi", "matplotlib", "symengine", "jinja2")
+
+
+@pytest.mark.parametrize(
+    ("argv", "forbidden"),
+    [
+        # building the parser imports no numeric library at all, not even SymPy
+        (["--help"], ("sympy", *HEAVY)),
+        (["ratios", "--help"], ("sympy", *HEAVY)),
+        # the gear table needs SymPy (exact ratios) and nothing else
+        (["ratios"], HEAVY),
+        (["default-config"], ("sympy", *HEAVY)),
+    ],
+)
+def test_light_commands_import_no_heavy_module(argv, forbidden):
+    """Start-up time: every command module is imported to build the parser, so each keeps its
+    heavy imports inside its handlers (README start-up row, benchmarks/bench_cli_startup.py)."""
+    code = (
+        "import contextlib, io, sys\n"
+        "from gearsym.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        "    try:\n"
+        f"        main({argv!r})\n"
+        "    except SystemExit:\n"
+        "        pass\n"
+        f"print(sorted(m for m in {forbidden!r} if m in sys.modules))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True
+    )
+    assert out.stdout.strip() == "[]", f"gearsym {' '.join(argv)} imports {out.stdout.strip()}"

@@ -232,7 +232,7 @@ def test_budget_overrun_reports_the_sound_partial_result(capsys):
 def test_run_summary_prints_the_verdict_and_skips_gearboxes_without_the_shift(capsys):
     from pathlib import Path
 
-    from gearsym.symbolic.description import load_description
+    from gearsym.symbolic.loader import load_description
 
     from gearsym.cmd_observability import print_observability_summary
 

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from gearsym.symbolic.description import load_description
 from gearsym.symbolic.dynamics import gearbox_dynamics
+from gearsym.symbolic.loader import load_description
 
 DATA = Path(__file__).parent / "data"
 

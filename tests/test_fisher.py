@@ -146,7 +146,7 @@ def test_fim_of_a_linear_in_parameter_ode():
 
 @pytest.fixture(scope="module")
 def study():
-    from gearsym.symbolic.description import load_description
+    from gearsym.symbolic.loader import load_description
     from gearsym.validation.fisher import fim_study
     from gearsym.validation.sensitivity_run import reference_data
 
@@ -209,7 +209,7 @@ def _null(result, name):
 
 @pytest.fixture(scope="module")
 def four_parameters():
-    from gearsym.symbolic.description import load_description
+    from gearsym.symbolic.loader import load_description
     from gearsym.validation.fisher import fim_study
     from gearsym.validation.sensitivity_run import reference_data
 
@@ -254,7 +254,7 @@ def test_gear_3_sees_mu_05_only_while_b05_still_slides():
     """The evidence behind μ05's finite scatter in gear 3: the phase starts when B05's slip
     has fallen below its threshold, but B05 still slides at capacity for about a millisecond.
     From the first sample at which it sticks on, μ05 has no influence at all (S ≡ 0)."""
-    from gearsym.symbolic.description import load_description
+    from gearsym.symbolic.loader import load_description
     from gearsym.validation.sensitivity_run import (
         driven_shift_model,
         reference_data,

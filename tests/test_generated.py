@@ -29,7 +29,6 @@ from unittest import mock
 
 import numpy as np
 import pytest
-from gearsym.symbolic.description import load_description
 from gearsym.symbolic.friction import DEFAULT_MU_MAP, shift_element_num
 from gearsym.symbolic.generate import (
     C_DIR,
@@ -39,6 +38,7 @@ from gearsym.symbolic.generate import (
     mu_map_files,
     shift_element_model,
 )
+from gearsym.symbolic.loader import load_description
 from gearsym.validation import c_check, generated_check
 
 from gearsym import cli

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from gearsym.symbolic.description import load_description
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.loader import load_description
 from gearsym.validation.scenario import default_scenario_path, load_scenario
 from gearsym.validation.simulate import simulate
 

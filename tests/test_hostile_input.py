@@ -19,9 +19,9 @@ from gearsym.symbolic.description import (
     RATIO_DECIMALS_MAX,
     TEETH_MAX,
     default_config_text,
-    load_description,
 )
 from gearsym.symbolic.input_files import MAX_INPUT_BYTES
+from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.model import Model, Variable
 from gearsym.validation.scenario import POINTS_MAX, T_END_MAX, default_scenario_path
 

@@ -16,7 +16,6 @@ import sys
 import numpy as np
 import pytest
 import sympy as sp
-from gearsym.symbolic.description import load_description
 from gearsym.symbolic.drivetrain import (
     adjacent_shifts,
     drivetrain_model,
@@ -25,6 +24,7 @@ from gearsym.symbolic.drivetrain import (
     shift_linear_form,
     shift_spec,
 )
+from gearsym.symbolic.loader import load_description
 
 
 @pytest.fixture(scope="module")

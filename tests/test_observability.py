@@ -748,7 +748,7 @@ NORMAL_FORCES_CONSTANT = {"F_N38": "constant", "F_N05": "constant"}
 
 @pytest.fixture(scope="module")
 def thesis_gearbox():
-    from gearsym.symbolic.description import load_description
+    from gearsym.symbolic.loader import load_description
 
     return load_description(None)
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 import sympy as sp
-from gearsym.symbolic.description import load_description
+from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.ratios import ratio_expressions, ratio_table
 from gearsym.symbolic.teeth import ToothRanges, fit_teeth, with_teeth
 

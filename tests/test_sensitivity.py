@@ -21,9 +21,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import sympy as sp
-from gearsym.symbolic.description import default_config_text, load_description, parse_description
+from gearsym.symbolic.description import default_config_text, parse_description
 from gearsym.symbolic.drivetrain import shift_model
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.model import Model, Variable
 from gearsym.symbolic.sensitivity import (
     DEFAULT_PARAMETERS,

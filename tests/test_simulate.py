@@ -16,8 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sympy as sp
-from gearsym.symbolic.description import default_config_text, load_description
+from gearsym.symbolic.description import default_config_text
 from gearsym.symbolic.drivetrain import power_on_slip_signs, shift_model, shift_spec
+from gearsym.symbolic.loader import load_description
 from gearsym.validation.scenario import default_scenario_path, load_scenario
 from gearsym.validation.simulate import simulate
 
@@ -307,3 +308,13 @@ def test_profile_matches_numpy_interp():
     profile = Profile(times, values)
     for t in rng.uniform(times[0] - 0.5, times[-1] + 0.5, 500):
         assert profile(float(t)) == pytest.approx(float(np.interp(t, times, values)), abs=1e-12)
+
+
+def test_twist_rate_is_recorded_as_2_44(description, result):
+    """Fig. 3.2 shows φ̇: the recorded dphi is (2.44), φ̇ = ω_out/i_D − ω_C, at every sample."""
+    s = result.signals
+    i_d = description.drivetrain["i_D"].value
+    expected = s["omega_2"] / i_d - s["omega_C"]
+    scale = float(np.max(np.abs(expected)))
+    assert scale > 0
+    assert float(np.max(np.abs(s["dphi"] - expected))) <= 1e-9 * max(scale, 1.0)

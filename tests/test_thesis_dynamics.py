@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import pytest
 import sympy as sp
-from gearsym.symbolic.description import load_description
 from gearsym.symbolic.dynamics import gearbox_dynamics
+from gearsym.symbolic.loader import load_description
 
 S = sp.Symbol
 

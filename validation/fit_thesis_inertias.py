@@ -17,10 +17,10 @@ from __future__ import annotations
 
 import numpy as np
 import sympy as sp
-from gearsym.symbolic.description import load_description
 from gearsym.symbolic.drivetrain import locked_projection, shift_spec
 from gearsym.symbolic.dynamics import GearboxDynamics, gearbox_dynamics
 from gearsym.symbolic.kinematics import exact
+from gearsym.symbolic.loader import load_description
 from scipy.optimize import linprog, lsq_linear
 
 #: Printed rows 1–2 of (5.4) (coefficients of d_ss ω2, k_ss φ, d_ss ω_C) and (5.5)

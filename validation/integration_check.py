@@ -40,8 +40,9 @@ from typing import Any
 import numpy as np
 import sympy as sp
 from gearsym.symbolic.codegen import file_names
-from gearsym.symbolic.description import GearboxDescription, load_description
+from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import full_model, shift_model
+from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.model import Model
 from gearsym.validation import c_check
 from scipy.integrate import solve_ivp

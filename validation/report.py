@@ -108,15 +108,19 @@ def plot_shift(d: GearboxDescription, result: SimulationResult, folder: Path) ->
     save(fig, folder / "fig_3_1_speeds.png")
     names.append("fig_3_1_speeds.png")
 
-    fig, ax = subplots(1, 1, (8, 4.5), {"top": 0.88, "bottom": 0.11, "left": 0.1})
+    # Fig. 3.2 shows the accelerations and the side-shaft twist rate φ̇ (2.44); φ̇ is in rad/s,
+    # so it gets its own axis below.
+    fig, axes = subplots(2, 1, (8, 6.5), two_rows, sharex=True)
     for key in [f"d{m}" for m in measured] + ["domega_C"]:
         if key in s:
-            ax.plot(t, s[key], label=f"dω_{key.removeprefix('domega_')}/dt")
-    ax.set_ylabel("acceleration / (rad/s²)")
-    ax.set_xlabel("t / s")
-    ax.legend(fontsize=8, ncol=2)
-    phases(ax)
-    ax.set_title("accelerations (cf. thesis Fig. 3.2)")
+            axes[0].plot(t, s[key], label=f"dω_{key.removeprefix('domega_')}/dt")
+    axes[0].set_ylabel("acceleration / (rad/s²)")
+    axes[0].legend(fontsize=8, ncol=2)
+    phases(axes[0])
+    axes[1].plot(t, s["dphi"], color="C3")
+    axes[1].set_ylabel("side-shaft twist rate φ̇ / (rad/s)")
+    axes[1].set_xlabel("t / s")
+    fig.suptitle("accelerations and side-shaft twist rate (cf. thesis Fig. 3.2)")
     save(fig, folder / "fig_3_2_accelerations.png")
     names.append("fig_3_2_accelerations.png")
 

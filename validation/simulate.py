@@ -658,6 +658,8 @@ def _signals(
     for name in names:
         if name.startswith(naming.speed("")):
             put(naming.derivative(name), xdot[:, index[name]])
+    # φ̇ = ω_out/i_D − ω_C (2.44), the side-shaft twist rate Fig. 3.2 shows
+    put(naming.derivative(naming.TWIST), xdot[:, index[naming.TWIST]])
     put(naming.INPUT_TORQUE, u[:, 0])
     put(naming.ENGINE_TORQUE, np.array([scenario.engine(float(t)) for t in grid]))
     put(naming.E_MACHINE_TORQUE, np.array([scenario.e_machine(float(t)) for t in grid]))

@@ -20,6 +20,10 @@ The generic engine behind thesis section 4.1 (equations 4.1–4.13), one module 
 * :mod:`.drops`, :mod:`.search`, :mod:`.minor` — the rank on a condition set, and the one drop
   search (inputs held at zero or constant, zero sets of the witness minor, nested sets),
   each drop followed to higher orders.
+* :mod:`.report` — the analysis of a gearbox's shift model behind ``gearsym observability`` and
+  the notebook API (:func:`analyze_shift` → :class:`ObservabilityReport`): the augmented shift
+  model (4.1), outputs, input models, conditions and parameters given as text, the verdict and
+  the drop search.
 """
 
 from gearsym.symbolic.observability.drops import (
@@ -42,6 +46,13 @@ from gearsym.symbolic.observability.rank import (
     RankWitness,
     analyze_observability,
 )
+from gearsym.symbolic.observability.report import (
+    ObservabilityReport,
+    analyze_shift,
+    order_label,
+    partial_text,
+    select_outputs,
+)
 from gearsym.symbolic.observability.search import find_rank_drops, propose_rank_drop_conditions
 from gearsym.symbolic.observability.session import ObservabilitySession, RankSettings
 from gearsym.symbolic.observability.system import AugmentedSystem, InputModel, augment
@@ -59,6 +70,7 @@ __all__ = [
     "InputModel",
     "ObservabilityError",
     "ObservabilityMatrix",
+    "ObservabilityReport",
     "ObservabilityResult",
     "ObservabilitySession",
     "PartialResult",
@@ -69,12 +81,16 @@ __all__ = [
     "SamplingError",
     "UnsupportedExpressionError",
     "analyze_observability",
+    "analyze_shift",
     "augment",
     "exact_rational",
     "find_rank_drops",
     "observability_matrix",
+    "order_label",
+    "partial_text",
     "propose_rank_drop_conditions",
     "rank_under_conditions",
     "rationalize",
+    "select_outputs",
     "smart_jacobian",
 ]

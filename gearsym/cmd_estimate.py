@@ -1,0 +1,128 @@
+"""``gearsym estimate``: estimators of thesis chapter 4 run on the reference shift.
+
+Today the unknown input observer (4.4): existence per phase, and its estimates of the states
+and the unknown inputs against the reference simulation. This module parses and prints; the
+work is in :mod:`gearsym.symbolic.estimators` and :mod:`gearsym.validation.estimation`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import TYPE_CHECKING, Any
+
+from gearsym.commands import add_command, load
+from gearsym.interrupts import check
+from gearsym.options import number
+
+if TYPE_CHECKING:
+    from gearsym.commands import Subparsers
+
+__all__ = ["cmd_estimate", "register"]
+
+FILTERS = ("uio",)
+
+
+def _say(message: str) -> None:
+    check()
+    print(f"  … {message}", file=sys.stderr, flush=True)
+
+
+def cmd_estimate(args: argparse.Namespace) -> int:
+    """Run the chosen estimator on the scenario's reference shift; print, or write with --out."""
+    from gearsym.symbolic.errors import GearsymError
+    from gearsym.validation.scenario import load_scenario
+
+    d = load(args.config)
+    scenario = load_scenario(d, args.scenario)
+    unknown = [u.strip() for u in args.unknown.split(",") if u.strip()]
+    if not unknown:
+        raise GearsymError("estimate", "--unknown", "name at least one unknown input")
+    noise = None
+    if args.noise is not None:
+        try:
+            noise = [number(float, minimum=0)(v) for v in args.noise.split(",")]
+        except argparse.ArgumentTypeError as err:
+            raise GearsymError("estimate", "--noise", str(err)) from None
+
+    from gearsym.symbolic.estimators import linear_modes
+    from gearsym.validation.estimation import check_unknown
+
+    check_unknown(linear_modes(d, scenario.shift.name), unknown)  # before the simulation
+
+    def work(folder: Any) -> Any:
+        from gearsym.cmd_dynamics import simulate_with_progress
+        from gearsym.validation.estimation import plot_uio, run_uio, write_csv
+
+        result = simulate_with_progress(d, scenario)
+        _say("designing and running the UIO of each phase")
+        run = run_uio(
+            d,
+            result,
+            unknown=unknown,
+            sample_time=args.sample_time,
+            relative_noise=noise,
+            seed=args.seed,
+        )
+        if folder is not None:
+            write_csv(run, folder / "uio.csv")
+            (folder / "uio.json").write_text(json.dumps(run.to_dict(), indent=2) + "\n")
+            if not args.no_plots:
+                plot_uio(run, folder)
+        return run
+
+    paths: list[Any] = []
+    if args.out is None:
+        run = work(None)
+    else:
+        from gearsym.symbolic.output_dir import OutputDir
+
+        with OutputDir(args.out, "estimate", before_commit=check) as out:
+            run = work(out.path)
+            paths = out.commit()
+    if args.json:
+        json.dump({**run.to_dict(), "files": [str(p) for p in paths]}, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return 0
+    from gearsym.validation.estimation import format_text
+
+    print(format_text(run))
+    if paths:
+        print(f"  wrote {len(paths)} files to {args.out}: {', '.join(p.name for p in paths)}")
+    return 0
+
+
+def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
+    """Register ``estimate``."""
+    p = add_command(
+        subparsers,
+        "estimate",
+        cmd_estimate,
+        "Run an estimator of thesis chapter 4 on the reference shift: today the unknown input "
+        "observer (4.4), its existence per phase and its errors against the reference.",
+        common,
+    )
+    p.add_argument("--scenario", help="scenario TOML (default: the built-in 2-3 power-on upshift)")
+    p.add_argument("--filter", choices=FILTERS, default="uio", help="the estimator (default uio)")
+    p.add_argument(
+        "--unknown",
+        default="T_res_star",
+        help="unknown inputs of the linear form (5.3), comma-separated (default T_res_star; "
+        "e.g. T_K38,T_B05,T_res_star)",
+    )
+    p.add_argument(
+        "--sample-time",
+        type=number(float, above=0),
+        default=0.01,
+        help="TCU sample time in s (default 0.01, as the thesis)",
+    )
+    p.add_argument(
+        "--noise",
+        help="relative speed-sensor error r (3.26): one value for every output or one per "
+        "output, comma-separated (default: no noise)",
+    )
+    p.add_argument("--seed", type=number(int, minimum=0), default=0, help="noise seed")
+    p.add_argument("--out", help="folder for uio.csv, uio.json and uio.png (written atomically)")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
