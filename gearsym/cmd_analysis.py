@@ -220,7 +220,7 @@ def _hybrid_fim(args: argparse.Namespace) -> int:
     ):
         if given:
             raise GearsymError("fim", option, "not available with --hybrid")
-    d = _load(args.config)
+    d = load(args.config)
     overrides = _overrides(d, args.set)
     scenario = load_scenario(d, args.scenario)
     with contextlib.ExitStack() as stack:
@@ -229,7 +229,7 @@ def _hybrid_fim(args: argparse.Namespace) -> int:
             if args.out
             else None
         )
-        _say(f"deriving the hybrid model of the {scenario.shift.name} shift")
+        progress(f"deriving the hybrid model of the {scenario.shift.name} shift")
         simulator = HybridSimulator(d, scenario)
         names = _parameter_list(args.params) or [
             "m_veh",
@@ -242,7 +242,7 @@ def _hybrid_fim(args: argparse.Namespace) -> int:
                 d.file, "params", f"unknown parameters {', '.join(unknown)} of the hybrid model"
             )
         simulator.values(overrides)  # unknown --set names fail before the integration
-        _say("integrating the hybrid model and its sensitivities")
+        progress("integrating the hybrid model and its sensitivities")
         study = hybrid_fim(
             d,
             names,
@@ -261,8 +261,7 @@ def _hybrid_fim(args: argparse.Namespace) -> int:
     if args.json:
         data_out = to_dict(study)
         data_out["files"] = [str(p) for p in paths]
-        json.dump(data_out, sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        emit_json(data_out)
         return 0
     print(format_text(study))
     if paths:

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import sympy as sp
-from gearsym.symbolic.description import default_config_text, load_description
+from gearsym.symbolic.description import default_config_text
 from gearsym.symbolic.drivetrain import element_slip_in_gear, power_on_slip_signs, shift_spec
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.hybrid import (
@@ -34,6 +34,7 @@ from gearsym.symbolic.hybrid import (
     hybrid_shift,
     slip_acceleration_gain,
 )
+from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.ratios import gear_ratio
 from gearsym.validation.hybrid_check import (
     check_modes,

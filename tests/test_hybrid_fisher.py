@@ -21,9 +21,9 @@ import sys
 
 import numpy as np
 import pytest
-from gearsym.symbolic.description import load_description
 from gearsym.symbolic.fisher import analyse, fisher_information, noise_variances
 from gearsym.symbolic.hybrid import LOCK_UP
+from gearsym.symbolic.loader import load_description
 from gearsym.validation.hybrid_fisher import VIEWS, format_text, hybrid_fim
 from gearsym.validation.hybrid_simulation import HybridSimulator
 from gearsym.validation.simulate import Phase, simulate

@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from gearsym.symbolic.description import load_description
 from gearsym.symbolic.hybrid import BREAK_AWAY, LOCK_UP
+from gearsym.symbolic.loader import load_description
 from gearsym.validation.hybrid_simulation import HybridSimulator
 from gearsym.validation.scenario import default_scenario_path, load_scenario
 

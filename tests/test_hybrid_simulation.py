@@ -13,9 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from gearsym.symbolic.description import default_config_text, load_description
+from gearsym.symbolic.description import default_config_text
 from gearsym.symbolic.drivetrain import power_on_slip_signs, shift_spec
 from gearsym.symbolic.hybrid import BREAK_AWAY, LOCK_UP, LOCKED, SLIDING
+from gearsym.symbolic.loader import load_description
 from gearsym.validation.hybrid_check import reference_mode_intervals
 from gearsym.validation.hybrid_simulation import HybridSimulator
 from gearsym.validation.scenario import default_scenario_path, load_scenario
