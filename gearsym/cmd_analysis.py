@@ -165,6 +165,10 @@ def cmd_fim(args: argparse.Namespace) -> int:
     """Fisher information per phase and over the shift (3.16–3.32)."""
     from gearsym.validation.fisher import fim_study, format_text, study_json
 
+    if args.hybrid:
+        return _hybrid_fim(args)
+    if args.known_initial_state:
+        raise GearsymError("fim", "--known-initial-state", "applies to --hybrid only")
     d, names, overrides, scenario = _prepare(args, args.with_wheel_acceleration)
     with contextlib.ExitStack() as stack:
         out = (
@@ -193,6 +197,69 @@ def cmd_fim(args: argparse.Namespace) -> int:
             paths = out.commit()
     if args.json:
         data_out = study_json(study)
+        data_out["files"] = [str(p) for p in paths]
+        emit_json(data_out)
+        return 0
+    print(format_text(study))
+    if paths:
+        print(f"\n  wrote {len(paths)} files to {args.out}")
+    return 0
+
+
+def _hybrid_fim(args: argparse.Namespace) -> int:
+    """``fim --hybrid``: the FIM on the hybrid shift model's sensitivities
+    (gearsym.validation.hybrid_fisher), per phase with φ at the phase start unknown, or with
+    ``--known-initial-state`` the thesis' continuous view (3.16)."""
+    from gearsym.validation.hybrid_fisher import format_text, hybrid_fim, to_dict
+    from gearsym.validation.hybrid_simulation import HybridSimulator
+    from gearsym.validation.scenario import load_scenario
+
+    for option, given in (
+        ("--with-wheel-acceleration", args.with_wheel_acceleration),
+        ("--carry-over", args.carry_over),
+    ):
+        if given:
+            raise GearsymError("fim", option, "not available with --hybrid")
+    d = load(args.config)
+    overrides = _overrides(d, args.set)
+    scenario = load_scenario(d, args.scenario)
+    with contextlib.ExitStack() as stack:
+        out = (
+            stack.enter_context(OutputDir(args.out, "fim", before_commit=check))
+            if args.out
+            else None
+        )
+        progress(f"deriving the hybrid model of the {scenario.shift.name} shift")
+        simulator = HybridSimulator(d, scenario)
+        names = _parameter_list(args.params) or [
+            "m_veh",
+            *(str(simulator.hybrid.friction_coefficient[e]) for e in simulator.hybrid.elements),
+            "zeta",
+        ]
+        unknown = [n for n in names if n not in simulator.parameter_names]
+        if unknown:
+            raise GearsymError(
+                d.file, "params", f"unknown parameters {', '.join(unknown)} of the hybrid model"
+            )
+        simulator.values(overrides)  # unknown --set names fail before the integration
+        progress("integrating the hybrid model and its sensitivities")
+        study = hybrid_fim(
+            d,
+            names,
+            view="continuous" if args.known_initial_state else "nuisance",
+            sample_time=args.sample_time,
+            speed_error=args.speed_error,
+            gamma_max=args.gamma_max,
+            overrides=overrides,
+            simulator=simulator,
+        )
+        paths: list[Path] = []
+        if out is not None:
+            (out.path / "fim.json").write_text(json.dumps(to_dict(study), indent=2) + "\n")
+            (out.path / "fim.txt").write_text(format_text(study) + "\n", encoding="utf-8")
+            paths = out.commit()
+    if args.json:
+        data_out = to_dict(study)
         data_out["files"] = [str(p) for p in paths]
         emit_json(data_out)
         return 0
@@ -366,6 +433,18 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         action="store_true",
         help="carry the sensitivities over from t0 (the thesis' view) instead of restarting "
         "them at every phase: a phase then also shows what earlier phases revealed",
+    )
+    p.add_argument(
+        "--hybrid",
+        action="store_true",
+        help="on the hybrid shift model (elements lock, slide and open; sensitivities jump at "
+        "the switches); per phase with the side-shaft twist at the phase start unknown",
+    )
+    p.add_argument(
+        "--known-initial-state",
+        action="store_true",
+        help="with --hybrid: the thesis' view (3.16), sensitivities from t0 with the initial "
+        "state known; a phase then also shows what earlier phases revealed",
     )
 
 

@@ -1,0 +1,448 @@
+"""Stage 3c: the hybrid shift model — modes, guards and state maps of a single-swap shift.
+
+The thesis' shift model (2.55)–(2.58) keeps the elements common to both gears locked and lets
+the off-going and the on-coming element act as torques; its friction form (3.14),
+T = k_sign 2 N_disc r_m μ F_N, holds only while an element slides ("nur im Gleitbereich").
+A shift is therefore a hybrid system. Each of the two swapping elements is, at any time,
+
+* **locked**: a constraint (its slip is zero); the torque it carries is the constraint
+  reaction, bounded by its static capacity 2 N_disc r_m μ F_N (2.60) with (2.69);
+* **sliding** with slip sign s = ±1: a torque T = s 2 N_disc r_m μ F_N (2.69), (3.14), k_sign
+  from the slip sign (2.70);
+* **open**: no torque (F_N = 0, 2.54).
+
+The elements shared by both gears stay locked. Every combination except "both locked" (a
+tie-up: no degree of freedom left, the gearbox stands still) is a *mode*, and each mode's model
+comes from :func:`gearsym.symbolic.drivetrain.drivetrain_model` like today's gear and shift
+models: locked elements are eliminated by the projection ẏ = P z (2.55), sliding elements act
+through (3.14) with μ a parameter and F_N an input, open elements are absent.
+
+Transitions are *guards*, symbolic expressions in the source mode's states, inputs and
+parameters that cross zero at the event:
+
+* **break-away** of a locked element: |T_req| exceeds its capacity, T_req the torque the mode's
+  constraint must carry (the Lagrange multiplier of the locked element, from the model with that
+  element released: the torque that keeps its slip acceleration at zero). The element slides
+  in the direction of T_req: with less torque than needed the slip grows with the sign of
+  T_req − T (:func:`slip_acceleration_gain` is negative), and (2.70) then gives k_sign = that sign.
+* **lock-up** of a sliding element: its slip crosses zero. It sticks if the torque the locked
+  mode needs is inside the capacity (the guard's *condition*), else it slides on the other way.
+* **opening**: the normal force vanishes; **engagement**: it becomes positive again (the slip
+  sign picks the direction).
+
+The state map at a switch (:class:`StateMap`) is the projection onto the new constraint set in
+the metric of the mass matrix M (2.34), z⁺ = (P⁺ᵀ M P⁺)⁻¹ P⁺ᵀ M P⁻ z⁻, the twist φ and the wheel
+speed ω_C unchanged. It conserves the generalized momentum of the motions the new mode allows,
+which is what a perfectly plastic (impulsive) engagement does. Two cases:
+
+* at lock-up the slip is zero, so P⁻ z⁻ already lies in the range of P⁺ and the map is only a
+  change of coordinates: no speed jumps, no energy is lost;
+* at break-away, opening and engagement the new mode has the larger motion space, P⁺ z⁺ = P⁻ z⁻
+  exactly (an embedding).
+
+An engagement at non-zero slip (closing a clutch on a slipping pair with infinite capacity, or a
+dog clutch) would need that impulse and lose the energy ½ Δẏᵀ M Δẏ; the same formula gives it,
+but friction elements of finite capacity never do it: they slide until the slip is zero.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from itertools import product
+
+import sympy as sp
+from gearsym.symbolic import naming
+from gearsym.symbolic.description import GearboxDescription
+from gearsym.symbolic.drivetrain import (
+    ShiftSpec,
+    drivetrain_model,
+    drivetrain_parameters,
+    drivetrain_parts,
+    element_short_name,
+    locked_projection,
+    quantity,
+    shift_spec,
+)
+from gearsym.symbolic.dynamics import GearboxDynamics, gearbox_dynamics
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.kinematics import exact
+from gearsym.symbolic.model import Model, Variable
+
+LOCKED = "locked"
+SLIDING = "sliding"
+OPEN = "open"
+
+#: Status of a swapping element in a mode: locked, sliding with slip sign +1 / −1, open.
+STATUSES: tuple[tuple[str, int], ...] = ((LOCKED, 0), (SLIDING, 1), (SLIDING, -1), (OPEN, 0))
+
+BREAK_AWAY = "break-away"
+LOCK_UP = "lock-up"
+OPENING = "opening"
+ENGAGEMENT = "engagement"
+
+
+def status_label(status: str, sign: int) -> str:
+    """``locked``, ``slide_pos``, ``slide_neg`` or ``open`` (parts of a mode name)."""
+    if status == SLIDING:
+        return "slide_pos" if sign > 0 else "slide_neg"
+    return status
+
+
+@dataclass(frozen=True)
+class Mode:
+    """One mode of the hybrid shift: a :class:`Model` (2.55)–(2.58) with (3.14) for the sliding
+    elements, and what the guards need.
+
+    ``status[e]`` is (``"locked"`` | ``"sliding"`` | ``"open"``, slip sign) of each swapping
+    element; ``projection`` is P with ẏ = P z (2.55), z the mode's gearbox speeds (``keep``);
+    ``slip[e]`` is Δω_e = ω_a − ω_b of each swapping element in the mode's states (2.59);
+    ``reaction[e]`` the torque a locked element must carry (sign of 2.36); ``capacity[e]`` the
+    magnitude 2 N_disc r_m μ_e F_N,e (2.69) of each swapping element.
+    """
+
+    name: str
+    status: dict[str, tuple[str, int]]
+    model: Model
+    keep: tuple[str, ...]
+    projection: sp.Matrix
+    slip: dict[str, sp.Expr]
+    reaction: dict[str, sp.Expr]
+    capacity: dict[str, sp.Expr]
+
+    @property
+    def locked(self) -> tuple[str, ...]:
+        return tuple(e for e, (s, _) in self.status.items() if s == LOCKED)
+
+    @property
+    def sliding(self) -> dict[str, int]:
+        return {e: k for e, (s, k) in self.status.items() if s == SLIDING}
+
+
+@dataclass(frozen=True)
+class Guard:
+    """A transition out of mode ``source``: when ``expression`` (source mode's x, u, p) crosses
+    zero in ``direction`` (+1 rising, −1 falling), the shift goes to ``target`` if
+    ``condition`` (source mode's x, u, p, evaluated after the crossing) is ≥ 0 or absent, else
+    to ``otherwise``."""
+
+    source: str
+    element: str
+    kind: str
+    expression: sp.Expr
+    direction: int
+    target: str
+    condition: sp.Expr | None = None
+    otherwise: str | None = None
+
+
+@dataclass(frozen=True)
+class StateMap:
+    """x⁺ = ``matrix`` · x⁻ at a switch from ``source`` to ``target``: the M-metric projection
+    of the gearbox speeds onto the target's constraint set (module docstring), φ and ω_C
+    unchanged. ``kind``: "change of coordinates" (fewer motions: lock-up at zero slip),
+    "embedding" (more motions) or "same" (same constraint set)."""
+
+    source: str
+    target: str
+    matrix: sp.Matrix
+    kind: str
+
+
+@dataclass(frozen=True)
+class HybridShift:
+    """Modes, guards and state maps of a single-swap shift (module docstring).
+
+    ``inputs`` (T_In, F_N of the off-going and the on-coming element) and ``parameters`` (the
+    drivetrain's and both μ) are the union over the modes; a mode's model uses a subset.
+    ``from_mode`` is the from-gear (off-going locked, on-coming open), ``to_mode`` the to-gear.
+    """
+
+    spec: ShiftSpec
+    elements: tuple[str, str]
+    modes: dict[str, Mode]
+    guards: tuple[Guard, ...]
+    maps: dict[tuple[str, str], StateMap]
+    inputs: tuple[Variable, ...]
+    parameters: tuple[Variable, ...]
+    normal_force: dict[str, sp.Symbol]
+    friction_coefficient: dict[str, sp.Symbol]
+    from_mode: str
+    to_mode: str
+
+    def guards_from(self, mode: str) -> tuple[Guard, ...]:
+        """Every guard whose source is ``mode``."""
+        return tuple(g for g in self.guards if g.source == mode)
+
+    def mode_of(self, status: Mapping[str, tuple[str, int]]) -> Mode:
+        """The mode with the given status per swapping element."""
+        return self.modes[mode_name(self.spec, self.elements, status)]
+
+
+def mode_name(
+    spec: ShiftSpec, elements: tuple[str, str], status: Mapping[str, tuple[str, int]]
+) -> str:
+    """``hybrid_2_3__K38_locked__B05_open``: shift and status of each swapping element."""
+    parts = [f"{e}_{status_label(*status[e])}" for e in elements]
+    return "__".join([f"hybrid_{spec.from_gear}_{spec.to_gear}", *parts])
+
+
+def _constraint_rows(
+    d: GearboxDescription, dyn: GearboxDynamics, locked: tuple[str, ...]
+) -> list[sp.Matrix]:
+    """Rows of the slip Δω_e = ω_a − ω_b of each locked element in ẏ (2.59), which vanish."""
+    transform = dyn.kinematics.transform
+    index = {b: i for i, b in enumerate(d.body_names)}
+    rows = []
+    for name in locked:
+        e = d.element(name)
+        row = -transform[index[e.b], :]
+        if e.a is not None:
+            row += transform[index[e.a], :]
+        rows.append(row)
+    return rows
+
+
+def mode_coordinates(
+    d: GearboxDescription, dyn: GearboxDynamics, locked: tuple[str, ...]
+) -> tuple[str, ...]:
+    """The shafts whose speeds are a mode's gearbox states: the output shaft alone when one
+    motion is left (as the gear models), else the input and output shaft first (as the shift
+    model (2.55)), completed by the measured shafts and the coordinates if more are needed."""
+    transform = dyn.kinematics.transform
+    index = {b: i for i, b in enumerate(d.body_names)}
+    rows = _constraint_rows(d, dyn, locked)
+    rank = sp.Matrix.vstack(*rows).rank() if rows else 0
+    free = transform.cols - rank
+    order = [d.output_shaft, d.input_shaft, *d.measured_shafts, *d.coordinates, *d.shaft_names]
+    chosen: list[str] = []
+    for shaft in dict.fromkeys(order):
+        if len(chosen) == free:
+            break
+        trial = sp.Matrix.vstack(*rows, *(transform[index[s], :] for s in [*chosen, shaft]))
+        if trial.rank() == rank + len(chosen) + 1:
+            chosen.append(shaft)
+    preferred = [d.input_shaft, d.output_shaft]
+    return tuple(sorted(chosen, key=lambda s: preferred.index(s) if s in preferred else 2))
+
+
+def _friction_symbols(d: GearboxDescription, element: str) -> tuple[sp.Expr, Variable, Variable]:
+    """(gain 2 N_disc r_m, F_N input, μ parameter) of an element, named as drivetrain_parts
+    names them (2.69), (3.14)."""
+    e = d.element(element)
+    if e.n_disc is None or e.r_m is None:
+        raise GearsymError(
+            d.file,
+            f'shift_element[name="{element}"].n_disc',
+            "missing (the hybrid shift model needs n_disc and r_m of the swapping elements)",
+        )
+    short = element_short_name(d, element)
+    mu_default = quantity(d, "friction", "mu_nominal")
+    mu = Variable(
+        naming.friction_coefficient(short),
+        sp.Symbol(naming.friction_coefficient(short), positive=True),
+        "1",
+        f"friction coefficient of {element} (2.69)",
+        mu_default.value,
+        mu_default.source,
+    )
+    normal = Variable(
+        naming.normal_force(short),
+        sp.Symbol(naming.normal_force(short)),
+        "N",
+        f"normal force on {element} (2.69)",
+    )
+    return 2 * e.n_disc * exact(e.r_m.value), normal, mu
+
+
+def _slip(d: GearboxDescription, body_speeds: Mapping[str, sp.Expr], element: str) -> sp.Expr:
+    e = d.element(element)
+    return sp.expand((body_speeds[e.a] if e.a is not None else 0) - body_speeds[e.b])
+
+
+def _released(
+    d: GearboxDescription,
+    dyn: GearboxDynamics,
+    locked: tuple[str, ...],
+    sliding: Mapping[str, int],
+    element: str,
+    friction: Mapping[str, tuple[sp.Expr, Variable, Variable]],
+) -> tuple[sp.Expr, sp.Expr, tuple[str, ...], dict[str, sp.Expr]]:
+    """The mode with ``element`` released to a torque input T_e: (d Δω_e/dt at T_e = 0,
+    ∂(d Δω_e/dt)/∂T_e, the released model's kept shafts, its body speeds)."""
+    others = tuple(e for e in locked if e != element)
+    keep = mode_coordinates(d, dyn, others)
+    parts = drivetrain_parts(d, others, (*sliding, element), keep)
+    torque = {
+        parts.torque_symbols[e]: sign
+        * friction[e][0]
+        * friction[e][2].symbol
+        * friction[e][1].symbol
+        for e, sign in sliding.items()
+    }
+    slip = _slip(d, parts.body_speeds, element)
+    row = sp.Matrix([[slip.diff(s) for s in parts.speeds]])
+    acceleration = sp.expand((row * parts.gearbox_rhs.xreplace(torque))[0])
+    t_e = parts.torque_symbols[element]
+    gain = acceleration.diff(t_e)
+    return sp.expand(acceleration.xreplace({t_e: 0})), gain, keep, parts.body_speeds
+
+
+def slip_acceleration_gain(
+    d: GearboxDescription, shift: str, element: str, locked_too: tuple[str, ...] = ()
+) -> sp.Expr:
+    """∂(d Δω_e/dt)/∂T_e of a swapping element released from the shift's locked set (plus
+    ``locked_too``): minus the inverse of the effective inertia the element sees, so negative
+    whenever M (2.34) is positive definite. It fixes the slip direction after a break-away."""
+    spec = shift_spec(d, shift)
+    dyn = gearbox_dynamics(d)
+    friction = {e: _friction_symbols(d, e) for e in (spec.off_going, spec.on_coming)}
+    locked = (*spec.locked, *locked_too, element)
+    return _released(d, dyn, locked, {}, element, friction)[1]
+
+
+def hybrid_shift(d: GearboxDescription, shift: str) -> HybridShift:
+    """Derive the hybrid model of a single-swap shift (module docstring): every mode's model
+    (2.55)–(2.58) with (3.14), the guards (break-away, lock-up, opening, engagement) and the
+    state maps. Nothing here is specific to a gearbox: the shift's elements come from the
+    gear table (:func:`gearsym.symbolic.drivetrain.shift_spec`)."""
+    spec = shift_spec(d, shift)
+    dyn = gearbox_dynamics(d)
+    elements = (spec.off_going, spec.on_coming)
+    friction = {e: _friction_symbols(d, e) for e in elements}
+    modes: dict[str, Mode] = {}
+    for statuses in product(STATUSES, repeat=2):
+        status = dict(zip(elements, statuses, strict=True))
+        swapped_locked = tuple(e for e in elements if status[e][0] == LOCKED)
+        if len(swapped_locked) == 2:
+            continue  # tie-up: no motion left (module docstring)
+        locked = (*spec.locked, *swapped_locked)
+        sliding = {e: k for e, (s, k) in status.items() if s == SLIDING}
+        keep = mode_coordinates(d, dyn, locked)
+        name = mode_name(spec, elements, status)
+        model = drivetrain_model(
+            d, name, locked=locked, torque_elements=tuple(sliding), keep=keep, slip_signs=sliding
+        )
+        parts_speeds = drivetrain_parts(d, locked, (), keep).body_speeds
+        slip = {e: _slip(d, parts_speeds, e) for e in elements}
+        reaction = {}
+        for e in swapped_locked:
+            free, gain, released_keep, _ = _released(d, dyn, locked, sliding, e, friction)
+            # the released model's speeds in this mode's coordinates (slip_e = 0 there)
+            to_mode = {sp.Symbol(naming.speed(s)): parts_speeds[s] for s in released_keep}
+            reaction[e] = sp.expand((-free / gain).xreplace(to_mode))
+        capacity = {
+            e: friction[e][0] * friction[e][2].symbol * friction[e][1].symbol for e in elements
+        }
+        projection = locked_projection(d, dyn, locked, keep)
+        modes[name] = Mode(name, status, model, keep, projection, slip, reaction, capacity)
+
+    mass = drivetrain_mass(d, dyn)
+    maps: dict[tuple[str, str], StateMap] = {}
+    guards: list[Guard] = []
+
+    def to(mode: Mode, element: str, status: tuple[str, int]) -> str | None:
+        new = {**mode.status, element: status}
+        name = mode_name(spec, elements, new)
+        if name not in modes:
+            return None
+        if (mode.name, name) not in maps:
+            maps[(mode.name, name)] = _state_map(mode, modes[name], mass)
+        return name
+
+    for mode in modes.values():
+        for e in elements:
+            state, sign = mode.status[e]
+            normal = friction[e][1].symbol
+            if state == LOCKED:
+                for k in (1, -1):
+                    target = to(mode, e, (SLIDING, k))
+                    assert target is not None
+                    guards.append(
+                        Guard(
+                            mode.name,
+                            e,
+                            BREAK_AWAY,
+                            k * mode.reaction[e] - mode.capacity[e],
+                            1,
+                            target,
+                        )
+                    )
+                target = to(mode, e, (OPEN, 0))
+                assert target is not None
+                guards.append(Guard(mode.name, e, OPENING, normal, -1, target))
+            elif state == SLIDING:
+                reverse = to(mode, e, (SLIDING, -sign))
+                stick = to(mode, e, (LOCKED, 0))
+                if stick is None:  # the other element is locked: lock-up would be a tie-up
+                    guards.append(Guard(mode.name, e, LOCK_UP, mode.slip[e], -sign, str(reverse)))
+                else:
+                    target_mode = modes[stick]
+                    matrix = maps[(mode.name, stick)].matrix
+                    x_next = dict(
+                        zip(
+                            target_mode.model.state_symbols,
+                            matrix * sp.Matrix(mode.model.state_symbols),
+                            strict=True,
+                        )
+                    )
+                    inside = mode.capacity[e] - sp.Abs(target_mode.reaction[e].xreplace(x_next))
+                    guards.append(
+                        Guard(mode.name, e, LOCK_UP, mode.slip[e], -sign, stick, inside, reverse)
+                    )
+                target = to(mode, e, (OPEN, 0))
+                assert target is not None
+                guards.append(Guard(mode.name, e, OPENING, normal, -1, target))
+            else:
+                forward, backward = to(mode, e, (SLIDING, 1)), to(mode, e, (SLIDING, -1))
+                assert forward is not None and backward is not None
+                guards.append(
+                    Guard(mode.name, e, ENGAGEMENT, normal, 1, forward, mode.slip[e], backward)
+                )
+
+    parameters = drivetrain_parameters(d) + tuple(friction[e][2] for e in elements)
+    u_in = modes[
+        mode_name(spec, elements, {spec.off_going: (LOCKED, 0), spec.on_coming: (OPEN, 0)})
+    ]
+    inputs = (u_in.model.variable(naming.INPUT_TORQUE), *(friction[e][1] for e in elements))
+    return HybridShift(
+        spec=spec,
+        elements=elements,
+        modes=modes,
+        guards=tuple(guards),
+        maps=maps,
+        inputs=inputs,
+        parameters=parameters,
+        normal_force={e: friction[e][1].symbol for e in elements},
+        friction_coefficient={e: friction[e][2].symbol for e in elements},
+        from_mode=u_in.name,
+        to_mode=mode_name(spec, elements, {spec.off_going: (OPEN, 0), spec.on_coming: (LOCKED, 0)}),
+    )
+
+
+def drivetrain_mass(d: GearboxDescription, dyn: GearboxDynamics) -> sp.Matrix:
+    """M of (2.34) with the output-side inertias of (2.51) (as drivetrain_parts adds them)."""
+    i_d = exact(quantity(d, "drivetrain", "i_D").value)
+    extra = exact(quantity(d, "drivetrain", "J_cs").value)
+    extra += exact(quantity(d, "drivetrain", "J_D").value) / i_d**2
+    index = {b: i for i, b in enumerate(d.body_names)}
+    out_row = dyn.kinematics.transform[index[d.output_shaft], :]
+    return dyn.mass_matrix + extra * (out_row.T * out_row)
+
+
+def _state_map(source: Mode, target: Mode, mass: sp.Matrix) -> StateMap:
+    """z⁺ = (P⁺ᵀ M P⁺)⁻¹ P⁺ᵀ M P⁻ z⁻, φ and ω_C unchanged (module docstring)."""
+    p_new, p_old = target.projection, source.projection
+    gearbox = (p_new.T * mass * p_new).inv() * (p_new.T * mass * p_old)
+    n_old, n_new = p_old.cols, p_new.cols
+    matrix = sp.zeros(n_new + 2, n_old + 2)
+    matrix[:n_new, :n_old] = gearbox
+    matrix[n_new, n_old] = 1  # φ
+    matrix[n_new + 1, n_old + 1] = 1  # ω_C
+    if n_new < n_old:
+        kind = "change of coordinates"
+    elif n_new > n_old:
+        kind = "embedding"
+    else:
+        kind = "same"
+    return StateMap(source.name, target.name, matrix, kind)

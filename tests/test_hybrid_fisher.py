@@ -1,0 +1,196 @@
+"""Fisher information on the hybrid model's sensitivities (validation/hybrid_fisher.py).
+
+Expected values from physics and independent methods:
+
+* a μ acts only through its element's sliding torque (3.14): where the element is open or
+  locked it has no influence, so μ is an exact null direction of that window's FIM (γ = inf) —
+  the verdicts issue 15 found wrong (μ38 "identifiable" in the speed phase and gear 3, μ05 in
+  gear 3) must be gone in the default view;
+* the Schur complement against the direct inverse of the FIM of [θ; φ] (linear algebra);
+* the nuisance column ∂x/∂φ(t_w) against central differences of the restarted hybrid run;
+* the thesis' continuous view (3.16) for m_veh and ζ against a FIM built from central finite
+  differences of the reference simulation (its own integrator, its own model with bristles).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from gearsym.symbolic.fisher import analyse, fisher_information, noise_variances
+from gearsym.symbolic.hybrid import LOCK_UP
+from gearsym.symbolic.loader import load_description
+from gearsym.validation.hybrid_fisher import VIEWS, format_text, hybrid_fim
+from gearsym.validation.hybrid_simulation import HybridSimulator
+from gearsym.validation.simulate import Phase, simulate
+
+PARAMETERS = ("m_veh", "mu_38", "mu_05", "zeta")
+
+
+@pytest.fixture(scope="module")
+def description():
+    return load_description()
+
+
+@pytest.fixture(scope="module")
+def simulator(description):
+    return HybridSimulator(description)
+
+
+@pytest.fixture(scope="module")
+def nuisance(description, simulator):
+    return hybrid_fim(description, PARAMETERS, simulator=simulator)
+
+
+def gamma(study, window, name):
+    analysis = study.window(window).analysis
+    return float(analysis.gamma[list(analysis.names).index(name)])
+
+
+def test_no_friction_information_where_the_element_is_open_or_locked(
+    description, simulator, nuisance
+):
+    """Default view (per phase, φ at the phase start unknown): μ38 is an exact null direction
+    in the speed phase and gear 3 (K38 open), where the open-loop model called it identifiable
+    (γ 0.023 and 0.008); μ05 is not identifiable in gear 3 — the little it shows there comes
+    from the 0.15 ms the phase (detected at 1 % slip) starts before B05's lock-up: from the
+    lock-up on, μ05 is an exact null direction too. Where the elements slide, the information
+    is there: μ38 and μ05 within γ_max in the torque phase."""
+    assert nuisance.view == "nuisance" and nuisance.nuisance == ("phi",)
+    for window in ("speed phase", "gear 3"):
+        assert gamma(nuisance, window, "mu_38") == np.inf, window
+        assert {"mu_38": 1.0} in nuisance.window(window).analysis.null_directions
+    assert gamma(nuisance, "gear 3", "mu_05") > 100 * nuisance.window("gear 3").analysis.gamma_max
+    lock_up = next(e for e in nuisance.nominal.events if e.kind == LOCK_UP)
+    stuck = hybrid_fim(
+        description,
+        PARAMETERS,
+        simulator=simulator,
+        windows=[Phase("B05 locked", lock_up.t, simulator.scenario.t_end)],
+    )
+    assert gamma(stuck, "B05 locked", "mu_05") == np.inf
+    assert gamma(stuck, "B05 locked", "mu_38") == np.inf
+    for name in ("mu_38", "mu_05"):
+        assert gamma(nuisance, "torque phase", name) < 0.1
+
+
+def test_schur_complement_is_the_block_of_the_inverse(nuisance):
+    """The reduced FIM's inverse equals the θ block of the inverse FIM of [θ; φ] (the bound
+    when φ is estimated alongside), and an unknown φ never adds information."""
+    window = nuisance.window("torque phase")
+    full, reduced = window.full_fim, window.fim
+    m = len(PARAMETERS)
+    scale = np.sqrt(np.diag(full))
+    block = (np.linalg.inv(full / np.outer(scale, scale)) / np.outer(scale, scale))[:m, :m]
+    assert np.allclose(np.linalg.inv(reduced), block, rtol=1e-6)
+    assert np.all(np.diag(reduced) <= np.diag(full[:m, :m]) * (1 + 1e-12))
+
+
+def test_nuisance_column_matches_finite_differences(simulator, nuisance):
+    """∂x/∂φ(t_w) of the restarted run (a unit column carried through (3.7) and the switches,
+    no ∂f/∂p) against central differences of the same restart with φ(t_w) ± h,
+    h = 1e-4 φ(t_w), rtol 1e-12 (the step and tolerance of tests/test_hybrid_sensitivity.py)."""
+    window = nuisance.window("torque phase")
+    piece = next(p for p in nuisance.nominal.pieces if p.t_start <= window.t_start < p.t_end)
+    n = simulator.modes[piece.mode].n
+    x0 = piece.state(np.array([window.t_start]))[0, :n]
+    names = [v.name for v in simulator.hybrid.modes[piece.mode].model.states]
+    phi = names.index("phi")
+    common = {"t_start": window.t_start, "mode": piece.mode, "rtol": 1e-12, "atol": 1e-12}
+    analytic = simulator.run(x0=x0, state_columns=("phi",), **common)
+    h = 1e-4 * abs(x0[phi])
+    shifted = [x0 + sign * h * np.eye(n)[phi] for sign in (1, -1)]
+    plus, minus = (simulator.run(x0=x, **common) for x in shifted)
+    mask = np.ones(len(analytic.t), dtype=bool)
+    for event in analytic.events:
+        mask &= np.abs(analytic.t - event.t) > 1e-3
+    for key in ("omega_1", "omega_2", "phi", "omega_C"):
+        derived = analytic.sensitivities[key][:, 0]
+        difference = (plus.signals[key] - minus.signals[key]) / (2 * h)
+        error = np.max(np.abs(difference - derived)[mask])
+        assert error < 1e-4 * np.max(np.abs(derived)), key
+
+
+def _with_value(d, key, value):
+    q = d.vehicle[key]
+    return dataclasses.replace(d, vehicle={**d.vehicle, key: dataclasses.replace(q, value=value)})
+
+
+def test_thesis_view_matches_the_reference_by_finite_differences(description, simulator):
+    """The thesis' view (3.16: sensitivities from t = 0, the quasi-static start) for m_veh and
+    ζ, per phase of the reference, against the FIM built from central differences of the
+    reference simulation (CVODES, rtol 1e-10, step 1e-3 p0: differences of the full gearbox
+    with bristles, the same noise model). The open-loop shift model was 40 % too large in gear
+    3; here every entry agrees to 1 % (measured ≤ 0.2 %, the bristle compliance) and the
+    scatter γ to 5 % (measured ≤ 2.5 %: m_veh and ζ are nearly collinear, which magnifies the
+    entries' differences in F⁻¹)."""
+    rtol = 1e-10
+    names = ("m_veh", "zeta")
+    scales = {"m_veh": description.vehicle["m_veh"].value, "zeta": 0.05}
+    reference = simulate(description, check_models=False, rtol=rtol)
+    outputs = ("omega_1", "omega_2", "omega_C")
+    differences = {}
+    for name in names:
+        value, h = description.vehicle[name].value, 1e-3 * scales[name]
+        plus = simulate(_with_value(description, name, value + h), check_models=False, rtol=rtol)
+        minus = simulate(_with_value(description, name, value - h), check_models=False, rtol=rtol)
+        differences[name] = {o: (plus.signals[o] - minus.signals[o]) / (2 * h) for o in outputs}
+    study = hybrid_fim(
+        description, names, view="continuous", windows=reference.phases, simulator=simulator
+    )
+    assert study.outputs == outputs
+    t_meas = np.arange(0.0, reference.t[-1] + 1e-12, 0.01)
+    index = np.array([np.argmin(np.abs(reference.t - t)) for t in t_meas])
+    floor = 0.01 * np.array([np.max(np.abs(reference.signals[o])) for o in outputs])
+    for k, phase in enumerate(reference.phases):
+        last = k == len(reference.phases) - 1
+        inside = (t_meas >= phase.t_start) & (
+            (t_meas < phase.t_end) | (last & (t_meas <= phase.t_end))
+        )
+        rows = index[inside]
+        y = np.column_stack([reference.signals[o][rows] for o in outputs])
+        dy = np.stack(
+            [np.column_stack([differences[p][o][rows] for p in names]) for o in outputs], axis=1
+        )
+        expected = fisher_information(dy, noise_variances(y, [0.01] * 3, floor))
+        window = study.window(phase.name)
+        assert np.allclose(window.fim, expected, rtol=1e-2), phase.name
+        reference_gamma = analyse(expected, names, [scales[n] for n in names]).gamma
+        assert np.allclose(window.analysis.gamma, reference_gamma, rtol=5e-2), phase.name
+
+
+def test_the_views_are_labelled(description, simulator, nuisance):
+    """Every study says which view it is; in the thesis' continuous view μ38's torque-phase
+    excitation is still seen in the speed phase (information of an earlier phase, labelled)."""
+    continuous = hybrid_fim(description, PARAMETERS, view="continuous", simulator=simulator)
+    assert VIEWS["nuisance"] in format_text(nuisance)
+    assert VIEWS["continuous"] in format_text(continuous)
+    assert np.isfinite(gamma(continuous, "speed phase", "mu_38"))
+
+
+def gearsym(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "gearsym", *args], capture_output=True, text=True, timeout=300
+    )
+
+
+def test_fim_hybrid_command(tmp_path):
+    """``gearsym fim --hybrid``: the per-phase verdicts with φ unknown, as JSON and as files
+    written through the output folder; ``--known-initial-state`` without ``--hybrid`` is a
+    one-line error naming the option."""
+    out = tmp_path / "fim"
+    done = gearsym("fim", "--hybrid", "--json", "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    data = json.loads(done.stdout)
+    assert data["view"] == "nuisance" and data["nuisance"] == ["phi"]
+    windows = {w["name"]: w for w in data["windows"]}
+    assert windows["gear 3"]["gamma"]["mu_38"] == "inf"
+    assert windows["speed phase"]["gamma"]["mu_38"] == "inf"
+    assert sorted(p.name for p in out.iterdir()) == ["MANIFEST", "fim.json", "fim.txt"]
+    refused = gearsym("fim", "--known-initial-state")
+    assert refused.returncode == 2
+    assert refused.stderr.strip() == "gearsym: fim: --known-initial-state: applies to --hybrid only"
