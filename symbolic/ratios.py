@@ -4,7 +4,9 @@ Adding the two Willis constraints (2.22) and (2.23) of a set eliminates its plan
 
     z_S ω_S + z_H ω_H − (z_S + z_H) ω_T = 0,   i.e.   ω_S + k ω_H − (1 + k) ω_T = 0
 
-with the stationary ratio k = z_H / z_S. A gear closes shift elements (a clutch ties ω_a = ω_b,
+with the stationary ratio k = z_H / z_S. Compound kinds (double pinion, Ravigneaux, stepped
+planet) give one such relation per sun–ring pair, with the sign of their stationary ratio
+(:mod:`gearsym.symbolic.set_kinds`). A gear closes shift elements (a clutch ties ω_a = ω_b,
 a brake holds ω_b = 0); a drivable gear leaves exactly one degree of freedom and its ratio is
 ω_in / ω_out along it. Ratios depend on the sets only through k, which is what
 :mod:`gearsym.symbolic.teeth` searches over.
@@ -18,30 +20,50 @@ import sympy as sp
 from gearsym.symbolic import naming
 from gearsym.symbolic.description import Gear, GearboxDescription
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.set_kinds import Relation, relations
 from gearsym.symbolic.sympy_utils import exact_nullspace
 
 
+def _symbol_name(relation: Relation, planetary_set: str) -> str:
+    if relation.key == planetary_set:
+        return naming.stationary_ratio(planetary_set)
+    return naming.second_stationary_ratio(planetary_set)
+
+
 def stationary_ratio_symbols(d: GearboxDescription) -> dict[str, sp.Symbol]:
-    """k_<set> = z_ring / z_sun as positive symbols, one per planetary set."""
+    """k of every sun–ring pair as positive symbols: k_<set>, and k2_<set> for the second
+    pair of a Ravigneaux set (keyed by :attr:`~gearsym.symbolic.set_kinds.Relation.key`)."""
     return {
-        ps.name: sp.Symbol(naming.stationary_ratio(ps.name), positive=True)
+        rel.key: sp.Symbol(_symbol_name(rel, ps.name), positive=True)
         for ps in d.planetary_sets
+        for rel in relations(ps)
     }
 
 
 def stationary_ratios(d: GearboxDescription) -> dict[str, sp.Rational]:
-    """Exact k = z_ring / z_sun of every set from the description's tooth counts."""
-    return {ps.name: sp.Rational(ps.z_ring, ps.z_sun) for ps in d.planetary_sets}
+    """Exact k of every sun–ring pair from the teeth (z_ring / z_sun for a simple set)."""
+    return {
+        rel.key: sp.Rational(rel.k.numerator, rel.k.denominator)
+        for ps in d.planetary_sets
+        for rel in relations(ps)
+    }
 
 
 def shaft_constraint_matrix(d: GearboxDescription, k: dict[str, sp.Expr]) -> sp.Matrix:
-    """One row per set: ω_S + k ω_H − (1 + k) ω_T = 0 over the shaft speeds (file order)."""
+    """One row per sun–ring pair over the shaft speeds (file order):
+    ω_S + k ω_H − (1 + k) ω_T = 0 for a negative stationary ratio (i0 = −k),
+    ω_S − k ω_H − (1 − k) ω_T = 0 for a positive one (i0 = +k, double pinion)."""
     index = {name: i for i, name in enumerate(d.shaft_names)}
-    rows = sp.zeros(len(d.planetary_sets), len(index))
-    for r, ps in enumerate(d.planetary_sets):
-        rows[r, index[ps.sun]] += 1
-        rows[r, index[ps.ring]] += k[ps.name]
-        rows[r, index[ps.carrier]] -= 1 + k[ps.name]
+    pairs = [rel for ps in d.planetary_sets for rel in relations(ps)]
+    rows = sp.zeros(len(pairs), len(index))
+    for r, rel in enumerate(pairs):
+        rows[r, index[rel.sun]] += 1
+        if rel.sign < 0:
+            rows[r, index[rel.ring]] += k[rel.key]
+            rows[r, index[rel.carrier]] -= 1 + k[rel.key]
+        else:
+            rows[r, index[rel.ring]] -= k[rel.key]
+            rows[r, index[rel.carrier]] -= 1 - k[rel.key]
     return rows
 
 

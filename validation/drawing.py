@@ -33,6 +33,7 @@ from typing import Any
 import sympy as sp
 from gearsym.symbolic.description import GearboxDescription, PlanetarySet
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.set_kinds import relations
 
 __all__ = [
     "DRAW_KINDS",
@@ -130,12 +131,23 @@ class LeverDiagram:
 
 def set_positions(ps: PlanetarySet) -> dict[str, Fraction]:
     """Sun 0, carrier z_H, ring z_H + z_S: the lever of one simple set (Benford & Leising;
-    the spacing follows from the Willis constraints (2.22)+(2.23), module docstring)."""
-    return {
-        ps.sun: Fraction(0),
-        ps.carrier: Fraction(ps.z_ring),
-        ps.ring: Fraction(ps.z_ring + ps.z_sun),
-    }
+    the spacing follows from the Willis constraints (2.22)+(2.23), module docstring).
+
+    Any kind from its shaft relations ω_S − i0 ω_H − (1 − i0) ω_C = 0: sun 0, carrier k,
+    ring k + 1 for i0 = −k and k − 1 for i0 = +k (the ring of a double pinion sits between
+    sun and carrier); a Ravigneaux set's second sun lands at k + k2.
+    Scaled by z_S so that a simple set keeps its tooth-unit positions.
+    """
+    rels = relations(ps)
+    first = rels[0]
+    scale = Fraction(ps.z_sun)
+    carrier = first.k * scale
+    ring = (first.k - first.sign) * scale
+    positions = {first.sun: Fraction(0), first.carrier: carrier, first.ring: ring}
+    for rel in rels[1:]:
+        # Same carrier and ring: the second sun extrapolates the lever through them.
+        positions[rel.sun] = carrier + rel.k * (ring - carrier) / rel.sign
+    return positions
 
 
 def member_name(role: str, set_name: str) -> str:
@@ -145,7 +157,10 @@ def member_name(role: str, set_name: str) -> str:
 
 
 def _members(ps: PlanetarySet) -> dict[str, str]:
-    return {getattr(ps, role): member_name(role, ps.name) for role in ROLES}
+    members = {getattr(ps, role): member_name(role, ps.name) for role in ROLES}
+    if ps.sun2 is not None:
+        members[ps.sun2] = member_name("sun", f"{ps.name}_short")
+    return members
 
 
 def lever_groups(d: GearboxDescription) -> list[tuple[list[PlanetarySet], dict[str, Fraction]]]:
