@@ -730,6 +730,21 @@ def _check_references(d: GearboxDescription) -> None:
     f = d.file
     shaft_names = d.shaft_names
     _no_duplicates(f, "shaft", shaft_names)
+    for name in (*shaft_names, *d.planet_names):
+        if name.casefold() == set_kinds.HOUSING:
+            # "housing" as a set member means the fixed housing (no body, ω = 0).
+            where = (
+                f'shaft[name="{name}"].name'
+                if name in shaft_names
+                else next(
+                    f'planetary_set[name="{ps.name}"]'
+                    for ps in d.planetary_sets
+                    if name in ps.pinions
+                )
+            )
+            raise GearsymError(
+                f, where, f"{name!r} is reserved: a set member named housing is fixed"
+            )
     _no_duplicates(f, "planetary_set", [s.name for s in d.planetary_sets])
     _no_duplicates(f, "shift_element", [e.name for e in d.shift_elements])
     _no_duplicates(f, "gear", [g.name for g in d.gears])
@@ -739,7 +754,7 @@ def _check_references(d: GearboxDescription) -> None:
         roles = set_kinds.MEMBERS[ps.kind]
         for role in roles:
             shaft = getattr(ps, role)
-            if shaft not in shaft_names:
+            if shaft not in shaft_names and shaft != set_kinds.HOUSING:
                 where = f"{key}.{set_kinds.file_key(ps.kind, role)}"
                 raise GearsymError(f, where, f"unknown shaft {shown(shaft)}")
         if len(set(ps.members)) != len(roles):
@@ -756,6 +771,14 @@ def _check_references(d: GearboxDescription) -> None:
             seen_planets.add(body)
     for e in d.shift_elements:
         for shaft in e.shafts:
+            if shaft == set_kinds.HOUSING:
+                key = "shafts" if e.kind == "clutch" else "shaft"
+                raise GearsymError(
+                    f,
+                    f'shift_element[name="{e.name}"].{key}',
+                    "the housing is fixed: an element holding a shaft to it is a brake "
+                    '(kind = "brake", shaft = "<the shaft>")',
+                )
             if shaft not in shaft_names:
                 key = "shafts" if e.kind == "clutch" else "shaft"
                 raise GearsymError(

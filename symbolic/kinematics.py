@@ -17,6 +17,7 @@ import sympy as sp
 from gearsym.symbolic import naming
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.set_kinds import HOUSING
 
 
 def exact(value: float) -> sp.Rational:
@@ -146,16 +147,19 @@ def willis_constraints(d: GearboxDescription, sym: GearboxSymbols) -> sp.Matrix:
     r = 0
     for ps in d.planetary_sets:
         teeth = sym.teeth[ps.name]
-        carrier = index[ps.carrier]
         for mesh in ps.meshes:
             za, zb = teeth[mesh.z_a], teeth[mesh.z_b]
-            a, b = index[getattr(ps, mesh.a)], index[getattr(ps, mesh.b)]
             # z_a (ω_a − ω_C) = ∓ z_b (ω_b − ω_C): external meshes reverse the relative
             # rotation, internal ones keep it.
             zb_signed = -zb if mesh.internal else zb
-            rows[r, a] += za
-            rows[r, carrier] += -(za + zb_signed)
-            rows[r, b] += zb_signed
+            terms = (
+                (getattr(ps, mesh.a), za),
+                (ps.carrier, -(za + zb_signed)),
+                (getattr(ps, mesh.b), zb_signed),
+            )
+            for body, coefficient in terms:
+                if body != HOUSING:  # a member fixed to the housing: ω = 0, no column
+                    rows[r, index[body]] += coefficient
             r += 1
     return rows
 
@@ -191,7 +195,7 @@ def coordinate_transform(
     while progress and len(rows) < len(bodies):
         progress = False
         for ps, (start, stop) in zip(d.planetary_sets, constraint_blocks(d), strict=True):
-            members = (*ps.members, *ps.pinions)
+            members = tuple(m for m in (*ps.members, *ps.pinions) if m != HOUSING)
             unknown = [m for m in members if m not in rows]
             size = stop - start
             if not unknown or len(unknown) > size:
@@ -317,6 +321,8 @@ def kinematics(d: GearboxDescription, sym: GearboxSymbols) -> Kinematics:
     position = sp.zeros(len(d.body_names), 1)
     translation = sp.zeros(len(d.body_names), len(d.coordinates))
     for ps in d.planetary_sets:
+        if ps.carrier == HOUSING:
+            continue  # pinions on a fixed carrier spin in place: no orbit
         carrier_row = transform[index[ps.carrier], :]
         for pinion in ps.pinions:
             i = index[pinion]

@@ -265,3 +265,102 @@ def test_bad_set_is_one_line(
     if key:
         assert f'planetary_set[name="x"].{key}: ' in err, err
     assert words in err, err
+
+
+# ----------------------------------------------------------------------------- housing
+
+
+def test_member_fixed_to_the_housing() -> None:
+    """sun = "housing": no shaft, no brake, no state. Hand: ring in, carrier out, sun at rest:
+    z_S(0 − ω_C) = −z_P(ω_P − ω_C), z_H(ω_H − ω_C) = z_P(ω_P − ω_C) → ω_H/ω_C = 1 + z_S/z_H
+    = 96/66; the one coordinate is the carrier and ½ M ω_C² is the hand energy."""
+    text = description_text("simple").replace('sun = "S"', 'sun = "housing"')
+    text = text.replace('[[shaft]]\nname = "S"\n', '[[shaft]]\nname = "unused"\n', 1)
+    text = text.replace('coordinates = ["T", "S"]', 'coordinates = ["T", "unused"]')
+    text = text.replace('input_shaft = "S"', 'input_shaft = "H"')
+    text = text.replace('output_shaft = "H"', 'output_shaft = "T"')
+    # the brake on the carrier would now lock it: the gear closes nothing
+    text = text.replace('closed = ["BT"]\nratio = -2.2', "closed = []\nratio = 1.454545454545")
+    text = text.replace('kind = "brake"\nshaft = "T"', 'kind = "brake"\nshaft = "unused"')
+    text = text.replace("ratio_decimals = 9", "ratio_decimals = 12")
+    d = parse_description(text, "housing.toml")
+    assert "housing" not in d.body_names
+    # shafts unused, T, H; one planet; 2 meshes → 2 DOF: the unused shaft is its own DOF
+    assert d.degrees_of_freedom == 2
+    result = gear_ratio(d, d.gear("1"))
+    assert result.ratio == sp.Rational(96, 66)
+    assert result.free_shafts == ("unused",)
+
+
+def test_housing_mass_matrix_by_hand() -> None:
+    text = description_text("simple").replace('sun = "S"', 'sun = "housing"')
+    d = parse_description(
+        text.replace('closed = ["BT"]', 'closed = ["BT"]\nneutral = true').replace(
+            "ratio = -2.2", "# ratio = -2.2"
+        ),
+        "housing.toml",
+    )
+    m = np.array(gearbox_dynamics(d).mass_matrix.evalf(), dtype=float)
+    w_c, w_s = 3.0, -7.0
+    # the sun shaft S is on no set now: its own coordinate; the set turns with the carrier
+    rel_p = -30 / 18 * (0 - w_c)
+    w_p, w_h = w_c + rel_p, w_c + 18 / 66 * rel_p
+    energy = 0.5 * (0.01 * w_s**2 + 0.03 * w_c**2 + 0.05 * w_h**2)
+    energy += 3 * (0.5 * 4e-5 * w_p**2 + 0.5 * 0.3 * (0.05 * w_c) ** 2)
+    y_dot = np.array([w_c, w_s])
+    assert 0.5 * y_dot @ m @ y_dot == pytest.approx(energy, rel=1e-12)
+
+
+def test_housing_is_reserved_and_not_an_element_shaft(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    text = description_text("simple")
+    err = run_ratios(tmp_path, text.replace('name = "H"', 'name = "housing"'), capsys)
+    assert "reserved" in err
+    err = run_ratios(
+        tmp_path,
+        text.replace('kind = "brake"\nshaft = "T"', 'kind = "brake"\nshaft = "housing"'),
+        capsys,
+    )
+    assert 'shift_element[name="BT"].shaft: ' in err and "brake" in err
+
+
+def test_a_truly_two_dof_gear_names_its_free_shafts(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Simpson 3-speed with only C1 closed: input held → ring_f held, yet sun, out and
+    carrier_r still turn together (two sets, three free shafts, one relation each way)."""
+    text = Path("tests/data/simpson_3speed.toml").read_text(encoding="utf-8")
+    text = text.replace('closed = ["C1", "B2"]', 'closed = ["C1"]')
+    err = run_ratios(tmp_path, text, capsys)
+    assert 'gear[name="1"].closed: ' in err
+    assert "leaves 2 degrees of freedom" in err
+    assert "shaft(s) sun, out, carrier_r can still turn" in err
+
+
+def test_idle_shaft_is_reported_by_the_ratio_table(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Simpson plus a shaft reached only through an open clutch: every gear keeps its
+    hand-derived ratio (26/11 in 1st, header of the file) and names the idle shaft."""
+    text = Path("tests/data/simpson_3speed.toml").read_text(encoding="utf-8")
+    text = text.replace(
+        "[[planetary_set]]",
+        '[[shaft]]\nname = "idle"\ninertia = { value = 0.01, unit = "kg*m^2", '
+        'source = "test" }\n\n[[planetary_set]]',
+        1,
+    )
+    text = text.replace(
+        '[[shift_element]]\nname = "C1"',
+        '[[shift_element]]\nname = "C3"\nkind = "clutch"\nshafts = ["idle", "sun"]\n\n'
+        '[[shift_element]]\nname = "C1"',
+    )
+    path = tmp_path / "idle.toml"
+    path.write_text(text, encoding="utf-8")
+    d = load_description(path)
+    first = gear_ratio(d, d.gear("1"))
+    assert first.ratio == sp.Rational(26, 11)
+    assert first.free_shafts == ("idle",)
+    assert main(["ratios", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "gear 1: shaft(s) idle free, speed undetermined" in out
