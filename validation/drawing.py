@@ -33,7 +33,7 @@ from typing import Any
 import sympy as sp
 from gearsym.symbolic.description import GearboxDescription, PlanetarySet
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.set_kinds import relations
+from gearsym.symbolic.set_kinds import HOUSING, relations
 
 __all__ = [
     "DRAW_KINDS",
@@ -374,10 +374,16 @@ def speed_plan(d: GearboxDescription, gear: str) -> SpeedPlan:
     for i, shaft in enumerate(shafts):
         value = sp.expand(combined[i].subs(chosen))
         speeds[shaft] = _fraction(value) if value.is_number else None
+    if _uses_housing(d):
+        speeds[HOUSING] = Fraction(0)  # a member fixed to the housing: a held node
     out = speeds[d.output_shaft]
     ratio = None if g.neutral or not out else speeds[d.input_shaft] / out
     held = tuple(d.element(e).b for e in g.closed if d.element(e).kind == "brake")
     return SpeedPlan(g.name, g.closed, g.neutral, speeds, ratio, g.ratio, held)
+
+
+def _uses_housing(d: GearboxDescription) -> bool:
+    return any(HOUSING in ps.members for ps in d.planetary_sets)
 
 
 def speed_plans(d: GearboxDescription) -> list[SpeedPlan]:
@@ -460,8 +466,10 @@ SET_PITCH = 3.2
 
 def stick_diagram(d: GearboxDescription) -> StickDiagram:
     """Stick diagram of any description (thesis Fig. 2.1 shows the built-in gearbox)."""
-    levels = {s: -SHAFT_STEP * (i + 1) for i, s in enumerate(d.shaft_names)}
-    attach: dict[str, list[float]] = {s: [] for s in d.shaft_names}
+    # A member fixed to the housing gets its own line, drawn like a shaft (labelled housing).
+    lines = d.shaft_names + ((HOUSING,) if _uses_housing(d) else ())
+    levels = {s: -SHAFT_STEP * (i + 1) for i, s in enumerate(lines)}
+    attach: dict[str, list[float]] = {s: [] for s in lines}
     segments: list[Segment] = []
     planets = []
     labels: list[Label] = []
