@@ -88,6 +88,13 @@ def print_ratio_table(d: Any, table: Sequence[Any], differ: Sequence[str] | None
         expected = "—" if r.expected is None else f"{r.expected:.{places}f}"
         value = f"{float(r.ratio):.{places}f}"
         print(f"{r.gear:>5}  {closed:<20} {value:>10} {expected:>10}  {'✓' if ok else '✗'}")
+    for r in table:
+        if r.free_shafts and not r.neutral:
+            # The ratio is fixed, but these shafts are not driven by it (README "Idle shafts").
+            print(
+                f"gear {r.gear}: shaft(s) {', '.join(r.free_shafts)} free, speed undetermined "
+                f"({r.degrees_of_freedom} degrees of freedom; ω_in/ω_out fixed)"
+            )
     if differ:
         print(f"{len(differ)} gear(s) differ from the expected table{source}.")
         return 1

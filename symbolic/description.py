@@ -20,6 +20,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from gearsym.symbolic import set_kinds
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.input_files import parse_toml, shown, unknown_key_reason
 
@@ -39,6 +40,9 @@ PLANET_COUNT_MAX = 100
 N_DISC_MAX = 100
 RATIO_DECIMALS_MAX = 12  # a double carries 15-17 significant digits
 ENTRIES_MAX = 100  # shafts, planetary sets, shift elements and gears, each
+#: Profile shift moves a centre distance by (x1 ± x2)·module; beyond 2 modules the teeth
+#: would be undercut or pointed, so a larger tolerance is a typing error, not a design.
+CENTRE_DISTANCE_TOLERANCE_MAX = 2.0
 
 #: The unit every quantity key must carry (no conversion: a different unit is an error).
 EXPECTED_UNITS: dict[str, str] = {
@@ -108,10 +112,15 @@ class Shaft:
 
 @dataclass(frozen=True)
 class PlanetarySet:
-    """One simple planetary set (2.20–2.23): sun, carrier and ring shafts and a planet body.
+    """One planetary set (2.20–2.23) of a kind (:mod:`gearsym.symbolic.set_kinds`).
 
     ``planet_mass`` and ``planet_inertia`` are per planet; the lumped planet body of the thesis
-    (J_9…J_12, m_P,j) is ``planet_count`` times these.
+    (J_9…J_12, m_P,j) is ``planet_count`` times these. The second-pinion fields belong to the
+    compound kinds: ``planet2`` is the outer pinion of a double-pinion set or the short pinion
+    of a Ravigneaux set (each its own body), ``sun2`` the Ravigneaux sun meshing the short
+    pinions, ``z_planet2`` also the ring-side step of a stepped planet.
+    ``centre_distance_tolerance`` (in modules) admits profile-shifted teeth whose
+    standard-module centre distances differ by at most that much.
     """
 
     name: str
@@ -127,6 +136,51 @@ class PlanetarySet:
     planet_inertia: Quantity
     carrier_radius: Quantity
     teeth_source: str
+    kind: str = "simple"
+    sun2: str | None = None
+    z_sun2: int | None = None
+    planet2: str | None = None
+    z_planet2: int | None = None
+    planet2_mass: Quantity | None = None
+    planet2_inertia: Quantity | None = None
+    planet2_radius: Quantity | None = None
+    centre_distance_tolerance: float = 0.0
+
+    @property
+    def members(self) -> tuple[str, ...]:
+        """Shaft members (sun, second sun, carrier, ring as the kind has them)."""
+        return tuple(getattr(self, role) for role in set_kinds.MEMBERS[self.kind])
+
+    @property
+    def pinions(self) -> tuple[str, ...]:
+        """Pinion bodies, each with its own mass and inertia (planet first)."""
+        return tuple(getattr(self, role) for role in set_kinds.PINIONS[self.kind])
+
+    @property
+    def meshes(self) -> tuple[set_kinds.Mesh, ...]:
+        return set_kinds.MESHES[self.kind]
+
+    def teeth(self, key: str) -> int:
+        value = getattr(self, key)
+        assert isinstance(value, int), (self.name, key)
+        return value
+
+    def pinion_mass(self, body: str) -> Quantity:
+        """Per-pinion mass of a pinion body of this set."""
+        q = self.planet_mass if body == self.planet else self.planet2_mass
+        assert q is not None
+        return q
+
+    def pinion_inertia(self, body: str) -> Quantity:
+        q = self.planet_inertia if body == self.planet else self.planet2_inertia
+        assert q is not None
+        return q
+
+    def pinion_radius(self, body: str) -> Quantity:
+        """Radius of the circle the pinion's centre runs on (2.27)."""
+        q = self.carrier_radius if body == self.planet else self.planet2_radius
+        assert q is not None
+        return q
 
 
 @dataclass(frozen=True)
@@ -190,7 +244,8 @@ class GearboxDescription:
 
     @property
     def planet_names(self) -> tuple[str, ...]:
-        return tuple(p.planet for p in self.planetary_sets)
+        """Every pinion body, set by set (one per simple set, as 9–12 of 2.26)."""
+        return tuple(p for ps in self.planetary_sets for p in ps.pinions)
 
     @property
     def body_names(self) -> tuple[str, ...]:
@@ -199,8 +254,8 @@ class GearboxDescription:
 
     @property
     def degrees_of_freedom(self) -> int:
-        """f = f_free − 2·(number of sets) (2.24)."""
-        return len(self.body_names) - 2 * len(self.planetary_sets)
+        """f = f_free − (number of meshes) (2.24: two per simple set)."""
+        return len(self.body_names) - sum(len(ps.meshes) for ps in self.planetary_sets)
 
     def element(self, name: str) -> ShiftElement:
         return next(e for e in self.shift_elements if e.name == name)
@@ -390,30 +445,7 @@ def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
     for r in root.tables("planetary_set"):
         set_name = r.name()
         _label(r, set_name)
-        members = {role: r.string(role) for role in ("sun", "carrier", "ring")}
-        planet = r.name("planet")
-        z_sun = r.positive_integer("z_sun", maximum=TEETH_MAX)
-        z_planet = r.positive_integer("z_planet", maximum=TEETH_MAX)
-        z_ring = r.positive_integer("z_ring", maximum=TEETH_MAX)
-        count = r.positive_integer("planet_count", maximum=PLANET_COUNT_MAX)
-        ps = PlanetarySet(
-            name=set_name,
-            sun=members["sun"],
-            carrier=members["carrier"],
-            ring=members["ring"],
-            planet=planet,
-            z_sun=z_sun,
-            z_planet=z_planet,
-            z_ring=z_ring,
-            planet_count=count,
-            planet_mass=r.quantity("planet_mass"),
-            planet_inertia=r.quantity("planet_inertia"),
-            carrier_radius=r.quantity("carrier_radius"),
-            teeth_source=r.string("teeth_source"),
-        )
-        r.reject_unknown()
-        _check_set(r, ps)
-        sets.append(ps)
+        sets.append(_planetary_set(r, set_name))
 
     elements: list[ShiftElement] = []
     for r in root.tables("shift_element"):
@@ -521,6 +553,62 @@ def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
     return description
 
 
+def _planetary_set(r: _Reader, set_name: str) -> PlanetarySet:
+    """One ``[[planetary_set]]`` of any kind; the keys a kind does not have are unknown keys."""
+    kind = r.string("kind", required=False, default="simple")
+    if kind not in set_kinds.KINDS:
+        raise r.fail("kind", f"expected one of {', '.join(set_kinds.KINDS)}; got {shown(kind)}")
+    key_of = {name: key for key, name in set_kinds.EXTRA_KEYS[kind].items()}
+    members = {role: r.string(role) for role in ("sun", "carrier", "ring")}
+    planet = r.name("planet")
+    z_sun = r.positive_integer("z_sun", maximum=TEETH_MAX)
+    z_planet = r.positive_integer("z_planet", maximum=TEETH_MAX)
+    z_ring = r.positive_integer("z_ring", maximum=TEETH_MAX)
+    count = r.positive_integer("planet_count", maximum=PLANET_COUNT_MAX)
+    extra: dict[str, Any] = {}
+    if "sun2" in key_of:
+        extra["sun2"] = r.string(key_of["sun2"])
+        extra["z_sun2"] = r.positive_integer(key_of["z_sun2"], maximum=TEETH_MAX)
+    if "planet2" in key_of:
+        extra["planet2"] = r.name(key_of["planet2"])
+        extra["planet2_mass"] = r.quantity(key_of["planet2_mass"], unit="kg")
+        extra["planet2_inertia"] = r.quantity(key_of["planet2_inertia"], unit="kg*m^2")
+        extra["planet2_radius"] = r.quantity(key_of["planet2_radius"], unit="m")
+    if "z_planet2" in key_of:
+        extra["z_planet2"] = r.positive_integer(key_of["z_planet2"], maximum=TEETH_MAX)
+    tolerance = r.number("centre_distance_tolerance", required=False)
+    if tolerance is not None and not 0 <= tolerance <= CENTRE_DISTANCE_TOLERANCE_MAX:
+        raise r.fail(
+            "centre_distance_tolerance",
+            f"must be 0 to {CENTRE_DISTANCE_TOLERANCE_MAX} modules, got {tolerance:g}",
+        )
+    ps = PlanetarySet(
+        name=set_name,
+        sun=members["sun"],
+        carrier=members["carrier"],
+        ring=members["ring"],
+        planet=planet,
+        z_sun=z_sun,
+        z_planet=z_planet,
+        z_ring=z_ring,
+        planet_count=count,
+        planet_mass=r.quantity("planet_mass"),
+        planet_inertia=r.quantity("planet_inertia"),
+        carrier_radius=r.quantity("carrier_radius"),
+        teeth_source=r.string("teeth_source"),
+        kind=kind,
+        centre_distance_tolerance=tolerance or 0.0,
+        **extra,
+    )
+    for key in r.data:
+        owners = [k for k, keys in set_kinds.EXTRA_KEYS.items() if key in keys]
+        if key not in r.used and owners:
+            raise r.fail(key, f"belongs to kind {' or '.join(owners)}; this set is {kind!r}")
+    r.reject_unknown()
+    _check_set(r, ps)
+    return ps
+
+
 def _replace_coordinates(d: GearboxDescription) -> GearboxDescription:
     from dataclasses import replace
 
@@ -528,25 +616,112 @@ def _replace_coordinates(d: GearboxDescription) -> GearboxDescription:
 
 
 def _check_set(r: _Reader, ps: PlanetarySet) -> None:
-    """Buildability: same module for all meshes, equal planet spacing, no planet collision."""
-    if ps.z_ring != ps.z_sun + 2 * ps.z_planet:
-        raise r.fail(
-            "z_ring",
-            f"z_ring must equal z_sun + 2 z_planet = {ps.z_sun + 2 * ps.z_planet} "
-            f"(same module, coaxial), got {ps.z_ring}",
+    """Buildability of one set, per kind (README "Planetary set kinds"), in module units.
+
+    simple: coaxial (z_H = z_S + 2 z_P), equal spacing ((z_S + z_H) / n ∈ ℤ), neighbours clear.
+    stepped planet: coaxial (z_S + z_P = z_H − z_P2), equal spacing
+    ((z_S z_P2 + z_H z_P) / (n·gcd(z_P, z_P2)) ∈ ℤ), neighbours clear.
+    double pinion: the inner/outer pinion centres form a triangle with the set axis, the
+    pinions clear the ring and the sun, equal spacing ((z_H − z_S) / n ∈ ℤ).
+    Ravigneaux: the long pinion as a simple set, the short pinion as a double pinion
+    (triangle, ring clearance), equal spacing of both pairs.
+    A coaxiality error up to ``centre_distance_tolerance`` modules is accepted (profile shift).
+    """
+    if ps.kind in ("simple", "ravigneaux"):
+        _check_coaxial(r, ps, ps.z_sun + ps.z_planet, ps.z_ring - ps.z_planet, "z_ring")
+        _check_spacing(r, ps, ps.z_sun + ps.z_ring, "(z_sun + z_ring)")
+        _check_neighbours(r, ps, ps.z_sun, ps.z_planet)
+    if ps.kind == "stepped_planet":
+        assert ps.z_planet2 is not None
+        _check_coaxial(
+            r, ps, ps.z_sun + ps.z_planet, ps.z_ring - ps.z_planet2, "z_planet_ring", stepped=True
         )
-    if (ps.z_sun + ps.z_ring) % ps.planet_count != 0:
+        g = math.gcd(ps.z_planet, ps.z_planet2)
+        if (ps.z_sun * ps.z_planet2 + ps.z_ring * ps.z_planet) % (ps.planet_count * g) != 0:
+            raise r.fail(
+                "planet_count",
+                f"{ps.planet_count} stepped planets cannot be assembled equally spaced: "
+                f"z_sun z_planet_ring + z_ring z_planet = "
+                f"{ps.z_sun * ps.z_planet2 + ps.z_ring * ps.z_planet} is not divisible by "
+                f"planet_count·gcd(z_planet, z_planet_ring) = {ps.planet_count * g}",
+            )
+        _check_neighbours(r, ps, ps.z_sun, ps.z_planet)
+    if ps.kind == "double_pinion":
+        assert ps.z_planet2 is not None
+        _check_pinion_pair(r, ps, ps.z_sun, ps.z_planet, ps.z_planet2, "z_planet_outer")
+        _check_spacing(r, ps, ps.z_ring - ps.z_sun, "(z_ring − z_sun)")
+    if ps.kind == "ravigneaux":
+        assert ps.z_planet2 is not None and ps.z_sun2 is not None
+        # The short pinion meshes the second sun and the long pinion (whose centre sits at
+        # (z_ring − z_planet)/2): the double-pinion triangle with the long pinion outside.
+        _check_pinion_pair(r, ps, ps.z_sun2, ps.z_planet2, ps.z_planet, "z_planet_short")
+        _check_spacing(r, ps, ps.z_ring - ps.z_sun2, "(z_ring − z_sun_short)")
+
+
+def _check_coaxial(
+    r: _Reader, ps: PlanetarySet, inner: int, outer: int, key: str, stepped: bool = False
+) -> None:
+    """Sun–planet and planet–ring centre distances (in modules: half the tooth sums) agree."""
+    error = abs(inner - outer) / 2
+    tolerance = ps.centre_distance_tolerance
+    if error <= tolerance:
+        return
+    if tolerance:
+        reason = (
+            f"centre distances sun–planet {inner / 2:g} and planet–ring {outer / 2:g} modules "
+            f"differ by {error:g}, more than centre_distance_tolerance = {tolerance:g}"
+        )
+    elif stepped:
+        reason = (
+            f"z_sun + z_planet = {inner} must equal z_ring − z_planet_ring = {outer} "
+            "(same module, coaxial)"
+        )
+    else:
+        reason = (
+            f"z_ring must equal z_sun + 2 z_planet = {ps.z_sun + 2 * ps.z_planet} "
+            f"(same module, coaxial), got {ps.z_ring}"
+        )
+    hint = "" if tolerance else "; profile-shifted teeth need centre_distance_tolerance"
+    raise r.fail(key, reason + hint)
+
+
+def _check_spacing(r: _Reader, ps: PlanetarySet, teeth: int, formula: str) -> None:
+    if teeth % ps.planet_count != 0:
         raise r.fail(
             "planet_count",
             f"{ps.planet_count} planets cannot be assembled equally spaced: "
-            f"(z_sun + z_ring) = {ps.z_sun + ps.z_ring} is not divisible by {ps.planet_count}",
+            f"{formula} = {teeth} is not divisible by {ps.planet_count}",
         )
-    if not planets_fit(ps.z_sun, ps.z_planet, ps.planet_count):
+
+
+def _check_neighbours(r: _Reader, ps: PlanetarySet, z_sun: int, z_planet: int) -> None:
+    if not planets_fit(z_sun, z_planet, ps.planet_count):
         raise r.fail(
             "planet_count",
-            f"{ps.planet_count} planets of {ps.z_planet} teeth collide around a sun of "
-            f"{ps.z_sun} teeth (need (z_sun + z_planet)·sin(π/n) > z_planet + 2)",
+            f"{ps.planet_count} planets of {z_planet} teeth collide around a sun of "
+            f"{z_sun} teeth (need (z_sun + z_planet)·sin(π/n) > z_planet + 2)",
         )
+
+
+def _check_pinion_pair(
+    r: _Reader, ps: PlanetarySet, z_sun: int, z_inner: int, z_outer: int, key: str
+) -> None:
+    """A pinion meshing the sun (inner) and a pinion meshing the ring (outer), meshing each
+    other: their centres and the axis must form a triangle, and neither may touch the gear
+    it does not mesh (tip circles one module outside the pitch circles)."""
+    r_inner = (z_sun + z_inner) / 2
+    r_outer = (ps.z_ring - z_outer) / 2
+    between = (z_inner + z_outer) / 2
+    if not abs(r_outer - r_inner) < between < r_outer + r_inner:
+        raise r.fail(
+            key,
+            f"the pinions cannot mesh: centre radii {r_inner:g} and {r_outer:g} and their "
+            f"distance {between:g} modules form no triangle",
+        )
+    if r_inner + (z_inner + 2) / 2 >= (ps.z_ring - 2) / 2:
+        raise r.fail(key, f"the sun-side pinion ({z_inner} teeth) reaches into the ring")
+    if ps.kind == "double_pinion" and r_outer - (z_outer + 2) / 2 <= (z_sun + 2) / 2:
+        raise r.fail(key, f"the ring-side pinion ({z_outer} teeth) reaches into the sun")
 
 
 def planets_fit(z_sun: int, z_planet: int, count: int) -> bool:
@@ -560,25 +735,55 @@ def _check_references(d: GearboxDescription) -> None:
     f = d.file
     shaft_names = d.shaft_names
     _no_duplicates(f, "shaft", shaft_names)
+    for name in (*shaft_names, *d.planet_names):
+        if name.casefold() == set_kinds.HOUSING:
+            # "housing" as a set member means the fixed housing (no body, ω = 0).
+            where = (
+                f'shaft[name="{name}"].name'
+                if name in shaft_names
+                else next(
+                    f'planetary_set[name="{ps.name}"]'
+                    for ps in d.planetary_sets
+                    if name in ps.pinions
+                )
+            )
+            raise GearsymError(
+                f, where, f"{name!r} is reserved: a set member named housing is fixed"
+            )
     _no_duplicates(f, "planetary_set", [s.name for s in d.planetary_sets])
     _no_duplicates(f, "shift_element", [e.name for e in d.shift_elements])
     _no_duplicates(f, "gear", [g.name for g in d.gears])
     seen_planets: set[str] = set()
     for ps in d.planetary_sets:
         key = f'planetary_set[name="{ps.name}"]'
-        for role in ("sun", "carrier", "ring"):
+        roles = set_kinds.MEMBERS[ps.kind]
+        for role in roles:
             shaft = getattr(ps, role)
-            if shaft not in shaft_names:
-                raise GearsymError(f, f"{key}.{role}", f"unknown shaft {shown(shaft)}")
-        if len({ps.sun, ps.carrier, ps.ring}) != 3:
-            raise GearsymError(f, key, "sun, carrier and ring must be three different shafts")
-        if ps.planet in shaft_names or ps.planet in seen_planets:
-            raise GearsymError(
-                f, f"{key}.planet", f"planet body {ps.planet!r} is already a shaft or a planet"
-            )
-        seen_planets.add(ps.planet)
+            if shaft not in shaft_names and shaft != set_kinds.HOUSING:
+                where = f"{key}.{set_kinds.file_key(ps.kind, role)}"
+                raise GearsymError(f, where, f"unknown shaft {shown(shaft)}")
+        if len(set(ps.members)) != len(roles):
+            what = ", ".join(set_kinds.file_key(ps.kind, role) for role in roles)
+            raise GearsymError(f, key, f"{what} must be {len(roles)} different shafts")
+        for role in set_kinds.PINIONS[ps.kind]:
+            body = getattr(ps, role)
+            if body in shaft_names or body in seen_planets:
+                raise GearsymError(
+                    f,
+                    f"{key}.{set_kinds.file_key(ps.kind, role)}",
+                    f"planet body {body!r} is already a shaft or a planet",
+                )
+            seen_planets.add(body)
     for e in d.shift_elements:
         for shaft in e.shafts:
+            if shaft == set_kinds.HOUSING:
+                key = "shafts" if e.kind == "clutch" else "shaft"
+                raise GearsymError(
+                    f,
+                    f'shift_element[name="{e.name}"].{key}',
+                    "the housing is fixed: an element holding a shaft to it is a brake "
+                    '(kind = "brake", shaft = "<the shaft>")',
+                )
             if shaft not in shaft_names:
                 key = "shafts" if e.kind == "clutch" else "shaft"
                 raise GearsymError(

@@ -106,9 +106,9 @@ def element_short_name(d: GearboxDescription, element: str) -> str:
 
 def element_slip_in_gear(d: GearboxDescription, gear: str, element: str) -> sp.Expr:
     """Slip Δω = ω_a − ω_b of an element in a gear, per unit output speed (exact)."""
-    from gearsym.symbolic.ratios import gear_motions, stationary_ratios
+    from gearsym.symbolic.ratios import gear_motion
 
-    (motion,) = gear_motions(d, d.gear(gear), stationary_ratios(d))
+    motion = gear_motion(d, d.gear(gear))
     speeds = dict(zip(d.shaft_names, motion, strict=True))
     motion_out = speeds[d.output_shaft]
     e = d.element(element)

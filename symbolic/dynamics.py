@@ -30,11 +30,11 @@ def mass_matrix(d: GearboxDescription, sym: GearboxSymbols, kin: Kinematics) -> 
         row = kin.rotation_jacobian[i, :]
         if any(entry != 0 for entry in row):
             m += sym.inertia[body] * (row.T * row)
-    planet_sets = {ps.planet: ps.name for ps in d.planetary_sets}
+    # Every pinion body also orbits with its carrier: m r² ω_C² (2.27, 2.30).
     for i, body in enumerate(kin.bodies):
-        if body in planet_sets:
+        if body in sym.pinion_mass:
             row = kin.translation_jacobian[i, :]
-            m += sym.planet_mass[planet_sets[body]] * (row.T * row)
+            m += sym.pinion_mass[body] * (row.T * row)
     return m
 
 

@@ -17,6 +17,7 @@ import sympy as sp
 from gearsym.symbolic import naming
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.set_kinds import HOUSING
 
 
 def exact(value: float) -> sp.Rational:
@@ -43,6 +44,12 @@ class GearboxSymbols:
     inertia: dict[str, sp.Expr]
     torque: dict[str, sp.Symbol]
     values: dict[sp.Symbol, sp.Rational] = field(default_factory=dict)
+    #: Per set, every tooth count by key (``z_sun``, ``z_planet``, ``z_ring``, ``z_sun2``,
+    #: ``z_planet2``): the meshes of :mod:`gearsym.symbolic.set_kinds` read them from here.
+    teeth: dict[str, dict[str, sp.Expr]] = field(default_factory=dict)
+    #: Lumped mass and orbit radius of every pinion body (m_P, r_T of 2.34 per pinion).
+    pinion_mass: dict[str, sp.Expr] = field(default_factory=dict)
+    pinion_radius: dict[str, sp.Expr] = field(default_factory=dict)
 
 
 def gearbox_symbols(
@@ -58,6 +65,9 @@ def gearbox_symbols(
 
     z_sun, z_planet, z_ring, radius, mass = {}, {}, {}, {}, {}
     inertia: dict[str, sp.Expr] = {}
+    teeth: dict[str, dict[str, sp.Expr]] = {}
+    pinion_mass: dict[str, sp.Expr] = {}
+    pinion_radius: dict[str, sp.Expr] = {}
     for s in d.shafts:
         inertia[s.name] = quantity(
             naming.inertia(s.name), exact(s.inertia.value), symbolic_inertias
@@ -77,6 +87,30 @@ def gearbox_symbols(
         inertia[ps.planet] = quantity(
             naming.inertia(ps.planet), n * exact(ps.planet_inertia.value), symbolic_inertias
         )
+        teeth[j] = {"z_sun": z_sun[j], "z_planet": z_planet[j], "z_ring": z_ring[j]}
+        pinion_mass[ps.planet] = mass[j]
+        pinion_radius[ps.planet] = radius[j]
+        if ps.z_sun2 is not None:
+            teeth[j]["z_sun2"] = quantity(
+                naming.second_sun_teeth(j), sp.Integer(ps.z_sun2), symbolic_teeth
+            )
+        if ps.z_planet2 is not None:
+            teeth[j]["z_planet2"] = quantity(
+                naming.second_planet_teeth(j), sp.Integer(ps.z_planet2), symbolic_teeth
+            )
+        if ps.planet2 is not None:
+            assert ps.planet2_mass and ps.planet2_inertia and ps.planet2_radius
+            pinion_radius[ps.planet2] = quantity(
+                naming.second_carrier_radius(j), exact(ps.planet2_radius.value), symbolic_inertias
+            )
+            pinion_mass[ps.planet2] = quantity(
+                naming.second_planet_mass(j), n * exact(ps.planet2_mass.value), symbolic_inertias
+            )
+            inertia[ps.planet2] = quantity(
+                naming.inertia(ps.planet2),
+                n * exact(ps.planet2_inertia.value),
+                symbolic_inertias,
+            )
     # An element named In or Out would overwrite these keys: gearsym.symbolic.naming.check_names
     # rejects it when the description is loaded.
     torque = {
@@ -96,22 +130,47 @@ def gearbox_symbols(
         inertia=inertia,
         torque=torque,
         values=values,
+        teeth=teeth,
+        pinion_mass=pinion_mass,
+        pinion_radius=pinion_radius,
     )
 
 
 def willis_constraints(d: GearboxDescription, sym: GearboxSymbols) -> sp.Matrix:
-    """G with G·ω = 0: two rows per set, (2.22) sun–planet and (2.23) planet–ring."""
+    """G with G·ω = 0: one row per tooth mesh, set by set (2.22 external, 2.23 internal).
+
+    For a simple set these are the thesis' two rows; compound kinds add a row per further
+    mesh (:mod:`gearsym.symbolic.set_kinds`).
+    """
     index = {b: i for i, b in enumerate(d.body_names)}
-    rows = sp.zeros(2 * len(d.planetary_sets), len(index))
-    for r, ps in enumerate(d.planetary_sets):
-        zs, zp, zh = sym.z_sun[ps.name], sym.z_planet[ps.name], sym.z_ring[ps.name]
-        rows[2 * r, index[ps.sun]] += zs
-        rows[2 * r, index[ps.carrier]] += -(zs + zp)
-        rows[2 * r, index[ps.planet]] += zp
-        rows[2 * r + 1, index[ps.ring]] += zh
-        rows[2 * r + 1, index[ps.carrier]] += -(zh - zp)
-        rows[2 * r + 1, index[ps.planet]] += -zp
+    rows = sp.zeros(sum(len(ps.meshes) for ps in d.planetary_sets), len(index))
+    r = 0
+    for ps in d.planetary_sets:
+        teeth = sym.teeth[ps.name]
+        for mesh in ps.meshes:
+            za, zb = teeth[mesh.z_a], teeth[mesh.z_b]
+            # z_a (ω_a − ω_C) = ∓ z_b (ω_b − ω_C): external meshes reverse the relative
+            # rotation, internal ones keep it.
+            zb_signed = -zb if mesh.internal else zb
+            terms = (
+                (getattr(ps, mesh.a), za),
+                (ps.carrier, -(za + zb_signed)),
+                (getattr(ps, mesh.b), zb_signed),
+            )
+            for body, coefficient in terms:
+                if body != HOUSING:  # a member fixed to the housing: ω = 0, no column
+                    rows[r, index[body]] += coefficient
+            r += 1
     return rows
+
+
+def constraint_blocks(d: GearboxDescription) -> list[tuple[int, int]]:
+    """Row range [start, stop) of each set's meshes in :func:`willis_constraints`."""
+    blocks, start = [], 0
+    for ps in d.planetary_sets:
+        blocks.append((start, start + len(ps.meshes)))
+        start += len(ps.meshes)
+    return blocks
 
 
 def coordinate_transform(
@@ -135,18 +194,26 @@ def coordinate_transform(
     progress = True
     while progress and len(rows) < len(bodies):
         progress = False
-        for r, ps in enumerate(d.planetary_sets):
-            members = (ps.sun, ps.carrier, ps.ring, ps.planet)
+        for ps, (start, stop) in zip(d.planetary_sets, constraint_blocks(d), strict=True):
+            members = tuple(m for m in (*ps.members, *ps.pinions) if m != HOUSING)
             unknown = [m for m in members if m not in rows]
-            if not unknown or len(unknown) > 2:
+            size = stop - start
+            if not unknown or len(unknown) > size:
                 continue
-            block = constraints[2 * r : 2 * r + 2, :]
-            a = sp.Matrix([[block[q, index[m]] for m in unknown] for q in range(2)])
-            known = sp.zeros(2, f)
+            block = constraints[start:stop, :]
+            a = sp.Matrix([[block[q, index[m]] for m in unknown] for q in range(size)])
+            known = sp.zeros(size, f)
             for m in members:
                 if m in rows:
                     known -= block[:, index[m]] * rows[m]
-            solution = _solve_small(a, known)
+            if size == 2:
+                solution = _solve_small(a, known)
+            else:
+                # A compound set: its members are determined once the block has full column
+                # rank in the unknowns; otherwise wait for more known members.
+                if a.rank(simplify=True) < len(unknown):
+                    continue
+                solution = _solve_block(a, known)
             if solution is None:
                 raise GearsymError(
                     d.file,
@@ -184,6 +251,17 @@ def _solve_small(a: sp.Matrix, rhs: sp.Matrix) -> list[sp.Matrix] | None:
     if any(sp.cancel(v) != 0 for v in a[other, 0] * x - rhs[other, :]):
         return None
     return [x]
+
+
+def _solve_block(a: sp.Matrix, rhs: sp.Matrix) -> list[sp.Matrix] | None:
+    """Rows X with a·X = rhs for a full-column-rank block; None when inconsistent."""
+    try:
+        x, free = a.gauss_jordan_solve(rhs)
+    except ValueError:
+        return None
+    assert free.shape[0] == 0
+    x = x.applyfunc(sp.cancel)
+    return [x[i, :] for i in range(a.shape[1])]
 
 
 def _solve_remaining(
@@ -243,10 +321,14 @@ def kinematics(d: GearboxDescription, sym: GearboxSymbols) -> Kinematics:
     position = sp.zeros(len(d.body_names), 1)
     translation = sp.zeros(len(d.body_names), len(d.coordinates))
     for ps in d.planetary_sets:
-        i = index[ps.planet]
+        if ps.carrier == HOUSING:
+            continue  # pinions on a fixed carrier spin in place: no orbit
         carrier_row = transform[index[ps.carrier], :]
-        position[i] = sym.carrier_radius[ps.name] * orientation[index[ps.carrier]]
-        translation[i, :] = sym.carrier_radius[ps.name] * carrier_row
+        for pinion in ps.pinions:
+            i = index[pinion]
+            radius = sym.pinion_radius[pinion]
+            position[i] = radius * orientation[index[ps.carrier]]
+            translation[i, :] = radius * carrier_row
     return Kinematics(
         bodies=d.body_names,
         coordinates=d.coordinates,

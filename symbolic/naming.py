@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.set_kinds import file_key
 
 if TYPE_CHECKING:
     from gearsym.symbolic.description import GearboxDescription
@@ -70,6 +71,31 @@ def planet_mass(planetary_set: str) -> str:
 def stationary_ratio(planetary_set: str) -> str:
     """k = z_ring / z_sun of a set (symbolic in the tooth search)."""
     return f"k_{planetary_set}"
+
+
+def second_sun_teeth(planetary_set: str) -> str:
+    """Teeth of the Ravigneaux sun meshing the short pinions."""
+    return f"z_S2_{planetary_set}"
+
+
+def second_planet_teeth(planetary_set: str) -> str:
+    """Teeth of the second pinion (outer / short) or of the ring-side step of a stepped planet."""
+    return f"z_P2_{planetary_set}"
+
+
+def second_carrier_radius(planetary_set: str) -> str:
+    """Orbit radius of the second pinion."""
+    return f"r_T2_{planetary_set}"
+
+
+def second_planet_mass(planetary_set: str) -> str:
+    """Lumped mass of the second pinions of a set."""
+    return f"m_P2_{planetary_set}"
+
+
+def second_stationary_ratio(planetary_set: str) -> str:
+    """k2 = z_ring / z_sun2 of a Ravigneaux set (its short-pinion pair)."""
+    return f"k2_{planetary_set}"
 
 
 INPUT = "In"  # key of the input torque among the element torques (T_In)
@@ -335,6 +361,9 @@ def check_names(d: GearboxDescription) -> None:
     bodies = {s.name: (f'shaft[name="{s.name}"].name', f"shaft {s.name!r}") for s in d.shafts}
     for ps in d.planetary_sets:
         bodies[ps.planet] = (f'planetary_set[name="{ps.name}"].planet', f"planet {ps.planet!r}")
+        if ps.planet2 is not None:
+            key = f'planetary_set[name="{ps.name}"].{file_key(ps.kind, "planet2")}'
+            bodies[ps.planet2] = (key, f"planet {ps.planet2!r}")
     for body, (key, of) in bodies.items():
         names.add(angle(body), f"angle of {of}", key)
         names.add(speed(body), f"speed of {of}", key)
@@ -352,6 +381,14 @@ def check_names(d: GearboxDescription) -> None:
         names.add(carrier_radius(ps.name), f"carrier radius {of}", key)
         names.add(planet_mass(ps.name), f"planet mass {of}", key)
         names.add(stationary_ratio(ps.name), f"stationary ratio {of}", key)
+        if ps.z_sun2 is not None:
+            names.add(second_sun_teeth(ps.name), f"second sun teeth {of}", key)
+            names.add(second_stationary_ratio(ps.name), f"second stationary ratio {of}", key)
+        if ps.z_planet2 is not None:
+            names.add(second_planet_teeth(ps.name), f"second planet teeth {of}", key)
+        if ps.planet2 is not None:
+            names.add(second_carrier_radius(ps.name), f"second carrier radius {of}", key)
+            names.add(second_planet_mass(ps.name), f"second planet mass {of}", key)
     elements = [e.name for e in d.shift_elements]
     for e in elements:
         key = f'shift_element[name="{e}"].name'

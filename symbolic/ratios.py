@@ -4,7 +4,9 @@ Adding the two Willis constraints (2.22) and (2.23) of a set eliminates its plan
 
     z_S ω_S + z_H ω_H − (z_S + z_H) ω_T = 0,   i.e.   ω_S + k ω_H − (1 + k) ω_T = 0
 
-with the stationary ratio k = z_H / z_S. A gear closes shift elements (a clutch ties ω_a = ω_b,
+with the stationary ratio k = z_H / z_S. Compound kinds (double pinion, Ravigneaux, stepped
+planet) give one such relation per sun–ring pair, with the sign of their stationary ratio
+(:mod:`gearsym.symbolic.set_kinds`). A gear closes shift elements (a clutch ties ω_a = ω_b,
 a brake holds ω_b = 0); a drivable gear leaves exactly one degree of freedom and its ratio is
 ω_in / ω_out along it. Ratios depend on the sets only through k, which is what
 :mod:`gearsym.symbolic.teeth` searches over.
@@ -18,30 +20,50 @@ import sympy as sp
 from gearsym.symbolic import naming
 from gearsym.symbolic.description import Gear, GearboxDescription
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.set_kinds import HOUSING, Relation, relations
 from gearsym.symbolic.sympy_utils import exact_nullspace
 
 
+def _symbol_name(relation: Relation, planetary_set: str) -> str:
+    if relation.key == planetary_set:
+        return naming.stationary_ratio(planetary_set)
+    return naming.second_stationary_ratio(planetary_set)
+
+
 def stationary_ratio_symbols(d: GearboxDescription) -> dict[str, sp.Symbol]:
-    """k_<set> = z_ring / z_sun as positive symbols, one per planetary set."""
+    """k of every sun–ring pair as positive symbols: k_<set>, and k2_<set> for the second
+    pair of a Ravigneaux set (keyed by :attr:`~gearsym.symbolic.set_kinds.Relation.key`)."""
     return {
-        ps.name: sp.Symbol(naming.stationary_ratio(ps.name), positive=True)
+        rel.key: sp.Symbol(_symbol_name(rel, ps.name), positive=True)
         for ps in d.planetary_sets
+        for rel in relations(ps)
     }
 
 
 def stationary_ratios(d: GearboxDescription) -> dict[str, sp.Rational]:
-    """Exact k = z_ring / z_sun of every set from the description's tooth counts."""
-    return {ps.name: sp.Rational(ps.z_ring, ps.z_sun) for ps in d.planetary_sets}
+    """Exact k of every sun–ring pair from the teeth (z_ring / z_sun for a simple set)."""
+    return {
+        rel.key: sp.Rational(rel.k.numerator, rel.k.denominator)
+        for ps in d.planetary_sets
+        for rel in relations(ps)
+    }
 
 
 def shaft_constraint_matrix(d: GearboxDescription, k: dict[str, sp.Expr]) -> sp.Matrix:
-    """One row per set: ω_S + k ω_H − (1 + k) ω_T = 0 over the shaft speeds (file order)."""
+    """One row per sun–ring pair over the shaft speeds (file order):
+    ω_S + k ω_H − (1 + k) ω_T = 0 for a negative stationary ratio (i0 = −k),
+    ω_S − k ω_H − (1 − k) ω_T = 0 for a positive one (i0 = +k, double pinion)."""
     index = {name: i for i, name in enumerate(d.shaft_names)}
-    rows = sp.zeros(len(d.planetary_sets), len(index))
-    for r, ps in enumerate(d.planetary_sets):
-        rows[r, index[ps.sun]] += 1
-        rows[r, index[ps.ring]] += k[ps.name]
-        rows[r, index[ps.carrier]] -= 1 + k[ps.name]
+    pairs = [rel for ps in d.planetary_sets for rel in relations(ps)]
+    rows = sp.zeros(len(pairs), len(index))
+    for r, rel in enumerate(pairs):
+        if rel.sign < 0:
+            coefficients = ((rel.sun, 1), (rel.ring, k[rel.key]), (rel.carrier, -(1 + k[rel.key])))
+        else:
+            coefficients = ((rel.sun, 1), (rel.ring, -k[rel.key]), (rel.carrier, -(1 - k[rel.key])))
+        for member, coefficient in coefficients:
+            if member != HOUSING:  # the housing does not turn: its column is ω = 0
+                rows[r, index[member]] += coefficient
     return rows
 
 
@@ -72,6 +94,8 @@ class GearRatio:
     ratio: sp.Rational | None
     expected: float | None
     degrees_of_freedom: int
+    #: Internal shafts the gear leaves free while ω_in/ω_out is fixed (speed undetermined).
+    free_shafts: tuple[str, ...] = ()
 
     @property
     def neutral(self) -> bool:
@@ -107,24 +131,66 @@ def gear_ratio(d: GearboxDescription, gear: Gear, k: dict[str, sp.Expr] | None =
                 f"it leaves {dof} degree(s) of freedom and the output follows the input",
             )
         return GearRatio(gear.name, gear.closed, None, gear.ratio, dof)
-    if dof != 1:
-        what = "locks the gearbox (0 degrees of freedom)" if dof == 0 else f"leaves {dof}"
-        if dof > 1:
-            what += " degrees of freedom"
+    if dof == 0:
         raise GearsymError(
             d.file,
             key,
-            f"gear {gear.name!r} (closed {closed}) {what}; a gear must leave exactly 1 "
-            "(mark it neutral = true if it is a neutral)",
+            f"gear {gear.name!r} (closed {closed}) locks the gearbox (0 degrees of freedom); "
+            "a gear must leave exactly 1 (mark it neutral = true if it is a neutral)",
         )
-    motion = motions[0]
+    basis = sp.Matrix.hstack(*motions)
+    free = _free_shafts(d, basis, i_in)
+    if dof > 1 and _output_free_with_input_held(motions, i_in, i_out):
+        raise GearsymError(
+            d.file,
+            key,
+            f"gear {gear.name!r} (closed {closed}) leaves {dof} degrees of freedom: with the "
+            f"input held, shaft(s) {', '.join(free)} can still turn, the output among them; a "
+            "gear must fix the output (mark it neutral = true if it is a neutral)",
+        )
+    # One motion with the input turning; with idle shafts free (dof > 1) every such motion
+    # has the same ω_in/ω_out, because holding the input holds the output (checked above).
+    motion = next((basis * c for c in _input_moving(basis, i_in)), motions[0])
     w_in, w_out = sp.simplify(motion[i_in]), sp.simplify(motion[i_out])
     if w_out == 0 or w_in == 0:
         which = "output" if w_out == 0 else "input"
         raise GearsymError(
             d.file, key, f"gear {gear.name!r} (closed {closed}) holds the {which} shaft at rest"
         )
-    return GearRatio(gear.name, gear.closed, sp.cancel(w_in / w_out), gear.ratio, dof)
+    return GearRatio(gear.name, gear.closed, sp.cancel(w_in / w_out), gear.ratio, dof, free)
+
+
+def _input_moving(basis: sp.Matrix, i_in: int) -> list[sp.Matrix]:
+    """Unit combinations of the basis whose motion turns the input."""
+    return [sp.eye(basis.cols)[:, j] for j in range(basis.cols) if sp.simplify(basis[i_in, j]) != 0]
+
+
+def _free_shafts(d: GearboxDescription, basis: sp.Matrix, i_in: int) -> tuple[str, ...]:
+    """Shafts that can turn while the input is held (none in a gear of one degree of
+    freedom); their speed is not determined by the input speed."""
+    held = exact_nullspace(sp.Matrix([basis.row(i_in)]))
+    return tuple(
+        name
+        for i, name in enumerate(d.shaft_names)
+        if any(sp.simplify((basis.row(i) * c)[0]) != 0 for c in held)
+    )
+
+
+def gear_motion(d: GearboxDescription, gear: Gear) -> sp.Matrix:
+    """The one shaft-speed motion of a drivable gear (exact), for the steady-gear uses
+    (element slips, initial states, speed plans). Raises :class:`GearsymError` naming the
+    free shafts when the gear leaves idle shafts free: their speeds, and so a steady state
+    of the gear, are not determined by the kinematics."""
+    motions = gear_motions(d, gear, stationary_ratios(d))
+    if len(motions) == 1:
+        return motions[0]
+    free = _free_shafts(d, sp.Matrix.hstack(*motions), d.shaft_names.index(d.input_shaft))
+    raise GearsymError(
+        d.file,
+        f'gear[name="{gear.name}"].closed',
+        f"gear {gear.name!r} leaves shaft(s) {', '.join(free)} free (speed undetermined by "
+        "the kinematics); its steady state cannot be derived",
+    )
 
 
 def _output_free_with_input_held(motions: list[sp.Matrix], i_in: int, i_out: int) -> bool:

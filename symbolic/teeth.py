@@ -91,6 +91,16 @@ def fit_teeth(
     :class:`GearsymError` when the search would exceed ``max_partial`` partial assignments.
     """
     ranges = ranges or ToothRanges()
+    for ps in d.planetary_sets:
+        if ps.kind != "simple":
+            # The search lists buildable simple sets (z_ring = z_sun + 2 z_planet); the
+            # buildability of compound kinds (pinion triangles, two suns) is not searched.
+            raise GearsymError(
+                d.file,
+                f'planetary_set[name="{ps.name}"].kind',
+                f"fit-teeth searches simple sets only; this set is {ps.kind!r} "
+                "(give its teeth, `gearsym ratios` checks them)",
+            )
     tol = _tolerance(d, tolerance)
     targets = {g.name: g.ratio for g in d.gears if not g.neutral and g.ratio is not None}
     if not targets:

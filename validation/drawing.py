@@ -33,6 +33,7 @@ from typing import Any
 import sympy as sp
 from gearsym.symbolic.description import GearboxDescription, PlanetarySet
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.set_kinds import HOUSING, relations
 
 __all__ = [
     "DRAW_KINDS",
@@ -130,12 +131,23 @@ class LeverDiagram:
 
 def set_positions(ps: PlanetarySet) -> dict[str, Fraction]:
     """Sun 0, carrier z_H, ring z_H + z_S: the lever of one simple set (Benford & Leising;
-    the spacing follows from the Willis constraints (2.22)+(2.23), module docstring)."""
-    return {
-        ps.sun: Fraction(0),
-        ps.carrier: Fraction(ps.z_ring),
-        ps.ring: Fraction(ps.z_ring + ps.z_sun),
-    }
+    the spacing follows from the Willis constraints (2.22)+(2.23), module docstring).
+
+    Any kind from its shaft relations ω_S − i0 ω_H − (1 − i0) ω_C = 0: sun 0, carrier k,
+    ring k + 1 for i0 = −k and k − 1 for i0 = +k (the ring of a double pinion sits between
+    sun and carrier); a Ravigneaux set's second sun lands at k + k2.
+    Scaled by z_S so that a simple set keeps its tooth-unit positions.
+    """
+    rels = relations(ps)
+    first = rels[0]
+    scale = Fraction(ps.z_sun)
+    carrier = first.k * scale
+    ring = (first.k - first.sign) * scale
+    positions = {first.sun: Fraction(0), first.carrier: carrier, first.ring: ring}
+    for rel in rels[1:]:
+        # Same carrier and ring: the second sun extrapolates the lever through them.
+        positions[rel.sun] = carrier + rel.k * (ring - carrier) / rel.sign
+    return positions
 
 
 def member_name(role: str, set_name: str) -> str:
@@ -145,7 +157,10 @@ def member_name(role: str, set_name: str) -> str:
 
 
 def _members(ps: PlanetarySet) -> dict[str, str]:
-    return {getattr(ps, role): member_name(role, ps.name) for role in ROLES}
+    members = {getattr(ps, role): member_name(role, ps.name) for role in ROLES}
+    if ps.sun2 is not None:
+        members[ps.sun2] = member_name("sun", f"{ps.name}_short")
+    return members
 
 
 def lever_groups(d: GearboxDescription) -> list[tuple[list[PlanetarySet], dict[str, Fraction]]]:
@@ -359,10 +374,16 @@ def speed_plan(d: GearboxDescription, gear: str) -> SpeedPlan:
     for i, shaft in enumerate(shafts):
         value = sp.expand(combined[i].subs(chosen))
         speeds[shaft] = _fraction(value) if value.is_number else None
+    if _uses_housing(d):
+        speeds[HOUSING] = Fraction(0)  # a member fixed to the housing: a held node
     out = speeds[d.output_shaft]
     ratio = None if g.neutral or not out else speeds[d.input_shaft] / out
     held = tuple(d.element(e).b for e in g.closed if d.element(e).kind == "brake")
     return SpeedPlan(g.name, g.closed, g.neutral, speeds, ratio, g.ratio, held)
+
+
+def _uses_housing(d: GearboxDescription) -> bool:
+    return any(HOUSING in ps.members for ps in d.planetary_sets)
 
 
 def speed_plans(d: GearboxDescription) -> list[SpeedPlan]:
@@ -445,8 +466,10 @@ SET_PITCH = 3.2
 
 def stick_diagram(d: GearboxDescription) -> StickDiagram:
     """Stick diagram of any description (thesis Fig. 2.1 shows the built-in gearbox)."""
-    levels = {s: -SHAFT_STEP * (i + 1) for i, s in enumerate(d.shaft_names)}
-    attach: dict[str, list[float]] = {s: [] for s in d.shaft_names}
+    # A member fixed to the housing gets its own line, drawn like a shaft (labelled housing).
+    lines = d.shaft_names + ((HOUSING,) if _uses_housing(d) else ())
+    levels = {s: -SHAFT_STEP * (i + 1) for i, s in enumerate(lines)}
+    attach: dict[str, list[float]] = {s: [] for s in lines}
     segments: list[Segment] = []
     planets = []
     labels: list[Label] = []

@@ -173,13 +173,13 @@ def smooth_inputs(model: Model, t_ramp: float = T_END) -> Callable[[float], np.n
 
 def initial_state(d: GearboxDescription, model: Model, gear: str, speed: float) -> np.ndarray:
     """Every shaft state at the speeds of ``gear`` at vehicle speed ``speed`` [m/s]."""
-    from gearsym.symbolic.ratios import gear_motions, stationary_ratios
+    from gearsym.symbolic.ratios import gear_motion
 
     r_dyn = float(d.vehicle["r_dyn"].value)
     i_d = float(d.drivetrain["i_D"].value)
     omega_c = speed / r_dyn
     omega_out = omega_c * i_d
-    (motion,) = gear_motions(d, d.gear(gear), stationary_ratios(d))
+    motion = gear_motion(d, d.gear(gear))
     speeds = dict(zip(d.shaft_names, motion, strict=True))
     per_out = {s: float(v / speeds[d.output_shaft]) for s, v in speeds.items()}
     values = []
