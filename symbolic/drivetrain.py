@@ -160,6 +160,34 @@ def quantity(d: GearboxDescription, section: str, key: str) -> Quantity:
     return values[key]
 
 
+def friction_symbols(
+    d: GearboxDescription, element: str, why: str = "needed for mu inputs"
+) -> tuple[sp.Expr, Variable, Variable]:
+    """(gain 2 N_disc r_m, normal-force input F_N, friction-coefficient parameter μ) of an
+    element: its sliding torque is k_sign · gain · μ · F_N (2.69), (3.14). ``why`` completes the
+    one-line error when the element lacks n_disc or r_m."""
+    e = d.element(element)
+    if e.n_disc is None or e.r_m is None:
+        raise GearsymError(d.file, f'shift_element[name="{element}"].n_disc', f"missing ({why})")
+    short = element_short_name(d, element)
+    mu_default = quantity(d, "friction", "mu_nominal")
+    mu = Variable(
+        naming.friction_coefficient(short),
+        sp.Symbol(naming.friction_coefficient(short), positive=True),
+        "1",
+        f"friction coefficient of {element} (2.69)",
+        mu_default.value,
+        mu_default.source,
+    )
+    normal = Variable(
+        naming.normal_force(short),
+        sp.Symbol(naming.normal_force(short)),
+        "N",
+        f"normal force on {element} (2.69)",
+    )
+    return 2 * e.n_disc * exact(e.r_m.value), normal, mu
+
+
 def drivetrain_parameters(d: GearboxDescription) -> tuple[Variable, ...]:
     """The model parameters with defaults, units and sources from the description."""
     section = {
@@ -322,29 +350,8 @@ def _derive_parts(
     if slip_signs is not None:
         # Sliding friction torque T = k_sign 2 N_disc r_m μ F_N (2.69, 3.14) with the known
         # slip direction as k_sign; μ is a parameter, F_N a known input.
-        mu_default = quantity(d, "friction", "mu_nominal")
         for e in torque_elements:
-            element = d.element(e)
-            if element.n_disc is None or element.r_m is None:
-                raise GearsymError(
-                    d.file, f'shift_element[name="{e}"].n_disc', "missing (needed for mu inputs)"
-                )
-            short = element_short_name(d, e)
-            mu = Variable(
-                naming.friction_coefficient(short),
-                sp.Symbol(naming.friction_coefficient(short), positive=True),
-                "1",
-                f"friction coefficient of {e} (2.69)",
-                mu_default.value,
-                mu_default.source,
-            )
-            normal = Variable(
-                naming.normal_force(short),
-                sp.Symbol(naming.normal_force(short)),
-                "N",
-                f"normal force on {e} (2.69)",
-            )
-            gain = 2 * element.n_disc * exact(element.r_m.value)
+            gain, normal, mu = friction_symbols(d, e, "needed for mu inputs")
             torque[e] = slip_signs[e] * gain * mu.symbol * normal.symbol
             friction[e] = (torque[e], normal, mu)
         params = params + tuple(friction[e][2] for e in torque_elements)

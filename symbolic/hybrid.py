@@ -59,13 +59,12 @@ from gearsym.symbolic.drivetrain import (
     drivetrain_model,
     drivetrain_parameters,
     drivetrain_parts,
-    element_short_name,
+    friction_symbols,
     locked_projection,
     quantity,
     shift_spec,
 )
 from gearsym.symbolic.dynamics import GearboxDynamics, gearbox_dynamics
-from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.kinematics import exact
 from gearsym.symbolic.model import Model, Variable
 
@@ -229,30 +228,9 @@ def mode_coordinates(
 def _friction_symbols(d: GearboxDescription, element: str) -> tuple[sp.Expr, Variable, Variable]:
     """(gain 2 N_disc r_m, F_N input, μ parameter) of an element, named as drivetrain_parts
     names them (2.69), (3.14)."""
-    e = d.element(element)
-    if e.n_disc is None or e.r_m is None:
-        raise GearsymError(
-            d.file,
-            f'shift_element[name="{element}"].n_disc',
-            "missing (the hybrid shift model needs n_disc and r_m of the swapping elements)",
-        )
-    short = element_short_name(d, element)
-    mu_default = quantity(d, "friction", "mu_nominal")
-    mu = Variable(
-        naming.friction_coefficient(short),
-        sp.Symbol(naming.friction_coefficient(short), positive=True),
-        "1",
-        f"friction coefficient of {element} (2.69)",
-        mu_default.value,
-        mu_default.source,
+    return friction_symbols(
+        d, element, "the hybrid shift model needs n_disc and r_m of the swapping elements"
     )
-    normal = Variable(
-        naming.normal_force(short),
-        sp.Symbol(naming.normal_force(short)),
-        "N",
-        f"normal force on {element} (2.69)",
-    )
-    return 2 * e.n_disc * exact(e.r_m.value), normal, mu
 
 
 def _slip(d: GearboxDescription, body_speeds: Mapping[str, sp.Expr], element: str) -> sp.Expr:
