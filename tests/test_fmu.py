@@ -16,9 +16,12 @@ import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
+import fmpy  # a pinned dev dependency: missing, the tests fail rather than skip
 import numpy as np
 import pytest
 import sympy as sp
+from fmpy.build import build_platform_binary
+from fmpy.validation import validate_fmu
 from gearsym.symbolic.codegen import emit_casadi
 from gearsym.symbolic.fmu import fmu_archive, fmu_files
 from gearsym.symbolic.generate import PARAMETER_BOUNDS, gearbox_models
@@ -29,10 +32,6 @@ from gearsym.validation.c_check import STRICT_FLAGS, write_files
 from gearsym.validation.simulate import simulate
 
 from gearsym.cli import main
-
-fmpy = pytest.importorskip("fmpy")
-from fmpy.build import build_platform_binary  # noqa: E402
-from fmpy.validation import validate_fmu  # noqa: E402
 
 MODELS = ("full", "shift_2_3", "shift_2_3_mu")
 
