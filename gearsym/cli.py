@@ -22,6 +22,7 @@ from gearsym import (
     cmd_draw,
     cmd_dynamics,
     cmd_estimate,
+    cmd_export,
     cmd_gearbox,
     cmd_generate,
     cmd_observability,
@@ -41,6 +42,7 @@ COMMAND_MODULES = (
     cmd_analysis,
     cmd_estimate,
     cmd_draw,
+    cmd_export,
 )
 
 

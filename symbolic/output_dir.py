@@ -17,10 +17,11 @@ staging directory in only when everything is written. The rules:
   run on the same ``DIR``; an old ``DIR`` left aside by a run killed between its two renames
   (``.DIR.gearsym-old-*``) is put back.
 
-A command that writes one picture (``gearsym draw --out FILE.svg``) goes through
-:class:`OutputFile`, with the same rules for a single file. A lone file has no ``MANIFEST``
-beside it, so it carries its own proof of origin: a signature that holds the SHA-256 of the
-rest of the file (an SVG: a closing XML comment; a PNG: a ``tEXt`` chunk before ``IEND``).
+A command that writes one file (``gearsym draw --out FILE.svg``, ``gearsym export-fmu --out
+FILE.fmu``) goes through :class:`OutputFile`, with the same rules for a single file. A lone file
+has no ``MANIFEST`` beside it, so it carries its own proof of origin: a signature that holds the
+SHA-256 of the rest of the file (an SVG: a closing XML comment; a PNG: a ``tEXt`` chunk before
+``IEND``; an FMU, a zip archive: the archive comment, which every zip reader skips).
 ``FILE`` is replaced only if it does not exist or its signature matches its content: a user's
 file, or a gearsym picture edited since, is refused. The file is written next to ``FILE``
 (``.FILE.gearsym-staging-*``) and renamed over it in one atomic step, under the same lock.
@@ -43,6 +44,7 @@ from gearsym.symbolic.errors import GearsymError
 
 __all__ = [
     "MANIFEST",
+    "PICTURE_SUFFIXES",
     "SIGNED_SUFFIXES",
     "OutputDir",
     "OutputFile",
@@ -429,7 +431,14 @@ class OutputDir:
 # ----------------------------------------------------------------------------- single files
 
 #: Formats :class:`OutputFile` can sign (lower-case suffixes).
-SIGNED_SUFFIXES = (".svg", ".png")
+SIGNED_SUFFIXES = (".svg", ".png", ".fmu")
+#: What :class:`OutputFile` accepts unless told otherwise (``gearsym draw``).
+PICTURE_SUFFIXES = (".svg", ".png")
+_ZIP_END = b"PK\x05\x06"  # end-of-central-directory record: 22 bytes, then the comment
+_ZIP_SIGNATURE = re.compile(
+    rb"gearsym ([a-z][a-z-]*) output: do not edit, regenerate with gearsym \1; "
+    rb"sha256 ([0-9a-f]{64}) of the archive without this comment"
+)
 _PNG_HEADER = b"\x89PNG\r\n\x1a\n"
 _PNG_KEYWORD = b"gearsym"
 _SVG_SIGNATURE = re.compile(
@@ -477,6 +486,17 @@ def sign_file(data: bytes, suffix: str, command: str) -> bytes:
         iend = chunks[-1][0]
         text = _PNG_KEYWORD + b"\0" + f"{command} sha256 {digest}".encode("ascii")
         return data[:iend] + _png_chunk(b"tEXt", text) + data[iend:]
+    if suffix.lower() == ".fmu":
+        # The archive comment closes a zip, its length the last field before it: an archive
+        # written without a comment ends with an end record whose length field is 0.
+        at = len(data) - 22
+        if at < 0 or data[at : at + 4] != _ZIP_END or data[-2:] != b"\0\0":
+            raise ValueError("not a zip archive without a comment")
+        comment = (
+            f"gearsym {command} output: do not edit, regenerate with gearsym {command}; "
+            f"sha256 {digest} of the archive without this comment"
+        ).encode("ascii")
+        return data[:-2] + len(comment).to_bytes(2, "little") + comment
     raise ValueError(f"cannot sign a {suffix!r} file")
 
 
@@ -496,6 +516,16 @@ def signed_by_gearsym(data: bytes, suffix: str) -> bool:
         if keyword != _PNG_KEYWORD or match is None:
             return False
         return hashlib.sha256(data[:start] + data[end:]).hexdigest().encode() == match[1]
+    if suffix.lower() == ".fmu":
+        at = data.rfind(_ZIP_END)
+        if at < 0 or at + 22 > len(data):
+            return False
+        length = int.from_bytes(data[at + 20 : at + 22], "little")
+        match = _ZIP_SIGNATURE.fullmatch(data[at + 22 :])
+        if at + 22 + length != len(data) or match is None:
+            return False
+        unsigned = data[: at + 20] + b"\0\0"
+        return hashlib.sha256(unsigned).hexdigest().encode() == match[2]
     return False
 
 
@@ -525,18 +555,28 @@ class OutputFile(OutputDir):
             data = render(...)
             path = out.commit(data)   # signed, renamed over target
 
-    The suffix must be one of :data:`SIGNED_SUFFIXES`. Leaving the block without
-    :meth:`commit` leaves ``target`` as it was.
+    The suffix must be one of ``suffixes`` (a subset of :data:`SIGNED_SUFFIXES`; default the
+    pictures). Leaving the block without :meth:`commit` leaves ``target`` as it was.
     """
 
-    def __init__(self, target: str | Path, command: str, *, shown: str | None = None) -> None:
+    def __init__(
+        self,
+        target: str | Path,
+        command: str,
+        *,
+        shown: str | None = None,
+        suffixes: tuple[str, ...] = PICTURE_SUFFIXES,
+    ) -> None:
+        unknown = [s for s in suffixes if s not in SIGNED_SUFFIXES]
+        if unknown or not suffixes:
+            raise ValueError(f"cannot sign {unknown or 'nothing'}; signable: {SIGNED_SUFFIXES}")
+        expected = " or ".join(suffixes)
         if str(target).strip() == "":
-            raise GearsymError("command line", "--out", "is empty; name a .svg or .png file")
+            raise GearsymError("command line", "--out", f"is empty; name a {expected} file")
         super().__init__(target, command, shown=shown)
-        if self.target.suffix.lower() not in SIGNED_SUFFIXES:
+        if self.target.suffix.lower() not in suffixes:
             raise self._error(
-                f"unsupported file type {self.target.suffix or '(none)'!r}; "
-                f"expected {' or '.join(SIGNED_SUFFIXES)}"
+                f"unsupported file type {self.target.suffix or '(none)'!r}; expected {expected}"
             )
 
     def _check(self) -> None:
