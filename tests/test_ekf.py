@@ -141,3 +141,131 @@ def test_unknown_augmented_parameter_is_one_line(aug):
         augmented_model(d, "2-3", parameters=("m_veh", "T_In"))
     with pytest.raises(GearsymError, match="intensities"):
         augmented_model(d, "2-3", intensities={"omega_9": 1.0})
+
+
+# ------------------------------------------------------- the filter on the reference (4.3)
+
+
+@pytest.fixture(scope="module")
+def reference():
+    from gearsym.validation.scenario import load_scenario
+    from gearsym.validation.simulate import simulate
+
+    d = load_description()
+    return d, simulate(d, load_scenario(d, None))
+
+
+@pytest.fixture(scope="module")
+def ekf_run(reference, aug, discrete):
+    from gearsym.validation.estimation import run_ekf
+
+    d, result = reference
+    return run_ekf(d, result, sample_time=0.01, seed=0, aug=aug, discrete=discrete)
+
+
+def test_nees_of_one_run_is_consistent_with_its_chi2_distribution(ekf_run):
+    # a consistent filter has NEES_k ~ χ²(dof_k): 95 % of the samples inside the per-sample
+    # 95 % interval, and a time-averaged NEES near its dof. One run's errors are correlated in
+    # time (the filter's memory is ~0.1 s, ten samples), so the average scatters more than the
+    # independent-sample band: a factor 2 either side is what "reasonable" means here.
+    assert ekf_run.nees_inside() > 0.8
+    dof = float(np.mean(ekf_run.nees_dof))
+    assert 0.5 * dof < ekf_run.nees_mean < 2.0 * dof
+    assert np.all(np.isfinite(ekf_run.nees))
+    # NIS: three speeds per sample, χ²(3) has mean 3
+    assert 1.5 < float(np.mean(ekf_run.nis)) < 6.0
+    # Joseph form: the covariance stays symmetric positive definite
+    assert ekf_run.min_eigenvalue > 0
+
+
+def test_mass_converges_towards_the_truth_from_30_percent_light(ekf_run):
+    (mass,) = [p for p in ekf_run.parameters if p.name == "m_veh"]
+    assert mass.initial == pytest.approx(0.7 * mass.truth)
+    error = abs(mass.estimate - mass.truth)
+    assert error < 0.5 * abs(mass.initial - mass.truth)  # moved well towards the truth
+    assert error < 3 * mass.sigma  # and the truth lies inside the filter's own 3σ
+    assert mass.sigma < 0.5 * 0.3 * mass.truth  # the data halved the prior's σ at least
+
+
+def test_mu_is_frozen_while_its_element_does_not_slide(ekf_run, reference):
+    names = list(ekf_run.state_names)
+    for mu, slides in (("mu_38", (0.267, 0.4495)), ("mu_05", (0.3, 0.577))):
+        j = names.index(mu)
+        sliding = ekf_run.scored[:, j]
+        t_slide = ekf_run.t[sliding]
+        # the reference's sliding windows (K38 from the torque phase until it opens, B05 from
+        # its fill until it locks), to a sample
+        assert t_slide[0] == pytest.approx(slides[0], abs=0.011)
+        assert t_slide[-1] == pytest.approx(slides[1], abs=0.011)
+        before = ekf_run.t < t_slide[0]
+        # before the element first slides: the prior, to the bit (0.12 nominal, σ 0.03)
+        assert np.all(ekf_run.estimates[before, j] == 0.12)
+        assert np.all(ekf_run.sigmas[before, j] == 0.03)
+        # after it stops sliding: the last estimate, and the σ at the end of the last sample
+        # interval in which it slid (the inputs are held, so it slid until then), to the bit
+        after = np.flatnonzero(ekf_run.t > t_slide[-1])
+        assert np.all(ekf_run.estimates[after, j] == ekf_run.estimates[after[0] - 1, j])
+        assert np.all(ekf_run.sigmas[after, j] == ekf_run.sigmas[after[0], j])
+        # while sliding, the measurements move it
+        assert np.ptp(ekf_run.estimates[sliding, j]) > 0
+
+
+def test_dropout_skips_updates_and_no_nan_enters_the_state(reference, aug, discrete, ekf_run):
+    from gearsym.validation.estimation import run_ekf
+
+    d, result = reference
+    run = run_ekf(d, result, sample_time=0.01, aug=aug, discrete=discrete, dropout=(0.6, 0.8))
+    lost = (run.t >= 0.6) & (run.t < 0.8)
+    assert np.all(np.isfinite(run.estimates)) and np.all(np.isfinite(run.sigmas))
+    assert np.all(run.nis_dof[lost] == 0) and np.all(run.nis_dof[~lost] == 3)
+    # without measurements the speeds' σ is the prediction's (it swings with the drivetrain
+    # mode, 2.44-2.47, so not monotonic) and above the σ with measurements; before the
+    # dropout the two runs are the same run
+    j = list(run.state_names).index("omega_2")
+    inside = np.flatnonzero(lost)
+    assert np.all(run.sigmas[inside, j] > ekf_run.sigmas[inside, j])
+    before = run.t < 0.6
+    np.testing.assert_array_equal(run.estimates[before], ekf_run.estimates[before])
+    # after it the filter recovers: the state's error is back inside 3σ
+    back = np.flatnonzero(run.t >= 0.9)
+    error = np.abs(run.estimates[back, j] - run.truth[back, j])
+    assert np.all(error < 3 * run.sigmas[back, j])
+
+
+def test_estimate_ekf_command(tmp_path):
+    import json
+    import subprocess
+    import sys
+
+    def gearsym(*args):
+        return subprocess.run(
+            [sys.executable, "-m", "gearsym", "estimate", "--filter", "ekf", *args],
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+
+    out = tmp_path / "est"
+    run = gearsym("--json", "--out", str(out), "--initial", "m_veh=1500")
+    assert run.returncode == 0, run.stderr
+    data = json.loads(run.stdout)
+    assert data["filter"] == "ekf" and data["shift"] == "2-3" and data["runs"] == 1
+    assert set(data["parameters"]) == {"m_veh", "mu_38", "mu_05", "zeta"}
+    for key in ("truth", "initial", "estimate", "sigma", "rmse", "crb_sigma", "efficiency"):
+        assert key in data["parameters"]["m_veh"]
+    assert data["parameters"]["m_veh"]["initial"] == 1500.0
+    for key in ("nees_mean", "nees_band", "nis_mean", "phases", "sample_time"):
+        assert key in data
+    assert sorted(p.name for p in out.iterdir()) == ["MANIFEST", "ekf.csv", "ekf.json", "ekf.png"]
+    header = (out / "ekf.csv").read_text().splitlines()[0].split(",")
+    assert header[:5] == ["t", "phase", "omega_1_hat", "omega_1_sigma", "omega_1"]
+    for bad, key in (
+        (("--initial", "m_veh"), "--initial"),
+        (("--initial", "m_car=3"), "--initial"),
+        (("--params", "m_veh,T_In"), "params"),
+        (("--noise", "0"), "--noise"),
+    ):
+        result = gearsym(*bad, "--out", str(tmp_path / "never"))
+        assert result.returncode == 2 and key in result.stderr, (bad, result.stderr)
+        assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
+        assert not (tmp_path / "never").exists()
