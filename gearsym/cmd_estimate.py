@@ -1,7 +1,9 @@
 """``gearsym estimate``: estimators of thesis chapter 4 run on the reference shift.
 
-Today the unknown input observer (4.4): existence per phase, and its estimates of the states
-and the unknown inputs against the reference simulation. This module parses and prints; the
+The unknown input observer (4.4): existence per phase, and its estimates of the states and the
+unknown inputs against the reference simulation; the extended Kalman filter (4.3) on the
+parameter-augmented shift model (4.1): m_veh, μ of the swapping elements and ζ with σ, NEES and
+NIS against the reference. This module parses and prints; the
 work is in :mod:`gearsym.symbolic.estimators` and :mod:`gearsym.validation.estimation`.
 """
 
@@ -21,7 +23,7 @@ if TYPE_CHECKING:
 
 __all__ = ["cmd_estimate", "register"]
 
-FILTERS = ("uio",)
+FILTERS = ("uio", "ekf")
 
 
 def _say(message: str) -> None:
@@ -36,6 +38,8 @@ def cmd_estimate(args: argparse.Namespace) -> int:
 
     d = load(args.config)
     scenario = load_scenario(d, args.scenario)
+    if args.filter == "ekf":
+        return _cmd_ekf(args, d, scenario)
     unknown = [u.strip() for u in args.unknown.split(",") if u.strip()]
     if not unknown:
         raise GearsymError("estimate", "--unknown", "name at least one unknown input")
@@ -93,18 +97,116 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _initial_values(items: list[str] | None) -> dict[str, float]:
+    from gearsym.symbolic.errors import GearsymError
+
+    values = {}
+    for item in items or []:
+        name, sep, text = item.partition("=")
+        try:
+            value = float(text)
+        except ValueError:
+            value = float("nan")
+        if not sep or not name.strip() or value != value or abs(value) == float("inf"):
+            raise GearsymError("estimate", "--initial", f"expected NAME=NUMBER, got {item!r}")
+        values[name.strip()] = value
+    return values
+
+
+def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
+    """``--filter ekf``: the EKF on the scenario's reference shift."""
+    from gearsym.symbolic.errors import GearsymError
+    from gearsym.symbolic.estimators.ekf import augmented_model
+
+    noise: Any = 0.01
+    if args.noise is not None:
+        try:
+            noise = [number(float, above=0)(v) for v in args.noise.split(",")]
+        except argparse.ArgumentTypeError as err:
+            raise GearsymError("estimate", "--noise", str(err)) from None
+        if len(noise) not in (1, 3):
+            raise GearsymError("estimate", "--noise", "give one value or one per output (3)")
+    parameters = None
+    if args.params is not None:
+        parameters = [p.strip() for p in args.params.split(",") if p.strip()]
+    initial = _initial_values(args.initial)
+    aug = augmented_model(d, scenario.shift.name, parameters)  # bad names fail before the run
+    wrong = [name for name in initial if name not in aug.state_names]
+    if wrong:
+        raise GearsymError(
+            "estimate",
+            "--initial",
+            f"{', '.join(wrong)} is not a state of the filter ({', '.join(aug.state_names)})",
+        )
+
+    def work(folder: Any) -> Any:
+        from gearsym.cmd_dynamics import simulate_with_progress
+        from gearsym.validation.estimation import plot_ekf, run_ekf, write_ekf_csv
+
+        result = simulate_with_progress(d, scenario)
+        _say("running the EKF")
+        run = run_ekf(
+            d,
+            result,
+            sample_time=args.sample_time,
+            relative_noise=noise,
+            seed=args.seed,
+            initial=initial,
+            aug=aug,
+        )
+        if folder is not None:
+            write_ekf_csv(run, folder / "ekf.csv")
+            (folder / "ekf.json").write_text(json.dumps(run.to_dict(), indent=2) + "\n")
+            if not args.no_plots:
+                plot_ekf(run, folder / "ekf.png")
+        return run
+
+    paths: list[Any] = []
+    if args.out is None:
+        run = work(None)
+    else:
+        from gearsym.symbolic.output_dir import OutputDir
+
+        with OutputDir(args.out, "estimate", before_commit=check) as out:
+            run = work(out.path)
+            paths = out.commit()
+    if args.json:
+        json.dump({**run.to_dict(), "files": [str(p) for p in paths]}, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return 0
+    from gearsym.validation.estimation import format_ekf_text
+
+    print(format_ekf_text(run))
+    if paths:
+        print(f"  wrote {len(paths)} files to {args.out}: {', '.join(p.name for p in paths)}")
+    return 0
+
+
 def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
     """Register ``estimate``."""
     p = add_command(
         subparsers,
         "estimate",
         cmd_estimate,
-        "Run an estimator of thesis chapter 4 on the reference shift: today the unknown input "
-        "observer (4.4), its existence per phase and its errors against the reference.",
+        "Run an estimator of thesis chapter 4 on the reference shift: the unknown input "
+        "observer (4.4, existence per phase, errors against the reference) or the extended "
+        "Kalman filter (4.3) of m_veh, mu and the grade with its sigma, NEES and NIS.",
         common,
     )
     p.add_argument("--scenario", help="scenario TOML (default: the built-in 2-3 power-on upshift)")
     p.add_argument("--filter", choices=FILTERS, default="uio", help="the estimator (default uio)")
+    p.add_argument(
+        "--params",
+        help="ekf: parameters appended as random-walk states, comma-separated (default "
+        "m_veh and mu of both swapping elements and zeta, thesis 4.1)",
+    )
+    p.add_argument(
+        "--initial",
+        nargs="+",
+        metavar="NAME=VALUE",
+        help="ekf: initial estimate of a filter state (default: m_veh 30 %% below the "
+        "description's value, mu nominal, zeta 0, phi 0, speeds from the first measurement)",
+    )
     p.add_argument(
         "--unknown",
         default="T_res_star",
@@ -120,9 +222,11 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--noise",
         help="relative speed-sensor error r (3.26): one value for every output or one per "
-        "output, comma-separated (default: no noise)",
+        "output, comma-separated (default: uio no noise, ekf 0.01)",
     )
     p.add_argument("--seed", type=number(int, minimum=0), default=0, help="noise seed")
-    p.add_argument("--out", help="folder for uio.csv, uio.json and uio.png (written atomically)")
+    p.add_argument(
+        "--out", help="folder for uio.csv/.json/.png or ekf.csv/.json/.png (written atomically)"
+    )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG")
     p.add_argument("--json", action="store_true", help="machine-readable output")

@@ -26,6 +26,7 @@ from gearsym.symbolic import naming
 from gearsym.symbolic.codegen import (
     INTEGRATORS,
     CodegenConfig,
+    EkfLayout,
     emit_all,
     file_names,
     float_repr,
@@ -131,15 +132,16 @@ class EmittedModel:
 
     model: Model
     bounds: dict[str, tuple[float | None, float | None]]
-    role: str  # "full", "shift", "shift_mu", "sensitivity" or "shift_element"
+    role: str  # "full", "shift", "shift_mu", "sensitivity", "ekf" or "shift_element"
     summary: str
     shift: ShiftSpec | None = None
     integrators: tuple[str, ...] = INTEGRATORS
+    ekf: EkfLayout | None = None
 
     @property
     def config(self) -> CodegenConfig:
-        """The emitters' decisions for this model (bounds, integrator steps)."""
-        return CodegenConfig(bounds=self.bounds, integrators=self.integrators)
+        """The emitters' decisions for this model (bounds, integrator steps, EKF rows)."""
+        return CodegenConfig(bounds=self.bounds, integrators=self.integrators, ekf=self.ekf)
 
 
 @dataclass(frozen=True)
@@ -315,6 +317,9 @@ def gearbox_models(
             models.append(
                 EmittedModel(s, _bounds(d, s), "sensitivity", what, spec, integrators=("rk4",))
             )
+    ekf_shift = next((spec for spec in shifts if spec.name == "2-3"), None)
+    if friction and ekf_shift is not None:
+        models.append(ekf_model(d, ekf_shift, say))
     if friction:
         say("building the shift-element friction model (2.66-2.70)")
         m = shift_element_model(d)
@@ -322,6 +327,32 @@ def gearbox_models(
             EmittedModel(m, _bounds(d, m), "shift_element", "shift-element friction (2.66-2.70)")
         )
     return models
+
+
+def ekf_model(
+    d: GearboxDescription, spec: ShiftSpec, say: Callable[[str], None] | None = None
+) -> EmittedModel:
+    """The EKF (4.3) of a shift: its augmented model (4.1) with the predict and update rows;
+    each μ state is frozen while its element's ``slide_<E>`` input is not set."""
+    from gearsym.symbolic.estimators.ekf import augmented_model, slide_input
+
+    if say is not None:
+        say(f"deriving the augmented model of shift {spec.name} for the EKF (4.1, 4.3)")
+    aug = augmented_model(d, spec.name)
+    states, inputs = aug.state_names, aug.input_names
+    frozen = tuple(
+        (states.index(mu), inputs.index(slide_input(e))) for e, mu in aug.mu_state.items()
+    )
+    what = f"shift {spec.name}: EKF of {', '.join(aug.parameters)} (4.1, 4.3)"
+    return EmittedModel(
+        aug.model,
+        _bounds(d, aug.model),
+        "ekf",
+        what,
+        spec,
+        integrators=("rk4",),
+        ekf=EkfLayout(frozen),
+    )
 
 
 def sample_ranges(model: Model) -> dict[str, tuple[float, float]]:

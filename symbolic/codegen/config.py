@@ -17,6 +17,7 @@ __all__ = [
     "INTEGRATORS",
     "Bounds",
     "CodegenConfig",
+    "EkfLayout",
     "Precision",
     "Sparsity",
     "as_config",
@@ -74,6 +75,16 @@ class Sparsity:
 
 
 @dataclass(frozen=True)
+class EkfLayout:
+    """What the EKF rows (thesis 4.3) need beyond the model: which states are frozen by which
+    input. ``frozen`` holds (state index, input index) pairs: while ``u[input] > 0.5`` is false
+    (the element does not slide), that state's process noise and gain entry are zero (a
+    Schmidt consider state: its estimate and variance stay unchanged)."""
+
+    frozen: tuple[tuple[int, int], ...] = ()
+
+
+@dataclass(frozen=True)
 class CodegenConfig:
     """The decisions one emission of a model makes (see the module docstring).
 
@@ -98,6 +109,8 @@ class CodegenConfig:
     sparsity: Sparsity = field(default_factory=Sparsity)
     cse_optimizations: str | None = None
     restrict_pointers: bool = True
+    #: Emit the EKF rows (output Jacobian, ekf_predict, ekf_update) for an augmented model.
+    ekf: EkfLayout | None = None
 
     def __post_init__(self) -> None:
         unknown = [name for name in self.integrators if name not in INTEGRATORS]

@@ -233,6 +233,41 @@ ROWS: tuple[Row, ...] = (
         when="implicit",
     ),
     Row(
+        "jac_outputs",
+        "expr",
+        _XUP,
+        (("dhdx", "ny", "nx", "real"),),
+        "Jacobian of the outputs with respect to the states, d y / d x ({ny} x {nx}), dense "
+        "column-major: dhdx[i + j*{ny}] = d y_i / d x_j (the EKF's H).",
+        when="ekf",
+    ),
+    Row(
+        "ekf_predict",
+        "ekf_predict",
+        ("x_io", "P_io", "u", "p", "h", "q"),
+        (),
+        "EKF time update (thesis 4.3) of the augmented model (4.1), in place: x = RK4 step of "
+        "size h with u held, P = F P F^T + h diag(q), F the exact Jacobian of that RK4 step "
+        "(chain rule through the four stages with jac_x). q: process-noise intensities per "
+        "state (unit^2/s; random walks of the parameters, model error of the states); the "
+        "entry of a state frozen by its input (see the header) counts as 0. P is "
+        "{nx} x {nx} column-major and symmetrised on return.",
+        when="ekf",
+    ),
+    Row(
+        "ekf_update",
+        "ekf_update",
+        ("x_io", "P_io", "u", "p", "y", "r", "y_floor"),
+        (("nis", "1", "1", "real"),),
+        "EKF measurement update (thesis 4.3), in place, one output at a time (diagonal R), "
+        "Joseph form P = (I - k h) P (I - k h)^T + R k k^T with R = (r_i max(|y_i|, "
+        "y_floor_i))^2 (3.26). A NaN or infinite y_i is skipped (no update); the gain entry "
+        "of a frozen state is 0 (its estimate and variance stay unchanged). *nis receives the "
+        "sum of nu^2/s over the used outputs. Returns the number of outputs used.",
+        returns="int",
+        when="ekf",
+    ),
+    Row(
         "params_default",
         "params_default",
         (),
@@ -260,6 +295,7 @@ def _selected(row: Row, config: CodegenConfig) -> bool:
         "dense": not config.sparsity.sparse,
         "rk4": config.rk4_step,
         "implicit": config.implicit_step,
+        "ekf": config.ekf is not None,
     }[row.when]
 
 
@@ -364,6 +400,7 @@ def build_function_table(
         model.output_expressions.xreplace(changed) if changed else model.output_expressions
     )
     jac = dict(zip("xup", jacobian_blocks(f, (xs, us, ps)), strict=True))
+    output_jacobian = sp.ImmutableMatrix(h.jacobian(sp.Matrix(xs)))
     patterns = {var: SparsityPattern.of(matrix) for var, matrix in jac.items()}
     sizes = {
         "nx": len(xs),
@@ -378,6 +415,12 @@ def build_function_table(
         "u": Arg("u", len(us), True, "vector", us),
         "p": Arg("p", len(ps), True, "params", ps, tuple(v.name for v in model.parameters)),
         "h": Arg("h", 1, True, "scalar"),
+        "x_io": Arg("x", len(xs), False, "vector", xs),
+        "P_io": Arg("P", len(xs) ** 2, False, "vector"),
+        "q": Arg("q", len(xs), True, "vector"),
+        "y": Arg("y", len(model.outputs), True, "vector"),
+        "r": Arg("r", len(model.outputs), True, "vector"),
+        "y_floor": Arg("y_floor", len(model.outputs), True, "vector"),
     }
     defaults = sp.ImmutableMatrix(
         len(ps), 1, [sp.nan if v.default is None else sp.Float(v.default) for v in model.parameters]
@@ -413,6 +456,8 @@ def build_function_table(
             expressions = (f,)
         elif row.name == "outputs":
             expressions = (h,)
+        elif row.name == "jac_outputs":
+            expressions = (output_jacobian,)
         elif row.jacobian and row.name.endswith("_sparse"):
             assert pattern is not None
             expressions = (pattern.nonzeros(jac[row.jacobian]),)

@@ -5,6 +5,11 @@ form (:class:`~gearsym.symbolic.drivetrain.LinearForm`, 5.1); nothing here is sp
 gearbox.
 """
 
+from gearsym.symbolic.estimators.ekf import (
+    AugmentedModel,
+    DiscreteModel,
+    augmented_model,
+)
 from gearsym.symbolic.estimators.uio import (
     LinearMode,
     UioDesign,
@@ -15,6 +20,9 @@ from gearsym.symbolic.estimators.uio import (
 )
 
 __all__ = [
+    "AugmentedModel",
+    "DiscreteModel",
+    "augmented_model",
     "LinearMode",
     "UioDesign",
     "UioExistence",

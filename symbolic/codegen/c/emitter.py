@@ -113,6 +113,7 @@ class CFunctionView:
     defaults: tuple[ParamDefault, ...] = ()
     checks: tuple[ParamCheck, ...] = ()
     spread: Spread | None = None
+    frozen: tuple[tuple[int, int], ...] = ()  # EKF: (state, input) pairs, see EkfLayout
 
 
 @dataclass(frozen=True)
@@ -242,6 +243,28 @@ def _function_views(
             op_text = (
                 f"Operations (at most): {total.format()} (rhs + jac_x + {own.format()} for "
                 "the checks, forming I - h J, its LU factors, the solve and ||(I - h J)^-1||)."
+            )
+        elif spec.kind in ("ekf_predict", "ekf_update"):
+            assert table.config.ekf is not None
+            extra["frozen"] = table.config.ekf.frozen
+            frozen = ", ".join(
+                f"{table.model.states[i].name} while {table.model.inputs[j].name} <= 0.5"
+                for i, j in table.config.ekf.frozen
+            )
+            if spec.kind == "ekf_predict":
+                own = OpCount(mul=4 * nx**3 + 10 * nx * nx + 8 * nx, add=4 * nx**3 + 8 * nx * nx)
+                jac_ops = counts.get("jac_x_sparse", counts.get("jac_x"))
+                assert jac_ops is not None
+                total = counts["rhs"].scaled(4) + jac_ops.scaled(4) + own
+                what = "4 rhs + 4 jac_x + the stage tangents, F P F^T and the symmetrisation"
+            else:
+                ny = len(table.model.outputs)
+                own = OpCount(mul=ny * (4 * nx * nx + 4 * nx + 4), add=ny * (4 * nx * nx + 3 * nx))
+                total = (counts["outputs"] + counts["jac_outputs"]).scaled(ny) + own
+                what = f"{ny} x (outputs + jac_outputs + the Joseph update)"
+            op_text = (
+                f"Frozen: {frozen or 'none'}. Operations (about): {total.format()} ({what}); "
+                f"stack: {6 * nx * nx + 6 * nx} reals."
             )
         elif spec.kind == "params_default":
             (defaults,) = spec.expressions

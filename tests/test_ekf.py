@@ -1,0 +1,271 @@
+"""EKF (thesis 4.1, 4.3): the augmented discrete model and its exact Jacobian.
+
+Expected values come from elsewhere than the code under test: the gear ratios of Table 2.1
+(a sticking element must make the shift model move in that gear), central finite differences
+and CasADi's algorithmic differentiation of the RK4 step (for the chain-rule Jacobian), and a
+tight CVODES integration of the same right-hand side with the convergence order of RK4 (global
+error ∝ h⁴) for the discretisation.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.estimators.ekf import (
+    SAMPLE_TIMES,
+    DiscreteModel,
+    augmented_model,
+)
+from gearsym.symbolic.loader import load_description
+
+# a state of the default 2-3 shift in the torque phase (the reference at t = 0.3 s, mass and
+# μ near their nominal values)
+Z0 = np.array([210.9, 64.15, 0.0578, 25.99, 1800.0, 0.109, 0.13, 0.01])
+INPUTS = ["T_In", "F_N38", "F_N05", "slide_K38", "stick_K38", "slide_B05", "stick_B05"]
+MODES = {
+    "gear 2 (K38 sticks, B05 open)": [150.0, 9750.0, 0.0, 0, 1, 0, 0],
+    "torque phase (both slide)": [150.0, 1240.0, 300.0, 1, 0, 1, 0],
+    "speed phase (B05 slides, K38 open)": [150.0, 0.0, 910.0, 0, 0, 1, 0],
+    "gear 3 (B05 sticks, K38 open)": [150.0, 0.0, 10500.0, 0, 0, 0, 1],
+}
+
+
+@pytest.fixture(scope="module")
+def aug():
+    return augmented_model(load_description(), "2-3")
+
+
+@pytest.fixture(scope="module")
+def discrete(aug):
+    return DiscreteModel(aug)
+
+
+def test_augmented_states_inputs_and_intensities(aug):
+    assert aug.state_names == [
+        "omega_1",
+        "omega_2",
+        "phi",
+        "omega_C",
+        "m_veh",
+        "mu_38",
+        "mu_05",
+        "zeta",
+    ]
+    assert aug.input_names == INPUTS
+    assert aug.n_x == 4 and aug.model.name == "ekf_2_3"
+    # random walks (4.1): the parameter rows of the right-hand side are zero
+    assert all(e == 0 for e in aug.model.rhs[4:])
+    assert all(aug.intensities[name] > 0 for name in aug.state_names)
+
+
+@pytest.mark.parametrize(("mode", "ratio"), [(0, 3.243), (3, 2.252)])
+def test_a_sticking_element_moves_the_shift_model_in_its_gear(discrete, aug, mode, ratio):
+    # K38 sticking is gear 2, B05 sticking gear 3: ω̇1/ω̇2 is that gear's ratio (Table 2.1)
+    u = list(MODES)[mode]
+    z = Z0.copy()
+    z[0] = ratio * z[1]  # on the gear's speed relation
+    zdot = discrete.rhs(z, MODES[u], aug.parameter_values())
+    assert zdot[0] / zdot[1] == pytest.approx(ratio, abs=5e-4)
+
+
+def test_mu_acts_only_while_its_element_slides(discrete, aug):
+    p = aug.parameter_values()
+    for name, u in MODES.items():
+        J = np.asarray(discrete.J(Z0, u, p))
+        slides = {"K38": u[3] == 1, "B05": u[5] == 1}
+        # a sticking element's torque depends on the other's μ (the constraint force balances
+        # it), so test the μ column of a non-sliding element only
+        for element, column in (("K38", 5), ("B05", 6)):
+            acts = bool(np.any(J[:4, column] != 0))
+            assert acts == slides[element], (name, element)
+
+
+@pytest.mark.parametrize("mode", list(MODES))
+@pytest.mark.parametrize("h", SAMPLE_TIMES)
+def test_step_jacobian_is_the_derivative_of_the_step(discrete, aug, mode, h):
+    p = aug.parameter_values()
+    u = MODES[mode]
+    z_next, F = discrete.step(Z0, u, h, p)
+    # CasADi's AD of the same step graph (independent of the stage chain rule)
+    _, F_ad = discrete.step_ad(Z0, u, h, p)
+    np.testing.assert_allclose(F, np.asarray(F_ad), rtol=1e-10, atol=1e-12)
+    # central differences, step relative to each state's scale
+    fd = np.empty_like(F)
+    for j in range(len(Z0)):
+        step = 1e-6 * max(abs(Z0[j]), 1e-2)
+        plus, minus = Z0.copy(), Z0.copy()
+        plus[j] += step
+        minus[j] -= step
+        fd[:, j] = (discrete.step(plus, u, h, p)[0] - discrete.step(minus, u, h, p)[0]) / (2 * step)
+    # compared in the states' own scales (∂z_i/∂z_j · s_j/s_i): the entries span 10 decades
+    s = np.maximum(np.abs(Z0), 1e-2)
+    assert np.max(np.abs(fd - F) * s[None, :] / s[:, None]) < 1e-7
+    # the random-walk rows are identity rows exactly (their estimate is frozen bit for bit)
+    assert np.array_equal(F[4:], np.eye(8)[4:]) and np.array_equal(z_next[4:], Z0[4:])
+
+
+def _cvodes(discrete, aug, z0, u, t_end):
+    z = ca.SX.sym("z", len(z0))
+    ode = discrete.f(z, ca.DM(u), ca.DM(aug.parameter_values()))
+    integrator = ca.integrator(
+        "ref", "cvodes", {"x": z, "ode": ode}, 0.0, t_end, {"abstol": 1e-13, "reltol": 1e-13}
+    )
+    return np.asarray(integrator(x0=z0)["xf"]).ravel()
+
+
+@pytest.mark.parametrize("mode", list(MODES))
+def test_rk4_converges_to_cvodes_with_order_four(discrete, aug, mode):
+    u, p = MODES[mode], aug.parameter_values()
+    t_end = 0.1  # a divisor of every sample time: 100, 20 and 10 steps
+    exact = _cvodes(discrete, aug, Z0, u, t_end)
+    scale = np.maximum(np.abs(Z0), 1e-3)
+    errors = {}
+    for h in SAMPLE_TIMES:
+        z = Z0.copy()
+        for _ in range(round(t_end / h)):
+            z = discrete.step(z, u, h, p)[0]
+        errors[h] = float(np.max(np.abs(z - exact) / scale))
+    # global error of RK4 ∝ h⁴: halving h from 10 to 5 ms divides it by 16
+    assert 16 / 1.6 < errors[0.01] / errors[0.005] < 16 * 1.6, errors
+    # and from 5 to 1 ms by 5⁴ = 625 (the CVODES reference is 1e-13 accurate: far below)
+    assert 625 / 1.6 < errors[0.005] / errors[0.001] < 625 * 1.6, errors
+    # at the thesis' 10 ms the state error over 0.1 s stays below the 1 % sensor error (3.26)
+    assert errors[0.01] < 1e-2, errors
+
+
+def test_unknown_augmented_parameter_is_one_line(aug):
+    d = load_description()
+    with pytest.raises(GearsymError, match="params: T_In: choose distinct parameters"):
+        augmented_model(d, "2-3", parameters=("m_veh", "T_In"))
+    with pytest.raises(GearsymError, match="intensities"):
+        augmented_model(d, "2-3", intensities={"omega_9": 1.0})
+
+
+# ------------------------------------------------------- the filter on the reference (4.3)
+
+
+@pytest.fixture(scope="module")
+def reference():
+    from gearsym.validation.scenario import load_scenario
+    from gearsym.validation.simulate import simulate
+
+    d = load_description()
+    return d, simulate(d, load_scenario(d, None))
+
+
+@pytest.fixture(scope="module")
+def ekf_run(reference, aug, discrete):
+    from gearsym.validation.estimation import run_ekf
+
+    d, result = reference
+    return run_ekf(d, result, sample_time=0.01, seed=0, aug=aug, discrete=discrete)
+
+
+def test_nees_of_one_run_is_consistent_with_its_chi2_distribution(ekf_run):
+    # a consistent filter has NEES_k ~ χ²(dof_k): 95 % of the samples inside the per-sample
+    # 95 % interval, and a time-averaged NEES near its dof. One run's errors are correlated in
+    # time (the filter's memory is ~0.1 s, ten samples), so the average scatters more than the
+    # independent-sample band: a factor 2 either side is what "reasonable" means here.
+    assert ekf_run.nees_inside() > 0.8
+    dof = float(np.mean(ekf_run.nees_dof))
+    assert 0.5 * dof < ekf_run.nees_mean < 2.0 * dof
+    assert np.all(np.isfinite(ekf_run.nees))
+    # NIS: three speeds per sample, χ²(3) has mean 3
+    assert 1.5 < float(np.mean(ekf_run.nis)) < 6.0
+    # Joseph form: the covariance stays symmetric positive definite
+    assert ekf_run.min_eigenvalue > 0
+
+
+def test_mass_converges_towards_the_truth_from_30_percent_light(ekf_run):
+    (mass,) = [p for p in ekf_run.parameters if p.name == "m_veh"]
+    assert mass.initial == pytest.approx(0.7 * mass.truth)
+    error = abs(mass.estimate - mass.truth)
+    assert error < 0.5 * abs(mass.initial - mass.truth)  # moved well towards the truth
+    assert error < 3 * mass.sigma  # and the truth lies inside the filter's own 3σ
+    assert mass.sigma < 0.5 * 0.3 * mass.truth  # the data halved the prior's σ at least
+
+
+def test_mu_is_frozen_while_its_element_does_not_slide(ekf_run, reference):
+    names = list(ekf_run.state_names)
+    for mu, slides in (("mu_38", (0.267, 0.4495)), ("mu_05", (0.3, 0.577))):
+        j = names.index(mu)
+        sliding = ekf_run.scored[:, j]
+        t_slide = ekf_run.t[sliding]
+        # the reference's sliding windows (K38 from the torque phase until it opens, B05 from
+        # its fill until it locks), to a sample
+        assert t_slide[0] == pytest.approx(slides[0], abs=0.011)
+        assert t_slide[-1] == pytest.approx(slides[1], abs=0.011)
+        before = ekf_run.t < t_slide[0]
+        # before the element first slides: the prior, to the bit (0.12 nominal, σ 0.03)
+        assert np.all(ekf_run.estimates[before, j] == 0.12)
+        assert np.all(ekf_run.sigmas[before, j] == 0.03)
+        # after it stops sliding: the last estimate, and the σ at the end of the last sample
+        # interval in which it slid (the inputs are held, so it slid until then), to the bit
+        after = np.flatnonzero(ekf_run.t > t_slide[-1])
+        assert np.all(ekf_run.estimates[after, j] == ekf_run.estimates[after[0] - 1, j])
+        assert np.all(ekf_run.sigmas[after, j] == ekf_run.sigmas[after[0], j])
+        # while sliding, the measurements move it
+        assert np.ptp(ekf_run.estimates[sliding, j]) > 0
+
+
+def test_dropout_skips_updates_and_no_nan_enters_the_state(reference, aug, discrete, ekf_run):
+    from gearsym.validation.estimation import run_ekf
+
+    d, result = reference
+    run = run_ekf(d, result, sample_time=0.01, aug=aug, discrete=discrete, dropout=(0.6, 0.8))
+    lost = (run.t >= 0.6) & (run.t < 0.8)
+    assert np.all(np.isfinite(run.estimates)) and np.all(np.isfinite(run.sigmas))
+    assert np.all(run.nis_dof[lost] == 0) and np.all(run.nis_dof[~lost] == 3)
+    # without measurements the speeds' σ is the prediction's (it swings with the drivetrain
+    # mode, 2.44-2.47, so not monotonic) and above the σ with measurements; before the
+    # dropout the two runs are the same run
+    j = list(run.state_names).index("omega_2")
+    inside = np.flatnonzero(lost)
+    assert np.all(run.sigmas[inside, j] > ekf_run.sigmas[inside, j])
+    before = run.t < 0.6
+    np.testing.assert_array_equal(run.estimates[before], ekf_run.estimates[before])
+    # after it the filter recovers: the state's error is back inside 3σ
+    back = np.flatnonzero(run.t >= 0.9)
+    error = np.abs(run.estimates[back, j] - run.truth[back, j])
+    assert np.all(error < 3 * run.sigmas[back, j])
+
+
+def test_estimate_ekf_command(tmp_path):
+    import json
+    import subprocess
+    import sys
+
+    def gearsym(*args):
+        return subprocess.run(
+            [sys.executable, "-m", "gearsym", "estimate", "--filter", "ekf", *args],
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+
+    out = tmp_path / "est"
+    run = gearsym("--json", "--out", str(out), "--initial", "m_veh=1500")
+    assert run.returncode == 0, run.stderr
+    data = json.loads(run.stdout)
+    assert data["filter"] == "ekf" and data["shift"] == "2-3" and data["runs"] == 1
+    assert set(data["parameters"]) == {"m_veh", "mu_38", "mu_05", "zeta"}
+    for key in ("truth", "initial", "estimate", "sigma", "rmse", "crb_sigma", "efficiency"):
+        assert key in data["parameters"]["m_veh"]
+    assert data["parameters"]["m_veh"]["initial"] == 1500.0
+    for key in ("nees_mean", "nees_band", "nis_mean", "phases", "sample_time"):
+        assert key in data
+    assert sorted(p.name for p in out.iterdir()) == ["MANIFEST", "ekf.csv", "ekf.json", "ekf.png"]
+    header = (out / "ekf.csv").read_text().splitlines()[0].split(",")
+    assert header[:5] == ["t", "phase", "omega_1_hat", "omega_1_sigma", "omega_1"]
+    for bad, key in (
+        (("--initial", "m_veh"), "--initial"),
+        (("--initial", "m_car=3"), "--initial"),
+        (("--params", "m_veh,T_In"), "params"),
+        (("--noise", "0"), "--noise"),
+    ):
+        result = gearsym(*bad, "--out", str(tmp_path / "never"))
+        assert result.returncode == 2 and key in result.stderr, (bad, result.stderr)
+        assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
+        assert not (tmp_path / "never").exists()
