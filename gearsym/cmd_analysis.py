@@ -101,7 +101,7 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
             names,
             data=data,
             overrides=overrides,
-            mode=args.sliding,
+            mode=_sliding(args),
             initial=args.initial,
             progress=progress,
         )
@@ -142,7 +142,7 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
         return 0
     print(
         f"Sensitivities of the {data.shift} shift model driven by the reference "
-        f"(3.2–3.7; sliding {args.sliding}, S(0) {args.initial}); "
+        f"(3.2–3.7; sliding {_sliding(args)}, S(0) {args.initial}); "
         f"derived in {run.timings['derive_s']:.2f} s, integrated in "
         f"{run.timings['integrate_s']:.2f} s"
     )
@@ -162,13 +162,19 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
 
 
 def cmd_fim(args: argparse.Namespace) -> int:
-    """Fisher information per phase and over the shift (3.16–3.32)."""
+    """Fisher information per phase (3.16–3.32): on the hybrid shift model by default
+    (:func:`_hybrid_fim`), the per-phase restarted open-loop study with ``--open-loop``."""
+    if not args.open_loop:
+        return _hybrid_fim(args)
+    from gearsym.symbolic.defaults import ACCELERATION_ERROR
     from gearsym.validation.fisher import fim_study, format_text, study_json
 
-    if args.hybrid:
-        return _hybrid_fim(args)
-    if args.known_initial_state:
-        raise GearsymError("fim", "--known-initial-state", "applies to --hybrid only")
+    for option, given in (
+        ("--hybrid", args.hybrid),
+        ("--known-initial-state", args.known_initial_state),
+    ):
+        if given:
+            raise GearsymError("fim", option, "not available with --open-loop")
     d, names, overrides, scenario = _prepare(args, args.with_wheel_acceleration)
     with contextlib.ExitStack() as stack:
         out = (
@@ -184,9 +190,11 @@ def cmd_fim(args: argparse.Namespace) -> int:
             with_wheel_acceleration=args.with_wheel_acceleration,
             sample_time=args.sample_time,
             speed_error=args.speed_error,
-            acceleration_error=args.acceleration_error,
+            acceleration_error=(
+                ACCELERATION_ERROR if args.acceleration_error is None else args.acceleration_error
+            ),
             gamma_max=args.gamma_max,
-            mode=args.sliding,
+            mode=_sliding(args),
             restart=not args.carry_over,
             overrides=overrides,
             progress=progress,
@@ -206,10 +214,16 @@ def cmd_fim(args: argparse.Namespace) -> int:
     return 0
 
 
+def _sliding(args: argparse.Namespace) -> str:
+    """``--sliding`` of the open-loop paths; ``None`` (not given) is ``detected``."""
+    return args.sliding or "detected"
+
+
 def _hybrid_fim(args: argparse.Namespace) -> int:
-    """``fim --hybrid``: the FIM on the hybrid shift model's sensitivities
+    """``fim`` (default): the FIM on the hybrid shift model's sensitivities
     (gearsym.validation.hybrid_fisher), per phase with φ at the phase start unknown, or with
-    ``--known-initial-state`` the thesis' continuous view (3.16)."""
+    ``--known-initial-state`` the thesis' continuous view (3.16). The open-loop study's options
+    are refused: they would silently not apply."""
     from gearsym.validation.hybrid_fisher import format_text, hybrid_fim, to_dict
     from gearsym.validation.hybrid_simulation import HybridSimulator
     from gearsym.validation.scenario import load_scenario
@@ -217,11 +231,19 @@ def _hybrid_fim(args: argparse.Namespace) -> int:
     for option, given in (
         ("--with-wheel-acceleration", args.with_wheel_acceleration),
         ("--carry-over", args.carry_over),
+        ("--sliding", args.sliding is not None),
+        ("--acceleration-error", args.acceleration_error is not None),
     ):
         if given:
-            raise GearsymError("fim", option, "not available with --hybrid")
+            raise GearsymError(
+                "fim", option, "applies to --open-loop only (the default is the hybrid model)"
+            )
     d = load(args.config)
     overrides = _overrides(d, args.set)
+    given = _parameter_list(args.params)
+    twice = sorted({n for n in given or () if given.count(n) > 1})
+    if twice:  # before the slow derivation
+        raise GearsymError(d.file, "params", f"parameter given twice: {', '.join(twice)}")
     scenario = load_scenario(d, args.scenario)
     with contextlib.ExitStack() as stack:
         out = (
@@ -231,7 +253,7 @@ def _hybrid_fim(args: argparse.Namespace) -> int:
         )
         progress(f"deriving the hybrid model of the {scenario.shift.name} shift")
         simulator = HybridSimulator(d, scenario)
-        names = _parameter_list(args.params) or [
+        names = given or [
             "m_veh",
             *(str(simulator.hybrid.friction_coefficient[e]) for e in simulator.hybrid.elements),
             "zeta",
@@ -279,22 +301,21 @@ def write_fim(study: Any, folder: Path) -> list[str]:
     return ["fim.json", "fim.txt", *(p.name for p in plot_scatter(study, folder))]
 
 
-def print_fim_summary(d: Any, result: Any = None, folder: Path | None = None) -> None:
-    """A few lines for ``gearsym run``: per phase, the thesis' parameters (3.2) that stay
-    estimable after the elimination (3.3), from the speeds alone and with ω̇_C (3.32).
+def print_fim_summary(
+    d: Any, result: Any = None, folder: Path | None = None, scenario: Any = None
+) -> None:
+    """A few lines for ``gearsym run``: per phase, the parameters that stay estimable after the
+    elimination (3.3), on the hybrid shift model with φ at each phase start unknown (what
+    ``gearsym fim`` prints by default; the view is printed with the verdicts).
 
-    ``result`` is a :class:`gearsym.validation.simulate.SimulationResult` (the default shift is
-    simulated when omitted). With ``folder``, also write what ``gearsym sensitivity`` and
-    ``gearsym fim`` write (CSV, JSON, text, Figures 3.4–3.14) into ``folder/sensitivity`` and
-    ``folder/fim``.
+    ``result`` is a :class:`gearsym.validation.simulate.SimulationResult` of ``scenario``
+    (default: the built-in 2-3); it feeds the open-loop sensitivities written with ``folder``.
+    With ``folder``, also write ``fim/fim.json``, ``fim/fim.txt`` (the hybrid study) and what
+    ``gearsym sensitivity`` writes (CSV, Figures 3.4–3.8) into ``folder/sensitivity``.
     """
-    from gearsym.validation.fisher import (
-        GAMMA_MAX,
-        SAMPLE_TIME,
-        SENSITIVITY_VIEW,
-        fim_study,
-        summary_lines,
-    )
+    from gearsym.symbolic.defaults import GAMMA_MAX, SAMPLE_TIME
+    from gearsym.validation.hybrid_fisher import format_text, hybrid_fim, summary_lines, to_dict
+    from gearsym.validation.hybrid_simulation import HybridSimulator
     from gearsym.validation.sensitivity_run import (
         plot_sensitivities,
         reference_data,
@@ -304,27 +325,37 @@ def print_fim_summary(d: Any, result: Any = None, folder: Path | None = None) ->
     )
 
     start = time.perf_counter()
-    data = reference_from_result(result) if result is not None else reference_data(d)
-    study = fim_study(d, data=data, with_wheel_acceleration=True)
+    simulator = HybridSimulator(d, scenario)
+    names = [
+        "m_veh",
+        *(str(simulator.hybrid.friction_coefficient[e]) for e in simulator.hybrid.elements),
+        "zeta",
+    ]
+    study = hybrid_fim(d, names, simulator=simulator)
     print(
         f"Fisher information (3.25) of {', '.join(study.parameters)} per phase of the "
-        f"{data.shift} shift: estimable after elimination (γ ≤ {GAMMA_MAX:g}, samples every "
-        f"{SAMPLE_TIME * 1e3:g} ms; {time.perf_counter() - start:.1f} s)"
+        f"{simulator.scenario.shift.name} shift on the hybrid shift model, outputs "
+        f"{', '.join(study.outputs)}: estimable after elimination (γ ≤ {GAMMA_MAX:g}, samples "
+        f"every {SAMPLE_TIME * 1e3:g} ms; {time.perf_counter() - start:.1f} s; the open-loop "
+        "study: gearsym fim --open-loop)"
     )
-    print(f"  sensitivities {SENSITIVITY_VIEW[True]}")
     for line in summary_lines(study):
         print(f"  {line}")
     if folder is None:
         return
-    charts = write_fim(study, folder / "fim")
+    fim_dir = folder / "fim"
+    fim_dir.mkdir(parents=True, exist_ok=True)
+    (fim_dir / "fim.json").write_text(json.dumps(to_dict(study), indent=2) + "\n")
+    (fim_dir / "fim.txt").write_text(format_text(study) + "\n", encoding="utf-8")
+    data = reference_from_result(result) if result is not None else reference_data(d, scenario)
     run = run_sensitivities(d, data=data)
     sens_dir = folder / "sensitivity"
     sens_dir.mkdir(parents=True, exist_ok=True)
     write_csv(run, sens_dir / "sensitivities.csv")
     figures = plot_sensitivities(run, sens_dir)
     print(
-        f"  fim/: fim.json, fim.txt and {len(charts) - 2} bar charts; "
-        f"sensitivity/: sensitivities.csv and {len(figures)} plots"
+        f"  fim/: fim.json, fim.txt; sensitivity/ (open-loop shift model): sensitivities.csv "
+        f"and {len(figures)} plots"
     )
 
 
@@ -345,9 +376,10 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--sliding",
         choices=SLIDING_MODES,
-        default="detected",
-        help="when μ acts on an element's torque: 'detected' from the record (|T| at the "
-        "friction capacity), or 'phases' as the thesis assumes (torque and speed phase)",
+        default=None,
+        help="open-loop shift model: when μ acts on an element's torque: 'detected' (default) "
+        "from the record (|T| at the friction capacity), or 'phases' as the thesis assumes "
+        "(torque and speed phase)",
     )
     p.add_argument(
         "--set",
@@ -391,15 +423,17 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         subparsers,
         "fim",
         cmd_fim,
-        "Fisher information per shift phase (3.16-3.32): Cramér-Rao bounds, normalised "
-        "scatter, eigen-analysis and parameter elimination.",
+        "Fisher information per shift phase (3.16-3.32) on the hybrid shift model (elements "
+        "lock, slide and open): Cramér-Rao scatter and parameter elimination per phase; "
+        "--open-loop for the open-loop shift model's study.",
         common,
     )
     _common(p)
     p.add_argument(
         "--with-wheel-acceleration",
         action="store_true",
-        help="also measure the wheel acceleration (3.32), at --acceleration-error",
+        help="with --open-loop: also measure the wheel acceleration (3.32), at "
+        "--acceleration-error",
     )
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.add_argument("--out", help="folder for fim.json, fim.txt and bar charts (Figs. 3.9-3.14)")
@@ -419,8 +453,9 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--acceleration-error",
         type=number(float, above=0),
-        default=ACCELERATION_ERROR,
-        help="relative error of the wheel acceleration (3.32)",
+        default=None,
+        help=f"with --open-loop: relative error of the wheel acceleration (3.32) "
+        f"(default {ACCELERATION_ERROR:g})",
     )
     p.add_argument(
         "--gamma-max",
@@ -431,19 +466,25 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--carry-over",
         action="store_true",
-        help="carry the sensitivities over from t0 (the thesis' view) instead of restarting "
-        "them at every phase: a phase then also shows what earlier phases revealed",
+        help="with --open-loop: carry the sensitivities over from t0 (the thesis' view) "
+        "instead of restarting them at every phase: a phase then also shows what earlier "
+        "phases revealed",
+    )
+    p.add_argument(
+        "--open-loop",
+        action="store_true",
+        help="the per-phase study on the open-loop shift model (never locks; sensitivities "
+        "restarted at every phase, or --carry-over), as before the hybrid model",
     )
     p.add_argument(
         "--hybrid",
         action="store_true",
-        help="on the hybrid shift model (elements lock, slide and open; sensitivities jump at "
-        "the switches); per phase with the side-shaft twist at the phase start unknown",
+        help="the hybrid shift model (the default; accepted for scripts that name it)",
     )
     p.add_argument(
         "--known-initial-state",
         action="store_true",
-        help="with --hybrid: the thesis' view (3.16), sensitivities from t0 with the initial "
+        help="hybrid model: the thesis' view (3.16), sensitivities from t0 with the initial "
         "state known; a phase then also shows what earlier phases revealed",
     )
 

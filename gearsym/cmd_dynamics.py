@@ -29,21 +29,33 @@ def _variables(variables: Any) -> list[dict[str, Any]]:
 
 
 def model_dict(
-    d: Any, shift: str | None, friction_inputs: bool, wheel: bool, gear: str | None = None
+    d: Any,
+    shift: str | None,
+    friction_inputs: bool,
+    wheel: bool,
+    gear: str | None = None,
+    mode: str | None = None,
 ) -> dict[str, Any]:
     """The model as data: variables, right-hand side (SymPy-parsable strings) and the numeric
     linear form A_ex, B_ex (5.1)–(5.5) at the defaults, with the inputs of (5.3) the mode has
-    (full model, a shift, or a gear with all its elements locked)."""
+    (full model, a shift, a gear with all its elements locked, or a mode of the hybrid shift:
+    ``mode`` with ``shift``)."""
     from gearsym.symbolic.drivetrain import (
         drivetrain_model,
         full_linear_form,
         full_model,
         gear_linear_form,
+        mode_linear_form,
         shift_linear_form,
         shift_model,
     )
 
-    if gear is not None:
+    if mode is not None:
+        from gearsym.symbolic.hybrid import hybrid_shift
+
+        form = mode_linear_form(d, shift or "2-3", mode)  # checks the mode name first
+        model = hybrid_shift(d, shift or "2-3").modes[mode].model
+    elif gear is not None:
         form = gear_linear_form(d, gear)  # checks the gear name first
         model = drivetrain_model(
             d,
@@ -98,7 +110,18 @@ def cmd_model(args: argparse.Namespace) -> int:
         from gearsym.symbolic.errors import GearsymError
 
         raise GearsymError("model", "--gear", "give --shift or --gear, not both")
-    data = model_dict(d, args.shift, args.friction_inputs, args.with_wheel_acceleration, gear)
+    mode = getattr(args, "mode", None)
+    if mode is not None:
+        from gearsym.symbolic.errors import GearsymError
+
+        for option, given in (
+            ("--gear", gear is not None),
+            ("--friction-inputs", args.friction_inputs),
+            ("--with-wheel-acceleration", args.with_wheel_acceleration),
+        ):
+            if given:
+                raise GearsymError("model", option, "not available with --mode")
+    data = model_dict(d, args.shift, args.friction_inputs, args.with_wheel_acceleration, gear, mode)
     if args.json:
         emit_json(data)
         return 0
@@ -199,6 +222,12 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--gear",
         help="e.g. 3: the gear with all its elements locked, inputs T_In, T_res*, zeta (5.3)",
+    )
+    p.add_argument(
+        "--mode",
+        help="a mode of the hybrid shift (--shift, default 2-3), e.g. "
+        "hybrid_2_3__K38_slide_pos__B05_open: its model and linear form (5.1), sliding "
+        "elements' torques as inputs",
     )
     p.add_argument(
         "--friction-inputs",

@@ -83,7 +83,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             write_results(d, result, out.path)
             print(format_summary(result))
             print()
-            print_fim_summary(d, result, folder=out.path)
+            print_fim_summary(d, result, folder=out.path, scenario=scenario)
             steps |= {"simulation": "done", "sensitivity": "done", "fim": "done"}
         else:
             print()

@@ -607,3 +607,23 @@ def shift_linear_form(d: GearboxDescription, shift: str) -> LinearForm:
     spec = shift_spec(d, shift)
     name = naming.shift_model_name(spec.from_gear, spec.to_gear)
     return _linear_form(d, name, spec.locked, (spec.off_going, spec.on_coming), None)
+
+
+def mode_linear_form(d: GearboxDescription, shift: str, mode: str) -> LinearForm:
+    """(5.1) of one mode of the hybrid ``shift`` (:func:`gearsym.symbolic.hybrid.hybrid_shift`):
+    the shared and the mode's locked swapping elements are constraints, a sliding element's
+    torque is an input of (5.3) (its place in the description order), an open one is absent
+    (2.54); the mode's own state coordinates (``Mode.keep``)."""
+    from gearsym.symbolic.hybrid import LOCKED, SLIDING, hybrid_shift
+
+    hybrid = hybrid_shift(d, shift)
+    if mode not in hybrid.modes:
+        raise GearsymError(
+            d.file,
+            "mode",
+            f"unknown mode {mode!r} of the {shift} shift (known: {', '.join(hybrid.modes)})",
+        )
+    m = hybrid.modes[mode]
+    locked = (*hybrid.spec.locked, *(e for e in hybrid.elements if m.status[e][0] == LOCKED))
+    sliding = tuple(e for e in hybrid.elements if m.status[e][0] == SLIDING)
+    return _linear_form(d, mode, locked, sliding, m.keep)

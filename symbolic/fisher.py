@@ -229,16 +229,22 @@ def eliminate(
     names: Sequence[str],
     scales: Sequence[float],
     gamma_max: float = 0.1,
+    rank_tolerance: float = RANK_TOLERANCE,
 ) -> Elimination:
     """The thesis' procedure (3.3): while some γ_j > γ_max, drop the parameter that dominates
-    the eigen-direction of the smallest eigenvalue of F_N (3.28)–(3.30) and recompute."""
+    the eigen-direction of the smallest eigenvalue of F_N (3.28)–(3.30) and recompute.
+    ``rank_tolerance`` as in :func:`analyse`."""
     names = list(names)
     scale_of = dict(zip(names, np.asarray(scales, dtype=float), strict=True))
     keep = list(names)
     steps = []
     while keep:
         a = analyse(
-            submatrix(fim, names, keep), keep, [scale_of[n] for n in keep], gamma_max=gamma_max
+            submatrix(fim, names, keep),
+            keep,
+            [scale_of[n] for n in keep],
+            gamma_max=gamma_max,
+            rank_tolerance=rank_tolerance,
         )
         if a.estimable:
             steps.append(EliminationStep(a, None, "every scatter below the limit"))

@@ -178,19 +178,52 @@ def gearsym(*args: str) -> subprocess.CompletedProcess:
     )
 
 
-def test_fim_hybrid_command(tmp_path):
-    """``gearsym fim --hybrid``: the per-phase verdicts with φ unknown, as JSON and as files
-    written through the output folder; ``--known-initial-state`` without ``--hybrid`` is a
-    one-line error naming the option."""
+def test_fim_defaults_to_the_hybrid_model(tmp_path):
+    """``gearsym fim`` (no option) is the hybrid study: the per-phase verdicts with φ unknown,
+    labelled with the view, as JSON and as files written through the output folder; the
+    issue-15 verdicts (μ38 identifiable in the speed phase and gear 3, μ05 in gear 3) are gone
+    because K38 is open and B05 sticks there (3.14 holds only while sliding). The open-loop
+    study's options refuse to run on the hybrid model with one line naming the option, and the
+    hybrid's option refuses with ``--open-loop``."""
     out = tmp_path / "fim"
-    done = gearsym("fim", "--hybrid", "--json", "--out", str(out))
+    done = gearsym("fim", "--json", "--out", str(out))
     assert done.returncode == 0, done.stderr
     data = json.loads(done.stdout)
     assert data["view"] == "nuisance" and data["nuisance"] == ["phi"]
+    assert data["label"] == VIEWS["nuisance"]
     windows = {w["name"]: w for w in data["windows"]}
     assert windows["gear 3"]["gamma"]["mu_38"] == "inf"
     assert windows["speed phase"]["gamma"]["mu_38"] == "inf"
+    for phase in ("speed phase", "gear 3"):
+        assert "mu_38" not in windows[phase]["elimination"]["final"], phase
+    assert "mu_05" not in windows["gear 3"]["elimination"]["final"]
     assert sorted(p.name for p in out.iterdir()) == ["MANIFEST", "fim.json", "fim.txt"]
-    refused = gearsym("fim", "--known-initial-state")
-    assert refused.returncode == 2
-    assert refused.stderr.strip() == "gearsym: fim: --known-initial-state: applies to --hybrid only"
+    assert VIEWS["nuisance"] in (out / "fim.txt").read_text()
+    for argv, option in (
+        (("--carry-over",), "--carry-over"),
+        (("--with-wheel-acceleration",), "--with-wheel-acceleration"),
+        (("--sliding", "phases"), "--sliding"),
+        (("--open-loop", "--known-initial-state"), "--known-initial-state"),
+        (("--open-loop", "--hybrid"), "--hybrid"),
+    ):
+        refused = gearsym("fim", *argv, "--out", str(tmp_path / "never"))
+        assert refused.returncode == 2, argv
+        assert refused.stdout == ""
+        assert refused.stderr.startswith(f"gearsym: fim: {option}: "), refused.stderr
+        assert refused.stderr.count("\n") == 1
+        assert not (tmp_path / "never").exists()
+
+
+def test_the_open_loop_study_stays_available_and_labelled():
+    """``--open-loop`` is the per-phase restarted study on the open-loop shift model, as the
+    default was before; every verdict it prints says so, and ``--carry-over`` keeps its
+    meaning there (the thesis' view, labelled)."""
+    from gearsym.validation.fisher import SENSITIVITY_VIEW
+
+    restarted = gearsym("fim", "--open-loop", "--params", "m_veh,mu_38")
+    assert restarted.returncode == 0, restarted.stderr
+    assert "open-loop shift model" in restarted.stdout.splitlines()[0]
+    assert SENSITIVITY_VIEW[True] in restarted.stdout
+    carried = gearsym("fim", "--open-loop", "--carry-over", "--params", "m_veh,mu_38")
+    assert carried.returncode == 0, carried.stderr
+    assert SENSITIVITY_VIEW[False] in carried.stdout

@@ -145,3 +145,52 @@ def test_model_gear_errors_are_one_line():
     )
     assert out.returncode == 2
     assert out.stderr.count("\n") == 1 and "gear: unknown gear '12'" in out.stderr
+
+
+def test_every_mode_of_the_hybrid_2_3_has_its_linear_form(d):
+    """(5.1) per mode of the hybrid shift: the mode's coordinates (as the hybrid model's
+    states), a sliding element's torque an input, locked and open ones absent; A and B equal
+    finite-difference Jacobians of the nonlinear model with the same constraint set. The slip
+    sign only picks the sign of T (2.70), and T is the input here, so the two sign variants of a
+    mode have the same form."""
+    from gearsym.symbolic.drivetrain import mode_linear_form
+    from gearsym.symbolic.hybrid import hybrid_shift
+
+    hybrid = hybrid_shift(d, "2-3")
+    spec = hybrid.spec
+    forms = {}
+    for name, mode in hybrid.modes.items():
+        form = mode_linear_form(d, "2-3", name)
+        locked = (*spec.locked, *(e for e in hybrid.elements if mode.status[e][0] == "locked"))
+        sliding = tuple(e for e in hybrid.elements if mode.status[e][0] == "sliding")
+        assert form.states == [v.name for v in mode.model.states], name
+        order = [e.name for e in d.shift_elements]  # (5.3): description order K81, K38, ...
+        torques = [f"T_{e}" for e in sorted(sliding, key=order.index)]
+        assert form.inputs == ["T_In", "T_res_star", *torques, "zeta"], name
+        check(d, form, locked, sliding, mode.keep)
+        forms[name] = form
+    for name, form in forms.items():
+        twin = forms[name.replace("slide_neg", "slide_pos")]
+        assert form.A == twin.A and form.B == twin.B, name
+
+
+def test_model_json_of_a_mode_and_an_unknown_mode():
+    name = "hybrid_2_3__K38_slide_pos__B05_open"
+    out = subprocess.run(
+        [sys.executable, "-m", "gearsym", "model", "--shift", "2-3", "--mode", name, "--json"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    data = json.loads(out.stdout)
+    lf = data["linear_form"]
+    assert data["name"] == lf["mode"] == name
+    assert lf["inputs"] == ["T_In", "T_res_star", "T_K38", "zeta"]
+    assert np.array(lf["B"]).shape == (4, 4)
+    bad = subprocess.run(
+        [sys.executable, "-m", "gearsym", "model", "--mode", "nonsense", "--json"],
+        capture_output=True,
+        text=True,
+    )
+    assert bad.returncode == 2 and bad.stdout == "" and bad.stderr.count("\n") == 1
+    assert "mode: unknown mode 'nonsense' of the 2-3 shift" in bad.stderr

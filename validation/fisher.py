@@ -287,8 +287,9 @@ def format_text(study: FimStudy) -> str:
     s = study.settings
     errors = ", ".join(f"{k.removeprefix('y_')} {v:.0%}" for k, v in s["relative_errors"].items())
     lines.append(
-        f"Fisher information along the reference shift (3.25) "
-        f"(reference: {s['source']}; sliding: {s['sliding']}; "
+        f"Fisher information along the reference shift (3.25), open-loop shift model "
+        f"(never locks; gearsym fim --open-loop) (reference: {s['source']}; "
+        f"sliding: {s['sliding']}; "
         f"sensitivities {SENSITIVITY_VIEW[s['restart']]})"
     )
     lines.append(

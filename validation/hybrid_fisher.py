@@ -39,7 +39,14 @@ from gearsym.symbolic.defaults import (
 )
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.fisher import FimAnalysis, analyse, fisher_information, noise_variances
+from gearsym.symbolic.fisher import (
+    Elimination,
+    FimAnalysis,
+    analyse,
+    eliminate,
+    fisher_information,
+    noise_variances,
+)
 from gearsym.validation.hybrid_simulation import HybridResult, HybridSimulator
 from gearsym.validation.scenario import Scenario
 from gearsym.validation.sensitivity_run import nominal_scales
@@ -74,6 +81,8 @@ class HybridWindow:
     fim: np.ndarray  # of θ (after the Schur complement in the nuisance view)
     full_fim: np.ndarray  # of [θ; ν]
     analysis: FimAnalysis
+    #: the thesis' elimination (3.3) on ``fim``: what stays estimable in this window
+    elimination: Elimination
 
 
 @dataclass(frozen=True)
@@ -206,6 +215,7 @@ def hybrid_fim(
                 fim=reduced,
                 full_fim=full,
                 analysis=analyse(reduced, parameters, scales, gamma_max, RANK_TOLERANCE),
+                elimination=eliminate(reduced, parameters, scales, gamma_max, RANK_TOLERANCE),
             )
         )
     return HybridFimStudy(
@@ -246,7 +256,21 @@ def format_text(study: HybridFimStudy) -> str:
             gamma = "inf" if not np.isfinite(a.gamma[j]) else f"{a.gamma[j]:.3g}"
             ok = "✓" if a.gamma[j] <= a.gamma_max else "✗"
             lines.append(f"    {name:<8} γ = {gamma:>9} {ok}")
+        dropped = [st.dropped for st in w.elimination.steps if st.dropped]
+        lines.append(
+            f"    elimination (3.3): drop {', '.join(dropped) or 'nothing'} → estimable: "
+            f"{', '.join(w.elimination.final) or 'none'}"
+        )
     return "\n".join(lines)
+
+
+def summary_lines(study: HybridFimStudy) -> list[str]:
+    """A few lines for ``gearsym run``: the view, then per window what stays estimable after
+    the elimination (3.3)."""
+    lines = [f"view: {study.label}"]
+    for w in study.windows:
+        lines.append(f"{w.name:<13} {', '.join(w.elimination.final) or 'none'}")
+    return lines
 
 
 def to_dict(study: HybridFimStudy) -> dict[str, Any]:
@@ -258,7 +282,13 @@ def to_dict(study: HybridFimStudy) -> dict[str, Any]:
         "nuisance": list(study.nuisance),
         "outputs": list(study.outputs),
         "windows": [
-            {"name": w.name, "t_start": w.t_start, "t_end": w.t_end, **w.analysis.to_dict()}
+            {
+                "name": w.name,
+                "t_start": w.t_start,
+                "t_end": w.t_end,
+                **w.analysis.to_dict(),
+                "elimination": w.elimination.to_dict(),
+            }
             for w in study.windows
         ],
     }

@@ -20,6 +20,8 @@ The generic engine behind thesis section 4.1 (equations 4.1–4.13), one module 
 * :mod:`.drops`, :mod:`.search`, :mod:`.minor` — the rank on a condition set, and the one drop
   search (inputs held at zero or constant, zero sets of the witness minor, nested sets),
   each drop followed to higher orders.
+* :mod:`.modes` — the same verdict per mode of the hybrid shift model
+  (:func:`analyze_modes`), a μ excluded where its element does not slide.
 * :mod:`.report` — the analysis of a gearbox's shift model behind ``gearsym observability`` and
   the notebook API (:func:`analyze_shift` → :class:`ObservabilityReport`): the augmented shift
   model (4.1), outputs, input models, conditions and parameters given as text, the verdict and
@@ -41,6 +43,7 @@ from gearsym.symbolic.observability.errors import (
 )
 from gearsym.symbolic.observability.exact import MODULUS, exact_rational, rationalize
 from gearsym.symbolic.observability.lie import ObservabilityMatrix, observability_matrix
+from gearsym.symbolic.observability.modes import ModeObservability, analyze_modes
 from gearsym.symbolic.observability.rank import (
     ObservabilityResult,
     RankWitness,
@@ -68,6 +71,7 @@ __all__ = [
     "CandidateCondition",
     "DropSearch",
     "InputModel",
+    "ModeObservability",
     "ObservabilityError",
     "ObservabilityMatrix",
     "ObservabilityReport",
@@ -80,6 +84,7 @@ __all__ = [
     "RankWitness",
     "SamplingError",
     "UnsupportedExpressionError",
+    "analyze_modes",
     "analyze_observability",
     "analyze_shift",
     "augment",
