@@ -302,7 +302,11 @@ def write_fim(study: Any, folder: Path) -> list[str]:
 
 
 def print_fim_summary(
-    d: Any, result: Any = None, folder: Path | None = None, scenario: Any = None
+    d: Any,
+    result: Any = None,
+    folder: Path | None = None,
+    scenario: Any = None,
+    background: Any = None,
 ) -> None:
     """A few lines for ``gearsym run``: per phase, the parameters that stay estimable after the
     elimination (3.3), on the hybrid shift model with φ at each phase start unknown (what
@@ -311,7 +315,9 @@ def print_fim_summary(
     ``result`` is a :class:`gearsym.validation.simulate.SimulationResult` of ``scenario``
     (default: the built-in 2-3); it feeds the open-loop sensitivities written with ``folder``.
     With ``folder``, also write ``fim/fim.json``, ``fim/fim.txt`` (the hybrid study) and what
-    ``gearsym sensitivity`` writes (CSV, Figures 3.4–3.8) into ``folder/sensitivity``.
+    ``gearsym sensitivity`` writes (CSV, Figures 3.4–3.8) into ``folder/sensitivity``; with
+    ``background`` (a :class:`gearsym.validation.figures.Background`) the figures are drawn in
+    a child process while the Fisher information is computed (the caller waits for it).
     """
     from gearsym.symbolic.defaults import GAMMA_MAX, SAMPLE_TIME
     from gearsym.validation.hybrid_fisher import format_text, hybrid_fim, summary_lines, to_dict
@@ -324,6 +330,18 @@ def print_fim_summary(
         write_csv,
     )
 
+    figures = 0
+    if folder is not None:  # first, so that its figures draw while the FIM is computed
+        data = reference_from_result(result) if result is not None else reference_data(d, scenario)
+        run = run_sensitivities(d, data=data)
+        sens_dir = folder / "sensitivity"
+        sens_dir.mkdir(parents=True, exist_ok=True)
+        write_csv(run, sens_dir / "sensitivities.csv")
+        figures = len(run.trajectory.parameter_names)  # one per parameter
+        if background is not None:
+            background.submit("Figures 3.4-3.8", plot_sensitivities, run, sens_dir)
+        else:
+            plot_sensitivities(run, sens_dir)
     start = time.perf_counter()
     simulator = HybridSimulator(d, scenario)
     names = [
@@ -347,15 +365,9 @@ def print_fim_summary(
     fim_dir.mkdir(parents=True, exist_ok=True)
     (fim_dir / "fim.json").write_text(json.dumps(to_dict(study), indent=2) + "\n")
     (fim_dir / "fim.txt").write_text(format_text(study) + "\n", encoding="utf-8")
-    data = reference_from_result(result) if result is not None else reference_data(d, scenario)
-    run = run_sensitivities(d, data=data)
-    sens_dir = folder / "sensitivity"
-    sens_dir.mkdir(parents=True, exist_ok=True)
-    write_csv(run, sens_dir / "sensitivities.csv")
-    figures = plot_sensitivities(run, sens_dir)
     print(
         f"  fim/: fim.json, fim.txt; sensitivity/ (open-loop shift model): sensitivities.csv "
-        f"and {len(figures)} plots"
+        f"and {figures} plots"
     )
 
 

@@ -50,7 +50,9 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     d = load(args.config)
     scenario, skipped = _run_scenario(d, args.scenario)
-    with OutputDir(args.out, "run", before_commit=check) as out:
+    from gearsym.validation.figures import Background
+
+    with OutputDir(args.out, "run", before_commit=check) as out, Background() as figures:
         print(f"gearsym: {d.title}")
         start = time.perf_counter()
         dyn = gearbox_dynamics(d, symbolic_inertias=True)
@@ -76,14 +78,16 @@ def cmd_run(args: argparse.Namespace) -> int:
         if scenario is not None:
             from gearsym.cmd_analysis import print_fim_summary
             from gearsym.cmd_dynamics import simulate_with_progress
-            from gearsym.validation.report import format_summary, write_results
+            from gearsym.validation.report import format_summary, plot_shift, write_results
 
             print()
             result = simulate_with_progress(d, scenario)
-            write_results(d, result, out.path)
+            write_results(d, result, out.path, plots=False)
+            # Figures 3.1-3.3 draw in a child process while the analyses run (two cores)
+            figures.submit("Figures 3.1-3.3", plot_shift, d, result, out.path)
             print(format_summary(result))
             print()
-            print_fim_summary(d, result, folder=out.path, scenario=scenario)
+            print_fim_summary(d, result, folder=out.path, scenario=scenario, background=figures)
             steps |= {"simulation": "done", "sensitivity": "done", "fim": "done"}
         else:
             print()
@@ -93,6 +97,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         (out.path / "run.json").write_text(
             json.dumps({"gearbox": d.name, "file": d.file, "steps": steps}, indent=2) + "\n"
         )
+        figures.wait()  # every figure is in the staging folder before it is swapped in
         paths = out.commit()
     print(f"  wrote {len(paths)} files to {args.out}")
     return status

@@ -8,10 +8,16 @@ time; PNGs are written with light zlib compression (lossless, a little larger, m
 from __future__ import annotations
 
 import io
+import os
+import signal
+import sys
+import traceback
+from collections.abc import Callable
 from pathlib import Path
+from types import TracebackType
 from typing import Any
 
-__all__ = ["STYLE", "pyplot", "save", "subplots", "to_bytes"]
+__all__ = ["STYLE", "Background", "pyplot", "save", "subplots", "to_bytes"]
 
 #: Shared rcParams: fonts, grid and line widths of every figure.
 STYLE: dict[str, Any] = {
@@ -78,3 +84,80 @@ def to_bytes(fig: Any, fmt: str, dpi: int = 110) -> bytes:
         fig.savefig(buffer, format="png", dpi=dpi, pil_kwargs={"compress_level": 1})
     plt.close(fig)
     return buffer.getvalue()
+
+
+class Background:
+    """Draw figures in forked child processes while the caller goes on computing.
+
+    Drawing is pure Python inside matplotlib (one core); ``gearsym run`` spends about as long
+    drawing as computing the Fisher information, so on a machine with two cores the two
+    overlap. Each :meth:`submit` forks once: the child inherits the data (nothing is pickled),
+    writes its files, and leaves with ``os._exit`` (no buffers of the parent flushed twice).
+    :meth:`wait` reaps every child and raises if one failed; leaving the ``with`` block on an
+    error (or a signal) kills and reaps the children, so no figure outlives the command. Where
+    ``os.fork`` is missing the work runs inline.
+    """
+
+    def __init__(self) -> None:
+        self._children: list[tuple[int, str]] = []
+
+    def submit(self, what: str, function: Callable[..., object], *args: object) -> None:
+        """Run ``function(*args)`` in a child process (``what`` names it in an error)."""
+        if not hasattr(os, "fork"):
+            function(*args)
+            return
+        sys.stdout.flush()
+        sys.stderr.flush()
+        pid = os.fork()
+        if pid == 0:  # the child: draw, then leave without running the parent's cleanup
+            status = 0
+            try:
+                signal.signal(signal.SIGTERM, signal.SIG_DFL)
+                signal.signal(signal.SIGINT, signal.SIG_DFL)
+                function(*args)
+            except BaseException:  # reported by the parent as a failed figure job
+                traceback.print_exc()
+                status = 1
+            finally:
+                sys.stderr.flush()
+                os._exit(status)
+        self._children.append((pid, what))
+
+    def wait(self) -> None:
+        """Reap every child; raise :class:`RuntimeError` naming the jobs that failed."""
+        failed = []
+        while self._children:
+            pid, what = self._children.pop(0)
+            _, status = os.waitpid(pid, 0)
+            if os.waitstatus_to_exitcode(status) != 0:
+                failed.append(what)
+        if failed:
+            raise RuntimeError(f"drawing failed: {', '.join(failed)}")
+
+    def kill(self) -> None:
+        """Stop and reap every child still drawing."""
+        for pid, _ in self._children:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        for pid, _ in self._children:
+            try:
+                os.waitpid(pid, 0)
+            except ChildProcessError:
+                pass
+        self._children.clear()
+
+    def __enter__(self) -> Background:
+        return self
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        value: BaseException | None,
+        trace: TracebackType | None,
+    ) -> None:
+        if kind is None:
+            self.wait()
+        else:
+            self.kill()
