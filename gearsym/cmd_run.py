@@ -70,6 +70,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         status = print_ratio_table(d, table)
         ratios = {r.gear: (None if r.ratio is None else float(r.ratio)) for r in table}
         (out.path / "ratios.json").write_text(json.dumps(ratios, indent=2) + "\n")
+        from gearsym.validation.drawing_render import write_pictures
+
+        # stick diagram, lever analogy, speed plans, drivetrain: drawn beside the analyses
+        figures.submit("drawings", write_pictures, d, out.path / "drawings")
         from gearsym.cmd_observability import print_observability_summary
 
         print()

@@ -278,6 +278,8 @@ def test_run_is_the_main_job_end_to_end(tmp_path):
     for name in ("timeseries.csv", "summary.json", "fim/fim.json", "sensitivity/sensitivities.csv"):
         assert (out / name).stat().st_size > 0, name
     assert len(list((out / "sensitivity").glob("sensitivity_*.png"))) == 5
+    for name in ("stick", "lever", "speeds", "drivetrain"):  # drawn in a child process
+        assert (out / "drawings" / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     steps = json.loads((out / "run.json").read_text())["steps"]
     assert set(steps.values()) == {"done"}
     assert json.loads((out / "ratios.json").read_text())["2"] == pytest.approx(3.243, abs=5e-4)

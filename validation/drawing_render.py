@@ -9,6 +9,7 @@ elements C3), grey for what is open or only links.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 from gearsym.symbolic.description import GearboxDescription
@@ -18,10 +19,13 @@ from gearsym.validation.drawing import (
     LeverDiagram,
     SpeedPlan,
     StickDiagram,
+    drivetrain_diagram,
     lever_diagram,
     speed_columns,
+    speed_plans,
+    stick_diagram,
 )
-from gearsym.validation.figures import subplots
+from gearsym.validation.figures import save, subplots
 
 __all__ = [
     "SPEED_SCALE",
@@ -29,6 +33,7 @@ __all__ = [
     "lever_figure",
     "speeds_figure",
     "stick_figure",
+    "write_pictures",
 ]
 
 #: Display units per unit speed (ω_in = 1) in the speed plan; the lever is LEVER_HEIGHT long.
@@ -320,3 +325,22 @@ def drivetrain_figure(d: GearboxDescription, dt: DrivetrainDiagram) -> Any:
     ax.set_ylim(-2.2, 1.6)
     fig.suptitle(f"{d.title}: drivetrain (thesis Fig. 2.2; (2.42)–(2.53))")
     return fig
+
+
+#: The pictures `gearsym run` writes into its `drawings/` folder, by file name.
+PICTURES = ("stick.png", "lever.png", "speeds.png", "drivetrain.png")
+
+
+def write_pictures(d: GearboxDescription, folder: Path) -> list[str]:
+    """The stick diagram, lever analogy, speed plan of every gear and drivetrain (Figs. 2.1,
+    2.2 and the lever analogy) of ``d`` as PNG files in ``folder`` (created); their names."""
+    folder.mkdir(parents=True, exist_ok=True)
+    figures = {
+        "stick.png": lambda: stick_figure(d, stick_diagram(d)),
+        "lever.png": lambda: lever_figure(d),
+        "speeds.png": lambda: speeds_figure(d, speed_plans(d)),
+        "drivetrain.png": lambda: drivetrain_figure(d, drivetrain_diagram(d)),
+    }
+    for name in PICTURES:
+        save(figures[name](), folder / name)
+    return list(PICTURES)
