@@ -167,12 +167,21 @@ def cmd_fit_teeth(args: argparse.Namespace) -> int:
     tol = args.tolerance if args.tolerance is not None else 0.5 * 10.0 ** (-d.ratio_decimals)
     if not candidates:
         print(f"No tooth counts in the ranges reproduce every ratio within ±{tol:g}.")
+        if args.planet_count is None:
+            counts = sorted({ps.planet_count for ps in d.planetary_sets})
+            print(
+                f"  Only the planet count of each set in the file was tried "
+                f"({', '.join(map(str, counts))}): equal spacing (z_sun + z_ring divisible by "
+                f"it) rules out many teeth; try --planet-count 3,4,5."
+            )
         return 1
     print(f"{len(candidates)} candidate(s) within ±{tol:g} of every ratio ({elapsed:.1f} s):")
     for rank, c in enumerate(candidates, start=1):
         print(f"\n#{rank}  largest ratio error {c.max_error:.2e}")
         for s, (zs, zp, zr, n) in c.teeth.items():
-            alts = ", ".join(f"{a}/{b}/{r}" for a, b, r, _ in c.alternatives.get(s, [])[:4])
+            # the same stationary ratio with other teeth or planet counts, each once
+            listed = list(dict.fromkeys(c.alternatives.get(s, [])))[:4]
+            alts = ", ".join(f"{a}/{b}/{r}×{m}" for a, b, r, m in listed)
             more = f"   (same k: {alts})" if alts else ""
             print(f"   set {s:<4} sun {zs:3d}  planet {zp:3d}  ring {zr:3d}  ×{n}{more}")
         worst = max(c.errors, key=lambda g: c.errors[g])

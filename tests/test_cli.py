@@ -205,3 +205,18 @@ def test_light_commands_import_no_heavy_module(argv, forbidden):
         [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True
     )
     assert out.stdout.strip() == "[]", f"gearsym {' '.join(argv)} imports {out.stdout.strip()}"
+
+
+def test_fit_teeth_hints_at_planet_counts_and_lists_alternatives_once():
+    # nothing in a too narrow sun range: with the file's planet counts the hint names the option
+    result = gearsym("fit-teeth", "--sun", "17:18")
+    assert result.returncode == 1
+    assert "try --planet-count 3,4,5" in result.stdout
+    result = gearsym("fit-teeth", "--sun", "17:18", "--planet-count", "3,4")
+    assert result.returncode == 1 and "--planet-count" not in result.stdout
+    # alternatives carry their planet count and appear once (k = 49/23 of set 1: 46/26/98 ×4)
+    result = gearsym("fit-teeth", "--top", "1")
+    assert result.returncode == 0, result.stderr
+    line = next(x for x in result.stdout.splitlines() if x.strip().startswith("set 1"))
+    alternatives = line.split("same k: ")[1].rstrip(")").split(", ")
+    assert "46/26/98×4" in alternatives and len(alternatives) == len(set(alternatives))
