@@ -38,6 +38,12 @@ def cmd_estimate(args: argparse.Namespace) -> int:
 
     d = load(args.config)
     scenario = load_scenario(d, args.scenario)
+    if args.sample_time > scenario.t_end / 4:  # before the simulation: it records [0, t_end]
+        raise GearsymError(
+            "estimate",
+            "--sample-time",
+            f"must be in (0, {scenario.t_end / 4:g}] s, got {args.sample_time!r}",
+        )
     if args.filter == "ekf":
         return _cmd_ekf(args, d, scenario)
     unknown = [u.strip() for u in args.unknown.split(",") if u.strip()]

@@ -231,7 +231,11 @@ def test_estimate_command(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == ["MANIFEST", "uio.csv", "uio.json", "uio.png"]
     header = (out / "uio.csv").read_text().splitlines()[0].split(",")
     assert header[:3] == ["t", "omega_2_hat", "omega_2"] and "T_res_star_hat" in header
-    for bad, key in ((("--unknown", "T_K99"), "--unknown"), (("--noise", "-1"), "--noise")):
+    for bad, key in (
+        (("--unknown", "T_K99"), "--unknown"),
+        (("--noise", "-1"), "--noise"),
+        (("--sample-time", "10"), "--sample-time"),
+    ):
         result = gearsym(*bad, "--out", str(tmp_path / "never"))
         assert result.returncode == 2 and key in result.stderr
         assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
