@@ -57,17 +57,21 @@ def cmd_export_fmu(args: argparse.Namespace) -> int:
     with OutputFile(args.out, "export-fmu", suffixes=(".fmu",)) as out:
         d = load(args.config)
         from gearsym.symbolic.fmu import fmu_archive, fmu_files
-        from gearsym.symbolic.generate import check_generatable, gearbox_models
+        from gearsym.symbolic.generate import (
+            check_generatable,
+            gearbox_model_names,
+            gearbox_models,
+        )
 
         check_generatable(d)
-        models = {m.model.name: m for m in gearbox_models(d, progress)}
-        if args.model not in models:
+        names = gearbox_model_names(d)  # the name is checked before anything is derived
+        if args.model not in names:
             raise GearsymError(
                 "command line",
                 "--model",
-                f"unknown model {args.model!r}; {d.name} has {', '.join(models)}",
+                f"unknown model {args.model!r}; {d.name} has {', '.join(names)}",
             )
-        emitted = models[args.model]
+        (emitted,) = gearbox_models(d, progress, only=args.model)
         progress(f"emitting {emitted.model.name} and its FMI wrapper")
         out.commit(fmu_archive(fmu_files(emitted, d.name)))
     m = emitted.model

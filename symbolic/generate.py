@@ -284,49 +284,91 @@ def check_generatable(d: GearboxDescription) -> None:
     full_model(d)
 
 
+def gearbox_model_names(d: GearboxDescription) -> list[str]:
+    """The names of :func:`gearbox_models`, in output order, without deriving anything."""
+    return [name for name, _ in _model_plan(d)]
+
+
 def gearbox_models(
-    d: GearboxDescription, progress: Callable[[str], None] | None = None
+    d: GearboxDescription,
+    progress: Callable[[str], None] | None = None,
+    only: str | None = None,
 ) -> list[EmittedModel]:
-    """Every model ``gearsym generate`` emits for ``d``, in output order."""
+    """Every model ``gearsym generate`` emits for ``d``, in output order (with ``only``: that
+    one model, deriving nothing else; an empty list for an unknown name)."""
     say = progress or (lambda message: None)
+    return [build(say) for name, build in _model_plan(d) if only is None or name == only]
+
+
+def _model_plan(
+    d: GearboxDescription,
+) -> list[tuple[str, Callable[[Callable[[str], None]], EmittedModel]]]:
+    """(name, builder) of every emitted model: the names come from the naming rules, so a
+    caller can pick one model before any derivation."""
+    from gearsym.symbolic.estimators.ekf import ekf_model_name
+
     shifts = adjacent_shifts(d)
     if not shifts:
         check_generatable(d)  # the one-line error (missing data fails in full_model below)
-    models = []
-    say("deriving the full model (2.53)")
-    full = full_model(d)
-    models.append(EmittedModel(full, _bounds(d, full), "full", "full model (2.53)"))
     friction = _has_friction_data(d)
-    for spec in shifts:
-        say(f"deriving shift model {spec.name} (2.55-2.58)")
-        m = shift_model(d, spec.name)
-        what = f"shift {spec.name}: {spec.off_going} off, {spec.on_coming} on, torque inputs"
-        models.append(EmittedModel(m, _bounds(d, m), "shift", what, spec))
-        if friction:
+
+    def full(say: Callable[[str], None]) -> EmittedModel:
+        say("deriving the full model (2.53)")
+        m = full_model(d)
+        return EmittedModel(m, _bounds(d, m), "full", "full model (2.53)")
+
+    def torque_shift(spec: ShiftSpec) -> Callable[[Callable[[str], None]], EmittedModel]:
+        def build(say: Callable[[str], None]) -> EmittedModel:
+            say(f"deriving shift model {spec.name} (2.55-2.58)")
+            m = shift_model(d, spec.name)
+            what = f"shift {spec.name}: {spec.off_going} off, {spec.on_coming} on, torque inputs"
+            return EmittedModel(m, _bounds(d, m), "shift", what, spec)
+
+        return build
+
+    def mu_shift(spec: ShiftSpec) -> Callable[[Callable[[str], None]], EmittedModel]:
+        def build(say: Callable[[str], None]) -> EmittedModel:
             m = shift_model(d, spec.name, friction_inputs=True)
             what = f"shift {spec.name}: normal-force inputs, mu parameters (2.69)"
-            models.append(EmittedModel(m, _bounds(d, m), "shift_mu", what, spec))
-            # the sensitivity system [x; S] (3.5)-(3.7) of that model for the thesis'
-            # parameter set, with the off-going element's μ (3.14)
+            return EmittedModel(m, _bounds(d, m), "shift_mu", what, spec)
+
+        return build
+
+    def sensitivity(spec: ShiftSpec) -> Callable[[Callable[[str], None]], EmittedModel]:
+        # the sensitivity system [x; S] (3.5)-(3.7) of the mu model for the thesis' parameter
+        # set, with the off-going element's μ (3.14)
+        def build(say: Callable[[str], None]) -> EmittedModel:
+            m = shift_model(d, spec.name, friction_inputs=True)
             parameters = sensitivity_parameters(d, spec)
             say(f"deriving the sensitivity system of shift {spec.name} (3.7)")
             s = sensitivity_model(m, parameters)
             what = f"shift {spec.name}: sensitivities to {', '.join(parameters)} (3.7)"
-            # RK4 only: (3.7) is not stiff, and an implicit 24 x 24 solve does not belong on an
-            # ECU's stack
-            models.append(
-                EmittedModel(s, _bounds(d, s), "sensitivity", what, spec, integrators=("rk4",))
-            )
-    ekf_shift = next((spec for spec in shifts if spec.name == "2-3"), None)
-    if friction and ekf_shift is not None:
-        models.append(ekf_model(d, ekf_shift, say))
-    if friction:
+            # RK4 only: (3.7) is not stiff, and an implicit 24 x 24 solve does not belong on
+            # an ECU's stack
+            return EmittedModel(s, _bounds(d, s), "sensitivity", what, spec, integrators=("rk4",))
+
+        return build
+
+    def element(say: Callable[[str], None]) -> EmittedModel:
         say("building the shift-element friction model (2.66-2.70)")
         m = shift_element_model(d)
-        models.append(
-            EmittedModel(m, _bounds(d, m), "shift_element", "shift-element friction (2.66-2.70)")
-        )
-    return models
+        return EmittedModel(m, _bounds(d, m), "shift_element", "shift-element friction (2.66-2.70)")
+
+    plan: list[tuple[str, Callable[[Callable[[str], None]], EmittedModel]]] = [
+        (naming.FULL_MODEL, full)
+    ]
+    for spec in shifts:
+        plan.append((naming.shift_model_name(spec.from_gear, spec.to_gear), torque_shift(spec)))
+        if friction:
+            mu_name = naming.shift_model_name(spec.from_gear, spec.to_gear, True)
+            plan.append((mu_name, mu_shift(spec)))
+            plan.append((naming.sensitivity_model_name(mu_name), sensitivity(spec)))
+    ekf_shift = next((spec for spec in shifts if spec.name == "2-3"), None)
+    if friction and ekf_shift is not None:
+        plan.append((ekf_model_name(ekf_shift.name), lambda say: ekf_model(d, ekf_shift, say)))
+    if friction:
+        plan.append((naming.SHIFT_ELEMENT_MODEL, element))
+    return plan
 
 
 def ekf_model(

@@ -453,3 +453,15 @@ def test_changed_tooth_counts_regenerate_compile_and_validate_in_one_command(
     assert "thesis_9speed_alt_teeth" in files["c/gearsym_full.h"]
     assert files["c/gearsym_full.c"] != generated_check.read_tree(GENERATED)["c/gearsym_full.c"]
     assert not list(tmp_path.glob(".*"))
+
+
+def test_model_names_are_known_before_any_derivation():
+    # export-fmu checks --model against these names, then derives only that model
+    from gearsym.symbolic.generate import gearbox_model_names, gearbox_models
+    from gearsym.symbolic.loader import load_description
+
+    d = load_description()
+    built = [m.model.name for m in gearbox_models(d)]
+    assert gearbox_model_names(d) == built
+    assert [m.model.name for m in gearbox_models(d, only="shift_2_3_mu")] == ["shift_2_3_mu"]
+    assert gearbox_models(d, only="nope") == []
