@@ -65,10 +65,6 @@ DEVIATIONS: dict[str, tuple[str, str]] = {
         "the validating functions return an error code at the first failed check instead of "
         "carrying a status flag to one exit",
     ),
-    "15.7": (
-        "required",
-        "not yet: the parameter range check ends an if-else-if chain without a final else",
-    ),
     "18.4": ("advisory", "the μ-map look-up steps a pointer through its axis table"),
     "20.10": ("advisory", "`##` in GEARSYM_LIT(v) appends the `f` suffix in single precision"),
     "21.6": ("required", "the example main.c prints with printf (not TCU code)"),

@@ -737,6 +737,8 @@ int gearsym_shift_4_5_mu_sens_params_validate(
     } else if (!(p->mu_81 >= GEARSYM_LIT(0.0) && p->mu_81 <= GEARSYM_LIT(1.0))) {
         status = GEARSYM_SHIFT_4_5_MU_SENS_ERR_RANGE;
         index = 10;
+    } else {
+        /* every parameter finite and in range: status stays OK (MISRA C:2012 rule 15.7) */
     }
     if (bad_index != NULL) {
         *bad_index = index;

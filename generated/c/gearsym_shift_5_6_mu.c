@@ -640,6 +640,8 @@ int gearsym_shift_5_6_mu_params_validate(
     } else if (!(p->mu_38 >= GEARSYM_LIT(0.0) && p->mu_38 <= GEARSYM_LIT(1.0))) {
         status = GEARSYM_SHIFT_5_6_MU_ERR_RANGE;
         index = 10;
+    } else {
+        /* every parameter finite and in range: status stays OK (MISRA C:2012 rule 15.7) */
     }
     if (bad_index != NULL) {
         *bad_index = index;

@@ -623,6 +623,8 @@ int gearsym_shift_8_9_params_validate(
     } else if (!(p->f_roll >= GEARSYM_LIT(0.0) && p->f_roll <= GEARSYM_LIT(0.1))) {
         status = GEARSYM_SHIFT_8_9_ERR_RANGE;
         index = 8;
+    } else {
+        /* every parameter finite and in range: status stays OK (MISRA C:2012 rule 15.7) */
     }
     if (bad_index != NULL) {
         *bad_index = index;

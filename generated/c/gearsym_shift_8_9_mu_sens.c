@@ -737,6 +737,8 @@ int gearsym_shift_8_9_mu_sens_params_validate(
     } else if (!(p->mu_05 >= GEARSYM_LIT(0.0) && p->mu_05 <= GEARSYM_LIT(1.0))) {
         status = GEARSYM_SHIFT_8_9_MU_SENS_ERR_RANGE;
         index = 10;
+    } else {
+        /* every parameter finite and in range: status stays OK (MISRA C:2012 rule 15.7) */
     }
     if (bad_index != NULL) {
         *bad_index = index;

@@ -628,6 +628,8 @@ int gearsym_shift_element_params_validate(
     } else if (!(p->r_m >= GEARSYM_LIT(0.005) && p->r_m <= GEARSYM_LIT(1.0))) {
         status = GEARSYM_SHIFT_ELEMENT_ERR_RANGE;
         index = 5;
+    } else {
+        /* every parameter finite and in range: status stays OK (MISRA C:2012 rule 15.7) */
     }
     if (bad_index != NULL) {
         *bad_index = index;
