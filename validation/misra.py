@@ -12,6 +12,7 @@ from __future__ import annotations
 import re
 import shutil
 import subprocess
+import tempfile
 from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
@@ -83,21 +84,32 @@ def misra_rules(c_files: Sequence[Path], jobs: int = 2) -> Counter[str]:
     cppcheck = shutil.which("cppcheck")
     if cppcheck is None:
         raise MisraUnavailable("cppcheck is not installed")
-    result = subprocess.run(
-        [
-            cppcheck,
-            "--addon=misra",
-            "--std=c99",
-            "-q",
-            f"-j{jobs}",
-            "--template={id}",
-            *map(str, c_files),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=1800,
-        check=False,
-    )
+    # The add-on writes .dump files beside each source: check copies in a temporary folder, so
+    # the emitted tree (generated/, checked for staleness) is never touched.
+    with tempfile.TemporaryDirectory(prefix="gearsym-misra-") as tmp:
+        copies = []
+        for folder in sorted({Path(f).parent for f in c_files}):
+            for header in sorted(folder.glob("*.h")):
+                shutil.copy2(header, Path(tmp) / header.name)
+        for source in c_files:
+            copies.append(Path(tmp) / Path(source).name)
+            shutil.copy2(source, copies[-1])
+        result = subprocess.run(
+            [
+                cppcheck,
+                "--addon=misra",
+                "--std=c99",
+                "-q",
+                f"-j{jobs}",
+                "--template={id}",
+                *map(str, copies),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=1800,
+            check=False,
+            cwd=tmp,
+        )
     if "misra" in result.stderr.lower() and "failed" in result.stderr.lower():
         raise MisraUnavailable(result.stderr.strip().splitlines()[-1])
     return Counter(m.group(1) for m in _RULE.finditer(result.stderr))
