@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from gearsym.commands import add_command, load
@@ -82,25 +83,9 @@ def cmd_estimate(args: argparse.Namespace) -> int:
                 plot_uio(run, folder)
         return run
 
-    paths: list[Any] = []
-    if args.out is None:
-        run = work(None)
-    else:
-        from gearsym.symbolic.output_dir import OutputDir
-
-        with OutputDir(args.out, "estimate", before_commit=check) as out:
-            run = work(out.path)
-            paths = out.commit()
-    if args.json:
-        json.dump({**run.to_dict(), "files": [str(p) for p in paths]}, sys.stdout, indent=2)
-        sys.stdout.write("\n")
-        return 0
     from gearsym.validation.estimation import format_text
 
-    print(format_text(run))
-    if paths:
-        print(f"  wrote {len(paths)} files to {args.out}: {', '.join(p.name for p in paths)}")
-    return 0
+    return _run_and_report(args, work, format_text)
 
 
 def _initial_values(items: list[str] | None) -> dict[str, float]:
@@ -167,6 +152,16 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
                 plot_ekf(run, folder / "ekf.png")
         return run
 
+    from gearsym.validation.estimation import format_ekf_text
+
+    return _run_and_report(args, work, format_ekf_text)
+
+
+def _run_and_report(
+    args: argparse.Namespace, work: Callable[[Any], Any], text: Callable[[Any], str]
+) -> int:
+    """Run ``work`` (given the staging folder with ``--out``, else ``None``), write through
+    the one output writer, print the run as JSON or as ``text`` with the files written."""
     paths: list[Any] = []
     if args.out is None:
         run = work(None)
@@ -180,9 +175,7 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
         json.dump({**run.to_dict(), "files": [str(p) for p in paths]}, sys.stdout, indent=2)
         sys.stdout.write("\n")
         return 0
-    from gearsym.validation.estimation import format_ekf_text
-
-    print(format_ekf_text(run))
+    print(text(run))
     if paths:
         print(f"  wrote {len(paths)} files to {args.out}: {', '.join(p.name for p in paths)}")
     return 0

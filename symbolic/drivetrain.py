@@ -213,6 +213,23 @@ def drivetrain_parameters(d: GearboxDescription) -> tuple[Variable, ...]:
     return tuple(result)
 
 
+def slip_rows(
+    d: GearboxDescription, dyn: GearboxDynamics, elements: tuple[str, ...]
+) -> list[sp.Matrix]:
+    """Rows of the slip Δω_e = ω_a − ω_b (2.59) of each element in ẏ: they vanish for a
+    locked element."""
+    transform = dyn.kinematics.transform
+    index = {b: i for i, b in enumerate(d.body_names)}
+    rows = []
+    for name in elements:
+        e = d.element(name)
+        row = -transform[index[e.b], :]
+        if e.a is not None:
+            row += transform[index[e.a], :]
+        rows.append(row)
+    return rows
+
+
 def locked_projection(
     d: GearboxDescription,
     dyn: GearboxDynamics,
@@ -223,13 +240,7 @@ def locked_projection(
     the shafts in ``keep`` (2.55). Raises when those speeds do not parametrise them."""
     transform = dyn.kinematics.transform
     index = {b: i for i, b in enumerate(d.body_names)}
-    rows = []
-    for name in locked:
-        e = d.element(name)
-        row = -transform[index[e.b], :]
-        if e.a is not None:
-            row += transform[index[e.a], :]
-        rows.append(row)
+    rows = slip_rows(d, dyn, locked)
     chooser = [transform[index[s], :] for s in keep]
     system = sp.Matrix.vstack(*rows, *chooser) if rows or chooser else sp.zeros(0, 0)
     if system.shape[0] != system.shape[1] or system.det() == 0:

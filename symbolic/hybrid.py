@@ -63,6 +63,7 @@ from gearsym.symbolic.drivetrain import (
     locked_projection,
     quantity,
     shift_spec,
+    slip_rows,
 )
 from gearsym.symbolic.dynamics import GearboxDynamics, gearbox_dynamics
 from gearsym.symbolic.kinematics import exact
@@ -190,16 +191,7 @@ def _constraint_rows(
     d: GearboxDescription, dyn: GearboxDynamics, locked: tuple[str, ...]
 ) -> list[sp.Matrix]:
     """Rows of the slip Δω_e = ω_a − ω_b of each locked element in ẏ (2.59), which vanish."""
-    transform = dyn.kinematics.transform
-    index = {b: i for i, b in enumerate(d.body_names)}
-    rows = []
-    for name in locked:
-        e = d.element(name)
-        row = -transform[index[e.b], :]
-        if e.a is not None:
-            row += transform[index[e.a], :]
-        rows.append(row)
-    return rows
+    return slip_rows(d, dyn, locked)
 
 
 def mode_coordinates(
