@@ -90,6 +90,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
                     args.points,
                     progress,
                     description=d,
+                    linear_sets=tree.linear_sets,
                 )
             for line in report.summary():
                 print(line)

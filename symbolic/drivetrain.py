@@ -554,7 +554,7 @@ class LinearForm:
         )
 
 
-def _linear_form(
+def linear_form(
     d: GearboxDescription,
     mode: str,
     locked: tuple[str, ...],
@@ -596,7 +596,7 @@ def full_linear_form(d: GearboxDescription) -> LinearForm:
     """A_ex, B_ex (5.1) of the full model (2.53): nothing locked, every element an input,
     the nine inputs of (5.3) for the built-in gearbox."""
     elements = tuple(e.name for e in d.shift_elements)
-    return _linear_form(d, naming.FULL_MODEL, (), elements, None)
+    return linear_form(d, naming.FULL_MODEL, (), elements, None)
 
 
 def gear_linear_form(d: GearboxDescription, gear: str) -> LinearForm:
@@ -608,7 +608,7 @@ def gear_linear_form(d: GearboxDescription, gear: str) -> LinearForm:
     g = gears[gear]
     if g.neutral:
         raise GearsymError(d.file, "gear", f"gear {gear!r} is a neutral: it has no drive path")
-    return _linear_form(d, f"gear_{gear}", tuple(g.closed), (), (d.output_shaft,))
+    return linear_form(d, f"gear_{gear}", tuple(g.closed), (), (d.output_shaft,))
 
 
 def shift_linear_form(d: GearboxDescription, shift: str) -> LinearForm:
@@ -617,7 +617,7 @@ def shift_linear_form(d: GearboxDescription, shift: str) -> LinearForm:
     (:func:`linear_shift_form` gives B in the column order of the printed (5.5))."""
     spec = shift_spec(d, shift)
     name = naming.shift_model_name(spec.from_gear, spec.to_gear)
-    return _linear_form(d, name, spec.locked, (spec.off_going, spec.on_coming), None)
+    return linear_form(d, name, spec.locked, (spec.off_going, spec.on_coming), None)
 
 
 def mode_linear_form(d: GearboxDescription, shift: str, mode: str) -> LinearForm:
@@ -637,4 +637,4 @@ def mode_linear_form(d: GearboxDescription, shift: str, mode: str) -> LinearForm
     m = hybrid.modes[mode]
     locked = (*hybrid.spec.locked, *(e for e in hybrid.elements if m.status[e][0] == LOCKED))
     sliding = tuple(e for e in hybrid.elements if m.status[e][0] == SLIDING)
-    return _linear_form(d, mode, locked, sliding, m.keep)
+    return linear_form(d, mode, locked, sliding, m.keep)

@@ -33,6 +33,7 @@ from gearsym.symbolic.codegen import (
     function_names,
     render,
 )
+from gearsym.symbolic.codegen.linear import LinearSystem, LinearSystemSet, emit_linear_files
 from gearsym.symbolic.codegen.mu_map import mu_map_files
 from gearsym.symbolic.description import GearboxDescription, Quantity
 from gearsym.symbolic.drivetrain import (
@@ -51,15 +52,18 @@ from gearsym.symbolic.friction import (
     mu_map_origin,
     shift_element_sym,
 )
+from gearsym.symbolic.linear_forms import gear_linear_forms, shift_linear_forms
 from gearsym.symbolic.model import Model, Variable
 from gearsym.symbolic.output_dir import MANIFEST, manifest_marker, manifest_text
 from gearsym.symbolic.sensitivity import sensitivity_model
 
 __all__ = [
     "MANIFEST_MARKER",
+    "EmittedLinearSet",
     "EmittedModel",
     "GeneratedTree",
     "gearbox_models",
+    "linear_system_sets",
     "generate_tree",
     "load_mu_map",
     "mu_map_files",
@@ -145,6 +149,14 @@ class EmittedModel:
 
 
 @dataclass(frozen=True)
+class EmittedLinearSet:
+    """One emitted file pair of linear forms (5.1) and the config it was emitted with."""
+
+    set: LinearSystemSet
+    config: CodegenConfig
+
+
+@dataclass(frozen=True)
 class GeneratedTree:
     """The output of :func:`generate_tree`: files by relative path, and what produced them."""
 
@@ -152,6 +164,7 @@ class GeneratedTree:
     models: tuple[EmittedModel, ...]
     mu_map: MuMap
     example_models: tuple[str, ...] = field(default=())
+    linear_sets: tuple[EmittedLinearSet, ...] = field(default=())
 
 
 # ---------------------------------------------------------------------------------------------
@@ -397,6 +410,38 @@ def ekf_model(
     )
 
 
+def linear_system_sets(
+    d: GearboxDescription, progress: Callable[[str], None] | None = None
+) -> list[EmittedLinearSet]:
+    """The linear forms (5.1) ``generate`` emits: ``linear_gears`` (the full model and every
+    gear) and ``linear_<a>_<b>`` (every mode of each emitted shift), as the emitters' sets."""
+    say = progress or (lambda message: None)
+    say("deriving the linear forms (5.1) of the full model and every gear")
+    groups = [gear_linear_forms(d)]
+    for spec in adjacent_shifts(d):
+        say(f"deriving the linear forms (5.1) of the modes of shift {spec.name}")
+        groups.append(shift_linear_forms(d, spec))
+    sets = []
+    for group in groups:
+        systems = tuple(
+            LinearSystem(
+                named.name,
+                tuple(named.form.states),
+                tuple(named.form.inputs),
+                named.form.A,
+                named.form.B,
+                named.summary,
+                (f"hybrid modes: {', '.join(named.modes)}",) if named.modes else (),
+            )
+            for named in group.forms
+        )
+        metadata = {"gearbox": d.name, "equations": "5.1-5.3", "content": group.summary}
+        s = LinearSystemSet(group.name, group.parameters, systems, metadata)
+        # the parameter ranges params_validate enforces are those of the models
+        sets.append(EmittedLinearSet(s, CodegenConfig(bounds=_bounds(d, s.as_model()))))
+    return sets
+
+
 def sample_ranges(model: Model) -> dict[str, tuple[float, float]]:
     """Physically meaningful sampling ranges of the states and inputs (and of parameters that
     have no default) of an emitted model, for :mod:`gearsym.validation.c_check`."""
@@ -587,10 +632,25 @@ class ReadmeView:
     explicit_only: tuple[str, ...]  # models without the implicit step
     example: ExampleView
     mu_map_origin: str  # mu_map_origin() leaves only [A-Za-z0-9._+-] and spaces: Markdown-safe
+    linear_sets: tuple[LinearSetRow, ...]
+
+
+@dataclass(frozen=True)
+class LinearSetRow:
+    name: str
+    summary: str
+    systems: str  # "full (6 x 9), gear_1 (3 x 3), ..."
+    parameters: str
+    c: str
+    python: str
 
 
 def _readme(
-    d: GearboxDescription, models: Sequence[EmittedModel], example: ExampleView, mu_map: MuMap
+    d: GearboxDescription,
+    models: Sequence[EmittedModel],
+    example: ExampleView,
+    mu_map: MuMap,
+    linear_sets: Sequence[EmittedLinearSet] = (),
 ) -> str:
     rows = []
     for m in models:
@@ -615,8 +675,21 @@ def _readme(
         explicit_only=tuple(m.model.name for m in models if not m.config.implicit_step),
         example=example,
         mu_map_origin=mu_map.origin,
+        linear_sets=tuple(_linear_set_row(emitted.set) for emitted in linear_sets),
     )
     return render("generated_readme.md.j2", view)
+
+
+def _linear_set_row(s: LinearSystemSet) -> LinearSetRow:
+    names = naming.model_file_names(s.name)
+    return LinearSetRow(
+        name=s.name,
+        summary=s.metadata["content"],
+        systems=", ".join(f"`{x.name}` ({len(x.states)} x {len(x.inputs)})" for x in s.systems),
+        parameters=", ".join(v.name for v in s.parameters),
+        c=f"{C_DIR}/{names['header']}, {C_DIR}/{names['source']}",
+        python=f"{PYTHON_DIR}/{names['casadi']}",
+    )
 
 
 def generate_tree(
@@ -631,11 +704,17 @@ def generate_tree(
         for name, text in emit_all(m.model, m.config).items():
             folder = PYTHON_DIR if name.endswith(".py") else C_DIR
             files[f"{folder}/{name}"] = text
+    linear_sets = linear_system_sets(d, say)
+    for emitted in linear_sets:
+        say(f"emitting {emitted.set.name}")
+        for name, text in emit_linear_files(emitted.set, emitted.config).items():
+            folder = PYTHON_DIR if name.endswith(".py") else C_DIR
+            files[f"{folder}/{name}"] = text
     say("emitting the mu map and the example")
     mu_map = load_mu_map(d)
     files.update(mu_map_files(mu_map))
     example = _example_view(d, models)
     files[f"{C_DIR}/main.c"] = render("c_example_main.c.j2", example)
-    files["README.md"] = _readme(d, models, example, mu_map)
+    files["README.md"] = _readme(d, models, example, mu_map, linear_sets)
     files[MANIFEST] = manifest_text({k: v.encode("utf-8") for k, v in files.items()}, "generate")
-    return GeneratedTree(files, tuple(models), mu_map, example.c_files)
+    return GeneratedTree(files, tuple(models), mu_map, example.c_files, tuple(linear_sets))

@@ -4,7 +4,8 @@
 
 * every model's C, compiled into one shared library per precision with the strict flags, against
   SymPy (:func:`gearsym.validation.c_check.compare_with_sympy`) at ``n_points`` random points, and
-  the emitted CasADi module against SymPy: ≤ 1e-12 in double, ≤ 1e-5 in single;
+  the emitted CasADi module against SymPy: ≤ 1e-12 in double, ≤ 1e-5 in single; the same for
+  the linear forms (5.1) (:mod:`gearsym.validation.linear_check`);
 * the μ map in C (both precisions) and in CasADi against :class:`gearsym.symbolic.friction.MuMap`,
   including points outside the grid (clamping) and negative slip;
 * ``main.c`` compiled alone with the strict flags in both precisions, run, exit code 0;
@@ -33,8 +34,15 @@ import numpy as np
 from gearsym.symbolic.codegen import file_names
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.friction import MuMap
-from gearsym.symbolic.generate import C_DIR, PYTHON_DIR, EmittedModel, sample_ranges
+from gearsym.symbolic.generate import (
+    C_DIR,
+    PYTHON_DIR,
+    EmittedLinearSet,
+    EmittedModel,
+    sample_ranges,
+)
 from gearsym.validation import c_check
+from gearsym.validation.linear_check import compare_linear_sets
 
 CPPCHECK_FLAGS: tuple[str, ...] = (
     "--std=c99",
@@ -446,6 +454,7 @@ def check_tree(
     progress: Progress | None = None,
     tools: bool = True,
     description: GearboxDescription | None = None,
+    linear_sets: Sequence[EmittedLinearSet] = (),
 ) -> TreeReport:
     """Run every check on the generated directory ``root`` (see the module docstring).
 
@@ -462,6 +471,15 @@ def check_tree(
     except c_check.CompileError as err:
         report.failures.append(f"compilation: {err}")
         return report
+    if linear_sets:
+        say(f"validating {len(linear_sets)} sets of linear forms (5.1)")
+        try:
+            report.comparisons += compare_linear_sets(
+                [(e.set, e.config) for e in linear_sets], root, build_dir / "linear", n_points
+            )
+        except c_check.CompileError as err:
+            report.failures.append(f"compilation: {err}")
+            return report
     for r in report.comparisons:
         if not comparison_ok(r):
             report.failures.append(f"{r.target}: error {r.worst():.3e}\n{r}")
