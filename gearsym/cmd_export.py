@@ -1,13 +1,19 @@
-"""``gearsym export-fmu [CONFIG] --model NAME --out FILE.fmu``: one emitted model as an FMU.
+"""``gearsym export-fmu`` and ``gearsym export-a2l``: the emitted code for the tools around it.
 
-Writes an FMI 2.0 Model Exchange source FMU (:mod:`gearsym.symbolic.fmu`): the model's
-``modelDescription.xml``, the emitted C of ``gearsym generate`` and an FMI wrapper in
-``sources/``, for the importer to compile with its own FMI headers. ``NAME`` is a model name of
-``gearsym generate`` (``full``, ``shift_2_3``, ``shift_2_3_mu``, ...).
+``gearsym export-fmu [CONFIG] --model NAME --out FILE.fmu`` writes an FMI 2.0 Model Exchange
+source FMU (:mod:`gearsym.symbolic.fmu`): the model's ``modelDescription.xml``, the emitted C of
+``gearsym generate`` and an FMI wrapper in ``sources/``, for the importer to compile with its own
+FMI headers. ``NAME`` is a model name of ``gearsym generate`` (``full``, ``shift_2_3``,
+``shift_2_3_mu``, ...).
+
+``gearsym export-a2l [CONFIG] [--model NAME ...] [--precision double|float] --out FILE.a2l``
+writes an ASAP2 file (:mod:`gearsym.symbolic.a2l`) of the emitted parameter structs and the μ map
+(``--model mu_map``), all of them without ``--model``, for INCA, CANape and the like.
 
 ``--out`` goes through :class:`gearsym.symbolic.output_dir.OutputFile`: written atomically,
-signed (the zip's archive comment), and only over an FMU gearsym wrote. The same input gives the
-same bytes. A bad model name or ``--out`` is one line on stderr, exit 2, and nothing written.
+signed (the zip's archive comment; the A2L's closing comment), and only over a file gearsym
+wrote. The same input gives the same bytes. A bad model name or ``--out`` is one line on stderr,
+exit 2, and nothing written.
 """
 
 from __future__ import annotations
@@ -21,11 +27,11 @@ from gearsym.symbolic.errors import GearsymError
 if TYPE_CHECKING:
     from gearsym.commands import Subparsers
 
-__all__ = ["cmd_export_fmu", "register"]
+__all__ = ["cmd_export_a2l", "cmd_export_fmu", "register"]
 
 
 def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
-    """Register ``gearsym export-fmu``."""
+    """Register ``gearsym export-fmu`` and ``gearsym export-a2l``."""
     p = add_command(
         subparsers,
         "export-fmu",
@@ -45,6 +51,41 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         required=True,
         metavar="FILE.fmu",
         help="the FMU; replaced only if gearsym wrote it",
+    )
+    a = add_command(
+        subparsers,
+        "export-a2l",
+        cmd_export_a2l,
+        "Write an ASAP2 (A2L, ASAM MCD-2 MC 1.7) file of the emitted parameter structs and the "
+        "mu map for calibration tools (INCA, CANape); addresses are placeholders (0, with "
+        "SYMBOL_LINK) for the linker map to fill in.",
+        common,
+    )
+    a.add_argument(
+        "--model",
+        action="append",
+        metavar="NAME",
+        help="a model of gearsym generate (full, shift_<a>_<b>, ...) or mu_map; repeat for "
+        "several; default: every model and the mu map",
+    )
+    a.add_argument(
+        "--precision",
+        choices=("double", "float"),
+        default="double",
+        help="gearsym_real of the ECU build: double (default) or float "
+        "(-DGEARSYM_SINGLE_PRECISION)",
+    )
+    a.add_argument(
+        "--byte-order",
+        choices=("little", "big"),
+        default="little",
+        help="byte order of the ECU (default little: Cortex-M, TriCore)",
+    )
+    a.add_argument(
+        "--out",
+        required=True,
+        metavar="FILE.a2l",
+        help="the A2L file; replaced only if gearsym wrote it",
     )
 
 
@@ -78,5 +119,50 @@ def cmd_export_fmu(args: argparse.Namespace) -> int:
     print(
         f"wrote the FMU of {m.name} ({len(m.states)} states, {len(m.inputs)} inputs, "
         f"{len(m.parameters)} parameters, {len(m.outputs)} outputs) of {d.name} to {args.out}"
+    )
+    return 0
+
+
+def cmd_export_a2l(args: argparse.Namespace) -> int:
+    """Check --out and --model, describe the chosen structs and the μ map, write atomically."""
+    from gearsym.symbolic.output_dir import OutputFile
+
+    # The target first (suffix, a foreign file, the lock): a bad --out costs no derivation.
+    with OutputFile(args.out, "export-a2l", suffixes=(".a2l",)) as out:
+        d = load(args.config)
+        from gearsym.symbolic.a2l import a2l_text
+        from gearsym.symbolic.generate import (
+            check_generatable,
+            gearbox_model_names,
+            gearbox_models,
+            load_mu_map,
+        )
+
+        check_generatable(d)
+        names = gearbox_model_names(d)
+        chosen = args.model or [*names, "mu_map"]
+        for name in chosen:  # every name is checked before anything is derived
+            if name not in names and name != "mu_map":
+                raise GearsymError(
+                    "command line",
+                    "--model",
+                    f"unknown model {name!r}; {d.name} has {', '.join(names)} and mu_map",
+                )
+        wanted = [n for n in names if n in chosen]  # output order, each once
+        models = [e for name in wanted for e in gearbox_models(d, progress, only=name)]
+        mu_map = load_mu_map(d) if "mu_map" in chosen else None
+        structs = f"{len(models)} parameter struct{'s' * (len(models) != 1)}"
+        progress(f"describing {structs}" + " and the mu map" * (mu_map is not None))
+        text = a2l_text(
+            models, mu_map, d.name, precision=args.precision, byte_order=args.byte_order
+        )
+        out.commit(text.encode("ascii"))
+    fields = sum(len(e.model.parameters) for e in models)
+    what = f"{structs} ({fields} fields)"
+    if mu_map is not None:
+        what += " and the mu map"
+    print(
+        f"wrote the A2L of {what} of {d.name}, gearsym_real = {args.precision}, addresses 0 "
+        f"(SYMBOL_LINK) to {args.out}"
     )
     return 0

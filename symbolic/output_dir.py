@@ -18,10 +18,12 @@ staging directory in only when everything is written. The rules:
   (``.DIR.gearsym-old-*``) is put back.
 
 A command that writes one file (``gearsym draw --out FILE.svg``, ``gearsym export-fmu --out
-FILE.fmu``) goes through :class:`OutputFile`, with the same rules for a single file. A lone file
-has no ``MANIFEST`` beside it, so it carries its own proof of origin: a signature that holds the
-SHA-256 of the rest of the file (an SVG: a closing XML comment; a PNG: a ``tEXt`` chunk before
-``IEND``; an FMU, a zip archive: the archive comment, which every zip reader skips).
+FILE.fmu``, ``gearsym export-a2l --out FILE.a2l``) goes through :class:`OutputFile`, with the
+same rules for a single file. A lone file has no ``MANIFEST`` beside it, so it carries its own
+proof of origin: a signature that holds the SHA-256 of the rest of the file (an SVG: a closing
+XML comment; a PNG: a ``tEXt`` chunk before ``IEND``; an FMU, a zip archive: the archive
+comment, which every zip reader skips; an A2L file: a closing ``/* ... */`` comment, which
+every ASAP2 reader skips).
 ``FILE`` is replaced only if it does not exist or its signature matches its content: a user's
 file, or a gearsym picture edited since, is refused. The file is written next to ``FILE``
 (``.FILE.gearsym-staging-*``) and renamed over it in one atomic step, under the same lock.
@@ -59,7 +61,7 @@ __all__ = [
 #: Name of the file that marks a gearsym output directory and lists its files.
 MANIFEST = "MANIFEST"
 _MARKER = re.compile(
-    r"# gearsym ([a-z][a-z-]*) output: do not edit, regenerate with `gearsym \1`\."
+    r"# gearsym ([a-z][a-z0-9-]*) output: do not edit, regenerate with `gearsym \1`\."
 )
 _ENTRY = re.compile(r"([0-9a-f]{64})  (\S(?:.*\S)?)")
 _STAGING = "gearsym-staging-"
@@ -431,18 +433,22 @@ class OutputDir:
 # ----------------------------------------------------------------------------- single files
 
 #: Formats :class:`OutputFile` can sign (lower-case suffixes).
-SIGNED_SUFFIXES = (".svg", ".png", ".fmu")
+SIGNED_SUFFIXES = (".svg", ".png", ".fmu", ".a2l")
 #: What :class:`OutputFile` accepts unless told otherwise (``gearsym draw``).
 PICTURE_SUFFIXES = (".svg", ".png")
 _ZIP_END = b"PK\x05\x06"  # end-of-central-directory record: 22 bytes, then the comment
 _ZIP_SIGNATURE = re.compile(
-    rb"gearsym ([a-z][a-z-]*) output: do not edit, regenerate with gearsym \1; "
+    rb"gearsym ([a-z][a-z0-9-]*) output: do not edit, regenerate with gearsym \1; "
     rb"sha256 ([0-9a-f]{64}) of the archive without this comment"
+)
+_A2L_SIGNATURE = re.compile(
+    rb"/\* gearsym ([a-z][a-z0-9-]*) output: do not edit, regenerate with gearsym \1; "
+    rb"sha256 ([0-9a-f]{64}) of everything before this comment \*/\n"
 )
 _PNG_HEADER = b"\x89PNG\r\n\x1a\n"
 _PNG_KEYWORD = b"gearsym"
 _SVG_SIGNATURE = re.compile(
-    rb"<!-- gearsym ([a-z][a-z-]*) output: do not edit, regenerate with gearsym \1; "
+    rb"<!-- gearsym ([a-z][a-z0-9-]*) output: do not edit, regenerate with gearsym \1; "
     rb"sha256 ([0-9a-f]{64}) of everything before this comment -->\n"
 )
 
@@ -469,14 +475,23 @@ def _png_chunks(data: bytes) -> list[tuple[int, int, bytes]] | None:
 
 
 def sign_file(data: bytes, suffix: str, command: str) -> bytes:
-    """``data`` with gearsym's signature: the SHA-256 of ``data`` in a comment (SVG) or a
-    ``tEXt`` chunk before ``IEND`` (PNG); the picture itself is unchanged."""
+    """``data`` with gearsym's signature: the SHA-256 of ``data`` in a closing comment (SVG,
+    A2L), a ``tEXt`` chunk before ``IEND`` (PNG) or the archive comment (FMU); the content
+    itself is unchanged."""
     manifest_marker(command)  # validates the name
     digest = hashlib.sha256(data).hexdigest()
     if suffix.lower() == ".svg":
         comment = (
             f"<!-- gearsym {command} output: do not edit, regenerate with gearsym {command}; "
             f"sha256 {digest} of everything before this comment -->\n"
+        )
+        return data + comment.encode("ascii")
+    if suffix.lower() == ".a2l":
+        if not data.endswith(b"\n"):
+            raise ValueError("an A2L file to sign ends with a newline")
+        comment = (
+            f"/* gearsym {command} output: do not edit, regenerate with gearsym {command}; "
+            f"sha256 {digest} of everything before this comment */\n"
         )
         return data + comment.encode("ascii")
     if suffix.lower() == ".png":
@@ -506,13 +521,17 @@ def signed_by_gearsym(data: bytes, suffix: str) -> bool:
         at = data.rfind(b"<!-- gearsym ")
         match = _SVG_SIGNATURE.fullmatch(data[at:]) if at >= 0 else None
         return match is not None and hashlib.sha256(data[:at]).hexdigest().encode() == match[2]
+    if suffix.lower() == ".a2l":
+        at = data.rfind(b"/* gearsym ")
+        match = _A2L_SIGNATURE.fullmatch(data[at:]) if at >= 0 else None
+        return match is not None and hashlib.sha256(data[:at]).hexdigest().encode() == match[2]
     if suffix.lower() == ".png":
         chunks = _png_chunks(data)
         if chunks is None or len(chunks) < 2 or chunks[-2][2] != b"tEXt":
             return False
         start, end, _ = chunks[-2]
         keyword, _, text = data[start + 8 : end - 4].partition(b"\0")
-        match = re.fullmatch(rb"[a-z][a-z-]* sha256 ([0-9a-f]{64})", text)
+        match = re.fullmatch(rb"[a-z][a-z0-9-]* sha256 ([0-9a-f]{64})", text)
         if keyword != _PNG_KEYWORD or match is None:
             return False
         return hashlib.sha256(data[:start] + data[end:]).hexdigest().encode() == match[1]
@@ -539,7 +558,7 @@ def foreign_file(target: Path) -> str | None:
         return "exists and is not a plain file"
     try:
         if target.stat().st_size > 256 << 20:
-            return "exists and was not written by gearsym (too large to be a gearsym picture)"
+            return "exists and was not written by gearsym (too large to be a gearsym file)"
         data = target.read_bytes()
     except OSError as err:
         return f"cannot be read ({err.strerror})"
