@@ -47,6 +47,14 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "orders, ECU rules, cppcheck, Cortex-M4F) before it replaces DIR",
     )
     p.add_argument(
+        "--shifts",
+        default="adjacent",
+        metavar="WHICH",
+        help="shift models to emit: adjacent (default: the upshifts between adjacent forward "
+        "gears), all (every single-swap shift: downshifts, skip shifts, reverse engagements) or "
+        "a list such as 3-2,5-3",
+    )
+    p.add_argument(
         "--points",
         type=int,
         default=1000,
@@ -66,7 +74,7 @@ def write_files(files: dict[str, str], root: Path) -> None:
 
 def cmd_generate(args: argparse.Namespace) -> int:
     """Generate, optionally check, and move the result into place."""
-    from gearsym.symbolic.generate import check_generatable, generate_tree
+    from gearsym.symbolic.generate import check_generatable, generate_tree, selected_shifts
 
     shown = args.out
     if args.points < 1:
@@ -74,9 +82,10 @@ def cmd_generate(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     d = load(args.config)
     check_generatable(d)
+    selected_shifts(d, args.shifts)  # a bad --shifts is a one-line error before any work
     with OutputDir(args.out, "generate", before_commit=check) as out:
         progress(f"generating code for {d.name}")
-        tree = generate_tree(d, progress=progress)
+        tree = generate_tree(d, progress=progress, shifts=args.shifts)
         write_files(tree.files, out.path)
         if args.check:
             from gearsym.validation.generated_check import check_tree

@@ -43,6 +43,7 @@ from gearsym.symbolic.drivetrain import (
     full_model,
     power_on_slip_signs,
     shift_model,
+    shift_spec,
 )
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.friction import (
@@ -69,6 +70,7 @@ __all__ = [
     "mu_map_files",
     "mu_map_origin",
     "sample_ranges",
+    "selected_shifts",
     "shift_element_model",
 ]
 
@@ -284,6 +286,44 @@ def sensitivity_parameters(d: GearboxDescription, spec: ShiftSpec) -> list[str]:
     return ["m_veh", "k_ss", "d_ss", mu, "zeta"]
 
 
+#: ``--shifts`` keywords: the adjacent upshifts (default) or every single-swap shift.
+SHIFT_SELECTIONS = ("adjacent", "all")
+
+
+def selected_shifts(d: GearboxDescription, shifts: str = "adjacent") -> list[ShiftSpec]:
+    """The shifts whose models ``generate`` emits.
+
+    ``"adjacent"``: the upshifts between forward gears adjacent by ratio (the thesis' shifts);
+    ``"all"``: every ordered pair of gears with a drive path that swaps exactly one element
+    (upshifts, downshifts, skip shifts such as 5-3, and reverse engagements where they are
+    single swaps), adjacent upshifts first; otherwise a comma-separated list such as
+    ``"3-2,5-3"`` (each a single swap, else a one-line error naming it).
+    """
+    adjacent = adjacent_shifts(d)
+    if shifts == "adjacent":
+        return adjacent
+    if shifts == "all":
+        names = [spec.name for spec in adjacent]
+        driven = [g.name for g in d.gears if not g.neutral]
+        for a in driven:
+            for b in driven:
+                if a == b or f"{a}-{b}" in names:
+                    continue
+                gear_a, gear_b = d.gear(a), d.gear(b)
+                off = set(gear_a.closed) - set(gear_b.closed)
+                on = set(gear_b.closed) - set(gear_a.closed)
+                if len(off) == 1 and len(on) == 1:
+                    names.append(f"{a}-{b}")
+        return [shift_spec(d, name) for name in names]
+    names = [part.strip() for part in shifts.split(",") if part.strip()]
+    if not names:
+        raise GearsymError(d.file, "--shifts", "expected adjacent, all or a list such as 3-2,5-3")
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise GearsymError(d.file, "--shifts", f"shift {twice[0]} listed twice")
+    return [shift_spec(d, name) for name in names]
+
+
 def check_generatable(d: GearboxDescription) -> None:
     """Raise the description's errors that ``generate`` would meet (too few forward gears,
     missing drivetrain or vehicle data) before any work is reported: one line, exit 2."""
@@ -297,32 +337,34 @@ def check_generatable(d: GearboxDescription) -> None:
     full_model(d)
 
 
-def gearbox_model_names(d: GearboxDescription) -> list[str]:
+def gearbox_model_names(d: GearboxDescription, shifts: str = "adjacent") -> list[str]:
     """The names of :func:`gearbox_models`, in output order, without deriving anything."""
-    return [name for name, _ in _model_plan(d)]
+    return [name for name, _ in _model_plan(d, shifts)]
 
 
 def gearbox_models(
     d: GearboxDescription,
     progress: Callable[[str], None] | None = None,
     only: str | None = None,
+    shifts: str = "adjacent",
 ) -> list[EmittedModel]:
     """Every model ``gearsym generate`` emits for ``d``, in output order (with ``only``: that
-    one model, deriving nothing else; an empty list for an unknown name)."""
+    one model, deriving nothing else; an empty list for an unknown name). ``shifts`` selects
+    the shift models (:func:`selected_shifts`)."""
     say = progress or (lambda message: None)
-    return [build(say) for name, build in _model_plan(d) if only is None or name == only]
+    return [build(say) for name, build in _model_plan(d, shifts) if only is None or name == only]
 
 
 def _model_plan(
-    d: GearboxDescription,
+    d: GearboxDescription, shifts_selected: str = "adjacent"
 ) -> list[tuple[str, Callable[[Callable[[str], None]], EmittedModel]]]:
     """(name, builder) of every emitted model: the names come from the naming rules, so a
     caller can pick one model before any derivation."""
     from gearsym.symbolic.estimators.ekf import ekf_model_name
 
-    shifts = adjacent_shifts(d)
-    if not shifts:
+    if not adjacent_shifts(d):
         check_generatable(d)  # the one-line error (missing data fails in full_model below)
+    shifts = selected_shifts(d, shifts_selected)
     friction = _has_friction_data(d)
 
     def full(say: Callable[[str], None]) -> EmittedModel:
@@ -411,14 +453,16 @@ def ekf_model(
 
 
 def linear_system_sets(
-    d: GearboxDescription, progress: Callable[[str], None] | None = None
+    d: GearboxDescription,
+    progress: Callable[[str], None] | None = None,
+    shifts: str = "adjacent",
 ) -> list[EmittedLinearSet]:
     """The linear forms (5.1) ``generate`` emits: ``linear_gears`` (the full model and every
     gear) and ``linear_<a>_<b>`` (every mode of each emitted shift), as the emitters' sets."""
     say = progress or (lambda message: None)
     say("deriving the linear forms (5.1) of the full model and every gear")
     groups = [gear_linear_forms(d)]
-    for spec in adjacent_shifts(d):
+    for spec in selected_shifts(d, shifts):
         say(f"deriving the linear forms (5.1) of the modes of shift {spec.name}")
         groups.append(shift_linear_forms(d, spec))
     sets = []
@@ -693,18 +737,21 @@ def _linear_set_row(s: LinearSystemSet) -> LinearSetRow:
 
 
 def generate_tree(
-    d: GearboxDescription, progress: Callable[[str], None] | None = None
+    d: GearboxDescription,
+    progress: Callable[[str], None] | None = None,
+    shifts: str = "adjacent",
 ) -> GeneratedTree:
-    """Every file of the output directory for ``d``, by relative path (``/`` separated)."""
+    """Every file of the output directory for ``d``, by relative path (``/`` separated);
+    ``shifts`` selects the shift models (:func:`selected_shifts`)."""
     say = progress or (lambda message: None)
-    models = gearbox_models(d, say)
+    models = gearbox_models(d, say, shifts=shifts)
     files: dict[str, str] = {}
     for m in models:
         say(f"emitting {m.model.name}")
         for name, text in emit_all(m.model, m.config).items():
             folder = PYTHON_DIR if name.endswith(".py") else C_DIR
             files[f"{folder}/{name}"] = text
-    linear_sets = linear_system_sets(d, say)
+    linear_sets = linear_system_sets(d, say, shifts)
     for emitted in linear_sets:
         say(f"emitting {emitted.set.name}")
         for name, text in emit_linear_files(emitted.set, emitted.config).items():
