@@ -449,9 +449,10 @@ def test_sanitizers_and_nan_contract_on_the_test_models(
         assert nan_check.casadi_failures(entry["casadi"], checked, strict) == []
 
 
-def test_conditions_shared_by_cse_become_int_temporaries(built: dict[str, Any]) -> None:
+def test_conditions_shared_by_cse_become_bool_temporaries(built: dict[str, Any]) -> None:
+    """A shared condition is an essentially Boolean temporary (MISRA C:2012 rule 10.3)."""
     source = built["coverage"]["files"]["gearsym_coverage.c"]
-    assert re.search(r"const int t\d+ = \(\(p->k < x\[0\]\) && \(x\[1\] < GEARSYM_LIT", source)
+    assert re.search(r"const _Bool t\d+ = \(\(p->k < x\[0\]\) && \(x\[1\] < GEARSYM_LIT", source)
     assert "((gearsym_real)NAN)" in source and "GEARSYM_POW(x[0], GEARSYM_LIT(12.0))" in source
 
 

@@ -39,11 +39,6 @@ DEVIATIONS: dict[str, tuple[str, str]] = {
         "the μ-map tables stay file-scope `static const` data beside their axes, though one "
         "function reads them",
     ),
-    "8.11": (
-        "advisory",
-        "not yet: the sparsity-pattern arrays are declared `extern const int name[]` in the "
-        "header; their sizes are macros there and could be written into the declaration",
-    ),
     "8.14": (
         "required",
         "`restrict` on the non-overlapping argument arrays: measured 2-13 % faster at -O2 "
@@ -51,11 +46,6 @@ DEVIATIONS: dict[str, tuple[str, str]] = {
         "never alias",
     ),
     "9.3": ("required", "the example main.c initialises demo arrays partially (not TCU code)"),
-    "10.3": (
-        "required",
-        "not yet: comparisons of the friction model's piecewise terms are stored in `int` "
-        "temporaries (essentially Boolean into signed); a `_Bool` temporary would comply",
-    ),
     "12.1": (
         "advisory",
         "not yet: products inside sums rely on C's precedence (a*b + c); the printer could "

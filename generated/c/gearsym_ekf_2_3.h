@@ -90,13 +90,13 @@ typedef double gearsym_real;
  */
 #define GEARSYM_EKF_2_3_JAC_X_NNZ 17 /* of 64 entries (NX x NX) */
 extern const int gearsym_ekf_2_3_jac_x_colptr[GEARSYM_EKF_2_3_NX + 1];
-extern const int gearsym_ekf_2_3_jac_x_rowind[];
+extern const int gearsym_ekf_2_3_jac_x_rowind[GEARSYM_EKF_2_3_JAC_X_NNZ];
 #define GEARSYM_EKF_2_3_JAC_U_NNZ 14 /* of 56 entries (NX x NU) */
 extern const int gearsym_ekf_2_3_jac_u_colptr[GEARSYM_EKF_2_3_NU + 1];
-extern const int gearsym_ekf_2_3_jac_u_rowind[];
+extern const int gearsym_ekf_2_3_jac_u_rowind[GEARSYM_EKF_2_3_JAC_U_NNZ];
 #define GEARSYM_EKF_2_3_JAC_P_NNZ 11 /* of 56 entries (NX x NP) */
 extern const int gearsym_ekf_2_3_jac_p_colptr[GEARSYM_EKF_2_3_NP + 1];
-extern const int gearsym_ekf_2_3_jac_p_rowind[];
+extern const int gearsym_ekf_2_3_jac_p_rowind[GEARSYM_EKF_2_3_JAC_P_NNZ];
 
 /*
  * Model parameters: fill with gearsym_ekf_2_3_params_default(),

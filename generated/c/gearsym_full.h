@@ -87,13 +87,13 @@ typedef double gearsym_real;
  */
 #define GEARSYM_FULL_JAC_X_NNZ 17 /* of 36 entries (NX x NX) */
 extern const int gearsym_full_jac_x_colptr[GEARSYM_FULL_NX + 1];
-extern const int gearsym_full_jac_x_rowind[];
+extern const int gearsym_full_jac_x_rowind[GEARSYM_FULL_JAC_X_NNZ];
 #define GEARSYM_FULL_JAC_U_NNZ 28 /* of 42 entries (NX x NU) */
 extern const int gearsym_full_jac_u_colptr[GEARSYM_FULL_NU + 1];
-extern const int gearsym_full_jac_u_rowind[];
+extern const int gearsym_full_jac_u_rowind[GEARSYM_FULL_JAC_U_NNZ];
 #define GEARSYM_FULL_JAC_P_NNZ 17 /* of 54 entries (NX x NP) */
 extern const int gearsym_full_jac_p_colptr[GEARSYM_FULL_NP + 1];
-extern const int gearsym_full_jac_p_rowind[];
+extern const int gearsym_full_jac_p_rowind[GEARSYM_FULL_JAC_P_NNZ];
 
 /*
  * Model parameters: fill with gearsym_full_params_default(),

@@ -80,13 +80,13 @@ typedef double gearsym_real;
  */
 #define GEARSYM_SHIFT_2_3_JAC_X_NNZ 11 /* of 16 entries (NX x NX) */
 extern const int gearsym_shift_2_3_jac_x_colptr[GEARSYM_SHIFT_2_3_NX + 1];
-extern const int gearsym_shift_2_3_jac_x_rowind[];
+extern const int gearsym_shift_2_3_jac_x_rowind[GEARSYM_SHIFT_2_3_JAC_X_NNZ];
 #define GEARSYM_SHIFT_2_3_JAC_U_NNZ 6 /* of 12 entries (NX x NU) */
 extern const int gearsym_shift_2_3_jac_u_colptr[GEARSYM_SHIFT_2_3_NU + 1];
-extern const int gearsym_shift_2_3_jac_u_rowind[];
+extern const int gearsym_shift_2_3_jac_u_rowind[GEARSYM_SHIFT_2_3_JAC_U_NNZ];
 #define GEARSYM_SHIFT_2_3_JAC_P_NNZ 13 /* of 36 entries (NX x NP) */
 extern const int gearsym_shift_2_3_jac_p_colptr[GEARSYM_SHIFT_2_3_NP + 1];
-extern const int gearsym_shift_2_3_jac_p_rowind[];
+extern const int gearsym_shift_2_3_jac_p_rowind[GEARSYM_SHIFT_2_3_JAC_P_NNZ];
 
 /*
  * Model parameters: fill with gearsym_shift_2_3_params_default(),

@@ -117,13 +117,13 @@ typedef double gearsym_real;
  */
 #define GEARSYM_SHIFT_2_3_MU_SENS_JAC_X_NNZ 81 /* of 576 entries (NX x NX) */
 extern const int gearsym_shift_2_3_mu_sens_jac_x_colptr[GEARSYM_SHIFT_2_3_MU_SENS_NX + 1];
-extern const int gearsym_shift_2_3_mu_sens_jac_x_rowind[];
+extern const int gearsym_shift_2_3_mu_sens_jac_x_rowind[GEARSYM_SHIFT_2_3_MU_SENS_JAC_X_NNZ];
 #define GEARSYM_SHIFT_2_3_MU_SENS_JAC_U_NNZ 8 /* of 72 entries (NX x NU) */
 extern const int gearsym_shift_2_3_mu_sens_jac_u_colptr[GEARSYM_SHIFT_2_3_MU_SENS_NU + 1];
-extern const int gearsym_shift_2_3_mu_sens_jac_u_rowind[];
+extern const int gearsym_shift_2_3_mu_sens_jac_u_rowind[GEARSYM_SHIFT_2_3_MU_SENS_JAC_U_NNZ];
 #define GEARSYM_SHIFT_2_3_MU_SENS_JAC_P_NNZ 82 /* of 264 entries (NX x NP) */
 extern const int gearsym_shift_2_3_mu_sens_jac_p_colptr[GEARSYM_SHIFT_2_3_MU_SENS_NP + 1];
-extern const int gearsym_shift_2_3_mu_sens_jac_p_rowind[];
+extern const int gearsym_shift_2_3_mu_sens_jac_p_rowind[GEARSYM_SHIFT_2_3_MU_SENS_JAC_P_NNZ];
 
 /*
  * Model parameters: fill with gearsym_shift_2_3_mu_sens_params_default(),

@@ -146,10 +146,10 @@ void gearsym_shift_element_jac_x_sparse(
     const gearsym_real t2 = gearsym_shift_element_max(p->t_ss_min, GEARSYM_LIT(2.0)*u[1]*u[2]*p->n_disc*p->r_m);
     const gearsym_real t3 = t1*t2;
     const gearsym_real t4 = t3*p->z_ba_ratio;
-    const int t5 = ((t0 <= t4) || (u[0]*x[0] <= GEARSYM_LIT(0.0)));
+    const _Bool t5 = ((t0 <= t4) || (u[0]*x[0] <= GEARSYM_LIT(0.0)));
     const gearsym_real t6 = GEARSYM_LIT(3.14159265358979323846)/(-t4 + t1*t2);
     const gearsym_real t7 = t6*(t0 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t3 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t4);
-    const int t8 = (t0 < t3);
+    const _Bool t8 = (t0 < t3);
     const gearsym_real t9 = p->sigma0/t2;
     jac_x_nz[0] = u[0]*(-t9*((isnan(t0) || isnan(t4) || isnan(u[0]*x[0]) || isnan(t3)) ? ((gearsym_real)NAN) : (t5 ? GEARSYM_LIT(0.0) : (t8 ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*GEARSYM_SIN(t7) : GEARSYM_LIT(1.0)))) - t0*t9*((isnan(t0) || isnan(t4) || isnan(u[0]*x[0]) || isnan(t3)) ? ((gearsym_real)NAN) : (t5 ? GEARSYM_LIT(0.0) : (t8 ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t6*GEARSYM_COS(t7) : GEARSYM_LIT(0.0)))))*gearsym_shift_element_sign(x[0]);
 }
@@ -196,14 +196,14 @@ void gearsym_shift_element_jac_u_sparse(
     const gearsym_real t8 = (GEARSYM_LIT(1.0)/p->sigma0);
     const gearsym_real t9 = t5*t8;
     const gearsym_real t10 = t9*p->z_ba_ratio;
-    const int t11 = ((t6 <= t10) || (u[0]*x[0] <= GEARSYM_LIT(0.0)));
+    const _Bool t11 = ((t6 <= t10) || (u[0]*x[0] <= GEARSYM_LIT(0.0)));
     const gearsym_real t12 = t6 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t10 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t9;
     const gearsym_real t13 = -t10 + t5*t8;
     const gearsym_real t14 = GEARSYM_LIT(3.14159265358979323846)/t13;
     const gearsym_real t15 = t12*t14;
     const gearsym_real t16 = GEARSYM_SIN(t15);
     const gearsym_real t17 = GEARSYM_COS(t15);
-    const int t18 = (t6 < t9);
+    const _Bool t18 = (t6 < t9);
     const gearsym_real t19 = ((isnan(t6) || isnan(t10) || isnan(u[0]*x[0]) || isnan(t9)) ? ((gearsym_real)NAN) : (t11 ? GEARSYM_LIT(0.0) : (t18 ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t16 : GEARSYM_LIT(1.0))));
     const gearsym_real t20 = t19*p->sigma0;
     const gearsym_real t21 = gearsym_shift_element_heaviside(t4 - p->t_ss_min, (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)));
@@ -262,14 +262,14 @@ void gearsym_shift_element_jac_p_sparse(
     const gearsym_real t7 = gearsym_shift_element_max(t6, p->t_ss_min);
     const gearsym_real t8 = t4*t7;
     const gearsym_real t9 = t8*p->z_ba_ratio;
-    const int t10 = ((t2 <= t9) || (u[0]*x[0] <= GEARSYM_LIT(0.0)));
+    const _Bool t10 = ((t2 <= t9) || (u[0]*x[0] <= GEARSYM_LIT(0.0)));
     const gearsym_real t11 = t2 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t8 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t9;
     const gearsym_real t12 = -t9 + t4*t7;
     const gearsym_real t13 = GEARSYM_LIT(3.14159265358979323846)/t12;
     const gearsym_real t14 = t11*t13;
     const gearsym_real t15 = GEARSYM_SIN(t14);
     const gearsym_real t16 = GEARSYM_COS(t14);
-    const int t17 = (t2 < t8);
+    const _Bool t17 = (t2 < t8);
     const gearsym_real t18 = ((isnan(t2) || isnan(t9) || isnan(u[0]*x[0]) || isnan(t8)) ? ((gearsym_real)NAN) : (t10 ? GEARSYM_LIT(0.0) : (t17 ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t15 : GEARSYM_LIT(1.0))));
     const gearsym_real t19 = ((isnan(t2) || isnan(t9) || isnan(u[0]*x[0]) || isnan(t8)) ? ((gearsym_real)NAN) : (t10 ? GEARSYM_LIT(0.0) : (t17 ? -(GEARSYM_LIT(1.0)/GEARSYM_LIT(4.0))*t13*t16 : GEARSYM_LIT(0.0))));
     const gearsym_real t20 = (GEARSYM_LIT(1.0)/t7);

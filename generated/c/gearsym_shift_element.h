@@ -73,13 +73,13 @@ typedef double gearsym_real;
  */
 #define GEARSYM_SHIFT_ELEMENT_JAC_X_NNZ 1 /* of 1 entries (NX x NX) */
 extern const int gearsym_shift_element_jac_x_colptr[GEARSYM_SHIFT_ELEMENT_NX + 1];
-extern const int gearsym_shift_element_jac_x_rowind[];
+extern const int gearsym_shift_element_jac_x_rowind[GEARSYM_SHIFT_ELEMENT_JAC_X_NNZ];
 #define GEARSYM_SHIFT_ELEMENT_JAC_U_NNZ 3 /* of 3 entries (NX x NU) */
 extern const int gearsym_shift_element_jac_u_colptr[GEARSYM_SHIFT_ELEMENT_NU + 1];
-extern const int gearsym_shift_element_jac_u_rowind[];
+extern const int gearsym_shift_element_jac_u_rowind[GEARSYM_SHIFT_ELEMENT_JAC_U_NNZ];
 #define GEARSYM_SHIFT_ELEMENT_JAC_P_NNZ 5 /* of 6 entries (NX x NP) */
 extern const int gearsym_shift_element_jac_p_colptr[GEARSYM_SHIFT_ELEMENT_NP + 1];
-extern const int gearsym_shift_element_jac_p_rowind[];
+extern const int gearsym_shift_element_jac_p_rowind[GEARSYM_SHIFT_ELEMENT_JAC_P_NNZ];
 
 /*
  * Model parameters: fill with gearsym_shift_element_params_default(),

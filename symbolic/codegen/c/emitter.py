@@ -38,7 +38,7 @@ _BINARY_FUNCTIONS = ("atan2", "pow", "fmin", "fmax", "hypot")
 
 @dataclass(frozen=True)
 class Temporary:
-    ctype: str  # "gearsym_real", or "int" for a shared condition
+    ctype: str  # "gearsym_real", or "_Bool" for a shared condition (MISRA C:2012 10.3)
     name: str
     code: str
 
@@ -205,7 +205,7 @@ def _function_views(
             counts[spec.name] = ops
             extra["temporaries"] = tuple(
                 Temporary(
-                    "int" if is_condition(expr) else "gearsym_real",
+                    "_Bool" if is_condition(expr) else "gearsym_real",
                     printer.code(symbol),
                     printer.code(expr),
                 )
