@@ -1,0 +1,127 @@
+"""Monte-Carlo evaluation of the EKF (4.3) against the matched posterior Cramér–Rao bound
+(3.25 with the filter's prior; noise 3.26; model 4.1).
+
+What the expectations rest on, none of them the code under test:
+
+* NEES: for a consistent filter, the NEES of one sample averaged over R independent runs is
+  χ²(R n)/R (n its dof); the band comes from SciPy's χ² quantiles.
+* The bound route itself is checked against hand closed forms in tests/test_posterior_bound.py;
+  here only what must hold for any correct posterior bound: it starts at the prior σ and never
+  grows (information only accumulates), and a μ has no information while its element does not
+  slide (exact: the model's equations do not contain it there).
+* The phases come from the scenario's detected phase windows and the element modes from the
+  reference's sliding masks; no time is written down here.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from gearsym.symbolic.loader import load_description
+
+RUNS = 50
+
+
+@pytest.fixture(scope="module")
+def setup():
+    from gearsym.validation.estimation import prepare_ekf
+    from gearsym.validation.scenario import load_scenario
+    from gearsym.validation.simulate import simulate
+
+    d = load_description()
+    return prepare_ekf(d, simulate(d, load_scenario(d, None)), sample_time=0.01)
+
+
+@pytest.fixture(scope="module")
+def mc(setup):
+    from gearsym.validation.estimation import run_ekf_monte_carlo
+
+    calls = []
+    result = run_ekf_monte_carlo(setup, RUNS, seed=0, progress=lambda f, m: calls.append((f, m)))
+    assert [f for f, _ in calls[:RUNS]] == pytest.approx([(i + 1) / RUNS for i in range(RUNS)])
+    return result
+
+
+def test_runs_differ_only_by_the_noise(mc, setup):
+    from gearsym.validation.estimation import filter_run
+
+    first, second = mc.runs[0], mc.runs[1]
+    assert [r.seed for r in mc.runs] == list(range(RUNS))
+    np.testing.assert_array_equal(first.truth, second.truth)
+    assert not np.array_equal(first.estimates, second.estimates)
+    # the same seed reproduces its run to the bit
+    np.testing.assert_array_equal(filter_run(setup, 1).estimates, second.estimates)
+
+
+def test_nees_mean_over_50_runs_is_inside_its_chi2_band(mc):
+    from scipy.stats import chi2
+
+    dof = float(np.mean(mc.first.nees_dof))
+    lo = chi2.ppf(0.025, RUNS * dof) / RUNS
+    hi = chi2.ppf(0.975, RUNS * dof) / RUNS
+    assert mc.nees_band() == pytest.approx((lo, hi))
+    assert lo <= mc.nees_mean <= hi, (mc.nees_mean, lo, hi)
+
+
+def test_bound_starts_at_the_prior_and_never_grows(mc, setup):
+    bound = mc.bound
+    for name in setup.aug.parameters:
+        j = setup.names.index(name)
+        sigma = bound.sigma[:, j]
+        assert np.all(np.diff(sigma) <= 1e-9 * sigma[0]), name
+        # the first sample only speaks about the speeds: each parameter's bound is ≤ its prior
+        assert sigma[0] <= setup.prior_sigma[j] * (1 + 1e-9)
+        assert sigma[-1] < sigma[0]  # every parameter is informed somewhere in the shift
+
+
+def _mode_phases(setup, element_index):
+    """Phases in which the element neither slides at any sample (from the modes)."""
+    aug = setup.aug
+    element = aug.elements[element_index]
+    slide = setup.u[:, aug.input_names.index(f"slide_{element}")] > 0.5
+    out = []
+    for k, phase in enumerate(setup.phases):
+        last = k == len(setup.phases) - 1
+        inside = (setup.t >= phase.t_start) & ((setup.t < phase.t_end) | last)
+        # the sample before the phase: its held input acts over the first interval
+        first = int(np.flatnonzero(inside)[0])
+        window = inside.copy()
+        window[max(first - 1, 0)] = True
+        if not slide[window].any():
+            out.append(phase.name)
+    return element, out
+
+
+@pytest.mark.parametrize("element_index", [0, 1])
+def test_mu_not_identifiable_where_its_element_does_not_slide_and_its_sigma_stays(
+    mc, setup, element_index
+):
+    from gearsym.validation.estimation import NOT_IDENTIFIABLE
+
+    element, idle = _mode_phases(setup, element_index)
+    mu = setup.aug.mu_state[element]
+    assert idle, "every element is idle in some phase of a shift (its gear)"
+    for phase in idle:
+        stats = mc.phase_stats[phase][mu]
+        assert not stats.identifiable and stats.to_dict()["verdict"] == NOT_IDENTIFIABLE
+        assert stats.sigma_ratio == 1.0  # the filter's σ does not shrink (frozen, to the bit)
+        assert stats.gamma == np.inf  # no information at all in the phase's own FIM
+    # and where the element slides for a whole phase, the phase identifies its μ
+    slid = [p for p in mc.phase_stats if mc.phase_stats[p][mu].samples > 5]
+    assert slid and all(mc.phase_stats[p][mu].identifiable for p in slid)
+
+
+def test_efficiency_reported_per_parameter_and_m_veh_within_1_5_where_identifiable(mc):
+    data = mc.to_dict()
+    assert data["runs"] == RUNS and "parameters constant" in data["bound"]
+    for name, entry in data["parameters"].items():
+        assert entry["crb_sigma"] > 0 and entry["efficiency"] > 0, name
+        assert entry["efficiency"] == pytest.approx(entry["rmse"] / entry["crb_sigma"])
+        assert isinstance(entry["identifiable"], list)
+    phases = [p for p, s in mc.phase_stats.items() if s["m_veh"].identifiable]
+    assert phases, "m_veh must be identifiable in some phase (else the check is empty)"
+    for phase in phases:
+        stats = mc.phase_stats[phase]["m_veh"]
+        assert stats.efficiency is not None and stats.efficiency <= 1.5, (phase, stats)
+    for phase in data["phases"]:
+        assert set(phase["parameters"]) == set(data["parameters"])
