@@ -125,3 +125,39 @@ def test_efficiency_reported_per_parameter_and_m_veh_within_1_5_where_identifiab
         assert stats.efficiency is not None and stats.efficiency <= 1.5, (phase, stats)
     for phase in data["phases"]:
         assert set(phase["parameters"]) == set(data["parameters"])
+
+
+def test_bound_equals_the_information_filter_along_the_truth(mc, setup):
+    # An independent route to the same number: without process noise, the Kalman covariance
+    # recursion along the true trajectory, P⁻ = F P Fᵀ and P⁻¹ += Hᵀ R⁻¹ H, with F the filter's
+    # exact RK4 Jacobian (CasADi, chain rule) instead of central differences of DOP853
+    # trajectories, gives P_k = J_k⁻¹ (the linearised problem is linear-Gaussian). They differ
+    # only by RK4's discretisation error and the differences' rounding. Compared: the
+    # parameters' σ (a state's σ of P_k is of z_k, the bound's of z0).
+    from gearsym.validation.posterior_bound import lambdified, output_sensitivities
+
+    model = setup.aug.model
+    args = (model.state_symbols, model.input_symbols, model.parameter_symbols, setup.p)
+    f = lambdified(list(model.rhs), *args)
+    h = lambdified(list(model.output_expressions), *args)
+    z0 = mc.bound.linearised_at
+    steps = 1e-5 * np.maximum(np.abs(z0), setup.prior_sigma)
+    _, _, z = output_sensitivities(f, h, z0, setup.t, setup.u, steps)
+    H = np.asarray(setup.discrete.H_fn(z0, setup.u[0], setup.p), dtype=float)
+    P = np.diag(setup.prior_sigma**2)
+    h_step = float(setup.t[1] - setup.t[0])
+    worst, n_x = 0.0, setup.aug.n_x
+    for k in range(len(setup.t)):
+        if k > 0:
+            _, F = setup.discrete.step(z[k - 1], setup.u[k - 1], h_step, setup.p)
+            P = F @ P @ F.T
+        R = np.diag(setup.sigma_y[k] ** 2)
+        K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+        A = np.eye(len(P)) - K @ H
+        P = A @ P @ A.T + K @ R @ K.T  # Joseph form: P⁻¹ + Hᵀ R⁻¹ H, inverted
+        P = 0.5 * (P + P.T)
+        sigma = np.sqrt(np.diag(P))
+        # the parameters (constant: their part of z_k is that of z0; the bound is of z0)
+        ratio = np.abs(sigma[n_x:] / mc.bound.sigma[k, n_x:] - 1)
+        worst = max(worst, float(np.max(ratio)))
+    assert worst < 1e-3, worst
