@@ -49,6 +49,8 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         return _cmd_ekf(args, d, scenario)
     if args.runs != 1:
         raise GearsymError("estimate", "--runs", "Monte-Carlo runs are for --filter ekf only")
+    if args.initial_from_prior:
+        raise GearsymError("estimate", "--initial-from-prior", "is for --filter ekf only")
     unknown = [u.strip() for u in args.unknown.split(",") if u.strip()]
     if not unknown:
         raise GearsymError("estimate", "--unknown", "name at least one unknown input")
@@ -123,6 +125,10 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
     if args.params is not None:
         parameters = [p.strip() for p in args.params.split(",") if p.strip()]
     initial = _initial_values(args.initial)
+    if args.initial_from_prior and initial:
+        raise GearsymError(
+            "estimate", "--initial-from-prior", "draws the initial estimate: drop --initial"
+        )
     aug = augmented_model(d, scenario.shift.name, parameters)  # bad names fail before the run
     wrong = [name for name in initial if name not in aug.state_names]
     if wrong:
@@ -153,7 +159,13 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
         )
         bar = ProgressBar(f"EKF, {args.runs} run{'s' if args.runs > 1 else ''}")
         try:
-            mc = run_ekf_monte_carlo(setup, args.runs, seed=args.seed, progress=bar)
+            mc = run_ekf_monte_carlo(
+                setup,
+                args.runs,
+                seed=args.seed,
+                progress=bar,
+                prior_draw=args.initial_from_prior,
+            )
         finally:
             bar.done()
         if folder is not None:
@@ -221,6 +233,13 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         metavar="NAME=VALUE",
         help="ekf: initial estimate of a filter state (default: m_veh 30 %% below the "
         "description's value, mu nominal, zeta 0, phi 0, speeds from the first measurement)",
+    )
+    p.add_argument(
+        "--initial-from-prior",
+        action="store_true",
+        help="ekf: draw each run's initial estimate of phi and the parameters from the "
+        "filter's prior around the truth (the premise of the posterior Cramer-Rao bound) "
+        "instead of the fixed default",
     )
     p.add_argument(
         "--unknown",
