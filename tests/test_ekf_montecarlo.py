@@ -133,7 +133,8 @@ def test_bound_equals_the_information_filter_along_the_truth(mc, setup):
     # exact RK4 Jacobian (CasADi, chain rule) instead of central differences of DOP853
     # trajectories, gives P_k = J_k⁻¹ (the linearised problem is linear-Gaussian). They differ
     # only by RK4's discretisation error and the differences' rounding. Compared: the
-    # parameters' σ (a state's σ of P_k is of z_k, the bound's of z0).
+    # parameters' σ (a state's σ of P_k is of z_k, the bound's of z0). And with process noise
+    # the same recursion with Q (Tichavský's bound for additive Gaussian noise).
     from gearsym.validation.posterior_bound import lambdified, output_sensitivities
 
     model = setup.aug.model
@@ -144,23 +145,35 @@ def test_bound_equals_the_information_filter_along_the_truth(mc, setup):
     steps = 1e-5 * np.maximum(np.abs(z0), setup.prior_sigma)
     _, _, z = output_sensitivities(f, h, z0, setup.t, setup.u, steps)
     H = np.asarray(setup.discrete.H_fn(z0, setup.u[0], setup.p), dtype=float)
-    P = np.diag(setup.prior_sigma**2)
     h_step = float(setup.t[1] - setup.t[0])
-    worst, n_x = 0.0, setup.aug.n_x
-    for k in range(len(setup.t)):
-        if k > 0:
-            _, F = setup.discrete.step(z[k - 1], setup.u[k - 1], h_step, setup.p)
-            P = F @ P @ F.T
-        R = np.diag(setup.sigma_y[k] ** 2)
-        K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
-        A = np.eye(len(P)) - K @ H
-        P = A @ P @ A.T + K @ R @ K.T  # Joseph form: P⁻¹ + Hᵀ R⁻¹ H, inverted
-        P = 0.5 * (P + P.T)
-        sigma = np.sqrt(np.diag(P))
-        # the parameters (constant: their part of z_k is that of z0; the bound is of z0)
-        ratio = np.abs(sigma[n_x:] / mc.bound.sigma[k, n_x:] - 1)
-        worst = max(worst, float(np.max(ratio)))
-    assert worst < 1e-3, worst
+    n_x = setup.aug.n_x
+
+    def recursion(with_process_noise: bool) -> np.ndarray:
+        P = np.diag(setup.prior_sigma**2)
+        out = []
+        for k in range(len(setup.t)):
+            if k > 0:
+                _, F = setup.discrete.step(z[k - 1], setup.u[k - 1], h_step, setup.p)
+                rates = np.array(setup.q, dtype=float)
+                rates[setup.aug.frozen_states(setup.u[k - 1])] = 0.0
+                P = F @ P @ F.T + (np.diag(h_step * rates) if with_process_noise else 0.0)
+            R = np.diag(setup.sigma_y[k] ** 2)
+            K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+            A = np.eye(len(P)) - K @ H
+            P = A @ P @ A.T + K @ R @ K.T  # Joseph form: P⁻¹ + Hᵀ R⁻¹ H, inverted
+            P = 0.5 * (P + P.T)
+            out.append(np.sqrt(np.diag(P)))
+        return np.array(out)
+
+    # the parameters (constant: their part of z_k is that of z0; the bound is of z0)
+    constant = recursion(False)[:, n_x:] / mc.bound.sigma[:, n_x:]
+    assert np.max(np.abs(constant - 1)) < 1e-3
+    # with the filter's process noise (the bound of z_k, every component): the same recursion
+    # with Q, against the bound built from the central-difference flow Φ_k
+    noisy = recursion(True) / mc.bound.sigma_process
+    assert np.max(np.abs(noisy - 1)) < 1e-3
+    # the process noise makes the parameters' bound larger (the filter forgets)
+    assert np.all(mc.bound.sigma_process[-1, n_x:] > mc.bound.sigma[-1, n_x:])
 
 
 @pytest.fixture(scope="module")

@@ -93,3 +93,46 @@ def test_the_scalar_kalman_filter_attains_the_posterior_bound():
         P = P - P * P / (P + R)  # scalar Kalman update
         assert bound_sigma(J[k : k + 1])[0, 0] ** 2 == pytest.approx(P, rel=1e-12)
         assert P == pytest.approx(1 / (1 / sigma0**2 + (k + 1) / R), rel=1e-12)
+
+
+def test_process_noise_bound_of_a_random_walk_follows_the_hand_recursion():
+    # x_{k+1} = x_k + w_k (variance q), y_k = x_k + v_k (variance R): P⁻ = P + q,
+    # P = P⁻ R / (P⁻ + R), from P0 before the first update
+    from gearsym.validation.posterior_bound import process_noise_bound
+
+    n, q, R, P0 = 30, 0.3, 0.5, 4.0
+    flow, S = np.ones((n, 1, 1)), np.ones((n, 1, 1))
+    sigma = process_noise_bound(
+        flow, S, np.full((n, 1), R), np.array([[P0]]), np.full((n, 1, 1), q)
+    )
+    P = P0
+    for k in range(n):
+        if k > 0:
+            P = P + q
+        P = P * R / (P + R)
+        assert sigma[k, 0] ** 2 == pytest.approx(P, rel=1e-12)
+    predicted = (q + np.sqrt(q * q + 4 * q * R)) / 2  # P⁻ at steady state: P⁻² − q P⁻ − q R = 0
+    assert sigma[-1, 0] ** 2 == pytest.approx(predicted * R / (predicted + R), rel=1e-9)
+
+
+def test_process_noise_bound_without_noise_is_the_constant_parameter_bound():
+    from gearsym.validation.posterior_bound import process_noise_bound
+
+    f, h = _ramp()
+    t = np.arange(25) * 0.02
+    u_values = 1.0 + 0.3 * np.cos(np.arange(25))
+    _, S, _, flow = output_sensitivities(
+        f, h, np.array([1.0, -2.0]), t, u_values[:, None], np.array([1e-3, 1e-3]), return_flow=True
+    )
+    # the flow of ẋ = θ u by hand: ∂x_k/∂θ = h Σ_{i<k} u_i
+    cumulative = np.concatenate([[0.0], np.cumsum(u_values[:-1])]) * 0.02
+    assert flow[:, 0, 1] == pytest.approx(cumulative, abs=1e-8)
+    variances = np.full((25, 1), 0.01)
+    prior = np.diag([0.5**2, 2.0**2])
+    constant = bound_sigma(posterior_information(S, variances, prior))
+    noisy = process_noise_bound(flow, S, variances, prior, np.zeros((25, 2, 2)))
+    assert noisy[:, 1] == pytest.approx(constant[:, 1], rel=1e-7)  # θ: z_k's θ is z0's
+    # with a random walk on θ the bound can only be larger
+    walk = np.zeros((25, 2, 2))
+    walk[:, 1, 1] = 0.05
+    assert np.all(process_noise_bound(flow, S, variances, prior, walk)[1:, 1] > noisy[1:, 1])

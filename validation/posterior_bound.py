@@ -24,12 +24,14 @@ it can be (efficiency RMSE / bound > 1 is expected).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
 __all__ = [
     "bound_sigma",
+    "process_noise_bound",
     "information_increments",
     "lambdified",
     "output_sensitivities",
@@ -70,10 +72,11 @@ def output_sensitivities(
     u: np.ndarray,
     steps: np.ndarray,
     rtol: float = 1e-12,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return_flow: bool = False,
+) -> Any:
     """(y, S, z): the outputs y(t_k) (N, m) of the trajectory from z0, their sensitivities
     S_k = ∂y(t_k)/∂z0 (N, m, n) by central differences with steps ``steps`` (n,), and the
-    trajectory's states z(t_k) (N, n).
+    trajectory's states z(t_k) (N, n); with ``return_flow`` also Φ_k = ∂z(t_k)/∂z0 (N, n, n).
 
     The 2n + 1 trajectories are integrated side by side (DOP853, ``rtol``, absolute tolerance
     ``rtol`` times each state's scale), restarting at every sample with u[k] held over
@@ -86,7 +89,7 @@ def output_sensitivities(
     Z[np.arange(n), 1 + n + np.arange(n)] -= steps
     width = Z.shape[1]
     atol = np.repeat((rtol * np.maximum(np.abs(z0), steps * 1e3))[:, None], width, axis=1).ravel()
-    ys, sens, states = [], [], []
+    ys, sens, states, flows = [], [], [], []
     for k in range(len(t)):
         if k > 0:
             uk = np.asarray(u[k - 1], dtype=float)
@@ -101,7 +104,10 @@ def output_sensitivities(
         Y = h(Z, np.asarray(u[k], dtype=float))
         ys.append(Y[:, 0])
         states.append(Z[:, 0].copy())
+        flows.append((Z[:, 1 : 1 + n] - Z[:, 1 + n :]) / (2.0 * steps[None, :]))
         sens.append((Y[:, 1 : 1 + n] - Y[:, 1 + n :]) / (2.0 * steps[None, :]))
+    if return_flow:
+        return np.array(ys), np.array(sens), np.array(states), np.array(flows)
     return np.array(ys), np.array(sens), np.array(states)
 
 
@@ -129,3 +135,40 @@ def bound_sigma(J: np.ndarray) -> np.ndarray:
         inverse = np.linalg.inv(scale[:, None] * Jk * scale[None, :])
         out.append(np.diag(inverse) * scale**2)
     return np.sqrt(np.array(out))
+
+
+def process_noise_bound(
+    flow: np.ndarray,
+    S: np.ndarray,
+    variances: np.ndarray,
+    prior_covariance: np.ndarray,
+    process: np.ndarray,
+) -> np.ndarray:
+    """The posterior bound of the *current* state z_k when z also takes white process noise,
+    z_{k+1} = Φ(z_k) + w_k, E[w wᵀ] = ``process[k]`` (N, n, n) over [t_k, t_{k+1}) (the
+    random walks of (4.1) and the model-error intensities): the recursion of Tichavský et al.
+    (1998), which for additive Gaussian noise is the Kalman covariance recursion along the
+    truth, P⁻ = F P Fᵀ + Q, P = (P⁻⁻¹ + Hᵀ R⁻¹ H)⁻¹ (here in Joseph form).
+
+    F_k = Φ_{k+1} Φ_k⁻¹ and H_k = S_k Φ_k⁻¹ come from the flow Φ_k = ∂z(t_k)/∂z0 and the
+    output sensitivities of :func:`output_sensitivities` (no other model access). With
+    ``process`` = 0 it equals :func:`posterior_information`'s bound for the parameters (whose
+    z_k is z0). Returns sqrt(diag P_k) after each sample's update, shape (N, n)."""
+    flow = np.asarray(flow, dtype=float)
+    n = flow.shape[1]
+    P = np.asarray(prior_covariance, dtype=float).copy()
+    out = []
+    previous = np.eye(n)
+    for k in range(len(flow)):
+        if k > 0:
+            F = np.linalg.solve(previous.T, flow[k].T).T  # Φ_k Φ_{k-1}⁻¹
+            P = F @ P @ F.T + process[k - 1]
+        H = np.linalg.solve(flow[k].T, S[k].T).T  # S_k Φ_k⁻¹
+        R = np.diag(variances[k])
+        gain = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+        A = np.eye(n) - gain @ H
+        P = A @ P @ A.T + gain @ R @ gain.T
+        P = 0.5 * (P + P.T)
+        previous = flow[k]
+        out.append(np.sqrt(np.diag(P)))
+    return np.array(out)
