@@ -1351,7 +1351,7 @@ def plot_efficiency(mc: EkfMonteCarlo, path: Path) -> Path:
 
     names = mc.parameter_names
     phases = [p.name for p in mc.first.phases]
-    fig, ax = subplots(1, 1, (8, 4), {"top": 0.86, "bottom": 0.12, "left": 0.08, "right": 0.98})
+    fig, ax = subplots(1, 1, (8, 4.4), {"top": 0.82, "bottom": 0.1, "left": 0.08, "right": 0.98})
     width = 0.8 / len(phases)
     marked = False
     for i, phase in enumerate(phases):
@@ -1386,8 +1386,8 @@ def plot_efficiency(mc: EkfMonteCarlo, path: Path) -> Path:
     fig.suptitle(
         f"EKF efficiency, {first.shift} shift, {len(mc.runs)} runs, samples every "
         f"{first.sample_time * 1e3:g} ms (n.i.: not identifiable in this phase)\n"
-        "bars: against the bound for constant parameters (the filter's random walks make > 1 "
-        "expected); initial estimates "
+        "bars: RMSE / bound for constant parameters (the filter's random walks make > 1 "
+        "expected)\n◆: RMSE / bound with the filter's process noise; initial estimates "
         + (
             "drawn from the prior"
             if mc.prior_draw
