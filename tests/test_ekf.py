@@ -254,6 +254,7 @@ def test_estimate_ekf_command(tmp_path):
     for key in ("truth", "initial", "estimate", "sigma", "rmse", "crb_sigma", "efficiency"):
         assert key in data["parameters"]["m_veh"]
     assert data["parameters"]["m_veh"]["initial"] == 1500.0
+    assert "run 1 of 1" in run.stderr  # the Monte-Carlo progress bar (one run by default)
     for key in ("nees_mean", "nees_band", "nis_mean", "phases", "sample_time"):
         assert key in data
     mass = data["parameters"]["m_veh"]

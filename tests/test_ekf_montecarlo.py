@@ -96,8 +96,9 @@ def _mode_phases(setup, element_index):
 def test_mu_not_identifiable_where_its_element_does_not_slide_and_its_sigma_stays(
     mc, setup, element_index
 ):
-    from gearsym.validation.estimation import NOT_IDENTIFIABLE
+    from gearsym.validation.estimation import NOT_IDENTIFIABLE, format_monte_carlo_text
 
+    text = format_monte_carlo_text(mc).splitlines()
     element, idle = _mode_phases(setup, element_index)
     mu = setup.aug.mu_state[element]
     assert idle, "every element is idle in some phase of a shift (its gear)"
@@ -106,6 +107,8 @@ def test_mu_not_identifiable_where_its_element_does_not_slide_and_its_sigma_stay
         assert not stats.identifiable and stats.to_dict()["verdict"] == NOT_IDENTIFIABLE
         assert stats.sigma_ratio == 1.0  # the filter's σ does not shrink (frozen, to the bit)
         assert stats.gamma == np.inf  # no information at all in the phase's own FIM
+        (line,) = [ln for ln in text if ln.split(mu)[0].strip() == phase]
+        assert NOT_IDENTIFIABLE in line and "σ × 1.000" in line
     # and where the element slides for a whole phase, the phase identifies its μ
     slid = [p for p in mc.phase_stats if mc.phase_stats[p][mu].samples > 5]
     assert slid and all(mc.phase_stats[p][mu].identifiable for p in slid)
