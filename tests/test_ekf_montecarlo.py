@@ -61,6 +61,10 @@ def test_nees_mean_over_50_runs_is_inside_its_chi2_band(mc):
     hi = chi2.ppf(0.975, RUNS * dof) / RUNS
     assert mc.nees_band() == pytest.approx((lo, hi))
     assert lo <= mc.nees_mean <= hi, (mc.nees_mean, lo, hi)
+    from gearsym.validation.estimation import format_monte_carlo_text
+
+    text = format_monte_carlo_text(mc)
+    assert f"NEES mean {mc.nees_mean:.2f} over {RUNS} runs" in text and "NIS mean" in text
 
 
 def test_bound_starts_at_the_prior_and_never_grows(mc, setup):

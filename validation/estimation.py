@@ -1341,6 +1341,14 @@ def format_monte_carlo_text(mc: EkfMonteCarlo) -> str:
         f"{'inside' if lo <= mc.nees_mean <= hi else 'OUTSIDE'}; "
         f"{100 * mc.nees_inside():.0f} % of samples' run means inside their band"
     )
+    d = mc.to_dict()
+    if d["nis_mean"] is not None:
+        nis_lo, nis_hi = d["nis_band"]
+        lines.append(
+            f"  NIS mean {d['nis_mean']:.2f} (95 % band {nis_lo:.2f}..{nis_hi:.2f}, innovations "
+            f"white: samples independent): "
+            f"{'inside' if nis_lo <= d['nis_mean'] <= nis_hi else 'OUTSIDE'}"
+        )
     return "\n".join(lines)
 
 
