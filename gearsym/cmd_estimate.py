@@ -47,6 +47,10 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         )
     if args.filter == "ekf":
         return _cmd_ekf(args, d, scenario)
+    if args.runs != 1:
+        raise GearsymError("estimate", "--runs", "Monte-Carlo runs are for --filter ekf only")
+    if args.initial_from_prior:
+        raise GearsymError("estimate", "--initial-from-prior", "is for --filter ekf only")
     unknown = [u.strip() for u in args.unknown.split(",") if u.strip()]
     if not unknown:
         raise GearsymError("estimate", "--unknown", "name at least one unknown input")
@@ -121,6 +125,10 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
     if args.params is not None:
         parameters = [p.strip() for p in args.params.split(",") if p.strip()]
     initial = _initial_values(args.initial)
+    if args.initial_from_prior and initial:
+        raise GearsymError(
+            "estimate", "--initial-from-prior", "draws the initial estimate: drop --initial"
+        )
     aug = augmented_model(d, scenario.shift.name, parameters)  # bad names fail before the run
     wrong = [name for name in initial if name not in aug.state_names]
     if wrong:
@@ -131,30 +139,50 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
         )
 
     def work(folder: Any) -> Any:
-        from gearsym.cmd_dynamics import simulate_with_progress
-        from gearsym.validation.estimation import plot_ekf, run_ekf, write_ekf_csv
+        from gearsym.cmd_dynamics import ProgressBar, simulate_with_progress
+        from gearsym.validation.estimation import (
+            plot_efficiency,
+            plot_ekf,
+            prepare_ekf,
+            run_ekf_monte_carlo,
+            write_ekf_csv,
+        )
 
         result = simulate_with_progress(d, scenario)
-        _say("running the EKF")
-        run = run_ekf(
+        setup = prepare_ekf(
             d,
             result,
             sample_time=args.sample_time,
             relative_noise=noise,
-            seed=args.seed,
             initial=initial,
             aug=aug,
         )
+        bar = ProgressBar(f"EKF, {args.runs} run{'s' if args.runs > 1 else ''}")
+        try:
+            mc = run_ekf_monte_carlo(
+                setup,
+                args.runs,
+                seed=args.seed,
+                progress=bar,
+                prior_draw=args.initial_from_prior,
+            )
+        finally:
+            bar.done()
         if folder is not None:
-            write_ekf_csv(run, folder / "ekf.csv")
-            (folder / "ekf.json").write_text(json.dumps(run.to_dict(), indent=2) + "\n")
+            write_ekf_csv(mc.first, folder / "ekf.csv")
+            (folder / "ekf.json").write_text(json.dumps(mc.to_dict(), indent=2) + "\n")
             if not args.no_plots:
-                plot_ekf(run, folder / "ekf.png")
-        return run
+                plot_ekf(mc.first, folder / "ekf.png")
+                plot_efficiency(mc, folder / "ekf_efficiency.png")
+        return mc
 
-    from gearsym.validation.estimation import format_ekf_text
+    from gearsym.validation.estimation import format_ekf_text, format_monte_carlo_text
 
-    return _run_and_report(args, work, format_ekf_text)
+    def text(mc: Any) -> str:
+        body = format_monte_carlo_text(mc)
+        return body if len(mc.runs) > 1 else format_ekf_text(mc.first) + "\n" + body
+
+    return _run_and_report(args, work, text)
 
 
 def _run_and_report(
@@ -207,6 +235,13 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "description's value, mu nominal, zeta 0, phi 0, speeds from the first measurement)",
     )
     p.add_argument(
+        "--initial-from-prior",
+        action="store_true",
+        help="ekf: draw each run's initial estimate of phi and the parameters from the "
+        "filter's prior around the truth (the premise of the posterior Cramer-Rao bound) "
+        "instead of the fixed default",
+    )
+    p.add_argument(
         "--unknown",
         default="T_res_star",
         help="unknown inputs of the linear form (5.3), comma-separated (default T_res_star; "
@@ -223,9 +258,24 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         help="relative speed-sensor error r (3.26): one value for every output or one per "
         "output, comma-separated (default: uio no noise, ekf 0.01)",
     )
-    p.add_argument("--seed", type=number(int, minimum=0), default=0, help="noise seed")
     p.add_argument(
-        "--out", help="folder for uio.csv/.json/.png or ekf.csv/.json/.png (written atomically)"
+        "--seed",
+        type=number(int, minimum=0),
+        default=0,
+        help="noise seed (with --runs N: the seeds K, K+1, ..., K+N-1)",
+    )
+    p.add_argument(
+        "--runs",
+        type=number(int, minimum=1),
+        default=1,
+        help="ekf: Monte-Carlo runs over noise seeds, the reference simulated once (default 1); "
+        "per parameter and phase: mean error, RMSE, sigma, the posterior Cramer-Rao bound "
+        "and the efficiency RMSE / bound, NEES mean against its chi2 band",
+    )
+    p.add_argument(
+        "--out",
+        help="folder for uio.csv/.json/.png or ekf.csv/.json/.png and ekf_efficiency.png "
+        "(written atomically)",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG")
     p.add_argument("--json", action="store_true", help="machine-readable output")

@@ -254,9 +254,22 @@ def test_estimate_ekf_command(tmp_path):
     for key in ("truth", "initial", "estimate", "sigma", "rmse", "crb_sigma", "efficiency"):
         assert key in data["parameters"]["m_veh"]
     assert data["parameters"]["m_veh"]["initial"] == 1500.0
+    assert "run 1 of 1" in run.stderr  # the Monte-Carlo progress bar (one run by default)
     for key in ("nees_mean", "nees_band", "nis_mean", "phases", "sample_time"):
         assert key in data
-    assert sorted(p.name for p in out.iterdir()) == ["MANIFEST", "ekf.csv", "ekf.json", "ekf.png"]
+    mass = data["parameters"]["m_veh"]
+    # one run: rmse is that run's error; the matched bound and the efficiency are filled in
+    assert mass["crb_sigma"] > 0 and mass["efficiency"] == pytest.approx(
+        mass["rmse"] / mass["crb_sigma"]
+    )
+    assert "m_veh" in data["parameters"] and isinstance(mass["identifiable"], list)
+    assert sorted(p.name for p in out.iterdir()) == [
+        "MANIFEST",
+        "ekf.csv",
+        "ekf.json",
+        "ekf.png",
+        "ekf_efficiency.png",
+    ]
     header = (out / "ekf.csv").read_text().splitlines()[0].split(",")
     assert header[:5] == ["t", "phase", "omega_1_hat", "omega_1_sigma", "omega_1"]
     for bad, key in (
@@ -264,6 +277,8 @@ def test_estimate_ekf_command(tmp_path):
         (("--initial", "m_car=3"), "--initial"),
         (("--params", "m_veh,T_In"), "params"),
         (("--noise", "0"), "--noise"),
+        (("--runs", "0"), "--runs"),
+        (("--runs", "2", "--filter", "uio"), "--runs"),
     ):
         result = gearsym(*bad, "--out", str(tmp_path / "never"))
         assert result.returncode == 2 and key in result.stderr, (bad, result.stderr)

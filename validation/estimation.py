@@ -37,6 +37,16 @@ from gearsym.symbolic.estimators import (
 from gearsym.validation.simulate import Phase, SimulationResult
 
 __all__ = [
+    "BOUND_ASSUMPTION",
+    "EkfBound",
+    "EkfMonteCarlo",
+    "EkfSetup",
+    "ekf_bound",
+    "filter_run",
+    "format_monte_carlo_text",
+    "plot_efficiency",
+    "prepare_ekf",
+    "run_ekf_monte_carlo",
     "EkfRun",
     "ParameterEstimate",
     "element_modes",
@@ -528,33 +538,65 @@ def _chi2_mean_band(dof: np.ndarray, probability: float = 0.95) -> tuple[float, 
     )
 
 
-def run_ekf(
+@dataclass
+class EkfSetup:
+    """Everything about an EKF run that does not depend on the noise seed: the sample grid,
+    the true outputs and their noise σ (3.26), the known inputs and element modes, the truth
+    per augmented state, the initial estimate and the prior σ (P0 = diag(σ0²)). Built once for
+    a Monte-Carlo study; only the noise draws change per run."""
+
+    aug: Any
+    discrete: Any
+    shift: str
+    t: np.ndarray
+    y_true: np.ndarray  # (N, m)
+    sigma_y: np.ndarray  # (N, m): r_i max(|y_i|, y_i^min) (3.26)
+    relative: np.ndarray  # (m,)
+    floor: np.ndarray  # (m,)
+    u: np.ndarray  # (N, n_u), held over each sample interval
+    p: list[float]
+    q: list[float]
+    truth: np.ndarray  # (N, n), NaN where none
+    scored: np.ndarray  # (N, n) bool
+    initial: np.ndarray  # (n,) initial estimate (speeds: filled in from the first measurement)
+    prior_sigma: np.ndarray  # (n,)
+    outputs: list[str]
+    phases: tuple[Phase, ...]
+
+    @property
+    def names(self) -> list[str]:
+        return self.aug.state_names
+
+    @property
+    def truth0(self) -> np.ndarray:
+        """The true z0 = [x0; p] as the filter's model sees it: the reference's initial states,
+        m_veh and ζ; a μ at its mean while its element slides (the model's μ is constant),
+        the initial estimate where an element never slides."""
+        n, n_x = len(self.names), self.aug.n_x
+        z0 = np.array(
+            [
+                np.mean(self.truth[self.scored[:, j], j])
+                if self.scored[:, j].any()
+                else self.initial[j]
+                for j in range(n)
+            ]
+        )
+        z0[:n_x] = self.truth[0, :n_x]
+        return z0
+
+
+def prepare_ekf(
     d: GearboxDescription,
     result: SimulationResult,
     sample_time: float = 0.01,
     relative_noise: Sequence[float] | float = EKF_RELATIVE_NOISE,
-    seed: int = 0,
     initial: Mapping[str, float] | None = None,
     parameters: Sequence[str] | None = None,
-    dropout: tuple[float, float] | None = None,
     aug: Any = None,
     discrete: Any = None,
-) -> EkfRun:
-    """The EKF (4.3) on the augmented model (4.1) along the reference shift of ``result``.
-
-    Measurements: the reference's speeds (3.31) every ``sample_time`` s plus Gaussian noise of
-    σ_i = r_i max(|y_i|, y_i^min) (3.26), drawn with ``seed``; ``dropout`` = (t0, t1) replaces
-    every measurement in [t0, t1) by NaN (a sensor dropout: the updates are skipped). Known
-    inputs T_In, F_N at the samples, held; element modes from :func:`element_modes`.
-    ``initial`` overrides the default initial estimate (m_veh 30 % light, μ nominal, ζ 0, φ 0,
-    the speeds from the first measurement). ``aug``/``discrete`` reuse a built model.
-    """
-    from gearsym.symbolic.estimators.ekf import (
-        DiscreteModel,
-        augmented_model,
-        ekf_predict,
-        ekf_update,
-    )
+) -> EkfSetup:
+    """The seed-independent part of :func:`run_ekf` (its arguments of the same name)."""
+    from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
 
     shift = result.scenario.shift.name
     if aug is None:
@@ -580,9 +622,6 @@ def run_ekf(
         raise GearsymError("estimate", "--noise", "relative errors must be finite and > 0")
     floor = EKF_FLOOR_FRACTION * np.max(np.abs(y_true), axis=0)
     sigma_y = r[None, :] * np.maximum(np.abs(y_true), floor[None, :])
-    y = y_true + np.random.default_rng(seed).normal(0.0, 1.0, y_true.shape) * sigma_y
-    if dropout is not None:
-        y[(t >= dropout[0]) & (t < dropout[1])] = np.nan
 
     modes = element_modes(d, result, t)
     columns = []
@@ -611,15 +650,12 @@ def run_ekf(
         j = names.index(mu)
         scored[:, j] = modes[e][0] > 0.5  # μ is defined (and estimated) while it slides
 
-    # initial estimate and prior
+    # initial estimate and prior (the speeds' are set from the first measurement per run)
     z = np.zeros(n)
     sig0 = np.zeros(n)
-    first = np.nan_to_num(y[0], nan=0.0)
     for j, name in enumerate(names):
         if name in outputs:
-            k = outputs.index(name)
-            z[j] = first[k] if np.isfinite(y[0, k]) else 0.0
-            sig0[j] = sigma_y[0, k] if np.isfinite(y[0, k]) else 1e3
+            sig0[j] = sigma_y[0, outputs.index(name)]
         elif name == naming.TWIST:
             z[j], sig0[j] = 0.0, EKF_PRIOR_SIGMA["phi"]
         elif name == "m_veh":
@@ -637,8 +673,92 @@ def run_ekf(
                 "estimate", "--initial", f"{name!r} is not a state ({', '.join(names)})"
             )
         z[names.index(name)] = float(value)
+    return EkfSetup(
+        aug=aug,
+        discrete=discrete,
+        shift=shift,
+        t=t,
+        y_true=y_true,
+        sigma_y=sigma_y,
+        relative=r,
+        floor=floor,
+        u=u,
+        p=p,
+        q=q,
+        truth=truth,
+        scored=scored,
+        initial=z,
+        prior_sigma=sig0,
+        outputs=outputs,
+        phases=tuple(result.phases),
+    )
+
+
+def run_ekf(
+    d: GearboxDescription,
+    result: SimulationResult,
+    sample_time: float = 0.01,
+    relative_noise: Sequence[float] | float = EKF_RELATIVE_NOISE,
+    seed: int = 0,
+    initial: Mapping[str, float] | None = None,
+    parameters: Sequence[str] | None = None,
+    dropout: tuple[float, float] | None = None,
+    aug: Any = None,
+    discrete: Any = None,
+    setup: EkfSetup | None = None,
+) -> EkfRun:
+    """The EKF (4.3) on the augmented model (4.1) along the reference shift of ``result``.
+
+    Measurements: the reference's speeds (3.31) every ``sample_time`` s plus Gaussian noise of
+    σ_i = r_i max(|y_i|, y_i^min) (3.26), drawn with ``seed``; ``dropout`` = (t0, t1) replaces
+    every measurement in [t0, t1) by NaN (a sensor dropout: the updates are skipped). Known
+    inputs T_In, F_N at the samples, held; element modes from :func:`element_modes`.
+    ``initial`` overrides the default initial estimate (m_veh 30 % light, μ nominal, ζ 0, φ 0,
+    the speeds from the first measurement). ``aug``/``discrete`` reuse a built model;
+    ``setup`` (from :func:`prepare_ekf`) reuses everything but the noise draws.
+    """
+    if setup is None:
+        setup = prepare_ekf(
+            d, result, sample_time, relative_noise, initial, parameters, aug, discrete
+        )
+    return filter_run(setup, seed, dropout)
+
+
+def filter_run(
+    setup: EkfSetup,
+    seed: int = 0,
+    dropout: tuple[float, float] | None = None,
+    prior_draw: bool = False,
+) -> EkfRun:
+    """One EKF run (4.3) on ``setup``'s samples with the noise (3.26) drawn from ``seed``.
+
+    ``prior_draw``: the initial estimate of every unmeasured state (φ and the parameters) is
+    the truth (:attr:`EkfSetup.truth0`) plus a draw from the prior N(0, σ0²) (a second stream
+    of ``seed``), the premise of the posterior bound, instead of the fixed initial estimate."""
+    from gearsym.symbolic.estimators.ekf import ekf_predict, ekf_update
+
+    s = setup
+    t, names, n = s.t, s.names, len(s.names)
+    sample_time = float(t[1] - t[0])
+    y = s.y_true + np.random.default_rng(seed).normal(0.0, 1.0, s.y_true.shape) * s.sigma_y
+    if dropout is not None:
+        y[(t >= dropout[0]) & (t < dropout[1])] = np.nan
+    z = s.initial.copy()
+    sig0 = s.prior_sigma.copy()
+    if prior_draw:
+        unmeasured = np.array([name not in s.outputs for name in names])
+        draw = np.random.default_rng([seed, 1]).normal(0.0, 1.0, len(z)) * sig0
+        z[unmeasured] = s.truth0[unmeasured] + draw[unmeasured]
+    for k, name in enumerate(s.outputs):
+        if name in names:
+            j = names.index(name)
+            if np.isfinite(y[0, k]):
+                z[j] = y[0, k]
+            else:
+                z[j], sig0[j] = 0.0, 1e3
     P = np.diag(sig0**2)
     initial_values = z.copy()
+    truth, scored = s.truth, s.scored
 
     estimates = np.empty((len(t), n))
     sigmas = np.empty((len(t), n))
@@ -649,8 +769,10 @@ def run_ekf(
     scale = np.maximum(sig0, 1e-12)
     for k in range(len(t)):
         if k > 0:
-            z, P = ekf_predict(discrete, z, P, u[k - 1], sample_time, p, q)
-        z, P, nis[k], nis_dof[k] = ekf_update(discrete, z, P, u[k], y[k], p, r, floor)
+            z, P = ekf_predict(s.discrete, z, P, s.u[k - 1], sample_time, s.p, s.q)
+        z, P, nis[k], nis_dof[k] = ekf_update(
+            s.discrete, z, P, s.u[k], y[k], s.p, s.relative, s.floor
+        )
         estimates[k] = z
         sigmas[k] = np.sqrt(np.diag(P))
         min_eig = min(min_eig, float(np.linalg.eigvalsh(P / np.outer(scale, scale))[0]))
@@ -658,9 +780,8 @@ def run_ekf(
         error = z[idx] - truth[k, idx]
         nees[k] = float(error @ np.linalg.solve(P[np.ix_(idx, idx)], error))
 
-    phases = tuple(result.phases)
     estimates_by_parameter = []
-    for name in aug.parameters:
+    for name in s.aug.parameters:
         j = names.index(name)
         inside = np.flatnonzero(scored[:, j])
         last = inside[-1] if inside.size else len(t) - 1
@@ -677,9 +798,9 @@ def run_ekf(
             )
         )
     return EkfRun(
-        shift=shift,
-        sample_time=float(sample_time),
-        relative_noise=tuple(float(v) for v in r),
+        shift=s.shift,
+        sample_time=sample_time,
+        relative_noise=tuple(float(v) for v in s.relative),
         seed=seed,
         state_names=tuple(names),
         t=t,
@@ -691,7 +812,7 @@ def run_ekf(
         nees_dof=scored.sum(axis=1).astype(float),
         nis=nis,
         nis_dof=nis_dof,
-        phases=phases,
+        phases=s.phases,
         parameters=tuple(estimates_by_parameter),
         min_eigenvalue=min_eig,
     )
@@ -810,3 +931,476 @@ def format_ekf_text(run: EkfRun) -> str:
         "  μ is scored while its element slides; outside that its estimate and σ are frozen"
     )
     return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------
+# Monte-Carlo evaluation against the matched posterior Cramér–Rao bound
+# ---------------------------------------------------------------------------------------------
+
+#: How the bound is matched to the filter, printed beside every efficiency.
+BOUND_ASSUMPTION = (
+    "posterior Cramér–Rao bound (3.25 with the filter's prior P0): the filter's model (4.1), "
+    "element modes, sample times and speed noise (3.26), initial states unknown; parameters "
+    "constant and the model exact. The filter's random walks (4.1) and model-error noise make "
+    "it forget, the truth's μ follows the μ map and the reference is elastic, so efficiency "
+    "RMSE / bound > 1 is expected even of a good filter. The bound averages over truths drawn "
+    "from the prior; the runs keep one truth and one initial estimate (m_veh 1 prior σ off, "
+    "μ and ζ closer), so below 1 is possible where the prior still dominates"
+)
+
+NOT_IDENTIFIABLE = "not identifiable in this phase"
+
+
+@dataclass(frozen=True)
+class EkfBound:
+    """The posterior Cramér–Rao bound matched to the EKF (:mod:`.posterior_bound`), per sample,
+    and what each phase's own information identifies."""
+
+    names: tuple[str, ...]
+    t: np.ndarray = field(repr=False)
+    sigma: np.ndarray = field(repr=False)  # (N, n): sqrt(diag J_k⁻¹) of z0 = [x0; p]
+    #: per phase name: the parameters the phase's own information identifies (the thesis'
+    #: elimination (3.3) on its FIM (3.25), the states at the phase start unknown)
+    identifiable: dict[str, tuple[str, ...]]
+    #: per phase name: γ_j (3.27) of every parameter on the phase's own FIM, all estimated
+    gamma: dict[str, dict[str, float]]
+    linearised_at: np.ndarray = field(repr=False)  # z0 of the sensitivities
+    #: (N, n): the bound of z_k with the filter's process noise (random walks (4.1) and model
+    #: error), :func:`~gearsym.validation.posterior_bound.process_noise_bound`
+    sigma_process: np.ndarray = field(repr=False)
+
+
+def ekf_bound(setup: EkfSetup, relative_step: float = 1e-5) -> EkfBound:
+    """The posterior bound J_k = P0⁻¹ + Σ S_iᵀ R_i⁻¹ S_i (3.25, 3.26) of the EKF's problem
+    (``setup``): sensitivities of the sampled speeds to z0 = [x0; p] by central differences
+    of tight DOP853 trajectories of the filter's right-hand side (lambdified, not the filter's
+    CasADi functions or RK4 Jacobian), linearised at the truth (the reference's initial
+    states, m_veh, ζ; μ at its mean while its element slides). Per phase, the phase's own FIM
+    with the states at its start as nuisance (Schur complement, restarted there) goes through
+    the thesis' elimination (3.3, γ_max of :data:`GAMMA_MAX`)."""
+    from gearsym.symbolic.defaults import GAMMA_MAX
+    from gearsym.symbolic.fisher import eliminate
+    from gearsym.validation.hybrid_fisher import schur_complement
+    from gearsym.validation.posterior_bound import (
+        bound_sigma,
+        information_increments,
+        lambdified,
+        output_sensitivities,
+        posterior_information,
+        process_noise_bound,
+    )
+    from gearsym.validation.sensitivity_run import nominal_scales
+
+    model = setup.aug.model
+    args = (model.state_symbols, model.input_symbols, model.parameter_symbols, setup.p)
+    f = lambdified(list(model.rhs), *args)
+    h = lambdified(list(model.output_expressions), *args)
+    names = setup.names
+    n, n_x = len(names), setup.aug.n_x
+    z0 = setup.truth0
+    steps = relative_step * np.maximum(np.abs(z0), setup.prior_sigma)
+    variances = setup.sigma_y**2
+    _, S, z, flow = output_sensitivities(f, h, z0, setup.t, setup.u, steps, return_flow=True)
+    J = posterior_information(S, variances, np.diag(setup.prior_sigma**2))
+    # the filter's process noise over each sample interval: h q, a μ's zero while its
+    # element does not slide (its random walk is switched off there, ekf_predict)
+    h_step = float(setup.t[1] - setup.t[0]) if len(setup.t) > 1 else 0.0
+    process = np.zeros((len(setup.t), n, n))
+    for k in range(len(setup.t)):
+        rates = np.array(setup.q, dtype=float)
+        rates[setup.aug.frozen_states(setup.u[k])] = 0.0
+        process[k] = np.diag(h_step * rates)
+    sigma_process = process_noise_bound(flow, S, variances, np.diag(setup.prior_sigma**2), process)
+    parameters = list(setup.aug.parameters)
+    values = {name: float(z0[names.index(name)]) for name in parameters}
+    scales = nominal_scales(parameters, values)
+    identifiable: dict[str, tuple[str, ...]] = {}
+    gamma: dict[str, dict[str, float]] = {}
+    for k, phase in enumerate(setup.phases):
+        inside = _phase_samples(setup.t, phase, last=k == len(setup.phases) - 1)
+        if inside.size == 0:
+            identifiable[phase.name], gamma[phase.name] = (), {}
+            continue
+        a = inside[0]
+        _, G, _ = output_sensitivities(
+            f,
+            h,
+            z[a],
+            setup.t[inside],
+            setup.u[inside],
+            relative_step * np.maximum(np.abs(z[a]), setup.prior_sigma),
+        )
+        fim = schur_complement(
+            _reorder(information_increments(G, variances[inside]).sum(axis=0), n_x),
+            n - n_x,
+        )
+        elimination = eliminate(fim, parameters, scales, gamma_max=GAMMA_MAX)
+        identifiable[phase.name] = tuple(elimination.final)
+        first = elimination.steps[0].analysis
+        gamma[phase.name] = {
+            name: float(g) for name, g in zip(first.names, first.gamma, strict=True)
+        }
+    return EkfBound(
+        names=tuple(names),
+        t=setup.t,
+        sigma=bound_sigma(J),
+        identifiable=identifiable,
+        gamma=gamma,
+        linearised_at=z0,
+        sigma_process=sigma_process,
+    )
+
+
+def _reorder(fim: np.ndarray, n_x: int) -> np.ndarray:
+    """[x; p] ordered as [p; x] (the Schur complement keeps the leading block)."""
+    order = np.r_[np.arange(n_x, len(fim)), np.arange(n_x)]
+    return fim[np.ix_(order, order)]
+
+
+def _phase_samples(t: np.ndarray, phase: Phase, last: bool) -> np.ndarray:
+    """Indices of the samples in [t_start, t_end) of ``phase`` (the last phase: its end too)."""
+    return np.flatnonzero((t >= phase.t_start) & ((t < phase.t_end) | last))
+
+
+@dataclass(frozen=True)
+class PhaseParameterStats:
+    """One parameter in one phase over the Monte-Carlo runs."""
+
+    samples: int  # scored samples per run
+    mean_error: float | None
+    rmse: float | None
+    sigma: float | None  # reported σ, RMS over the scored samples and runs
+    crb_sigma: float | None  # the posterior bound, RMS over the same samples
+    efficiency: float | None  # rmse / crb_sigma
+    #: the bound with the filter's process noise (random walks, model error), and rmse over it
+    crb_sigma_process: float | None
+    efficiency_process: float | None
+    identifiable: bool
+    gamma: float | None  # (3.27) on the phase's own FIM
+    #: filter σ and bound at the phase's last sample over those before it (1: no information)
+    sigma_ratio: float
+    crb_ratio: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "samples": self.samples,
+            "mean_error": self.mean_error,
+            "rmse": self.rmse,
+            "sigma": self.sigma,
+            "crb_sigma": self.crb_sigma,
+            "efficiency": self.efficiency,
+            "crb_sigma_process_noise": self.crb_sigma_process,
+            "efficiency_process_noise": self.efficiency_process,
+            "identifiable": self.identifiable,
+            "verdict": None if self.identifiable else NOT_IDENTIFIABLE,
+            "gamma": self.gamma if self.gamma is None or np.isfinite(self.gamma) else "inf",
+            "sigma_ratio": self.sigma_ratio,
+            "crb_ratio": self.crb_ratio,
+        }
+
+
+@dataclass(frozen=True)
+class EkfMonteCarlo:
+    """The EKF over ``len(runs)`` noise seeds of one reference shift, with the matched bound."""
+
+    runs: tuple[EkfRun, ...]
+    bound: EkfBound
+    seconds_per_run: float
+    #: per phase name, per parameter
+    phase_stats: dict[str, dict[str, PhaseParameterStats]]
+    #: initial estimates drawn from the prior around the truth (else the fixed default)
+    prior_draw: bool = False
+
+    @property
+    def first(self) -> EkfRun:
+        return self.runs[0]
+
+    def _stack(self, attribute: str) -> np.ndarray:
+        return np.array([getattr(r, attribute) for r in self.runs])
+
+    def nees_run_mean(self) -> np.ndarray:
+        """ε̄_k: NEES at each sample averaged over the runs."""
+        return np.mean(self._stack("nees"), axis=0)
+
+    @property
+    def nees_mean(self) -> float:
+        return float(np.mean(self.nees_run_mean()))
+
+    def nees_band(self, probability: float = 0.95) -> tuple[float, float]:
+        """Band of the NEES mean of a consistent filter: one sample's mean over the R runs is
+        χ²(R n)/R (n its dof, the runs independent); the time average of such means, which are
+        correlated in time, scatters no more than one of them. n: the mean dof."""
+        from scipy.stats import chi2
+
+        runs, dof = len(self.runs), float(np.mean(self.first.nees_dof))
+        return (
+            float(chi2.ppf((1 - probability) / 2, runs * dof) / runs),
+            float(chi2.ppf((1 + probability) / 2, runs * dof) / runs),
+        )
+
+    def nees_inside(self, probability: float = 0.95) -> float:
+        """Fraction of samples whose run-averaged NEES lies inside its χ²(R n_k)/R band."""
+        from scipy.stats import chi2
+
+        runs, dof = len(self.runs), self.first.nees_dof
+        lo = chi2.ppf((1 - probability) / 2, runs * dof) / runs
+        hi = chi2.ppf((1 + probability) / 2, runs * dof) / runs
+        mean = self.nees_run_mean()
+        return float(np.mean((mean >= lo) & (mean <= hi)))
+
+    def parameter_summary(self, name: str) -> dict[str, Any]:
+        """Over every scored sample of every run: the JSON entry of one parameter."""
+        first = self.first
+        j = first.state_names.index(name)
+        scored = first.scored[:, j]
+        errors = self._stack("estimates")[:, scored, j] - first.truth[None, scored, j]
+        sigmas = self._stack("sigmas")[:, scored, j]
+        crb = self.bound.sigma[scored, j]
+        crb_process = self.bound.sigma_process[scored, j]
+        process_rms = float(np.sqrt(np.mean(crb_process**2))) if crb_process.size else None
+        final = [next(p for p in r.parameters if p.name == name) for r in self.runs]
+        rmse = float(np.sqrt(np.mean(errors**2))) if errors.size else None
+        crb_rms = float(np.sqrt(np.mean(crb**2))) if crb.size else None
+        return {
+            "truth": final[0].truth,
+            "initial": float(np.mean([p.initial for p in final])),
+            "estimate": float(np.mean([p.estimate for p in final])),
+            "sigma": float(np.mean([p.sigma for p in final])),
+            "rmse": rmse,
+            "mean_error": float(np.mean(errors)) if errors.size else None,
+            "sigma_rms": float(np.sqrt(np.mean(sigmas**2))) if sigmas.size else None,
+            "crb_sigma": crb_rms,
+            "efficiency": None if rmse is None or not crb_rms else rmse / crb_rms,
+            "crb_sigma_process_noise": process_rms,
+            "efficiency_process_noise": None
+            if rmse is None or not process_rms
+            else rmse / process_rms,
+            "identifiable": [
+                phase for phase, stats in self.phase_stats.items() if stats[name].identifiable
+            ],
+            "samples": int(np.count_nonzero(scored)),
+        }
+
+    def to_dict(self) -> dict[str, Any]:
+        first = self.first
+        band = self.nees_band()
+        nis = self._stack("nis")
+        nis_dof = first.nis_dof
+        used = nis_dof > 0
+        return {
+            "filter": "ekf",
+            "shift": first.shift,
+            "runs": len(self.runs),
+            "seed": first.seed,
+            "seeds": [r.seed for r in self.runs],
+            "sample_time": first.sample_time,
+            "relative_noise": list(first.relative_noise),
+            "seconds_per_run": self.seconds_per_run,
+            "initial_estimate": "drawn from the prior around the truth"
+            if self.prior_draw
+            else "fixed",
+            "parameters": {name: self.parameter_summary(name) for name in self.parameter_names},
+            "bound": BOUND_ASSUMPTION,
+            "nees_mean": self.nees_mean,
+            "nees_band": list(band),
+            "nees_dof_mean": float(np.mean(first.nees_dof)),
+            "nees_inside_95": self.nees_inside(),
+            "nis_mean": float(np.mean(nis[:, used])) if used.any() else None,
+            "nis_band": list(_chi2_mean_band(np.tile(nis_dof[used], len(self.runs))))
+            if used.any()
+            else None,
+            "min_covariance_eigenvalue": min(r.min_eigenvalue for r in self.runs),
+            "phases": [
+                {
+                    **phase.to_dict(),
+                    "parameters": {
+                        name: stats.to_dict()
+                        for name, stats in self.phase_stats[phase.name].items()
+                    },
+                }
+                for phase in first.phases
+            ],
+        }
+
+    @property
+    def parameter_names(self) -> list[str]:
+        return [p.name for p in self.first.parameters]
+
+
+def run_ekf_monte_carlo(
+    setup: EkfSetup,
+    runs: int,
+    seed: int = 0,
+    progress: Any = None,
+    bound: EkfBound | None = None,
+    prior_draw: bool = False,
+) -> EkfMonteCarlo:
+    """The EKF (4.3) over ``runs`` seeds ``seed``, ``seed`` + 1, …: the reference and
+    everything of ``setup`` fixed, only the speed noise (3.26) drawn anew. ``progress(fraction,
+    message)`` is called after each run. Per parameter and phase: mean error, RMSE and RMS
+    reported σ over the scored samples of every run, the posterior bound (:func:`ekf_bound`)
+    over the same samples and the efficiency RMSE / bound; the phase's own identifiability.
+    ``prior_draw``: each run's initial estimate drawn from the prior around the truth
+    (:func:`filter_run`), the bound's premise."""
+    import time
+
+    if runs < 1:
+        raise GearsymError("estimate", "--runs", f"must be at least 1, got {runs}")
+    done = []
+    start = time.perf_counter()
+    for i in range(runs):
+        done.append(filter_run(setup, seed + i, prior_draw=prior_draw))
+        if progress is not None:
+            progress((i + 1) / runs, f"run {i + 1} of {runs}")
+    seconds = (time.perf_counter() - start) / runs
+    if bound is None:
+        if progress is not None:
+            progress(1.0, "posterior Cramér–Rao bound")
+        bound = ekf_bound(setup)
+    estimates = np.array([r.estimates for r in done])
+    sigmas = np.array([r.sigmas for r in done])
+    first = done[0]
+    stats: dict[str, dict[str, PhaseParameterStats]] = {}
+    for k, phase in enumerate(first.phases):
+        inside = _phase_samples(first.t, phase, last=k == len(first.phases) - 1)
+        stats[phase.name] = {}
+        for p in first.parameters:
+            j = first.state_names.index(p.name)
+            idx = inside[first.scored[inside, j]]
+            err = estimates[:, idx, j] - first.truth[None, idx, j]
+            sig = sigmas[:, idx, j]
+            crb = bound.sigma[idx, j]
+            crb_process = bound.sigma_process[idx, j]
+            before = max(int(inside[0]) - 1, 0) if inside.size else 0
+            end = int(inside[-1]) if inside.size else 0
+            rmse = float(np.sqrt(np.mean(err**2))) if idx.size else None
+            crb_rms = float(np.sqrt(np.mean(crb**2))) if idx.size else None
+            process_rms = float(np.sqrt(np.mean(crb_process**2))) if idx.size else None
+            g = bound.gamma.get(phase.name, {}).get(p.name)
+            stats[phase.name][p.name] = PhaseParameterStats(
+                samples=int(idx.size),
+                mean_error=float(np.mean(err)) if idx.size else None,
+                rmse=rmse,
+                sigma=float(np.sqrt(np.mean(sig**2))) if idx.size else None,
+                crb_sigma=crb_rms,
+                efficiency=None if rmse is None or not crb_rms else rmse / crb_rms,
+                crb_sigma_process=process_rms,
+                efficiency_process=None if rmse is None or not process_rms else rmse / process_rms,
+                identifiable=p.name in bound.identifiable.get(phase.name, ()),
+                gamma=g,
+                sigma_ratio=float(np.mean(sigmas[:, end, j]) / np.mean(sigmas[:, before, j])),
+                crb_ratio=float(bound.sigma[end, j] / bound.sigma[before, j]),
+            )
+    return EkfMonteCarlo(
+        runs=tuple(done),
+        bound=bound,
+        seconds_per_run=seconds,
+        phase_stats=stats,
+        prior_draw=prior_draw,
+    )
+
+
+def format_monte_carlo_text(mc: EkfMonteCarlo) -> str:
+    """Per phase and parameter: mean error, RMSE, σ, bound, efficiency, or "not identifiable
+    in this phase" with the σ ratio; the NEES mean against its band."""
+    first = mc.first
+    lines = [
+        f"EKF (4.3) of the {first.shift} shift, Monte-Carlo over {len(mc.runs)} noise seeds "
+        f"({first.seed}..{first.seed + len(mc.runs) - 1}; the reference simulated once), "
+        f"samples every {first.sample_time * 1e3:g} ms, speed noise (3.26) r = "
+        f"{', '.join(f'{v:g}' for v in sorted(set(first.relative_noise)))}; "
+        f"{mc.seconds_per_run * 1e3:.0f} ms per run; initial estimates "
+        f"{'drawn from the prior around the truth' if mc.prior_draw else 'fixed'}",
+        f"  bound: {BOUND_ASSUMPTION}",
+        "  the second bound adds the filter's own process noise (random walks 4.1, model error):"
+        " the best a filter with exactly these assumptions could do",
+        "  phase          parameter   mean error       RMSE    σ (RMS)      bound  efficiency"
+        "  | bound w/ noise  efficiency",
+    ]
+    for phase in first.phases:
+        for name, s in mc.phase_stats[phase.name].items():
+            head = f"  {phase.name:<14} {name:<8}"
+            if not s.identifiable:
+                note = f"{NOT_IDENTIFIABLE} (σ × {s.sigma_ratio:.3f}, bound × {s.crb_ratio:.3f})"
+                if s.rmse is not None:
+                    note = f"RMSE {s.rmse:.3g}, bound {s.crb_sigma:.3g}; " + note
+                lines.append(f"{head} {note}")
+                continue
+            assert s.rmse is not None and s.crb_sigma is not None and s.sigma is not None
+            assert s.mean_error is not None and s.efficiency is not None
+            assert s.crb_sigma_process is not None and s.efficiency_process is not None
+            lines.append(
+                f"{head} {s.mean_error:>11.3g} {s.rmse:>10.3g} {s.sigma:>10.3g} "
+                f"{s.crb_sigma:>10.3g} {s.efficiency:>10.2f}  | {s.crb_sigma_process:>14.3g} "
+                f"{s.efficiency_process:>11.2f}"
+            )
+    lo, hi = mc.nees_band()
+    lines.append(
+        f"  NEES mean {mc.nees_mean:.2f} over {len(mc.runs)} runs (dof "
+        f"{float(np.mean(first.nees_dof)):.2f}; 95 % band {lo:.2f}..{hi:.2f}): "
+        f"{'inside' if lo <= mc.nees_mean <= hi else 'OUTSIDE'}; "
+        f"{100 * mc.nees_inside():.0f} % of samples' run means inside their band"
+    )
+    d = mc.to_dict()
+    if d["nis_mean"] is not None:
+        nis_lo, nis_hi = d["nis_band"]
+        lines.append(
+            f"  NIS mean {d['nis_mean']:.2f} (95 % band {nis_lo:.2f}..{nis_hi:.2f}, innovations "
+            f"white: samples independent): "
+            f"{'inside' if nis_lo <= d['nis_mean'] <= nis_hi else 'OUTSIDE'}"
+        )
+    return "\n".join(lines)
+
+
+def plot_efficiency(mc: EkfMonteCarlo, path: Path) -> Path:
+    """Efficiency RMSE / posterior bound per parameter and phase (bars; a phase in which the
+    parameter is not identifiable is left empty and labelled), the line at 1 the bound."""
+    from gearsym.validation.figures import save, subplots
+
+    names = mc.parameter_names
+    phases = [p.name for p in mc.first.phases]
+    fig, ax = subplots(1, 1, (8, 4.4), {"top": 0.82, "bottom": 0.1, "left": 0.08, "right": 0.98})
+    width = 0.8 / len(phases)
+    marked = False
+    for i, phase in enumerate(phases):
+        for j, name in enumerate(names):
+            s = mc.phase_stats[phase][name]
+            x = j + (i - (len(phases) - 1) / 2) * width
+            if s.identifiable and s.efficiency is not None:
+                ax.bar(x, s.efficiency, width * 0.9, color=f"C{i}", label=phase if j == 0 else None)
+                ax.plot(
+                    x,
+                    s.efficiency_process,
+                    "kD",
+                    ms=4,
+                    label="against the bound with the filter's process noise"
+                    if not marked
+                    else None,
+                )
+                marked = True
+                ax.annotate(
+                    f"{s.efficiency:.2f}", (x, s.efficiency), ha="center", va="bottom", fontsize=6
+                )
+            else:
+                ax.annotate("n.i.", (x, 0.05), ha="center", va="bottom", fontsize=6, rotation=90)
+                if j == 0:
+                    ax.bar(x, 0, width * 0.9, color=f"C{i}", label=phase)
+    ax.axhline(1.0, color="k", lw=0.8, ls="--", label="the bound (efficiency 1)")
+    ax.set_xticks(range(len(names)), [_LABELS.get(n, n).split(" /")[0] for n in names])
+    ax.set_xlim(-0.5, len(names) - 0.5)
+    ax.set_ylabel("RMSE / posterior Cramér–Rao bound")
+    ax.legend(fontsize=6, loc="upper left", ncol=3)
+    first = mc.first
+    fig.suptitle(
+        f"EKF efficiency, {first.shift} shift, {len(mc.runs)} runs, samples every "
+        f"{first.sample_time * 1e3:g} ms (n.i.: not identifiable in this phase)\n"
+        "bars: RMSE / bound for constant parameters (the filter's random walks make > 1 "
+        "expected)\n◆: RMSE / bound with the filter's process noise; initial estimates "
+        + (
+            "drawn from the prior"
+            if mc.prior_draw
+            else "fixed (< 1 possible while the prior rules)"
+        ),
+        fontsize=9,
+    )
+    return save(fig, path)
