@@ -197,7 +197,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     scenario = load_scenario(d, args.scenario)
     with OutputDir(args.out, "simulate", before_commit=check) as out:
         result = simulate_with_progress(d, scenario)
-        write_results(d, result, out.path, plots=not args.no_plots)
+        write_results(d, result, out.path, plots=not args.no_plots, speed_unit=args.speed_unit)
         paths = out.commit()
     if args.json:
         emit_json({**summary(result), "files": [str(p) for p in paths]})
@@ -243,7 +243,8 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "simulate",
         cmd_simulate,
         "Reference simulation of a shift (thesis 3.1): writes timeseries.csv, phases.csv, "
-        "summary.json (phases, energy audit, model checks) and Figures 3.1-3.3 as PNG.",
+        "summary.json (phases, energy audit, model checks), Figures 3.1-3.3 and the vehicle's "
+        "acceleration and jerk as PNG.",
         common,
     )
     p.add_argument("--scenario", help="scenario TOML (default: the built-in 2-3 power-on upshift)")
@@ -253,6 +254,12 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         help="output folder (replaced atomically, and only if gearsym wrote it)",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    p.add_argument(
+        "--speed-unit",
+        choices=("rad/s", "rpm"),
+        default="rad/s",
+        help="unit of the speeds and slips in the figures (default rad/s; the CSV stays in rad/s)",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
 
 

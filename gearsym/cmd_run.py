@@ -88,7 +88,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             result = simulate_with_progress(d, scenario)
             write_results(d, result, out.path, plots=False)
             # Figures 3.1-3.3 draw in a child process while the analyses run (two cores)
-            figures.submit("Figures 3.1-3.3", plot_shift, d, result, out.path)
+            figures.submit("Figures 3.1-3.3", plot_shift, d, result, out.path, args.speed_unit)
             print(format_summary(result))
             print()
             print_fim_summary(d, result, folder=out.path, scenario=scenario, background=figures)
@@ -123,4 +123,10 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "--out",
         default="out/run",
         help="folder for every result (replaced atomically, and only if gearsym wrote it)",
+    )
+    p.add_argument(
+        "--speed-unit",
+        choices=("rad/s", "rpm"),
+        default="rad/s",
+        help="unit of the speeds and slips in the figures (default rad/s)",
     )

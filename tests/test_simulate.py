@@ -205,6 +205,7 @@ def test_simulate_cli_writes_everything(tmp_path):
             "fig_3_1_speeds.png",
             "fig_3_2_accelerations.png",
             "fig_3_3_torques.png",
+            "fig_vehicle_acceleration_jerk.png",
             "MANIFEST",
         ]
     )
