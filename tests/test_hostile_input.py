@@ -242,7 +242,7 @@ def simulate(capsys: pytest.CaptureFixture[str], tmp_path: Path, scenario: str, 
 
 @pytest.mark.parametrize("t_end", ["1e9", "300", f"{T_END_MAX + 0.001}", "inf", "nan"])
 def test_scenario_duration_limit(tmp_path, capsys, t_end):
-    text = edited("t_end = 1.2", f"t_end = {t_end}", SCENARIO)
+    text = edited("t_end = 1.5", f"t_end = {t_end}", SCENARIO)
     reason = simulate(capsys, tmp_path, text, "scenario.t_end")
     assert f"at most {T_END_MAX:g}" in reason or "finite" in reason
 
@@ -268,7 +268,7 @@ def test_scenario_profile_length_limit(tmp_path, capsys):
     [
         ("value = [1.5e6]\n", "value = [1.5e6]\nvlaue = [0.0]\n", "pressure.K81.vlaue", "value"),
         ('unit = "m/s",', 'unit = "m/s", sorce = "x",', "scenario.vehicle_speed.sorce", "source"),
-        ("t_end = 1.2", "t_end = 1.2\nt_ned = 2.0", "scenario.t_ned", "t_end"),
+        ("t_end = 1.5", "t_end = 1.5\nt_ned = 2.0", "scenario.t_ned", "t_end"),
         ("[input_torque]", "[input_torqe]", "input_torqe", "input_torque"),
         ('unit = "N*m"', 'unit = "N*m"\nengin = [0.0]', "input_torque.engin", "engine"),
     ],

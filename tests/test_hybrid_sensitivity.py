@@ -3,15 +3,18 @@
 against central finite differences of the same hybrid simulation (an independent method: no
 derivative of any kind, only re-integration with perturbed parameters).
 
-The step: h = 1e-4 · p0 (p0 the nominal value, 0.05 rad for ζ at zero). Central differences
-have a truncation error ~ h² x''' / 6, relative ~1e-8 here; the integration error enters the
+The step: h = 3e-4 · p0 (p0 the nominal value, 0.05 rad for ζ at zero). Central differences
+have a truncation error ~ h² x''' / 6, relative ~1e-7 here; the integration error enters the
 quotient as ~ rtol |x| / h, and because the adaptive step sequence (and the μ map's kinks in
 |Δω|, 2.69) make that error non-smooth in p, it is what limits the agreement: at rtol 1e-10 it
-reached 2.6e-3 for μ38 (measured), at rtol 1e-12 (used here) it stays below 5e-5 for every
-parameter, so the tests ask for 1e-4 of each sensitivity's peak. Samples within 1 ms of a
-break-away or lock-up are left out: between τ(p − h) and τ(p + h) (|Δτ| ≤ 2e-5 s here) the
-trajectory has a kink, where a difference quotient is no derivative; the event times' own
-sensitivities ∂τ/∂p are compared instead.
+reached 2.6e-3 for μ38 (measured); at rtol 1e-12 (used here) and h = 1e-4 · p0 it stayed below
+5e-5 on the former 1.2 s scenario but reached 1.06e-4 for m_veh (ω1, one jump in the speed
+phase) on the 1.5 s one; with h = 3e-4 · p0 the same comparison gives 3.1e-7 (8.5e-7 at
+1e-3 · p0, where the truncation error takes over), so the jump was the quotient's integration
+noise, not the sensitivity. The tests ask for 1e-4 of each sensitivity's peak. Samples within
+1 ms of a break-away or lock-up are left out: between τ(p − h) and τ(p + h) (|Δτ| ≤ 6e-5 s
+here) the trajectory has a kink, where a difference quotient is no derivative; the event
+times' own sensitivities ∂τ/∂p are compared instead.
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ from gearsym.validation.hybrid_simulation import HybridSimulator
 from gearsym.validation.scenario import default_scenario_path, load_scenario
 
 RTOL = 1e-12
-STEP = 1e-4
+STEP = 3e-4
 KEYS = ("omega_1", "omega_2", "omega_8", "phi", "omega_C")
 PARAMETERS = ("m_veh", "mu_38", "mu_05", "zeta", "k_ss")
 

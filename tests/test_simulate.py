@@ -230,13 +230,13 @@ BAD_SCENARIOS = [
         "pressures must not be negative",
     ),
     (
-        "time = [0.0, 0.2, 0.27, 0.45]",
-        "time = [0.0, 0.3, 0.27, 0.45]",
+        "time = [0.0, 0.5, 0.57, 0.75]",
+        "time = [0.0, 0.6, 0.57, 0.75]",
         "pressure.K38.time",
         "times must increase strictly",
     ),
     ('shift = "2-3"', 'shift = "2-4"', "scenario.shift", "needs exactly one of each"),
-    ("t_end = 1.2", "t_end = -1.2", "scenario.t_end", "must be a positive number"),
+    ("t_end = 1.5", "t_end = -1.5", "scenario.t_end", "must be a positive number"),
     (
         "[scenario]\nname",
         "[scenario\nname",

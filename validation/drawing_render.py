@@ -64,9 +64,19 @@ def _ground_vertical(ax: Any, x: float, y: float, color: str, height: float = 0.
         ax.plot([x, x - 0.15], [y0, y0 - 0.12], color=color, lw=0.8)
 
 
+Spot = tuple[float, float, str, str]  # x, y (data), horizontal and vertical alignment
+
+
 def _draw_levers(
-    ax: Any, diagram: LeverDiagram, plan: SpeedPlan | None, label_nodes: bool = True
+    ax: Any,
+    diagram: LeverDiagram,
+    plan: SpeedPlan | None,
+    label_nodes: bool = True,
+    movable: list[tuple[Any, list[Spot]]] | None = None,
 ) -> None:
+    """The levers, nodes, elements and in/out arrows. Element labels go to ``movable`` with
+    their candidate spots (placed by :func:`_place_labels` once everything is drawn)."""
+    movable = [] if movable is None else movable
     closed = set(plan.closed) if plan is not None else set()
     held = set(plan.held) if plan is not None else set()
     for _, a, b in diagram.shaft_links:
@@ -106,25 +116,57 @@ def _draw_levers(
                     color=color,
                     lw=2.5,
                 )
-            ax.text(mx + 0.22 * abs(uy) + 0.05, my + 0.22 * abs(ux) + 0.05, e.name, color=color)
+            label = ax.text(0, 0, e.name, color=color)
+            # beside the plates, then further along the line either way, then the other side
+            spots = [
+                (
+                    mx + side * (0.22 * abs(uy) + 0.05) + t * (x1 - x0),
+                    my + side * (0.22 * abs(ux) + 0.05) + t * (y1 - y0),
+                    "left" if side > 0 else "right",
+                    "bottom" if side > 0 else "top",
+                )
+                for side in (1, -1)
+                for t in (0.0, -0.2, 0.2)
+            ]
+            movable.append((label, spots))
         else:
             # node → housing: a line to the left ending in a vertical ground bar
             ax.plot([x0, x1], [y0, y1], color=color, lw=lw, zorder=2)
             _ground_vertical(ax, x1, y1, color)
-            ax.text((x0 + x1) / 2, y1 - 0.08, e.name, ha="center", va="top", color=color)
+            label = ax.text(0, 0, e.name, color=color)
+            spots = [
+                ((x0 + x1) / 2, y1 - 0.08, "center", "top"),
+                ((x0 + x1) / 2, y1 + 0.08, "center", "bottom"),
+            ]
+            movable.append((label, spots))
     start = diagram.node(diagram.input_shaft)
     end = diagram.node(diagram.output_shaft)
     arrow = {"arrowstyle": "-|>", "color": "k", "lw": 1.2}
     # From below: above a node is its label, right of it its speed arrow and value.
     ax.annotate("", xy=(start.x, start.y), xytext=(start.x - 0.9, start.y - 0.5), arrowprops=arrow)
-    ax.text(start.x - 0.95, start.y - 0.55, "in", ha="right", va="top", weight="bold")
+    label = ax.text(0, 0, "in", weight="bold")
+    sx, sy = start.x - 0.9, start.y - 0.5  # the arrow's tail
+    movable.append(
+        (label, [(sx - 0.05, sy - 0.05, "right", "top"), (sx, sy - 0.08, "center", "top")])
+    )
     ax.annotate("", xy=(end.x + 0.9, end.y - 0.5), xytext=(end.x, end.y), arrowprops=arrow)
-    ax.text(end.x + 0.95, end.y - 0.55, "out", ha="left", va="top", weight="bold")
+    label = ax.text(0, 0, "out", weight="bold")
+    ex, ey = end.x + 0.9, end.y - 0.5  # the arrow's head
+    spots = [(ex + 0.05, ey - 0.05, "left", "top"), (ex, ey - 0.1, "center", "top")]
+    spots += [(ex - 0.05, ey - 0.1, "right", "top"), (ex + 0.1, ey, "left", "center")]
+    spots += [(ex + 0.1, ey - 0.3, "left", "top"), (ex - 0.2, ey - 0.3, "right", "top")]
+    movable.append((label, spots))
 
 
-def _draw_speeds(ax: Any, diagram: LeverDiagram, plan: SpeedPlan, decimals: int) -> None:
+def _draw_speeds(
+    ax: Any,
+    diagram: LeverDiagram,
+    plan: SpeedPlan,
+    decimals: int,
+    movable: list[tuple[Any, list[Spot]]],
+) -> None:
     """Speed arrows from every node, each lever's speed line through their tips (straight:
-    the lever property), values at the tips."""
+    the lever property), values at the tips (into ``movable`` with their candidate spots)."""
     for lever in diagram.levers:
         tips = [
             (n.x + float(v) * SPEED_SCALE, n.y)
@@ -137,7 +179,9 @@ def _draw_speeds(ax: Any, diagram: LeverDiagram, plan: SpeedPlan, decimals: int)
     for n in nodes:
         v = plan.speeds[n.shaft]
         if v is None:
-            ax.text(n.x + 0.15, n.y + 0.12, "free", color=_OPEN, va="bottom")
+            label = ax.text(0, 0, "free", color=_OPEN)
+            spots = [(n.x + 0.15, n.y + 0.12, "left", "bottom")]
+            movable.append((label, spots + [(n.x + 0.15, n.y - 0.12, "left", "top")]))
             continue
         tip = n.x + float(v) * SPEED_SCALE
         if v != 0:
@@ -148,15 +192,73 @@ def _draw_speeds(ax: Any, diagram: LeverDiagram, plan: SpeedPlan, decimals: int)
                 arrowprops={"arrowstyle": "-|>", "color": _SPEED, "lw": 1.2, "shrinkA": 0},
                 zorder=4,
             )
-        # node labels sit above-left of the node: a negative speed's value goes below the line
-        ax.text(
-            tip + (0.05 if v >= 0 else -0.05),
-            n.y + (0.08 if v >= 0 else -0.08),
-            f"{float(v):.{decimals}f}",
-            color=_SPEED,
-            ha="left" if v >= 0 else "right",
-            va="bottom" if v >= 0 else "top",
-        )
+        # node labels sit above-left of the node: a negative speed's value goes below the line;
+        # where that spot is taken, the other side of the line, then beyond the tip
+        label = ax.text(0, 0, f"{float(v):.{decimals}f}", color=_SPEED)
+        side = 1.0 if v >= 0 else -1.0
+        h = "left" if v >= 0 else "right"
+        spots = [
+            (tip + 0.05 * side, n.y + 0.08 * side, h, "bottom" if v >= 0 else "top"),
+            (tip + 0.05 * side, n.y - 0.08 * side, h, "top" if v >= 0 else "bottom"),
+            (tip + 0.12 * side, n.y, h, "center"),
+            ((n.x + tip) / 2, n.y + 0.08, "center", "bottom"),  # over the arrow's middle
+            ((n.x + tip) / 2, n.y - 0.08, "center", "top"),
+        ]
+        movable.append((label, spots))
+
+
+def _place_labels(fig: Any, movable: list[tuple[Any, list[Spot]]]) -> None:
+    """Put each movable label at the first of its spots where it overlaps no other label (text
+    boxes as the renderer measures them, after the axes' limits and aspect are final); where
+    every spot collides, the spots moved up or down by one, two, three text heights; where
+    those collide too, the first spot. Labels already placed count for the next."""
+    import matplotlib.text
+
+    if not movable:
+        return
+    for ax in fig.axes:
+        ax.autoscale_view()
+        ax.apply_aspect()
+    renderer = fig.canvas.get_renderer()
+    moving = {id(text) for text, _ in movable}
+    boxes = [
+        t.get_window_extent(renderer)
+        for t in fig.findobj(matplotlib.text.Text)
+        if t.get_visible() and t.get_text() and id(t) not in moving
+    ]
+
+    def put(text: Any, spot: Spot) -> Any:
+        x, y, ha, va = spot
+        text.set_position((x, y))
+        text.set_horizontalalignment(ha)
+        text.set_verticalalignment(va)
+        return text.get_window_extent(renderer)
+
+    for text, spots in movable:
+        height = put(text, spots[0]).height
+        to_data = text.get_transform().inverted()
+        step = to_data.transform((0, height))[1] - to_data.transform((0, 0))[1]
+        tries = list(spots) + [
+            (x, y + sign * k * step, ha, va)
+            for k in (1, 2, 3)
+            for sign in (1, -1)
+            for x, y, ha, va in spots
+        ]
+        chosen = None
+        for spot in tries:
+            box = put(text, spot)
+            if not any(box.overlaps(other) for other in boxes):
+                chosen = box
+                break
+        boxes.append(chosen if chosen is not None else put(text, spots[0]))
+
+
+def _suptitle(fig: Any, title: str, what: str) -> None:
+    """``title: what`` above the figure, on two lines where one would not fit its width."""
+    text = fig.suptitle(f"{title}: {what}")
+    width = text.get_window_extent(fig.canvas.get_renderer()).width
+    if width > 0.98 * fig.bbox.width:
+        text.set_text(f"{title}:\n{what}")
 
 
 def _finish(ax: Any, levers: bool = False) -> None:
@@ -178,9 +280,11 @@ def lever_figure(d: GearboxDescription) -> Any:
     diagram = lever_diagram(d)
     width = _extent(diagram, None)
     fig, ax = subplots(1, 1, (max(4.0, 0.9 * width), 4.2), _MARGINS)
-    _draw_levers(ax, diagram, None)
+    movable: list[tuple[Any, list[Spot]]] = []
+    _draw_levers(ax, diagram, None, movable=movable)
     _finish(ax, levers=True)
-    fig.suptitle(f"{d.title}: lever analogy (node spacing ∝ teeth)")
+    _suptitle(fig, d.title, "lever analogy (node spacing ∝ teeth)")
+    _place_labels(fig, movable)
     return fig
 
 
@@ -201,9 +305,11 @@ def speeds_figure(d: GearboxDescription, plans: list[SpeedPlan]) -> Any:
         squeeze=False,
     )
     decimals = 2 if len(plans) > 1 else 3
+    movable: list[tuple[Any, list[Spot]]] = []
+    values: list[tuple[Any, list[Spot]]] = []  # placed first: they are the plan's data
     for ax, plan in zip(axes.flat, plans, strict=False):
-        _draw_levers(ax, diagram, plan, label_nodes=True)
-        _draw_speeds(ax, diagram, plan, decimals)
+        _draw_levers(ax, diagram, plan, label_nodes=True, movable=movable)
+        _draw_speeds(ax, diagram, plan, decimals, values)
         closed = " ".join(plan.closed) or "nothing"
         if plan.ratio is None:
             read = "neutral (ω_out = 0)"
@@ -217,7 +323,8 @@ def speeds_figure(d: GearboxDescription, plans: list[SpeedPlan]) -> Any:
     for ax in list(axes.flat)[len(plans) :]:
         ax.axis("off")
     what = "speed plan" if len(plans) == 1 else "speed plans of every gear"
-    fig.suptitle(f"{d.title}: {what} (ω_in = 1; closed elements red)")
+    _suptitle(fig, d.title, f"{what} (ω_in = 1; closed elements red)")
+    _place_labels(fig, values + movable)
     return fig
 
 
@@ -257,7 +364,7 @@ def stick_figure(d: GearboxDescription, stick: StickDiagram) -> Any:
         ax.plot([x0, x1], [y, y], color="k", lw=1.4)  # (annotations do not widen the axes)
         ax.annotate("", xy=(x1, y), xytext=(x0, y), arrowprops=arrow)
     _finish(ax)
-    fig.suptitle(f"{d.title}: stick diagram (one line per shaft)")
+    _suptitle(fig, d.title, "stick diagram (one line per shaft)")
     return fig
 
 
@@ -323,7 +430,7 @@ def drivetrain_figure(d: GearboxDescription, dt: DrivetrainDiagram) -> Any:
             ax.text(b.x + b.width / 2, y - 0.95 - 0.3 * i, line, ha="center", va="top", fontsize=7)
     _finish(ax)
     ax.set_ylim(-2.2, 1.6)
-    fig.suptitle(f"{d.title}: drivetrain (thesis Fig. 2.2; (2.42)–(2.53))")
+    _suptitle(fig, d.title, "drivetrain (thesis Fig. 2.2; (2.42)–(2.53))")
     return fig
 
 

@@ -50,7 +50,7 @@ from gearsym.symbolic.input_files import parse_toml, read_text, shown, unknown_k
 DEFAULT_SCENARIO = "scenario_2_3.toml"
 
 #: Stated limits (README "Limits and the error contract"). A scenario is one shift (the
-#: built-in one lasts 1.2 s); 10 s at the simulation's 0.5 ms samples is 20 000 rows of
+#: built-in one lasts 1.5 s); 10 s at the simulation's 0.5 ms samples is 20 000 rows of
 #: timeseries.csv (about 12 MB), where 300 s wrote 356 MB and 1e9 s ran out of memory.
 T_END_MAX = 10.0  # s
 

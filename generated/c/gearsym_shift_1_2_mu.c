@@ -85,8 +85,8 @@ void gearsym_shift_1_2_mu_rhs(
     const gearsym_real t5 = u[2]*p->mu_81;
     const gearsym_real t6 = x[1]*p->d_ss;
     const gearsym_real t7 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
-    xdot[0] = -GEARSYM_LIT(7.22848435408155808103)*t5 - GEARSYM_LIT(5.23769988672470955434)*t4 - GEARSYM_LIT(1.26551356519507148330)*t3 - GEARSYM_LIT(0.512561184769166254881)*t6 + GEARSYM_LIT(1.26551356519507148330)*t2 + GEARSYM_LIT(12.1535920572330550166)*u[0];
-    xdot[1] = -GEARSYM_LIT(0.763504011555191344960)*t3 - GEARSYM_LIT(0.309236132667149187914)*t6 + GEARSYM_LIT(0.763504011555191344960)*t2 + GEARSYM_LIT(1.52452105376693055405)*t5 + GEARSYM_LIT(1.56227649623331574613)*u[0] + GEARSYM_LIT(4.81762848291806133085)*t4;
+    xdot[0] = -GEARSYM_LIT(7.23336330553691079086)*t5 - GEARSYM_LIT(5.24596851922053083716)*t4 - GEARSYM_LIT(1.26505415212431483026)*t3 - GEARSYM_LIT(0.512375112241520789898)*t6 + GEARSYM_LIT(1.26505415212431483026)*t2 + GEARSYM_LIT(12.1565359523708430894)*u[0];
+    xdot[1] = -GEARSYM_LIT(0.763612817835958417772)*t3 - GEARSYM_LIT(0.309280201634653065116)*t6 + GEARSYM_LIT(0.763612817835958417772)*t2 + GEARSYM_LIT(1.52554389167045583616)*t5 + GEARSYM_LIT(1.56170935079746665796)*u[0] + GEARSYM_LIT(4.81940696299510697463)*t4;
     xdot[2] = t7;
     xdot[3] = (GEARSYM_LIT(2.0)*t3 + GEARSYM_LIT(2.0)*t7*p->d_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*p->m_veh - GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[3]*x[3]) - GEARSYM_LIT(1.05990859890000000000)*t1*x[3]*p->f_roll*p->m_veh)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
 }
@@ -127,15 +127,15 @@ void gearsym_shift_1_2_mu_jac_x_sparse(
     const gearsym_real t1 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh));
     const gearsym_real t2 = t1*p->d_ss;
     (void)u;
-    jac_x_nz[0] = -GEARSYM_LIT(0.512561184769166254881)*p->d_ss;
-    jac_x_nz[1] = -GEARSYM_LIT(0.309236132667149187914)*p->d_ss;
+    jac_x_nz[0] = -GEARSYM_LIT(0.512375112241520789898)*p->d_ss;
+    jac_x_nz[1] = -GEARSYM_LIT(0.309280201634653065116)*p->d_ss;
     jac_x_nz[2] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
     jac_x_nz[3] = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t2;
-    jac_x_nz[4] = -GEARSYM_LIT(1.26551356519507148330)*p->k_ss;
-    jac_x_nz[5] = -GEARSYM_LIT(0.763504011555191344960)*p->k_ss;
+    jac_x_nz[4] = -GEARSYM_LIT(1.26505415212431483026)*p->k_ss;
+    jac_x_nz[5] = -GEARSYM_LIT(0.763612817835958417772)*p->k_ss;
     jac_x_nz[6] = GEARSYM_LIT(2.0)*t1*p->k_ss;
-    jac_x_nz[7] = GEARSYM_LIT(1.26551356519507148330)*p->d_ss;
-    jac_x_nz[8] = GEARSYM_LIT(0.763504011555191344960)*p->d_ss;
+    jac_x_nz[7] = GEARSYM_LIT(1.26505415212431483026)*p->d_ss;
+    jac_x_nz[8] = GEARSYM_LIT(0.763612817835958417772)*p->d_ss;
     jac_x_nz[9] = -GEARSYM_LIT(1.0);
     jac_x_nz[10] = -GEARSYM_LIT(2.0)*t2 + t1*(-GEARSYM_LIT(1.05990859890000000000)*t0*p->f_roll*p->m_veh - GEARSYM_LIT(0.0355139609030000000000)*x[3]*p->A_front*p->c_W*p->rho_air);
 }
@@ -190,12 +190,12 @@ void gearsym_shift_1_2_mu_jac_u_sparse(
 {
     (void)x;
     (void)u;
-    jac_u_nz[0] = GEARSYM_LIT(12.1535920572330550166);
-    jac_u_nz[1] = GEARSYM_LIT(1.56227649623331574613);
-    jac_u_nz[2] = -GEARSYM_LIT(5.23769988672470955434)*p->mu_05;
-    jac_u_nz[3] = GEARSYM_LIT(4.81762848291806133085)*p->mu_05;
-    jac_u_nz[4] = -GEARSYM_LIT(7.22848435408155808103)*p->mu_81;
-    jac_u_nz[5] = GEARSYM_LIT(1.52452105376693055405)*p->mu_81;
+    jac_u_nz[0] = GEARSYM_LIT(12.1565359523708430894);
+    jac_u_nz[1] = GEARSYM_LIT(1.56170935079746665796);
+    jac_u_nz[2] = -GEARSYM_LIT(5.24596851922053083716)*p->mu_05;
+    jac_u_nz[3] = GEARSYM_LIT(4.81940696299510697463)*p->mu_05;
+    jac_u_nz[4] = -GEARSYM_LIT(7.23336330553691079086)*p->mu_81;
+    jac_u_nz[5] = GEARSYM_LIT(1.52554389167045583616)*p->mu_81;
 }
 
 /**
@@ -262,11 +262,11 @@ void gearsym_shift_1_2_mu_jac_p_sparse(
     const gearsym_real t13 = (-t11*p->rho_air - t5*p->m_veh - t7*t8 + GEARSYM_LIT(2.0)*t12*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss)/(t2*t2);
     const gearsym_real t14 = t10*t3*p->rho_air;
     jac_p_nz[0] = -GEARSYM_LIT(0.108043690000000000000)*t13 + t3*(-t5 - t1*t7);
-    jac_p_nz[1] = -GEARSYM_LIT(1.26551356519507148330)*x[2];
-    jac_p_nz[2] = -GEARSYM_LIT(0.763504011555191344960)*x[2];
+    jac_p_nz[1] = -GEARSYM_LIT(1.26505415212431483026)*x[2];
+    jac_p_nz[2] = -GEARSYM_LIT(0.763612817835958417772)*x[2];
     jac_p_nz[3] = t4*x[2];
-    jac_p_nz[4] = -GEARSYM_LIT(0.512561184769166254881)*x[1] + GEARSYM_LIT(1.26551356519507148330)*x[3];
-    jac_p_nz[5] = -GEARSYM_LIT(0.309236132667149187914)*x[1] + GEARSYM_LIT(0.763504011555191344960)*x[3];
+    jac_p_nz[4] = -GEARSYM_LIT(0.512375112241520789898)*x[1] + GEARSYM_LIT(1.26505415212431483026)*x[3];
+    jac_p_nz[5] = -GEARSYM_LIT(0.309280201634653065116)*x[1] + GEARSYM_LIT(0.763612817835958417772)*x[3];
     jac_p_nz[6] = t12*t4;
     jac_p_nz[7] = t3*(-(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t8 + t0*t7*p->m_veh);
     jac_p_nz[8] = -t13;
@@ -274,10 +274,10 @@ void gearsym_shift_1_2_mu_jac_p_sparse(
     jac_p_nz[10] = -t14*p->A_front;
     jac_p_nz[11] = -t14*p->c_W;
     jac_p_nz[12] = -t3*t6*t8;
-    jac_p_nz[13] = -GEARSYM_LIT(5.23769988672470955434)*u[1];
-    jac_p_nz[14] = GEARSYM_LIT(4.81762848291806133085)*u[1];
-    jac_p_nz[15] = -GEARSYM_LIT(7.22848435408155808103)*u[2];
-    jac_p_nz[16] = GEARSYM_LIT(1.52452105376693055405)*u[2];
+    jac_p_nz[13] = -GEARSYM_LIT(5.24596851922053083716)*u[1];
+    jac_p_nz[14] = GEARSYM_LIT(4.81940696299510697463)*u[1];
+    jac_p_nz[15] = -GEARSYM_LIT(7.23336330553691079086)*u[2];
+    jac_p_nz[16] = GEARSYM_LIT(1.52554389167045583616)*u[2];
 }
 
 /**

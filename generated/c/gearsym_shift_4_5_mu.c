@@ -85,8 +85,8 @@ void gearsym_shift_4_5_mu_rhs(
     const gearsym_real t5 = x[1]*p->d_ss;
     const gearsym_real t6 = x[3]*p->d_ss;
     const gearsym_real t7 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
-    xdot[0] = -GEARSYM_LIT(1.75611480518437338205)*t5 - GEARSYM_LIT(4.33584745400021788027)*t2 + GEARSYM_LIT(1.93527419763802894491)*t4 + GEARSYM_LIT(4.33584745400021788027)*t6 + GEARSYM_LIT(4.55838742437608803876)*u[0] + GEARSYM_LIT(7.92262272467218783468)*t3;
-    xdot[1] = -GEARSYM_LIT(5.78363354510054822552)*t2 - GEARSYM_LIT(2.34250042328900292650)*t5 + GEARSYM_LIT(3.31461828523869922006)*t4 + GEARSYM_LIT(5.35260368196326897319)*u[0] + GEARSYM_LIT(5.78363354510054822552)*t6 + GEARSYM_LIT(11.9423224304450387529)*t3;
+    xdot[0] = -GEARSYM_LIT(1.75613327404192302898)*t5 - GEARSYM_LIT(4.33589305360950795856)*t2 + GEARSYM_LIT(1.93516905363433508276)*t4 + GEARSYM_LIT(4.33589305360950795856)*t6 + GEARSYM_LIT(4.55855996160404281989)*u[0] + GEARSYM_LIT(7.92247080366166628553)*t3;
+    xdot[1] = -GEARSYM_LIT(5.78364842261980591097)*t2 - GEARSYM_LIT(2.34250644901571725839)*t5 + GEARSYM_LIT(3.31458398051626542617)*t4 + GEARSYM_LIT(5.35265997468093757484)*u[0] + GEARSYM_LIT(5.78364842261980591097)*t6 + GEARSYM_LIT(11.9422728640607019212)*t3;
     xdot[2] = t7;
     xdot[3] = (GEARSYM_LIT(2.0)*t2 + GEARSYM_LIT(2.0)*t7*p->d_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*p->m_veh - GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[3]*x[3]) - GEARSYM_LIT(1.05990859890000000000)*t1*x[3]*p->f_roll*p->m_veh)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
 }
@@ -127,15 +127,15 @@ void gearsym_shift_4_5_mu_jac_x_sparse(
     const gearsym_real t1 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh));
     const gearsym_real t2 = t1*p->d_ss;
     (void)u;
-    jac_x_nz[0] = -GEARSYM_LIT(1.75611480518437338205)*p->d_ss;
-    jac_x_nz[1] = -GEARSYM_LIT(2.34250042328900292650)*p->d_ss;
+    jac_x_nz[0] = -GEARSYM_LIT(1.75613327404192302898)*p->d_ss;
+    jac_x_nz[1] = -GEARSYM_LIT(2.34250644901571725839)*p->d_ss;
     jac_x_nz[2] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
     jac_x_nz[3] = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t2;
-    jac_x_nz[4] = -GEARSYM_LIT(4.33584745400021788027)*p->k_ss;
-    jac_x_nz[5] = -GEARSYM_LIT(5.78363354510054822552)*p->k_ss;
+    jac_x_nz[4] = -GEARSYM_LIT(4.33589305360950795856)*p->k_ss;
+    jac_x_nz[5] = -GEARSYM_LIT(5.78364842261980591097)*p->k_ss;
     jac_x_nz[6] = GEARSYM_LIT(2.0)*t1*p->k_ss;
-    jac_x_nz[7] = GEARSYM_LIT(4.33584745400021788027)*p->d_ss;
-    jac_x_nz[8] = GEARSYM_LIT(5.78363354510054822552)*p->d_ss;
+    jac_x_nz[7] = GEARSYM_LIT(4.33589305360950795856)*p->d_ss;
+    jac_x_nz[8] = GEARSYM_LIT(5.78364842261980591097)*p->d_ss;
     jac_x_nz[9] = -GEARSYM_LIT(1.0);
     jac_x_nz[10] = -GEARSYM_LIT(2.0)*t2 + t1*(-GEARSYM_LIT(1.05990859890000000000)*t0*p->f_roll*p->m_veh - GEARSYM_LIT(0.0355139609030000000000)*x[3]*p->A_front*p->c_W*p->rho_air);
 }
@@ -190,12 +190,12 @@ void gearsym_shift_4_5_mu_jac_u_sparse(
 {
     (void)x;
     (void)u;
-    jac_u_nz[0] = GEARSYM_LIT(4.55838742437608803876);
-    jac_u_nz[1] = GEARSYM_LIT(5.35260368196326897319);
-    jac_u_nz[2] = GEARSYM_LIT(7.92262272467218783468)*p->mu_06;
-    jac_u_nz[3] = GEARSYM_LIT(11.9423224304450387529)*p->mu_06;
-    jac_u_nz[4] = GEARSYM_LIT(1.93527419763802894491)*p->mu_81;
-    jac_u_nz[5] = GEARSYM_LIT(3.31461828523869922006)*p->mu_81;
+    jac_u_nz[0] = GEARSYM_LIT(4.55855996160404281989);
+    jac_u_nz[1] = GEARSYM_LIT(5.35265997468093757484);
+    jac_u_nz[2] = GEARSYM_LIT(7.92247080366166628553)*p->mu_06;
+    jac_u_nz[3] = GEARSYM_LIT(11.9422728640607019212)*p->mu_06;
+    jac_u_nz[4] = GEARSYM_LIT(1.93516905363433508276)*p->mu_81;
+    jac_u_nz[5] = GEARSYM_LIT(3.31458398051626542617)*p->mu_81;
 }
 
 /**
@@ -262,11 +262,11 @@ void gearsym_shift_4_5_mu_jac_p_sparse(
     const gearsym_real t13 = (-t11*p->rho_air - t5*p->m_veh - t7*t8 + GEARSYM_LIT(2.0)*t12*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss)/(t2*t2);
     const gearsym_real t14 = t10*t3*p->rho_air;
     jac_p_nz[0] = -GEARSYM_LIT(0.108043690000000000000)*t13 + t3*(-t5 - t1*t7);
-    jac_p_nz[1] = -GEARSYM_LIT(4.33584745400021788027)*x[2];
-    jac_p_nz[2] = -GEARSYM_LIT(5.78363354510054822552)*x[2];
+    jac_p_nz[1] = -GEARSYM_LIT(4.33589305360950795856)*x[2];
+    jac_p_nz[2] = -GEARSYM_LIT(5.78364842261980591097)*x[2];
     jac_p_nz[3] = t4*x[2];
-    jac_p_nz[4] = -GEARSYM_LIT(1.75611480518437338205)*x[1] + GEARSYM_LIT(4.33584745400021788027)*x[3];
-    jac_p_nz[5] = -GEARSYM_LIT(2.34250042328900292650)*x[1] + GEARSYM_LIT(5.78363354510054822552)*x[3];
+    jac_p_nz[4] = -GEARSYM_LIT(1.75613327404192302898)*x[1] + GEARSYM_LIT(4.33589305360950795856)*x[3];
+    jac_p_nz[5] = -GEARSYM_LIT(2.34250644901571725839)*x[1] + GEARSYM_LIT(5.78364842261980591097)*x[3];
     jac_p_nz[6] = t12*t4;
     jac_p_nz[7] = t3*(-(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t8 + t0*t7*p->m_veh);
     jac_p_nz[8] = -t13;
@@ -274,10 +274,10 @@ void gearsym_shift_4_5_mu_jac_p_sparse(
     jac_p_nz[10] = -t14*p->A_front;
     jac_p_nz[11] = -t14*p->c_W;
     jac_p_nz[12] = -t3*t6*t8;
-    jac_p_nz[13] = GEARSYM_LIT(7.92262272467218783468)*u[1];
-    jac_p_nz[14] = GEARSYM_LIT(11.9423224304450387529)*u[1];
-    jac_p_nz[15] = GEARSYM_LIT(1.93527419763802894491)*u[2];
-    jac_p_nz[16] = GEARSYM_LIT(3.31461828523869922006)*u[2];
+    jac_p_nz[13] = GEARSYM_LIT(7.92247080366166628553)*u[1];
+    jac_p_nz[14] = GEARSYM_LIT(11.9422728640607019212)*u[1];
+    jac_p_nz[15] = GEARSYM_LIT(1.93516905363433508276)*u[2];
+    jac_p_nz[16] = GEARSYM_LIT(3.31458398051626542617)*u[2];
 }
 
 /**

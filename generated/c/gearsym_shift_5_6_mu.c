@@ -85,8 +85,8 @@ void gearsym_shift_5_6_mu_rhs(
     const gearsym_real t5 = x[1]*p->d_ss;
     const gearsym_real t6 = x[3]*p->d_ss;
     const gearsym_real t7 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
-    xdot[0] = -GEARSYM_LIT(4.30688747337101674938)*t2 - GEARSYM_LIT(1.74438536791049686083)*t5 + GEARSYM_LIT(0.502550038189759172744)*t4 + GEARSYM_LIT(4.30688747337101674938)*t6 + GEARSYM_LIT(5.06849936932925546965)*u[0] + GEARSYM_LIT(5.84657850731332780754)*t3;
-    xdot[1] = -GEARSYM_LIT(4.76356156215210760369)*t2 - GEARSYM_LIT(1.92934854684167987189)*t5 + GEARSYM_LIT(1.14079336432051935835)*t4 + GEARSYM_LIT(4.76356156215210760369)*t6 + GEARSYM_LIT(5.31685258587652017711)*u[0] + GEARSYM_LIT(7.70196854288110515517)*t3;
+    xdot[0] = -GEARSYM_LIT(4.30708455595063247233)*t2 - GEARSYM_LIT(1.74446519074549715364)*t5 + GEARSYM_LIT(0.502793496968922997499)*t4 + GEARSYM_LIT(4.30708455595063247233)*t6 + GEARSYM_LIT(5.06862235384222756159)*u[0] + GEARSYM_LIT(5.84731167320809201494)*t3;
+    xdot[1] = -GEARSYM_LIT(4.76399043792454885820)*t2 - GEARSYM_LIT(1.92952225108325186642)*t5 + GEARSYM_LIT(1.14137239462411249265)*t4 + GEARSYM_LIT(4.76399043792454885820)*t6 + GEARSYM_LIT(5.31709588432105578710)*u[0] + GEARSYM_LIT(7.70366798668923783165)*t3;
     xdot[2] = t7;
     xdot[3] = (GEARSYM_LIT(2.0)*t2 + GEARSYM_LIT(2.0)*t7*p->d_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*p->m_veh - GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[3]*x[3]) - GEARSYM_LIT(1.05990859890000000000)*t1*x[3]*p->f_roll*p->m_veh)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
 }
@@ -125,15 +125,15 @@ void gearsym_shift_5_6_mu_jac_x_sparse(
     const gearsym_real t1 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh));
     const gearsym_real t2 = t1*p->d_ss;
     (void)u;
-    jac_x_nz[0] = -GEARSYM_LIT(1.74438536791049686083)*p->d_ss;
-    jac_x_nz[1] = -GEARSYM_LIT(1.92934854684167987189)*p->d_ss;
+    jac_x_nz[0] = -GEARSYM_LIT(1.74446519074549715364)*p->d_ss;
+    jac_x_nz[1] = -GEARSYM_LIT(1.92952225108325186642)*p->d_ss;
     jac_x_nz[2] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
     jac_x_nz[3] = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t2;
-    jac_x_nz[4] = -GEARSYM_LIT(4.30688747337101674938)*p->k_ss;
-    jac_x_nz[5] = -GEARSYM_LIT(4.76356156215210760369)*p->k_ss;
+    jac_x_nz[4] = -GEARSYM_LIT(4.30708455595063247233)*p->k_ss;
+    jac_x_nz[5] = -GEARSYM_LIT(4.76399043792454885820)*p->k_ss;
     jac_x_nz[6] = GEARSYM_LIT(2.0)*t1*p->k_ss;
-    jac_x_nz[7] = GEARSYM_LIT(4.30688747337101674938)*p->d_ss;
-    jac_x_nz[8] = GEARSYM_LIT(4.76356156215210760369)*p->d_ss;
+    jac_x_nz[7] = GEARSYM_LIT(4.30708455595063247233)*p->d_ss;
+    jac_x_nz[8] = GEARSYM_LIT(4.76399043792454885820)*p->d_ss;
     jac_x_nz[9] = -GEARSYM_LIT(1.0);
     jac_x_nz[10] = -GEARSYM_LIT(2.0)*t2 + t1*(-GEARSYM_LIT(1.05990859890000000000)*t0*p->f_roll*p->m_veh - GEARSYM_LIT(0.0355139609030000000000)*x[3]*p->A_front*p->c_W*p->rho_air);
 }
@@ -188,12 +188,12 @@ void gearsym_shift_5_6_mu_jac_u_sparse(
 {
     (void)x;
     (void)u;
-    jac_u_nz[0] = GEARSYM_LIT(5.06849936932925546965);
-    jac_u_nz[1] = GEARSYM_LIT(5.31685258587652017711);
-    jac_u_nz[2] = GEARSYM_LIT(5.84657850731332780754)*p->mu_05;
-    jac_u_nz[3] = GEARSYM_LIT(7.70196854288110515517)*p->mu_05;
-    jac_u_nz[4] = GEARSYM_LIT(0.502550038189759172744)*p->mu_38;
-    jac_u_nz[5] = GEARSYM_LIT(1.14079336432051935835)*p->mu_38;
+    jac_u_nz[0] = GEARSYM_LIT(5.06862235384222756159);
+    jac_u_nz[1] = GEARSYM_LIT(5.31709588432105578710);
+    jac_u_nz[2] = GEARSYM_LIT(5.84731167320809201494)*p->mu_05;
+    jac_u_nz[3] = GEARSYM_LIT(7.70366798668923783165)*p->mu_05;
+    jac_u_nz[4] = GEARSYM_LIT(0.502793496968922997499)*p->mu_38;
+    jac_u_nz[5] = GEARSYM_LIT(1.14137239462411249265)*p->mu_38;
 }
 
 /**
@@ -260,11 +260,11 @@ void gearsym_shift_5_6_mu_jac_p_sparse(
     const gearsym_real t13 = (-t11*p->rho_air - t5*p->m_veh - t7*t8 + GEARSYM_LIT(2.0)*t12*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss)/(t2*t2);
     const gearsym_real t14 = t10*t3*p->rho_air;
     jac_p_nz[0] = -GEARSYM_LIT(0.108043690000000000000)*t13 + t3*(-t5 - t1*t7);
-    jac_p_nz[1] = -GEARSYM_LIT(4.30688747337101674938)*x[2];
-    jac_p_nz[2] = -GEARSYM_LIT(4.76356156215210760369)*x[2];
+    jac_p_nz[1] = -GEARSYM_LIT(4.30708455595063247233)*x[2];
+    jac_p_nz[2] = -GEARSYM_LIT(4.76399043792454885820)*x[2];
     jac_p_nz[3] = t4*x[2];
-    jac_p_nz[4] = -GEARSYM_LIT(1.74438536791049686083)*x[1] + GEARSYM_LIT(4.30688747337101674938)*x[3];
-    jac_p_nz[5] = -GEARSYM_LIT(1.92934854684167987189)*x[1] + GEARSYM_LIT(4.76356156215210760369)*x[3];
+    jac_p_nz[4] = -GEARSYM_LIT(1.74446519074549715364)*x[1] + GEARSYM_LIT(4.30708455595063247233)*x[3];
+    jac_p_nz[5] = -GEARSYM_LIT(1.92952225108325186642)*x[1] + GEARSYM_LIT(4.76399043792454885820)*x[3];
     jac_p_nz[6] = t12*t4;
     jac_p_nz[7] = t3*(-(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t8 + t0*t7*p->m_veh);
     jac_p_nz[8] = -t13;
@@ -272,10 +272,10 @@ void gearsym_shift_5_6_mu_jac_p_sparse(
     jac_p_nz[10] = -t14*p->A_front;
     jac_p_nz[11] = -t14*p->c_W;
     jac_p_nz[12] = -t3*t6*t8;
-    jac_p_nz[13] = GEARSYM_LIT(5.84657850731332780754)*u[1];
-    jac_p_nz[14] = GEARSYM_LIT(7.70196854288110515517)*u[1];
-    jac_p_nz[15] = GEARSYM_LIT(0.502550038189759172744)*u[2];
-    jac_p_nz[16] = GEARSYM_LIT(1.14079336432051935835)*u[2];
+    jac_p_nz[13] = GEARSYM_LIT(5.84731167320809201494)*u[1];
+    jac_p_nz[14] = GEARSYM_LIT(7.70366798668923783165)*u[1];
+    jac_p_nz[15] = GEARSYM_LIT(0.502793496968922997499)*u[2];
+    jac_p_nz[16] = GEARSYM_LIT(1.14137239462411249265)*u[2];
 }
 
 /**

@@ -85,8 +85,8 @@ void gearsym_shift_6_7_mu_rhs(
     const gearsym_real t5 = u[2]*p->mu_05;
     const gearsym_real t6 = x[1]*p->d_ss;
     const gearsym_real t7 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
-    xdot[0] = -GEARSYM_LIT(1.66441830613490066906)*t6 - GEARSYM_LIT(4.10944879784706975190)*t4 - GEARSYM_LIT(3.43491144536497051936)*t5 + GEARSYM_LIT(0.437204643793988952246)*t2 + GEARSYM_LIT(4.10944879784706975190)*t3 + GEARSYM_LIT(4.90365537668097158072)*u[0];
-    xdot[1] = -GEARSYM_LIT(5.00422039463903630704)*t4 - GEARSYM_LIT(2.02682073496923301217)*t6 + GEARSYM_LIT(2.84985648349838139778)*t2 + GEARSYM_LIT(1.81161775721338066950)*t5 + GEARSYM_LIT(5.00422039463903630704)*t3 + GEARSYM_LIT(5.07311454094220760872)*u[0];
+    xdot[0] = -GEARSYM_LIT(1.66444901376985388155)*t6 - GEARSYM_LIT(4.10952461499776923356)*t4 - GEARSYM_LIT(3.43466416432060594472)*t5 + GEARSYM_LIT(0.437332809100104777962)*t2 + GEARSYM_LIT(4.10952461499776923356)*t3 + GEARSYM_LIT(4.90369929647827139869)*u[0];
+    xdot[1] = -GEARSYM_LIT(5.00459337605401915750)*t4 - GEARSYM_LIT(2.02697180075091905934)*t6 + GEARSYM_LIT(1.81365153770224017296)*t5 + GEARSYM_LIT(2.85080295465176657025)*t2 + GEARSYM_LIT(5.00459337605401915750)*t3 + GEARSYM_LIT(5.07320813721474611883)*u[0];
     xdot[2] = t7;
     xdot[3] = (GEARSYM_LIT(2.0)*t4 + GEARSYM_LIT(2.0)*t7*p->d_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*p->m_veh - GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[3]*x[3]) - GEARSYM_LIT(1.05990859890000000000)*t1*x[3]*p->f_roll*p->m_veh)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
 }
@@ -127,15 +127,15 @@ void gearsym_shift_6_7_mu_jac_x_sparse(
     const gearsym_real t1 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh));
     const gearsym_real t2 = t1*p->d_ss;
     (void)u;
-    jac_x_nz[0] = -GEARSYM_LIT(1.66441830613490066906)*p->d_ss;
-    jac_x_nz[1] = -GEARSYM_LIT(2.02682073496923301217)*p->d_ss;
+    jac_x_nz[0] = -GEARSYM_LIT(1.66444901376985388155)*p->d_ss;
+    jac_x_nz[1] = -GEARSYM_LIT(2.02697180075091905934)*p->d_ss;
     jac_x_nz[2] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
     jac_x_nz[3] = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t2;
-    jac_x_nz[4] = -GEARSYM_LIT(4.10944879784706975190)*p->k_ss;
-    jac_x_nz[5] = -GEARSYM_LIT(5.00422039463903630704)*p->k_ss;
+    jac_x_nz[4] = -GEARSYM_LIT(4.10952461499776923356)*p->k_ss;
+    jac_x_nz[5] = -GEARSYM_LIT(5.00459337605401915750)*p->k_ss;
     jac_x_nz[6] = GEARSYM_LIT(2.0)*t1*p->k_ss;
-    jac_x_nz[7] = GEARSYM_LIT(4.10944879784706975190)*p->d_ss;
-    jac_x_nz[8] = GEARSYM_LIT(5.00422039463903630704)*p->d_ss;
+    jac_x_nz[7] = GEARSYM_LIT(4.10952461499776923356)*p->d_ss;
+    jac_x_nz[8] = GEARSYM_LIT(5.00459337605401915750)*p->d_ss;
     jac_x_nz[9] = -GEARSYM_LIT(1.0);
     jac_x_nz[10] = -GEARSYM_LIT(2.0)*t2 + t1*(-GEARSYM_LIT(1.05990859890000000000)*t0*p->f_roll*p->m_veh - GEARSYM_LIT(0.0355139609030000000000)*x[3]*p->A_front*p->c_W*p->rho_air);
 }
@@ -190,12 +190,12 @@ void gearsym_shift_6_7_mu_jac_u_sparse(
 {
     (void)x;
     (void)u;
-    jac_u_nz[0] = GEARSYM_LIT(4.90365537668097158072);
-    jac_u_nz[1] = GEARSYM_LIT(5.07311454094220760872);
-    jac_u_nz[2] = GEARSYM_LIT(0.437204643793988952246)*p->mu_81;
-    jac_u_nz[3] = GEARSYM_LIT(2.84985648349838139778)*p->mu_81;
-    jac_u_nz[4] = -GEARSYM_LIT(3.43491144536497051936)*p->mu_05;
-    jac_u_nz[5] = GEARSYM_LIT(1.81161775721338066950)*p->mu_05;
+    jac_u_nz[0] = GEARSYM_LIT(4.90369929647827139869);
+    jac_u_nz[1] = GEARSYM_LIT(5.07320813721474611883);
+    jac_u_nz[2] = GEARSYM_LIT(0.437332809100104777962)*p->mu_81;
+    jac_u_nz[3] = GEARSYM_LIT(2.85080295465176657025)*p->mu_81;
+    jac_u_nz[4] = -GEARSYM_LIT(3.43466416432060594472)*p->mu_05;
+    jac_u_nz[5] = GEARSYM_LIT(1.81365153770224017296)*p->mu_05;
 }
 
 /**
@@ -262,11 +262,11 @@ void gearsym_shift_6_7_mu_jac_p_sparse(
     const gearsym_real t13 = (-t11*p->rho_air - t5*p->m_veh - t7*t8 + GEARSYM_LIT(2.0)*t12*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss)/(t2*t2);
     const gearsym_real t14 = t10*t3*p->rho_air;
     jac_p_nz[0] = -GEARSYM_LIT(0.108043690000000000000)*t13 + t3*(-t5 - t1*t7);
-    jac_p_nz[1] = -GEARSYM_LIT(4.10944879784706975190)*x[2];
-    jac_p_nz[2] = -GEARSYM_LIT(5.00422039463903630704)*x[2];
+    jac_p_nz[1] = -GEARSYM_LIT(4.10952461499776923356)*x[2];
+    jac_p_nz[2] = -GEARSYM_LIT(5.00459337605401915750)*x[2];
     jac_p_nz[3] = t4*x[2];
-    jac_p_nz[4] = -GEARSYM_LIT(1.66441830613490066906)*x[1] + GEARSYM_LIT(4.10944879784706975190)*x[3];
-    jac_p_nz[5] = -GEARSYM_LIT(2.02682073496923301217)*x[1] + GEARSYM_LIT(5.00422039463903630704)*x[3];
+    jac_p_nz[4] = -GEARSYM_LIT(1.66444901376985388155)*x[1] + GEARSYM_LIT(4.10952461499776923356)*x[3];
+    jac_p_nz[5] = -GEARSYM_LIT(2.02697180075091905934)*x[1] + GEARSYM_LIT(5.00459337605401915750)*x[3];
     jac_p_nz[6] = t12*t4;
     jac_p_nz[7] = t3*(-(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t8 + t0*t7*p->m_veh);
     jac_p_nz[8] = -t13;
@@ -274,10 +274,10 @@ void gearsym_shift_6_7_mu_jac_p_sparse(
     jac_p_nz[10] = -t14*p->A_front;
     jac_p_nz[11] = -t14*p->c_W;
     jac_p_nz[12] = -t3*t6*t8;
-    jac_p_nz[13] = GEARSYM_LIT(0.437204643793988952246)*u[1];
-    jac_p_nz[14] = GEARSYM_LIT(2.84985648349838139778)*u[1];
-    jac_p_nz[15] = -GEARSYM_LIT(3.43491144536497051936)*u[2];
-    jac_p_nz[16] = GEARSYM_LIT(1.81161775721338066950)*u[2];
+    jac_p_nz[13] = GEARSYM_LIT(0.437332809100104777962)*u[1];
+    jac_p_nz[14] = GEARSYM_LIT(2.85080295465176657025)*u[1];
+    jac_p_nz[15] = -GEARSYM_LIT(3.43466416432060594472)*u[2];
+    jac_p_nz[16] = GEARSYM_LIT(1.81365153770224017296)*u[2];
 }
 
 /**

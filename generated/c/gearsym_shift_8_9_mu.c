@@ -85,8 +85,8 @@ void gearsym_shift_8_9_mu_rhs(
     const gearsym_real t5 = u[2]*p->mu_05;
     const gearsym_real t6 = x[1]*p->d_ss;
     const gearsym_real t7 = -x[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*x[1];
-    xdot[0] = -GEARSYM_LIT(3.46434343303613180533)*t4 - GEARSYM_LIT(3.39589781264432030130)*t5 - GEARSYM_LIT(1.40313626287409145619)*t6 + GEARSYM_LIT(0.276265980852698919638)*t2 + GEARSYM_LIT(3.46434343303613180533)*t3 + GEARSYM_LIT(2.96714704224089417744)*u[0];
-    xdot[1] = -GEARSYM_LIT(5.23901114661380261579)*t4 - GEARSYM_LIT(3.32580544704322010438)*t5 - GEARSYM_LIT(2.12191621977067744665)*t6 + GEARSYM_LIT(1.01181788782529450984)*t2 + GEARSYM_LIT(4.27673196808310471369)*u[0] + GEARSYM_LIT(5.23901114661380261579)*t3;
+    xdot[0] = -GEARSYM_LIT(3.46450429524166928987)*t4 - GEARSYM_LIT(3.39729349681827992913)*t5 - GEARSYM_LIT(1.40320141565073685292)*t6 + GEARSYM_LIT(0.275872437544651273052)*t2 + GEARSYM_LIT(3.46450429524166928987)*t3 + GEARSYM_LIT(2.96742874097728853661)*u[0];
+    xdot[1] = -GEARSYM_LIT(5.23912583231101793837)*t4 - GEARSYM_LIT(3.32678112905522078406)*t5 - GEARSYM_LIT(2.12196267003281406982)*t6 + GEARSYM_LIT(1.01154366922030477323)*t2 + GEARSYM_LIT(4.27693055247584073834)*u[0] + GEARSYM_LIT(5.23912583231101793837)*t3;
     xdot[2] = t7;
     xdot[3] = (GEARSYM_LIT(2.0)*t4 + GEARSYM_LIT(2.0)*t7*p->d_ss - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*p->m_veh - GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air*(x[3]*x[3]) - GEARSYM_LIT(1.05990859890000000000)*t1*x[3]*p->f_roll*p->m_veh)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh);
 }
@@ -127,15 +127,15 @@ void gearsym_shift_8_9_mu_jac_x_sparse(
     const gearsym_real t1 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh));
     const gearsym_real t2 = t1*p->d_ss;
     (void)u;
-    jac_x_nz[0] = -GEARSYM_LIT(1.40313626287409145619)*p->d_ss;
-    jac_x_nz[1] = -GEARSYM_LIT(2.12191621977067744665)*p->d_ss;
+    jac_x_nz[0] = -GEARSYM_LIT(1.40320141565073685292)*p->d_ss;
+    jac_x_nz[1] = -GEARSYM_LIT(2.12196267003281406982)*p->d_ss;
     jac_x_nz[2] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
     jac_x_nz[3] = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*t2;
-    jac_x_nz[4] = -GEARSYM_LIT(3.46434343303613180533)*p->k_ss;
-    jac_x_nz[5] = -GEARSYM_LIT(5.23901114661380261579)*p->k_ss;
+    jac_x_nz[4] = -GEARSYM_LIT(3.46450429524166928987)*p->k_ss;
+    jac_x_nz[5] = -GEARSYM_LIT(5.23912583231101793837)*p->k_ss;
     jac_x_nz[6] = GEARSYM_LIT(2.0)*t1*p->k_ss;
-    jac_x_nz[7] = GEARSYM_LIT(3.46434343303613180533)*p->d_ss;
-    jac_x_nz[8] = GEARSYM_LIT(5.23901114661380261579)*p->d_ss;
+    jac_x_nz[7] = GEARSYM_LIT(3.46450429524166928987)*p->d_ss;
+    jac_x_nz[8] = GEARSYM_LIT(5.23912583231101793837)*p->d_ss;
     jac_x_nz[9] = -GEARSYM_LIT(1.0);
     jac_x_nz[10] = -GEARSYM_LIT(2.0)*t2 + t1*(-GEARSYM_LIT(1.05990859890000000000)*t0*p->f_roll*p->m_veh - GEARSYM_LIT(0.0355139609030000000000)*x[3]*p->A_front*p->c_W*p->rho_air);
 }
@@ -190,12 +190,12 @@ void gearsym_shift_8_9_mu_jac_u_sparse(
 {
     (void)x;
     (void)u;
-    jac_u_nz[0] = GEARSYM_LIT(2.96714704224089417744);
-    jac_u_nz[1] = GEARSYM_LIT(4.27673196808310471369);
-    jac_u_nz[2] = GEARSYM_LIT(0.276265980852698919638)*p->mu_38;
-    jac_u_nz[3] = GEARSYM_LIT(1.01181788782529450984)*p->mu_38;
-    jac_u_nz[4] = -GEARSYM_LIT(3.39589781264432030130)*p->mu_05;
-    jac_u_nz[5] = -GEARSYM_LIT(3.32580544704322010438)*p->mu_05;
+    jac_u_nz[0] = GEARSYM_LIT(2.96742874097728853661);
+    jac_u_nz[1] = GEARSYM_LIT(4.27693055247584073834);
+    jac_u_nz[2] = GEARSYM_LIT(0.275872437544651273052)*p->mu_38;
+    jac_u_nz[3] = GEARSYM_LIT(1.01154366922030477323)*p->mu_38;
+    jac_u_nz[4] = -GEARSYM_LIT(3.39729349681827992913)*p->mu_05;
+    jac_u_nz[5] = -GEARSYM_LIT(3.32678112905522078406)*p->mu_05;
 }
 
 /**
@@ -262,11 +262,11 @@ void gearsym_shift_8_9_mu_jac_p_sparse(
     const gearsym_real t13 = (-t11*p->rho_air - t5*p->m_veh - t7*t8 + GEARSYM_LIT(2.0)*t12*p->d_ss + GEARSYM_LIT(2.0)*x[2]*p->k_ss)/(t2*t2);
     const gearsym_real t14 = t10*t3*p->rho_air;
     jac_p_nz[0] = -GEARSYM_LIT(0.108043690000000000000)*t13 + t3*(-t5 - t1*t7);
-    jac_p_nz[1] = -GEARSYM_LIT(3.46434343303613180533)*x[2];
-    jac_p_nz[2] = -GEARSYM_LIT(5.23901114661380261579)*x[2];
+    jac_p_nz[1] = -GEARSYM_LIT(3.46450429524166928987)*x[2];
+    jac_p_nz[2] = -GEARSYM_LIT(5.23912583231101793837)*x[2];
     jac_p_nz[3] = t4*x[2];
-    jac_p_nz[4] = -GEARSYM_LIT(1.40313626287409145619)*x[1] + GEARSYM_LIT(3.46434343303613180533)*x[3];
-    jac_p_nz[5] = -GEARSYM_LIT(2.12191621977067744665)*x[1] + GEARSYM_LIT(5.23901114661380261579)*x[3];
+    jac_p_nz[4] = -GEARSYM_LIT(1.40320141565073685292)*x[1] + GEARSYM_LIT(3.46450429524166928987)*x[3];
+    jac_p_nz[5] = -GEARSYM_LIT(2.12196267003281406982)*x[1] + GEARSYM_LIT(5.23912583231101793837)*x[3];
     jac_p_nz[6] = t12*t4;
     jac_p_nz[7] = t3*(-(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t8 + t0*t7*p->m_veh);
     jac_p_nz[8] = -t13;
@@ -274,10 +274,10 @@ void gearsym_shift_8_9_mu_jac_p_sparse(
     jac_p_nz[10] = -t14*p->A_front;
     jac_p_nz[11] = -t14*p->c_W;
     jac_p_nz[12] = -t3*t6*t8;
-    jac_p_nz[13] = GEARSYM_LIT(0.276265980852698919638)*u[1];
-    jac_p_nz[14] = GEARSYM_LIT(1.01181788782529450984)*u[1];
-    jac_p_nz[15] = -GEARSYM_LIT(3.39589781264432030130)*u[2];
-    jac_p_nz[16] = -GEARSYM_LIT(3.32580544704322010438)*u[2];
+    jac_p_nz[13] = GEARSYM_LIT(0.275872437544651273052)*u[1];
+    jac_p_nz[14] = GEARSYM_LIT(1.01154366922030477323)*u[1];
+    jac_p_nz[15] = -GEARSYM_LIT(3.39729349681827992913)*u[2];
+    jac_p_nz[16] = -GEARSYM_LIT(3.32678112905522078406)*u[2];
 }
 
 /**
