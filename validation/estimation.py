@@ -729,8 +729,13 @@ def filter_run(
     seed: int = 0,
     dropout: tuple[float, float] | None = None,
     prior_draw: bool = False,
+    dropout_outputs: Sequence[str] | None = None,
 ) -> EkfRun:
     """One EKF run (4.3) on ``setup``'s samples with the noise (3.26) drawn from ``seed``.
+
+    ``dropout`` = (t0, t1): the measurements in [t0, t1) are NaN (a sensor dropout), of every
+    output or only of ``dropout_outputs`` (names of :attr:`EkfSetup.outputs`); the update
+    skips each NaN speed on its own, as the emitted C does.
 
     ``prior_draw``: the initial estimate of every unmeasured state (φ and the parameters) is
     the truth (:attr:`EkfSetup.truth0`) plus a draw from the prior N(0, σ0²) (a second stream
@@ -742,7 +747,13 @@ def filter_run(
     sample_time = float(t[1] - t[0])
     y = s.y_true + np.random.default_rng(seed).normal(0.0, 1.0, s.y_true.shape) * s.sigma_y
     if dropout is not None:
-        y[(t >= dropout[0]) & (t < dropout[1])] = np.nan
+        lost = (t >= dropout[0]) & (t < dropout[1])
+        for name in dropout_outputs if dropout_outputs is not None else s.outputs:
+            if name not in s.outputs:
+                raise GearsymError(
+                    "estimate", "--dropout", f"{name!r} is not an output ({', '.join(s.outputs)})"
+                )
+            y[lost, s.outputs.index(name)] = np.nan
     z = s.initial.copy()
     sig0 = s.prior_sigma.copy()
     if prior_draw:
