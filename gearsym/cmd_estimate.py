@@ -108,6 +108,31 @@ def _initial_values(items: list[str] | None) -> dict[str, float]:
     return values
 
 
+def _dropout_window(text: str | None, shift: str) -> tuple[float, float] | str | None:
+    """``--dropout``: (T0, T1) in s, or the name of a phase of the shift (``speed_phase``),
+    checked before the simulation; a phase is resolved to its detected window afterwards."""
+    from gearsym.symbolic.errors import GearsymError
+
+    if text is None:
+        return None
+    source, target = shift.split("-")
+    phases = [f"gear_{source}", "torque_phase", "speed_phase", f"gear_{target}"]
+    if text.strip() in phases:
+        return text.strip().replace("_", " ")
+    parts = text.split(",")
+    try:
+        t0, t1 = (float(v) for v in parts)
+    except ValueError:
+        t0 = t1 = float("nan")
+    if not (t0 < t1):  # also false for NaN
+        raise GearsymError(
+            "estimate",
+            "--dropout",
+            f"expected T0,T1 with T0 < T1 or a phase ({', '.join(phases)}), got {text!r}",
+        )
+    return (t0, t1)
+
+
 def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
     """``--filter ekf``: the EKF on the scenario's reference shift."""
     from gearsym.symbolic.errors import GearsymError
@@ -129,7 +154,21 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
         raise GearsymError(
             "estimate", "--initial-from-prior", "draws the initial estimate: drop --initial"
         )
+    dropout_outputs = None
+    if args.dropout_outputs is not None:
+        if args.dropout is None:
+            raise GearsymError("estimate", "--dropout-outputs", "needs --dropout")
+        dropout_outputs = [o.strip() for o in args.dropout_outputs.split(",") if o.strip()]
+    dropout = _dropout_window(args.dropout, scenario.shift.name)
     aug = augmented_model(d, scenario.shift.name, parameters)  # bad names fail before the run
+    outputs = [name.removeprefix("y_") for name in aug.output_names]
+    wrong = [o for o in dropout_outputs or [] if o not in outputs]
+    if wrong or dropout_outputs == []:
+        raise GearsymError(
+            "estimate",
+            "--dropout-outputs",
+            f"expected outputs of the filter ({', '.join(outputs)}), got {args.dropout_outputs!r}",
+        )
     wrong = [name for name in initial if name not in aug.state_names]
     if wrong:
         raise GearsymError(
@@ -137,6 +176,8 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
             "--initial",
             f"{', '.join(wrong)} is not a state of the filter ({', '.join(aug.state_names)})",
         )
+
+    assumes: list[str] = []
 
     def work(folder: Any) -> Any:
         from gearsym.cmd_dynamics import ProgressBar, simulate_with_progress
@@ -149,6 +190,10 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
         )
 
         result = simulate_with_progress(d, scenario)
+        window = dropout
+        if isinstance(dropout, str):  # a phase: its window as the simulation detected it
+            (phase,) = [p for p in result.phases if p.name == dropout]
+            window = (float(phase.t_start), float(phase.t_end))
         setup = prepare_ekf(
             d,
             result,
@@ -165,9 +210,17 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
                 seed=args.seed,
                 progress=bar,
                 prior_draw=args.initial_from_prior,
+                dropout=window,
+                dropout_outputs=dropout_outputs,
             )
         finally:
             bar.done()
+        assumes.append(f"scenario: {scenario.name} ({args.scenario or 'built-in'})")
+        if window is not None:
+            assumes.append(
+                f"sensor dropout: {', '.join(dropout_outputs or outputs)} missing (NaN) in "
+                f"[{window[0]:.4g}, {window[1]:.4g}) s: those updates are skipped"
+            )
         if folder is not None:
             write_ekf_csv(mc.first, folder / "ekf.csv")
             (folder / "ekf.json").write_text(json.dumps(mc.to_dict(), indent=2) + "\n")
@@ -180,7 +233,8 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
 
     def text(mc: Any) -> str:
         body = format_monte_carlo_text(mc)
-        return body if len(mc.runs) > 1 else format_ekf_text(mc.first) + "\n" + body
+        body = body if len(mc.runs) > 1 else format_ekf_text(mc.first) + "\n" + body
+        return "\n".join(f"  assumes {line}" for line in assumes) + "\n" + body
 
     return _run_and_report(args, work, text)
 
@@ -276,6 +330,17 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "--out",
         help="folder for uio.csv/.json/.png or ekf.csv/.json/.png and ekf_efficiency.png "
         "(written atomically)",
+    )
+    p.add_argument(
+        "--dropout",
+        metavar="T0,T1|PHASE",
+        help="ekf: sensor dropout, the measurements in [T0, T1) s (or in a detected phase: "
+        "gear_2, torque_phase, speed_phase, gear_3) are NaN and their updates skipped",
+    )
+    p.add_argument(
+        "--dropout-outputs",
+        metavar="NAMES",
+        help="ekf: only these speeds drop out, comma-separated (default: all of them)",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG")
     p.add_argument("--json", action="store_true", help="machine-readable output")

@@ -126,3 +126,41 @@ def test_element_that_never_slides_keeps_its_prior(d, aug, discrete):
     assert np.all(run.estimates[:, j] == 0.12) and np.all(run.sigmas[:, j] == 0.03)
     # B05 does slide in the same run, and its μ moves
     assert np.ptp(run.estimates[:, list(run.state_names).index("mu_05")]) > 0
+
+
+def test_estimate_command_runs_the_cases_and_states_what_it_assumes():
+    import subprocess
+    import sys
+
+    def gearsym(*args):
+        return subprocess.run(
+            [sys.executable, "-m", "gearsym", "estimate", "--filter", "ekf", *args],
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+
+    run = gearsym(
+        "--scenario",
+        str(DATA / "scenario_2_3_grade4.toml"),
+        "--initial",
+        "m_veh=2700",
+        "--dropout",
+        "speed_phase",
+        "--dropout-outputs",
+        "omega_C",
+    )
+    assert run.returncode == 0, run.stderr
+    assert "assumes scenario: power-on upshift 2-3 on a 4 % grade" in run.stdout
+    assert "assumes sensor dropout: omega_C missing (NaN) in [" in run.stdout
+    assert "2700" in run.stdout
+    for bad, key in (
+        (("--dropout", "0.5"), "--dropout"),
+        (("--dropout", "0.6,0.5"), "--dropout"),
+        (("--dropout", "clutch_phase"), "--dropout"),
+        (("--dropout-outputs", "omega_C"), "--dropout-outputs"),
+        (("--dropout", "0,1", "--dropout-outputs", "omega_9"), "--dropout-outputs"),
+    ):
+        result = gearsym(*bad)
+        assert result.returncode == 2 and key in result.stderr, (bad, result.stderr)
+        assert result.stderr.strip().count("\n") == 0 and "Traceback" not in result.stderr

@@ -1245,6 +1245,8 @@ def run_ekf_monte_carlo(
     progress: Any = None,
     bound: EkfBound | None = None,
     prior_draw: bool = False,
+    dropout: tuple[float, float] | None = None,
+    dropout_outputs: Sequence[str] | None = None,
 ) -> EkfMonteCarlo:
     """The EKF (4.3) over ``runs`` seeds ``seed``, ``seed`` + 1, …: the reference and
     everything of ``setup`` fixed, only the speed noise (3.26) drawn anew. ``progress(fraction,
@@ -1252,7 +1254,8 @@ def run_ekf_monte_carlo(
     reported σ over the scored samples of every run, the posterior bound (:func:`ekf_bound`)
     over the same samples and the efficiency RMSE / bound; the phase's own identifiability.
     ``prior_draw``: each run's initial estimate drawn from the prior around the truth
-    (:func:`filter_run`), the bound's premise."""
+    (:func:`filter_run`), the bound's premise. ``dropout``/``dropout_outputs``: a sensor
+    dropout in every run (:func:`filter_run`); the bound keeps every sample."""
     import time
 
     if runs < 1:
@@ -1260,7 +1263,15 @@ def run_ekf_monte_carlo(
     done = []
     start = time.perf_counter()
     for i in range(runs):
-        done.append(filter_run(setup, seed + i, prior_draw=prior_draw))
+        done.append(
+            filter_run(
+                setup,
+                seed + i,
+                dropout=dropout,
+                prior_draw=prior_draw,
+                dropout_outputs=dropout_outputs,
+            )
+        )
         if progress is not None:
             progress((i + 1) / runs, f"run {i + 1} of {runs}")
     seconds = (time.perf_counter() - start) / runs
