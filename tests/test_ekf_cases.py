@@ -164,3 +164,30 @@ def test_estimate_command_runs_the_cases_and_states_what_it_assumes():
         result = gearsym(*bad)
         assert result.returncode == 2 and key in result.stderr, (bad, result.stderr)
         assert result.stderr.strip().count("\n") == 0 and "Traceback" not in result.stderr
+
+
+def test_drive_of_upshifts_1_2_3_4_carries_mass_and_grade(d, level):
+    from gearsym.validation.estimation import run_ekf_drive
+
+    results = [
+        simulate(d, load_scenario(d, DATA / "scenario_1_2.toml")),
+        level,
+        simulate(d, load_scenario(d, DATA / "scenario_3_4.toml")),
+    ]
+    assert [r.scenario.shift.name for r in results] == ["1-2", "2-3", "3-4"]
+    runs = run_ekf_drive(d, results)
+    truth = d.vehicle["m_veh"].value
+    sigmas = []
+    for k, run in enumerate(runs):
+        mass, sigma, j = final(run, "m_veh")
+        assert abs(mass - truth) < 3 * sigma
+        if k > 0:  # each shift starts where the previous one ended (estimate and σ)
+            start = {p.name: p.initial for p in run.parameters}
+            assert start["m_veh"] == final(runs[k - 1], "m_veh")[0]
+            assert start["zeta"] == final(runs[k - 1], "zeta")[0]
+        sigmas.append(sigma)
+    # information accumulates: the σ of m_veh after shift k+1 is at most the one after shift k
+    assert sigmas[1] <= sigmas[0] and sigmas[2] <= sigmas[1]
+    # and the last shift's σ is below a single 2-3's σ from the prior (the same noise seed)
+    alone = run_ekf(d, level, seed=1)
+    assert sigmas[1] < final(alone, "m_veh")[1]

@@ -487,6 +487,7 @@ class EkfRun:
     phases: tuple[Phase, ...]
     parameters: tuple[ParameterEstimate, ...]
     min_eigenvalue: float  # smallest eigenvalue of P over the run (scaled), > 0: SPD
+    covariance: np.ndarray | None = field(default=None, repr=False)  # P after the last sample
 
     @property
     def nees_mean(self) -> float:
@@ -730,8 +731,13 @@ def filter_run(
     dropout: tuple[float, float] | None = None,
     prior_draw: bool = False,
     dropout_outputs: Sequence[str] | None = None,
+    carried: tuple[Sequence[str], np.ndarray, np.ndarray] | None = None,
 ) -> EkfRun:
     """One EKF run (4.3) on ``setup``'s samples with the noise (3.26) drawn from ``seed``.
+
+    ``carried`` = (names, mean, covariance): the initial estimate and the covariance block of
+    these states are taken over from a previous run (a drive of consecutive shifts: what the
+    filter knows about m_veh and ζ at the end of one shift is its prior for the next).
 
     ``dropout`` = (t0, t1): the measurements in [t0, t1) are NaN (a sensor dropout), of every
     output or only of ``dropout_outputs`` (names of :attr:`EkfSetup.outputs`); the update
@@ -768,6 +774,11 @@ def filter_run(
             else:
                 z[j], sig0[j] = 0.0, 1e3
     P = np.diag(sig0**2)
+    if carried is not None:
+        idx = [names.index(name) for name in carried[0]]
+        z[idx] = carried[1]
+        P[np.ix_(idx, idx)] = carried[2]
+        sig0[idx] = np.sqrt(np.diag(carried[2]))
     initial_values = z.copy()
     truth, scored = s.truth, s.scored
 
@@ -826,7 +837,45 @@ def filter_run(
         phases=s.phases,
         parameters=tuple(estimates_by_parameter),
         min_eigenvalue=min_eig,
+        covariance=P,
     )
+
+
+#: The parameters a drive of consecutive shifts carries from one shift to the next: they
+#: belong to the vehicle and the road, not to a shift's elements.
+DRIVE_CARRIED = ("m_veh", "zeta")
+
+
+def run_ekf_drive(
+    d: GearboxDescription,
+    results: Sequence[SimulationResult],
+    seed: int = 0,
+    sample_time: float = 0.01,
+    initial: Mapping[str, float] | None = None,
+) -> list[EkfRun]:
+    """The EKF (4.3) through consecutive shifts, carrying m_veh and ζ (:data:`DRIVE_CARRIED`).
+
+    Each result is one shift's reference simulation (its own scenario, simulated on its own:
+    the reference does not chain shifts, so the vehicle speed at one shift's start is its
+    scenario's, not the previous shift's end). The filter of shift k+1 (its own augmented
+    model (4.1): the μ of its swapping elements) starts from the estimate and the covariance
+    block of m_veh and ζ at the end of shift k; its other states start as in a single shift
+    (μ at the prior: another element or another operating point). ``initial`` is the first
+    shift's initial estimate; shift k uses noise seed ``seed`` + k."""
+    runs: list[EkfRun] = []
+    carried = None
+    for k, result in enumerate(results):
+        setup = prepare_ekf(d, result, sample_time, initial=initial if k == 0 else None)
+        run = filter_run(setup, seed + k, carried=carried)
+        idx = [list(run.state_names).index(name) for name in DRIVE_CARRIED]
+        assert run.covariance is not None
+        carried = (
+            DRIVE_CARRIED,
+            run.estimates[-1, idx].copy(),
+            run.covariance[np.ix_(idx, idx)].copy(),
+        )
+        runs.append(run)
+    return runs
 
 
 def write_ekf_csv(run: EkfRun, path: Path) -> Path:
