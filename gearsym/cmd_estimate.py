@@ -45,6 +45,10 @@ def cmd_estimate(args: argparse.Namespace) -> int:
             "--sample-time",
             f"must be in (0, {scenario.t_end / 4:g}] s, got {args.sample_time!r}",
         )
+    if args.drive is not None:
+        if args.filter != "ekf":
+            raise GearsymError("estimate", "--drive", "is for --filter ekf only")
+        return _cmd_drive(args, d)
     if args.filter == "ekf":
         return _cmd_ekf(args, d, scenario)
     if args.runs != 1:
@@ -131,6 +135,69 @@ def _dropout_window(text: str | None, shift: str) -> tuple[float, float] | str |
             f"expected T0,T1 with T0 < T1 or a phase ({', '.join(phases)}), got {text!r}",
         )
     return (t0, t1)
+
+
+#: ``--drive upshifts``: the shipped scenarios of the drive 1->2->3->4.
+DRIVE_UPSHIFTS = ("scenario_1_2.toml", "scenario_2_3.toml", "scenario_3_4.toml")
+
+
+def _cmd_drive(args: argparse.Namespace, d: Any) -> int:
+    """``--drive``: the EKF through consecutive shifts, m_veh and ζ carried across them."""
+    from pathlib import Path
+
+    from gearsym.symbolic.errors import GearsymError
+    from gearsym.validation.scenario import default_scenario_path, load_scenario
+
+    for option, given in (
+        ("--scenario", args.scenario is not None),
+        ("--runs", args.runs != 1),
+        ("--dropout", args.dropout is not None),
+        ("--params", args.params is not None),
+        ("--noise", args.noise is not None),
+        ("--initial-from-prior", args.initial_from_prior),
+        ("--out", args.out is not None),
+    ):
+        if given:
+            raise GearsymError("estimate", option, "is not available with --drive")
+    if args.drive.strip() == "upshifts":
+        folder = Path(default_scenario_path()).parent
+        files: list[Any] = [folder / name for name in DRIVE_UPSHIFTS]
+    else:
+        files = [f.strip() for f in args.drive.split(",") if f.strip()]
+        if len(files) < 2:
+            raise GearsymError(
+                "estimate", "--drive", "give 'upshifts' or at least two scenario files"
+            )
+    scenarios = [load_scenario(d, f) for f in files]
+    initial = _initial_values(args.initial)
+    wrong = [name for name in initial if name not in ("m_veh", "zeta")]
+    if wrong:
+        raise GearsymError(
+            "estimate", "--initial", f"with --drive only m_veh and zeta, got {', '.join(wrong)}"
+        )
+
+    from gearsym.cmd_dynamics import simulate_with_progress
+    from gearsym.validation.estimation import format_ekf_text, run_ekf_drive
+
+    results = [simulate_with_progress(d, sc) for sc in scenarios]
+    _say("running the EKF through the shifts, m_veh and zeta carried")
+    runs = run_ekf_drive(d, results, seed=args.seed, sample_time=args.sample_time, initial=initial)
+    if args.json:
+        data = {"filter": "ekf", "drive": [r.to_dict() for r in runs]}
+        json.dump(data, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return 0
+    print(
+        "  assumes a drive of consecutive shifts "
+        + " -> ".join(sc.name for sc in scenarios)
+        + ": each shift simulated on its own (the reference does not chain shifts); the "
+        "filter carries m_veh and zeta, estimate and covariance, from one shift's end to "
+        "the next one's start; every other state starts as in a single shift"
+    )
+    for sc, run in zip(scenarios, runs, strict=True):
+        print(f"  shift {sc.shift.name} ({sc.name}):")
+        print(format_ekf_text(run))
+    return 0
 
 
 def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
@@ -341,6 +408,13 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "--dropout-outputs",
         metavar="NAMES",
         help="ekf: only these speeds drop out, comma-separated (default: all of them)",
+    )
+    p.add_argument(
+        "--drive",
+        metavar="upshifts|FILE,FILE,...",
+        help="ekf: run the filter through consecutive shifts (each its own scenario), "
+        "carrying m_veh and zeta with their covariance; 'upshifts' is the shipped 1-2, 2-3, "
+        "3-4",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG")
     p.add_argument("--json", action="store_true", help="machine-readable output")

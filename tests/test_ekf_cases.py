@@ -160,6 +160,9 @@ def test_estimate_command_runs_the_cases_and_states_what_it_assumes():
         (("--dropout", "clutch_phase"), "--dropout"),
         (("--dropout-outputs", "omega_C"), "--dropout-outputs"),
         (("--dropout", "0,1", "--dropout-outputs", "omega_9"), "--dropout-outputs"),
+        (("--drive", "one.toml"), "--drive"),
+        (("--drive", "upshifts", "--runs", "2"), "--runs"),
+        (("--drive", "upshifts", "--initial", "mu_38=0.1"), "--initial"),
     ):
         result = gearsym(*bad)
         assert result.returncode == 2 and key in result.stderr, (bad, result.stderr)
@@ -191,3 +194,24 @@ def test_drive_of_upshifts_1_2_3_4_carries_mass_and_grade(d, level):
     # and the last shift's σ is below a single 2-3's σ from the prior (the same noise seed)
     alone = run_ekf(d, level, seed=1)
     assert sigmas[1] < final(alone, "m_veh")[1]
+
+
+def test_estimate_command_runs_the_drive():
+    import json
+    import subprocess
+    import sys
+
+    run = subprocess.run(
+        [sys.executable, "-m", "gearsym", "estimate", "--filter", "ekf", "--drive", "upshifts"]
+        + ["--json", "--initial", "m_veh=2700"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert run.returncode == 0, run.stderr
+    drive = json.loads(run.stdout)["drive"]
+    assert [r["shift"] for r in drive] == ["1-2", "2-3", "3-4"]
+    masses = [r["parameters"]["m_veh"] for r in drive]
+    assert masses[0]["initial"] == 2700.0
+    assert masses[1]["initial"] == masses[0]["estimate"]  # carried
+    assert masses[2]["sigma"] <= masses[1]["sigma"] <= masses[0]["sigma"]
