@@ -257,10 +257,12 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
         )
 
         result = simulate_with_progress(d, scenario)
-        window = dropout
+        window: tuple[float, float] | None
         if isinstance(dropout, str):  # a phase: its window as the simulation detected it
             (phase,) = [p for p in result.phases if p.name == dropout]
             window = (float(phase.t_start), float(phase.t_end))
+        else:
+            window = dropout
         setup = prepare_ekf(
             d,
             result,
