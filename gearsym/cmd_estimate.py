@@ -45,6 +45,10 @@ def cmd_estimate(args: argparse.Namespace) -> int:
             "--sample-time",
             f"must be in (0, {scenario.t_end / 4:g}] s, got {args.sample_time!r}",
         )
+    if args.drive is not None:
+        if args.filter != "ekf":
+            raise GearsymError("estimate", "--drive", "is for --filter ekf only")
+        return _cmd_drive(args, d)
     if args.filter == "ekf":
         return _cmd_ekf(args, d, scenario)
     if args.runs != 1:
@@ -108,6 +112,94 @@ def _initial_values(items: list[str] | None) -> dict[str, float]:
     return values
 
 
+def _dropout_window(text: str | None, shift: str) -> tuple[float, float] | str | None:
+    """``--dropout``: (T0, T1) in s, or the name of a phase of the shift (``speed_phase``),
+    checked before the simulation; a phase is resolved to its detected window afterwards."""
+    from gearsym.symbolic.errors import GearsymError
+
+    if text is None:
+        return None
+    source, target = shift.split("-")
+    phases = [f"gear_{source}", "torque_phase", "speed_phase", f"gear_{target}"]
+    if text.strip() in phases:
+        return text.strip().replace("_", " ")
+    parts = text.split(",")
+    try:
+        t0, t1 = (float(v) for v in parts)
+    except ValueError:
+        t0 = t1 = float("nan")
+    if not (t0 < t1):  # also false for NaN
+        raise GearsymError(
+            "estimate",
+            "--dropout",
+            f"expected T0,T1 with T0 < T1 or a phase ({', '.join(phases)}), got {text!r}",
+        )
+    return (t0, t1)
+
+
+#: ``--drive upshifts``: the shipped scenarios of the drive 1->2->3->4.
+DRIVE_UPSHIFTS = ("scenario_1_2.toml", "scenario_2_3.toml", "scenario_3_4.toml")
+
+
+def _cmd_drive(args: argparse.Namespace, d: Any) -> int:
+    """``--drive``: the EKF through consecutive shifts, m_veh and ζ carried across them."""
+    from pathlib import Path
+
+    from gearsym.symbolic.errors import GearsymError
+    from gearsym.validation.scenario import default_scenario_path, load_scenario
+
+    for option, given in (
+        ("--scenario", args.scenario is not None),
+        ("--runs", args.runs != 1),
+        ("--dropout", args.dropout is not None),
+        ("--params", args.params is not None),
+        ("--noise", args.noise is not None),
+        ("--initial-from-prior", args.initial_from_prior),
+        ("--out", args.out is not None),
+    ):
+        if given:
+            raise GearsymError("estimate", option, "is not available with --drive")
+    if args.drive.strip() == "upshifts":
+        folder = Path(default_scenario_path()).parent
+        files: list[Any] = [folder / name for name in DRIVE_UPSHIFTS]
+    else:
+        files = [f.strip() for f in args.drive.split(",") if f.strip()]
+        if len(files) < 2:
+            raise GearsymError(
+                "estimate", "--drive", "give 'upshifts' or at least two scenario files"
+            )
+    scenarios = [load_scenario(d, f) for f in files]
+    initial = _initial_values(args.initial)
+    wrong = [name for name in initial if name not in ("m_veh", "zeta")]
+    if wrong:
+        raise GearsymError(
+            "estimate", "--initial", f"with --drive only m_veh and zeta, got {', '.join(wrong)}"
+        )
+
+    from gearsym.cmd_dynamics import simulate_with_progress
+    from gearsym.validation.estimation import format_ekf_text, run_ekf_drive
+
+    results = [simulate_with_progress(d, sc) for sc in scenarios]
+    _say("running the EKF through the shifts, m_veh and zeta carried")
+    runs = run_ekf_drive(d, results, seed=args.seed, sample_time=args.sample_time, initial=initial)
+    if args.json:
+        data = {"filter": "ekf", "drive": [r.to_dict() for r in runs]}
+        json.dump(data, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return 0
+    print(
+        "  assumes a drive of consecutive shifts "
+        + " -> ".join(sc.name for sc in scenarios)
+        + ": each shift simulated on its own (the reference does not chain shifts); the "
+        "filter carries m_veh and zeta, estimate and covariance, from one shift's end to "
+        "the next one's start; every other state starts as in a single shift"
+    )
+    for sc, run in zip(scenarios, runs, strict=True):
+        print(f"  shift {sc.shift.name} ({sc.name}):")
+        print(format_ekf_text(run))
+    return 0
+
+
 def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
     """``--filter ekf``: the EKF on the scenario's reference shift."""
     from gearsym.symbolic.errors import GearsymError
@@ -129,7 +221,21 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
         raise GearsymError(
             "estimate", "--initial-from-prior", "draws the initial estimate: drop --initial"
         )
+    dropout_outputs = None
+    if args.dropout_outputs is not None:
+        if args.dropout is None:
+            raise GearsymError("estimate", "--dropout-outputs", "needs --dropout")
+        dropout_outputs = [o.strip() for o in args.dropout_outputs.split(",") if o.strip()]
+    dropout = _dropout_window(args.dropout, scenario.shift.name)
     aug = augmented_model(d, scenario.shift.name, parameters)  # bad names fail before the run
+    outputs = [name.removeprefix("y_") for name in aug.output_names]
+    wrong = [o for o in dropout_outputs or [] if o not in outputs]
+    if wrong or dropout_outputs == []:
+        raise GearsymError(
+            "estimate",
+            "--dropout-outputs",
+            f"expected outputs of the filter ({', '.join(outputs)}), got {args.dropout_outputs!r}",
+        )
     wrong = [name for name in initial if name not in aug.state_names]
     if wrong:
         raise GearsymError(
@@ -137,6 +243,8 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
             "--initial",
             f"{', '.join(wrong)} is not a state of the filter ({', '.join(aug.state_names)})",
         )
+
+    assumes: list[str] = []
 
     def work(folder: Any) -> Any:
         from gearsym.cmd_dynamics import ProgressBar, simulate_with_progress
@@ -149,6 +257,12 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
         )
 
         result = simulate_with_progress(d, scenario)
+        window: tuple[float, float] | None
+        if isinstance(dropout, str):  # a phase: its window as the simulation detected it
+            (phase,) = [p for p in result.phases if p.name == dropout]
+            window = (float(phase.t_start), float(phase.t_end))
+        else:
+            window = dropout
         setup = prepare_ekf(
             d,
             result,
@@ -165,9 +279,17 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
                 seed=args.seed,
                 progress=bar,
                 prior_draw=args.initial_from_prior,
+                dropout=window,
+                dropout_outputs=dropout_outputs,
             )
         finally:
             bar.done()
+        assumes.append(f"scenario: {scenario.name} ({args.scenario or 'built-in'})")
+        if window is not None:
+            assumes.append(
+                f"sensor dropout: {', '.join(dropout_outputs or outputs)} missing (NaN) in "
+                f"[{window[0]:.4g}, {window[1]:.4g}) s: those updates are skipped"
+            )
         if folder is not None:
             write_ekf_csv(mc.first, folder / "ekf.csv")
             (folder / "ekf.json").write_text(json.dumps(mc.to_dict(), indent=2) + "\n")
@@ -180,7 +302,8 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
 
     def text(mc: Any) -> str:
         body = format_monte_carlo_text(mc)
-        return body if len(mc.runs) > 1 else format_ekf_text(mc.first) + "\n" + body
+        body = body if len(mc.runs) > 1 else format_ekf_text(mc.first) + "\n" + body
+        return "\n".join(f"  assumes {line}" for line in assumes) + "\n" + body
 
     return _run_and_report(args, work, text)
 
@@ -276,6 +399,24 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "--out",
         help="folder for uio.csv/.json/.png or ekf.csv/.json/.png and ekf_efficiency.png "
         "(written atomically)",
+    )
+    p.add_argument(
+        "--dropout",
+        metavar="T0,T1|PHASE",
+        help="ekf: sensor dropout, the measurements in [T0, T1) s (or in a detected phase: "
+        "gear_2, torque_phase, speed_phase, gear_3) are NaN and their updates skipped",
+    )
+    p.add_argument(
+        "--dropout-outputs",
+        metavar="NAMES",
+        help="ekf: only these speeds drop out, comma-separated (default: all of them)",
+    )
+    p.add_argument(
+        "--drive",
+        metavar="upshifts|FILE,FILE,...",
+        help="ekf: run the filter through consecutive shifts (each its own scenario), "
+        "carrying m_veh and zeta with their covariance; 'upshifts' is the shipped 1-2, 2-3, "
+        "3-4",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG")
     p.add_argument("--json", action="store_true", help="machine-readable output")

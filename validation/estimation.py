@@ -487,6 +487,7 @@ class EkfRun:
     phases: tuple[Phase, ...]
     parameters: tuple[ParameterEstimate, ...]
     min_eigenvalue: float  # smallest eigenvalue of P over the run (scaled), > 0: SPD
+    covariance: np.ndarray | None = field(default=None, repr=False)  # P after the last sample
 
     @property
     def nees_mean(self) -> float:
@@ -729,8 +730,18 @@ def filter_run(
     seed: int = 0,
     dropout: tuple[float, float] | None = None,
     prior_draw: bool = False,
+    dropout_outputs: Sequence[str] | None = None,
+    carried: tuple[Sequence[str], np.ndarray, np.ndarray] | None = None,
 ) -> EkfRun:
     """One EKF run (4.3) on ``setup``'s samples with the noise (3.26) drawn from ``seed``.
+
+    ``carried`` = (names, mean, covariance): the initial estimate and the covariance block of
+    these states are taken over from a previous run (a drive of consecutive shifts: what the
+    filter knows about m_veh and ζ at the end of one shift is its prior for the next).
+
+    ``dropout`` = (t0, t1): the measurements in [t0, t1) are NaN (a sensor dropout), of every
+    output or only of ``dropout_outputs`` (names of :attr:`EkfSetup.outputs`); the update
+    skips each NaN speed on its own, as the emitted C does.
 
     ``prior_draw``: the initial estimate of every unmeasured state (φ and the parameters) is
     the truth (:attr:`EkfSetup.truth0`) plus a draw from the prior N(0, σ0²) (a second stream
@@ -742,7 +753,13 @@ def filter_run(
     sample_time = float(t[1] - t[0])
     y = s.y_true + np.random.default_rng(seed).normal(0.0, 1.0, s.y_true.shape) * s.sigma_y
     if dropout is not None:
-        y[(t >= dropout[0]) & (t < dropout[1])] = np.nan
+        lost = (t >= dropout[0]) & (t < dropout[1])
+        for name in dropout_outputs if dropout_outputs is not None else s.outputs:
+            if name not in s.outputs:
+                raise GearsymError(
+                    "estimate", "--dropout", f"{name!r} is not an output ({', '.join(s.outputs)})"
+                )
+            y[lost, s.outputs.index(name)] = np.nan
     z = s.initial.copy()
     sig0 = s.prior_sigma.copy()
     if prior_draw:
@@ -757,6 +774,11 @@ def filter_run(
             else:
                 z[j], sig0[j] = 0.0, 1e3
     P = np.diag(sig0**2)
+    if carried is not None:
+        idx = [names.index(name) for name in carried[0]]
+        z[idx] = carried[1]
+        P[np.ix_(idx, idx)] = carried[2]
+        sig0[idx] = np.sqrt(np.diag(carried[2]))
     initial_values = z.copy()
     truth, scored = s.truth, s.scored
 
@@ -815,7 +837,45 @@ def filter_run(
         phases=s.phases,
         parameters=tuple(estimates_by_parameter),
         min_eigenvalue=min_eig,
+        covariance=P,
     )
+
+
+#: The parameters a drive of consecutive shifts carries from one shift to the next: they
+#: belong to the vehicle and the road, not to a shift's elements.
+DRIVE_CARRIED = ("m_veh", "zeta")
+
+
+def run_ekf_drive(
+    d: GearboxDescription,
+    results: Sequence[SimulationResult],
+    seed: int = 0,
+    sample_time: float = 0.01,
+    initial: Mapping[str, float] | None = None,
+) -> list[EkfRun]:
+    """The EKF (4.3) through consecutive shifts, carrying m_veh and ζ (:data:`DRIVE_CARRIED`).
+
+    Each result is one shift's reference simulation (its own scenario, simulated on its own:
+    the reference does not chain shifts, so the vehicle speed at one shift's start is its
+    scenario's, not the previous shift's end). The filter of shift k+1 (its own augmented
+    model (4.1): the μ of its swapping elements) starts from the estimate and the covariance
+    block of m_veh and ζ at the end of shift k; its other states start as in a single shift
+    (μ at the prior: another element or another operating point). ``initial`` is the first
+    shift's initial estimate; shift k uses noise seed ``seed`` + k."""
+    runs: list[EkfRun] = []
+    carried = None
+    for k, result in enumerate(results):
+        setup = prepare_ekf(d, result, sample_time, initial=initial if k == 0 else None)
+        run = filter_run(setup, seed + k, carried=carried)
+        idx = [list(run.state_names).index(name) for name in DRIVE_CARRIED]
+        assert run.covariance is not None
+        carried = (
+            DRIVE_CARRIED,
+            run.estimates[-1, idx].copy(),
+            run.covariance[np.ix_(idx, idx)].copy(),
+        )
+        runs.append(run)
+    return runs
 
 
 def write_ekf_csv(run: EkfRun, path: Path) -> Path:
@@ -1234,6 +1294,8 @@ def run_ekf_monte_carlo(
     progress: Any = None,
     bound: EkfBound | None = None,
     prior_draw: bool = False,
+    dropout: tuple[float, float] | None = None,
+    dropout_outputs: Sequence[str] | None = None,
 ) -> EkfMonteCarlo:
     """The EKF (4.3) over ``runs`` seeds ``seed``, ``seed`` + 1, …: the reference and
     everything of ``setup`` fixed, only the speed noise (3.26) drawn anew. ``progress(fraction,
@@ -1241,7 +1303,8 @@ def run_ekf_monte_carlo(
     reported σ over the scored samples of every run, the posterior bound (:func:`ekf_bound`)
     over the same samples and the efficiency RMSE / bound; the phase's own identifiability.
     ``prior_draw``: each run's initial estimate drawn from the prior around the truth
-    (:func:`filter_run`), the bound's premise."""
+    (:func:`filter_run`), the bound's premise. ``dropout``/``dropout_outputs``: a sensor
+    dropout in every run (:func:`filter_run`); the bound keeps every sample."""
     import time
 
     if runs < 1:
@@ -1249,7 +1312,15 @@ def run_ekf_monte_carlo(
     done = []
     start = time.perf_counter()
     for i in range(runs):
-        done.append(filter_run(setup, seed + i, prior_draw=prior_draw))
+        done.append(
+            filter_run(
+                setup,
+                seed + i,
+                dropout=dropout,
+                prior_draw=prior_draw,
+                dropout_outputs=dropout_outputs,
+            )
+        )
         if progress is not None:
             progress((i + 1) / runs, f"run {i + 1} of {runs}")
     seconds = (time.perf_counter() - start) / runs
