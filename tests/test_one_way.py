@@ -228,3 +228,34 @@ def test_pressure_on_a_one_way_clutch_is_refused(tmp_path: Path) -> None:
     )
     with pytest.raises(GearsymError, match="one-way clutch"):
         load_scenario(d, path)
+
+
+# ------------------------------------------------------------------ shift models, emitted C
+
+
+def test_gear_model_locks_the_one_way_and_states_its_validity() -> None:
+    """Gear 1's model has F1 locked (one gearbox state, like 1M with B2 locked: the same
+    constraint ω_carrier_r = 0), and its metadata, which the emitted C header prints, says
+    the model holds only while T_F1 > 0 (the blocking sign); 1M's has no such condition."""
+    from gearsym.symbolic.drivetrain import drivetrain_model
+
+    d = load_description(BOX)
+    models = {
+        g: drivetrain_model(d, f"gear_{g}", locked=tuple(d.gear(g).closed), keep=("out",))
+        for g in ("1", "1M")
+    }
+    assert [v.name for v in models["1"].states] == ["omega_out", "phi", "omega_C"]
+    assert models["1"].rhs.equals(models["1M"].rhs)  # same constraint, same dynamics
+    note = models["1"].metadata["one_way"]
+    assert "T_F1 > 0" in note and "F1 open" in note and "-omega_carrier_r" in note
+    assert "one_way" not in models["1M"].metadata
+
+
+def test_emitted_linear_gears_header_documents_the_switch(tmp_path: Path) -> None:
+    """The emitted C of the one-way box says, in the header of the gears' linear forms (gear 1
+    locks F1), that a system locking a freewheel holds only while it carries torque of its
+    blocking sign and that the switch is the caller's."""
+    out = tmp_path / "gen"
+    assert main(["generate", str(BOX), "--out", str(out)]) == 0
+    header = (out / "c" / "gearsym_linear_gears.h").read_text(encoding="utf-8")
+    assert "one-way clutch (F1)" in header and "the caller switches" in header
