@@ -94,6 +94,13 @@ ROLLING_RESISTANCE_FORMS = ("thesis", "textbook", "polynomial")
 
 DEFAULT_CONFIG_NAME = "thesis_9speed.toml"
 
+#: Shift-element kinds: friction clutch (two shafts), friction brake (a shaft to the housing),
+#: one-way clutch / freewheel (two shafts, or one shaft to the housing).
+ONE_WAY = "one_way"
+ELEMENT_KINDS = ("clutch", "brake", ONE_WAY)
+#: ``locks`` of a one-way clutch: the sign of the slip ω_a − ω_b it prevents.
+LOCK_DIRECTIONS = {"positive": 1, "negative": -1}
+
 
 @dataclass(frozen=True)
 class Quantity:
@@ -185,10 +192,14 @@ class PlanetarySet:
 
 @dataclass(frozen=True)
 class ShiftElement:
-    """A clutch between shafts ``(a, b)`` or a brake on shaft ``(b,)``.
+    """A clutch between shafts ``(a, b)``, a brake on shaft ``(b,)``, or a one-way clutch
+    (freewheel) between ``(a, b)`` or from ``(b,)`` to the housing.
 
     Sign convention of (2.36): the element torque T acts with +T on ``b`` and −T on ``a`` (a is
-    the housing for a brake); its slip speed is Δω = ω_a − ω_b.
+    the housing for a brake); its slip speed is Δω = ω_a − ω_b. A one-way clutch
+    (``kind = "one_way"``) prevents the slip sign ``locks`` (+1: it blocks Δω > 0, −1: it blocks
+    Δω < 0) and runs free the other way; locked, it carries a torque of the sign ``locks``
+    (the sign a friction element resisting that slip would have, 2.70), never the other.
     """
 
     name: str
@@ -197,10 +208,16 @@ class ShiftElement:
     n_disc: int | None = None  # friction surfaces pairs N_disc (2.69)
     r_m: Quantity | None = None  # mean friction radius (2.69)
     a_piston: Quantity | None = None  # piston area: F_N = p_N·A (2.69)
+    locks: int = 0  # one-way clutch: the blocked slip sign, +1 or −1; 0 for the others
 
     @property
     def a(self) -> str | None:
-        return self.shafts[0] if self.kind == "clutch" else None
+        return self.shafts[0] if len(self.shafts) == 2 else None
+
+    @property
+    def one_way(self) -> bool:
+        """A freewheel: a unilateral constraint, no pressure, no friction data."""
+        return self.kind == ONE_WAY
 
     @property
     def b(self) -> str:
@@ -452,6 +469,10 @@ def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
         element_name = r.name()
         _label(r, element_name)
         kind = r.string("kind")
+        if kind == ONE_WAY:
+            elements.append(_one_way(r, element_name))
+            r.reject_unknown()
+            continue
         if kind == "clutch":
             pair = r.string_list("shafts")
             if len(pair) != 2:
@@ -461,7 +482,11 @@ def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
         elif kind == "brake":
             pair = (r.string("shaft"),)
         else:
-            raise r.fail("kind", f"expected 'clutch' or 'brake', got {shown(kind)}")
+            raise r.fail("kind", f"expected 'clutch', 'brake' or 'one_way', got {shown(kind)}")
+        if "locks" in r.data:
+            raise r.fail(
+                "locks", f"only a one-way clutch has a locking direction; this is a {kind}"
+            )
         has_friction = any(k in r.data for k in ("n_disc", "r_m", "a_piston"))
         elements.append(
             ShiftElement(
@@ -607,6 +632,43 @@ def _planetary_set(r: _Reader, set_name: str) -> PlanetarySet:
     r.reject_unknown()
     _check_set(r, ps)
     return ps
+
+
+def _one_way(r: _Reader, name: str) -> ShiftElement:
+    """A ``kind = "one_way"`` element: ``shafts = [a, b]`` (between two shafts) or
+    ``shaft = b`` (to the housing), and ``locks = "positive" | "negative"``, the sign of the
+    slip ω_a − ω_b (2.59) it prevents. A freewheel has no piston and no discs: the friction
+    keys of a clutch or brake are refused."""
+    if "shafts" in r.data and "shaft" in r.data:
+        raise r.fail(
+            "shaft",
+            "give shafts = [a, b] (between two shafts) or shaft = b (to the housing), not both",
+        )
+    if "shafts" in r.data:
+        pair = r.string_list("shafts")
+        if len(pair) != 2:
+            raise r.fail(
+                "shafts",
+                "a one-way clutch joins exactly two shafts [a, b] "
+                "(or shaft = b for one to the housing)",
+            )
+        if pair[0] == pair[1]:
+            raise r.fail(
+                "shafts", f"a one-way clutch must join two different shafts, got {list(pair)}"
+            )
+    else:
+        pair = (r.string("shaft"),)
+    direction = r.string("locks")
+    if direction not in LOCK_DIRECTIONS:
+        raise r.fail(
+            "locks",
+            "expected 'positive' or 'negative' (the sign of the slip ω_a − ω_b the freewheel "
+            f"prevents), got {shown(direction)}",
+        )
+    for key in ("n_disc", "r_m", "a_piston"):
+        if key in r.data:
+            raise r.fail(key, "a one-way clutch has no discs or piston (it is not pressed)")
+    return ShiftElement(name, ONE_WAY, pair, locks=LOCK_DIRECTIONS[direction])
 
 
 def _replace_coordinates(d: GearboxDescription) -> GearboxDescription:
@@ -777,15 +839,20 @@ def _check_references(d: GearboxDescription) -> None:
     for e in d.shift_elements:
         for shaft in e.shafts:
             if shaft == set_kinds.HOUSING:
-                key = "shafts" if e.kind == "clutch" else "shaft"
+                key = "shafts" if e.a is not None else "shaft"
                 raise GearsymError(
                     f,
                     f'shift_element[name="{e.name}"].{key}',
                     "the housing is fixed: an element holding a shaft to it is a brake "
-                    '(kind = "brake", shaft = "<the shaft>")',
+                    '(kind = "brake", shaft = "<the shaft>")'
+                    + (
+                        '; a freewheel to the housing has shaft = "<the shaft>"'
+                        if e.one_way
+                        else ""
+                    ),
                 )
             if shaft not in shaft_names:
-                key = "shafts" if e.kind == "clutch" else "shaft"
+                key = "shafts" if e.a is not None else "shaft"
                 raise GearsymError(
                     f, f'shift_element[name="{e.name}"].{key}', f"unknown shaft {shown(shaft)}"
                 )

@@ -463,6 +463,16 @@ def drivetrain_model(
         y = naming.measured(naming.derivative(naming.WHEEL_SPEED))
         outputs.append(Variable(y, sp.Symbol(y), "rad/s^2", "wheel acceleration"))
         output_exprs.append(wheel)
+    metadata = {
+        "gearbox": d.name,
+        "locked": " ".join(locked),
+        "torque_elements": " ".join(parts.torque_elements),
+        "equations": "2.42-2.58",
+        "rolling_resistance": d.rolling_resistance,
+    }
+    validity = one_way_validity(d, locked)
+    if validity:
+        metadata["one_way"] = validity
     return Model(
         name=name,
         states=states,
@@ -471,14 +481,33 @@ def drivetrain_model(
         outputs=tuple(outputs),
         rhs=rhs,
         output_expressions=sp.Matrix(output_exprs),
-        metadata={
-            "gearbox": d.name,
-            "locked": " ".join(locked),
-            "torque_elements": " ".join(parts.torque_elements),
-            "equations": "2.42-2.58",
-            "rolling_resistance": d.rolling_resistance,
-        },
+        metadata=metadata,
     )
+
+
+def one_way_validity(d: GearboxDescription, locked: tuple[str, ...]) -> str:
+    """The condition under which a model that treats one-way clutches as locked holds, as text
+    for the model's metadata (and so the emitted C header); "" when none is locked.
+
+    A one-way clutch is a unilateral constraint: locked, it carries the reaction torque T of
+    the sign it blocks (``locks``, sign convention of 2.36); when T would change sign it
+    overruns, and the model with it open (absent, 2.54) holds until its slip reaches zero
+    towards the blocked side again. That switch depends on the state and is the caller's.
+    """
+    parts = []
+    for name in locked:
+        e = d.element(name)
+        if not e.one_way:
+            continue
+        sign = ">" if e.locks > 0 else "<"
+        slip = f"omega_{e.a} - omega_{e.b}" if e.a is not None else f"-omega_{e.b}"
+        parts.append(
+            f"one-way clutch {name} treated as locked: valid only while its reaction torque "
+            f"T_{name} {sign} 0 (the blocking sign); when it would change sign {name} "
+            f"overruns and the model with {name} open applies until its slip {slip} "
+            f"reaches 0 towards {sign} 0 again (a state-dependent switch the caller applies)"
+        )
+    return "; ".join(parts)
 
 
 def full_model(d: GearboxDescription, with_wheel_acceleration: bool = False) -> Model:

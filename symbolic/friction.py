@@ -388,6 +388,43 @@ def shift_element_num(
     return elastoplastic_num(z, dw, capacity, sigma0, sigma1, z_ba_ratio)
 
 
+def one_way_sym(
+    z: Sym, dw: Sym, locks: int, stiffness: Sym, damping: Sym
+) -> tuple[sp.Expr, sp.Expr]:
+    """One-way clutch (freewheel) as a stiff, damped unilateral spring; returns ``(dz/dt, T)``.
+
+    Not in the thesis (its gearbox has no freewheel); built like the bristle of (2.66)-(2.67)
+    with the sign rule of (2.70). ``locks`` = +1 blocks ``dw > 0``, −1 blocks ``dw < 0``;
+    ``v = locks dw`` is the slip towards the blocked side. ``z`` is the wind-up of the sprags
+    into the blocked direction (``z > 0``: in contact):
+
+    * ``dz/dt = v`` while in contact (``z > 0``) or closing (``v > 0``), else 0: overrunning,
+      the freewheel keeps no memory of the free travel, so it locks the moment the slip crosses
+      zero into the blocked direction;
+    * ``T = locks max(0, stiffness z + damping dz/dt)``: a contact pushes, never pulls, so the
+      torque has the blocked sign or is zero (no drag torque while overrunning).
+
+    Passive with storage ``V = stiffness max(z, 0)^2 / 2``: ``T dw − dV/dt`` is ``damping v^2``
+    in contact, ``−stiffness z v > 0`` while a contact opens faster than the spring relaxes,
+    and ``T dw >= 0`` otherwise.
+    """
+    z = sp.sympify(z)
+    v = locks * sp.sympify(dw)
+    zdot = sp.Piecewise((v, sp.Or(z > 0, v > 0)), (0, True))
+    return zdot, locks * sp.Max(0, stiffness * z + damping * zdot)
+
+
+def one_way_num(
+    z: ArrayLike, dw: ArrayLike, locks: int, stiffness: ArrayLike, damping: ArrayLike
+) -> tuple[Num, Num]:
+    """Numeric one-way clutch, see :func:`one_way_sym`."""
+    z = np.asarray(z, dtype=float)
+    v = locks * np.asarray(dw, dtype=float)
+    zdot = np.where((z > 0) | (v > 0), v, 0.0)
+    force = np.maximum(0.0, np.multiply(stiffness, z) + np.multiply(damping, zdot))
+    return _out(zdot), _out(locks * force)
+
+
 # --------------------------------------------------------------------------------------------
 # Friction-coefficient map mu(p_N, T_oil, dw), used in (2.69)
 # --------------------------------------------------------------------------------------------
@@ -522,6 +559,8 @@ __all__ = [
     "lugre_num",
     "lugre_sym",
     "normal_force",
+    "one_way_num",
+    "one_way_sym",
     "shift_element_num",
     "shift_element_sym",
     "stiction_num",

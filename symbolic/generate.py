@@ -480,6 +480,14 @@ def linear_system_sets(
             for named in group.forms
         )
         metadata = {"gearbox": d.name, "equations": "5.1-5.3", "content": group.summary}
+        one_way = [e for e in d.shift_elements if e.one_way]
+        if one_way:
+            metadata["one_way"] = (
+                f"systems that lock a one-way clutch ({', '.join(e.name for e in one_way)}) "
+                "hold only while it carries reaction torque of its blocking sign; when that "
+                "torque would change sign the caller switches to the system with it released "
+                "(a state-dependent switch, see gearsym README: one-way clutches)"
+            )
         s = LinearSystemSet(group.name, group.parameters, systems, metadata)
         # the parameter ranges params_validate enforces are those of the models
         sets.append(EmittedLinearSet(s, CodegenConfig(bounds=_bounds(d, s.as_model()))))

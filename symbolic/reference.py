@@ -21,7 +21,7 @@ from gearsym.symbolic import naming
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import drivetrain_parts, quantity
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.friction import shift_element_sym
+from gearsym.symbolic.friction import one_way_sym, shift_element_sym
 from gearsym.symbolic.kinematics import exact
 from gearsym.symbolic.model import Model, Variable
 
@@ -50,11 +50,15 @@ def reference_model(d: GearboxDescription, elements: Sequence[str] | None = None
     """Build the reference model of the description.
 
     ``elements`` (default: all) get a friction state; every other element is open (zero
-    torque), which keeps the model small when a scenario never presses them.
+    torque), which keeps the model small when a scenario never presses them. A one-way clutch
+    among them gets a wind-up state and the unilateral law of
+    :func:`gearsym.symbolic.friction.one_way_sym` (no pressure or μ input).
     """
     names = [e.name for e in d.shift_elements]
     chosen = names if elements is None else [n for n in names if n in set(elements)]
     for e in (d.element(n) for n in chosen):
+        if e.one_way:
+            continue
         if e.n_disc is None or e.r_m is None or e.a_piston is None:
             raise GearsymError(
                 d.file,
@@ -69,7 +73,21 @@ def reference_model(d: GearboxDescription, elements: Sequence[str] | None = None
     torque: dict[str, sp.Expr] = {}
     rates: dict[str, sp.Expr] = {}
     z_vars, p_vars, mu_vars = [], [], []
+    storage: list[sp.Expr] = []
     for e in (d.element(n) for n in chosen):
+        if e.one_way:
+            # a freewheel: unilateral spring-damper on its wind-up z (friction.one_way_sym),
+            # with the bristle stiffness and damping of the description; no pressure, no μ
+            z = sp.Symbol(naming.bristle(e.name))
+            slip[e.name] = (speeds[e.a] if e.a is not None else 0) - speeds[e.b]
+            dw = sp.Symbol(naming.slip_symbol(e.name), real=True)
+            rate, t_ow = one_way_sym(z, dw, e.locks, friction["sigma0"], friction["sigma1"])
+            with sp.evaluate(False):
+                rates[e.name] = rate.xreplace({dw: slip[e.name]})
+                torque[e.name] = t_ow.xreplace({dw: slip[e.name]})
+            z_vars.append(Variable(z.name, z, "rad", f"wind-up of the one-way clutch {e.name}"))
+            storage.append(friction["sigma0"] * sp.Max(z, 0) ** 2 / 2)
+            continue
         z = sp.Symbol(naming.bristle(e.name))
         p = sp.Symbol(naming.pressure(e.name))
         mu = sp.Symbol(naming.friction_coefficient(e.name), positive=True)
@@ -94,6 +112,7 @@ def reference_model(d: GearboxDescription, elements: Sequence[str] | None = None
             rates[e.name] = rate.xreplace({dw: slip[e.name]})
             torque[e.name] = t_cl.xreplace({dw: slip[e.name]})
         z_vars.append(Variable(z.name, z, "rad", f"bristle deflection of {e.name} (2.66)"))
+        storage.append(friction["sigma0"] * z**2 / 2)
         p_vars.append(Variable(p.name, p, "Pa", f"apply pressure of {e.name}"))
         mu_vars.append(Variable(mu.name, mu, "1", f"friction coefficient of {e.name}"))
 
@@ -157,7 +176,7 @@ def reference_model(d: GearboxDescription, elements: Sequence[str] | None = None
         body_speeds=speeds,
         kinetic_energy=kinetic,
         spring_energy=params["k_ss"] * sp.Symbol(naming.TWIST) ** 2,
-        bristle_energy=sum((friction["sigma0"] * v.symbol**2 / 2 for v in z_vars), sp.Integer(0)),
+        bristle_energy=sum(storage, sp.Integer(0)),
         input_power=parts.torque_symbols[naming.INPUT] * speeds[d.input_shaft],
         friction_power=sum((torque[e] * slip[e] for e in torque), sp.Integer(0)),
         damper_power=2 * params["d_ss"] * parts.phi_dot**2,

@@ -284,8 +284,7 @@ def lever_diagram(
             links.append((shaft, (a.x, a.y), (b.x, b.y)))
     elements = []
     for e in d.shift_elements:
-        if e.kind == "clutch":
-            assert e.a is not None
+        if e.a is not None:  # a clutch or a one-way clutch between two shafts
             a, b = _closest(diagram.nodes_of(e.a), diagram.nodes_of(e.b))
             elements.append(ElementLink(e.name, e.kind, e.shafts, (a.x, a.y), (b.x, b.y)))
         else:
@@ -378,7 +377,7 @@ def speed_plan(d: GearboxDescription, gear: str) -> SpeedPlan:
         speeds[HOUSING] = Fraction(0)  # a member fixed to the housing: a held node
     out = speeds[d.output_shaft]
     ratio = None if g.neutral or not out else speeds[d.input_shaft] / out
-    held = tuple(d.element(e).b for e in g.closed if d.element(e).kind == "brake")
+    held = tuple(d.element(e).b for e in g.closed if d.element(e).a is None)
     return SpeedPlan(g.name, g.closed, g.neutral, speeds, ratio, g.ratio, held)
 
 
@@ -501,8 +500,7 @@ def stick_diagram(d: GearboxDescription) -> StickDiagram:
     bottom = min(levels.values()) - 0.9
     for k, e in enumerate(d.shift_elements):
         x = xe + 1.3 * k
-        if e.kind == "clutch":
-            assert e.a is not None
+        if e.a is not None:  # a clutch or a one-way clutch between two shafts
             ya, yb = levels[e.a], levels[e.b]
             ym = (ya + yb) / 2
             lo, hi = sorted((ya, yb))

@@ -102,7 +102,7 @@ def _draw_levers(
         color = _CLOSED if e.name in closed else (_OPEN if plan is not None else "0.25")
         lw = 2.0 if e.name in closed else 1.0
         (x0, y0), (x1, y1) = e.start, e.end
-        if e.kind == "clutch":
+        if len(e.shafts) == 2:  # a clutch or a one-way clutch between two shafts
             ax.plot([x0, x1], [y0, y1], color=color, lw=lw, zorder=2)
             # two plates across the line at its middle
             mx, my = (x0 + x1) / 2, (y0 + y1) / 2

@@ -188,6 +188,8 @@ def load_scenario(d: GearboxDescription, path: str | Path | None = None) -> Scen
             raise fail(
                 key, f"unknown shift element {shown(name)} (known: {', '.join(element_names)})"
             )
+        if d.element(name).one_way:
+            raise fail(key, f"{name} is a one-way clutch: it is not pressed, it locks by itself")
         if not isinstance(entry, dict) or entry.get("unit") != "Pa":
             raise fail(f"{key}.unit", "expected unit = 'Pa'")
         only(entry, key, ("unit", "time", "value"))

@@ -208,13 +208,20 @@ class _Compiled:
     and (5.3) treat it as an input, and a scenario may give ζ(t) (``[grade]``); without one
     :class:`_Inputs` feeds the description's constant."""
 
-    def __init__(self, ref: ReferenceModel, d: GearboxDescription, elements: Sequence[str]):
+    def __init__(
+        self,
+        ref: ReferenceModel,
+        d: GearboxDescription,
+        elements: Sequence[str],
+        one_way: Sequence[str] = (),
+    ):
         import casadi as ca
 
         model = ref.model
         defaults = model.parameter_defaults()
         self.n = len(model.states)
-        self.elements = tuple(elements)
+        self.elements = tuple(elements)  # pressed friction elements: a pressure and a μ input
+        self.one_way = tuple(one_way)  # one-way clutches: a wind-up state, no input
         self.x = ca.SX.sym("x", self.n)
         self.u = ca.SX.sym("u", len(model.inputs) + 1)  # + ζ
         mapping: dict[Any, Any] = {s: self.x[i] for i, s in enumerate(model.state_symbols)}
@@ -244,7 +251,8 @@ class _Compiled:
         all_slip = _all_slips(d, ref)
         self.all_slips = x_only("all_slips", list(all_slip.values()))
         self.all_slip_names = tuple(all_slip)
-        self.torques = xu("torques", [ref.element_torque[e] for e in self.elements])
+        self.torque_names = self.elements + self.one_way
+        self.torques = xu("torques", [ref.element_torque[e] for e in self.torque_names])
         self.speeds = x_only("speeds", [ref.body_speeds[s.name] for s in d.shafts])
         self.shaft_names = tuple(s.name for s in d.shafts)
         self.energies = x_only(
@@ -414,6 +422,7 @@ def simulate(
     check_models: bool = True,
     method: str = "cvodes",
     analytic_jacobian: bool = True,
+    phases: bool = True,
 ) -> SimulationResult:
     """Integrate the reference model through the scenario (thesis 3.1).
 
@@ -423,6 +432,12 @@ def simulate(
     ``sample_time`` is the spacing of the returned time series; between samples the state is a
     cubic Hermite interpolant (values and derivatives at the samples). ``analytic_jacobian``
     False lets SciPy difference the right-hand side instead (SciPy methods only).
+    ``phases`` False skips the phase detection and the model checks (a scenario that holds its
+    from-gear, e.g. a one-way clutch in drive or coast).
+
+    Every one-way clutch of the description is in the model (it needs no pressure): the
+    unilateral spring-damper of :func:`gearsym.symbolic.friction.one_way_sym`, starting
+    unwound (z = 0); its wind-up energy is part of the bristle energy of the audit.
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
@@ -437,11 +452,14 @@ def simulate(
         )
     report = progress or (lambda fraction, message: None)
     elements = tuple(
-        e.name for e in d.shift_elements if float(np.max(scenario.pressure[e.name].value)) > 0
+        e.name
+        for e in d.shift_elements
+        if not e.one_way and float(np.max(scenario.pressure[e.name].value)) > 0
     )
+    one_way = tuple(e.name for e in d.shift_elements if e.one_way)
     report(0.0, "deriving the reference model")
-    ref = reference_model(d, elements)
-    compiled = _Compiled(ref, d, elements)
+    ref = reference_model(d, elements + one_way)
+    compiled = _Compiled(ref, d, elements, one_way)
     t_oil = quantity(d, "friction", "T_oil").value
     inputs = _Inputs(scenario, elements, load_mu_map(d), t_oil, compiled)
     x0 = quasi_static_state(d, ref, inputs, compiled)
@@ -468,16 +486,16 @@ def simulate(
 
     signals = _signals(d, grid, states, names, inputs, compiled, scenario)
     audit = _audit(states, x0, compiled)
-    phases = detect_phases(d, scenario, grid, signals)
+    found = detect_phases(d, scenario, grid, signals) if phases else ()
     checks: tuple[ModelCheck, ...] = ()
-    if check_models:
+    if check_models and phases:
         report(1.0, "checking the reduced models phase by phase")
-        checks = check_reduced_models(d, scenario, phases, names, grid, states, signals, compiled)
+        checks = check_reduced_models(d, scenario, found, names, grid, states, signals, compiled)
     stats["wall_time_s"] = time.perf_counter() - start
     return SimulationResult(
         t=grid,
         signals=signals,
-        phases=phases,
+        phases=found,
         audit=audit,
         checks=checks,
         scenario=scenario,
@@ -672,10 +690,13 @@ def _signals(
         put(naming.normal_force(short[e]), u[:, 1 + k] * area.value)
         put(naming.friction_coefficient(short[e]), u[:, 1 + ne + k])
         put(naming.bristle(e), x[:, index[naming.bristle(e)]])
+    for e in compiled.one_way:
+        put(naming.bristle(e), x[:, index[naming.bristle(e)]])
     slips = compiled.all_slips.many(x)
     for k, e in enumerate(compiled.all_slip_names):
         put(naming.slip_column(e.name), slips[:, k])
-        position = compiled.elements.index(e.name) if e.name in compiled.elements else None
+        carried = compiled.torque_names
+        position = carried.index(e.name) if e.name in carried else None
         zero = np.zeros(len(grid))
         put(naming.torque(e.name), torques[:, position] if position is not None else zero)
     t_ss = compiled.side_shaft.many(x)[:, 0]
