@@ -125,10 +125,25 @@ def test_c_and_casadi_equal_sympy_at_random_parameters(emitted, tmp_path):
         assert r.ok(tolerance), str(r)
 
 
-def test_parameters_are_those_a_and_b_use(emitted):
+def test_parameters_are_the_drivetrain_ones(emitted):
+    """(2.42)-(2.53) linearised: the gearbox inertias are numbers, so A and B depend on the
+    vehicle mass (wheel row, 2.49), the side-shaft stiffness and damping (2.47) and the wheel
+    inertia only; rolling and air resistance went into T_res* (5.2), ζ is an input (5.3)."""
     for e in emitted.values():
-        used = set()
-        for x in e.set.systems:
-            used |= {str(s) for s in x.A.free_symbols | x.B.free_symbols}
-        assert {v.name for v in e.set.parameters} == used
-        assert "m_veh" in used and "k_ss" in used  # the wheel row and the twist (2.47)
+        assert [v.name for v in e.set.parameters] == ["m_veh", "k_ss", "d_ss", "I_wheel"]
+
+
+def test_a_set_that_cannot_be_emitted_is_refused(emitted):
+    from dataclasses import replace
+
+    import sympy as sp
+    from gearsym.symbolic.codegen.linear import linear_table
+
+    good = emitted["linear_2_3"].set
+    system = good.systems[0]
+    bad_name = replace(good, systems=(replace(system, name="2x"),))
+    with pytest.raises(ValueError, match="'2x' is not a C identifier"):
+        linear_table(bad_name)
+    stray = replace(good, systems=(replace(system, A=system.A + sp.Symbol("q") * sp.eye(3)),))
+    with pytest.raises(ValueError, match="non-parameters \\['q'\\]"):
+        linear_table(stray)

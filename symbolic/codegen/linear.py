@@ -11,6 +11,7 @@ inertias). :func:`emit_linear_files` prints ``gearsym_<set>.{h,c}`` and
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import sympy as sp
@@ -27,7 +28,6 @@ from gearsym.symbolic.codegen.table import (
     FunctionSpec,
     FunctionTable,
     Output,
-    _check_names,
     _normalise_bounds,
     real_symbols,
 )
@@ -81,7 +81,15 @@ class LinearSystemSet:
 
 
 def _check(s: LinearSystemSet) -> None:
+    """The names a set's files are made of are C identifiers, each system fits its sizes and
+    uses parameters only."""
     problems = []
+    if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", s.name):
+        problems.append(f"set name {s.name!r} must match [A-Za-z][A-Za-z0-9_]*")
+    for v in s.parameters:
+        problem = c_identifier_problem(v.name)
+        if problem:
+            problems.append(f"parameter {v.name!r} {problem}")
     names = [system.name for system in s.systems]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
@@ -109,7 +117,6 @@ def linear_table(s: LinearSystemSet, config: CodegenConfig | None = None) -> Fun
     system, ``<system>(p, A, B)``."""
     config = as_config(config)
     model = s.as_model()
-    _check_names(_with_dummy_state(model))
     _check(s)
     bounds = _normalise_bounds(model, config.bounds)
     real = real_symbols(model)
@@ -173,21 +180,6 @@ def linear_table(s: LinearSystemSet, config: CodegenConfig | None = None) -> Fun
         parameters=ps,
         bounds=bounds,
         functions=tuple(functions),
-    )
-
-
-def _with_dummy_state(model: Model) -> Model:
-    """``model`` with one state, so that the name checks of a model apply to a stateless set."""
-    x = sp.Symbol("x_")
-    return Model(
-        model.name,
-        (Variable("x_", x, "1"),),
-        model.inputs,
-        model.parameters,
-        model.outputs,
-        sp.Matrix([0]),
-        model.output_expressions,
-        model.metadata,
     )
 
 
