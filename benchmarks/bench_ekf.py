@@ -33,10 +33,13 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 from ekf_peers import (
     C_IMPLEMENTATIONS,
+    Build,
     FilterPyPeer,
+    Sequence,
     build_driver,
     c_values,
     casadi_step,
@@ -60,7 +63,9 @@ AGREE_FLOAT = 5e-4  # 150 steps of float rounding (measured about 5e-5)
 STEP_FUNCTIONS = ("ekf_predict", "ekf_update", "rhs", "jac_x", "outputs", "jac_outputs")
 
 
-def check_agreement(seq, build, cas_step, filterpy) -> dict[str, float]:
+def check_agreement(
+    seq: Sequence, build: Build, cas_step: Any, peer: FilterPyPeer
+) -> dict[str, float]:
     """Largest scaled difference of each implementation from the emitted C in double."""
     values = c_values(build)
     ref = values["gearsym_double"]
@@ -72,7 +77,7 @@ def check_agreement(seq, build, cas_step, filterpy) -> dict[str, float]:
     for impl in ("gearsym_float", "casadi_c_double", "casadi_c_float"):
         diffs[impl] = scaled_difference(*values[impl], *ref)
     diffs["casadi_python"] = scaled_difference(*run_casadi(cas_step, seq), *ref)
-    diffs["filterpy"] = scaled_difference(*filterpy.run(), *ref)
+    diffs["filterpy"] = scaled_difference(*peer.run(), *ref)
     for impl, diff in diffs.items():
         limit = AGREE_FLOAT if impl.endswith("float") else AGREE_DOUBLE
         if not diff < limit:
@@ -80,7 +85,7 @@ def check_agreement(seq, build, cas_step, filterpy) -> dict[str, float]:
     return diffs
 
 
-def time_c(build, rounds: int) -> dict[str, list[float]]:
+def time_c(build: Build, rounds: int) -> dict[str, list[float]]:
     times: dict[str, list[float]] = {name: [] for name in C_IMPLEMENTATIONS}
     for line in run_cmd([str(build.exe), "time", str(rounds), str(PASSES)]).splitlines():
         fields = line.split()
@@ -89,7 +94,9 @@ def time_c(build, rounds: int) -> dict[str, list[float]]:
     return times
 
 
-def time_python(seq, cas_step, filterpy, rounds: int) -> dict[str, list[float]]:
+def time_python(
+    seq: Sequence, cas_step: Any, peer: FilterPyPeer, rounds: int
+) -> dict[str, list[float]]:
     u, y, p, h, q, r, fl = seq.u, seq.y, seq.p, seq.h, seq.q, seq.r, seq.floor
 
     def casadi_pass() -> float:
@@ -100,10 +107,10 @@ def time_python(seq, cas_step, filterpy, rounds: int) -> dict[str, list[float]]:
         return time.perf_counter() - start
 
     def filterpy_pass() -> float:
-        filterpy.reset()
+        peer.reset()
         start = time.perf_counter()
         for k in range(1, len(u)):
-            filterpy.step(k)
+            peer.step(k)
         return time.perf_counter() - start
 
     runners = {"CasADi from Python": casadi_pass, "FilterPy (NumPy, lambdified)": filterpy_pass}
@@ -118,7 +125,7 @@ def time_python(seq, cas_step, filterpy, rounds: int) -> dict[str, list[float]]:
     return times
 
 
-def code_sizes(build) -> str:
+def code_sizes(build: Build) -> str:
     """``size`` .text of each object; for gearsym also the functions a step runs."""
     parts = []
     for name, obj in build.objects.items():

@@ -294,7 +294,7 @@ def casadi_c(step: Any, out: Path, real: str) -> Path:
 # The C driver
 # ---------------------------------------------------------------------------------------------
 
-#: (label, C function that runs `passes` passes over the sequence) in the driver.
+#: The C implementations in the order of the driver's RUN table (its `T which ...` lines).
 C_IMPLEMENTATIONS = ("gearsym double", "gearsym float", "CasADi C double", "CasADi C float")
 
 
