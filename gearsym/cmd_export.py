@@ -120,6 +120,8 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
 
 def cmd_export_measurement(args: argparse.Namespace) -> int:
     """Simulate the scenario, sample its mapped channels with speed noise, write atomically."""
+    from pathlib import Path
+
     from gearsym.symbolic.output_dir import OutputFile
 
     noise = args.noise.split(",")
@@ -162,10 +164,10 @@ def cmd_export_measurement(args: argparse.Namespace) -> int:
 
         result = simulate_with_progress(d, scenario)
         t, values = synthetic_recording(result, cmap, relative, args.seed)
+        source = Path(args.scenario).name if args.scenario else "built-in"
         comment = (
-            f"gearsym export-measurement: reference simulation of {scenario.name} "
-            f"({args.scenario or 'built-in'}), speed noise r = {args.noise} (3.26), "
-            f"seed {args.seed}"
+            f"gearsym export-measurement: reference simulation of {scenario.name} ({source}), "
+            f"speed noise r = {args.noise} (3.26), seed {args.seed}"
         )
         out.commit(recording_bytes(cmap, t, values, out.target.suffix, comment))
     channels = ", ".join(f"{c.signal} as {c.name!r} [{c.unit}]" for c in cmap.channels)

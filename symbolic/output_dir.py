@@ -23,7 +23,8 @@ same rules for a single file. A lone file has no ``MANIFEST`` beside it, so it c
 proof of origin: a signature that holds the SHA-256 of the rest of the file (an SVG: a closing
 XML comment; a PNG: a ``tEXt`` chunk before ``IEND``; an FMU, a zip archive: the archive
 comment, which every zip reader skips; an A2L file: a closing ``/* ... */`` comment, which
-every ASAP2 reader skips).
+every ASAP2 reader skips; a recording of ``gearsym export-measurement``, MDF4 or CSV: a
+closing ``# gearsym ...`` line, after the last MDF4 block, a comment line to a CSV reader).
 ``FILE`` is replaced only if it does not exist or its signature matches its content: a user's
 file, or a gearsym picture edited since, is refused. The file is written next to ``FILE``
 (``.FILE.gearsym-staging-*``) and renamed over it in one atomic step, under the same lock.
