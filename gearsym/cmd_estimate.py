@@ -325,13 +325,13 @@ def _cmd_measured(args: argparse.Namespace, d: Any, scenario: Any) -> int:
         ("--runs", args.runs != 1),
         ("--initial-from-prior", args.initial_from_prior),
         ("--sample-time", args.sample_time is not None),
+        ("--seed", args.seed != 0),
     ):
         if given:
-            reason = (
-                "the recording's grid is the channel map's sample_time"
-                if option == "--sample-time"
-                else "needs a truth and noise seeds; a recording has neither"
-            )
+            reason = {
+                "--sample-time": "the recording's grid is the channel map's sample_time",
+                "--seed": "a recording carries its own noise, none is drawn",
+            }.get(option, "needs a truth and noise seeds; a recording has neither")
             raise GearsymError("estimate", option, f"is not available with --measurement: {reason}")
     if scenario.measurement is None:
         raise GearsymError(

@@ -249,7 +249,6 @@ def test_ekf_on_the_recording_reproduces_the_synthetic_run_of_the_same_seed(tmp_
     for name, p in a["parameters"].items():
         q = b["parameters"][name]
         assert abs(p["estimate"] - q["estimate"]) < 0.02 * q["sigma"], (name, p, q)
-    # the trajectories, sample by sample (the CSV of --out against the library's synthetic run)
     lo, hi = a["nis_band"]
     assert lo <= a["nis_mean"] <= hi  # the filter is consistent with the recording
     assert (tmp_path / "ekf" / "ekf.json").exists()
@@ -449,7 +448,58 @@ def test_measurement_options_are_checked(tmp_path):
         )
     )
     assert "--runs" in line and "truth" in line
+    line = one_line_error(
+        gearsym_cli(
+            "estimate",
+            "--filter",
+            "ekf",
+            "--measurement",
+            str(EXAMPLE),
+            "--seed",
+            "4",
+            "--scenario",
+            str(SCENARIO),
+        )
+    )
+    assert "--seed" in line and "own noise" in line
     line = one_line_error(gearsym_cli("estimate", "--filter", "ekf", "--measurement", str(EXAMPLE)))
     assert "measurement" in line and "missing table [measurement]" in line
     line = one_line_error(gearsym_cli("export-measurement", "--out", str(tmp_path / "x.mf4")))
     assert "missing table [measurement]" in line and not (tmp_path / "x.mf4").exists()
+
+
+def test_fim_along_the_recorded_inputs_is_the_scenarios(tmp_path):
+    """The example records the scenario's inputs on the 10 ms grid, where every breakpoint of
+    its profiles lies: linear between the samples they are the same inputs (to float32), so
+    the FIM along them (a second path: MDF4 -> reader -> resampled profiles) is the
+    scenario's, per phase, within 1e-4 of each matrix's largest entry."""
+    args = ("fim", "--scenario", str(SCENARIO), "--json")
+    a = gearsym_cli(*args)
+    b = gearsym_cli(*args, "--measurement", str(EXAMPLE))
+    assert a.returncode == 0 and b.returncode == 0, a.stderr + b.stderr
+    assert "inputs along the recording" in b.stderr
+    wa, wb = json.loads(a.stdout)["windows"], json.loads(b.stdout)["windows"]
+    assert [w["name"] for w in wa] == [w["name"] for w in wb]
+    for x, y in zip(wa, wb, strict=True):
+        fa, fb = np.array(x["fim"]), np.array(y["fim"])
+        assert np.max(np.abs(fa - fb)) <= 1e-4 * np.max(np.abs(fa)), x["name"]
+    line = one_line_error(gearsym_cli("fim", "--measurement", str(EXAMPLE)))
+    assert "--measurement" in line and "needs --scenario" in line
+
+
+def test_sensitivities_along_the_recorded_inputs_are_the_scenarios(tmp_path):
+    """As the FIM above: the sensitivities (3.7) along the recorded inputs are the scenario's,
+    per column within 1e-3 of its largest value."""
+    common = ("sensitivity", "--scenario", str(SCENARIO), "--no-plots", "--out")
+    a = gearsym_cli(*common, str(tmp_path / "a"))
+    b = gearsym_cli(*common, str(tmp_path / "b"), "--measurement", str(EXAMPLE))
+    assert a.returncode == 0 and b.returncode == 0, a.stderr + b.stderr
+    sa = np.genfromtxt(tmp_path / "a" / "sensitivities.csv", delimiter=",", names=True)
+    sb = np.genfromtxt(tmp_path / "b" / "sensitivities.csv", delimiter=",", names=True)
+    assert sa.dtype.names == sb.dtype.names
+    # the record's grid holds the breakpoints too: the scenario's 0.57 s is one more sample
+    for name in sa.dtype.names[2:]:  # after t and phase
+        scale = np.nanmax(np.abs(sa[name]))
+        on_a = np.interp(sa["t"], sb["t"], sb[name])
+        if scale > 0:
+            assert np.nanmax(np.abs(sa[name] - on_a)) <= 1e-3 * scale, name
