@@ -97,10 +97,14 @@ def test_gain_and_offset_apply_in_the_recording_unit():
 # ----------------------------------------------------------------------------- CSV reader
 
 
-def _channel_map(box, text: str) -> M.ChannelMap:
+def _toml(text: str) -> dict:
     import tomllib
 
-    return M.parse_channel_map(box, "bench.toml", tomllib.loads(text)["measurement"])
+    return tomllib.loads(text)["measurement"]
+
+
+def _channel_map(box, text: str) -> M.ChannelMap:
+    return M.parse_channel_map(box, "bench.toml", _toml(text), 1.0)
 
 
 CSV_MAP = """
@@ -130,6 +134,14 @@ def test_csv_reader_converts_shifts_and_interpolates_linearly(box, tmp_path):
     np.testing.assert_allclose(m.values["omega_1"], rpm * math.pi / 30, rtol=1e-12)
     np.testing.assert_allclose(m.values["p_K38"], [10e5, 11e5, 12e5, 6e5, 0.0], atol=1e-3)
     assert m.inputs == ["p_K38"] and m.outputs == ["omega_1"]
+
+
+def test_a_grid_of_more_than_5000_samples_is_refused(box):
+    text = CSV_MAP.replace("sample_time = 0.01", "sample_time = 0.001")
+    assert M.parse_channel_map(box, "bench.toml", _toml(text), 4.0).sample_time == 0.001
+    with pytest.raises(GearsymError) as err:  # 10 s at 1 ms: 10 001 restarts of the integrator
+        M.parse_channel_map(box, "bench.toml", _toml(text), 10.0)
+    assert err.value.key == "measurement.sample_time" and "more than 5000" in err.value.reason
 
 
 def test_nan_speed_is_kept_as_a_dropout_but_a_nan_input_is_refused(box, tmp_path):
@@ -325,7 +337,7 @@ GOOD_ROW = "{t},1900,600,240,150,15,15,0,15"
     ("old", "new", "key", "words"),
     [
         ('unit = "rpm" }\nomega_2', 'unit = "U/min" }\nomega_2', "channel.omega_1.unit", "U/min"),
-        ("sample_time = 0.01 ", "sample_time = 0.0001 ", "measurement.sample_time", "at least"),
+        ("sample_time = 0.01 ", "sample_time = 0.0002 ", "measurement.sample_time", "at least"),
         ('resample = "linear"', 'resample = "zoh"', "measurement.resample", "only 'linear'"),
         ("omega_C = {", "omega_X = {", "measurement.channel.omega_X", "unknown signal"),
         ('time_unit = "s"', 'time_unit = "min"', "measurement.time_unit", "'s' or 'ms'"),

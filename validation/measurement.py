@@ -60,6 +60,10 @@ __all__ = [
     "with_measured_inputs",
 ]
 
+#: Most samples of the analysis grid: each is a breakpoint of the recorded inputs where the
+#: integrator restarts (1501 samples, 1 ms over the 1.5 s example, simulated in 15 s).
+GRID_SAMPLES_MAX = 5000
+
 #: Largest recording read (bytes): a one-shift bench file at 1 kHz with 50 channels is ~10 MB.
 RECORDING_BYTES_MAX = 256 << 20
 
@@ -184,8 +188,9 @@ def _quantity(d: GearboxDescription, signal: str) -> str | None:
     return "pressure" if signal in pressed else None
 
 
-def parse_channel_map(d: GearboxDescription, file: str, table: object) -> ChannelMap:
-    """Check the scenario's ``[measurement]`` table (module docstring) against ``d``."""
+def parse_channel_map(d: GearboxDescription, file: str, table: object, t_end: float) -> ChannelMap:
+    """Check the scenario's ``[measurement]`` table (module docstring) against ``d`` and the
+    scenario's ``t_end``."""
 
     def fail(key: str, reason: str) -> GearsymError:
         return GearsymError(file, key, reason)
@@ -204,6 +209,12 @@ def parse_channel_map(d: GearboxDescription, file: str, table: object) -> Channe
             "measurement.sample_time",
             f"must be at least {RECORD_SAMPLE_TIME:g} s (the simulated record's spacing), "
             f"got {sample_time:g}",
+        )
+    if t_end / sample_time + 1 > GRID_SAMPLES_MAX:
+        raise fail(
+            "measurement.sample_time",
+            f"{t_end:g} s at {sample_time:g} s is more than {GRID_SAMPLES_MAX} grid samples (each "
+            "one a breakpoint of the recorded inputs, where the integrator restarts)",
         )
     resample = table.get("resample", RESAMPLE)
     if resample != RESAMPLE:
@@ -399,7 +410,12 @@ def _read_mdf(
                 raise GearsymError(
                     file, key, f"no channel {channel.name!r} in the recording ({_few(known)})"
                 )
-            signal = mdf.get(channel.name, raw=False)
+            try:
+                signal = mdf.get(channel.name, raw=False)
+            except Exception as err:  # e.g. the name in several channel groups
+                raise GearsymError(
+                    file, key, f"cannot read channel {channel.name!r}: {err}"
+                ) from None
             unit = (signal.unit or "").strip()
             if unit and unit != channel.unit:
                 raise GearsymError(

@@ -233,7 +233,7 @@ def load_scenario(d: GearboxDescription, path: str | Path | None = None) -> Scen
         grade = Profile(t, values)
     channel_map = None
     if "measurement" in data:
-        channel_map = parse_channel_map(d, file, data["measurement"])
+        channel_map = parse_channel_map(d, file, data["measurement"], t_end)
     return Scenario(
         name=title if title is not None else spec.name,
         file=file,
