@@ -515,3 +515,84 @@ def test_sensitivities_along_the_recorded_inputs_are_the_scenarios(tmp_path):
         on_a = np.interp(sa["t"], sb["t"], sb[name])
         if scale > 0:
             assert np.nanmax(np.abs(sa[name] - on_a)) <= 1e-3 * scale, name
+
+
+def test_hostile_channel_maps_fail_with_one_error_type(box):
+    """Any value in any place of the [measurement] table: a ChannelMap or a GearsymError."""
+    import tomllib
+
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    base = tomllib.loads(SCENARIO.read_text())["measurement"]
+    values = st.one_of(
+        st.none(),
+        st.booleans(),
+        st.integers(-(10**20), 10**20),
+        st.floats(allow_nan=True, allow_infinity=True),
+        st.text(max_size=8),
+        st.lists(st.integers(), max_size=3),
+        st.dictionaries(st.text(max_size=5), st.integers(), max_size=3),
+    )
+    places = [
+        ("sample_time",),
+        ("resample",),
+        ("time_channel",),
+        ("time_unit",),
+        ("time_offset",),
+        ("channel",),
+        ("channel", "omega_1"),
+        ("channel", "omega_1", "name"),
+        ("channel", "omega_1", "unit"),
+        ("channel", "p_K38", "gain"),
+        ("channel", "p_K38", "offset"),
+        ("channel", "p_K38", "extra"),
+    ]
+
+    @settings(max_examples=300, deadline=None, database=None, derandomize=True)
+    @given(st.sampled_from(places), values, st.floats(1e-3, 10.0))
+    def check(place, value, t_end):
+        import copy
+
+        table = copy.deepcopy(base)
+        node = table
+        for key in place[:-1]:
+            node = node[key]
+        node[place[-1]] = value
+        try:
+            cmap = M.parse_channel_map(box, "bench.toml", table, t_end)
+        except GearsymError as err:
+            assert err.key.startswith("measurement") and "\n" not in str(err)
+        else:
+            assert cmap.sample_time >= 5e-4 and all(c.gain != 0 for c in cmap.channels)
+
+    check()
+
+
+def test_hostile_csv_recordings_fail_with_one_error_type(box, tmp_path):
+    """Any cell text in a CSV recording: a Measurement (NaN only in speeds) or a GearsymError."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    cmap = _channel_map(box, CSV_MAP)
+    cells = st.one_of(
+        st.sampled_from(["", "nan", "inf", "-inf", "1e400", "0", "600", "-5", "x", "1,2"]),
+        st.floats(allow_nan=False, allow_infinity=False, width=32).map(repr),
+    )
+    times = st.sampled_from(["5000", "5010", "5020", "5040", "4990", "", "nan", "5e3"])
+    row = st.tuples(times, cells, cells)
+
+    @settings(max_examples=200, deadline=None, database=None, derandomize=True)
+    @given(st.lists(row, max_size=6))
+    def check(rows):
+        path = tmp_path / "fuzz.csv"
+        path.write_text("t_ms,n_in,p38\n" + "".join(f"{a},{b},{c}\n" for a, b, c in rows))
+        try:
+            m = M.read_measurement(path, cmap, t_end=0.03)
+        except GearsymError as err:
+            assert "\n" not in str(err)
+        else:
+            assert np.all(np.isfinite(m.values["p_K38"])) and np.all(m.values["p_K38"] >= 0)
+            assert not np.any(np.isinf(m.values["omega_1"]))
+
+    check()

@@ -225,7 +225,7 @@ def parse_channel_map(d: GearboxDescription, file: str, table: object, t_end: fl
     if not isinstance(time_channel, str) or not time_channel:
         raise fail("measurement.time_channel", f"expected a column name, got {shown(time_channel)}")
     time_unit = table.get("time_unit", "s")
-    if time_unit not in ("s", "ms"):
+    if not isinstance(time_unit, str) or time_unit not in ("s", "ms"):
         raise fail("measurement.time_unit", f"expected 's' or 'ms', got {shown(time_unit)}")
     time_offset = _number(fail, "measurement.time_offset", table.get("time_offset", 0.0))
     entries = table.get("channel")
@@ -255,7 +255,7 @@ def parse_channel_map(d: GearboxDescription, file: str, table: object, t_end: fl
         if not isinstance(name, str) or not name:
             raise fail(f"{key}.name", f"expected the channel's name, got {shown(name)}")
         unit = entry.get("unit")
-        if unit not in UNITS[quantity]:
+        if not isinstance(unit, str) or unit not in UNITS[quantity]:
             raise fail(
                 f"{key}.unit",
                 f"unknown unit {shown(unit)} for a {quantity} (known: "
@@ -365,6 +365,14 @@ def read_measurement(path: str | Path, channel_map: ChannelMap, t_end: float) ->
                 f"{channel_map.time_offset:g} s)",
             )
         si = channel.to_si(v)
+        if np.any(np.isinf(si)):
+            first = int(np.argmax(np.isinf(si)))
+            raise GearsymError(
+                file,
+                key,
+                f"channel {channel.name!r} is infinite at t = {t[first]:g} s (after its gain, "
+                "offset and unit)",
+            )
         if channel.is_input and not np.all(np.isfinite(si)):
             first = int(np.argmax(~np.isfinite(si)))
             raise GearsymError(
