@@ -596,3 +596,16 @@ def test_hostile_csv_recordings_fail_with_one_error_type(box, tmp_path):
             assert not np.any(np.isinf(m.values["omega_1"]))
 
     check()
+
+
+def test_notebook_api_simulates_along_a_recording():
+    import gearsym
+
+    box = gearsym.load()
+    recording = box.measurement(EXAMPLE, SCENARIO)
+    result = box.simulate(SCENARIO, measurement=recording, check_models=False)
+    residuals = M.compare_outputs(result, recording)
+    # the 1 % speed noise (3.26) of the example, as through the command line
+    assert all(0.008 < r["relative_rms_residual"] < 0.012 for r in residuals.values())
+    with pytest.raises(GearsymError, match="missing table"):
+        box.measurement(EXAMPLE, None)
