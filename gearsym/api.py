@@ -79,14 +79,37 @@ class Gearbox:
 
         return load_scenario(self.description, path)
 
-    def simulate(self, scenario: Any = None, **options: Any) -> Any:
+    def measurement(self, recording: str | Path, scenario: Any) -> Any:
+        """A bench recording (MDF4 or CSV) read with the ``[measurement]`` channel map of
+        ``scenario`` (a path, a loaded scenario, or None: the built-in one, which has no map),
+        in SI units on the analysis grid
+        (:func:`gearsym.validation.measurement.read_measurement`)."""
+        from gearsym.symbolic.errors import GearsymError
+        from gearsym.validation.measurement import read_measurement
+
+        if scenario is None or isinstance(scenario, str | Path):
+            scenario = self.scenario(scenario)
+        if scenario.measurement is None:
+            raise GearsymError(
+                scenario.file, "measurement", "missing table [measurement] (the channel map)"
+            )
+        return read_measurement(recording, scenario.measurement, scenario.t_end)
+
+    def simulate(self, scenario: Any = None, measurement: Any = None, **options: Any) -> Any:
         """Reference simulation (thesis 3.1): ``scenario`` a path or a loaded scenario;
-        ``options`` go to :func:`gearsym.validation.simulate.simulate` (``method``, ``rtol``,
-        ``sample_time``, ``check_models``, ``progress``)."""
+        ``measurement`` a recording (path, or from :meth:`measurement`) whose inputs drive
+        it; ``options`` go to :func:`gearsym.validation.simulate.simulate` (``method``,
+        ``rtol``, ``sample_time``, ``check_models``, ``progress``)."""
         from gearsym.validation.simulate import simulate
 
         if scenario is None or isinstance(scenario, str | Path):
             scenario = self.scenario(scenario)
+        if measurement is not None:
+            from gearsym.validation.measurement import with_measured_inputs
+
+            if isinstance(measurement, str | Path):
+                measurement = self.measurement(measurement, scenario)
+            scenario = with_measured_inputs(scenario, measurement)
         return simulate(self.description, scenario, **options)
 
     def sensitivities(

@@ -59,7 +59,9 @@ def _prepare(args: argparse.Namespace, wheel: bool) -> tuple[Any, list[str] | No
     if args.scenario is not None:
         from gearsym.validation.scenario import load_scenario
 
-        scenario = load_scenario(d, args.scenario)
+        scenario = _measured(args, d, load_scenario(d, args.scenario))
+    elif args.measurement is not None:
+        raise GearsymError("command line", "--measurement", "needs --scenario (its channel map)")
     shift = scenario.shift.name if scenario is not None else "2-3"
     driven = driven_shift_model(d, shift, wheel)
     if names is None:
@@ -67,6 +69,33 @@ def _prepare(args: argparse.Namespace, wheel: bool) -> tuple[Any, list[str] | No
     select_parameters(driven.model, names, file=d.file)
     parameter_values(driven.model, overrides)
     return d, names, overrides, scenario
+
+
+def _measured(args: argparse.Namespace, d: Any, scenario: Any) -> Any:
+    """``--measurement FILE``: the scenario with the recording's inputs (its ``[measurement]``
+    map; :func:`gearsym.validation.measurement.with_measured_inputs`); the recorded speeds are
+    not used (the Fisher information needs the noise model (3.26), not the data)."""
+    if args.measurement is None:
+        return scenario
+    from gearsym.validation.measurement import (
+        RESAMPLE_TEXT,
+        input_sources,
+        read_measurement,
+        with_measured_inputs,
+    )
+
+    if scenario.measurement is None:
+        raise GearsymError(
+            scenario.file, "measurement", "missing table [measurement] (the channel map)"
+        )
+    measurement = read_measurement(args.measurement, scenario.measurement, scenario.t_end)
+    sources = input_sources(scenario, measurement)
+    recorded = [name for name, where in sources.items() if where == "recording"]
+    progress(
+        f"inputs along the recording {measurement.file}: {', '.join(recorded) or 'none'} "
+        f"({RESAMPLE_TEXT}); the others from the scenario"
+    )
+    return with_measured_inputs(scenario, measurement)
 
 
 def _reference(d: Any, scenario: Any) -> Any:
@@ -244,7 +273,9 @@ def _hybrid_fim(args: argparse.Namespace) -> int:
     twice = sorted({n for n in given or () if given.count(n) > 1})
     if twice:  # before the slow derivation
         raise GearsymError(d.file, "params", f"parameter given twice: {', '.join(twice)}")
-    scenario = load_scenario(d, args.scenario)
+    if args.measurement is not None and args.scenario is None:
+        raise GearsymError("command line", "--measurement", "needs --scenario (its channel map)")
+    scenario = _measured(args, d, load_scenario(d, args.scenario))
     with contextlib.ExitStack() as stack:
         out = (
             stack.enter_context(OutputDir(args.out, "fim", before_commit=check))
@@ -385,6 +416,12 @@ def _common(p: argparse.ArgumentParser) -> None:
         help=f"parameters, comma or space separated (default: {','.join(DEFAULT_PARAMETERS)})",
     )
     p.add_argument("--scenario", help="scenario TOML (default: the built-in 2-3 upshift)")
+    p.add_argument(
+        "--measurement",
+        metavar="FILE",
+        help="along a bench recording's inputs (MDF4 .mf4 or CSV, mapped by the scenario's "
+        "[measurement] table; inputs it lacks stay the scenario's)",
+    )
     p.add_argument(
         "--sliding",
         choices=SLIDING_MODES,

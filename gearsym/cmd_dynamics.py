@@ -195,16 +195,76 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
     d = load(args.config)
     scenario = load_scenario(d, args.scenario)
+    measurement = None
+    if args.measurement is not None:
+        from gearsym.validation.measurement import read_measurement
+
+        if scenario.measurement is None:
+            from gearsym.symbolic.errors import GearsymError
+
+            raise GearsymError(
+                scenario.file, "measurement", "missing table [measurement] (the channel map)"
+            )
+        measurement = read_measurement(args.measurement, scenario.measurement, scenario.t_end)
     with OutputDir(args.out, "simulate", before_commit=check) as out:
-        result = simulate_with_progress(d, scenario)
+        comparison: dict[str, Any] = {}
+        if measurement is not None:
+            from gearsym.validation.measurement import (
+                RESAMPLE_TEXT,
+                compare_outputs,
+                input_sources,
+                plot_comparison,
+                with_measured_inputs,
+                write_comparison_csv,
+            )
+
+            result = simulate_with_progress(d, with_measured_inputs(scenario, measurement))
+            comparison = {
+                "measurement": measurement.to_dict(),
+                "input_sources": input_sources(scenario, measurement),
+                "resample": RESAMPLE_TEXT,
+                "residuals": compare_outputs(result, measurement),
+            }
+        else:
+            result = simulate_with_progress(d, scenario)
         write_results(d, result, out.path, plots=not args.no_plots, speed_unit=args.speed_unit)
+        if measurement is not None:
+            import json
+
+            write_comparison_csv(result, measurement, out.path / "measured.csv")
+            (out.path / "measured.json").write_text(json.dumps(comparison, indent=2) + "\n")
+            if not args.no_plots:
+                plot_comparison(result, measurement, out.path / "measured.png")
         paths = out.commit()
     if args.json:
-        emit_json({**summary(result), "files": [str(p) for p in paths]})
+        emit_json({**summary(result), **comparison, "files": [str(p) for p in paths]})
     else:
         print(format_summary(result))
+        if comparison:
+            print(_comparison_text(comparison))
         print(f"  wrote {len(paths)} files to {args.out}: {', '.join(p.name for p in paths)}")
     return 0
+
+
+def _comparison_text(comparison: dict[str, Any]) -> str:
+    m = comparison["measurement"]
+    lines = [
+        f"  recording {m['file']} ({m['format']}, {m['samples']} samples every "
+        f"{m['sample_time'] * 1e3:g} ms; {comparison['resample']})",
+        "  inputs: "
+        + ", ".join(f"{k} from the {v}" for k, v in comparison["input_sources"].items()),
+        "  simulated - recorded speed (recorded inputs), over the samples that are not NaN:",
+    ]
+    for name, r in comparison["residuals"].items():
+        if r["rms_residual"] is None:
+            lines.append(f"    {name:<10} ({r['channel']}): no finite sample")
+            continue
+        lines.append(
+            f"    {name:<10} ({r['channel']}): RMS {r['rms_residual']:.4g} rad/s "
+            f"({100 * r['relative_rms_residual']:.3g} % of its RMS), max "
+            f"{r['max_abs_residual']:.4g} rad/s, {r['samples']} samples"
+        )
+    return "\n".join(lines)
 
 
 def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
@@ -252,6 +312,13 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "--out",
         required=True,
         help="output folder (replaced atomically, and only if gearsym wrote it)",
+    )
+    p.add_argument(
+        "--measurement",
+        metavar="FILE",
+        help="a bench recording (MDF4 .mf4 or CSV) mapped by the scenario's [measurement] "
+        "table: its inputs drive the simulation, its speeds are compared with the simulated "
+        "ones (measured.csv/.json/.png, RMS residual printed)",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     p.add_argument(

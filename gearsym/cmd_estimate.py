@@ -39,6 +39,10 @@ def cmd_estimate(args: argparse.Namespace) -> int:
 
     d = load(args.config)
     scenario = load_scenario(d, args.scenario)
+    if args.measurement is not None:
+        return _cmd_measured(args, d, scenario)
+    if args.sample_time is None:
+        args.sample_time = 0.01
     if args.sample_time > scenario.t_end / 4:  # before the simulation: it records [0, t_end]
         raise GearsymError(
             "estimate",
@@ -308,6 +312,145 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
     return _run_and_report(args, work, text)
 
 
+def _cmd_measured(args: argparse.Namespace, d: Any, scenario: Any) -> int:
+    """``--measurement FILE``: the EKF on a bench recording mapped by the scenario's
+    ``[measurement]`` table; the inputs of the simulation that gives the element modes and
+    the phases are the recorded ones."""
+    from gearsym.symbolic.errors import GearsymError
+
+    if args.filter != "ekf":
+        raise GearsymError("estimate", "--measurement", "runs the EKF: add --filter ekf")
+    for option, given in (
+        ("--drive", args.drive is not None),
+        ("--runs", args.runs != 1),
+        ("--initial-from-prior", args.initial_from_prior),
+        ("--sample-time", args.sample_time is not None),
+        ("--seed", args.seed != 0),
+    ):
+        if given:
+            reason = {
+                "--sample-time": "the recording's grid is the channel map's sample_time",
+                "--seed": "a recording carries its own noise, none is drawn",
+            }.get(option, "needs a truth and noise seeds; a recording has neither")
+            raise GearsymError("estimate", option, f"is not available with --measurement: {reason}")
+    if scenario.measurement is None:
+        raise GearsymError(
+            scenario.file, "measurement", "missing table [measurement] (the channel map)"
+        )
+    from gearsym.symbolic.estimators.ekf import augmented_model
+    from gearsym.validation.measurement import read_measurement
+
+    cmap = scenario.measurement
+    if cmap.sample_time > scenario.t_end / 4:
+        raise GearsymError(
+            scenario.file,
+            "measurement.sample_time",
+            f"must be at most t_end / 4 = {scenario.t_end / 4:g} s, got {cmap.sample_time:g}",
+        )
+    noise: Any = 0.01
+    if args.noise is not None:
+        try:
+            noise = [number(float, above=0)(v) for v in args.noise.split(",")]
+        except argparse.ArgumentTypeError as err:
+            raise GearsymError("estimate", "--noise", str(err)) from None
+        if len(noise) not in (1, 3):
+            raise GearsymError("estimate", "--noise", "give one value or one per output (3)")
+    parameters = None
+    if args.params is not None:
+        parameters = [p.strip() for p in args.params.split(",") if p.strip()]
+    initial = _initial_values(args.initial)
+    aug = augmented_model(d, scenario.shift.name, parameters)
+    outputs = [name.removeprefix("y_") for name in aug.output_names]
+    missing = [o for o in outputs if cmap.channel(o) is None]
+    if missing:
+        raise GearsymError(
+            scenario.file,
+            f"measurement.channel.{missing[0]}",
+            f"missing: the filter measures {', '.join(outputs)}",
+        )
+    measurement = read_measurement(args.measurement, cmap, scenario.t_end)
+    dropout = _dropout_window(args.dropout, scenario.shift.name)
+    dropout_outputs = None
+    if args.dropout_outputs is not None:
+        if args.dropout is None:
+            raise GearsymError("estimate", "--dropout-outputs", "needs --dropout")
+        dropout_outputs = [o.strip() for o in args.dropout_outputs.split(",") if o.strip()]
+    assumes: list[str] = []
+
+    def work(folder: Any) -> Any:
+        from gearsym.cmd_dynamics import simulate_with_progress
+        from gearsym.validation.estimation import (
+            filter_run,
+            measured_ekf_dict,
+            plot_ekf,
+            prepare_ekf,
+            write_ekf_csv,
+        )
+        from gearsym.validation.measurement import RESAMPLE_TEXT, input_sources
+        from gearsym.validation.measurement import with_measured_inputs as driven
+
+        measured_scenario = driven(scenario, measurement)
+        result = simulate_with_progress(d, measured_scenario)
+        window: tuple[float, float] | None
+        if isinstance(dropout, str):
+            (phase,) = [p for p in result.phases if p.name == dropout]
+            window = (float(phase.t_start), float(phase.t_end))
+        else:
+            window = dropout
+        setup = prepare_ekf(
+            d,
+            result,
+            sample_time=cmap.sample_time,
+            relative_noise=noise,
+            initial=initial,
+            aug=aug,
+            measured={o: measurement.values[o] for o in outputs},
+        )
+        _say("running the EKF on the recording")
+        run = filter_run(setup, dropout=window, dropout_outputs=dropout_outputs)
+        sources = input_sources(scenario, measurement)
+        assumes.extend(
+            [
+                f"recording: {measurement.file} ({measurement.format}, {len(measurement.t)} "
+                f"samples every {cmap.sample_time * 1e3:g} ms; {RESAMPLE_TEXT})",
+                "inputs: "
+                + ", ".join(f"{name} from the {where}" for name, where in sources.items()),
+                "element modes and phases: from the reference simulation driven by those "
+                "inputs (scenario "
+                f"{scenario.name}, {args.scenario or 'built-in'})",
+            ]
+        )
+        data = {
+            **measured_ekf_dict(run),
+            "measurement": measurement.to_dict(),
+            "input_sources": sources,
+        }
+        if folder is not None:
+            write_ekf_csv(run, folder / "ekf.csv")
+            (folder / "ekf.json").write_text(json.dumps(data, indent=2) + "\n")
+            if not args.no_plots:
+                plot_ekf(run, folder / "ekf.png")
+        return _Report(data, run)
+
+    from gearsym.validation.estimation import format_measured_ekf_text
+
+    def text(report: Any) -> str:
+        body = format_measured_ekf_text(report.run)
+        return "\n".join(f"  assumes {line}" for line in assumes) + "\n" + body
+
+    return _run_and_report(args, work, text)
+
+
+class _Report:
+    """A run with its JSON (``to_dict``), as :func:`_run_and_report` expects."""
+
+    def __init__(self, data: dict[str, Any], run: Any) -> None:
+        self.data, self.run = data, run
+
+    def to_dict(self) -> dict[str, Any]:
+        return self.data
+
+
 def _run_and_report(
     args: argparse.Namespace, work: Callable[[Any], Any], text: Callable[[Any], str]
 ) -> int:
@@ -344,6 +487,12 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         common,
     )
     p.add_argument("--scenario", help="scenario TOML (default: the built-in 2-3 power-on upshift)")
+    p.add_argument(
+        "--measurement",
+        metavar="FILE",
+        help="ekf: run on a bench recording (MDF4 .mf4 or CSV) mapped by the scenario's "
+        "[measurement] table: measured speeds and inputs instead of the synthetic ones",
+    )
     p.add_argument("--filter", choices=FILTERS, default="uio", help="the estimator (default uio)")
     p.add_argument(
         "--params",
@@ -373,8 +522,9 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--sample-time",
         type=number(float, above=0),
-        default=0.01,
-        help="TCU sample time in s (default 0.01, as the thesis)",
+        default=None,
+        help="TCU sample time in s (default 0.01, as the thesis; with --measurement the "
+        "channel map's sample_time)",
     )
     p.add_argument(
         "--noise",

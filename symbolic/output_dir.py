@@ -23,7 +23,8 @@ same rules for a single file. A lone file has no ``MANIFEST`` beside it, so it c
 proof of origin: a signature that holds the SHA-256 of the rest of the file (an SVG: a closing
 XML comment; a PNG: a ``tEXt`` chunk before ``IEND``; an FMU, a zip archive: the archive
 comment, which every zip reader skips; an A2L file: a closing ``/* ... */`` comment, which
-every ASAP2 reader skips).
+every ASAP2 reader skips; a recording of ``gearsym export-measurement``, MDF4 or CSV: a
+closing ``# gearsym ...`` line, after the last MDF4 block, a comment line to a CSV reader).
 ``FILE`` is replaced only if it does not exist or its signature matches its content: a user's
 file, or a gearsym picture edited since, is refused. The file is written next to ``FILE``
 (``.FILE.gearsym-staging-*``) and renamed over it in one atomic step, under the same lock.
@@ -433,7 +434,11 @@ class OutputDir:
 # ----------------------------------------------------------------------------- single files
 
 #: Formats :class:`OutputFile` can sign (lower-case suffixes).
-SIGNED_SUFFIXES = (".svg", ".png", ".fmu", ".a2l")
+SIGNED_SUFFIXES = (".svg", ".png", ".fmu", ".a2l", ".mf4", ".csv")
+#: Formats signed by a closing ``# gearsym ...`` line: a CSV reader skips ``#`` lines, an MDF4
+#: reader follows the block links from the file's start and never reaches bytes after the
+#: last block.
+_LINE_SIGNED = (".mf4", ".csv")
 #: What :class:`OutputFile` accepts unless told otherwise (``gearsym draw``).
 PICTURE_SUFFIXES = (".svg", ".png")
 _ZIP_END = b"PK\x05\x06"  # end-of-central-directory record: 22 bytes, then the comment
@@ -444,6 +449,10 @@ _ZIP_SIGNATURE = re.compile(
 _A2L_SIGNATURE = re.compile(
     rb"/\* gearsym ([a-z][a-z0-9-]*) output: do not edit, regenerate with gearsym \1; "
     rb"sha256 ([0-9a-f]{64}) of everything before this comment \*/\n"
+)
+_LINE_SIGNATURE = re.compile(
+    rb"# gearsym ([a-z][a-z0-9-]*) output: do not edit, regenerate with gearsym \1; "
+    rb"sha256 ([0-9a-f]{64}) of everything before this line\n"
 )
 _PNG_HEADER = b"\x89PNG\r\n\x1a\n"
 _PNG_KEYWORD = b"gearsym"
@@ -494,6 +503,14 @@ def sign_file(data: bytes, suffix: str, command: str) -> bytes:
             f"sha256 {digest} of everything before this comment */\n"
         )
         return data + comment.encode("ascii")
+    if suffix.lower() in _LINE_SIGNED:
+        if suffix.lower() == ".csv" and not data.endswith(b"\n"):
+            raise ValueError("a CSV file to sign ends with a newline")
+        line = (
+            f"# gearsym {command} output: do not edit, regenerate with gearsym {command}; "
+            f"sha256 {digest} of everything before this line\n"
+        )
+        return data + line.encode("ascii")
     if suffix.lower() == ".png":
         chunks = _png_chunks(data)
         if chunks is None:
@@ -524,6 +541,10 @@ def signed_by_gearsym(data: bytes, suffix: str) -> bool:
     if suffix.lower() == ".a2l":
         at = data.rfind(b"/* gearsym ")
         match = _A2L_SIGNATURE.fullmatch(data[at:]) if at >= 0 else None
+        return match is not None and hashlib.sha256(data[:at]).hexdigest().encode() == match[2]
+    if suffix.lower() in _LINE_SIGNED:
+        at = data.rfind(b"# gearsym ")
+        match = _LINE_SIGNATURE.fullmatch(data[at:]) if at >= 0 else None
         return match is not None and hashlib.sha256(data[:at]).hexdigest().encode() == match[2]
     if suffix.lower() == ".png":
         chunks = _png_chunks(data)

@@ -43,6 +43,9 @@ __all__ = [
     "EkfSetup",
     "ekf_bound",
     "filter_run",
+    "format_measured_ekf_text",
+    "measured_ekf_dict",
+    "noisy_outputs",
     "format_monte_carlo_text",
     "plot_efficiency",
     "prepare_ekf",
@@ -563,6 +566,9 @@ class EkfSetup:
     prior_sigma: np.ndarray  # (n,)
     outputs: list[str]
     phases: tuple[Phase, ...]
+    #: The outputs are a recording's (``y_true`` holds them, noise included): no noise is
+    #: drawn and there is no truth.
+    measured: bool = False
 
     @property
     def names(self) -> list[str]:
@@ -595,8 +601,14 @@ def prepare_ekf(
     parameters: Sequence[str] | None = None,
     aug: Any = None,
     discrete: Any = None,
+    measured: Mapping[str, np.ndarray] | None = None,
 ) -> EkfSetup:
-    """The seed-independent part of :func:`run_ekf` (its arguments of the same name)."""
+    """The seed-independent part of :func:`run_ekf` (its arguments of the same name).
+
+    ``measured``: per output of the filter its recorded values on the sample grid (a bench
+    recording, :mod:`gearsym.validation.measurement`); they replace the reference's outputs,
+    no noise is drawn on them, and no state has a truth. ``result`` is then the simulation
+    driven by the recorded inputs: it gives the inputs, the element modes and the phases."""
     from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
 
     shift = result.scenario.shift.name
@@ -617,11 +629,28 @@ def prepare_ekf(
     def sampled(name: str) -> np.ndarray:
         return np.interp(t, result.t, result.signals[name])
 
-    y_true = np.column_stack([sampled(name) for name in outputs])
+    if measured is None:
+        y_true = np.column_stack([sampled(name) for name in outputs])
+    else:
+        missing = [name for name in outputs if name not in measured]
+        if missing:
+            raise GearsymError(
+                "estimate",
+                "--measurement",
+                f"the recording has no channel for the filter's output {missing[0]} (map it in "
+                "[measurement.channel])",
+            )
+        y_true = np.column_stack([np.asarray(measured[name], dtype=float) for name in outputs])
+        if y_true.shape[0] != len(t):
+            raise GearsymError(
+                "estimate",
+                "--measurement",
+                f"{y_true.shape[0]} recorded samples for {len(t)} sample times",
+            )
     r = np.broadcast_to(np.asarray(relative_noise, dtype=float), (len(outputs),)).copy()
     if np.any(~np.isfinite(r)) or np.any(r <= 0):
         raise GearsymError("estimate", "--noise", "relative errors must be finite and > 0")
-    floor = EKF_FLOOR_FRACTION * np.max(np.abs(y_true), axis=0)
+    floor = EKF_FLOOR_FRACTION * np.nanmax(np.abs(y_true), axis=0)
     sigma_y = r[None, :] * np.maximum(np.abs(y_true), floor[None, :])
 
     modes = element_modes(d, result, t)
@@ -650,6 +679,9 @@ def prepare_ekf(
     for e, mu in aug.mu_state.items():
         j = names.index(mu)
         scored[:, j] = modes[e][0] > 0.5  # μ is defined (and estimated) while it slides
+    if measured is not None:  # a recording: no state has a truth
+        truth[:] = np.nan
+        scored[:] = False
 
     # initial estimate and prior (the speeds' are set from the first measurement per run)
     z = np.zeros(n)
@@ -692,6 +724,7 @@ def prepare_ekf(
         prior_sigma=sig0,
         outputs=outputs,
         phases=tuple(result.phases),
+        measured=measured is not None,
     )
 
 
@@ -725,6 +758,13 @@ def run_ekf(
     return filter_run(setup, seed, dropout)
 
 
+def noisy_outputs(setup: EkfSetup, seed: int) -> np.ndarray:
+    """The synthetic measurements: the reference's outputs plus Gaussian noise of
+    σ_i = r_i max(|y_i|, y_i^min) (3.26), drawn from ``seed``."""
+    rng = np.random.default_rng(seed)
+    return setup.y_true + rng.normal(0.0, 1.0, setup.y_true.shape) * setup.sigma_y
+
+
 def filter_run(
     setup: EkfSetup,
     seed: int = 0,
@@ -751,7 +791,7 @@ def filter_run(
     s = setup
     t, names, n = s.t, s.names, len(s.names)
     sample_time = float(t[1] - t[0])
-    y = s.y_true + np.random.default_rng(seed).normal(0.0, 1.0, s.y_true.shape) * s.sigma_y
+    y = s.y_true.copy() if s.measured else noisy_outputs(s, seed)
     if dropout is not None:
         lost = (t >= dropout[0]) & (t < dropout[1])
         for name in dropout_outputs if dropout_outputs is not None else s.outputs:
@@ -1475,3 +1515,58 @@ def plot_efficiency(mc: EkfMonteCarlo, path: Path) -> Path:
         fontsize=9,
     )
     return save(fig, path)
+
+
+#: What an EKF run on a recording reports instead of errors against a truth.
+NO_TRUTH = (
+    "the recording carries no truth channels: no RMSE, no NEES; the filter's σ and its NIS "
+    "(innovations against their predicted covariance) are the consistency check"
+)
+
+
+def measured_ekf_dict(run: EkfRun) -> dict[str, Any]:
+    """An EKF run on a recording as data: per parameter initial, estimate and σ at the end;
+    NIS mean and band; no truth (:data:`NO_TRUTH`)."""
+    used = run.nis_dof > 0
+    return {
+        "filter": "ekf",
+        "shift": run.shift,
+        "sample_time": run.sample_time,
+        "relative_noise": list(run.relative_noise),
+        "truth": None,
+        "truth_note": NO_TRUTH,
+        "parameters": {
+            # no scored sample: ParameterEstimate holds the values at the last sample
+            p.name: {"initial": p.initial, "estimate": p.estimate, "sigma": p.sigma}
+            for p in run.parameters
+        },
+        "nis_mean": float(np.mean(run.nis[used])) if used.any() else None,
+        "nis_band": list(_chi2_mean_band(run.nis_dof[used])) if used.any() else None,
+        "skipped_updates": int(np.count_nonzero(~used)),
+        "min_covariance_eigenvalue": run.min_eigenvalue,
+        "phases": [p.to_dict() for p in run.phases],
+    }
+
+
+def format_measured_ekf_text(run: EkfRun) -> str:
+    """Per parameter: initial and final estimate ± σ; the NIS mean against its band."""
+    data = measured_ekf_dict(run)
+    lines = [
+        f"EKF (4.3) of the {run.shift} shift on a recording, samples every "
+        f"{run.sample_time * 1e3:g} ms, assumed speed noise (3.26) r = "
+        f"{', '.join(f'{v:g}' for v in run.relative_noise)}",
+        "  parameter    initial   estimate ± σ (at the end of the recording)",
+    ]
+    for name, p in data["parameters"].items():
+        lines.append(
+            f"  {name:<8} {p['initial']:>10.4g} {p['estimate']:>10.4g} ± {p['sigma']:<10.3g}"
+        )
+    if data["nis_mean"] is not None:
+        lo, hi = data["nis_band"]
+        lines.append(
+            f"  NIS mean {data['nis_mean']:.2f} (95 % band {lo:.2f}..{hi:.2f}): "
+            f"{'inside' if lo <= data['nis_mean'] <= hi else 'OUTSIDE'}; "
+            f"{data['skipped_updates']} samples without an update (NaN speeds)"
+        )
+    lines.append(f"  {NO_TRUTH}")
+    return "\n".join(lines)

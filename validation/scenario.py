@@ -24,6 +24,9 @@ A scenario is a TOML file::
     time = [0.0, 0.4, 0.41]
     value = [0.0, 0.0, 0.05]
 
+An optional ``[measurement]`` table maps the signals onto the channels of a bench recording
+(:mod:`gearsym.validation.measurement`; ``--measurement FILE``).
+
 Without ``[grade]`` ζ is the description's constant parameter ``vehicle.zeta``; with it ζ is an
 input of the reference simulation, like T_In and the pressures ((2.53) and (5.3) list ζ among
 the inputs).
@@ -46,6 +49,7 @@ from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import ShiftSpec, shift_spec
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.input_files import parse_toml, read_text, shown, unknown_key_reason
+from gearsym.validation.measurement import ChannelMap, parse_channel_map
 
 DEFAULT_SCENARIO = "scenario_2_3.toml"
 
@@ -97,6 +101,8 @@ class Scenario:
     pressure: dict[str, Profile]
     #: ζ(t) (2.49) from ``[grade]``, or None: ζ is then the description's constant parameter.
     grade: Profile | None = None
+    #: The channel map of a bench recording (``[measurement]``, :mod:`.measurement`), or None.
+    measurement: ChannelMap | None = None
 
     def input_torque(self, t: float) -> float:
         return self.engine(t) + self.e_machine(t)
@@ -128,7 +134,7 @@ def load_scenario(d: GearboxDescription, path: str | Path | None = None) -> Scen
         if unknown:
             raise fail(f"{key}.{unknown[0]}", unknown_key_reason(unknown[0], known))
 
-    known_tables = ("scenario", "input_torque", "pressure", "grade")
+    known_tables = ("scenario", "input_torque", "pressure", "grade", "measurement")
     unknown = sorted(set(data) - set(known_tables))
     if unknown:
         known = known_tables
@@ -225,6 +231,9 @@ def load_scenario(d: GearboxDescription, path: str | Path | None = None) -> Scen
                 f"are about 35 %: degrees or percent?), got {worst:g} rad",
             )
         grade = Profile(t, values)
+    channel_map = None
+    if "measurement" in data:
+        channel_map = parse_channel_map(d, file, data["measurement"], t_end)
     return Scenario(
         name=title if title is not None else spec.name,
         file=file,
@@ -235,6 +244,7 @@ def load_scenario(d: GearboxDescription, path: str | Path | None = None) -> Scen
         e_machine=Profile(times, e_machine),
         pressure=pressures,
         grade=grade,
+        measurement=channel_map,
     )
 
 
