@@ -1,0 +1,160 @@
+/*
+ * gearsym's Cortex-M4F driver: the emitted float EKF of the 2-3 shift (predict + update, thesis
+ * 4.3) along a measured shift, and RK4 steps of the emitted 2-3 shift model (2.42-2.58), on the
+ * data of case_data.h (written by gearsym.validation.cortex_m4). Every result is printed as the
+ * bit pattern of its float, so that the host build and the emulated target can be compared
+ * exactly. On the target, SysTick counts the time of each step (instructions under
+ * `-icount shift=0`).
+ */
+#include <stdint.h>
+#include <string.h>
+
+#include "case_data.h"
+#include "gearsym_ekf_2_3.h"
+#include "gearsym_shift_2_3.h"
+#include "harness.h"
+
+#define NX GEARSYM_EKF_2_3_NX
+#define NS GEARSYM_SHIFT_2_3_NX
+
+static char line[16 + 12 * (NX + NX * NX + 4)];
+static size_t used_chars;
+
+static void put_char(char c)
+{
+    if (used_chars + 1u < sizeof line) {
+        line[used_chars++] = c;
+        line[used_chars] = '\0';
+    }
+}
+
+static void put_word(const char *w)
+{
+    while (*w != '\0') {
+        put_char(*w++);
+    }
+}
+
+static void put_hex(uint32_t v)
+{
+    static const char digits[] = "0123456789abcdef";
+    put_char(' ');
+    for (int shift = 28; shift >= 0; shift -= 4) {
+        put_char(digits[(v >> (unsigned)shift) & 0xFu]);
+    }
+}
+
+static void put_real(float v)
+{
+    uint32_t bits;
+    memcpy(&bits, &v, sizeof bits);
+    put_hex(bits);
+}
+
+static void flush(void)
+{
+    put_char('\n');
+    gearsym_m4_put(line);
+    used_chars = 0u;
+    line[0] = '\0';
+}
+
+#ifdef GEARSYM_M4_TARGET
+#define TICKS() gearsym_m4_ticks()
+#define ELAPSED(start, end) (((start) - (end)) & 0x00FFFFFFu)
+static void report(const char *name, uint32_t value)
+{
+    put_word(name);
+    put_hex(value);
+    flush();
+}
+
+/* A loop of exactly 2 instructions per turn (subs, bne): instructions per SysTick tick. */
+static uint32_t calibration_loop(uint32_t turns)
+{
+    const uint32_t start = TICKS();
+    __asm__ volatile("1:\n\tsubs %0, %0, #1\n\tbne 1b" : "+r"(turns) : : "cc");
+    return ELAPSED(start, TICKS());
+}
+#endif
+
+int main(void)
+{
+    float x[NX], P[NX * NX], nis = 0.0f;
+    gearsym_ekf_2_3_params pe;
+    gearsym_shift_2_3_params ps;
+    gearsym_ekf_2_3_params_default(&pe);
+    gearsym_shift_2_3_params_default(&ps);
+    memcpy(x, case_x0, sizeof x);
+    memcpy(P, case_P0, sizeof P);
+#ifdef GEARSYM_M4_TARGET
+    uint32_t t_predict = 0u, t_update = 0u, t_empty = 0u;
+    gearsym_m4_ticks_start();
+    for (int i = 0; i < 64; ++i) {
+        const uint32_t start = TICKS();
+        t_empty += ELAPSED(start, TICKS());
+    }
+    report("empty64", t_empty);
+    report("calibration", calibration_loop(CASE_CALIBRATION_TURNS));
+#endif
+    for (int k = 1; k < CASE_EKF_STEPS; ++k) {
+#ifdef GEARSYM_M4_TARGET
+        const uint32_t t0 = TICKS();
+#endif
+        gearsym_ekf_2_3_ekf_predict(x, P, case_u[k - 1], &pe, CASE_H, case_q);
+#ifdef GEARSYM_M4_TARGET
+        const uint32_t t1 = TICKS();
+#endif
+        const int n = gearsym_ekf_2_3_ekf_update(x, P, case_u[k], &pe, case_y[k], case_r,
+                                                 case_floor, &nis);
+#ifdef GEARSYM_M4_TARGET
+        const uint32_t t2 = TICKS();
+        t_predict += ELAPSED(t0, t1);
+        t_update += ELAPSED(t1, t2);
+#endif
+        put_word("ekf");
+        put_hex((uint32_t)k);
+        put_hex((uint32_t)n);
+        put_real(nis);
+        for (int i = 0; i < NX; ++i) {
+            put_real(x[i]);
+        }
+        for (int i = 0; i < NX * NX; ++i) {
+            put_real(P[i]);
+        }
+        flush();
+    }
+    float s[NS];
+    memcpy(s, case_shift_x0, sizeof s);
+    for (int k = 0; k < CASE_SHIFT_STEPS; ++k) {
+        gearsym_shift_2_3_rk4_step(s, case_shift_u[k], &ps, CASE_SHIFT_H, s);
+        put_word("rk4");
+        put_hex((uint32_t)k);
+        for (int i = 0; i < NS; ++i) {
+            put_real(s[i]);
+        }
+        flush();
+    }
+#ifdef GEARSYM_M4_TARGET
+    report("ekf_steps", (uint32_t)(CASE_EKF_STEPS - 1));
+    report("ekf_predict", t_predict);
+    report("ekf_update", t_update);
+    /* RK4 timed as one loop of CASE_SHIFT_STEPS steps, nothing printed inside */
+    memcpy(s, case_shift_x0, sizeof s);
+    const uint32_t t3 = TICKS();
+    for (int k = 0; k < CASE_SHIFT_STEPS; ++k) {
+        gearsym_shift_2_3_rk4_step(s, case_shift_u[k], &ps, CASE_SHIFT_H, s);
+    }
+    const uint32_t t4 = TICKS();
+    report("rk4_steps", (uint32_t)CASE_SHIFT_STEPS);
+    report("rk4_total", ELAPSED(t3, t4));
+    put_word("rk4_check");
+    for (int i = 0; i < NS; ++i) {
+        put_real(s[i]);
+    }
+    flush();
+#endif
+    put_word("done");
+    flush();
+    return 0;
+}
