@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 HARNESS_DIR = Path(__file__).parent / "cortex_m4"
-TOOLS = ("arm-none-eabi-gcc", "arm-none-eabi-size", "qemu-system-arm", "gcc")
+TOOLS = ("arm-none-eabi-gcc", "arm-none-eabi-size", "arm-none-eabi-nm", "qemu-system-arm", "gcc")
 COMMON_FLAGS: tuple[str, ...] = (
     "-std=c99",
     "-Wall",
@@ -178,21 +178,19 @@ def _run(cmd: list[str], cwd: Path) -> str:
     return proc.stdout
 
 
-def build(c_dir: Path, case: Case, out: Path) -> tuple[Path, Path]:
-    """Write the case into ``out`` and build the driver with the emitted sources of ``c_dir``
-    twice: the ELF for the mps2-an386 board and the host executable. Returns both paths."""
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "case_data.h").write_text(case_header(case), encoding="utf-8")
+def build_target(
+    sources: list[Path], includes: list[Path], elf: Path, extra: tuple[str, ...] = ()
+) -> Path:
+    """Link ``sources`` with the harness' start-up into ``elf`` for the mps2-an386 board
+    (no start files of newlib; its libm and libc only for sinf, cosf, memcpy)."""
     harness = HARNESS_DIR
-    sources = [str(c_dir / s) for s in SOURCES]
-    inc = [f"-I{out}", f"-I{c_dir}", f"-I{harness}"]
-    elf = out / "gearsym_m4.elf"
     _run(
         [
             "arm-none-eabi-gcc",
             *COMMON_FLAGS,
             *TARGET_FLAGS,
-            *inc,
+            *extra,
+            *(f"-I{d}" for d in (*includes, harness)),
             "-nostartfiles",
             "-T",
             str(harness / "mps2_an386.ld"),
@@ -200,25 +198,34 @@ def build(c_dir: Path, case: Case, out: Path) -> tuple[Path, Path]:
             "-o",
             str(elf),
             str(harness / "startup.c"),
-            str(harness / "driver.c"),
-            *sources,
+            *map(str, sources),
             "-lm",
             "-lc",
             "-lgcc",
         ],
-        out,
+        elf.parent,
     )
+    return elf
+
+
+def build(c_dir: Path, case: Case, out: Path) -> tuple[Path, Path]:
+    """Write the case into ``out`` and build the driver with the emitted sources of ``c_dir``
+    twice: the ELF for the mps2-an386 board and the host executable. Returns both paths."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "case_data.h").write_text(case_header(case), encoding="utf-8")
+    sources = [c_dir / s for s in SOURCES]
+    elf = build_target([HARNESS_DIR / "driver.c", *sources], [out, c_dir], out / "gearsym_m4.elf")
     host = out / "gearsym_host"
     _run(
         [
             "gcc",
             *COMMON_FLAGS,
-            *inc,
+            *(f"-I{d}" for d in (out, c_dir, HARNESS_DIR)),
             "-o",
             str(host),
-            str(harness / "host.c"),
-            str(harness / "driver.c"),
-            *sources,
+            str(HARNESS_DIR / "host.c"),
+            str(HARNESS_DIR / "driver.c"),
+            *map(str, sources),
             "-lm",
         ],
         out,
@@ -285,22 +292,29 @@ class Timing:
         return self.ekf_predict + self.ekf_update
 
 
-def timing(text: str) -> Timing:
-    """Instructions per step from the target's report lines: SysTick ticks times the
-    calibrated instructions per tick, less the cost of reading SysTick (``empty64``)."""
-    v = {}
+def reports(text: str) -> dict[str, int]:
+    """The target's report lines (``name hex``) by name."""
+    found = {}
     for ln in text.splitlines():
         words = ln.split()
-        if len(words) == 2 and words[0] in (
-            "empty64",
-            "calibration",
-            "ekf_steps",
-            "ekf_predict",
-            "ekf_update",
-            "rk4_steps",
-            "rk4_total",
-        ):
-            v[words[0]] = int(words[1], 16)
+        if len(words) == 2 and words[0] not in ("ekf", "rk4"):
+            found[words[0]] = int(words[1], 16)
+    return found
+
+
+def instructions(text: str, name: str, calls: int) -> float:
+    """Instructions per call of the region reported as ``name`` (SysTick ticks over ``calls``
+    calls, by the calibrated instructions per tick, less one read of SysTick)."""
+    v = reports(text)
+    per_tick = 2 * CALIBRATION_TURNS / v["calibration"]
+    return v[name] * per_tick / calls - v["empty64"] * per_tick / 64 / calls
+
+
+def timing(text: str) -> Timing:
+    """Instructions per step from the target's report lines: SysTick ticks times the
+    calibrated instructions per tick, less the cost of reading SysTick (``empty64``); the
+    EKF steps are timed one by one (one read each), the RK4 steps as one loop."""
+    v = reports(text)
     per_tick = 2 * CALIBRATION_TURNS / v["calibration"]
     read = v["empty64"] * per_tick / 64
     n_ekf, n_rk4 = v["ekf_steps"], v["rk4_steps"]
@@ -308,7 +322,7 @@ def timing(text: str) -> Timing:
         instructions_per_tick=per_tick,
         ekf_predict=v["ekf_predict"] * per_tick / n_ekf - read,
         ekf_update=v["ekf_update"] * per_tick / n_ekf - read,
-        rk4=(v["rk4_total"] * per_tick - read) / n_rk4,
+        rk4=instructions(text, "rk4_total", n_rk4),
         ekf_steps=n_ekf,
         rk4_steps=n_rk4,
     )

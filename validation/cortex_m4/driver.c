@@ -69,13 +69,6 @@ static void report(const char *name, uint32_t value)
     flush();
 }
 
-/* A loop of exactly 2 instructions per turn (subs, bne): instructions per SysTick tick. */
-static uint32_t calibration_loop(uint32_t turns)
-{
-    const uint32_t start = TICKS();
-    __asm__ volatile("1:\n\tsubs %0, %0, #1\n\tbne 1b" : "+r"(turns) : : "cc");
-    return ELAPSED(start, TICKS());
-}
 #endif
 
 int main(void)
@@ -95,7 +88,7 @@ int main(void)
         t_empty += ELAPSED(start, TICKS());
     }
     report("empty64", t_empty);
-    report("calibration", calibration_loop(CASE_CALIBRATION_TURNS));
+    report("calibration", gearsym_m4_calibration(CASE_CALIBRATION_TURNS));
 #endif
     for (int k = 1; k < CASE_EKF_STEPS; ++k) {
 #ifdef GEARSYM_M4_TARGET

@@ -13,6 +13,8 @@ void gearsym_m4_put(const char *text);
 void gearsym_m4_exit(int status);
 void gearsym_m4_ticks_start(void);
 uint32_t gearsym_m4_ticks(void);
+/* SysTick ticks of a loop of exactly 2 instructions (subs, bne) per turn */
+uint32_t gearsym_m4_calibration(uint32_t turns);
 #endif
 
 #endif /* GEARSYM_M4_HARNESS_H */

@@ -82,6 +82,13 @@ uint32_t gearsym_m4_ticks(void)
     return SYST_CVR; /* counts down */
 }
 
+uint32_t gearsym_m4_calibration(uint32_t turns)
+{
+    const uint32_t start = SYST_CVR;
+    __asm__ volatile("1:\n\tsubs %0, %0, #1\n\tbne 1b" : "+r"(turns) : : "cc");
+    return (start - SYST_CVR) & 0x00FFFFFFu;
+}
+
 void gearsym_m4_reset(void)
 {
     SCB_CPACR |= (0xFu << 20); /* CP10, CP11: full access to the FPU */
