@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import shutil
 import subprocess
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -56,7 +56,16 @@ TARGET_FLAGS: tuple[str, ...] = (
     "-DGEARSYM_M4_TARGET",
 )
 #: The emitted sources the driver links.
-SOURCES = ("gearsym_ekf_2_3.c", "gearsym_shift_2_3.c")
+SOURCES = (
+    "gearsym_ekf_2_3.c",
+    "gearsym_shift_2_3.c",
+    "gearsym_shift_2_3_mu.c",
+    "gearsym_full.c",
+)
+#: Tags of the RK4 result lines: the 2-3 shift model, its μ form, the full model.
+RK4_TAGS = ("rk4", "rk4mu", "rk4full")
+FULL_STATES = ("omega_1", "omega_2", "omega_3", "omega_8", "phi", "omega_C")
+FULL_INPUTS = ("T_In", "T_K81", "T_K38", "T_B08", "T_B05", "T_B06", "T_K27")
 CALIBRATION_TURNS = 100_000
 EKF_SAMPLE_TIME = 0.01
 EKF_R = (0.01, 0.01, 0.01)
@@ -84,15 +93,20 @@ class Case:
     shift_x0: np.ndarray
     shift_u: np.ndarray  # (steps, 3) T_In, T_K38, T_B05
     shift_h: float
-    truth: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    shift_truth: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    mu_u: np.ndarray  # (steps, 3) T_In, F_N38, F_N05
+    full_x0: np.ndarray
+    full_u: np.ndarray  # (steps, 7) T_In and the six element torques
+    full_truth: np.ndarray  # (steps + 1, 6)
+    truth: np.ndarray  # (samples, 8) the augmented state along the shift, at the EKF samples
+    shift_truth: np.ndarray  # (steps + 1, 4) the reference simulation's 2-3 model states
 
 
 def reference_case(description: Any, seed: int = 11, noise: float = 0.01) -> Case:
     """The reference shift (built-in scenario) sampled for the EKF at 10 ms with relative
     measurement noise ``noise`` (and a dropout of the second speed sensor every 17th sample),
     started from the reference filter's first estimate; and the reference simulation's torques
-    for the 2-3 shift model at the simulation's own step."""
+    and normal forces for the 2-3 shift model (torque and μ form) and the full model at the
+    simulation's own step."""
     from gearsym.symbolic.estimators.ekf import augmented_model
     from gearsym.validation.estimation import element_modes, run_ekf
     from gearsym.validation.scenario import load_scenario
@@ -115,6 +129,7 @@ def reference_case(description: Any, seed: int = 11, noise: float = 0.01) -> Cas
     f32 = np.float32
     shift_states = ("omega_1", "omega_2", "phi", "omega_C")
     shift_truth = np.column_stack([result.signals[n] for n in shift_states])
+    full_truth = np.column_stack([result.signals[n] for n in FULL_STATES])
     return Case(
         x0=np.asarray(run.estimates[0], dtype=f32),
         P0=np.diag(np.asarray(run.sigmas[0]) ** 2).astype(f32),
@@ -126,6 +141,12 @@ def reference_case(description: Any, seed: int = 11, noise: float = 0.01) -> Cas
             :-1
         ].astype(f32),
         shift_h=float(result.t[1] - result.t[0]),
+        mu_u=np.column_stack([result.signals[n] for n in ("T_In", "F_N38", "F_N05")])[:-1].astype(
+            f32
+        ),
+        full_x0=full_truth[0].astype(f32),
+        full_u=np.column_stack([result.signals[n] for n in FULL_INPUTS])[:-1].astype(f32),
+        full_truth=full_truth,
         truth=run.truth,
         shift_truth=shift_truth,
     )
@@ -166,6 +187,9 @@ def case_header(case: Case) -> str:
         _array("case_y", case.y),
         _array("case_shift_x0", case.shift_x0),
         _array("case_shift_u", case.shift_u),
+        _array("case_mu_u", case.mu_u),
+        _array("case_full_x0", case.full_x0),
+        _array("case_full_u", case.full_u),
         "#endif\n",
     ]
     return "".join(parts)
@@ -265,7 +289,8 @@ def run_host(exe: Path) -> str:
 
 def result_lines(text: str) -> list[str]:
     """The lines holding results (EKF and RK4 steps), in order."""
-    return [ln for ln in text.splitlines() if ln.startswith(("ekf ", "rk4 "))]
+    tags = ("ekf ", *(t + " " for t in RK4_TAGS))
+    return [ln for ln in text.splitlines() if ln.startswith(tags)]
 
 
 def floats(line: str) -> np.ndarray:
@@ -284,6 +309,8 @@ class Timing:
     ekf_predict: float  # instructions per call
     ekf_update: float
     rk4: float
+    rk4mu: float
+    rk4full: float
     ekf_steps: int
     rk4_steps: int
 
@@ -297,7 +324,7 @@ def reports(text: str) -> dict[str, int]:
     found = {}
     for ln in text.splitlines():
         words = ln.split()
-        if len(words) == 2 and words[0] not in ("ekf", "rk4"):
+        if len(words) == 2 and words[0] not in ("ekf", *RK4_TAGS):
             found[words[0]] = int(words[1], 16)
     return found
 
@@ -323,6 +350,8 @@ def timing(text: str) -> Timing:
         ekf_predict=v["ekf_predict"] * per_tick / n_ekf - read,
         ekf_update=v["ekf_update"] * per_tick / n_ekf - read,
         rk4=instructions(text, "rk4_total", n_rk4),
+        rk4mu=instructions(text, "rk4mu_total", n_rk4),
+        rk4full=instructions(text, "rk4full_total", n_rk4),
         ekf_steps=n_ekf,
         rk4_steps=n_rk4,
     )

@@ -1,7 +1,7 @@
 /*
  * gearsym's Cortex-M4F driver: the emitted float EKF of the 2-3 shift (predict + update, thesis
- * 4.3) along a measured shift, and RK4 steps of the emitted 2-3 shift model (2.42-2.58), on the
- * data of case_data.h (written by gearsym.validation.cortex_m4). Every result is printed as the
+ * 4.3) along a measured shift, and RK4 steps of the emitted 2-3 shift model (2.42-2.58), of its
+ * mu form (2.69) and of the full model, on the data of case_data.h (written by gearsym.validation.qemu_m4). Every result is printed as the
  * bit pattern of its float, so that the host build and the emulated target can be compared
  * exactly. On the target, SysTick counts the time of each step (instructions under
  * `-icount shift=0`).
@@ -11,11 +11,48 @@
 
 #include "case_data.h"
 #include "gearsym_ekf_2_3.h"
+#include "gearsym_full.h"
 #include "gearsym_shift_2_3.h"
+#include "gearsym_shift_2_3_mu.h"
 #include "harness.h"
 
 #define NX GEARSYM_EKF_2_3_NX
 #define NS GEARSYM_SHIFT_2_3_NX
+#define NF GEARSYM_FULL_NX
+
+/* One model's RK4 run along CASE_SHIFT_STEPS samples, every state printed after each step. */
+#define RUN_RK4(tag, step, n, params, x0, u)                      \
+    do {                                                         \
+        float state_[n];                                         \
+        memcpy(state_, (x0), sizeof state_);                     \
+        for (int k_ = 0; k_ < CASE_SHIFT_STEPS; ++k_) {          \
+            step(state_, (u)[k_], (params), CASE_SHIFT_H, state_); \
+            put_word(tag);                                       \
+            put_hex((uint32_t)k_);                               \
+            for (int i_ = 0; i_ < (n); ++i_) {                   \
+                put_real(state_[i_]);                            \
+            }                                                    \
+            flush();                                             \
+        }                                                        \
+    } while (0)
+
+/* The same run timed as one loop, nothing printed inside; reports the ticks and end state. */
+#define TIME_RK4(tag, step, n, params, x0, u)                    \
+    do {                                                         \
+        float state_[n];                                         \
+        memcpy(state_, (x0), sizeof state_);                     \
+        const uint32_t start_ = TICKS();                         \
+        for (int k_ = 0; k_ < CASE_SHIFT_STEPS; ++k_) {          \
+            step(state_, (u)[k_], (params), CASE_SHIFT_H, state_); \
+        }                                                        \
+        const uint32_t end_ = TICKS();                           \
+        report(tag "_total", ELAPSED(start_, end_));             \
+        put_word(tag "_check");                                  \
+        for (int i_ = 0; i_ < (n); ++i_) {                       \
+            put_real(state_[i_]);                                \
+        }                                                        \
+        flush();                                                 \
+    } while (0)
 
 static char line[16 + 12 * (NX + NX * NX + 4)];
 static size_t used_chars;
@@ -76,8 +113,12 @@ int main(void)
     float x[NX], P[NX * NX], nis = 0.0f;
     gearsym_ekf_2_3_params pe;
     gearsym_shift_2_3_params ps;
+    gearsym_shift_2_3_mu_params pm;
+    gearsym_full_params pf;
     gearsym_ekf_2_3_params_default(&pe);
     gearsym_shift_2_3_params_default(&ps);
+    gearsym_shift_2_3_mu_params_default(&pm);
+    gearsym_full_params_default(&pf);
     memcpy(x, case_x0, sizeof x);
     memcpy(P, case_P0, sizeof P);
 #ifdef GEARSYM_M4_TARGET
@@ -117,35 +158,17 @@ int main(void)
         }
         flush();
     }
-    float s[NS];
-    memcpy(s, case_shift_x0, sizeof s);
-    for (int k = 0; k < CASE_SHIFT_STEPS; ++k) {
-        gearsym_shift_2_3_rk4_step(s, case_shift_u[k], &ps, CASE_SHIFT_H, s);
-        put_word("rk4");
-        put_hex((uint32_t)k);
-        for (int i = 0; i < NS; ++i) {
-            put_real(s[i]);
-        }
-        flush();
-    }
+    RUN_RK4("rk4", gearsym_shift_2_3_rk4_step, NS, &ps, case_shift_x0, case_shift_u);
+    RUN_RK4("rk4mu", gearsym_shift_2_3_mu_rk4_step, NS, &pm, case_shift_x0, case_mu_u);
+    RUN_RK4("rk4full", gearsym_full_rk4_step, NF, &pf, case_full_x0, case_full_u);
 #ifdef GEARSYM_M4_TARGET
     report("ekf_steps", (uint32_t)(CASE_EKF_STEPS - 1));
     report("ekf_predict", t_predict);
     report("ekf_update", t_update);
-    /* RK4 timed as one loop of CASE_SHIFT_STEPS steps, nothing printed inside */
-    memcpy(s, case_shift_x0, sizeof s);
-    const uint32_t t3 = TICKS();
-    for (int k = 0; k < CASE_SHIFT_STEPS; ++k) {
-        gearsym_shift_2_3_rk4_step(s, case_shift_u[k], &ps, CASE_SHIFT_H, s);
-    }
-    const uint32_t t4 = TICKS();
     report("rk4_steps", (uint32_t)CASE_SHIFT_STEPS);
-    report("rk4_total", ELAPSED(t3, t4));
-    put_word("rk4_check");
-    for (int i = 0; i < NS; ++i) {
-        put_real(s[i]);
-    }
-    flush();
+    TIME_RK4("rk4", gearsym_shift_2_3_rk4_step, NS, &ps, case_shift_x0, case_shift_u);
+    TIME_RK4("rk4mu", gearsym_shift_2_3_mu_rk4_step, NS, &pm, case_shift_x0, case_mu_u);
+    TIME_RK4("rk4full", gearsym_full_rk4_step, NF, &pf, case_full_x0, case_full_u);
 #endif
     put_word("done");
     flush();
