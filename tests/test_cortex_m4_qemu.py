@@ -44,6 +44,8 @@ def test_the_emulated_target_prints_the_hosts_float_results_bit_for_bit(runs) ->
     assert sum(ln.startswith("ekf ") for ln in ours) == n_ekf
     for tag in qemu_m4.RK4_TAGS:
         assert sum(ln.startswith(tag + " ") for ln in ours) == n_rk4
+    words = {"ekf": 3 + 1 + 8 + 64, "rk4": 2 + 4, "rk4mu": 2 + 4, "rk4full": 2 + 6}
+    assert all(len(ln.split()) == words[ln.split()[0]] for ln in ours)  # none cut short
     assert len(theirs) == len(ours)
     differing = [(a, b) for a, b in zip(ours, theirs, strict=True) if a != b]
     assert not differing, f"{len(differing)} lines differ, first:\n{differing[0]}"
