@@ -8,16 +8,18 @@ HybridSimulator`: the modes' right-hand sides and guards compiled to CasADi func
 by SciPy's DOP853 with the guards as events). That evaluator is chosen because it is the only
 fast one in which the shift *ends by itself*: the on-coming element locks up when its slip
 reaches zero, so the shift duration and the slip energy are outcomes, not inputs (the driven
-open-loop model of :mod:`gearsym.validation.sensitivity_run` and the emitted C shift models are
-driven with recorded element torques and never lock up). One run takes about 0.3 s at
+open-loop model of :mod:`gearsym.validation.sensitivity_run` is driven with recorded element
+torques, and the emitted C shift models take the element torques or μ F_N as inputs: neither
+has lock-up logic). One run takes about 0.3 s at
 rtol = 10⁻⁶ on the development machine.
 
 Quantities of interest per run (:data:`QUANTITIES`): the shift duration (lock-up of the
-on-coming element minus the start of the torque phase, the first scenario breakpoint at which
-an element's normal force changes), the slip energy dissipated in the on-coming element
-∫ T_on Δω_on dt, the peak output (side-shaft) torque 2 (k_ss φ + d_ss φ̇) (2.47), and the
-final speeds ω_in, ω_C. (No jerk: the hybrid model's acceleration jumps at every lock-up and
-break-away, so a sampled jerk measures the sample time, not the shift.)
+on-coming element minus the start of the torque phase: the last scenario breakpoint before the
+swapping elements' normal forces first leave their initial values), the slip energy
+dissipated in the on-coming element ∫ T_on Δω_on dt, the peak output (side-shaft) torque
+2 (k_ss φ + d_ss φ̇) (2.47), and the final speeds ω_in, ω_C. (No jerk: the hybrid model's
+acceleration jumps at every lock-up and break-away, so a sampled jerk measures the sample
+time, not the shift.)
 The local sensitivities of chapter 3 of the same quantities at the nominal point come from the
 hybrid sensitivities (3.7) with their jumps at events: ∂τ/∂p of the lock-up event and
 ∂ω/∂p at the end (:func:`local_sensitivities`).
@@ -227,7 +229,8 @@ class ShiftEvaluator(Evaluator):
 
 
 def torque_phase_start(sim: Any) -> float:
-    """The first breakpoint at which a swapping element's normal force changes."""
+    """The start of the torque phase: the last breakpoint before the swapping elements' normal
+    forces first leave their initial values (0.5 s in the built-in 2-3 scenario)."""
     scenario = sim.scenario
     points = [b for b in scenario.breakpoints() if b > 0]
     f0 = sim.normal_forces(0.0)
