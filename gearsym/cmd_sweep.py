@@ -21,7 +21,12 @@ def _definition(args: argparse.Namespace, file: str) -> Any:
     (which adds or replaces ranges); ``--samples``/``--seed`` override the file's."""
     from dataclasses import replace
 
-    from gearsym.validation.sweep import SweepDefinition, load_definition, parse_range
+    from gearsym.validation.sweep import (
+        SweepDefinition,
+        check_samples,
+        load_definition,
+        parse_range,
+    )
 
     definition = (
         load_definition(args.definition)
@@ -36,6 +41,7 @@ def _definition(args: argparse.Namespace, file: str) -> Any:
         raise GearsymError(file, "param", "no parameter to sweep (--param NAME=LO:HI)")
     changes: dict[str, Any] = {"ranges": ranges}
     if args.samples is not None:
+        check_samples(args.samples, "sweep", "samples")
         changes["samples"] = args.samples
     if args.seed is not None:
         changes["seed"] = args.seed
@@ -184,7 +190,7 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--samples",
         type=number(int, minimum=2, maximum=100000),
-        help="base sample count N (runs: N (d + 2)); default 64 or the file's",
+        help="base sample count N, a power of two (runs: N (d + 2)); default 64 or the file's",
     )
     p.add_argument("--seed", type=number(int, minimum=0), help="sampling seed (default 1)")
     p.add_argument(

@@ -127,6 +127,7 @@ def test_shift_ranking_by_total_index_agrees_with_local_sensitivities(shift, cli
         (["--param", "m_veh=1000:nan", "--param", "k_ss=1:2"], "must be finite"),
         (["--param", "m_vehx=1:2", "--param", "k_ss=1:2"], "unknown parameter 'm_vehx'"),
         (["--param", "m_veh=1:2", "--scheduler", "udp://x"], "expected local or tcp://"),
+        (["--param", "m_veh=1:2", "--samples", "10"], "samples: must be a power of two"),
         (
             [
                 "--param",

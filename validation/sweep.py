@@ -139,7 +139,15 @@ def load_definition(path: str | Path) -> SweepDefinition:
             or value < (1 if key == "samples" else 0)
         ):
             raise GearsymError(file, f"sweep.{key}", f"expected a positive integer, got {value!r}")
+    check_samples(samples, file, "sweep.samples")
     return SweepDefinition(ranges, samples, seed, file)
+
+
+def check_samples(samples: int, file: str, key: str) -> None:
+    """N must be a power of two: the balance properties of the Sobol' points (and SALib's
+    estimators) need it."""
+    if samples < 2 or samples & (samples - 1):
+        raise GearsymError(file, key, f"must be a power of two (Sobol' points), got {samples}")
 
 
 def check_parameters(definition: SweepDefinition, known: Sequence[str], file: str) -> None:
@@ -221,8 +229,8 @@ class ShiftEvaluator(Evaluator):
                 result = sim.run(
                     dict(zip(names, map(float, row), strict=True)), rtol=self.rtol, atol=self.rtol
                 )
-            except (RuntimeError, ValueError, ArithmeticError):
-                continue  # a failed run stays NaN and is reported
+            except (GearsymError, RuntimeError, ValueError, ArithmeticError):
+                continue  # a failed run (chattering, integrator failure) stays NaN: reported
             for q, v in shift_quantities(sim, result).items():
                 out[q][k] = v
         return out
