@@ -184,3 +184,41 @@ def test_cli_end_to_end_writes_tables_and_figures(tmp_path, capsys):
     assert (out / "sobol_shift_duration.png").exists()
     # a faster-gripping on-coming clutch shortens the shift in every run pair
     assert summary["local_derivatives"]["shift_duration"]["mu_05"] < 0
+
+
+def test_definition_file_and_params_merge(tmp_path):
+    """A [sweep] table is read as written; --param parses NAME=LO:HI."""
+    from gearsym.validation.sweep import load_definition, parse_range
+
+    path = tmp_path / "s.toml"
+    path.write_text(
+        "[sweep]\nsamples = 16\nseed = 4\n[sweep.parameters]\nm_veh = [1600, 2000.5]\n", "utf-8"
+    )
+    definition = load_definition(path)
+    assert definition.ranges == {"m_veh": (1600.0, 2000.5)}
+    assert (definition.samples, definition.seed) == (16, 4)
+    assert parse_range("k_ss=9e3:1.1e4") == ("k_ss", (9000.0, 11000.0))
+
+
+class _HalfFails:
+    """An evaluator that fails (NaN) wherever x1 > 0.5 for one quantity."""
+
+    quantities = ("ok", "broken")
+
+    def __call__(self, points, names):
+        x1 = points[:, 0]
+        return {"ok": x1 + 2 * points[:, 1], "broken": np.where(x1 > 0.5, np.nan, x1)}
+
+
+def test_failed_runs_are_counted_and_get_no_indices(client):
+    """A quantity with failed runs keeps statistics (with the count) but no indices; the other
+    quantity's indices are those of the linear f = x1 + 2 x2 on the unit square: S = (1, 4)/5."""
+    from gearsym.validation.sweep import SweepDefinition, run_sweep
+
+    definition = SweepDefinition({"x1": (0.0, 1.0), "x2": (0.0, 1.0)}, samples=256, seed=2)
+    result = run_sweep(definition, _HalfFails(), batch=256, client=client)
+    assert "broken" not in result.indices and "runs gave no value" in result.skipped["broken"]
+    assert result.statistics["broken"]["failed"] == int(np.sum(result.points[:, 0] > 0.5))
+    si = result.indices["ok"]
+    for k, exact in enumerate((0.2, 0.8)):
+        assert abs(si["ST"][k] - exact) <= 2 * si["ST_conf"][k] + 1e-9
