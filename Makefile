@@ -30,6 +30,7 @@ lock:
 
 run: $(STAMP)
 	$(BIN)/gearsym run
+	@echo "Parameter sweeps (Sobol indices on Dask, slower, not run here): $(BIN)/gearsym sweep --param mu_05=0.108:0.132 --param m_veh=1620:1980 --out out/sweep  (results: out/sweep/indices.csv, samples.parquet, sobol_*.png; README: Global sensitivity sweeps)"
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

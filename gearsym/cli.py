@@ -27,6 +27,7 @@ from gearsym import (
     cmd_generate,
     cmd_observability,
     cmd_run,
+    cmd_sweep,
 )
 from gearsym.commands import common_arguments
 from gearsym.interrupts import Terminated, sigterm_raises
@@ -40,6 +41,7 @@ COMMAND_MODULES = (
     cmd_observability,
     cmd_generate,
     cmd_analysis,
+    cmd_sweep,
     cmd_estimate,
     cmd_draw,
     cmd_export,
