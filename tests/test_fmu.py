@@ -444,7 +444,7 @@ def test_a_fixed_step_that_does_not_divide_the_interval(shift_fmu, shift_run, rk
 
 
 @pytest.mark.parametrize("kind", ["me", "cs"])
-def test_a_single_kind_validates_and_lists_its_interface(tmp_path, kind):
+def test_a_single_kind_validates_lists_its_interface_and_compiles(tmp_path, kind):
     path = tmp_path / f"{kind}.fmu"
     assert main(["export-fmu", "--model", "shift_2_3", "--kind", kind, "--out", str(path)]) == 0
     assert validate_fmu(str(path)) == []
@@ -453,6 +453,9 @@ def test_a_single_kind_validates_and_lists_its_interface(tmp_path, kind):
     assert (root.find("CoSimulation") is not None) == (kind == "cs")
     names = {v.get("name") for v in root.iter("ScalarVariable")}
     assert ("fixed_step" in names) == (kind == "cs")
+    # and the sources of the one interface build with the strict flags
+    unpacked = _compile(path, tmp_path)
+    assert list((unpacked / "binaries").rglob("gearsym_shift_2_3.*"))
 
 
 @pytest.mark.parametrize(
@@ -466,3 +469,9 @@ def test_bad_kind_or_fixed_step_is_one_line_exit_2_and_writes_nothing(tmp_path, 
     assert stop.value.code == 2
     assert len(lines) == 1 and lines[0].startswith("gearsym: ") and key in lines[0], lines
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_fixed_step_outside_its_range_is_refused(shift_fmu, shift_run):
+    times, inputs, states, _, model = shift_run
+    with pytest.raises(Exception, match="fmi2ExitInitializationMode"):
+        _simulate_cs(shift_fmu, times[:3], inputs[:3], states[0], model, {"fixed_step": 2.0})
