@@ -13,7 +13,9 @@ pure function.
 * ``sources/gearsym_<model>.{h,c}``: the emitted C of ``gearsym generate``, byte for byte;
 * ``sources/fmi2_gearsym.c``: the FMI wrapper (``templates/fmu_wrapper.c.j2``), which keeps
   its instance in memory from the environment's ``allocateMemory`` and calls the emitted
-  ``rhs``, ``outputs``, ``params_default`` and ``params_validate``.
+  ``rhs``, ``outputs``, ``params_default`` and ``params_validate``; with Co-Simulation (``kind``
+  ``"cs"`` or ``"both"``) also ``fmi2DoStep``, which steps the emitted ``rk4_step`` with the
+  structural parameter ``fixed_step`` (whole steps, then one partial step for the rest).
 
 A source FMU ships no binary and no FMI headers: the importer compiles ``sources/`` with its
 own ``fmi2Functions.h`` (FMPy's ``build_platform_binary``, Dymola, OpenModelica and Simulink's
