@@ -1,10 +1,11 @@
 """``gearsym export-fmu`` and ``gearsym export-a2l``: the emitted code for the tools around it.
 
-``gearsym export-fmu [CONFIG] --model NAME --out FILE.fmu`` writes an FMI 2.0 Model Exchange
-source FMU (:mod:`gearsym.symbolic.fmu`): the model's ``modelDescription.xml``, the emitted C of
-``gearsym generate`` and an FMI wrapper in ``sources/``, for the importer to compile with its own
-FMI headers. ``NAME`` is a model name of ``gearsym generate`` (``full``, ``shift_2_3``,
-``shift_2_3_mu``, ...).
+``gearsym export-fmu [CONFIG] --model NAME [--kind me|cs|both] [--fixed-step S] --out FILE.fmu``
+writes an FMI 2.0 source FMU (:mod:`gearsym.symbolic.fmu`), Model Exchange and Co-Simulation in
+one by default (the Co-Simulation part steps the emitted RK4 with the fixed internal step S,
+default 1e-4 s): the model's ``modelDescription.xml``, the emitted C of ``gearsym generate`` and
+an FMI wrapper in ``sources/``, for the importer to compile with its own FMI headers. ``NAME`` is
+a model name of ``gearsym generate`` (``full``, ``shift_2_3``, ``shift_2_3_mu``, ...).
 
 ``gearsym export-a2l [CONFIG] [--model NAME ...] [--precision double|float] --out FILE.a2l``
 writes an ASAP2 file (:mod:`gearsym.symbolic.a2l`) of the emitted parameter structs and the μ map
@@ -33,6 +34,13 @@ from gearsym.symbolic.errors import GearsymError
 if TYPE_CHECKING:
     from gearsym.commands import Subparsers
 
+#: How the printed line names each ``--kind``.
+KIND_NAMES = {
+    "me": "Model Exchange",
+    "cs": "Co-Simulation",
+    "both": "Model Exchange + Co-Simulation",
+}
+
 __all__ = ["cmd_export_a2l", "cmd_export_fmu", "cmd_export_measurement", "register"]
 
 
@@ -42,8 +50,9 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         subparsers,
         "export-fmu",
         cmd_export_fmu,
-        "Write one emitted model as an FMI 2.0 Model Exchange source FMU (C sources, "
-        "modelDescription.xml) for Simulink, Dymola, OpenModelica or FMPy.",
+        "Write one emitted model as an FMI 2.0 source FMU, Model Exchange and/or "
+        "Co-Simulation (C sources, modelDescription.xml) for Simulink, Dymola, OpenModelica "
+        "or FMPy.",
         common,
     )
     p.add_argument(
@@ -51,6 +60,21 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         required=True,
         metavar="NAME",
         help="a model of gearsym generate: full, shift_<a>_<b>, shift_<a>_<b>_mu, ...",
+    )
+    p.add_argument(
+        "--kind",
+        choices=("me", "cs", "both"),
+        default="both",
+        help="FMI interfaces: Model Exchange, Co-Simulation (the emitted RK4 at a fixed step), "
+        "or both in one FMU (default)",
+    )
+    p.add_argument(
+        "--fixed-step",
+        type=number(float, minimum=1e-9, maximum=1.0),
+        default=1e-4,
+        metavar="S",
+        help="Co-Simulation: start value of the FMU's fixed_step parameter, the internal RK4 "
+        "step in s (default 1e-4)",
     )
     p.add_argument(
         "--out",
@@ -203,11 +227,14 @@ def cmd_export_fmu(args: argparse.Namespace) -> int:
             )
         (emitted,) = gearbox_models(d, progress, only=args.model)
         progress(f"emitting {emitted.model.name} and its FMI wrapper")
-        out.commit(fmu_archive(fmu_files(emitted, d.name)))
+        files = fmu_files(emitted, d.name, kind=args.kind, fixed_step=args.fixed_step)
+        out.commit(fmu_archive(files))
     m = emitted.model
+    step = f", RK4 fixed_step {args.fixed_step:g} s" if args.kind != "me" else ""
     print(
-        f"wrote the FMU of {m.name} ({len(m.states)} states, {len(m.inputs)} inputs, "
-        f"{len(m.parameters)} parameters, {len(m.outputs)} outputs) of {d.name} to {args.out}"
+        f"wrote the {KIND_NAMES[args.kind]} FMU of {m.name} ({len(m.states)} states, "
+        f"{len(m.inputs)} inputs, {len(m.parameters)} parameters, {len(m.outputs)} outputs"
+        f"{step}) of {d.name} to {args.out}"
     )
     return 0
 

@@ -1,4 +1,5 @@
-"""An emitted model as an FMI 2.0 Model Exchange **source** FMU, as a pure function.
+"""An emitted model as an FMI 2.0 Model Exchange and/or Co-Simulation **source** FMU, as a
+pure function.
 
 :func:`fmu_files` returns ``{path in the archive: bytes}`` for one model of
 :func:`gearsym.symbolic.generate.gearbox_models`:
@@ -12,7 +13,9 @@
 * ``sources/gearsym_<model>.{h,c}``: the emitted C of ``gearsym generate``, byte for byte;
 * ``sources/fmi2_gearsym.c``: the FMI wrapper (``templates/fmu_wrapper.c.j2``), which keeps
   its instance in memory from the environment's ``allocateMemory`` and calls the emitted
-  ``rhs``, ``outputs``, ``params_default`` and ``params_validate``.
+  ``rhs``, ``outputs``, ``params_default`` and ``params_validate``; with Co-Simulation (``kind``
+  ``"cs"`` or ``"both"``) also ``fmi2DoStep``, which steps the emitted ``rk4_step`` with the
+  structural parameter ``fixed_step`` (whole steps, then one partial step for the rest).
 
 A source FMU ships no binary and no FMI headers: the importer compiles ``sources/`` with its
 own ``fmi2Functions.h`` (FMPy's ``build_platform_binary``, Dymola, OpenModelica and Simulink's
@@ -48,6 +51,8 @@ from gearsym.symbolic.model import Variable
 from gearsym import __version__
 
 __all__ = [
+    "DEFAULT_FIXED_STEP",
+    "KINDS",
     "WRAPPER_SOURCE",
     "FmuVariable",
     "fmu_archive",
@@ -58,6 +63,13 @@ __all__ = [
 
 #: The FMI wrapper's file name inside ``sources/``.
 WRAPPER_SOURCE = "fmi2_gearsym.c"
+
+#: What an FMU offers: Model Exchange, Co-Simulation, or both in one modelDescription (FMI 2.0
+#: allows both elements side by side over the same sources; FMPy, Dymola, OpenModelica and
+#: Simulink then let the user pick the interface).
+KINDS = ("me", "cs", "both")
+#: The Co-Simulation part's default internal RK4 step (the structural parameter ``fixed_step``).
+DEFAULT_FIXED_STEP = 1e-4
 
 #: The SI base units of FMI 2.0 ``BaseUnit`` (in its attribute order).
 _BASE = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
@@ -204,6 +216,8 @@ class ModelDescriptionView:
     initial_unknowns: tuple[Unknown, ...]
     sources: tuple[str, ...]
     nx: int
+    me: bool
+    cs: bool
 
 
 @dataclass(frozen=True)
@@ -236,6 +250,9 @@ class WrapperView:
     state_starts: tuple[str, ...]
     input_starts: tuple[str, ...]
     nominals: tuple[str, ...]
+    me: bool
+    cs: bool
+    fixed_step: str
 
 
 def _variable(
@@ -290,7 +307,15 @@ def _dependencies(pattern: SparsityPattern, row: int, indices: Sequence[int]) ->
     ]
 
 
-def _render(emitted: EmittedModel, gearbox: str, guid: str, c_files: Mapping[str, str]) -> dict:
+def _render(
+    emitted: EmittedModel,
+    gearbox: str,
+    guid: str,
+    c_files: Mapping[str, str],
+    kind: str,
+    fixed_step: float,
+) -> dict:
+    me, cs = kind in ("me", "both"), kind in ("cs", "both")
     model = emitted.model
     table = build_function_table(model, emitted.config)
     nx, nu, ny = len(model.states), len(model.inputs), len(model.outputs)
@@ -365,6 +390,29 @@ def _render(emitted: EmittedModel, gearbox: str, guid: str, c_files: Mapping[str
             )
         )
 
+    if cs:
+        # The Co-Simulation step: structural (fixed), set before initialization ends.
+        variables.append(
+            FmuVariable(
+                name="fixed_step",
+                vr=vr_p + np_,
+                index=vr_p + np_ + 1,
+                description=_xml(
+                    "Co-Simulation: internal RK4 step; fmi2DoStep takes whole steps of it and a "
+                    "last partial one"
+                ),
+                causality="parameter",
+                variability="fixed",
+                initial="exact",
+                start=_number(fixed_step),
+                unit="s",
+                min=_number(1e-9),
+                max=_number(1.0),
+                nominal=None,
+                derivative=None,
+            )
+        )
+
     # Dependencies from the Jacobians' structural nonzeros: the derivatives' from the function
     # table (the patterns of jac_x, jac_u, jac_p the emitted C computes), the outputs' from the
     # same forward-mode differentiation of h.
@@ -414,6 +462,8 @@ def _render(emitted: EmittedModel, gearbox: str, guid: str, c_files: Mapping[str
         initial_unknowns=tuple(initial),
         sources=(names["source"], WRAPPER_SOURCE),
         nx=nx,
+        me=me,
+        cs=cs,
     )
     wrapper = WrapperView(
         model_name=model.name,
@@ -436,6 +486,9 @@ def _render(emitted: EmittedModel, gearbox: str, guid: str, c_files: Mapping[str
         state_starts=tuple("0.0" for _ in model.states),
         input_starts=tuple("0.0" for _ in model.inputs),
         nominals=tuple(_number(n) for n in nominals),
+        me=me,
+        cs=cs,
+        fixed_step=_number(fixed_step),
     )
     files = {
         "modelDescription.xml": render("fmu_model_description.xml.j2", description),
@@ -445,16 +498,31 @@ def _render(emitted: EmittedModel, gearbox: str, guid: str, c_files: Mapping[str
     return {path: text.encode("utf-8") for path, text in files.items()}
 
 
-def fmu_files(emitted: EmittedModel, gearbox: str) -> dict[str, bytes]:
-    """Every file of the source FMU of ``emitted``, by path inside the archive."""
+def fmu_files(
+    emitted: EmittedModel,
+    gearbox: str,
+    kind: str = "both",
+    fixed_step: float = DEFAULT_FIXED_STEP,
+) -> dict[str, bytes]:
+    """Every file of the source FMU of ``emitted``, by path inside the archive.
+
+    ``kind`` (one of :data:`KINDS`) chooses the interfaces. The Co-Simulation part steps the
+    emitted classical RK4 (``rk4_step``) with the fixed internal step ``fixed_step`` (a
+    structural parameter of the FMU, this its start value): ``fmi2DoStep`` takes the whole steps
+    that fit the communication interval and one last partial step for the rest.
+    """
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {', '.join(KINDS)}, not {kind!r}")
+    if not (1e-9 <= fixed_step <= 1.0):
+        raise ValueError(f"fixed_step must lie in [1e-9, 1] s, not {fixed_step!r}")
     c_files = emit_c(emitted.model, emitted.config)
     # The GUID names this content: the hash of everything written with an empty GUID.
-    draft = _render(emitted, gearbox, "", c_files)
+    draft = _render(emitted, gearbox, "", c_files, kind, fixed_step)
     digest = hashlib.sha256()
     for path in sorted(draft):
         digest.update(path.encode("utf-8") + b"\0" + draft[path] + b"\0")
     guid = "{" + str(uuid.UUID(bytes=digest.digest()[:16], version=4)) + "}"
-    return _render(emitted, gearbox, guid, c_files)
+    return _render(emitted, gearbox, guid, c_files, kind, fixed_step)
 
 
 def fmu_archive(files: Mapping[str, bytes]) -> bytes:
