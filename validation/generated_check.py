@@ -37,11 +37,13 @@ from gearsym.symbolic.friction import MuMap
 from gearsym.symbolic.generate import (
     C_DIR,
     PYTHON_DIR,
+    EmittedHybridSet,
     EmittedLinearSet,
     EmittedModel,
     sample_ranges,
 )
 from gearsym.validation import c_check
+from gearsym.validation.hybrid_code_check import compare_hybrid_sets
 from gearsym.validation.linear_check import compare_linear_sets
 
 CPPCHECK_FLAGS: tuple[str, ...] = (
@@ -455,6 +457,7 @@ def check_tree(
     tools: bool = True,
     description: GearboxDescription | None = None,
     linear_sets: Sequence[EmittedLinearSet] = (),
+    hybrid_sets: Sequence[EmittedHybridSet] = (),
 ) -> TreeReport:
     """Run every check on the generated directory ``root`` (see the module docstring).
 
@@ -476,6 +479,18 @@ def check_tree(
         try:
             report.comparisons += compare_linear_sets(
                 [(e.set, e.config) for e in linear_sets], root, build_dir / "linear", n_points
+            )
+        except c_check.CompileError as err:
+            report.failures.append(f"compilation: {err}")
+            return report
+    if hybrid_sets:
+        say(f"validating {len(hybrid_sets)} sets of hybrid sensitivities (3.7 and the jumps)")
+        try:
+            report.comparisons += compare_hybrid_sets(
+                [(e.sensitivity, e.config) for e in hybrid_sets],
+                root,
+                build_dir / "hybrid",
+                n_points,
             )
         except c_check.CompileError as err:
             report.failures.append(f"compilation: {err}")
