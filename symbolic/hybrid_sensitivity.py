@@ -97,6 +97,9 @@ class Jump:
     guard: Guard
     expressions: sp.Matrix
     event_time: bool
+    #: g_x f⁻ + g_u u̇, the rate at which the guard crosses zero (near 0: a grazing crossing,
+    #: where ∂τ/∂p is ill-conditioned)
+    rate: sp.Expr = sp.Integer(0)
 
 
 @dataclass(frozen=True)
@@ -220,6 +223,12 @@ def hybrid_sensitivity(
             g_x = smart_jacobian([g], x)
             g_p = smart_jacobian([g], p)
             event_time = any(e != 0 for e in (*g_x, *g_p))
+            g_u = smart_jacobian([g], u)
+            terms = [
+                *(g_x[k] * f_minus[k] for k in range(len(x))),
+                *(g_u[k] * u_dot[k] for k in range(len(u))),
+            ]
+            rate = sp.Add(*terms)
             for target_name in (guard.target, guard.otherwise):
                 if target_name is None:
                     continue
@@ -229,15 +238,20 @@ def hybrid_sensitivity(
                 if event_time:
                     f_plus, _, x_target = parts[target_name]
                     f_plus = f_plus.xreplace(dict(zip(x_target, x_plus, strict=True)))
-                    g_u = smart_jacobian([g], u)
-                    rate = (g_x * f_minus + g_u * u_dot)[0]
                     tau_p = -(g_x * sens + g_p) / rate
                     s_plus = s_plus + (matrix * f_minus - f_plus) * tau_p
                 expressions = sp.Matrix(
                     [*x_plus, *[s_plus[i, j] for j in range(len(p)) for i in range(len(x_plus))]]
                 )
                 jumps.append(
-                    Jump(source.index, index_of[target_name], guard, expressions, event_time)
+                    Jump(
+                        source.index,
+                        index_of[target_name],
+                        guard,
+                        expressions,
+                        event_time,
+                        rate if event_time else sp.Integer(0),
+                    )
                 )
     pairs = [(j.source, j.target) for j in jumps]
     assert len(set(pairs)) == len(pairs), "one guard per transition"

@@ -132,6 +132,13 @@ def compare_models(
 
 #: Float ulps by which :func:`conditioned_error` perturbs every input, and how many times the
 #: resulting spread of the exact function the float build may deviate.
+#: Targets of the hybrid sets' jump functions: the event-time term is a quotient of long sums,
+#: −(g_x S + g_p)/(g_x f⁻ + g_u u̇), times the difference A f⁻ − f⁺ of two right-hand sides. At
+#: random points (grazing crossings redrawn) C double and CasADi agree with each other but
+#: differ from NumPy's evaluation of the SymPy expressions by up to 2.5e-12 (the reference rounds
+#: too), and float by up to 2.5e-4, beyond what one ulp of input rounding explains (measured on
+#: the built-in 2-3; README, "The hybrid sensitivities as code").
+HYBRID_JUMP = {"double": 1e-10, "single": 1e-3}
 PERTURBATION_ULPS = 1.0
 CONDITIONED_FACTOR = 10.0
 
@@ -383,6 +390,13 @@ def comparison_ok(report: c_check.ComparisonReport) -> bool:
     tolerance = c_check.TOLERANCE["single" if single else "double"]
     if report.ok(tolerance):
         return True
+    if report.target.startswith("hybrid_"):
+        jump = HYBRID_JUMP["single" if single else "double"]
+        return all(
+            err <= (jump if name.startswith("jump_") else tolerance)
+            or report.conditioned.get(name, float("inf")) <= tolerance
+            for name, err in report.max_error.items()
+        )
     if single and report.target.split(":")[0].endswith("_sens"):
         # ∂/∂p of a sensitivity system (3.7) is a second derivative: long sums of products with
         # cancellation between terms (not between inputs, so conditioned_error does not see
