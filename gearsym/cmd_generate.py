@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 from gearsym.commands import add_command, load, progress
 from gearsym.interrupts import check
+from gearsym.symbolic.defaults import DEFAULT_SHIFT
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.output_dir import OutputDir
 
@@ -55,6 +56,14 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "a list such as 3-2,5-3",
     )
     p.add_argument(
+        "--hybrid-shifts",
+        default=None,
+        metavar="WHICH",
+        help="hybrid shift models whose sensitivities across lock-up and break-away are "
+        f"emitted: none, adjacent, all or a list (default: {DEFAULT_SHIFT}, the thesis' shift, "
+        "if the gearbox has it)",
+    )
+    p.add_argument(
         "--points",
         type=int,
         default=1000,
@@ -74,7 +83,12 @@ def write_files(files: dict[str, str], root: Path) -> None:
 
 def cmd_generate(args: argparse.Namespace) -> int:
     """Generate, optionally check, and move the result into place."""
-    from gearsym.symbolic.generate import check_generatable, generate_tree, selected_shifts
+    from gearsym.symbolic.generate import (
+        check_generatable,
+        generate_tree,
+        hybrid_shift_names,
+        selected_shifts,
+    )
 
     shown = args.out
     if args.points < 1:
@@ -83,9 +97,12 @@ def cmd_generate(args: argparse.Namespace) -> int:
     d = load(args.config)
     check_generatable(d)
     selected_shifts(d, args.shifts)  # a bad --shifts is a one-line error before any work
+    hybrid_shift_names(d, args.hybrid_shifts)
     with OutputDir(args.out, "generate", before_commit=check) as out:
         progress(f"generating code for {d.name}")
-        tree = generate_tree(d, progress=progress, shifts=args.shifts)
+        tree = generate_tree(
+            d, progress=progress, shifts=args.shifts, hybrid_shifts=args.hybrid_shifts
+        )
         write_files(tree.files, out.path)
         if args.check:
             from gearsym.validation.generated_check import check_tree
@@ -100,6 +117,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
                     progress,
                     description=d,
                     linear_sets=tree.linear_sets,
+                    hybrid_sets=tree.hybrid_sets,
                 )
             for line in report.summary():
                 print(line)

@@ -33,8 +33,10 @@ from gearsym.symbolic.codegen import (
     function_names,
     render,
 )
+from gearsym.symbolic.codegen.hybrid import emit_hybrid_files, hybrid_set_model, hybrid_set_name
 from gearsym.symbolic.codegen.linear import LinearSystem, LinearSystemSet, emit_linear_files
 from gearsym.symbolic.codegen.mu_map import mu_map_files
+from gearsym.symbolic.defaults import DEFAULT_SHIFT
 from gearsym.symbolic.description import GearboxDescription, Quantity
 from gearsym.symbolic.drivetrain import (
     ShiftSpec,
@@ -53,6 +55,8 @@ from gearsym.symbolic.friction import (
     mu_map_origin,
     shift_element_sym,
 )
+from gearsym.symbolic.hybrid import hybrid_shift
+from gearsym.symbolic.hybrid_sensitivity import HybridSensitivity, hybrid_sensitivity
 from gearsym.symbolic.linear_forms import gear_linear_forms, shift_linear_forms
 from gearsym.symbolic.model import Model, Variable
 from gearsym.symbolic.output_dir import MANIFEST, manifest_marker, manifest_text
@@ -159,6 +163,18 @@ class EmittedLinearSet:
 
 
 @dataclass(frozen=True)
+class EmittedHybridSet:
+    """The sensitivities of one hybrid shift (3.7 per mode, jumps at switches) as emitted."""
+
+    sensitivity: HybridSensitivity
+    config: CodegenConfig
+
+    @property
+    def name(self) -> str:
+        return hybrid_set_name(self.sensitivity)
+
+
+@dataclass(frozen=True)
 class GeneratedTree:
     """The output of :func:`generate_tree`: files by relative path, and what produced them."""
 
@@ -167,6 +183,7 @@ class GeneratedTree:
     mu_map: MuMap
     example_models: tuple[str, ...] = field(default=())
     linear_sets: tuple[EmittedLinearSet, ...] = field(default=())
+    hybrid_sets: tuple[EmittedHybridSet, ...] = field(default=())
 
 
 # ---------------------------------------------------------------------------------------------
@@ -290,7 +307,9 @@ def sensitivity_parameters(d: GearboxDescription, spec: ShiftSpec) -> list[str]:
 SHIFT_SELECTIONS = ("adjacent", "all")
 
 
-def selected_shifts(d: GearboxDescription, shifts: str = "adjacent") -> list[ShiftSpec]:
+def selected_shifts(
+    d: GearboxDescription, shifts: str = "adjacent", key: str = "--shifts"
+) -> list[ShiftSpec]:
     """The shifts whose models ``generate`` emits.
 
     ``"adjacent"``: the upshifts between forward gears adjacent by ratio (the thesis' shifts);
@@ -317,10 +336,10 @@ def selected_shifts(d: GearboxDescription, shifts: str = "adjacent") -> list[Shi
         return [shift_spec(d, name) for name in names]
     names = [part.strip() for part in shifts.split(",") if part.strip()]
     if not names:
-        raise GearsymError(d.file, "--shifts", "expected adjacent, all or a list such as 3-2,5-3")
+        raise GearsymError(d.file, key, "expected adjacent, all or a list such as 3-2,5-3")
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
-        raise GearsymError(d.file, "--shifts", f"shift {twice[0]} listed twice")
+        raise GearsymError(d.file, key, f"shift {twice[0]} listed twice")
     return [shift_spec(d, name) for name in names]
 
 
@@ -491,6 +510,39 @@ def linear_system_sets(
         s = LinearSystemSet(group.name, group.parameters, systems, metadata)
         # the parameter ranges params_validate enforces are those of the models
         sets.append(EmittedLinearSet(s, CodegenConfig(bounds=_bounds(d, s.as_model()))))
+    return sets
+
+
+def hybrid_shift_names(d: GearboxDescription, hybrid_shifts: str | None = None) -> list[str]:
+    """The shifts whose hybrid sensitivities ``generate`` emits: ``hybrid_shifts`` as
+    :func:`selected_shifts` reads it, ``"none"``, or by default the thesis' shift
+    (:data:`~gearsym.symbolic.defaults.DEFAULT_SHIFT`) where the gearbox has it as a single
+    swap and friction data (each set is about 110 kB of object code, so not every shift by
+    default)."""
+    if hybrid_shifts == "none":
+        return []
+    if hybrid_shifts is None:
+        if not _has_friction_data(d):  # the hybrid model needs n_disc and r_m (3.14)
+            return []
+        names = {spec.name for spec in selected_shifts(d, "all")}
+        return [DEFAULT_SHIFT] if DEFAULT_SHIFT in names else []
+    return [spec.name for spec in selected_shifts(d, hybrid_shifts, "--hybrid-shifts")]
+
+
+def hybrid_sensitivity_sets(
+    d: GearboxDescription,
+    progress: Callable[[str], None] | None = None,
+    hybrid_shifts: str | None = None,
+) -> list[EmittedHybridSet]:
+    """The hybrid shift models' sensitivities (3.7 per mode, jumps at every switch) that
+    ``generate`` emits (:func:`hybrid_shift_names`)."""
+    say = progress or (lambda message: None)
+    sets = []
+    for name in hybrid_shift_names(d, hybrid_shifts):
+        say(f"deriving the hybrid sensitivities of shift {name} (3.7 and the switch jumps)")
+        hs = hybrid_sensitivity(hybrid_shift(d, name), file=d.file)
+        config = CodegenConfig(bounds=_bounds(d, hybrid_set_model(hs)))
+        sets.append(EmittedHybridSet(hs, config))
     return sets
 
 
@@ -685,6 +737,7 @@ class ReadmeView:
     example: ExampleView
     mu_map_origin: str  # mu_map_origin() leaves only [A-Za-z0-9._+-] and spaces: Markdown-safe
     linear_sets: tuple[LinearSetRow, ...]
+    hybrid_sets: tuple[LinearSetRow, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -703,6 +756,7 @@ def _readme(
     example: ExampleView,
     mu_map: MuMap,
     linear_sets: Sequence[EmittedLinearSet] = (),
+    hybrid_sets: Sequence[EmittedHybridSet] = (),
 ) -> str:
     rows = []
     for m in models:
@@ -728,6 +782,7 @@ def _readme(
         example=example,
         mu_map_origin=mu_map.origin,
         linear_sets=tuple(_linear_set_row(emitted.set) for emitted in linear_sets),
+        hybrid_sets=tuple(_hybrid_set_row(emitted) for emitted in hybrid_sets),
     )
     return render("generated_readme.md.j2", view)
 
@@ -744,10 +799,25 @@ def _linear_set_row(s: LinearSystemSet) -> LinearSetRow:
     )
 
 
+def _hybrid_set_row(emitted: EmittedHybridSet) -> LinearSetRow:
+    hs = emitted.sensitivity
+    names = naming.model_file_names(emitted.name)
+    return LinearSetRow(
+        name=emitted.name,
+        summary=f"shift {hs.hybrid.spec.name}: {len(hs.jumps)} switches",
+        systems=f"{len(hs.modes)} (NX_AUG {min(len(m.states) for m in hs.modes)}"
+        f"-{max(len(m.states) for m in hs.modes)})",
+        parameters=", ".join(v.name for v in hs.parameters),
+        c=f"{C_DIR}/{names['header']}, {C_DIR}/{names['source']}",
+        python=f"{PYTHON_DIR}/{names['casadi']}",
+    )
+
+
 def generate_tree(
     d: GearboxDescription,
     progress: Callable[[str], None] | None = None,
     shifts: str = "adjacent",
+    hybrid_shifts: str | None = None,
 ) -> GeneratedTree:
     """Every file of the output directory for ``d``, by relative path (``/`` separated);
     ``shifts`` selects the shift models (:func:`selected_shifts`)."""
@@ -765,11 +835,21 @@ def generate_tree(
         for name, text in emit_linear_files(emitted.set, emitted.config).items():
             folder = PYTHON_DIR if name.endswith(".py") else C_DIR
             files[f"{folder}/{name}"] = text
+    hybrid_sets = hybrid_sensitivity_sets(d, say, hybrid_shifts)
+    for emitted_hybrid in hybrid_sets:
+        say(f"emitting {emitted_hybrid.name}")
+        for name, text in emit_hybrid_files(
+            emitted_hybrid.sensitivity, emitted_hybrid.config
+        ).items():
+            folder = PYTHON_DIR if name.endswith(".py") else C_DIR
+            files[f"{folder}/{name}"] = text
     say("emitting the mu map and the example")
     mu_map = load_mu_map(d)
     files.update(mu_map_files(mu_map))
     example = _example_view(d, models)
     files[f"{C_DIR}/main.c"] = render("c_example_main.c.j2", example)
-    files["README.md"] = _readme(d, models, example, mu_map, linear_sets)
+    files["README.md"] = _readme(d, models, example, mu_map, linear_sets, hybrid_sets)
     files[MANIFEST] = manifest_text({k: v.encode("utf-8") for k, v in files.items()}, "generate")
-    return GeneratedTree(files, tuple(models), mu_map, example.c_files, tuple(linear_sets))
+    return GeneratedTree(
+        files, tuple(models), mu_map, example.c_files, tuple(linear_sets), tuple(hybrid_sets)
+    )

@@ -23,12 +23,12 @@ from gearsym.symbolic.codegen.cse import CseForm, cse_function
 from gearsym.symbolic.codegen.printing import comment_text, float_repr, wrap
 from gearsym.symbolic.codegen.render import render
 from gearsym.symbolic.codegen.table import (
-    ROWS,
     Arg,
     FunctionSpec,
     FunctionTable,
     Output,
     _normalise_bounds,
+    parameter_functions,
     real_symbols,
 )
 from gearsym.symbolic.codegen.views import ModelView, model_view
@@ -123,34 +123,7 @@ def linear_table(s: LinearSystemSet, config: CodegenConfig | None = None) -> Fun
     ps = tuple(real[v.symbol] for v in model.parameters)
     p_arg = Arg("p", len(ps), True, "params", ps, tuple(v.name for v in model.parameters))
     prefix, macro = function_prefix(model.name), macro_prefix(model.name)
-    defaults = sp.ImmutableMatrix(
-        len(ps), 1, [sp.nan if v.default is None else sp.Float(v.default) for v in s.parameters]
-    )
-    lower = [sp.S.NegativeInfinity if lo is None else sp.Float(lo) for lo, _ in bounds]
-    upper = [sp.S.Infinity if hi is None else sp.Float(hi) for _, hi in bounds]
-    data = {
-        "params_default": (defaults,),
-        "params_validate": (sp.ImmutableMatrix(2, len(ps), lower + upper),),
-    }
-    functions = []
-    for row in ROWS:
-        if row.kind not in data:
-            continue
-        outputs = tuple(
-            Output(name, (len(ps) if rows == "np" else 1, 1), ctype)
-            for name, rows, _, ctype in row.outputs
-        )
-        functions.append(
-            FunctionSpec(
-                row.name,
-                (p_arg,) if row.args else (),
-                outputs,
-                data[row.kind],
-                row.doc,
-                kind=row.kind,
-                returns=row.returns,
-            )
-        )
+    functions = parameter_functions(model, bounds, p_arg)
     changed = {old: new for old, new in real.items() if old != new}
     for system in s.systems:
         n, m = len(system.states), len(system.inputs)

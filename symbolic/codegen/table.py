@@ -37,6 +37,7 @@ __all__ = [
     "build_function_table",
     "file_names",
     "function_names",
+    "parameter_functions",
     "real_symbols",
 ]
 
@@ -327,6 +328,43 @@ def _check_names(model: Model) -> None:
         problems.append("the model has no states")
     if problems:
         raise ValueError(f"model {model.name!r} cannot be emitted: " + "; ".join(problems))
+
+
+def parameter_functions(
+    model: Model, bounds: Sequence[tuple[float | None, float | None]], p_arg: Arg
+) -> list[FunctionSpec]:
+    """``params_default`` and ``params_validate`` of :data:`ROWS` for a model whose functions
+    are not the model rows (the linear and hybrid sets): the defaults and the bounds as data."""
+    n = len(model.parameters)
+    defaults = sp.ImmutableMatrix(
+        n, 1, [sp.nan if v.default is None else sp.Float(v.default) for v in model.parameters]
+    )
+    lower = [sp.S.NegativeInfinity if lo is None else sp.Float(lo) for lo, _ in bounds]
+    upper = [sp.S.Infinity if hi is None else sp.Float(hi) for _, hi in bounds]
+    data = {
+        "params_default": (defaults,),
+        "params_validate": (sp.ImmutableMatrix(2, n, lower + upper),),
+    }
+    functions = []
+    for row in ROWS:
+        if row.kind not in data:
+            continue
+        outputs = tuple(
+            Output(name, (n if rows == "np" else 1, 1), ctype)
+            for name, rows, _, ctype in row.outputs
+        )
+        functions.append(
+            FunctionSpec(
+                row.name,
+                (p_arg,) if row.args else (),
+                outputs,
+                data[row.kind],
+                row.doc,
+                kind=row.kind,
+                returns=row.returns,
+            )
+        )
+    return functions
 
 
 def _normalise_bounds(
