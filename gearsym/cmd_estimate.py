@@ -204,10 +204,9 @@ def _cmd_drive(args: argparse.Namespace, d: Any) -> int:
     return 0
 
 
-def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
-    """``--filter ekf``: the EKF on the scenario's reference shift."""
+def _ekf_noise_and_parameters(args: argparse.Namespace) -> tuple[Any, list[str] | None]:
+    """``--noise`` (one relative error or one per output, default 0.01) and ``--params``."""
     from gearsym.symbolic.errors import GearsymError
-    from gearsym.symbolic.estimators.ekf import augmented_model
 
     noise: Any = 0.01
     if args.noise is not None:
@@ -220,6 +219,15 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
     parameters = None
     if args.params is not None:
         parameters = [p.strip() for p in args.params.split(",") if p.strip()]
+    return noise, parameters
+
+
+def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
+    """``--filter ekf``: the EKF on the scenario's reference shift."""
+    from gearsym.symbolic.errors import GearsymError
+    from gearsym.symbolic.estimators.ekf import augmented_model
+
+    noise, parameters = _ekf_noise_and_parameters(args)
     initial = _initial_values(args.initial)
     if args.initial_from_prior and initial:
         raise GearsymError(
@@ -347,17 +355,7 @@ def _cmd_measured(args: argparse.Namespace, d: Any, scenario: Any) -> int:
             "measurement.sample_time",
             f"must be at most t_end / 4 = {scenario.t_end / 4:g} s, got {cmap.sample_time:g}",
         )
-    noise: Any = 0.01
-    if args.noise is not None:
-        try:
-            noise = [number(float, above=0)(v) for v in args.noise.split(",")]
-        except argparse.ArgumentTypeError as err:
-            raise GearsymError("estimate", "--noise", str(err)) from None
-        if len(noise) not in (1, 3):
-            raise GearsymError("estimate", "--noise", "give one value or one per output (3)")
-    parameters = None
-    if args.params is not None:
-        parameters = [p.strip() for p in args.params.split(",") if p.strip()]
+    noise, parameters = _ekf_noise_and_parameters(args)
     initial = _initial_values(args.initial)
     aug = augmented_model(d, scenario.shift.name, parameters)
     outputs = [name.removeprefix("y_") for name in aug.output_names]
