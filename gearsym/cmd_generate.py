@@ -55,6 +55,14 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "a list such as 3-2,5-3",
     )
     p.add_argument(
+        "--uio-unknown",
+        default="T_res_star",
+        metavar="NAMES",
+        help="unknown inputs of the emitted UIO of the default shift (thesis 4.4), comma "
+        "separated (default T_res_star; generate refuses a set for which a phase has no UIO, "
+        "e.g. T_res_star,T_K38,T_B05)",
+    )
+    p.add_argument(
         "--points",
         type=int,
         default=1000,
@@ -85,7 +93,8 @@ def cmd_generate(args: argparse.Namespace) -> int:
     selected_shifts(d, args.shifts)  # a bad --shifts is a one-line error before any work
     with OutputDir(args.out, "generate", before_commit=check) as out:
         progress(f"generating code for {d.name}")
-        tree = generate_tree(d, progress=progress, shifts=args.shifts)
+        unknown = tuple(name.strip() for name in args.uio_unknown.split(",") if name.strip())
+        tree = generate_tree(d, progress=progress, shifts=args.shifts, uio_unknown=unknown)
         write_files(tree.files, out.path)
         if args.check:
             from gearsym.validation.generated_check import check_tree
