@@ -43,7 +43,8 @@ static const gearsym_real gear_2_T[9] = {
 
 void gearsym_uio_2_3_gear_2_init(const gearsym_real x0[3], gearsym_real z0[3])
 {
-    size_t i, j;
+    size_t i;
+    size_t j;
     for (i = 0; i < 3u; ++i) {
         gearsym_real acc = GEARSYM_LIT(0.0);
         for (j = 0; j < 3u; ++j) {
@@ -57,7 +58,8 @@ void gearsym_uio_2_3_gear_2_step(const gearsym_real z[3], const gearsym_real y[3
     const gearsym_real u[2], const gearsym_real u_next[2],
     gearsym_real z_next[3])
 {
-    size_t i, j;
+    size_t i;
+    size_t j;
     for (i = 0; i < 3u; ++i) {
         gearsym_real acc = GEARSYM_LIT(0.0);
         for (j = 0; j < 3u; ++j) {
@@ -76,7 +78,8 @@ void gearsym_uio_2_3_gear_2_step(const gearsym_real z[3], const gearsym_real y[3
 void gearsym_uio_2_3_gear_2_estimate(const gearsym_real z[3], const gearsym_real y[3],
     gearsym_real x_hat[3])
 {
-    size_t i, j;
+    size_t i;
+    size_t j;
     for (i = 0; i < 3u; ++i) {
         gearsym_real acc = z[i];
         for (j = 0; j < 3u; ++j) {
@@ -129,7 +132,8 @@ static const gearsym_real torque_and_speed_phase_T[16] = {
 
 void gearsym_uio_2_3_torque_and_speed_phase_init(const gearsym_real x0[4], gearsym_real z0[4])
 {
-    size_t i, j;
+    size_t i;
+    size_t j;
     for (i = 0; i < 4u; ++i) {
         gearsym_real acc = GEARSYM_LIT(0.0);
         for (j = 0; j < 4u; ++j) {
@@ -143,7 +147,8 @@ void gearsym_uio_2_3_torque_and_speed_phase_step(const gearsym_real z[4], const 
     const gearsym_real u[4], const gearsym_real u_next[4],
     gearsym_real z_next[4])
 {
-    size_t i, j;
+    size_t i;
+    size_t j;
     for (i = 0; i < 4u; ++i) {
         gearsym_real acc = GEARSYM_LIT(0.0);
         for (j = 0; j < 4u; ++j) {
@@ -162,7 +167,8 @@ void gearsym_uio_2_3_torque_and_speed_phase_step(const gearsym_real z[4], const 
 void gearsym_uio_2_3_torque_and_speed_phase_estimate(const gearsym_real z[4], const gearsym_real y[3],
     gearsym_real x_hat[4])
 {
-    size_t i, j;
+    size_t i;
+    size_t j;
     for (i = 0; i < 4u; ++i) {
         gearsym_real acc = z[i];
         for (j = 0; j < 3u; ++j) {
@@ -209,7 +215,8 @@ static const gearsym_real gear_3_T[9] = {
 
 void gearsym_uio_2_3_gear_3_init(const gearsym_real x0[3], gearsym_real z0[3])
 {
-    size_t i, j;
+    size_t i;
+    size_t j;
     for (i = 0; i < 3u; ++i) {
         gearsym_real acc = GEARSYM_LIT(0.0);
         for (j = 0; j < 3u; ++j) {
@@ -223,7 +230,8 @@ void gearsym_uio_2_3_gear_3_step(const gearsym_real z[3], const gearsym_real y[3
     const gearsym_real u[2], const gearsym_real u_next[2],
     gearsym_real z_next[3])
 {
-    size_t i, j;
+    size_t i;
+    size_t j;
     for (i = 0; i < 3u; ++i) {
         gearsym_real acc = GEARSYM_LIT(0.0);
         for (j = 0; j < 3u; ++j) {
@@ -242,7 +250,8 @@ void gearsym_uio_2_3_gear_3_step(const gearsym_real z[3], const gearsym_real y[3
 void gearsym_uio_2_3_gear_3_estimate(const gearsym_real z[3], const gearsym_real y[3],
     gearsym_real x_hat[3])
 {
-    size_t i, j;
+    size_t i;
+    size_t j;
     for (i = 0; i < 3u; ++i) {
         gearsym_real acc = z[i];
         for (j = 0; j < 3u; ++j) {
