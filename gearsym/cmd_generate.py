@@ -64,6 +64,14 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "if the gearbox has it)",
     )
     p.add_argument(
+        "--uio-unknown",
+        default="T_res_star",
+        metavar="NAMES",
+        help="unknown inputs of the emitted UIO of the default shift (thesis 4.4), comma "
+        "separated (default T_res_star; generate refuses a set for which a phase has no UIO, "
+        "e.g. T_res_star,T_K38,T_B05)",
+    )
+    p.add_argument(
         "--points",
         type=int,
         default=1000,
@@ -100,8 +108,13 @@ def cmd_generate(args: argparse.Namespace) -> int:
     hybrid_shift_names(d, args.hybrid_shifts)
     with OutputDir(args.out, "generate", before_commit=check) as out:
         progress(f"generating code for {d.name}")
+        unknown = tuple(name.strip() for name in args.uio_unknown.split(",") if name.strip())
         tree = generate_tree(
-            d, progress=progress, shifts=args.shifts, hybrid_shifts=args.hybrid_shifts
+            d,
+            progress=progress,
+            shifts=args.shifts,
+            hybrid_shifts=args.hybrid_shifts,
+            uio_unknown=unknown,
         )
         write_files(tree.files, out.path)
         if args.check:

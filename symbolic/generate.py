@@ -738,6 +738,7 @@ class ReadmeView:
     mu_map_origin: str  # mu_map_origin() leaves only [A-Za-z0-9._+-] and spaces: Markdown-safe
     linear_sets: tuple[LinearSetRow, ...]
     hybrid_sets: tuple[LinearSetRow, ...] = ()
+    uio_rows: tuple[str, ...] = ()  # Markdown table rows of the emitted UIOs
 
 
 @dataclass(frozen=True)
@@ -757,6 +758,7 @@ def _readme(
     mu_map: MuMap,
     linear_sets: Sequence[EmittedLinearSet] = (),
     hybrid_sets: Sequence[EmittedHybridSet] = (),
+    uio_rows: Sequence[str] = (),
 ) -> str:
     rows = []
     for m in models:
@@ -783,6 +785,7 @@ def _readme(
         mu_map_origin=mu_map.origin,
         linear_sets=tuple(_linear_set_row(emitted.set) for emitted in linear_sets),
         hybrid_sets=tuple(_hybrid_set_row(emitted) for emitted in hybrid_sets),
+        uio_rows=tuple(uio_rows),
     )
     return render("generated_readme.md.j2", view)
 
@@ -813,11 +816,52 @@ def _hybrid_set_row(emitted: EmittedHybridSet) -> LinearSetRow:
     )
 
 
+def uio_files(
+    d: GearboxDescription,
+    progress: Callable[[str], None] | None = None,
+    shifts: str = "adjacent",
+    unknown: Sequence[str] = (naming.RESISTANCE_INPUT,),
+) -> tuple[dict[str, str], list[str]]:
+    """The UIO files (thesis 4.4) of the default shift, when it is emitted, and their README
+    rows. Only T_res* is unknown by default: with the clutch torques T_K38, T_B05 unknown too
+    the torque and speed phase has an invariant zero at s = 0 and no UIO exists, and
+    :func:`~gearsym.symbolic.estimators.uio.shift_uio_designs` refuses it (naming the phase and
+    the condition)."""
+    from gearsym.symbolic.codegen.uio import emit_uio_files, phase_identifier, uio_set_name
+    from gearsym.symbolic.defaults import DEFAULT_SHIFT, SAMPLE_TIME
+    from gearsym.symbolic.estimators.uio import shift_uio_designs
+
+    if DEFAULT_SHIFT not in {spec.name for spec in selected_shifts(d, shifts)}:
+        return {}, []
+    say = progress or (lambda message: None)
+    say(f"designing the UIO of shift {DEFAULT_SHIFT} ({', '.join(unknown)} unknown)")
+    designs = shift_uio_designs(d, DEFAULT_SHIFT, unknown, SAMPLE_TIME)
+    metadata = {
+        "gearbox": d.name,
+        "equations": "4.4, 5.1-5.3",
+        "unknown inputs": ", ".join(unknown),
+        "sample time": f"{SAMPLE_TIME:g} s",
+    }
+    files = {}
+    for name, text in emit_uio_files(DEFAULT_SHIFT, designs, metadata).items():
+        files[f"{PYTHON_DIR if name.endswith('.py') else C_DIR}/{name}"] = text
+    names = naming.model_file_names(uio_set_name(DEFAULT_SHIFT))
+    rows = [
+        f"| `{uio_set_name(DEFAULT_SHIFT)}` | `{phase_identifier(x.phase)}` ({x.phase}) | "
+        f"{', '.join(x.unknown)} | {len(x.states)} / {len(x.outputs)} / {len(x.known)} | "
+        f"{x.spectral_radius:.3g} | {C_DIR}/{names['header']}, {C_DIR}/{names['source']} | "
+        f"{PYTHON_DIR}/{names['casadi']} |"
+        for x in designs
+    ]
+    return files, rows
+
+
 def generate_tree(
     d: GearboxDescription,
     progress: Callable[[str], None] | None = None,
     shifts: str = "adjacent",
     hybrid_shifts: str | None = None,
+    uio_unknown: Sequence[str] = (naming.RESISTANCE_INPUT,),
 ) -> GeneratedTree:
     """Every file of the output directory for ``d``, by relative path (``/`` separated);
     ``shifts`` selects the shift models (:func:`selected_shifts`)."""
@@ -843,12 +887,16 @@ def generate_tree(
         ).items():
             folder = PYTHON_DIR if name.endswith(".py") else C_DIR
             files[f"{folder}/{name}"] = text
+    uio, uio_rows = uio_files(d, say, shifts, uio_unknown)
+    files.update(uio)
     say("emitting the mu map and the example")
     mu_map = load_mu_map(d)
     files.update(mu_map_files(mu_map))
     example = _example_view(d, models)
     files[f"{C_DIR}/main.c"] = render("c_example_main.c.j2", example)
-    files["README.md"] = _readme(d, models, example, mu_map, linear_sets, hybrid_sets)
+    files["README.md"] = _readme(
+        d, models, example, mu_map, linear_sets, hybrid_sets=hybrid_sets, uio_rows=uio_rows
+    )
     files[MANIFEST] = manifest_text({k: v.encode("utf-8") for k, v in files.items()}, "generate")
     return GeneratedTree(
         files, tuple(models), mu_map, example.c_files, tuple(linear_sets), tuple(hybrid_sets)

@@ -67,6 +67,7 @@ __all__ = [
     "UioExistence",
     "design_uio",
     "linear_modes",
+    "shift_uio_designs",
     "uio_existence",
 ]
 
@@ -423,3 +424,44 @@ def design_uio(
         F=f,
         K=k1 + f @ h,
     )
+
+
+def shift_uio_designs(
+    d: GearboxDescription,
+    shift: str,
+    unknown: Sequence[str],
+    sample_time: float,
+    source: str = "generate",
+    key: str = "--uio-unknown",
+) -> tuple[UioDesign, ...]:
+    """The UIO of every phase of ``shift`` in which an ``unknown`` input acts (4.4), designed at
+    the description's parameters as :func:`design_uio` does (first-order hold, unit weights).
+
+    Refuses with one :class:`GearsymError` (``source``, ``key``) naming the phase and the first
+    failed existence condition (rank(CE) = rank(E), or strong detectability) when a phase has
+    no UIO: nothing is emitted for a shift whose observer cannot exist."""
+    modes = linear_modes(d, shift)
+    known_inputs = list(dict.fromkeys(name for m in modes for name in m.form.inputs))
+    wrong = [u for u in unknown if u not in known_inputs]
+    if wrong or not unknown:
+        raise GearsymError(
+            source,
+            key,
+            f"{', '.join(wrong) or 'nothing'} is not an input of any phase of shift {shift} "
+            f"(inputs of (5.3): {', '.join(known_inputs)})",
+        )
+    designs = []
+    for mode in modes:
+        acting = [u for u in unknown if u in mode.form.inputs]
+        if not acting:
+            continue
+        existence = uio_existence(mode, acting)
+        if not existence.exists:
+            raise GearsymError(
+                source,
+                key,
+                f"no UIO of shift {shift} in the {mode.phase} with {', '.join(acting)} unknown: "
+                f"{existence.reason()}",
+            )
+        designs.append(design_uio(mode, acting, sample_time, existence=existence))
+    return tuple(designs)
