@@ -545,7 +545,7 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "--initial",
         nargs="+",
         metavar="NAME=VALUE",
-        help="ekf: initial estimate of a filter state (default: m_veh 30 %% below the "
+        help="ekf, euio: initial estimate of a filter state (default: m_veh 30 %% below the "
         "description's value, mu nominal, zeta 0, phi 0, speeds from the first measurement)",
     )
     p.add_argument(
