@@ -172,3 +172,18 @@ def test_cli_json_keys(tmp_path, capsys):
     assert "rmse" in out["unknown_inputs"]["T_res_star"]
     assert [p["name"] for p in out["phases"]] == ["gear 2", "torque phase", "speed phase", "gear 3"]
     assert {p.name for p in (tmp_path / "o").iterdir()} >= {"euio.csv", "euio.png", "euio.json"}
+
+
+def test_cli_refuses_bad_initial_in_one_line():
+    import subprocess
+    import sys
+
+    result = subprocess.run(
+        [sys.executable, "-m", "gearsym", "estimate", "--filter", "euio", "--initial", "m_veh=x"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--initial" in lines[0] and "Traceback" not in result.stderr
