@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 
 __all__ = ["cmd_estimate", "register"]
 
-FILTERS = ("uio", "ekf")
+FILTERS = ("uio", "ekf", "euio")
 
 
 def _say(message: str) -> None:
@@ -57,6 +57,8 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         return _cmd_ekf(args, d, scenario)
     if args.runs != 1:
         raise GearsymError("estimate", "--runs", "Monte-Carlo runs are for --filter ekf only")
+    if args.filter == "euio":
+        return _cmd_euio(args, d, scenario)
     if args.initial_from_prior:
         raise GearsymError("estimate", "--initial-from-prior", "is for --filter ekf only")
     unknown = [u.strip() for u in args.unknown.split(",") if u.strip()]
@@ -98,6 +100,46 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     from gearsym.validation.estimation import format_text
 
     return _run_and_report(args, work, format_text)
+
+
+def _cmd_euio(args: argparse.Namespace, d: Any, scenario: Any) -> int:
+    """``--filter euio``: the extended UIO (4.5) on the reference shift."""
+    from gearsym.symbolic.errors import GearsymError
+
+    if args.initial_from_prior:
+        raise GearsymError("estimate", "--initial-from-prior", "is for --filter ekf only")
+    initial = _initial_values(args.initial)
+    noise = 0.01
+    if args.noise is not None:
+        try:
+            noise = number(float, above=0)(args.noise)
+        except argparse.ArgumentTypeError as err:
+            raise GearsymError("estimate", "--noise", str(err)) from None
+
+    def work(folder: Any) -> Any:
+        from gearsym.cmd_dynamics import simulate_with_progress
+        from gearsym.validation.estimation import plot_euio, run_euio, write_euio_csv
+
+        result = simulate_with_progress(d, scenario)
+        _say("running the extended UIO")
+        run = run_euio(
+            d,
+            result,
+            sample_time=args.sample_time,
+            relative_noise=noise,
+            seed=args.seed,
+            initial=initial,
+        )
+        if folder is not None:
+            write_euio_csv(run, folder / "euio.csv")
+            (folder / "euio.json").write_text(json.dumps(run.to_dict(), indent=2) + "\n")
+            if not args.no_plots:
+                plot_euio(run, folder / "euio.png")
+        return run
+
+    from gearsym.validation.estimation import format_euio_text
+
+    return _run_and_report(args, work, format_euio_text)
 
 
 def _initial_values(items: list[str] | None) -> dict[str, float]:
@@ -501,7 +543,7 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "--initial",
         nargs="+",
         metavar="NAME=VALUE",
-        help="ekf: initial estimate of a filter state (default: m_veh 30 %% below the "
+        help="ekf, euio: initial estimate of a filter state (default: m_veh 30 %% below the "
         "description's value, mu nominal, zeta 0, phi 0, speeds from the first measurement)",
     )
     p.add_argument(

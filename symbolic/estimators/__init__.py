@@ -10,6 +10,7 @@ from gearsym.symbolic.estimators.ekf import (
     DiscreteModel,
     augmented_model,
 )
+from gearsym.symbolic.estimators.euio import EuioExistence, euio_existence
 from gearsym.symbolic.estimators.uio import (
     LinearMode,
     UioDesign,
@@ -23,6 +24,8 @@ __all__ = [
     "AugmentedModel",
     "DiscreteModel",
     "augmented_model",
+    "EuioExistence",
+    "euio_existence",
     "LinearMode",
     "UioDesign",
     "UioExistence",

@@ -1,0 +1,253 @@
+"""Extended unknown input observer (thesis 4.5) on the parameter-augmented shift model (4.1).
+
+**Model.** The EKF's augmented model (:mod:`.ekf`) with the parameters m_veh, μ_off, μ_on as
+random-walk states, but *without* a road model: ζ, f_roll and c_W are set to 0 in the filter,
+and the whole road load T_res* (2.48: rolling, aero and grade, so it absorbs ζ; (5.5) has
+T_res* and ζ in collinear columns, only their sum is estimable) is an unknown input d acting
+on the wheel speed, I_C^eff ω̇_C = 2 T_ss − d (2.45, 2.46). Its column is
+E = −e_{ω_C} / (I_wheel + m_veh r_dyn²).
+
+**Decoupling (4.5).** The UIO's decoupling (4.4) applied to the model linearised at each step
+like the EKF: the unbiased minimum-variance filter of Gillijns & De Moor (Automatica 43, 2007,
+the stochastic form of the UIO). With the RK4 step z⁻ = Φ_h(z, u) and its exact Jacobian F
+(:class:`.ekf.DiscreteModel`), P⁻ = F P Fᵀ + h diag(q), C = ∂h/∂z at z⁻, the discrete column
+E_d = h (I + hA/2 + h²A²/6 + h³A³/24) E (A = ∂f/∂z: the RK4 series of Γ E), R̃ = C P⁻ Cᵀ + R:
+
+    M = (E_dᵀ Cᵀ R̃⁻¹ C E_d)⁻¹ E_dᵀ Cᵀ R̃⁻¹,   d̂ = M ν,   ν = y − h(z⁻),
+    K = P⁻ Cᵀ R̃⁻¹,   L = K (I − C E_d M) + E_d M,   z = z⁻ + L ν,
+    P = (I − L C) P⁻ (I − L C)ᵀ + L R Lᵀ   (Joseph: the covariance of this gain).
+
+L C E_d = E_d, so the error does not depend on d: the load may be any ramp or step. The
+matching condition rank(C E) = rank(E) makes M exist; σ_d² = (E_dᵀ Cᵀ R̃⁻¹ C E_d)⁻¹.
+
+**Existence per phase** (as for the UIO, 4.4) on the continuous linearisation (A, E, C) at the
+phase's operating point, per parameter: the states are the physical ones plus the parameter;
+matching rank(CE) = rank(E) and strong detectability (no invariant zero of the Rosenbrock
+matrix [[sI − A, −E], [C, 0]] with Re s ≥ 0; zeros where its rank drops below its normal
+rank). A parameter whose test fails in a phase is *held* there: its row of L is 0 and its
+random walk stops, so estimate and σ stay unchanged (as a μ whose element does not slide).
+
+m_veh is never decoupled from the road load: it enters ω̇_C only, through I_C^eff, in the
+same row as d (the A column of m_veh is a multiple of E), so s = 0 is an invariant zero in
+every phase: a mass error is indistinguishable from a road load. The EUIO therefore holds
+m_veh at its prior and reports why; the μ of a sliding element acts on ω_1, ω_2 and is
+decoupled.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import numpy as np
+
+__all__ = [
+    "EuioExistence",
+    "euio_existence",
+    "euio_step",
+    "load_column",
+    "ROAD_FREE",
+]
+
+#: Filter-model parameters set to 0: the road load is the unknown input instead.
+ROAD_FREE: dict[str, float] = {"zeta": 0.0, "f_roll": 0.0, "c_W": 0.0}
+
+#: Relative rank tolerance of the numerical rank tests.
+RANK_TOL = 1e-9
+
+
+def load_column(
+    discrete: Any, z: np.ndarray, r_dyn: float, p: Sequence[float], i_wheel: float
+) -> np.ndarray:
+    """E = −e_{ω_C} / (I_wheel + m_veh r_dyn²) (2.45, 2.46): ∂ż/∂d of the road load d."""
+    import numpy as np
+
+    names = discrete.aug.state_names
+    e = np.zeros(len(names))
+    m = float(z[names.index("m_veh")]) if "m_veh" in names else float("nan")
+    e[names.index("omega_C")] = -1.0 / (i_wheel + m * r_dyn**2)
+    return e
+
+
+def _rank(m: np.ndarray) -> int:
+    import numpy as np
+
+    if m.size == 0:
+        return 0
+    s = np.linalg.svd(m, compute_uv=False)
+    return int(np.sum(s > RANK_TOL * max(1.0, s[0])))
+
+
+def rosenbrock(a: np.ndarray, e: np.ndarray, c: np.ndarray, s: complex) -> np.ndarray:
+    """P(s) = [[sI − A, −E], [C, 0]]."""
+    import numpy as np
+
+    n, q, p = a.shape[0], e.shape[1], c.shape[0]
+    return np.block([[s * np.eye(n) - a, -e], [c, np.zeros((p, q))]])
+
+
+def invariant_zeros(a: np.ndarray, e: np.ndarray, c: np.ndarray) -> tuple[int, list[complex]]:
+    """(normal rank, finite invariant zeros) of the Rosenbrock matrix.
+
+    A tall pencil is squared down by two random left projections W (n+q × n+p); the zeros of
+    P(s) are generalized eigenvalues of (W N, W M) for every W, spurious ones differ between
+    the two draws, so the common ones are kept. A zero at s = 0 is confirmed by the rank of
+    P(0) directly."""
+    import numpy as np
+    from scipy.linalg import eigvals
+
+    n, q, p = a.shape[0], e.shape[1], c.shape[0]
+    rng = np.random.default_rng(7)
+    normal = max(_rank(rosenbrock(a, e, c, complex(rng.normal(), rng.normal()))) for _ in range(2))
+    mm = np.zeros((n + p, n + q))
+    mm[:n, :n] = np.eye(n)
+    nn = -rosenbrock(a, e, c, 0.0)  # P(s) = s M − N
+    sets = []
+    for _ in range(2):
+        w = rng.normal(size=(n + q, n + p))
+        with np.errstate(all="ignore"):
+            lam = eigvals(w @ nn, w @ mm)
+        sets.append([z for z in lam if np.isfinite(z)])
+    common = []
+    for z in sets[0]:
+        if any(abs(z - y) <= 1e-6 * max(1.0, abs(z)) for y in sets[1]):
+            common.append(complex(z))
+    zeros = [z for z in common if _rank(rosenbrock(a, e, c, z)) < normal]
+    zeros = [0j if abs(z) < 1e-9 else z for z in zeros]
+    if _rank(rosenbrock(a, e, c, 0.0)) < normal and not any(abs(z) < 1e-9 for z in zeros):
+        zeros.append(0j)
+    return normal, zeros
+
+
+@dataclass(frozen=True)
+class EuioExistence:
+    """The UIO conditions for one parameter in one phase, on the linearisation there."""
+
+    phase: str
+    parameter: str
+    rank_CE: int
+    rank_E: int
+    invariant_zeros: tuple[complex, ...]
+    active: bool  # False: the parameter does not act in this phase (a μ whose element is off)
+
+    @property
+    def unstable_zeros(self) -> tuple[complex, ...]:
+        return tuple(z for z in self.invariant_zeros if z.real >= -1e-9)
+
+    @property
+    def exists(self) -> bool:
+        return self.active and self.rank_CE == self.rank_E and not self.unstable_zeros
+
+    def reason(self) -> str | None:
+        """Why the parameter is held in this phase, or ``None``."""
+        if not self.active:
+            return "its element does not slide in this phase (μ has no effect)"
+        if self.rank_CE != self.rank_E:
+            return f"rank(CE) = {self.rank_CE} < rank(E) = {self.rank_E}"
+        if self.unstable_zeros:
+            zs = ", ".join(f"{z.real:.4g}{z.imag:+.4g}j" for z in self.unstable_zeros)
+            return (
+                f"not strongly detectable: invariant zero(s) {zs} with Re s >= 0 "
+                "(indistinguishable from the road load)"
+            )
+        return None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "phase": self.phase,
+            "parameter": self.parameter,
+            "rank_CE": self.rank_CE,
+            "rank_E": self.rank_E,
+            "invariant_zeros": [[z.real, z.imag] for z in self.invariant_zeros],
+            "exists": self.exists,
+            "reason": self.reason(),
+        }
+
+
+def euio_existence(
+    discrete: Any,
+    phase: str,
+    z: np.ndarray,
+    u: Sequence[float],
+    p: Sequence[float],
+    e: np.ndarray,
+) -> list[EuioExistence]:
+    """Per augmented parameter: the UIO conditions (4.4) on the linearisation of the filter's
+    model at (z, u) with the road-load column ``e`` (:func:`load_column`), the states being
+    the physical ones plus that parameter."""
+    import numpy as np
+
+    aug = discrete.aug
+    a_full = np.asarray(discrete.J(z, u, p), dtype=float)
+    c_full = np.asarray(discrete.H_fn(z, u, p), dtype=float)
+    frozen = set(aug.frozen_states(u))
+    n_x = aug.n_x
+    out = []
+    for name in aug.parameters:
+        j = aug.state_names.index(name)
+        idx = [*range(n_x), j]
+        a = a_full[np.ix_(idx, idx)]
+        c = c_full[:, idx]
+        ecol = e[idx][:, None]
+        _, zeros = invariant_zeros(a, ecol, c)
+        out.append(
+            EuioExistence(
+                phase=phase,
+                parameter=name,
+                rank_CE=_rank(c @ ecol),
+                rank_E=_rank(ecol),
+                invariant_zeros=tuple(zeros),
+                active=j not in frozen and bool(np.any(a_full[:n_x, j] != 0.0)),
+            )
+        )
+    return out
+
+
+def euio_step(
+    discrete: Any,
+    z: np.ndarray,
+    P: np.ndarray,
+    u_prev: Sequence[float],
+    u: Sequence[float],
+    y: np.ndarray,
+    R: np.ndarray,
+    h: float,
+    p: Sequence[float],
+    q: np.ndarray,
+    e: np.ndarray,
+    held: Sequence[int],
+) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """One EUIO step (module text): predict with ``u_prev`` held, decouple the road load,
+    correct with the measurement ``y`` (variances ``R``). ``held``: state indices whose
+    estimate and variance stay unchanged (no random walk, zero gain row).
+    Returns (z, P, d̂, σ_d); with a non-finite measurement only the prediction is done and
+    d̂ is NaN."""
+    import numpy as np
+
+    z_pred, F = discrete.step(z, u_prev, h, p)
+    rates = np.array(q, dtype=float)
+    rates[list(held)] = 0.0
+    P_pred = F @ P @ F.T + np.diag(h * rates)
+    P_pred = 0.5 * (P_pred + P_pred.T)
+    if not np.all(np.isfinite(y)):
+        return z_pred, P_pred, float("nan"), float("nan")
+    a = np.asarray(discrete.J(z, u_prev, p), dtype=float)
+    ha = h * a
+    ed = h * (e + ha @ e / 2 + ha @ (ha @ e) / 6 + ha @ (ha @ (ha @ e)) / 24)
+    y_hat, C = discrete.outputs(z_pred, u, p)
+    nu = y - y_hat
+    rt = C @ P_pred @ C.T + np.diag(R)
+    rt_inv = np.linalg.inv(rt)
+    ce = C @ ed
+    info = float(ce @ rt_inv @ ce)
+    m = (ce @ rt_inv) / info
+    d_hat = float(m @ nu)
+    K = P_pred @ C.T @ rt_inv
+    L = K @ (np.eye(len(y)) - np.outer(ce, m)) + np.outer(ed, m)
+    L[list(held), :] = 0.0
+    z_new = z_pred + L @ nu
+    A = np.eye(len(z)) - L @ C
+    P_new = A @ P_pred @ A.T + L @ np.diag(R) @ L.T
+    return z_new, 0.5 * (P_new + P_new.T), d_hat, float(np.sqrt(1.0 / info))
