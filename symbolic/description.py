@@ -44,6 +44,8 @@ ENTRIES_MAX = 100  # shafts, planetary sets, shift elements and gears, each
 #: Profile shift moves a centre distance by (x1 ± x2)·module; beyond 2 modules the teeth
 #: would be undercut or pointed, so a larger tolerance is a typing error, not a design.
 CENTRE_DISTANCE_TOLERANCE_MAX = 2.0
+#: ``planet_spacing`` of a set: "unequal" skips the equal-spacing assembly condition.
+PLANET_SPACINGS = ("equal", "unequal")
 
 #: The unit every quantity key must carry (no conversion: a different unit is an error).
 EXPECTED_UNITS: dict[str, str] = {
@@ -157,6 +159,9 @@ class PlanetarySet:
     #: the tooth counts are then 0 and everything that needs teeth refuses the set
     #: (:meth:`require_teeth`).
     given_k: Fraction | None = None
+    #: ``"equal"`` (default): the tooth sums must allow equally spaced planets;
+    #: ``"unequal"``: the file states the planets sit unequally spaced, the check is skipped.
+    planet_spacing: str = "equal"
 
     def require_teeth(self, file: str, purpose: str) -> None:
         """Raise a one-line :class:`GearsymError` naming the set's ``k`` key when the set
@@ -625,6 +630,11 @@ def _planetary_set(r: _Reader, set_name: str) -> PlanetarySet:
             "centre_distance_tolerance",
             f"must be 0 to {CENTRE_DISTANCE_TOLERANCE_MAX} modules, got {tolerance:g}",
         )
+    spacing = r.string("planet_spacing", required=False, default="equal")
+    if spacing not in PLANET_SPACINGS:
+        raise r.fail(
+            "planet_spacing", f"expected one of {', '.join(PLANET_SPACINGS)}; got {shown(spacing)}"
+        )
     ps = PlanetarySet(
         name=set_name,
         sun=members["sun"],
@@ -642,6 +652,7 @@ def _planetary_set(r: _Reader, set_name: str) -> PlanetarySet:
         kind=kind,
         centre_distance_tolerance=tolerance or 0.0,
         given_k=given_k,
+        planet_spacing=spacing,
         **extra,
     )
     for key in r.data:
@@ -749,7 +760,8 @@ def _check_set(r: _Reader, ps: PlanetarySet) -> None:
             r, ps, ps.z_sun + ps.z_planet, ps.z_ring - ps.z_planet2, "z_planet_ring", stepped=True
         )
         g = math.gcd(ps.z_planet, ps.z_planet2)
-        if (ps.z_sun * ps.z_planet2 + ps.z_ring * ps.z_planet) % (ps.planet_count * g) != 0:
+        assembly = ps.z_sun * ps.z_planet2 + ps.z_ring * ps.z_planet
+        if ps.planet_spacing == "equal" and assembly % (ps.planet_count * g) != 0:
             raise r.fail(
                 "planet_count",
                 f"{ps.planet_count} stepped planets cannot be assembled equally spaced: "
@@ -798,11 +810,12 @@ def _check_coaxial(
 
 
 def _check_spacing(r: _Reader, ps: PlanetarySet, teeth: int, formula: str) -> None:
-    if teeth % ps.planet_count != 0:
+    if ps.planet_spacing == "equal" and teeth % ps.planet_count != 0:
         raise r.fail(
             "planet_count",
             f"{ps.planet_count} planets cannot be assembled equally spaced: "
-            f"{formula} = {teeth} is not divisible by {ps.planet_count}",
+            f"{formula} = {teeth} is not divisible by {ps.planet_count} "
+            '(planet_spacing = "unequal" accepts it)',
         )
 
 

@@ -99,3 +99,50 @@ def test_ravigneaux_needs_its_teeth(tmp_path: Path, capsys: pytest.CaptureFixtur
     path.write_text(text, encoding="utf-8")
     assert main(["ratios", str(path)]) == 2
     assert "two stationary ratios" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------- tolerances
+
+
+def run(tmp_path: Path, text: str, capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    path = tmp_path / "set.toml"
+    path.write_text(text, encoding="utf-8")
+    code = main(["ratios", str(path)])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_unequal_planet_spacing_is_a_stated_choice(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # 5 planets on z_S + z_H = 30 + 66 = 96 teeth: 96 / 5 is no integer, so equal spacing fails
+    text = description_text("simple").replace("planet_count = 3", "planet_count = 5")
+    code, out, err = run(tmp_path, text, capsys)
+    assert code == 2 and 'planetary_set[name="x"].planet_count: ' in err
+    assert "not divisible by 5" in err and 'planet_spacing = "unequal"' in err
+    unequal = text.replace("planet_count = 5", 'planet_count = 5\nplanet_spacing = "unequal"')
+    code, out, err = run(tmp_path, unequal, capsys)
+    assert code == 0, err
+    bad = text.replace("planet_count = 5", 'planet_count = 5\nplanet_spacing = "odd"')
+    code, out, err = run(tmp_path, bad, capsys)
+    assert code == 2 and 'planetary_set[name="x"].planet_spacing: ' in err and "unequal" in err
+
+
+def test_coaxiality_tolerance_admits_a_profile_shifted_simple_set(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # z_H = 67 ≠ z_S + 2 z_P = 66: centre distances 48/2 and 49/2 modules differ by 0.5;
+    # (30 + 67) = 97 is no multiple of 3, so one planet (no spacing condition).
+    text = (
+        description_text("simple")
+        .replace("z_ring = 66", "z_ring = 67")
+        .replace("planet_count = 3", "planet_count = 1")
+        .replace(f"ratio = {float(Fraction(-66, 30))!r}", f"ratio = {-67 / 30!r}")
+    )
+    code, out, err = run(tmp_path, text, capsys)
+    assert code == 2 and ".z_ring: " in err and "centre_distance_tolerance" in err
+    shifted = text.replace("z_ring = 67", "z_ring = 67\ncentre_distance_tolerance = 0.5")
+    d = parse_description(shifted, "shifted.toml")
+    assert gear_ratio(d, d.gear("1")).ratio == sp.Rational(-67, 30)  # i0 = −z_H/z_S
+    code, out, err = run(tmp_path, shifted, capsys)
+    assert code == 0, err
