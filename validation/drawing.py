@@ -466,7 +466,7 @@ SET_PITCH = 3.2
 def stick_diagram(d: GearboxDescription) -> StickDiagram:
     """Stick diagram of any description (thesis Fig. 2.1 shows the built-in gearbox)."""
     for ps in d.planetary_sets:
-        ps.require_teeth(d.file, "the stick diagram (it labels the teeth)")
+        ps.require_teeth(d.file, "drawing the stick diagram (it labels the teeth)")
     # A member fixed to the housing gets its own line, drawn like a shaft (labelled housing).
     lines = d.shaft_names + ((HOUSING,) if _uses_housing(d) else ())
     levels = {s: -SHAFT_STEP * (i + 1) for i, s in enumerate(lines)}
