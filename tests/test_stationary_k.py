@@ -8,6 +8,7 @@ i0 = −72·24/(30·18) = −3.2. With the carrier braked, ω_S/ω_H = i0.
 
 from __future__ import annotations
 
+import json
 from fractions import Fraction
 from pathlib import Path
 
@@ -146,3 +147,20 @@ def test_coaxiality_tolerance_admits_a_profile_shifted_simple_set(
     assert gear_ratio(d, d.gear("1")).ratio == sp.Rational(-67, 30)  # i0 = −z_H/z_S
     code, out, err = run(tmp_path, shifted, capsys)
     assert code == 0, err
+
+
+@pytest.mark.parametrize("args", [["show", "--what", "mass-matrix"], ["ratios", "--json"]])
+def test_k_set_through_model_commands(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str]
+) -> None:
+    """The mass matrix needs the teeth (one line, exit 2); the JSON ratio is i0 = −2.2."""
+    path = tmp_path / "k.toml"
+    path.write_text(k_text("simple", "-2.2"), encoding="utf-8")
+    code = main([args[0], str(path), *args[1:]])
+    out, err = capsys.readouterr()
+    if args[0] == "show":
+        assert code == 2 and out == "" and len(err.splitlines()) == 1, err
+        assert f'{path}: planetary_set[name="x"].k: building the planet bodies' in err
+    else:
+        assert code == 0, err
+        assert json.loads(out)["1"] == pytest.approx(-2.2, abs=1e-12)
