@@ -18,7 +18,12 @@ from gearsym.symbolic.description import parse_description
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.kinematics import gearbox_symbols
 from gearsym.symbolic.ratios import gear_ratio
-from gearsym.validation.drawing import lever_diagram, set_positions, stick_diagram
+from gearsym.validation.drawing import (
+    lever_diagram,
+    set_positions,
+    speed_plan,
+    stick_diagram,
+)
 
 from gearsym.cli import main
 from tests.test_set_kinds import TEETH, description_text
@@ -70,6 +75,8 @@ def test_what_needs_teeth_refuses_naming_the_k_key() -> None:
         "H": Fraction(16, 5),
     }
     assert lever_diagram(d).levers
+    # speed plan, carrier braked: ω_H = ω_S / i0 = −5/11 per unit input
+    assert speed_plan(d, "1").speeds == {"S": 1, "T": 0, "H": Fraction(-5, 11)}
 
 
 @pytest.mark.parametrize(
