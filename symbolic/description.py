@@ -16,6 +16,7 @@ import difflib
 import math
 import re
 from dataclasses import dataclass, field
+from fractions import Fraction
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -43,6 +44,8 @@ ENTRIES_MAX = 100  # shafts, planetary sets, shift elements and gears, each
 #: Profile shift moves a centre distance by (x1 ± x2)·module; beyond 2 modules the teeth
 #: would be undercut or pointed, so a larger tolerance is a typing error, not a design.
 CENTRE_DISTANCE_TOLERANCE_MAX = 2.0
+#: ``planet_spacing`` of a set: "unequal" skips the equal-spacing assembly condition.
+PLANET_SPACINGS = ("equal", "unequal")
 
 #: The unit every quantity key must carry (no conversion: a different unit is an error).
 EXPECTED_UNITS: dict[str, str] = {
@@ -152,6 +155,24 @@ class PlanetarySet:
     planet2_inertia: Quantity | None = None
     planet2_radius: Quantity | None = None
     centre_distance_tolerance: float = 0.0
+    #: The signed stationary (Willis) ratio i0 when the file gives ``k`` instead of teeth;
+    #: the tooth counts are then 0 and everything that needs teeth refuses the set
+    #: (:meth:`require_teeth`).
+    given_k: Fraction | None = None
+    #: ``"equal"`` (default): the tooth sums must allow equally spaced planets;
+    #: ``"unequal"``: the file states the planets sit unequally spaced, the check is skipped.
+    planet_spacing: str = "equal"
+
+    def require_teeth(self, file: str, purpose: str) -> None:
+        """Raise a one-line :class:`GearsymError` naming the set's ``k`` key when the set
+        gives a stationary ratio instead of tooth counts and ``purpose`` needs teeth."""
+        if self.given_k is not None:
+            raise GearsymError(
+                file,
+                f'planetary_set[name="{self.name}"].k',
+                f"{purpose} needs the tooth counts of set {self.name!r}, which gives only its "
+                "stationary ratio k; give z_sun, z_planet and z_ring instead",
+            )
 
     @property
     def members(self) -> tuple[str, ...]:
@@ -586,9 +607,11 @@ def _planetary_set(r: _Reader, set_name: str) -> PlanetarySet:
     key_of = {name: key for key, name in set_kinds.EXTRA_KEYS[kind].items()}
     members = {role: r.string(role) for role in ("sun", "carrier", "ring")}
     planet = r.name("planet")
-    z_sun = r.positive_integer("z_sun", maximum=TEETH_MAX)
-    z_planet = r.positive_integer("z_planet", maximum=TEETH_MAX)
-    z_ring = r.positive_integer("z_ring", maximum=TEETH_MAX)
+    given_k = _given_k(r, kind)
+    teeth_needed = given_k is None
+    z_sun = r.positive_integer("z_sun", maximum=TEETH_MAX) if teeth_needed else 0
+    z_planet = r.positive_integer("z_planet", maximum=TEETH_MAX) if teeth_needed else 0
+    z_ring = r.positive_integer("z_ring", maximum=TEETH_MAX) if teeth_needed else 0
     count = r.positive_integer("planet_count", maximum=PLANET_COUNT_MAX)
     extra: dict[str, Any] = {}
     if "sun2" in key_of:
@@ -599,13 +622,18 @@ def _planetary_set(r: _Reader, set_name: str) -> PlanetarySet:
         extra["planet2_mass"] = r.quantity(key_of["planet2_mass"], unit="kg")
         extra["planet2_inertia"] = r.quantity(key_of["planet2_inertia"], unit="kg*m^2")
         extra["planet2_radius"] = r.quantity(key_of["planet2_radius"], unit="m")
-    if "z_planet2" in key_of:
+    if "z_planet2" in key_of and teeth_needed:
         extra["z_planet2"] = r.positive_integer(key_of["z_planet2"], maximum=TEETH_MAX)
     tolerance = r.number("centre_distance_tolerance", required=False)
     if tolerance is not None and not 0 <= tolerance <= CENTRE_DISTANCE_TOLERANCE_MAX:
         raise r.fail(
             "centre_distance_tolerance",
             f"must be 0 to {CENTRE_DISTANCE_TOLERANCE_MAX} modules, got {tolerance:g}",
+        )
+    spacing = r.string("planet_spacing", required=False, default="equal")
+    if spacing not in PLANET_SPACINGS:
+        raise r.fail(
+            "planet_spacing", f"expected one of {', '.join(PLANET_SPACINGS)}; got {shown(spacing)}"
         )
     ps = PlanetarySet(
         name=set_name,
@@ -623,6 +651,8 @@ def _planetary_set(r: _Reader, set_name: str) -> PlanetarySet:
         teeth_source=r.string("teeth_source"),
         kind=kind,
         centre_distance_tolerance=tolerance or 0.0,
+        given_k=given_k,
+        planet_spacing=spacing,
         **extra,
     )
     for key in r.data:
@@ -630,8 +660,39 @@ def _planetary_set(r: _Reader, set_name: str) -> PlanetarySet:
         if key not in r.used and owners:
             raise r.fail(key, f"belongs to kind {' or '.join(owners)}; this set is {kind!r}")
     r.reject_unknown()
-    _check_set(r, ps)
+    if teeth_needed:
+        _check_set(r, ps)
     return ps
+
+
+#: Sign of the stationary ratio i0 per kind that may give ``k`` (set_kinds.relations).
+K_SIGN: dict[str, int] = {"simple": -1, "double_pinion": 1, "stepped_planet": -1}
+
+
+def _given_k(r: _Reader, kind: str) -> Fraction | None:
+    """The optional ``k`` of a set: its signed stationary ratio i0 = (ω_S − ω_C)/(ω_H − ω_C)
+    with the carrier held (Willis, thesis 2.22/2.23 with the planet eliminated), negative for
+    simple and stepped-planet sets (i0 = −z_H/z_S), positive for double-pinion sets; exact as
+    written in decimal (−2.1 is −21/10). Teeth keys beside it are an error."""
+    value = r.number("k", required=False)
+    if value is None:
+        return None
+    if kind not in K_SIGN:
+        raise r.fail("k", f"a {kind} set has two stationary ratios; give its tooth counts")
+    teeth = [key for key in ("z_sun", "z_planet", "z_ring", *_teeth_keys(kind)) if key in r.data]
+    if teeth:
+        raise r.fail("k", f"give either k or tooth counts, not both (also {', '.join(teeth)})")
+    sign = K_SIGN[kind]
+    # z_H > z_S in a simple or double-pinion set, so |k| > 1; a stepped planet may go below 1.
+    least = 0 if kind == "stepped_planet" else 1
+    if value * sign <= least or abs(value) > TEETH_MAX:
+        bound = ("< " if sign < 0 else "> ") + str(least * sign)
+        raise r.fail("k", f"a {kind} set needs k {bound} (and |k| <= {TEETH_MAX}), got {value:g}")
+    return Fraction(repr(value))
+
+
+def _teeth_keys(kind: str) -> tuple[str, ...]:
+    return tuple(key for key, name in set_kinds.EXTRA_KEYS[kind].items() if name.startswith("z_"))
 
 
 def _one_way(r: _Reader, name: str) -> ShiftElement:
@@ -699,7 +760,8 @@ def _check_set(r: _Reader, ps: PlanetarySet) -> None:
             r, ps, ps.z_sun + ps.z_planet, ps.z_ring - ps.z_planet2, "z_planet_ring", stepped=True
         )
         g = math.gcd(ps.z_planet, ps.z_planet2)
-        if (ps.z_sun * ps.z_planet2 + ps.z_ring * ps.z_planet) % (ps.planet_count * g) != 0:
+        assembly = ps.z_sun * ps.z_planet2 + ps.z_ring * ps.z_planet
+        if ps.planet_spacing == "equal" and assembly % (ps.planet_count * g) != 0:
             raise r.fail(
                 "planet_count",
                 f"{ps.planet_count} stepped planets cannot be assembled equally spaced: "
@@ -748,11 +810,12 @@ def _check_coaxial(
 
 
 def _check_spacing(r: _Reader, ps: PlanetarySet, teeth: int, formula: str) -> None:
-    if teeth % ps.planet_count != 0:
+    if ps.planet_spacing == "equal" and teeth % ps.planet_count != 0:
         raise r.fail(
             "planet_count",
             f"{ps.planet_count} planets cannot be assembled equally spaced: "
-            f"{formula} = {teeth} is not divisible by {ps.planet_count}",
+            f"{formula} = {teeth} is not divisible by {ps.planet_count} "
+            '(planet_spacing = "unequal" accepts it)',
         )
 
 

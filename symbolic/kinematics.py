@@ -73,6 +73,9 @@ def gearbox_symbols(
             naming.inertia(s.name), exact(s.inertia.value), symbolic_inertias
         )
     for ps in d.planetary_sets:
+        ps.require_teeth(
+            d.file, "building the planet bodies of the model (Willis meshes 2.22/2.23)"
+        )
         j = ps.name
         z_sun[j] = quantity(naming.sun_teeth(j), sp.Integer(ps.z_sun), symbolic_teeth)
         z_planet[j] = quantity(naming.planet_teeth(j), sp.Integer(ps.z_planet), symbolic_teeth)

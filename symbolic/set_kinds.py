@@ -158,7 +158,11 @@ def relations(ps: PlanetarySet) -> tuple[Relation, ...]:
     stepped planet: z_S(ω_S−ω_C) = −z_P(ω_P−ω_C), z_H(ω_H−ω_C) = z_P2(ω_P−ω_C)
     →  i0 = −z_H z_P/(z_S z_P2).
     Ravigneaux: the long-pinion pair as simple, the short-pinion pair as double pinion.
+    A set that gives ``k`` (its signed i0) instead of teeth has k = |i0| with the kind's sign.
     """
+    if ps.given_k is not None:
+        sign = 1 if ps.given_k > 0 else -1
+        return (Relation(ps.name, ps.sun, ps.ring, ps.carrier, sign, abs(ps.given_k)),)
     if ps.kind == "simple":
         return (Relation(ps.name, ps.sun, ps.ring, ps.carrier, -1, Fraction(ps.z_ring, ps.z_sun)),)
     if ps.kind == "double_pinion":

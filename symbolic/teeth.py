@@ -221,7 +221,7 @@ def with_teeth(
 ) -> GearboxDescription:
     """A copy of the description with new tooth counts and planet counts."""
     sets = tuple(
-        replace(ps, z_sun=t[0], z_planet=t[1], z_ring=t[2], planet_count=t[3])
+        replace(ps, z_sun=t[0], z_planet=t[1], z_ring=t[2], planet_count=t[3], given_k=None)
         if (t := teeth.get(ps.name))
         else ps
         for ps in d.planetary_sets

@@ -140,7 +140,7 @@ def set_positions(ps: PlanetarySet) -> dict[str, Fraction]:
     """
     rels = relations(ps)
     first = rels[0]
-    scale = Fraction(ps.z_sun)
+    scale = Fraction(ps.z_sun) if ps.given_k is None else Fraction(1)  # cosmetic
     carrier = first.k * scale
     ring = (first.k - first.sign) * scale
     positions = {first.sun: Fraction(0), first.carrier: carrier, first.ring: ring}
@@ -465,6 +465,8 @@ SET_PITCH = 3.2
 
 def stick_diagram(d: GearboxDescription) -> StickDiagram:
     """Stick diagram of any description (thesis Fig. 2.1 shows the built-in gearbox)."""
+    for ps in d.planetary_sets:
+        ps.require_teeth(d.file, "drawing the stick diagram (it labels the teeth)")
     # A member fixed to the housing gets its own line, drawn like a shaft (labelled housing).
     lines = d.shaft_names + ((HOUSING,) if _uses_housing(d) else ())
     levels = {s: -SHAFT_STEP * (i + 1) for i, s in enumerate(lines)}
