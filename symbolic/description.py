@@ -46,6 +46,10 @@ ENTRIES_MAX = 100  # shafts, planetary sets, shift elements and gears, each
 CENTRE_DISTANCE_TOLERANCE_MAX = 2.0
 #: ``planet_spacing`` of a set: "unequal" skips the equal-spacing assembly condition.
 PLANET_SPACINGS = ("equal", "unequal")
+#: A set given by ``k``: its planets' kinetic energy as inertias reflected to its members.
+REFLECTED_KEY = "planet_inertia_reflected"
+#: The keys ``planet_inertia_reflected`` replaces (their content is in the reflected values).
+REFLECTED_REPLACES = ("planet_mass", "planet_inertia", "carrier_radius")
 
 #: The unit every quantity key must carry (no conversion: a different unit is an error).
 EXPECTED_UNITS: dict[str, str] = {
@@ -162,17 +166,30 @@ class PlanetarySet:
     #: ``"equal"`` (default): the tooth sums must allow equally spaced planets;
     #: ``"unequal"``: the file states the planets sit unequally spaced, the check is skipped.
     planet_spacing: str = "equal"
+    #: A set given by ``k``: the kinetic energy of its planets (spin and orbit) as inertias
+    #: reflected to its members, ``(role, inertia)`` for sun, carrier, ring (the housing left
+    #: out): ½ Σ J_m ω_m² over the members equals the planets' energy for every motion the
+    #: set allows (README "Stationary ratio instead of teeth"). Empty: not given.
+    reflected_inertia: tuple[tuple[str, Quantity], ...] = ()
 
-    def require_teeth(self, file: str, purpose: str) -> None:
+    def require_teeth(self, file: str, purpose: str, reflected_ok: bool = False) -> None:
         """Raise a one-line :class:`GearsymError` naming the set's ``k`` key when the set
-        gives a stationary ratio instead of tooth counts and ``purpose`` needs teeth."""
-        if self.given_k is not None:
-            raise GearsymError(
-                file,
-                f'planetary_set[name="{self.name}"].k',
-                f"{purpose} needs the tooth counts of set {self.name!r}, which gives only its "
-                "stationary ratio k; give z_sun, z_planet and z_ring instead",
-            )
+        gives a stationary ratio instead of tooth counts and ``purpose`` needs teeth.
+        ``reflected_ok``: the purpose (the mass matrix) is also served by
+        ``planet_inertia_reflected``, which the message then names."""
+        if self.given_k is None or (reflected_ok and self.reflected_inertia):
+            return
+        alternative = (
+            f", or {REFLECTED_KEY} (the planets' inertia reflected to sun, carrier and ring)"
+            if reflected_ok
+            else ""
+        )
+        raise GearsymError(
+            file,
+            f'planetary_set[name="{self.name}"].k',
+            f"{purpose} needs the tooth counts of set {self.name!r}, which gives only its "
+            f"stationary ratio k; give z_sun, z_planet and z_ring instead{alternative}",
+        )
 
     @property
     def members(self) -> tuple[str, ...]:
@@ -181,12 +198,26 @@ class PlanetarySet:
 
     @property
     def pinions(self) -> tuple[str, ...]:
-        """Pinion bodies, each with its own mass and inertia (planet first)."""
+        """Pinion bodies, each with its own mass and inertia (planet first); none for a set
+        given by ``k`` (its pinion speeds are unknown without teeth)."""
+        if self.given_k is not None:
+            return ()
         return tuple(getattr(self, role) for role in set_kinds.PINIONS[self.kind])
 
     @property
     def meshes(self) -> tuple[set_kinds.Mesh, ...]:
-        return set_kinds.MESHES[self.kind]
+        """Tooth meshes (rows 2.22/2.23); none for a set given by ``k``."""
+        return () if self.given_k is not None else set_kinds.MESHES[self.kind]
+
+    @property
+    def constraint_count(self) -> int:
+        """Rows of the set in the constraint matrix: one per mesh, or the one shaft relation
+        ω_S − i0 ω_H − (1 − i0) ω_C = 0 of a set given by ``k`` (its pinions eliminated)."""
+        return 1 if self.given_k is not None else len(self.meshes)
+
+    def reflected(self) -> dict[str, Quantity]:
+        """Reflected planet inertia by member shaft (``planet_inertia_reflected``)."""
+        return {getattr(self, role): q for role, q in self.reflected_inertia}
 
     def teeth(self, key: str) -> int:
         value = getattr(self, key)
@@ -293,7 +324,7 @@ class GearboxDescription:
     @property
     def degrees_of_freedom(self) -> int:
         """f = f_free − (number of meshes) (2.24: two per simple set)."""
-        return len(self.body_names) - sum(len(ps.meshes) for ps in self.planetary_sets)
+        return len(self.body_names) - sum(ps.constraint_count for ps in self.planetary_sets)
 
     def element(self, name: str) -> ShiftElement:
         return next(e for e in self.shift_elements if e.name == name)
@@ -617,7 +648,22 @@ def _planetary_set(r: _Reader, set_name: str) -> PlanetarySet:
     if "sun2" in key_of:
         extra["sun2"] = r.string(key_of["sun2"])
         extra["z_sun2"] = r.positive_integer(key_of["z_sun2"], maximum=TEETH_MAX)
-    if "planet2" in key_of:
+    reflected = _reflected_inertia(r, kind, members, given_k)
+    if reflected:
+        # the planets' mass, inertia and orbit radius are inside the reflected values
+        replaced = REFLECTED_REPLACES + tuple(
+            key_of[field]
+            for field in ("planet2", "planet2_mass", "planet2_inertia", "planet2_radius")
+            if field in key_of
+        )
+        for key in replaced:
+            if key in r.data:
+                raise r.fail(
+                    key,
+                    f"the planets of a set with {REFLECTED_KEY} enter through it "
+                    "(spin and orbit); leave out " + ", ".join(replaced),
+                )
+    if "planet2" in key_of and not reflected:
         extra["planet2"] = r.name(key_of["planet2"])
         extra["planet2_mass"] = r.quantity(key_of["planet2_mass"], unit="kg")
         extra["planet2_inertia"] = r.quantity(key_of["planet2_inertia"], unit="kg*m^2")
@@ -635,6 +681,13 @@ def _planetary_set(r: _Reader, set_name: str) -> PlanetarySet:
         raise r.fail(
             "planet_spacing", f"expected one of {', '.join(PLANET_SPACINGS)}; got {shown(spacing)}"
         )
+    if reflected:
+        lumped = Quantity(0.0, "", f"in {REFLECTED_KEY}")
+        planet_mass = planet_inertia = carrier_radius = lumped
+    else:
+        planet_mass = r.quantity("planet_mass")
+        planet_inertia = r.quantity("planet_inertia")
+        carrier_radius = r.quantity("carrier_radius")
     ps = PlanetarySet(
         name=set_name,
         sun=members["sun"],
@@ -645,14 +698,15 @@ def _planetary_set(r: _Reader, set_name: str) -> PlanetarySet:
         z_planet=z_planet,
         z_ring=z_ring,
         planet_count=count,
-        planet_mass=r.quantity("planet_mass"),
-        planet_inertia=r.quantity("planet_inertia"),
-        carrier_radius=r.quantity("carrier_radius"),
+        planet_mass=planet_mass,
+        planet_inertia=planet_inertia,
+        carrier_radius=carrier_radius,
         teeth_source=r.string("teeth_source"),
         kind=kind,
         centre_distance_tolerance=tolerance or 0.0,
         given_k=given_k,
         planet_spacing=spacing,
+        reflected_inertia=reflected,
         **extra,
     )
     for key in r.data:
@@ -689,6 +743,84 @@ def _given_k(r: _Reader, kind: str) -> Fraction | None:
         bound = ("< " if sign < 0 else "> ") + str(least * sign)
         raise r.fail("k", f"a {kind} set needs k {bound} (and |k| <= {TEETH_MAX}), got {value:g}")
     return Fraction(repr(value))
+
+
+def _reflected_inertia(
+    r: _Reader, kind: str, members: dict[str, str], given_k: Fraction | None
+) -> tuple[tuple[str, Quantity], ...]:
+    """``planet_inertia_reflected = { sun = J_S, carrier = J_T, ring = J_H, unit = "kg*m^2",
+    source = "..." }`` of a set given by ``k``: inertias on the members whose kinetic energy
+    ½ (J_S ω_S² + J_T ω_T² + J_H ω_H²) equals that of the set's planets (spin and orbit,
+    2.34) for every motion the set allows. The three are unique (holding each member in turn
+    gives three independent equations); one may be negative, but the energy may not.
+    A member on the housing has no entry (it does not turn)."""
+    value = r._get(REFLECTED_KEY, False)
+    if value is None:
+        return ()
+    if given_k is None:
+        raise r.fail(
+            REFLECTED_KEY,
+            "only a set given by k needs it: with tooth counts the planet bodies are derived "
+            "(planet_mass, planet_inertia, carrier_radius)",
+        )
+    if not isinstance(value, dict):
+        raise r.fail(
+            REFLECTED_KEY,
+            'expected { sun = <number>, carrier = <number>, ring = <number>, unit = "kg*m^2", '
+            'source = "..." }',
+        )
+    sub = _Reader(r.file, value, r.key(REFLECTED_KEY))
+    unit = sub.string("unit")
+    if unit != "kg*m^2":
+        raise sub.fail("unit", f"expected 'kg*m^2', got {unit!r}")
+    source = sub.string("source")
+    if not source.strip():
+        raise sub.fail("source", "must say where the values come from (or 'assumed')")
+    entries: list[tuple[str, Quantity]] = []
+    for role in ("sun", "carrier", "ring"):
+        if members[role] == set_kinds.HOUSING:
+            if role in sub.data:
+                raise sub.fail(role, f"the {role} is the housing (it does not turn): leave it out")
+            sub.used.add(role)
+            continue
+        number = sub.number(role)
+        assert number is not None
+        entries.append((role, Quantity(number, unit, source)))
+    sub.reject_unknown()
+    _check_reflected_energy(sub, given_k, dict(entries), members)
+    return tuple(entries)
+
+
+def _check_reflected_energy(
+    r: _Reader, i0: Fraction, inertia: dict[str, Quantity], members: dict[str, str]
+) -> None:
+    """The reflected planet energy may not be negative for any motion of the set.
+
+    Motions of a set with the Willis relation ω_S − i0 ω_H − (1 − i0) ω_C = 0, by
+    (ω_S, ω_C): ω_H = (ω_S − (1 − i0) ω_C)/i0; a member on the housing is held at 0."""
+    j = {role: Fraction(repr(q.value)) for role, q in inertia.items()}
+    # (ω_S, ω_C, ω_H) of the two basis motions: sun alone with the carrier held; carrier alone
+    basis = [(Fraction(1), Fraction(0), 1 / i0), (Fraction(0), Fraction(1), -(1 - i0) / i0)]
+    fixed = [role for role in ("sun", "carrier", "ring") if members[role] == set_kinds.HOUSING]
+    if fixed:
+        # the motions with that member at rest: one line through the origin
+        k = ("sun", "carrier", "ring").index(fixed[0])
+        a, b = basis
+        basis = [tuple(b[k] * x - a[k] * y for x, y in zip(a, b, strict=True))]
+    roles = ("sun", "carrier", "ring")
+    q = [
+        [sum((j.get(m, 0) * u[n] * v[n] for n, m in enumerate(roles)), Fraction(0)) for v in basis]
+        for u in basis
+    ]
+    diagonal_ok = all(q[i][i] >= 0 for i in range(len(q)))
+    determinant_ok = len(q) == 1 or q[0][0] * q[1][1] - q[0][1] ** 2 >= 0
+    if not (diagonal_ok and determinant_ok):
+        raise r.fail(
+            "carrier",
+            "the reflected inertias give the planets a negative kinetic energy for some motion "
+            "of the set (½ Σ J ω² over sun, carrier, ring must be >= 0 wherever the Willis "
+            "relation holds)",
+        )
 
 
 def _teeth_keys(kind: str) -> tuple[str, ...]:

@@ -35,6 +35,13 @@ def mass_matrix(d: GearboxDescription, sym: GearboxSymbols, kin: Kinematics) -> 
         if body in sym.pinion_mass:
             row = kin.translation_jacobian[i, :]
             m += sym.pinion_mass[body] * (row.T * row)
+    # A set given by k: its planets as inertias reflected to its members, the same rotation
+    # term J ω_member² on the member's row of J_R (planet_inertia_reflected).
+    index = {b: i for i, b in enumerate(kin.bodies)}
+    for members in sym.reflected.values():
+        for shaft, inertia in members.items():
+            row = kin.rotation_jacobian[index[shaft], :]
+            m += inertia * (row.T * row)
     return m
 
 

@@ -50,6 +50,9 @@ class GearboxSymbols:
     #: Lumped mass and orbit radius of every pinion body (m_P, r_T of 2.34 per pinion).
     pinion_mass: dict[str, sp.Expr] = field(default_factory=dict)
     pinion_radius: dict[str, sp.Expr] = field(default_factory=dict)
+    #: Per set given by ``k``: its planets' inertia reflected to each member shaft
+    #: (``planet_inertia_reflected``), added to that shaft's rotation term of (2.34).
+    reflected: dict[str, dict[str, sp.Expr]] = field(default_factory=dict)
 
 
 def gearbox_symbols(
@@ -68,15 +71,30 @@ def gearbox_symbols(
     teeth: dict[str, dict[str, sp.Expr]] = {}
     pinion_mass: dict[str, sp.Expr] = {}
     pinion_radius: dict[str, sp.Expr] = {}
+    reflected: dict[str, dict[str, sp.Expr]] = {}
     for s in d.shafts:
         inertia[s.name] = quantity(
             naming.inertia(s.name), exact(s.inertia.value), symbolic_inertias
         )
     for ps in d.planetary_sets:
         ps.require_teeth(
-            d.file, "building the planet bodies of the model (Willis meshes 2.22/2.23)"
+            d.file,
+            "building the planet bodies of the model (Willis meshes 2.22/2.23)",
+            reflected_ok=True,
         )
         j = ps.name
+        if ps.given_k is not None:
+            # No teeth: the one shaft relation with |i0| (set_kinds.relations), and the
+            # planets only through their inertia reflected to the members.
+            ratio = sp.Rational(abs(ps.given_k.numerator), ps.given_k.denominator)
+            teeth[j] = {"k": quantity(naming.stationary_ratio(j), ratio, symbolic_teeth)}
+            reflected[j] = {
+                getattr(ps, role): quantity(
+                    naming.reflected_inertia(j, role), exact(q.value), symbolic_inertias
+                )
+                for role, q in ps.reflected_inertia
+            }
+            continue
         z_sun[j] = quantity(naming.sun_teeth(j), sp.Integer(ps.z_sun), symbolic_teeth)
         z_planet[j] = quantity(naming.planet_teeth(j), sp.Integer(ps.z_planet), symbolic_teeth)
         z_ring[j] = quantity(naming.ring_teeth(j), sp.Integer(ps.z_ring), symbolic_teeth)
@@ -136,6 +154,7 @@ def gearbox_symbols(
         teeth=teeth,
         pinion_mass=pinion_mass,
         pinion_radius=pinion_radius,
+        reflected=reflected,
     )
 
 
@@ -146,10 +165,19 @@ def willis_constraints(d: GearboxDescription, sym: GearboxSymbols) -> sp.Matrix:
     mesh (:mod:`gearsym.symbolic.set_kinds`).
     """
     index = {b: i for i, b in enumerate(d.body_names)}
-    rows = sp.zeros(sum(len(ps.meshes) for ps in d.planetary_sets), len(index))
+    rows = sp.zeros(sum(ps.constraint_count for ps in d.planetary_sets), len(index))
     r = 0
     for ps in d.planetary_sets:
         teeth = sym.teeth[ps.name]
+        if ps.given_k is not None:
+            # A set given by k: ω_S − i0 ω_H − (1 − i0) ω_C = 0 with i0 = ±k (set_kinds).
+            assert not ps.meshes
+            i0 = teeth["k"] if ps.given_k > 0 else -teeth["k"]
+            for body, coefficient in ((ps.sun, 1), (ps.ring, -i0), (ps.carrier, -(1 - i0))):
+                if body != HOUSING:
+                    rows[r, index[body]] += coefficient
+            r += 1
+            continue
         for mesh in ps.meshes:
             za, zb = teeth[mesh.z_a], teeth[mesh.z_b]
             # z_a (ω_a − ω_C) = ∓ z_b (ω_b − ω_C): external meshes reverse the relative
@@ -171,8 +199,8 @@ def constraint_blocks(d: GearboxDescription) -> list[tuple[int, int]]:
     """Row range [start, stop) of each set's meshes in :func:`willis_constraints`."""
     blocks, start = [], 0
     for ps in d.planetary_sets:
-        blocks.append((start, start + len(ps.meshes)))
-        start += len(ps.meshes)
+        blocks.append((start, start + ps.constraint_count))
+        start += ps.constraint_count
     return blocks
 
 

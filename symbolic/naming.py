@@ -73,6 +73,13 @@ def stationary_ratio(planetary_set: str) -> str:
     return f"k_{planetary_set}"
 
 
+def reflected_inertia(planetary_set: str, role: str) -> str:
+    """Planet inertia of a set given by k, reflected to its sun, carrier or ring
+    (``planet_inertia_reflected``): ``Jr_S_<set>``, ``Jr_T_<set>``, ``Jr_H_<set>``."""
+    letter = {"sun": "S", "carrier": "T", "ring": "H"}[role]
+    return f"Jr_{letter}_{planetary_set}"
+
+
 def second_sun_teeth(planetary_set: str) -> str:
     """Teeth of the Ravigneaux sun meshing the short pinions."""
     return f"z_S2_{planetary_set}"
@@ -381,6 +388,8 @@ def check_names(d: GearboxDescription) -> None:
         names.add(carrier_radius(ps.name), f"carrier radius {of}", key)
         names.add(planet_mass(ps.name), f"planet mass {of}", key)
         names.add(stationary_ratio(ps.name), f"stationary ratio {of}", key)
+        for role in ("sun", "carrier", "ring"):
+            names.add(reflected_inertia(ps.name, role), f"reflected {role} inertia {of}", key)
         if ps.z_sun2 is not None:
             names.add(second_sun_teeth(ps.name), f"second sun teeth {of}", key)
             names.add(second_stationary_ratio(ps.name), f"second stationary ratio {of}", key)
