@@ -88,6 +88,8 @@ def model_dict(
             v.name: str(e) for v, e in zip(model.outputs, model.output_expressions, strict=True)
         },
     }
+    if "idle" in model.metadata:
+        data["idle"] = model.metadata["idle"]  # the dynamics assumption (README "Idle shafts")
     a, b = form.at_defaults()
     data["linear_form"] = {
         "equations": "5.1-5.5",
@@ -131,6 +133,8 @@ def cmd_model(args: argparse.Namespace) -> int:
         for v in data[group]:
             default = f" = {v['default']:g}" if "default" in v else ""
             print(f"    {v['name']:<14} [{v['unit']}]{default}  {v['description']}")
+    if "idle" in data:
+        print(f"  assumption: {data['idle']}")
     print("  right-hand side (6 digits shown; --json gives the exact expressions):")
     names = [v["name"] for group in ("states", "inputs", "parameters") for v in data[group]]
     symbols = {n: sp.Symbol(n) for n in names}

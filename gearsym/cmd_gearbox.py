@@ -47,7 +47,14 @@ def cmd_ratios(args: argparse.Namespace) -> int:
     differ = _differing_gears(d, table)
     source = f" ({d.gear_table_source})" if d.gear_table_source else ""
     if args.json:
-        emit_json({r.gear: (None if r.ratio is None else float(r.ratio)) for r in table})
+        data: dict[str, Any] = {
+            r.gear: (None if r.ratio is None else float(r.ratio)) for r in table
+        }
+        idle = {r.gear: list(r.free_shafts) for r in table if r.free_shafts and not r.neutral}
+        if idle:
+            # "_" cannot start a gear name: the key never clashes with a gear (README)
+            data["_free_shafts"] = idle
+        emit_json(data)
         if differ:
             first = next(r for r in table if r.gear == differ[0])
             print(
@@ -88,13 +95,15 @@ def print_ratio_table(d: Any, table: Sequence[Any], differ: Sequence[str] | None
         expected = "—" if r.expected is None else f"{r.expected:.{places}f}"
         value = f"{float(r.ratio):.{places}f}"
         print(f"{r.gear:>5}  {closed:<20} {value:>10} {expected:>10}  {'✓' if ok else '✗'}")
-    for r in table:
-        if r.free_shafts and not r.neutral:
-            # The ratio is fixed, but these shafts are not driven by it (README "Idle shafts").
-            print(
-                f"gear {r.gear}: shaft(s) {', '.join(r.free_shafts)} free, speed undetermined "
-                f"({r.degrees_of_freedom} degrees of freedom; ω_in/ω_out fixed)"
-            )
+    idle = [r for r in table if r.free_shafts and not r.neutral]
+    if idle:
+        from gearsym.symbolic.drivetrain import idle_drag
+
+        drag = idle_drag(d)
+        assumption = f"model assumes drag {drag.value:g} N·m·s/rad to the housing per idle shaft"
+    for r in idle:
+        # The ratio is fixed, but these shafts are not driven by it (README "Idle shafts").
+        print(f"gear {r.gear}: idle: {', '.join(r.free_shafts)} (speed undetermined; {assumption})")
     if differ:
         print(f"{len(differ)} gear(s) differ from the expected table{source}.")
         return 1

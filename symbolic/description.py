@@ -69,6 +69,8 @@ SECTION_UNITS: dict[str, dict[str, str]] = {
         "J_cs": "kg*m^2",
         "J_D": "kg*m^2",
         "I_wheel": "kg*m^2",
+        # viscous drag of each idle shaft to the housing (README "Idle shafts"), optional
+        "idle_drag": "N*m*s/rad",
     },
     "vehicle": {
         "m_veh": "kg",

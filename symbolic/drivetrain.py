@@ -160,6 +160,34 @@ def quantity(d: GearboxDescription, section: str, key: str) -> Quantity:
     return values[key]
 
 
+#: Viscous drag of an idle shaft to the housing when the description gives no
+#: ``[drivetrain] idle_drag``: 2 N·m at 1000 rad/s, the order of an open wet clutch's drag
+#: (README "Idle shafts").
+IDLE_DRAG_DEFAULT = Quantity(0.002, "N*m*s/rad", "default of gearsym (README 'Idle shafts')")
+
+
+def idle_drag(d: GearboxDescription) -> Quantity:
+    """d of the drag torque −d ω that every idle shaft (:func:`~gearsym.symbolic.ratios.
+    idle_shafts`) feels against the housing in every model of the description."""
+    return d.drivetrain.get("idle_drag", IDLE_DRAG_DEFAULT)
+
+
+def idle_note(d: GearboxDescription) -> str:
+    """The dynamics assumption for idle shafts, as text for model metadata and ``ratios``;
+    "" when no gear leaves a shaft idle."""
+    from gearsym.symbolic.ratios import idle_shafts
+
+    idle = idle_shafts(d)
+    if not idle:
+        return ""
+    drag = idle_drag(d)
+    return (
+        f"idle shafts {', '.join(idle)}: each has a viscous drag torque -d*omega to the "
+        f"housing, d = {drag.value:g} N*m*s/rad ({drag.source}); a gear that leaves them free "
+        "keeps their speeds as states, driven by the inertia coupling and this drag"
+    )
+
+
 def friction_symbols(
     d: GearboxDescription, element: str, why: str = "needed for mu inputs"
 ) -> tuple[sp.Expr, Variable, Variable]:
@@ -254,6 +282,35 @@ def locked_projection(
     return inverse[:, len(rows) :]
 
 
+def keep_with_idle(
+    d: GearboxDescription, dyn: GearboxDynamics, locked: tuple[str, ...], keep: tuple[str, ...]
+) -> tuple[str, ...]:
+    """``keep`` extended by idle shafts (:func:`~gearsym.symbolic.ratios.idle_shafts`, in
+    order) while the locked elements and the kept speeds leave motions undetermined: a gear
+    that leaves idle shafts free keeps their speeds as further states. Unchanged for a
+    gearbox without idle shafts."""
+    from gearsym.symbolic.ratios import idle_shafts
+
+    idle = [s for s in idle_shafts(d) if s not in keep]
+    f = len(d.coordinates)
+    if not idle or len(locked) + len(keep) >= f:
+        return keep
+    transform = dyn.kinematics.transform
+    index = {b: i for i, b in enumerate(d.body_names)}
+    rows = [*slip_rows(d, dyn, locked), *(transform[index[s], :] for s in keep)]
+    rank = sp.Matrix.vstack(*rows).rank() if rows else 0
+    extended = list(keep)
+    for shaft in idle:
+        if rank == f:
+            break
+        candidate = sp.Matrix.vstack(*rows, transform[index[shaft], :])
+        if candidate.rank() > rank:
+            rows.append(transform[index[shaft], :])
+            rank += 1
+            extended.append(shaft)
+    return tuple(extended)
+
+
 @dataclass(frozen=True)
 class DrivetrainParts:
     """The pieces of a drivetrain model before they are assembled into a :class:`Model`."""
@@ -273,6 +330,8 @@ class DrivetrainParts:
     torque_symbols: dict[str, sp.Symbol]
     #: With friction inputs: element -> (torque expression, normal-force input, μ parameter).
     friction: dict[str, tuple[sp.Expr, Variable, Variable]]
+    #: Power d Σ ω² the idle-shaft drag dissipates (README "Idle shafts"); 0 without idle shafts.
+    drag_power: sp.Expr = sp.Integer(0)
 
 
 #: The parts last derived, by description object and normalised arguments: a model and its
@@ -318,6 +377,7 @@ def _derive_parts(
 ) -> DrivetrainParts:
     dyn = gearbox_dynamics(d)
     sym = dyn.symbols
+    keep = keep_with_idle(d, dyn, locked, keep)
     projection = locked_projection(d, dyn, locked, keep)
 
     i_d = exact(quantity(d, "drivetrain", "i_D").value)
@@ -372,6 +432,18 @@ def _derive_parts(
     generalized += dyn.input_matrix[:, column[naming.OUTPUT_TORQUE]] * t_out
     for e in torque_elements:
         generalized += dyn.input_matrix[:, column[naming.torque(e)]] * torque[e]
+    # Idle shafts: viscous drag −d ω to the housing on each (README "Idle shafts"); its
+    # generalized force J_Rᵀ (−d ω) (2.35) and its power d Σ ω².
+    from gearsym.symbolic.ratios import idle_shafts
+
+    drag_power = sp.Integer(0)
+    idle = idle_shafts(d)
+    if idle:
+        drag = exact(idle_drag(d).value)
+        for shaft in idle:
+            row = transform[index[shaft], :]
+            generalized -= drag * row.T * body_speeds[shaft]
+            drag_power += drag * body_speeds[shaft] ** 2
     gearbox_rhs = sp.ImmutableMatrix(
         (reduced_mass.inv() * (projection.T * generalized)).applyfunc(sp.expand)
     )
@@ -393,6 +465,7 @@ def _derive_parts(
             **{e: sym.torque[e] for e in torque_elements},
         },
         friction=friction,
+        drag_power=drag_power,
     )
 
 
@@ -473,6 +546,9 @@ def drivetrain_model(
     validity = one_way_validity(d, locked)
     if validity:
         metadata["one_way"] = validity
+    idle = idle_note(d)
+    if idle:
+        metadata["idle"] = idle
     return Model(
         name=name,
         states=states,

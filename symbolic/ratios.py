@@ -178,19 +178,64 @@ def _free_shafts(d: GearboxDescription, basis: sp.Matrix, i_in: int) -> tuple[st
 
 def gear_motion(d: GearboxDescription, gear: Gear) -> sp.Matrix:
     """The one shaft-speed motion of a drivable gear (exact), for the steady-gear uses
-    (element slips, initial states, speed plans). Raises :class:`GearsymError` naming the
-    free shafts when the gear leaves idle shafts free: their speeds, and so a steady state
-    of the gear, are not determined by the kinematics."""
+    (element slips, initial states, speed plans).
+
+    A gear that leaves idle shafts free (:func:`idle_shafts`) has no unique motion by the
+    kinematics; under the dynamics assumption of the models (README "Idle shafts": a viscous
+    drag −d ω to the housing on every idle shaft of the description) the idle speeds settle
+    where the drag does no work on the idle motion: the motion with the least Σ ω² over the
+    idle shafts, which is the one returned."""
     motions = gear_motions(d, gear, stationary_ratios(d))
     if len(motions) == 1:
         return motions[0]
-    free = _free_shafts(d, sp.Matrix.hstack(*motions), d.shaft_names.index(d.input_shaft))
-    raise GearsymError(
-        d.file,
-        f'gear[name="{gear.name}"].closed',
-        f"gear {gear.name!r} leaves shaft(s) {', '.join(free)} free (speed undetermined by "
-        "the kinematics); its steady state cannot be derived",
-    )
+    i_in = d.shaft_names.index(d.input_shaft)
+    basis = sp.Matrix.hstack(*motions)
+    moving = next((basis * c for c in _input_moving(basis, i_in)), None)
+    if moving is None or _output_free_with_input_held(
+        motions, i_in, d.shaft_names.index(d.output_shaft)
+    ):
+        free = _free_shafts(d, basis, i_in)
+        raise GearsymError(
+            d.file,
+            f'gear[name="{gear.name}"].closed',
+            f"gear {gear.name!r} leaves shaft(s) {', '.join(free)} free and does not fix the "
+            "output; its steady state cannot be derived",
+        )
+    idle = sp.Matrix.hstack(*(basis * c for c in exact_nullspace(sp.Matrix([basis.row(i_in)]))))
+    dragged = [d.shaft_names.index(s) for s in idle_shafts(d)]
+    select = sp.Matrix([[1 if j == i else 0 for j in range(len(d.shaft_names))] for i in dragged])
+    a, b = select * idle, select * moving
+    # least squares: (Aᵀ A) c = −Aᵀ b, A of full column rank (every idle direction moves an
+    # idle shaft, by the definition of the idle shafts)
+    c = (a.T * a).LUsolve(-(a.T * b))
+    return (moving + idle * c).applyfunc(sp.cancel)
+
+
+#: Idle shafts by description object (kept with its entry, so its id is not reused meanwhile).
+_IDLE: dict[int, tuple[GearboxDescription, tuple[str, ...]]] = {}
+
+
+def idle_shafts(d: GearboxDescription) -> tuple[str, ...]:
+    """Shafts that some drivable gear leaves free (idle: they turn while the input, and so the
+    output, is held), in the description's order; () for most gearboxes. The models give each
+    a viscous drag to the housing (README "Idle shafts")."""
+    cached = _IDLE.get(id(d))
+    if cached is not None and cached[0] is d:
+        return cached[1]
+    k = stationary_ratios(d)
+    i_in = d.shaft_names.index(d.input_shaft)
+    found: set[str] = set()
+    for g in d.gears:
+        if g.neutral:
+            continue
+        motions = gear_motions(d, g, k)
+        if len(motions) > 1:
+            found.update(_free_shafts(d, sp.Matrix.hstack(*motions), i_in))
+    result = tuple(s for s in d.shaft_names if s in found)
+    if len(_IDLE) >= 16:
+        _IDLE.clear()
+    _IDLE[id(d)] = (d, result)
+    return result
 
 
 def _output_free_with_input_held(motions: list[sp.Matrix], i_in: int, i_out: int) -> bool:

@@ -39,7 +39,7 @@ class ReferenceModel:
     bristle_energy: sp.Expr  # Σ ½ σ0 z²
     input_power: sp.Expr  # T_In ω_in
     friction_power: sp.Expr  # Σ T_e Δω_e  (taken out of the shafts)
-    damper_power: sp.Expr  # 2 d_ss φ̇²
+    damper_power: sp.Expr  # 2 d_ss φ̇² (+ d Σ ω² of idle shafts)
     road_power: sp.Expr  # T_res ω_C
     side_shaft_torque: sp.Expr
     road_torque: sp.Expr
@@ -179,7 +179,8 @@ def reference_model(d: GearboxDescription, elements: Sequence[str] | None = None
         bristle_energy=sum(storage, sp.Integer(0)),
         input_power=parts.torque_symbols[naming.INPUT] * speeds[d.input_shaft],
         friction_power=sum((torque[e] * slip[e] for e in torque), sp.Integer(0)),
-        damper_power=2 * params["d_ss"] * parts.phi_dot**2,
+        # the side-shaft dampers, and the drag of idle shafts (README "Idle shafts")
+        damper_power=2 * params["d_ss"] * parts.phi_dot**2 + parts.drag_power,
         road_power=parts.road_torque * omega_c,
         side_shaft_torque=parts.side_shaft_torque,
         road_torque=parts.road_torque,

@@ -363,4 +363,4 @@ def test_idle_shaft_is_reported_by_the_ratio_table(
     assert first.free_shafts == ("idle",)
     assert main(["ratios", str(path)]) == 0
     out = capsys.readouterr().out
-    assert "gear 1: shaft(s) idle free, speed undetermined" in out
+    assert "gear 1: idle: idle (speed undetermined; model assumes drag" in out

@@ -394,10 +394,17 @@ def _sliding_bristles(
 
 
 def _gear_speeds(d: GearboxDescription, gear: str, omega_out: float) -> dict[str, float]:
-    """Every shaft's speed in a gear at the given output speed (kinematics only)."""
+    """Every shaft's speed in a gear at the given output speed (kinematics only; idle shafts
+    at the steady speeds of the drag assumption, :func:`gearsym.symbolic.ratios.gear_motion`)."""
     from gearsym.symbolic.drivetrain import drivetrain_parts
 
     parts = drivetrain_parts(d, locked=tuple(d.gear(gear).closed), keep=(d.output_shaft,))
+    if len(parts.speeds) > 1:  # idle shafts kept as states
+        from gearsym.symbolic.ratios import gear_motion
+
+        motion = gear_motion(d, d.gear(gear))
+        scale = omega_out / float(motion[d.shaft_names.index(d.output_shaft)])
+        return {s: float(w) * scale for s, w in zip(d.shaft_names, motion, strict=True)}
     out = parts.speeds[0]
     return {s.name: float(parts.body_speeds[s.name].subs(out, omega_out)) for s in d.shafts}
 
