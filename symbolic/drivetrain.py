@@ -173,8 +173,9 @@ def idle_drag(d: GearboxDescription) -> Quantity:
 
 
 def idle_note(d: GearboxDescription) -> str:
-    """The dynamics assumption for idle shafts, as text for model metadata and ``ratios``;
-    "" when no gear leaves a shaft idle."""
+    """The dynamics assumption for idle shafts, as text for model metadata (and so the emitted
+    C headers: no word the ECU source check reads as dynamic memory); "" when no gear leaves a
+    shaft idle."""
     from gearsym.symbolic.ratios import idle_shafts
 
     idle = idle_shafts(d)
@@ -183,7 +184,7 @@ def idle_note(d: GearboxDescription) -> str:
     drag = idle_drag(d)
     return (
         f"idle shafts {', '.join(idle)}: each has a viscous drag torque -d*omega to the "
-        f"housing, d = {drag.value:g} N*m*s/rad ({drag.source}); a gear that leaves them free "
+        f"housing, d = {drag.value:g} N*m*s/rad ({drag.source}); a gear that leaves them idle "
         "keeps their speeds as states, driven by the inertia coupling and this drag"
     )
 
