@@ -258,3 +258,14 @@ def test_reduced_models_with_idle_state_follow_the_reference(tmp_path: Path) -> 
     for name in ("gear_1", "shift_1_2"):
         assert "omega_sun_od" in checks[name].max_abs_error
         assert checks[name].max_relative_error < 1e-3, (name, checks[name])
+
+
+def test_idle_note_passes_the_ecu_source_scan() -> None:
+    """The note lands in emitted C headers, whose sources the ECU check scans for the names
+    of dynamic-memory functions (validation/generated_check.py): none may appear in it."""
+    import re
+
+    d = load_description(OVERDRIVE)
+    note = gear_model(d, "1").metadata["idle"]
+    assert "sun_od" in note and "0.002" in note
+    assert not re.search(r"\b(malloc|calloc|realloc|free|alloca)\b", note)
