@@ -162,6 +162,9 @@ class PlanetarySet:
     #: ``"equal"`` (default): the tooth sums must allow equally spaced planets;
     #: ``"unequal"``: the file states the planets sit unequally spaced, the check is skipped.
     planet_spacing: str = "equal"
+    #: False only in a description read for ``gearsym fit-teeth`` (``teeth_optional``) when
+    #: the set gives no tooth counts yet: the counts are then 0, nothing is checked.
+    teeth_given: bool = True
 
     def require_teeth(self, file: str, purpose: str) -> None:
         """Raise a one-line :class:`GearsymError` naming the set's ``k`` key when the set
@@ -456,8 +459,16 @@ def _label(reader: _Reader, name: str) -> None:
     reader.path = re.sub(r"\[\d+\]$", f'[name="{name}"]', reader.path)
 
 
-def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
-    """Parse and check a description; raise :class:`GearsymError` on the first problem."""
+def parse_description(
+    text: str, file: str = "<string>", *, teeth_optional: bool = False
+) -> GearboxDescription:
+    """Parse and check a description; raise :class:`GearsymError` on the first problem.
+
+    ``teeth_optional`` (``gearsym fit-teeth`` only): a planetary set may leave out its tooth
+    counts (or give 0 as a placeholder), its planet count and its pinion data; such a set
+    has :attr:`PlanetarySet.teeth_given` false, tooth counts 0 and is not checked for
+    buildability (the search proposes buildable teeth for it).
+    """
     data = parse_toml(text, file)
     root = _Reader(file, data, "")
 
@@ -483,7 +494,7 @@ def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
     for r in root.tables("planetary_set"):
         set_name = r.name()
         _label(r, set_name)
-        sets.append(_planetary_set(r, set_name))
+        sets.append(_planetary_set(r, set_name, teeth_optional))
 
     elements: list[ShiftElement] = []
     for r in root.tables("shift_element"):
@@ -599,8 +610,12 @@ def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
     return description
 
 
-def _planetary_set(r: _Reader, set_name: str) -> PlanetarySet:
-    """One ``[[planetary_set]]`` of any kind; the keys a kind does not have are unknown keys."""
+def _planetary_set(r: _Reader, set_name: str, teeth_optional: bool = False) -> PlanetarySet:
+    """One ``[[planetary_set]]`` of any kind; the keys a kind does not have are unknown keys.
+
+    With ``teeth_optional`` a set without tooth counts (keys absent or 0) is accepted
+    unchecked, and so are absent planet count and pinion data (placeholders of value 0).
+    """
     kind = r.string("kind", required=False, default="simple")
     if kind not in set_kinds.KINDS:
         raise r.fail("kind", f"expected one of {', '.join(set_kinds.KINDS)}; got {shown(kind)}")
@@ -608,22 +623,44 @@ def _planetary_set(r: _Reader, set_name: str) -> PlanetarySet:
     members = {role: r.string(role) for role in ("sun", "carrier", "ring")}
     planet = r.name("planet")
     given_k = _given_k(r, kind)
-    teeth_needed = given_k is None
+    teeth_keys = ("z_sun", "z_planet", "z_ring", *_teeth_keys(kind))
+    # fit-teeth: a set whose teeth are all absent or 0 is searched from the ratio targets.
+    teeth_given = not (
+        teeth_optional and given_k is None and all(r.data.get(k, 0) == 0 for k in teeth_keys)
+    )
+    teeth_needed = given_k is None and teeth_given
     z_sun = r.positive_integer("z_sun", maximum=TEETH_MAX) if teeth_needed else 0
     z_planet = r.positive_integer("z_planet", maximum=TEETH_MAX) if teeth_needed else 0
     z_ring = r.positive_integer("z_ring", maximum=TEETH_MAX) if teeth_needed else 0
-    count = r.positive_integer("planet_count", maximum=PLANET_COUNT_MAX)
+    lenient = not teeth_given
+    if lenient:
+        r.used.update(k for k in teeth_keys if k in r.data)
+    count = (
+        r.integer("planet_count", required=False)
+        if lenient and r.data.get("planet_count", 0) == 0
+        else r.positive_integer("planet_count", maximum=PLANET_COUNT_MAX)
+    )
+
+    def quantity(key: str, unit: str | None = None) -> Quantity:
+        if lenient and key not in r.data:
+            return Quantity(0.0, unit or EXPECTED_UNITS.get(key, ""), "not given (fit-teeth)")
+        return r.quantity(key, unit=unit)
+
     extra: dict[str, Any] = {}
     if "sun2" in key_of:
         extra["sun2"] = r.string(key_of["sun2"])
-        extra["z_sun2"] = r.positive_integer(key_of["z_sun2"], maximum=TEETH_MAX)
+        extra["z_sun2"] = (
+            r.positive_integer(key_of["z_sun2"], maximum=TEETH_MAX) if teeth_given else 0
+        )
     if "planet2" in key_of:
         extra["planet2"] = r.name(key_of["planet2"])
-        extra["planet2_mass"] = r.quantity(key_of["planet2_mass"], unit="kg")
-        extra["planet2_inertia"] = r.quantity(key_of["planet2_inertia"], unit="kg*m^2")
-        extra["planet2_radius"] = r.quantity(key_of["planet2_radius"], unit="m")
-    if "z_planet2" in key_of and teeth_needed:
-        extra["z_planet2"] = r.positive_integer(key_of["z_planet2"], maximum=TEETH_MAX)
+        extra["planet2_mass"] = quantity(key_of["planet2_mass"], unit="kg")
+        extra["planet2_inertia"] = quantity(key_of["planet2_inertia"], unit="kg*m^2")
+        extra["planet2_radius"] = quantity(key_of["planet2_radius"], unit="m")
+    if "z_planet2" in key_of and given_k is None:
+        extra["z_planet2"] = (
+            r.positive_integer(key_of["z_planet2"], maximum=TEETH_MAX) if teeth_given else 0
+        )
     tolerance = r.number("centre_distance_tolerance", required=False)
     if tolerance is not None and not 0 <= tolerance <= CENTRE_DISTANCE_TOLERANCE_MAX:
         raise r.fail(
@@ -645,14 +682,15 @@ def _planetary_set(r: _Reader, set_name: str) -> PlanetarySet:
         z_planet=z_planet,
         z_ring=z_ring,
         planet_count=count,
-        planet_mass=r.quantity("planet_mass"),
-        planet_inertia=r.quantity("planet_inertia"),
-        carrier_radius=r.quantity("carrier_radius"),
-        teeth_source=r.string("teeth_source"),
+        planet_mass=quantity("planet_mass"),
+        planet_inertia=quantity("planet_inertia"),
+        carrier_radius=quantity("carrier_radius"),
+        teeth_source=r.string("teeth_source", required=not lenient),
         kind=kind,
         centre_distance_tolerance=tolerance or 0.0,
         given_k=given_k,
         planet_spacing=spacing,
+        teeth_given=teeth_given,
         **extra,
     )
     for key in r.data:
@@ -832,21 +870,34 @@ def _check_pinion_pair(
     r: _Reader, ps: PlanetarySet, z_sun: int, z_inner: int, z_outer: int, key: str
 ) -> None:
     """A pinion meshing the sun (inner) and a pinion meshing the ring (outer), meshing each
-    other: their centres and the axis must form a triangle, and neither may touch the gear
-    it does not mesh (tip circles one module outside the pitch circles)."""
+    other: :func:`pinion_pair_problem`, raised on ``key``."""
+    problem = pinion_pair_problem(
+        z_sun, z_inner, z_outer, ps.z_ring, outer_clears_sun=ps.kind == "double_pinion"
+    )
+    if problem:
+        raise r.fail(key, problem)
+
+
+def pinion_pair_problem(
+    z_sun: int, z_inner: int, z_outer: int, z_ring: int, outer_clears_sun: bool
+) -> str | None:
+    """Why two meshing pinions, the inner on the sun and the outer on the ring, cannot be
+    built (None if they can): their centres and the axis must form a triangle, and neither
+    may touch the gear it does not mesh (tip circles one module outside the pitch circles;
+    the outer pinion's sun clearance only where the sun is under it, ``outer_clears_sun``)."""
     r_inner = (z_sun + z_inner) / 2
-    r_outer = (ps.z_ring - z_outer) / 2
+    r_outer = (z_ring - z_outer) / 2
     between = (z_inner + z_outer) / 2
     if not abs(r_outer - r_inner) < between < r_outer + r_inner:
-        raise r.fail(
-            key,
+        return (
             f"the pinions cannot mesh: centre radii {r_inner:g} and {r_outer:g} and their "
-            f"distance {between:g} modules form no triangle",
+            f"distance {between:g} modules form no triangle"
         )
-    if r_inner + (z_inner + 2) / 2 >= (ps.z_ring - 2) / 2:
-        raise r.fail(key, f"the sun-side pinion ({z_inner} teeth) reaches into the ring")
-    if ps.kind == "double_pinion" and r_outer - (z_outer + 2) / 2 <= (z_sun + 2) / 2:
-        raise r.fail(key, f"the ring-side pinion ({z_outer} teeth) reaches into the sun")
+    if r_inner + (z_inner + 2) / 2 >= (z_ring - 2) / 2:
+        return f"the sun-side pinion ({z_inner} teeth) reaches into the ring"
+    if outer_clears_sun and r_outer - (z_outer + 2) / 2 <= (z_sun + 2) / 2:
+        return f"the ring-side pinion ({z_outer} teeth) reaches into the sun"
+    return None
 
 
 def planets_fit(z_sun: int, z_planet: int, count: int) -> bool:

@@ -35,7 +35,7 @@ The kinds (README "Planetary set kinds"):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from fractions import Fraction
 from typing import TYPE_CHECKING
 
@@ -159,7 +159,12 @@ def relations(ps: PlanetarySet) -> tuple[Relation, ...]:
     →  i0 = −z_H z_P/(z_S z_P2).
     Ravigneaux: the long-pinion pair as simple, the short-pinion pair as double pinion.
     A set that gives ``k`` (its signed i0) instead of teeth has k = |i0| with the kind's sign.
+    A set without teeth yet (``teeth_given`` false, read for ``fit-teeth``) has k = 0: only
+    its relation keys, members and signs are meaningful.
     """
+    if not ps.teeth_given:
+        z = {"z_sun": 1, "z_sun2": 1, "z_planet2": 1}
+        ps = replace(ps, z_ring=0, **{k: v for k, v in z.items() if getattr(ps, k) is not None})
     if ps.given_k is not None:
         sign = 1 if ps.given_k > 0 else -1
         return (Relation(ps.name, ps.sun, ps.ring, ps.carrier, sign, abs(ps.given_k)),)
