@@ -128,7 +128,8 @@ class PlanetarySet:
     (J_9…J_12, m_P,j) is ``planet_count`` times these. The second-pinion fields belong to the
     compound kinds: ``planet2`` is the outer pinion of a double-pinion set or the short pinion
     of a Ravigneaux set (each its own body), ``sun2`` the Ravigneaux sun meshing the short
-    pinions, ``z_planet2`` also the ring-side step of a stepped planet.
+    pinions, ``ring2`` the ring meshing the short pinions of a Ravigneaux set with two rings,
+    ``z_planet2`` also the ring-side step of a stepped planet.
     ``centre_distance_tolerance`` (in modules) admits profile-shifted teeth whose
     standard-module centre distances differ by at most that much.
     """
@@ -149,6 +150,8 @@ class PlanetarySet:
     kind: str = "simple"
     sun2: str | None = None
     z_sun2: int | None = None
+    ring2: str | None = None
+    z_ring2: int | None = None
     planet2: str | None = None
     z_planet2: int | None = None
     planet2_mass: Quantity | None = None
@@ -652,6 +655,11 @@ def _planetary_set(r: _Reader, set_name: str, teeth_optional: bool = False) -> P
         extra["z_sun2"] = (
             r.positive_integer(key_of["z_sun2"], maximum=TEETH_MAX) if teeth_given else 0
         )
+    if "ring2" in key_of:
+        extra["ring2"] = r.string(key_of["ring2"])
+        extra["z_ring2"] = (
+            r.positive_integer(key_of["z_ring2"], maximum=TEETH_MAX) if teeth_given else 0
+        )
     if "planet2" in key_of:
         extra["planet2"] = r.name(key_of["planet2"])
         extra["planet2_mass"] = quantity(key_of["planet2_mass"], unit="kg")
@@ -786,9 +794,12 @@ def _check_set(r: _Reader, ps: PlanetarySet) -> None:
     pinions clear the ring and the sun, equal spacing ((z_H − z_S) / n ∈ ℤ).
     Ravigneaux: the long pinion as a simple set, the short pinion as a double pinion
     (triangle, ring clearance), equal spacing of both pairs.
+    Ravigneaux with two rings: the long pinion as a simple set with the first ring; long
+    and short pinion as a double pinion between the sun and the second ring (triangle,
+    clearances, (z_ring_short − z_sun) / n ∈ ℤ).
     A coaxiality error up to ``centre_distance_tolerance`` modules is accepted (profile shift).
     """
-    if ps.kind in ("simple", "ravigneaux"):
+    if ps.kind in ("simple", "ravigneaux", "ravigneaux_two_rings"):
         _check_coaxial(r, ps, ps.z_sun + ps.z_planet, ps.z_ring - ps.z_planet, "z_ring")
         _check_spacing(r, ps, ps.z_sun + ps.z_ring, "(z_sun + z_ring)")
         _check_neighbours(r, ps, ps.z_sun, ps.z_planet)
@@ -818,6 +829,17 @@ def _check_set(r: _Reader, ps: PlanetarySet) -> None:
         # (z_ring − z_planet)/2): the double-pinion triangle with the long pinion outside.
         _check_pinion_pair(r, ps, ps.z_sun2, ps.z_planet2, ps.z_planet, "z_planet_short")
         _check_spacing(r, ps, ps.z_ring - ps.z_sun2, "(z_ring − z_sun_short)")
+    if ps.kind == "ravigneaux_two_rings":
+        assert ps.z_planet2 is not None and ps.z_ring2 is not None
+        # The long pinion (centre (z_sun + z_planet)/2) meshes the short pinion, whose centre
+        # sits at (z_ring_short − z_planet_short)/2: the double-pinion triangle with the long
+        # pinion inside; the short pinion must clear the sun, the long one the second ring.
+        problem = pinion_pair_problem(
+            ps.z_sun, ps.z_planet, ps.z_planet2, ps.z_ring2, outer_clears_sun=True
+        )
+        if problem:
+            raise r.fail("z_planet_short", problem)
+        _check_spacing(r, ps, ps.z_ring2 - ps.z_sun, "(z_ring_short − z_sun)")
 
 
 def _check_coaxial(

@@ -1,7 +1,8 @@
 """Search integer tooth counts that reproduce a target ratio table.
 
 Gear ratios depend on a set's teeth only through its stationary ratios: k = z_ring / z_sun of
-a simple or double-pinion set, and k, k2 = z_ring / z_sun_short of a Ravigneaux set
+a simple or double-pinion set, k, k2 = z_ring / z_sun_short of a Ravigneaux set and k,
+k2 = z_ring_short / z_sun of a Ravigneaux set with two rings
 (:mod:`gearsym.symbolic.ratios`, :mod:`gearsym.symbolic.set_kinds`). The search therefore
 
 1. lists, per set, every buildable realisation in the given ranges, grouped by the exact
@@ -17,6 +18,9 @@ a simple or double-pinion set, and k, k2 = z_ring / z_sun_short of a Ravigneaux 
      by the planet count;
    - Ravigneaux: the long pinion as a simple set, the short pinion with the second sun and
      the long pinion as a pinion pair, (z_ring − z_sun_short) divisible by the planet count;
+   - Ravigneaux with two rings: the long pinion as a simple set, long and short pinion as a
+     pinion pair between the sun and the second ring, (z_ring_short − z_sun) divisible by
+     the planet count;
 
 2. assigns the stationary ratios one after another (the next is the one that completes the
    most gears), pruning every partial assignment by the gears whose ratio depends only on
@@ -55,6 +59,7 @@ EXTRA_TEETH: dict[str, tuple[str, ...]] = {
     "simple": (),
     "double_pinion": ("z_planet_outer",),
     "ravigneaux": ("z_sun_short", "z_planet_short"),
+    "ravigneaux_two_rings": ("z_ring_short", "z_planet_short"),
 }
 #: Planet counts tried for a set that gives none (and no --planet-count).
 DEFAULT_PLANET_COUNTS = (3, 4, 5)
@@ -171,6 +176,23 @@ def buildable_realisations(
                 z_p2 = int(planets[np.flatnonzero(ok[i])[0]])
                 key = (Fraction(z_ring, z_sun), Fraction(z_ring, z_s2))
                 found.setdefault(key, []).append((z_sun, z_long, z_ring, n, z_s2, z_p2))
+        return found
+    if kind == "ravigneaux_two_rings":
+        rings = np.arange(1, ranges.ring_max + 1)
+        ring2, short = np.meshgrid(rings, planets, indexing="ij")
+        for z_sun, z_long, z_ring, n in (
+            t for teeth in buildable_teeth(ranges, planet_counts).values() for t in teeth
+        ):
+            # the short pinion: outer, on the second ring; inner the long pinion on the sun
+            ok = _pair_fits(
+                np.full(short.shape, z_sun), np.full(short.shape, z_long), short, ring2, True
+            )
+            ok &= (ring2 - z_sun) % n == 0
+            for i in np.flatnonzero(ok.any(axis=1)).tolist():
+                z_r2 = int(rings[i])
+                z_p2 = int(planets[np.flatnonzero(ok[i])[0]])
+                key = (Fraction(z_ring, z_sun), Fraction(z_r2, z_sun))
+                found.setdefault(key, []).append((z_sun, z_long, z_ring, n, z_r2, z_p2))
         return found
     raise ValueError(f"fit-teeth cannot build kind {kind!r}")
 
@@ -348,6 +370,8 @@ def with_teeth(d: GearboxDescription, teeth: dict[str, Realisation]) -> GearboxD
             extra = {"z_planet2": t[4]}
         elif ps.kind == "ravigneaux":
             extra = {"z_sun2": t[4], "z_planet2": t[5]}
+        elif ps.kind == "ravigneaux_two_rings":
+            extra = {"z_ring2": t[4], "z_planet2": t[5]}
         sets.append(
             replace(
                 ps,

@@ -135,7 +135,8 @@ def set_positions(ps: PlanetarySet) -> dict[str, Fraction]:
 
     Any kind from its shaft relations ω_S − i0 ω_H − (1 − i0) ω_C = 0: sun 0, carrier k,
     ring k + 1 for i0 = −k and k − 1 for i0 = +k (the ring of a double pinion sits between
-    sun and carrier); a Ravigneaux set's second sun lands at k + k2.
+    sun and carrier); a Ravigneaux set's second sun lands at k + k2, the second ring of a
+    Ravigneaux set with two rings at k (k2 − 1)/k2.
     Scaled by z_S so that a simple set keeps its tooth-unit positions.
     """
     rels = relations(ps)
@@ -145,8 +146,14 @@ def set_positions(ps: PlanetarySet) -> dict[str, Fraction]:
     ring = (first.k - first.sign) * scale
     positions = {first.sun: Fraction(0), first.carrier: carrier, first.ring: ring}
     for rel in rels[1:]:
-        # Same carrier and ring: the second sun extrapolates the lever through them.
-        positions[rel.sun] = carrier + rel.k * (ring - carrier) / rel.sign
+        if rel.ring in positions:
+            # Same carrier and ring (Ravigneaux): the second sun extrapolates the lever.
+            positions[rel.sun] = carrier + rel.k * (ring - carrier) / rel.sign
+        else:
+            # Same sun and carrier (Ravigneaux with two rings): in the pair's own units the
+            # sun is at 0, the carrier at k2 and the ring at k2 − sign.
+            sun = positions[rel.sun]
+            positions[rel.ring] = sun + (positions[rel.carrier] - sun) * (rel.k - rel.sign) / rel.k
     return positions
 
 
@@ -160,6 +167,8 @@ def _members(ps: PlanetarySet) -> dict[str, str]:
     members = {getattr(ps, role): member_name(role, ps.name) for role in ROLES}
     if ps.sun2 is not None:
         members[ps.sun2] = member_name("sun", f"{ps.name}_short")
+    if ps.ring2 is not None:
+        members[ps.ring2] = member_name("ring", f"{ps.name}_short")
     return members
 
 
