@@ -249,3 +249,27 @@ def test_json_holds_what_the_speed_plan_shows(thesis):
     gears = {g["gear"]: g for g in data["gears"]}
     assert round(1 / gears["3"]["speeds"]["2"], 3) == 2.252
     assert [n["position"] for n in data["levers"][0]["nodes"]] == [0.0, 98.0, 144.0]
+
+
+@pytest.mark.parametrize(
+    "kind", ["simple", "double_pinion", "ravigneaux", "ravigneaux_two_rings", "stepped_planet"]
+)
+def test_stick_diagram_of_each_set_kind(kind):
+    """The README sketches (docs/set_kinds/): one box per pinion body (a stepped planet's two
+    steps are two boxes of one body), and every member of the kind, the second sun or second
+    ring included, has one stem ending on its own shaft line at a junction dot."""
+    sketch = Path(__file__).parents[1] / "docs" / "set_kinds" / f"{kind}.toml"
+    d = load_description(sketch)
+    (ps,) = d.planetary_sets
+    stick = stick_diagram(d)
+    boxes = {"simple": 1, "double_pinion": 2, "ravigneaux": 2, "ravigneaux_two_rings": 2}
+    assert len(stick.planets) == boxes.get(kind, 2)
+    owners = {"sun": "S", "carrier": "C", "ring": "R", "sun2": "S2", "ring2": "R2"}
+    for role in owners:
+        shaft = getattr(ps, role)
+        if shaft is None:
+            continue
+        ends = [seg.end for seg in stick.segments if seg.owner == f"{owners[role]}{ps.name}"]
+        stem = [e for e in ends if e[1] == stick.shaft_levels[shaft]]
+        assert len(stem) == 1 and stem[0] in set(stick.junctions), (kind, role)
+    assert len({stick.shaft_levels[m] for m in ps.members}) == len(ps.members)
