@@ -309,3 +309,21 @@ def test_fit_teeth_empty_search_space_is_one_line(tmp_path):
     assert len(lines) == 1, result.stderr
     assert str(path) in lines[0] and 'planetary_set[name="front"]' in lines[0]
     assert "search space is empty" in lines[0]
+
+
+@pytest.mark.parametrize("kind", ["double_pinion", "ravigneaux", "ravigneaux_two_rings"])
+def test_fit_teeth_proposals_pass_the_description_checks(tmp_path, kind):
+    """A one-set description of each compound kind (docs/set_kinds/) with its teeth zeroed:
+    the best proposal, written back into the file, passes the parser's own buildability
+    checks (triangles, clearances, spacing; no profile shift) and `gearsym ratios`."""
+    sketch = Path(__file__).parents[1] / "docs" / "set_kinds" / f"{kind}.toml"
+    original = sketch.read_text().replace("centre_distance_tolerance = 0.5", "")
+    path = tmp_path / "zero.toml"
+    path.write_text(_strip_teeth(original, zeros=True))
+    result = gearsym("fit-teeth", str(path), "--json", "--top", "1")
+    assert result.returncode == 0, result.stderr
+    (best,) = json.loads(result.stdout)
+    refit = tmp_path / "refit.toml"
+    refit.write_text(_set_keys(original, best["sets"]))
+    checked = gearsym("ratios", str(refit))
+    assert checked.returncode == 0, checked.stdout + checked.stderr
