@@ -9,7 +9,7 @@ STAMP  := $(VENV)/.installed
 
 PIP    := pip==26.3
 
-.PHONY: run test lint format bench fuzz lock clean
+.PHONY: run test lint format bench fuzz lock clean sketches
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null || { echo "make: $(PYTHON) not found (need Python 3.11+; set PYTHON=...)"; exit 2; }
@@ -49,6 +49,14 @@ fuzz: $(STAMP)
 format: $(STAMP)
 	$(BIN)/ruff format .
 	$(BIN)/ruff check --fix .
+
+# The README's set-kind sketches: one stick diagram per planetary set kind, drawn by gearsym
+# from the minimal descriptions in docs/set_kinds/ (deterministic SVG bytes).
+SET_KINDS := simple double_pinion ravigneaux ravigneaux_two_rings stepped_planet
+sketches: $(STAMP)
+	@for kind in $(SET_KINDS); do \
+		$(BIN)/gearsym draw docs/set_kinds/$$kind.toml --what stick --out docs/set_kinds/$$kind.svg || exit 1; \
+	done
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/run_all.py

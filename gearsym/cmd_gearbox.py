@@ -139,9 +139,12 @@ def _counts(text: str) -> tuple[int, ...]:
 def cmd_fit_teeth(args: argparse.Namespace) -> int:
     """Tooth counts that reproduce every ratio of the gear table (Table 2.1) within the
     tolerance; exit code 1 when no candidate in the ranges does."""
-    from gearsym.symbolic.teeth import ToothRanges, fit_teeth
+    from gearsym.symbolic.loader import load_description
+    from gearsym.symbolic.teeth import ToothRanges, fit_teeth, teeth_keys
 
-    d = load(args.config)
+    # The file's teeth are not needed: a set may give none yet (or zeros), README "fit-teeth".
+    d = load_description(args.config, teeth_optional=True)
+    kinds = {ps.name: ps.kind for ps in d.planetary_sets}
     ranges = ToothRanges(
         sun=args.sun, planet=args.planet, ring_max=args.ring_max, planet_counts=args.planet_count
     )
@@ -160,7 +163,7 @@ def cmd_fit_teeth(args: argparse.Namespace) -> int:
                 {
                     "max_error": c.max_error,
                     "sets": {
-                        s: {"z_sun": t[0], "z_planet": t[1], "z_ring": t[2], "planet_count": t[3]}
+                        s: dict(zip(teeth_keys(kinds[s]), t, strict=True))
                         for s, t in c.teeth.items()
                     },
                     "alternatives": {
@@ -176,8 +179,8 @@ def cmd_fit_teeth(args: argparse.Namespace) -> int:
     tol = args.tolerance if args.tolerance is not None else 0.5 * 10.0 ** (-d.ratio_decimals)
     if not candidates:
         print(f"No tooth counts in the ranges reproduce every ratio within ±{tol:g}.")
-        if args.planet_count is None:
-            counts = sorted({ps.planet_count for ps in d.planetary_sets})
+        counts = sorted({ps.planet_count for ps in d.planetary_sets if ps.planet_count})
+        if args.planet_count is None and counts:
             print(
                 f"  Only the planet count of each set in the file was tried "
                 f"({', '.join(map(str, counts))}): equal spacing (z_sun + z_ring divisible by "
@@ -187,12 +190,17 @@ def cmd_fit_teeth(args: argparse.Namespace) -> int:
     print(f"{len(candidates)} candidate(s) within ±{tol:g} of every ratio ({elapsed:.1f} s):")
     for rank, c in enumerate(candidates, start=1):
         print(f"\n#{rank}  largest ratio error {c.max_error:.2e}")
-        for s, (zs, zp, zr, n) in c.teeth.items():
+        for s, t in c.teeth.items():
+            zs, zp, zr, n = t[:4]
             # the same stationary ratio with other teeth or planet counts, each once
             listed = list(dict.fromkeys(c.alternatives.get(s, [])))[:4]
-            alts = ", ".join(f"{a}/{b}/{r}×{m}" for a, b, r, m in listed)
+            alts = ", ".join("/".join(map(str, a[:3] + a[4:])) + f"×{a[3]}" for a in listed)
             more = f"   (same k: {alts})" if alts else ""
-            print(f"   set {s:<4} sun {zs:3d}  planet {zp:3d}  ring {zr:3d}  ×{n}{more}")
+            extra = "".join(
+                f"  {key.removeprefix('z_')} {z:3d}"
+                for key, z in zip(teeth_keys(kinds[s])[4:], t[4:], strict=True)
+            )
+            print(f"   set {s:<4} sun {zs:3d}  planet {zp:3d}  ring {zr:3d}{extra}  ×{n}{more}")
         worst = max(c.errors, key=lambda g: c.errors[g])
         print(f"   worst gear {worst}: {c.ratios[worst]:.6f} (error {c.errors[worst]:.2e})")
     return 0

@@ -134,7 +134,8 @@ class PlanetarySet:
     (J_9…J_12, m_P,j) is ``planet_count`` times these. The second-pinion fields belong to the
     compound kinds: ``planet2`` is the outer pinion of a double-pinion set or the short pinion
     of a Ravigneaux set (each its own body), ``sun2`` the Ravigneaux sun meshing the short
-    pinions, ``z_planet2`` also the ring-side step of a stepped planet.
+    pinions, ``ring2`` the ring meshing the short pinions of a Ravigneaux set with two rings,
+    ``z_planet2`` also the ring-side step of a stepped planet.
     ``centre_distance_tolerance`` (in modules) admits profile-shifted teeth whose
     standard-module centre distances differ by at most that much.
     """
@@ -155,6 +156,8 @@ class PlanetarySet:
     kind: str = "simple"
     sun2: str | None = None
     z_sun2: int | None = None
+    ring2: str | None = None
+    z_ring2: int | None = None
     planet2: str | None = None
     z_planet2: int | None = None
     planet2_mass: Quantity | None = None
@@ -173,6 +176,9 @@ class PlanetarySet:
     #: out): ½ Σ J_m ω_m² over the members equals the planets' energy for every motion the
     #: set allows (README "Stationary ratio instead of teeth"). Empty: not given.
     reflected_inertia: tuple[tuple[str, Quantity], ...] = ()
+    #: False only in a description read for ``gearsym fit-teeth`` (``teeth_optional``) when
+    #: the set gives no tooth counts yet: the counts are then 0, nothing is checked.
+    teeth_given: bool = True
 
     def require_teeth(self, file: str, purpose: str, reflected_ok: bool = False) -> None:
         """Raise a one-line :class:`GearsymError` naming the set's ``k`` key when the set
@@ -489,8 +495,16 @@ def _label(reader: _Reader, name: str) -> None:
     reader.path = re.sub(r"\[\d+\]$", f'[name="{name}"]', reader.path)
 
 
-def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
-    """Parse and check a description; raise :class:`GearsymError` on the first problem."""
+def parse_description(
+    text: str, file: str = "<string>", *, teeth_optional: bool = False
+) -> GearboxDescription:
+    """Parse and check a description; raise :class:`GearsymError` on the first problem.
+
+    ``teeth_optional`` (``gearsym fit-teeth`` only): a planetary set may leave out its tooth
+    counts (or give 0 as a placeholder), its planet count and its pinion data; such a set
+    has :attr:`PlanetarySet.teeth_given` false, tooth counts 0 and is not checked for
+    buildability (the search proposes buildable teeth for it).
+    """
     data = parse_toml(text, file)
     root = _Reader(file, data, "")
 
@@ -516,7 +530,7 @@ def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
     for r in root.tables("planetary_set"):
         set_name = r.name()
         _label(r, set_name)
-        sets.append(_planetary_set(r, set_name))
+        sets.append(_planetary_set(r, set_name, teeth_optional))
 
     elements: list[ShiftElement] = []
     for r in root.tables("shift_element"):
@@ -632,8 +646,12 @@ def parse_description(text: str, file: str = "<string>") -> GearboxDescription:
     return description
 
 
-def _planetary_set(r: _Reader, set_name: str) -> PlanetarySet:
-    """One ``[[planetary_set]]`` of any kind; the keys a kind does not have are unknown keys."""
+def _planetary_set(r: _Reader, set_name: str, teeth_optional: bool = False) -> PlanetarySet:
+    """One ``[[planetary_set]]`` of any kind; the keys a kind does not have are unknown keys.
+
+    With ``teeth_optional`` a set without tooth counts (keys absent or 0) is accepted
+    unchecked, and so are absent planet count and pinion data (placeholders of value 0).
+    """
     kind = r.string("kind", required=False, default="simple")
     if kind not in set_kinds.KINDS:
         raise r.fail("kind", f"expected one of {', '.join(set_kinds.KINDS)}; got {shown(kind)}")
@@ -641,15 +659,40 @@ def _planetary_set(r: _Reader, set_name: str) -> PlanetarySet:
     members = {role: r.string(role) for role in ("sun", "carrier", "ring")}
     planet = r.name("planet")
     given_k = _given_k(r, kind)
-    teeth_needed = given_k is None
+    teeth_keys = ("z_sun", "z_planet", "z_ring", *_teeth_keys(kind))
+    # fit-teeth: a set whose teeth are all absent or 0 is searched from the ratio targets.
+    teeth_given = not (
+        teeth_optional and given_k is None and all(r.data.get(k, 0) == 0 for k in teeth_keys)
+    )
+    teeth_needed = given_k is None and teeth_given
     z_sun = r.positive_integer("z_sun", maximum=TEETH_MAX) if teeth_needed else 0
     z_planet = r.positive_integer("z_planet", maximum=TEETH_MAX) if teeth_needed else 0
     z_ring = r.positive_integer("z_ring", maximum=TEETH_MAX) if teeth_needed else 0
-    count = r.positive_integer("planet_count", maximum=PLANET_COUNT_MAX)
+    lenient = not teeth_given
+    if lenient:
+        r.used.update(k for k in teeth_keys if k in r.data)
+    count = (
+        r.integer("planet_count", required=False)
+        if lenient and r.data.get("planet_count", 0) == 0
+        else r.positive_integer("planet_count", maximum=PLANET_COUNT_MAX)
+    )
+
+    def quantity(key: str, unit: str | None = None) -> Quantity:
+        if lenient and key not in r.data:
+            return Quantity(0.0, unit or EXPECTED_UNITS.get(key, ""), "not given (fit-teeth)")
+        return r.quantity(key, unit=unit)
+
     extra: dict[str, Any] = {}
     if "sun2" in key_of:
         extra["sun2"] = r.string(key_of["sun2"])
-        extra["z_sun2"] = r.positive_integer(key_of["z_sun2"], maximum=TEETH_MAX)
+        extra["z_sun2"] = (
+            r.positive_integer(key_of["z_sun2"], maximum=TEETH_MAX) if teeth_given else 0
+        )
+    if "ring2" in key_of:
+        extra["ring2"] = r.string(key_of["ring2"])
+        extra["z_ring2"] = (
+            r.positive_integer(key_of["z_ring2"], maximum=TEETH_MAX) if teeth_given else 0
+        )
     reflected = _reflected_inertia(r, kind, members, given_k)
     if reflected:
         # the planets' mass, inertia and orbit radius are inside the reflected values
@@ -667,11 +710,13 @@ def _planetary_set(r: _Reader, set_name: str) -> PlanetarySet:
                 )
     if "planet2" in key_of and not reflected:
         extra["planet2"] = r.name(key_of["planet2"])
-        extra["planet2_mass"] = r.quantity(key_of["planet2_mass"], unit="kg")
-        extra["planet2_inertia"] = r.quantity(key_of["planet2_inertia"], unit="kg*m^2")
-        extra["planet2_radius"] = r.quantity(key_of["planet2_radius"], unit="m")
-    if "z_planet2" in key_of and teeth_needed:
-        extra["z_planet2"] = r.positive_integer(key_of["z_planet2"], maximum=TEETH_MAX)
+        extra["planet2_mass"] = quantity(key_of["planet2_mass"], unit="kg")
+        extra["planet2_inertia"] = quantity(key_of["planet2_inertia"], unit="kg*m^2")
+        extra["planet2_radius"] = quantity(key_of["planet2_radius"], unit="m")
+    if "z_planet2" in key_of and given_k is None:
+        extra["z_planet2"] = (
+            r.positive_integer(key_of["z_planet2"], maximum=TEETH_MAX) if teeth_given else 0
+        )
     tolerance = r.number("centre_distance_tolerance", required=False)
     if tolerance is not None and not 0 <= tolerance <= CENTRE_DISTANCE_TOLERANCE_MAX:
         raise r.fail(
@@ -687,9 +732,9 @@ def _planetary_set(r: _Reader, set_name: str) -> PlanetarySet:
         lumped = Quantity(0.0, "", f"in {REFLECTED_KEY}")
         planet_mass = planet_inertia = carrier_radius = lumped
     else:
-        planet_mass = r.quantity("planet_mass")
-        planet_inertia = r.quantity("planet_inertia")
-        carrier_radius = r.quantity("carrier_radius")
+        planet_mass = quantity("planet_mass")
+        planet_inertia = quantity("planet_inertia")
+        carrier_radius = quantity("carrier_radius")
     ps = PlanetarySet(
         name=set_name,
         sun=members["sun"],
@@ -703,12 +748,13 @@ def _planetary_set(r: _Reader, set_name: str) -> PlanetarySet:
         planet_mass=planet_mass,
         planet_inertia=planet_inertia,
         carrier_radius=carrier_radius,
-        teeth_source=r.string("teeth_source"),
+        teeth_source=r.string("teeth_source", required=not lenient),
         kind=kind,
         centre_distance_tolerance=tolerance or 0.0,
         given_k=given_k,
         planet_spacing=spacing,
         reflected_inertia=reflected,
+        teeth_given=teeth_given,
         **extra,
     )
     for key in r.data:
@@ -882,9 +928,12 @@ def _check_set(r: _Reader, ps: PlanetarySet) -> None:
     pinions clear the ring and the sun, equal spacing ((z_H − z_S) / n ∈ ℤ).
     Ravigneaux: the long pinion as a simple set, the short pinion as a double pinion
     (triangle, ring clearance), equal spacing of both pairs.
+    Ravigneaux with two rings: the long pinion as a simple set with the first ring; long
+    and short pinion as a double pinion between the sun and the second ring (triangle,
+    clearances, (z_ring_short − z_sun) / n ∈ ℤ).
     A coaxiality error up to ``centre_distance_tolerance`` modules is accepted (profile shift).
     """
-    if ps.kind in ("simple", "ravigneaux"):
+    if ps.kind in ("simple", "ravigneaux", "ravigneaux_two_rings"):
         _check_coaxial(r, ps, ps.z_sun + ps.z_planet, ps.z_ring - ps.z_planet, "z_ring")
         _check_spacing(r, ps, ps.z_sun + ps.z_ring, "(z_sun + z_ring)")
         _check_neighbours(r, ps, ps.z_sun, ps.z_planet)
@@ -914,6 +963,17 @@ def _check_set(r: _Reader, ps: PlanetarySet) -> None:
         # (z_ring − z_planet)/2): the double-pinion triangle with the long pinion outside.
         _check_pinion_pair(r, ps, ps.z_sun2, ps.z_planet2, ps.z_planet, "z_planet_short")
         _check_spacing(r, ps, ps.z_ring - ps.z_sun2, "(z_ring − z_sun_short)")
+    if ps.kind == "ravigneaux_two_rings":
+        assert ps.z_planet2 is not None and ps.z_ring2 is not None
+        # The long pinion (centre (z_sun + z_planet)/2) meshes the short pinion, whose centre
+        # sits at (z_ring_short − z_planet_short)/2: the double-pinion triangle with the long
+        # pinion inside; the short pinion must clear the sun, the long one the second ring.
+        problem = pinion_pair_problem(
+            ps.z_sun, ps.z_planet, ps.z_planet2, ps.z_ring2, outer_clears_sun=True
+        )
+        if problem:
+            raise r.fail("z_planet_short", problem)
+        _check_spacing(r, ps, ps.z_ring2 - ps.z_sun, "(z_ring_short − z_sun)")
 
 
 def _check_coaxial(
@@ -966,21 +1026,34 @@ def _check_pinion_pair(
     r: _Reader, ps: PlanetarySet, z_sun: int, z_inner: int, z_outer: int, key: str
 ) -> None:
     """A pinion meshing the sun (inner) and a pinion meshing the ring (outer), meshing each
-    other: their centres and the axis must form a triangle, and neither may touch the gear
-    it does not mesh (tip circles one module outside the pitch circles)."""
+    other: :func:`pinion_pair_problem`, raised on ``key``."""
+    problem = pinion_pair_problem(
+        z_sun, z_inner, z_outer, ps.z_ring, outer_clears_sun=ps.kind == "double_pinion"
+    )
+    if problem:
+        raise r.fail(key, problem)
+
+
+def pinion_pair_problem(
+    z_sun: int, z_inner: int, z_outer: int, z_ring: int, outer_clears_sun: bool
+) -> str | None:
+    """Why two meshing pinions, the inner on the sun and the outer on the ring, cannot be
+    built (None if they can): their centres and the axis must form a triangle, and neither
+    may touch the gear it does not mesh (tip circles one module outside the pitch circles;
+    the outer pinion's sun clearance only where the sun is under it, ``outer_clears_sun``)."""
     r_inner = (z_sun + z_inner) / 2
-    r_outer = (ps.z_ring - z_outer) / 2
+    r_outer = (z_ring - z_outer) / 2
     between = (z_inner + z_outer) / 2
     if not abs(r_outer - r_inner) < between < r_outer + r_inner:
-        raise r.fail(
-            key,
+        return (
             f"the pinions cannot mesh: centre radii {r_inner:g} and {r_outer:g} and their "
-            f"distance {between:g} modules form no triangle",
+            f"distance {between:g} modules form no triangle"
         )
-    if r_inner + (z_inner + 2) / 2 >= (ps.z_ring - 2) / 2:
-        raise r.fail(key, f"the sun-side pinion ({z_inner} teeth) reaches into the ring")
-    if ps.kind == "double_pinion" and r_outer - (z_outer + 2) / 2 <= (z_sun + 2) / 2:
-        raise r.fail(key, f"the ring-side pinion ({z_outer} teeth) reaches into the sun")
+    if r_inner + (z_inner + 2) / 2 >= (z_ring - 2) / 2:
+        return f"the sun-side pinion ({z_inner} teeth) reaches into the ring"
+    if outer_clears_sun and r_outer - (z_outer + 2) / 2 <= (z_sun + 2) / 2:
+        return f"the ring-side pinion ({z_outer} teeth) reaches into the sun"
+    return None
 
 
 def planets_fit(z_sun: int, z_planet: int, count: int) -> bool:

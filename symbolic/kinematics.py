@@ -45,7 +45,8 @@ class GearboxSymbols:
     torque: dict[str, sp.Symbol]
     values: dict[sp.Symbol, sp.Rational] = field(default_factory=dict)
     #: Per set, every tooth count by key (``z_sun``, ``z_planet``, ``z_ring``, ``z_sun2``,
-    #: ``z_planet2``): the meshes of :mod:`gearsym.symbolic.set_kinds` read them from here.
+    #: ``z_ring2``, ``z_planet2``): the meshes of :mod:`gearsym.symbolic.set_kinds` read them
+    #: from here.
     teeth: dict[str, dict[str, sp.Expr]] = field(default_factory=dict)
     #: Lumped mass and orbit radius of every pinion body (m_P, r_T of 2.34 per pinion).
     pinion_mass: dict[str, sp.Expr] = field(default_factory=dict)
@@ -114,6 +115,10 @@ def gearbox_symbols(
         if ps.z_sun2 is not None:
             teeth[j]["z_sun2"] = quantity(
                 naming.second_sun_teeth(j), sp.Integer(ps.z_sun2), symbolic_teeth
+            )
+        if ps.z_ring2 is not None:
+            teeth[j]["z_ring2"] = quantity(
+                naming.second_ring_teeth(j), sp.Integer(ps.z_ring2), symbolic_teeth
             )
         if ps.z_planet2 is not None:
             teeth[j]["z_planet2"] = quantity(

@@ -24,13 +24,18 @@ from gearsym.symbolic.ratios import check_gear_table
 __all__ = ["load_description"]
 
 
-def load_description(path: str | Path | None = None) -> GearboxDescription:
+def load_description(
+    path: str | Path | None = None, *, teeth_optional: bool = False
+) -> GearboxDescription:
     """Load a description file, or the built-in default when ``path`` is None.
 
     Checks the structure (:func:`~gearsym.symbolic.description.parse_description`) and that
     every gear leaves the degrees of freedom it claims
     (:func:`~gearsym.symbolic.ratios.check_gear_table`, Table 2.1). Bad input raises
     :class:`~gearsym.symbolic.errors.GearsymError` (file, key, reason).
+
+    ``teeth_optional`` (``gearsym fit-teeth``): sets may leave out their teeth; the gear
+    table of such a description is checked by the search, for generic stationary ratios.
     """
     if path is None:
         text = default_config_text()
@@ -38,6 +43,7 @@ def load_description(path: str | Path | None = None) -> GearboxDescription:
     else:
         file = str(path)
         text = read_text(path, file)
-    description = parse_description(text, file)
-    check_gear_table(description)
+    description = parse_description(text, file, teeth_optional=teeth_optional)
+    if all(ps.teeth_given for ps in description.planetary_sets):
+        check_gear_table(description)
     return description

@@ -85,6 +85,11 @@ def second_sun_teeth(planetary_set: str) -> str:
     return f"z_S2_{planetary_set}"
 
 
+def second_ring_teeth(planetary_set: str) -> str:
+    """Teeth of the ring meshing the short pinions of a Ravigneaux set with two rings."""
+    return f"z_H2_{planetary_set}"
+
+
 def second_planet_teeth(planetary_set: str) -> str:
     """Teeth of the second pinion (outer / short) or of the ring-side step of a stepped planet."""
     return f"z_P2_{planetary_set}"
@@ -101,7 +106,8 @@ def second_planet_mass(planetary_set: str) -> str:
 
 
 def second_stationary_ratio(planetary_set: str) -> str:
-    """k2 = z_ring / z_sun2 of a Ravigneaux set (its short-pinion pair)."""
+    """k2 = z_ring / z_sun2 of a Ravigneaux set (its short-pinion pair); z_ring2 / z_sun of
+    a Ravigneaux set with two rings."""
     return f"k2_{planetary_set}"
 
 
@@ -392,6 +398,9 @@ def check_names(d: GearboxDescription) -> None:
             names.add(reflected_inertia(ps.name, role), f"reflected {role} inertia {of}", key)
         if ps.z_sun2 is not None:
             names.add(second_sun_teeth(ps.name), f"second sun teeth {of}", key)
+            names.add(second_stationary_ratio(ps.name), f"second stationary ratio {of}", key)
+        if ps.z_ring2 is not None:
+            names.add(second_ring_teeth(ps.name), f"second ring teeth {of}", key)
             names.add(second_stationary_ratio(ps.name), f"second stationary ratio {of}", key)
         if ps.z_planet2 is not None:
             names.add(second_planet_teeth(ps.name), f"second planet teeth {of}", key)

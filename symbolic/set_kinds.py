@@ -29,20 +29,23 @@ The kinds (README "Planetary set kinds"):
 ``ravigneaux``      one carrier, one ring, long pinions meshing the sun and the ring, short
                     pinions meshing the long pinions and a second sun: k = z_H/z_S (i0 = −k)
                     and k2 = z_H/z_S2 (i0 = +k2).
+``ravigneaux_two_rings``  one carrier, one sun, long pinions meshing the sun and a ring,
+                    short pinions meshing the long pinions and a second ring (the 7G-Tronic's
+                    set): k = z_H/z_S (i0 = −k) and k2 = z_H2/z_S (i0 = +k2).
 ``stepped_planet``  one planet body with two tooth counts, z_P on the sun, z_P2 on the ring:
                     k = z_H z_P/(z_S z_P2), i0 = −k.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from fractions import Fraction
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from gearsym.symbolic.description import PlanetarySet
 
-KINDS = ("simple", "double_pinion", "ravigneaux", "stepped_planet")
+KINDS = ("simple", "double_pinion", "ravigneaux", "ravigneaux_two_rings", "stepped_planet")
 
 #: The member that is fixed: a set member named ``housing`` never turns (no state, no brake).
 HOUSING = "housing"
@@ -53,7 +56,8 @@ class Mesh:
     """One tooth contact: roles of the two gears and the tooth-count keys that mesh there.
 
     Roles are attribute names of :class:`~gearsym.symbolic.description.PlanetarySet`
-    (``sun``, ``sun2``, ``ring``, ``planet``, ``planet2``); teeth keys likewise (``z_sun``, …).
+    (``sun``, ``sun2``, ``ring``, ``ring2``, ``planet``, ``planet2``); teeth keys likewise
+    (``z_sun``, …).
     ``internal`` is the ring–pinion mesh (2.23), otherwise external (2.22).
     """
 
@@ -81,6 +85,12 @@ MESHES: dict[str, tuple[Mesh, ...]] = {
         Mesh("planet2", "z_planet2", "planet", "z_planet"),
         Mesh("sun2", "z_sun2", "planet2", "z_planet2"),
     ),
+    "ravigneaux_two_rings": (
+        Mesh("sun", "z_sun", "planet", "z_planet"),
+        Mesh("ring", "z_ring", "planet", "z_planet", internal=True),
+        Mesh("planet2", "z_planet2", "planet", "z_planet"),
+        Mesh("ring2", "z_ring2", "planet2", "z_planet2", internal=True),
+    ),
     "stepped_planet": (
         Mesh("sun", "z_sun", "planet", "z_planet"),
         Mesh("ring", "z_ring", "planet", "z_planet2", internal=True),
@@ -92,6 +102,7 @@ PINIONS: dict[str, tuple[str, ...]] = {
     "simple": ("planet",),
     "double_pinion": ("planet", "planet2"),
     "ravigneaux": ("planet", "planet2"),
+    "ravigneaux_two_rings": ("planet", "planet2"),
     "stepped_planet": ("planet",),
 }
 
@@ -100,6 +111,7 @@ MEMBERS: dict[str, tuple[str, ...]] = {
     "simple": ("sun", "carrier", "ring"),
     "double_pinion": ("sun", "carrier", "ring"),
     "ravigneaux": ("sun", "sun2", "carrier", "ring"),
+    "ravigneaux_two_rings": ("sun", "carrier", "ring", "ring2"),
     "stepped_planet": ("sun", "carrier", "ring"),
 }
 
@@ -116,6 +128,15 @@ EXTRA_KEYS: dict[str, dict[str, str]] = {
     "ravigneaux": {
         "sun_short": "sun2",
         "z_sun_short": "z_sun2",
+        "planet_short": "planet2",
+        "z_planet_short": "z_planet2",
+        "planet_short_mass": "planet2_mass",
+        "planet_short_inertia": "planet2_inertia",
+        "planet_short_radius": "planet2_radius",
+    },
+    "ravigneaux_two_rings": {
+        "ring_short": "ring2",
+        "z_ring_short": "z_ring2",
         "planet_short": "planet2",
         "z_planet_short": "z_planet2",
         "planet_short_mass": "planet2_mass",
@@ -158,8 +179,15 @@ def relations(ps: PlanetarySet) -> tuple[Relation, ...]:
     stepped planet: z_S(ω_S−ω_C) = −z_P(ω_P−ω_C), z_H(ω_H−ω_C) = z_P2(ω_P−ω_C)
     →  i0 = −z_H z_P/(z_S z_P2).
     Ravigneaux: the long-pinion pair as simple, the short-pinion pair as double pinion.
+    Ravigneaux with two rings: sun–long pinion–ring as simple; sun–long–short–second ring
+    z_S(ω_S−ω_C) = −z_L(ω_L−ω_C) = z_Ps(ω_Ps−ω_C) = z_H2(ω_H2−ω_C) → i0 = +z_H2/z_S.
     A set that gives ``k`` (its signed i0) instead of teeth has k = |i0| with the kind's sign.
+    A set without teeth yet (``teeth_given`` false, read for ``fit-teeth``) has k = 0: only
+    its relation keys, members and signs are meaningful.
     """
+    if not ps.teeth_given:
+        z = {"z_sun": 1, "z_sun2": 1, "z_planet2": 1, "z_ring2": 0}
+        ps = replace(ps, z_ring=0, **{k: v for k, v in z.items() if getattr(ps, k) is not None})
     if ps.given_k is not None:
         sign = 1 if ps.given_k > 0 else -1
         return (Relation(ps.name, ps.sun, ps.ring, ps.carrier, sign, abs(ps.given_k)),)
@@ -171,6 +199,14 @@ def relations(ps: PlanetarySet) -> tuple[Relation, ...]:
         assert ps.z_planet2 is not None
         k = Fraction(ps.z_ring * ps.z_planet, ps.z_sun * ps.z_planet2)
         return (Relation(ps.name, ps.sun, ps.ring, ps.carrier, -1, k),)
+    if ps.kind == "ravigneaux_two_rings":
+        assert ps.ring2 is not None and ps.z_ring2 is not None
+        return (
+            Relation(ps.name, ps.sun, ps.ring, ps.carrier, -1, Fraction(ps.z_ring, ps.z_sun)),
+            Relation(
+                f"{ps.name}:short", ps.sun, ps.ring2, ps.carrier, 1, Fraction(ps.z_ring2, ps.z_sun)
+            ),
+        )
     assert ps.kind == "ravigneaux" and ps.sun2 is not None and ps.z_sun2 is not None
     return (
         Relation(ps.name, ps.sun, ps.ring, ps.carrier, -1, Fraction(ps.z_ring, ps.z_sun)),

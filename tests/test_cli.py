@@ -220,3 +220,110 @@ def test_fit_teeth_hints_at_planet_counts_and_lists_alternatives_once():
     line = next(x for x in result.stdout.splitlines() if x.strip().startswith("set 1"))
     alternatives = line.split("same k: ")[1].rstrip(")").split(", ")
     assert "46/26/98×4" in alternatives and len(alternatives) == len(set(alternatives))
+
+
+def _set_keys(text: str, sets: dict[str, dict[str, int]]) -> str:
+    """Write integer keys into the named [[planetary_set]] blocks of a description."""
+    import re
+
+    blocks = text.split("[[planetary_set]]")
+    for i, block in enumerate(blocks[1:], start=1):
+        name = re.search(r'^name = "(\w+)"', block, flags=re.M).group(1)
+        for key, value in sets.get(name, {}).items():
+            block = re.sub(rf"^{key} = .*$", f"{key} = {value}", block, flags=re.M)
+        blocks[i] = block
+    return "[[planetary_set]]".join(blocks)
+
+
+def _strip_teeth(text: str, zeros: bool) -> str:
+    """A description as written before the teeth are known: every tooth count removed (or 0
+    as a placeholder), with planet counts and pinion data left out as well."""
+    import re
+
+    keys = r"z_\w+|planet_count|planet_mass|planet_inertia|carrier_radius|teeth_source"
+    keys += r"|planet_(?:short|outer)_(?:mass|inertia|radius)|centre_distance_tolerance"
+    if zeros:
+        return re.sub(r"^(z_\w+) = \d+.*$", r"\1 = 0", text, flags=re.M)
+    return re.sub(rf"^(?:{keys}) = .*$\n", "", text, flags=re.M)
+
+
+@pytest.mark.parametrize("zeros", [False, True])
+def test_fit_teeth_without_teeth_in_the_file(tmp_path, zeros):
+    """The Simpson 3-speed with no teeth (or 0 placeholders): the search works from the ratio
+    targets alone. Hand: 2nd (C1 + B1, sun held, ring in, carrier out) is 1 + 1/k_front =
+    1.4545 (4 decimals), so k_front = z_ring/z_sun = 11/5; 1st (C1 + B2) then needs
+    k_rear = 2: with the rear carrier held ω_sun = −k_r ω_out, and the front set
+    ω_sun + k_f ω_in = (1 + k_f) ω_out gives ω_in/ω_out = (1 + k_f + k_r)/k_f = 26/11."""
+    text = _strip_teeth((DATA / "simpson_3speed.toml").read_text(), zeros)
+    assert "z_sun = 30" not in text
+    path = tmp_path / "no_teeth.toml"
+    path.write_text(text)
+    # The description is unusable without teeth everywhere else (one line, exit 2) ...
+    assert gearsym("ratios", str(path)).returncode == 2
+    # ... but fit-teeth searches it: 3, 4 or 5 planets where the file gives no count.
+    result = gearsym("fit-teeth", str(path), "--json", "--top", "3")
+    assert result.returncode == 0, result.stderr
+    best = json.loads(result.stdout)[0]
+    front, rear = best["sets"]["front"], best["sets"]["rear"]
+    assert front["z_ring"] * 5 == front["z_sun"] * 11
+    assert rear["z_ring"] == 2 * rear["z_sun"]
+    for teeth in (front, rear):
+        assert teeth["z_ring"] == teeth["z_sun"] + 2 * teeth["z_planet"]
+        assert (teeth["z_sun"] + teeth["z_ring"]) % teeth["planet_count"] == 0
+        assert teeth["planet_count"] in (3, 4, 5)
+    assert round(best["ratios"]["1"], 4) == 2.3636 and round(best["ratios"]["2"], 4) == 1.4545
+
+
+def test_fit_teeth_without_teeth_finds_a_ravigneaux_set(tmp_path):
+    """The 6HP26 example with every tooth count removed: the Ravigneaux set's two stationary
+    ratios come back as the published 85/38 and 85/31 (tests/test_examples.py shows by a
+    brute force independent of gearsym that these are the only ones in a wide range), with
+    teeth that are buildable without profile shift (the file re-parses with them)."""
+    example = Path(__file__).parents[1] / "gearsym/data/examples/lepelletier_6speed.toml"
+    original = example.read_text()
+    path = tmp_path / "lep.toml"
+    path.write_text(_strip_teeth(original, zeros=True).replace("centre_distance_tolerance", "#"))
+    result = gearsym("fit-teeth", str(path), "--json")
+    assert result.returncode == 0, result.stderr
+    best = json.loads(result.stdout)[0]
+    rav = best["sets"]["rav"]
+    assert rav["z_ring"] * 38 == rav["z_sun"] * 85
+    assert rav["z_ring"] * 31 == rav["z_sun_short"] * 85
+    simple = best["sets"]["1"]
+    assert simple["z_ring"] * 37 == simple["z_sun"] * 71
+    # the proposed teeth pass the description's own buildability checks
+    refit = _set_keys(original.replace("centre_distance_tolerance = 0.5", ""), best["sets"])
+    (tmp_path / "refit.toml").write_text(refit)
+    assert gearsym("ratios", str(tmp_path / "refit.toml")).returncode == 0
+
+
+def test_fit_teeth_empty_search_space_is_one_line(tmp_path):
+    """No buildable set in the ranges: one line naming the file and the set, exit 2."""
+    path = tmp_path / "no_teeth.toml"
+    path.write_text(_strip_teeth((DATA / "simpson_3speed.toml").read_text(), zeros=False))
+    result = gearsym(
+        "fit-teeth", str(path), "--sun", "17:17", "--planet", "13:13", "--ring-max", "40"
+    )
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert str(path) in lines[0] and 'planetary_set[name="front"]' in lines[0]
+    assert "search space is empty" in lines[0]
+
+
+@pytest.mark.parametrize("kind", ["double_pinion", "ravigneaux", "ravigneaux_two_rings"])
+def test_fit_teeth_proposals_pass_the_description_checks(tmp_path, kind):
+    """A one-set description of each compound kind (docs/set_kinds/) with its teeth zeroed:
+    the best proposal, written back into the file, passes the parser's own buildability
+    checks (triangles, clearances, spacing; no profile shift) and `gearsym ratios`."""
+    sketch = Path(__file__).parents[1] / "docs" / "set_kinds" / f"{kind}.toml"
+    original = sketch.read_text().replace("centre_distance_tolerance = 0.5", "")
+    path = tmp_path / "zero.toml"
+    path.write_text(_strip_teeth(original, zeros=True))
+    result = gearsym("fit-teeth", str(path), "--json", "--top", "1")
+    assert result.returncode == 0, result.stderr
+    (best,) = json.loads(result.stdout)
+    refit = tmp_path / "refit.toml"
+    refit.write_text(_set_keys(original, best["sets"]))
+    checked = gearsym("ratios", str(refit))
+    assert checked.returncode == 0, checked.stdout + checked.stderr

@@ -249,3 +249,41 @@ def test_json_holds_what_the_speed_plan_shows(thesis):
     gears = {g["gear"]: g for g in data["gears"]}
     assert round(1 / gears["3"]["speeds"]["2"], 3) == 2.252
     assert [n["position"] for n in data["levers"][0]["nodes"]] == [0.0, 98.0, 144.0]
+
+
+@pytest.mark.parametrize(
+    "kind", ["simple", "double_pinion", "ravigneaux", "ravigneaux_two_rings", "stepped_planet"]
+)
+def test_stick_diagram_of_each_set_kind(kind):
+    """The README sketches (docs/set_kinds/): one box per pinion body (a stepped planet's two
+    steps are two boxes of one body), and every member of the kind, the second sun or second
+    ring included, has one stem ending on its own shaft line at a junction dot."""
+    sketch = Path(__file__).parents[1] / "docs" / "set_kinds" / f"{kind}.toml"
+    d = load_description(sketch)
+    (ps,) = d.planetary_sets
+    stick = stick_diagram(d)
+    boxes = {"simple": 1, "double_pinion": 2, "ravigneaux": 2, "ravigneaux_two_rings": 2}
+    assert len(stick.planets) == boxes.get(kind, 2)
+    owners = {"sun": "S", "carrier": "C", "ring": "R", "sun2": "S2", "ring2": "R2"}
+    for role in owners:
+        shaft = getattr(ps, role)
+        if shaft is None:
+            continue
+        ends = [seg.end for seg in stick.segments if seg.owner == f"{owners[role]}{ps.name}"]
+        stem = [e for e in ends if e[1] == stick.shaft_levels[shaft]]
+        assert len(stem) == 1 and stem[0] in set(stick.junctions), (kind, role)
+    assert len({stick.shaft_levels[m] for m in ps.members}) == len(ps.members)
+
+
+def test_lever_of_a_ravigneaux_set_with_two_rings():
+    """docs/set_kinds/ravigneaux_two_rings.toml (z_S 30, z_H 66, z_H2 78), by hand: sun 0,
+    carrier z_H = 66, ring z_H + z_S = 96; the second ring at 66·(k2 − 1)/k2 with
+    k2 = 78/30, i.e. 528/13, between sun and carrier. Check by speeds linear along the lever:
+    carrier held (0 at 66), sun 1 at 0 → ω_H2 = (66 − 528/13)/66 = 5/13, so
+    ω_S/ω_H2 = 13/5 = +78/30 (the short pair's positive stationary ratio)."""
+    d = load_description(Path(__file__).parents[1] / "docs/set_kinds/ravigneaux_two_rings.toml")
+    positions = set_positions(d.planetary_sets[0])
+    assert positions == {"S": 0, "T": 66, "H": 96, "H2": Fraction(528, 13)}
+    assert (66 - positions["H2"]) / 66 == Fraction(5, 13)
+    plan = speed_plan(d, "1")
+    assert plan.ratio == pytest.approx(-66 / 30)

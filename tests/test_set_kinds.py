@@ -1,4 +1,5 @@
-"""Planetary set kinds (simple, double pinion, Ravigneaux, stepped planet) against hand work.
+"""Planetary set kinds (simple, double pinion, Ravigneaux with two suns or two rings, stepped
+planet) against hand work.
 
 Expected values are derived by hand in the comments (Willis: teeth pass every mesh at the same
 rate in the carrier frame), never read off the code under test; the kinetic energy is summed
@@ -43,6 +44,17 @@ TEETH = {
         f"planet_short_mass = {q(0.15, 'kg')}\nplanet_short_inertia = {q(2e-5, 'kg*m^2')}\n"
         f"planet_short_radius = {q(0.045, 'm')}\n"
     ),
+    # the 7G-Tronic's kind: long pinion on sun and ring H, short pinion on long pinion and
+    # ring H2. Buildable by hand: coaxial 30 + 2·18 = 66; long-pinion centre 24, short-pinion
+    # centre (78 − 15)/2 = 31.5, distance (18 + 15)/2 = 16.5: |31.5 − 24| < 16.5 < 55.5; the
+    # long pinion's tip 24 + 10 < (78 − 2)/2, the short one 31.5 − 8.5 > (30 + 2)/2;
+    # (30 + 66)/3 and (78 − 30)/3 are integers.
+    "ravigneaux_two_rings": (
+        "z_sun = 30\nz_planet = 18\nz_ring = 66\n"
+        'ring_short = "H2"\nz_ring_short = 78\nplanet_short = "Ps"\nz_planet_short = 15\n'
+        f"planet_short_mass = {q(0.15, 'kg')}\nplanet_short_inertia = {q(2e-5, 'kg*m^2')}\n"
+        f"planet_short_radius = {q(0.063, 'm')}\n"
+    ),
 }
 
 # Hand: carrier held, z_S ω_S = −z_P ω_P (external), z_H ω_H = z_P' ω_P (internal), so
@@ -56,13 +68,15 @@ STATIONARY = {
     "double_pinion": Fraction(84, 30),
     "stepped_planet": Fraction(-72 * 24, 30 * 18),
     "ravigneaux": Fraction(-85, 38),
+    # two rings: sun–long–ring H as simple, −66/30 (the short pair is tested below)
+    "ravigneaux_two_rings": Fraction(-66, 30),
 }
 
 
 def description_text(kind: str, input_shaft: str = "S", ratio: Fraction | None = None) -> str:
     ratio = STATIONARY[kind] if ratio is None else ratio
-    shafts = ["S", "T", "H"] + (["S2"] if kind == "ravigneaux" else [])
-    inertias = {"S": 0.01, "T": 0.03, "H": 0.05, "S2": 0.02}
+    shafts = ["S", "T", "H"] + {"ravigneaux": ["S2"], "ravigneaux_two_rings": ["H2"]}.get(kind, [])
+    inertias = {"S": 0.01, "T": 0.03, "H": 0.05, "S2": 0.02, "H2": 0.04}
     text = f'''
 [gearbox]
 name = "one_{kind}"
@@ -141,6 +155,24 @@ def test_ravigneaux_degrees_of_freedom() -> None:
     assert d.body_names == ("S", "T", "H", "S2", "P", "Ps")
 
 
+def test_two_ring_ravigneaux_short_pair_is_a_positive_ratio() -> None:
+    """Output on the ring of the short pinions, carrier held: z_S ω_S = −z_L ω_L (external),
+    z_L ω_L = −z_Ps ω_Ps (external), z_Ps ω_Ps = z_H2 ω_H2 (internal), so
+    ω_S/ω_H2 = +z_H2/z_S = +78/30, both from the gear table and from the mesh rows."""
+    text = description_text("ravigneaux_two_rings", "S", Fraction(78, 30))
+    d = parse_description(text.replace('output_shaft = "H"', 'output_shaft = "H2"'), "r2.toml")
+    assert gear_ratio(d, d.gear("1")).ratio == sp.Rational(78, 30)
+    g = willis_constraints(d, gearbox_symbols(d))
+    index = {b: i for i, b in enumerate(d.body_names)}
+    held = sp.zeros(1, len(index))
+    held[0, index["T"]] = 1
+    (motion,) = exact_nullspace(g.col_join(held))
+    assert motion[index["S"]] / motion[index["H2"]] == sp.Rational(78, 30)
+    # 4 shafts + 2 pinion bodies − 4 meshes = 2 degrees of freedom
+    assert d.degrees_of_freedom == 2
+    assert d.body_names == ("S", "T", "H", "H2", "P", "Ps")
+
+
 def hand_speeds(kind: str, w_c: float, w_s: float) -> dict[str, float]:
     """Body speeds from carrier and sun speed, mesh by mesh (relative to the carrier)."""
     rel_s = w_s - w_c
@@ -160,6 +192,17 @@ def hand_speeds(kind: str, w_c: float, w_s: float) -> dict[str, float]:
     if kind == "stepped_planet":  # sun on the 24-tooth step, ring on the 18-tooth step
         rel_p = -30 / 24 * rel_s
         return {"S": w_s, "T": w_c, "P": w_c + rel_p, "H": w_c + 18 / 72 * rel_p}
+    if kind == "ravigneaux_two_rings":  # sun–long ext, ring–long int, long–short ext,
+        rel_l = -30 / 18 * rel_s  # short–second ring internal
+        rel_sh = -18 / 15 * rel_l
+        return {
+            "S": w_s,
+            "T": w_c,
+            "P": w_c + rel_l,
+            "H": w_c + 18 / 66 * rel_l,
+            "Ps": w_c + rel_sh,
+            "H2": w_c + 15 / 78 * rel_sh,
+        }
     # Ravigneaux: sun–long external, ring–long internal, long–short external, short–sun2
     rel_l = -38 / 23 * rel_s
     rel_sh = -23 / 20 * rel_l
@@ -182,8 +225,9 @@ def test_kinetic_energy_of_one_set(kind: str) -> None:
     rng = np.random.default_rng(11)
     w_c, w_s = rng.normal(size=2) * 100
     w = hand_speeds(kind, w_c, w_s)
-    shafts = {"S": 0.01, "T": 0.03, "H": 0.05, "S2": 0.02}
-    pinions = {"P": (4e-5, 0.3, 0.05), "Po": (3e-5, 0.2, 0.06), "Ps": (2e-5, 0.15, 0.045)}
+    shafts = {"S": 0.01, "T": 0.03, "H": 0.05, "S2": 0.02, "H2": 0.04}
+    radius_short = 0.063 if kind == "ravigneaux_two_rings" else 0.045
+    pinions = {"P": (4e-5, 0.3, 0.05), "Po": (3e-5, 0.2, 0.06), "Ps": (2e-5, 0.15, radius_short)}
     n = 3
     energy = sum(0.5 * shafts[b] * w[b] ** 2 for b in shafts if b in w)
     for body, (inertia, mass, radius) in pinions.items():
@@ -244,6 +288,23 @@ def run_ratios(tmp_path: Path, text: str, capsys: pytest.CaptureFixture[str]) ->
         ("ravigneaux", 'sun_short = "S2"', 'sun_short = "S"', "", "different shafts"),
         ("ravigneaux", "z_planet_short = 20", "z_planet_short = 2", "z_planet_short", "triangle"),
         ("double_pinion", "z_planet_outer = 19", "z_planet_outer = 40", "z_planet_outer", "sun"),
+        # 24 + 10 ≥ (70 − 2)/2: the long pinion would touch the second ring
+        (
+            "ravigneaux_two_rings",
+            "z_ring_short = 78",
+            "z_ring_short = 70",
+            "z_planet_short",
+            "ring",
+        ),
+        # (80 − 30)/3 is no integer
+        (
+            "ravigneaux_two_rings",
+            "z_ring_short = 78",
+            "z_ring_short = 80",
+            "planet_count",
+            "spaced",
+        ),
+        ("ravigneaux_two_rings", 'ring_short = "H2"', 'ring_short = "H"', "", "different shafts"),
         ("double_pinion", "planet_count = 3", "planet_count = 4", "planet_count", "spaced"),
         ("stepped_planet", "z_planet_ring = 18", "z_planet_ring = 17", "z_planet_ring", "coaxial"),
         ("stepped_planet", "planet_count = 3", "planet_count = 5", "planet_count", "gcd"),

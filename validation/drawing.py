@@ -135,7 +135,8 @@ def set_positions(ps: PlanetarySet) -> dict[str, Fraction]:
 
     Any kind from its shaft relations ω_S − i0 ω_H − (1 − i0) ω_C = 0: sun 0, carrier k,
     ring k + 1 for i0 = −k and k − 1 for i0 = +k (the ring of a double pinion sits between
-    sun and carrier); a Ravigneaux set's second sun lands at k + k2.
+    sun and carrier); a Ravigneaux set's second sun lands at k + k2, the second ring of a
+    Ravigneaux set with two rings at k (k2 − 1)/k2.
     Scaled by z_S so that a simple set keeps its tooth-unit positions.
     """
     rels = relations(ps)
@@ -145,8 +146,14 @@ def set_positions(ps: PlanetarySet) -> dict[str, Fraction]:
     ring = (first.k - first.sign) * scale
     positions = {first.sun: Fraction(0), first.carrier: carrier, first.ring: ring}
     for rel in rels[1:]:
-        # Same carrier and ring: the second sun extrapolates the lever through them.
-        positions[rel.sun] = carrier + rel.k * (ring - carrier) / rel.sign
+        if rel.ring in positions:
+            # Same carrier and ring (Ravigneaux): the second sun extrapolates the lever.
+            positions[rel.sun] = carrier + rel.k * (ring - carrier) / rel.sign
+        else:
+            # Same sun and carrier (Ravigneaux with two rings): in the pair's own units the
+            # sun is at 0, the carrier at k2 and the ring at k2 − sign.
+            sun = positions[rel.sun]
+            positions[rel.ring] = sun + (positions[rel.carrier] - sun) * (rel.k - rel.sign) / rel.k
     return positions
 
 
@@ -160,6 +167,8 @@ def _members(ps: PlanetarySet) -> dict[str, str]:
     members = {getattr(ps, role): member_name(role, ps.name) for role in ROLES}
     if ps.sun2 is not None:
         members[ps.sun2] = member_name("sun", f"{ps.name}_short")
+    if ps.ring2 is not None:
+        members[ps.ring2] = member_name("ring", f"{ps.name}_short")
     return members
 
 
@@ -478,24 +487,13 @@ def stick_diagram(d: GearboxDescription) -> StickDiagram:
     x0 = 1.5
     for j, ps in enumerate(d.planetary_sets):
         xc = x0 + SET_PITCH * j
-        # ring: bar at the ring radius, stem on the left
-        segments.append(Segment(f"R{ps.name}", (xc - 0.75, RING_Y), (xc + 0.6, RING_Y)))
-        segments.append(Segment(f"R{ps.name}", (xc - 0.75, RING_Y), (xc - 0.75, levels[ps.ring])))
-        # sun: bar at the sun radius, stem in the middle
-        segments.append(Segment(f"S{ps.name}", (xc - 0.6, SUN_Y), (xc + 0.6, SUN_Y)))
-        segments.append(Segment(f"S{ps.name}", (xc, SUN_Y), (xc, levels[ps.sun])))
-        # planet between sun and ring; carrier from its centre, stem on the right
-        planets.append((ps.name, xc - 0.3, PLANET_Y0, xc + 0.3, PLANET_Y1))
-        mid = (PLANET_Y0 + PLANET_Y1) / 2
-        segments.append(Segment(f"C{ps.name}", (xc + 0.3, mid), (xc + 0.75, mid)))
-        segments.append(Segment(f"C{ps.name}", (xc + 0.75, mid), (xc + 0.75, levels[ps.carrier])))
-        for shaft, stem in ((ps.ring, xc - 0.75), (ps.sun, xc), (ps.carrier, xc + 0.75)):
+        set_segments, set_planets, stems, set_labels = _stick_set(ps, xc, levels)
+        segments += set_segments
+        planets += set_planets
+        labels += set_labels
+        for shaft, stem in stems:
             attach[shaft].append(stem)
             junctions.append((stem, levels[shaft]))
-        labels.append(Label(f"set {ps.name}", xc, RING_Y + 0.45))
-        labels.append(Label(f"z_R={ps.z_ring}", xc + 0.65, RING_Y + 0.12, "left"))
-        labels.append(Label(f"z_P={ps.z_planet}", xc + 0.35, PLANET_Y1 - 0.1, "left"))
-        labels.append(Label(f"z_S={ps.z_sun}", xc + 0.65, SUN_Y + 0.12, "left"))
     xe = x0 + SET_PITCH * len(d.planetary_sets)
     plates: list[Segment] = []
     grounds = []
@@ -548,6 +546,93 @@ def stick_diagram(d: GearboxDescription) -> StickDiagram:
         input_arrow=(-1.6, 0.0, levels[d.input_shaft]),
         output_arrow=(right, right + 1.6, levels[d.output_shaft]),
     )
+
+
+def _stick_set(
+    ps: PlanetarySet, xc: float, levels: dict[str, float]
+) -> tuple[
+    list[Segment],
+    list[tuple[str, float, float, float, float]],
+    list[tuple[str, float]],
+    list[Label],
+]:
+    """The half-section symbol of one set of any kind, centred at ``xc``: gears as bars
+    (suns below, rings above), pinion bodies as boxes, the carrier joining the pinions,
+    and a stem from every member down to its shaft line (``levels``).
+
+    simple: sun – planet – ring. double pinion: inner pinion on the sun, outer pinion on
+    the ring, stacked radially. stepped planet: one body of two steps, the sun-side step
+    left, the ring-side step right. Ravigneaux: long pinion on the sun and the ring, short
+    pinion under its right half on the second sun. Ravigneaux with two rings: long pinion on
+    the sun and the ring, short pinion over its right half in the second ring.
+    Returns segments, pinion boxes, (shaft, stem x) and labels.
+    """
+    segments: list[Segment] = []
+    boxes: list[tuple[str, float, float, float, float]] = []
+    stems: list[tuple[str, float]] = []
+    labels = [Label(f"set {ps.name}", xc, RING_Y + 0.55)]
+    n = ps.name
+
+    def bar(owner: str, shaft: str, y: float, x0: float, x1: float, stem: float) -> None:
+        segments.append(Segment(owner, (x0, y), (x1, y)))
+        segments.append(Segment(owner, (stem, y), (stem, levels[shaft])))
+        stems.append((shaft, stem))
+
+    def pinion(x0: float, y0: float, x1: float, y1: float, text: str) -> None:
+        boxes.append((n, x0, y0, x1, y1))
+        labels.append(Label(text, x1 + 0.05, y1 - 0.12, "left"))
+        # carrier arm from the box's right edge to the carrier stem
+        segments.append(Segment(f"C{n}", (x1, (y0 + y1) / 2), (xc + 0.75, (y0 + y1) / 2)))
+
+    kind = ps.kind
+    if kind == "double_pinion":
+        bar(f"S{n}", ps.sun, SUN_Y, xc - 0.6, xc + 0.6, xc)
+        bar(f"R{n}", ps.ring, RING_Y, xc - 0.75, xc + 0.6, xc - 0.75)
+        pinion(xc - 0.3, PLANET_Y0, xc + 0.3, 1.9, f"z_P={ps.z_planet}")
+        pinion(xc - 0.3, 2.1, xc + 0.3, PLANET_Y1, f"z_Po={ps.z_planet2}")
+    elif kind == "stepped_planet":
+        bar(f"S{n}", ps.sun, SUN_Y, xc - 0.6, xc, xc - 0.3)
+        bar(f"R{n}", ps.ring, RING_Y, xc - 0.75, xc + 0.6, xc - 0.75)
+        boxes.append((n, xc - 0.3, PLANET_Y0, xc, 2.2))  # the sun-side step
+        labels.append(Label(f"z_P={ps.z_planet}", xc - 0.25, PLANET_Y0 - 0.15, "left"))
+        pinion(xc, 1.8, xc + 0.3, PLANET_Y1, f"z_P2={ps.z_planet2}")
+    elif kind == "ravigneaux":
+        bar(f"S{n}", ps.sun, 1.35, xc - 0.6, xc - 0.05, xc - 0.3)
+        bar(f"S2{n}", ps.sun2 or "", 0.75, xc + 0.05, xc + 0.6, xc + 0.3)
+        bar(f"R{n}", ps.ring, RING_Y, xc - 0.75, xc + 0.6, xc - 0.75)
+        pinion(xc - 0.5, 1.65, xc + 0.5, PLANET_Y1, f"z_L={ps.z_planet}")
+        pinion(xc + 0.1, 1.05, xc + 0.5, 1.55, f"z_Ps={ps.z_planet2}")
+        labels.append(Label(f"z_S2={ps.z_sun2}", xc + 0.35, 0.55, "left"))
+        labels.append(Label(f"z_S={ps.z_sun}", xc - 0.62, 1.2, "left"))
+        labels.append(Label(f"z_R={ps.z_ring}", xc + 0.65, RING_Y + 0.12, "left"))
+    elif kind == "ravigneaux_two_rings":
+        bar(f"S{n}", ps.sun, SUN_Y, xc - 0.6, xc + 0.6, xc)
+        bar(f"R{n}", ps.ring, 2.45, xc - 0.75, xc - 0.05, xc - 0.75)
+        bar(f"R2{n}", ps.ring2 or "", 3.25, xc + 0.05, xc + 1.0, xc + 1.0)
+        pinion(xc - 0.5, PLANET_Y0, xc + 0.5, 2.15, f"z_L={ps.z_planet}")
+        pinion(xc + 0.1, 2.25, xc + 0.5, 2.95, f"z_Ps={ps.z_planet2}")
+        labels.append(Label(f"z_R2={ps.z_ring2}", xc + 1.05, 3.35, "left"))
+        labels.append(Label(f"z_S={ps.z_sun}", xc + 0.65, SUN_Y + 0.12, "left"))
+        labels.append(Label(f"z_R={ps.z_ring}", xc - 0.7, 2.6, "left"))
+    else:  # simple: as drawn before the compound kinds (docs/stick.png)
+        labels[0] = Label(f"set {ps.name}", xc, RING_Y + 0.45)
+        bar(f"R{n}", ps.ring, RING_Y, xc - 0.75, xc + 0.6, xc - 0.75)
+        bar(f"S{n}", ps.sun, SUN_Y, xc - 0.6, xc + 0.6, xc)
+        boxes.append((n, xc - 0.3, PLANET_Y0, xc + 0.3, PLANET_Y1))
+        mid = (PLANET_Y0 + PLANET_Y1) / 2
+        segments.append(Segment(f"C{n}", (xc + 0.3, mid), (xc + 0.75, mid)))
+    # the carrier stem, from the highest arm down to its shaft line
+    arms = [seg.start[1] for seg in segments if seg.owner == f"C{n}"]
+    segments.append(Segment(f"C{n}", (xc + 0.75, max(arms)), (xc + 0.75, levels[ps.carrier])))
+    stems.append((ps.carrier, xc + 0.75))
+    if kind == "simple":
+        labels.append(Label(f"z_R={ps.z_ring}", xc + 0.65, RING_Y + 0.12, "left"))
+        labels.append(Label(f"z_P={ps.z_planet}", xc + 0.35, PLANET_Y1 - 0.1, "left"))
+    if kind not in ("ravigneaux", "ravigneaux_two_rings"):
+        if kind != "simple":
+            labels.append(Label(f"z_R={ps.z_ring}", xc + 0.65, RING_Y + 0.12, "left"))
+        labels.append(Label(f"z_S={ps.z_sun}", xc + 0.65, SUN_Y + 0.12, "left"))
+    return segments, boxes, stems, labels
 
 
 # ----------------------------------------------------------------------------- drivetrain
