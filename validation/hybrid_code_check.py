@@ -21,14 +21,14 @@ from typing import Any
 
 import numpy as np
 from gearsym.symbolic.codegen.hybrid import hybrid_table
-from gearsym.symbolic.hybrid import BREAK_AWAY, ENGAGEMENT, LOCK_UP, OPEN, OPENING
+from gearsym.symbolic.hybrid import ENGAGEMENT, OPEN, OPENING, STATE_GUARDS
 from gearsym.symbolic.hybrid_sensitivity import HybridSensitivity
 from scipy.optimize import brentq
 
 __all__ = ["EmittedRun", "HybridFunctions", "run_emitted"]
 
 #: Guard kinds that depend on the state: located inside a step.
-CONTINUOUS = (BREAK_AWAY, LOCK_UP)
+CONTINUOUS = STATE_GUARDS
 
 
 class HybridFunctions:
