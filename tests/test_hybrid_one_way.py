@@ -336,3 +336,48 @@ def test_energy_audit_closes(case, request):
     assert audit.damper_dissipation > 0
     if case != "coast":
         assert audit.friction_dissipation > 0
+
+
+# ------------------------------------------------------------------ sensitivities across it
+
+
+@pytest.mark.parametrize("path", [UPSHIFT, DOWNSHIFT], ids=["1-2", "2-1"])
+def test_sensitivities_across_release_and_lock_up(box, path):
+    """∂x/∂p of the hybrid simulation ((3.7) in each mode, the jump with ∂τ/∂p at each switch)
+    across F1's release (1-2) and lock-up (2-1) against central finite differences of the same
+    simulation (re-integration only; step and tolerance as tests/test_hybrid_sensitivity.py:
+    h = 3e-4 p0, rtol 1e-12, 1e-4 of each sensitivity's peak, samples within 1 ms of a state
+    event left out, the event times' own ∂τ/∂p compared instead). The initial state is the
+    nominal one in every run (S(0) = 0, as the thesis' (3.7) from t = 0)."""
+    names = ("m_veh", "mu_1", "k_ss")
+    keys = ("omega_in", "omega_out", "phi", "omega_C")
+    simulator = HybridSimulator(box, load_scenario(box, path))
+    values = simulator.values()
+    x0 = simulator.initial_state(simulator.parameter_vector(values))
+    analytic = simulator.run(parameters=names, x0=x0, rtol=1e-12, atol=1e-12)
+    mask = np.ones(len(analytic.t), dtype=bool)
+    for event in analytic.events:
+        if event.kind in ("break-away", LOCK_UP, RELEASE):
+            mask &= np.abs(analytic.t - event.t) > 1e-3
+    assert {RELEASE, LOCK_UP} & {e.kind for e in analytic.events if e.element == "F1"}
+    for j, name in enumerate(names):
+        h = 3e-4 * values[name]
+        plus = simulator.run({name: values[name] + h}, x0=x0, rtol=1e-12, atol=1e-12)
+        minus = simulator.run({name: values[name] - h}, x0=x0, rtol=1e-12, atol=1e-12)
+        assert [e.target for e in plus.events] == [e.target for e in analytic.events]
+        assert [e.target for e in minus.events] == [e.target for e in analytic.events]
+        for key in keys:
+            derived = analytic.sensitivities[key][:, j]
+            quotient = (plus.signals[key] - minus.signals[key]) / (2 * h)
+            scale = np.max(np.abs(derived))
+            error = np.max(np.abs(quotient - derived)[mask])
+            assert error < 1e-4 * scale, (name, key, error / scale)
+        times = np.array(
+            [(a.t - b.t) / (2 * h) for a, b in zip(plus.events, minus.events, strict=True)]
+        )
+        tau = analytic.event_time_sensitivities[:, j]
+        assert np.allclose(times, tau, rtol=1e-4, atol=1e-4 * np.max(np.abs(tau)) + 1e-12), (
+            name,
+            times,
+            tau,
+        )
