@@ -381,3 +381,39 @@ def test_sensitivities_across_release_and_lock_up(box, path):
             times,
             tau,
         )
+
+
+# ------------------------------------------------------------------ commands
+
+
+def test_fim_runs_the_freewheel_shift(capsys):
+    """``gearsym fim`` (the hybrid model by default) on the 1-2 with F1: exit 0 and its four
+    windows; in gear 1 B1 is open (F_N = 0), so μ of B1 has no influence there: its row of
+    the Fisher information is exactly zero (physics, not a tolerance), while it has information
+    in the torque phase, where B1 slides."""
+    import json
+
+    assert main(["fim", str(BOX), "--scenario", str(UPSHIFT), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    windows = {w["name"]: w for w in data["windows"]}
+    assert list(windows) == ["gear 1", "torque phase", "speed phase", "gear 2"]
+    k = data["parameters"].index("mu_1")
+    assert all(v == 0 for v in windows["gear 1"]["fim"][k])
+    assert windows["torque phase"]["fim"][k][k] > 0
+
+
+def test_observability_per_mode_of_the_freewheel_shift(capsys):
+    """``observability --per-mode`` ranks the seven modes (module test above)."""
+    assert main(["observability", str(BOX), "--shift", "1-2", "--per-mode"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("\n== hybrid_1_2__") == 7 and "F1 overrun" in out
+
+
+def test_generate_refuses_hybrid_code_of_a_freewheel_shift(tmp_path, capsys):
+    """The emitted hybrid sensitivities have no input slot for a freewheel: naming such a
+    shift is refused in one line (exit 2) before anything is written."""
+    out = tmp_path / "gen"
+    assert main(["generate", str(BOX), "--hybrid-shifts", "1-2", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--hybrid-shifts" in err and "one-way clutch F1" in err
+    assert not out.exists()
