@@ -489,9 +489,7 @@ def _one_way_guards(
         return []
     stay = to(mode, element, mode.status[element])
     condition = locks * modes[stick].reaction[element].xreplace(mapped(mode, stick))
-    return [
-        Guard(mode.name, element, LOCK_UP, mode.slip[element], locks, stick, condition, stay)
-    ]
+    return [Guard(mode.name, element, LOCK_UP, mode.slip[element], locks, stick, condition, stay)]
 
 
 def drivetrain_mass(d: GearboxDescription, dyn: GearboxDynamics) -> sp.Matrix:

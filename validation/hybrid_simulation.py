@@ -174,9 +174,7 @@ class CompiledMode:
 
         self.rhs_sx = ca.vertcat(*[to_casadi(e, mapping) for e in model.rhs])
         self.f = ca.Function("f", [self.x, self.u, self.p], [self.rhs_sx])
-        self.continuous = [
-            g for g in hybrid.guards_from(mode.name) if g.kind in STATE_GUARDS
-        ]
+        self.continuous = [g for g in hybrid.guards_from(mode.name) if g.kind in STATE_GUARDS]
         self.guard_sx = [to_casadi(g.expression, mapping) for g in self.continuous]
         self.guard = [ca.Function("g", [self.x, self.u, self.p], [g]) for g in self.guard_sx]
         self._augmented: dict[tuple[int, ...], Any] = {}
