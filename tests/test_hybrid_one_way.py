@@ -218,7 +218,7 @@ def _differences(hybrid, reference, window, keys=SPEEDS):
 def reference_upshift(box):
     from gearsym.validation.simulate import simulate
 
-    return simulate(box, load_scenario(box, UPSHIFT), check_models=False, phases=False)
+    return simulate(box, load_scenario(box, UPSHIFT), check_models=False)
 
 
 def test_upshift_follows_the_reference(upshift, reference_upshift):
@@ -252,6 +252,21 @@ def test_upshift_follows_the_reference(upshift, reference_upshift):
     assert abs(free[0] - release.t) < 2e-3
     synchronous = t[(np.abs(reference.signals["slip_B1"]) < 1e-2) & (t > release.t)]
     assert abs(synchronous[0] - lock.t) < 3e-3
+
+
+def test_reference_phases_of_the_freewheel_upshift(upshift, reference_upshift):
+    """The reference simulation's phase detection (thesis 3.1) runs on a shift whose
+    off-going element is a freewheel (it never slides, so the torque phase starts when B1
+    takes load): four phases, the torque phase from B1's fill to after F1's release in the
+    hybrid model, the speed phase ending within 3 ms of the hybrid's B1 lock-up."""
+    _, hybrid = upshift
+    phases = {p.name: p for p in reference_upshift.phases}
+    assert len(phases) == 4
+    (release,) = [e for e in hybrid.events if e.kind == RELEASE]
+    (lock,) = [e for e in hybrid.events if e.kind == LOCK_UP]
+    torque, speed = phases["torque phase"], phases["speed phase"]
+    assert 0.5 <= torque.t_start < release.t < torque.t_end == speed.t_start
+    assert abs(speed.t_end - lock.t) < 3e-3
 
 
 def test_differences_are_the_sprag_compliance(box, tmp_path, upshift, reference_upshift):
