@@ -518,8 +518,7 @@ def hybrid_shift_names(d: GearboxDescription, hybrid_shifts: str | None = None) 
     :func:`selected_shifts` reads it, ``"none"``, or by default the thesis' shift
     (:data:`~gearsym.symbolic.defaults.DEFAULT_SHIFT`) where the gearbox has it as a single
     swap and friction data (each set is about 110 kB of object code, so not every shift by
-    default). Shifts that swap a one-way clutch are skipped by ``all`` and ``adjacent`` and
-    refused by name: their hybrid sensitivities are not emitted yet."""
+    default)."""
     if hybrid_shifts == "none":
         return []
     if hybrid_shifts is None:
@@ -527,23 +526,7 @@ def hybrid_shift_names(d: GearboxDescription, hybrid_shifts: str | None = None) 
             return []
         names = {spec.name for spec in selected_shifts(d, "all")}
         return [DEFAULT_SHIFT] if DEFAULT_SHIFT in names else []
-    specs = selected_shifts(d, hybrid_shifts, "--hybrid-shifts")
-    listed = hybrid_shifts not in ("all", "adjacent")
-    names = []
-    for spec in specs:
-        one_way = [e for e in (spec.off_going, spec.on_coming) if d.element(e).one_way]
-        if not one_way:
-            names.append(spec.name)
-        elif listed:
-            # the emitted input vector has no slot for a freewheel; the hybrid simulator and
-            # the commands on it (fim, sweep) run such shifts
-            raise GearsymError(
-                d.file,
-                "--hybrid-shifts",
-                f"shift {spec.name} swaps the one-way clutch {one_way[0]}: its hybrid "
-                "sensitivities are not emitted (gearsym fim and sweep run the shift)",
-            )
-    return names
+    return [spec.name for spec in selected_shifts(d, hybrid_shifts, "--hybrid-shifts")]
 
 
 def hybrid_sensitivity_sets(
