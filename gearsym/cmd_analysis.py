@@ -286,7 +286,7 @@ def _hybrid_fim(args: argparse.Namespace) -> int:
         simulator = HybridSimulator(d, scenario)
         names = given or [
             "m_veh",
-            *(str(simulator.hybrid.friction_coefficient[e]) for e in simulator.hybrid.elements),
+            *(str(mu) for mu in simulator.hybrid.friction_coefficient.values()),
             "zeta",
         ]
         unknown = [n for n in names if n not in simulator.parameter_names]
@@ -377,7 +377,7 @@ def print_fim_summary(
     simulator = HybridSimulator(d, scenario)
     names = [
         "m_veh",
-        *(str(simulator.hybrid.friction_coefficient[e]) for e in simulator.hybrid.elements),
+        *(str(mu) for mu in simulator.hybrid.friction_coefficient.values()),
         "zeta",
     ]
     study = hybrid_fim(d, names, simulator=simulator)

@@ -43,12 +43,33 @@ which is what a perfectly plastic (impulsive) engagement does. Two cases:
 An engagement at non-zero slip (closing a clutch on a slipping pair with infinite capacity, or a
 dog clutch) would need that impulse and lose the energy ½ Δẏᵀ M Δẏ; the same formula gives it,
 but friction elements of finite capacity never do it: they slide until the slip is zero.
+
+**One-way clutches** (``kind = "one_way"``, ``locks`` = the slip sign they block) may be a
+swapping element: the classic 1-2 upshift of a Simpson box where only the on-coming brake is
+pressed and the freewheel releases by itself, or the 2-1 downshift where it locks again. A
+freewheel is a unilateral constraint, so it has two statuses only (no "open", no sliding with
+friction):
+
+* **locked**: a constraint like a locked friction element; it can carry a reaction torque of
+  the sign ``locks`` only (sign convention of 2.36), with no capacity limit;
+* **overrunning** with slip sign −``locks``: no torque (like an open element, 2.54).
+
+Its guards: **release** (locked → overrunning) when ``locks`` · T_req falls through zero, T_req
+the reaction as for a break-away; **lock-up** (overrunning → locked) when its slip crosses zero
+heading into the blocked sign, with the condition ``locks`` · T_req ≥ 0 of the locked mode at the
+mapped state. At a transversal crossing the condition holds by itself: the released slip
+acceleration has the blocked sign there, and the reaction has the sign of that acceleration
+(T_req = −a₀/g with the gain g < 0 of :func:`slip_acceleration_gain`); a grazing crossing that
+fails it keeps the freewheel overrunning. The state maps are the friction elements' M-metric
+projections: at a release P⁺ z⁺ = P⁻ z⁻ (an embedding), at a lock-up the slip is zero (a change
+of coordinates). A freewheel has no normal force and no μ: the shift's inputs and parameters
+carry those of its friction element only.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 from itertools import product
 
 import sympy as sp
@@ -66,12 +87,14 @@ from gearsym.symbolic.drivetrain import (
     slip_rows,
 )
 from gearsym.symbolic.dynamics import GearboxDynamics, gearbox_dynamics
+from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.kinematics import exact
 from gearsym.symbolic.model import Model, Variable
 
 LOCKED = "locked"
 SLIDING = "sliding"
 OPEN = "open"
+OVERRUNNING = "overrunning"
 
 #: Status of a swapping element in a mode: locked, sliding with slip sign +1 / −1, open.
 STATUSES: tuple[tuple[str, int], ...] = ((LOCKED, 0), (SLIDING, 1), (SLIDING, -1), (OPEN, 0))
@@ -80,13 +103,37 @@ BREAK_AWAY = "break-away"
 LOCK_UP = "lock-up"
 OPENING = "opening"
 ENGAGEMENT = "engagement"
+RELEASE = "release"
+
+#: The guards that depend on the state (located by a root search, with the event-time term of
+#: the sensitivity jump); opening and engagement depend on F_N alone.
+STATE_GUARDS = (BREAK_AWAY, LOCK_UP, RELEASE)
 
 
 def status_label(status: str, sign: int) -> str:
-    """``locked``, ``slide_pos``, ``slide_neg`` or ``open`` (parts of a mode name)."""
+    """``locked``, ``slide_pos``, ``slide_neg``, ``open`` or ``overrun`` (parts of a mode
+    name)."""
     if status == SLIDING:
         return "slide_pos" if sign > 0 else "slide_neg"
+    if status == OVERRUNNING:
+        return "overrun"
     return status
+
+
+def element_statuses(d: GearboxDescription, element: str) -> tuple[tuple[str, int], ...]:
+    """The statuses a swapping element can take: :data:`STATUSES` for a friction element;
+    locked or overrunning (slip sign −``locks``) for a one-way clutch (module docstring)."""
+    e = d.element(element)
+    if e.one_way:
+        return ((LOCKED, 0), (OVERRUNNING, -e.locks))
+    return STATUSES
+
+
+def released_status(d: GearboxDescription, element: str) -> tuple[str, int]:
+    """The status of a swapping element in the gear that does not close it: open, or
+    overrunning for a one-way clutch."""
+    e = d.element(element)
+    return (OVERRUNNING, -e.locks) if e.one_way else (OPEN, 0)
 
 
 @dataclass(frozen=True)
@@ -98,7 +145,8 @@ class Mode:
     element; ``projection`` is P with ẏ = P z (2.55), z the mode's gearbox speeds (``keep``);
     ``slip[e]`` is Δω_e = ω_a − ω_b of each swapping element in the mode's states (2.59);
     ``reaction[e]`` the torque a locked element must carry (sign of 2.36); ``capacity[e]`` the
-    magnitude 2 N_disc r_m μ_e F_N,e (2.69) of each swapping element.
+    magnitude 2 N_disc r_m μ_e F_N,e (2.69) of each swapping friction element (a one-way
+    clutch has none).
     """
 
     name: str
@@ -154,8 +202,11 @@ class HybridShift:
     """Modes, guards and state maps of a single-swap shift (module docstring).
 
     ``inputs`` (T_In, F_N of the off-going and the on-coming element) and ``parameters`` (the
-    drivetrain's and both μ) are the union over the modes; a mode's model uses a subset.
-    ``from_mode`` is the from-gear (off-going locked, on-coming open), ``to_mode`` the to-gear.
+    drivetrain's and both μ) are the union over the modes; a mode's model uses a subset. A
+    one-way clutch among the elements has no F_N and no μ: ``normal_force`` and
+    ``friction_coefficient`` name the friction elements only, and ``one_way`` maps a one-way
+    swapping element to its ``locks``. ``from_mode`` is the from-gear (off-going locked,
+    on-coming open or overrunning), ``to_mode`` the to-gear.
     """
 
     spec: ShiftSpec
@@ -169,6 +220,12 @@ class HybridShift:
     friction_coefficient: dict[str, sp.Symbol]
     from_mode: str
     to_mode: str
+    one_way: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def friction_elements(self) -> tuple[str, ...]:
+        """The swapping elements with a normal force and a μ (not one-way clutches)."""
+        return tuple(e for e in self.elements if e not in self.one_way)
 
     def guards_from(self, mode: str) -> tuple[Guard, ...]:
         """Every guard whose source is ``mode``."""
@@ -279,9 +336,17 @@ def hybrid_shift(d: GearboxDescription, shift: str) -> HybridShift:
     spec = shift_spec(d, shift)
     dyn = gearbox_dynamics(d)
     elements = (spec.off_going, spec.on_coming)
-    friction = {e: _friction_symbols(d, e) for e in elements}
+    one_way = {e: d.element(e).locks for e in elements if d.element(e).one_way}
+    if len(one_way) == 2:
+        raise GearsymError(
+            d.file,
+            "shift",
+            f"shift {shift!r} swaps two one-way clutches ({', '.join(elements)}); the hybrid "
+            "model needs a friction element that is pressed",
+        )
+    friction = {e: _friction_symbols(d, e) for e in elements if e not in one_way}
     modes: dict[str, Mode] = {}
-    for statuses in product(STATUSES, repeat=2):
+    for statuses in product(*(element_statuses(d, e) for e in elements)):
         status = dict(zip(elements, statuses, strict=True))
         swapped_locked = tuple(e for e in elements if status[e][0] == LOCKED)
         if len(swapped_locked) == 2:
@@ -301,9 +366,7 @@ def hybrid_shift(d: GearboxDescription, shift: str) -> HybridShift:
             # the released model's speeds in this mode's coordinates (slip_e = 0 there)
             to_mode = {sp.Symbol(naming.speed(s)): parts_speeds[s] for s in released_keep}
             reaction[e] = sp.expand((-free / gain).xreplace(to_mode))
-        capacity = {
-            e: friction[e][0] * friction[e][2].symbol * friction[e][1].symbol for e in elements
-        }
+        capacity = {e: f[0] * f[2].symbol * f[1].symbol for e, f in friction.items()}
         projection = locked_projection(d, dyn, locked, keep)
         modes[name] = Mode(name, status, model, keep, projection, slip, reaction, capacity)
 
@@ -320,9 +383,23 @@ def hybrid_shift(d: GearboxDescription, shift: str) -> HybridShift:
             maps[(mode.name, name)] = _state_map(mode, modes[name], mass)
         return name
 
+    def mapped(source: Mode, target: str) -> dict[sp.Symbol, sp.Expr]:
+        """The target mode's states as the state map gives them from the source's."""
+        matrix = maps[(source.name, target)].matrix
+        return dict(
+            zip(
+                modes[target].model.state_symbols,
+                matrix * sp.Matrix(source.model.state_symbols),
+                strict=True,
+            )
+        )
+
     for mode in modes.values():
         for e in elements:
             state, sign = mode.status[e]
+            if e in one_way:
+                guards.extend(_one_way_guards(mode, e, one_way[e], modes, to, mapped))
+                continue
             normal = friction[e][1].symbol
             if state == LOCKED:
                 for k in (1, -1):
@@ -347,15 +424,8 @@ def hybrid_shift(d: GearboxDescription, shift: str) -> HybridShift:
                 if stick is None:  # the other element is locked: lock-up would be a tie-up
                     guards.append(Guard(mode.name, e, LOCK_UP, mode.slip[e], -sign, str(reverse)))
                 else:
+                    x_next = mapped(mode, stick)
                     target_mode = modes[stick]
-                    matrix = maps[(mode.name, stick)].matrix
-                    x_next = dict(
-                        zip(
-                            target_mode.model.state_symbols,
-                            matrix * sp.Matrix(mode.model.state_symbols),
-                            strict=True,
-                        )
-                    )
                     inside = mode.capacity[e] - sp.Abs(target_mode.reaction[e].xreplace(x_next))
                     guards.append(
                         Guard(mode.name, e, LOCK_UP, mode.slip[e], -sign, stick, inside, reverse)
@@ -370,11 +440,15 @@ def hybrid_shift(d: GearboxDescription, shift: str) -> HybridShift:
                     Guard(mode.name, e, ENGAGEMENT, normal, 1, forward, mode.slip[e], backward)
                 )
 
-    parameters = drivetrain_parameters(d) + tuple(friction[e][2] for e in elements)
-    u_in = modes[
-        mode_name(spec, elements, {spec.off_going: (LOCKED, 0), spec.on_coming: (OPEN, 0)})
-    ]
-    inputs = (u_in.model.variable(naming.INPUT_TORQUE), *(friction[e][1] for e in elements))
+    friction_elements = tuple(e for e in elements if e not in one_way)
+    parameters = drivetrain_parameters(d) + tuple(friction[e][2] for e in friction_elements)
+    from_status = {spec.off_going: (LOCKED, 0), spec.on_coming: released_status(d, spec.on_coming)}
+    to_status = {spec.off_going: released_status(d, spec.off_going), spec.on_coming: (LOCKED, 0)}
+    u_in = modes[mode_name(spec, elements, from_status)]
+    inputs = (
+        u_in.model.variable(naming.INPUT_TORQUE),
+        *(friction[e][1] for e in friction_elements),
+    )
     return HybridShift(
         spec=spec,
         elements=elements,
@@ -383,11 +457,39 @@ def hybrid_shift(d: GearboxDescription, shift: str) -> HybridShift:
         maps=maps,
         inputs=inputs,
         parameters=parameters,
-        normal_force={e: friction[e][1].symbol for e in elements},
-        friction_coefficient={e: friction[e][2].symbol for e in elements},
+        normal_force={e: friction[e][1].symbol for e in friction_elements},
+        friction_coefficient={e: friction[e][2].symbol for e in friction_elements},
         from_mode=u_in.name,
-        to_mode=mode_name(spec, elements, {spec.off_going: (OPEN, 0), spec.on_coming: (LOCKED, 0)}),
+        to_mode=mode_name(spec, elements, to_status),
+        one_way=one_way,
     )
+
+
+def _one_way_guards(
+    mode: Mode,
+    element: str,
+    locks: int,
+    modes: Mapping[str, Mode],
+    to: Callable[[Mode, str, tuple[str, int]], str | None],
+    mapped: Callable[[Mode, str], dict[sp.Symbol, sp.Expr]],
+) -> list[Guard]:
+    """The guards of a one-way swapping element (module docstring): release when ``locks`` ·
+    T_req falls through zero; lock-up when the slip crosses zero towards the blocked sign, with
+    the condition ``locks`` · T_req ≥ 0 of the locked mode (else it stays overrunning). With
+    the other element locked a lock-up would be a tie-up: the slip of an overrunning freewheel
+    is then a fixed multiple of the output speed and reaches zero only with the vehicle at
+    rest, which a shift model does not cover, so there is no guard."""
+    state, _ = mode.status[element]
+    if state == LOCKED:
+        target = to(mode, element, (OVERRUNNING, -locks))
+        assert target is not None
+        return [Guard(mode.name, element, RELEASE, locks * mode.reaction[element], -1, target)]
+    stick = to(mode, element, (LOCKED, 0))
+    if stick is None:
+        return []
+    stay = to(mode, element, mode.status[element])
+    condition = locks * modes[stick].reaction[element].xreplace(mapped(mode, stick))
+    return [Guard(mode.name, element, LOCK_UP, mode.slip[element], locks, stick, condition, stay)]
 
 
 def drivetrain_mass(d: GearboxDescription, dyn: GearboxDynamics) -> sp.Matrix:

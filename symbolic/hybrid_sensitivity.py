@@ -128,7 +128,7 @@ def default_hybrid_parameters(hybrid: HybridShift) -> tuple[str, ...]:
     elements (3.15) if not already among them."""
     names = [v.name for v in hybrid.parameters]
     chosen = [n for n in SENSITIVITY_PARAMETERS if n in names]
-    for e in hybrid.elements:
+    for e in hybrid.friction_elements:
         mu = str(hybrid.friction_coefficient[e])
         if mu not in chosen:
             chosen.append(mu)

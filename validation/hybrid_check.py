@@ -21,7 +21,15 @@ from typing import Any
 import numpy as np
 import sympy as sp
 from gearsym.symbolic import naming
-from gearsym.symbolic.hybrid import LOCKED, OPEN, SLIDING, HybridShift, Mode, mode_name
+from gearsym.symbolic.hybrid import (
+    LOCKED,
+    OPEN,
+    OVERRUNNING,
+    SLIDING,
+    HybridShift,
+    Mode,
+    mode_name,
+)
 from gearsym.symbolic.numeric import casadi_function, integrate_linear_inputs
 
 
@@ -54,7 +62,7 @@ def time_varying_symbols(hybrid: HybridShift) -> list[sp.Symbol]:
     zeta = next(v.symbol for v in hybrid.parameters if v.name == naming.GRADE)
     return [
         *(v.symbol for v in hybrid.inputs),
-        *(hybrid.friction_coefficient[e] for e in hybrid.elements),
+        *(hybrid.friction_coefficient[e] for e in hybrid.friction_elements),
         zeta,
     ]
 
@@ -90,6 +98,14 @@ def reference_statuses(
     result = {}
     for e in hybrid.elements:
         element = d.element(e)
+        if e in hybrid.one_way:
+            # a freewheel carries torque only locked (its blocking sign), none overrunning
+            locks = hybrid.one_way[e]
+            result[e] = [
+                (LOCKED, 0) if locks * t > 0 else (OVERRUNNING, -locks)
+                for t in signals[naming.torque(e)]
+            ]
+            continue
         force = signals[str(hybrid.normal_force[e])]
         mu = signals[str(hybrid.friction_coefficient[e])]
         capacity = 2 * element.n_disc * element.r_m.value * mu * force

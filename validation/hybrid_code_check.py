@@ -21,14 +21,14 @@ from typing import Any
 
 import numpy as np
 from gearsym.symbolic.codegen.hybrid import hybrid_table
-from gearsym.symbolic.hybrid import BREAK_AWAY, ENGAGEMENT, LOCK_UP, OPEN, OPENING
+from gearsym.symbolic.hybrid import ENGAGEMENT, OPEN, OPENING, STATE_GUARDS
 from gearsym.symbolic.hybrid_sensitivity import HybridSensitivity
 from scipy.optimize import brentq
 
 __all__ = ["EmittedRun", "HybridFunctions", "run_emitted"]
 
 #: Guard kinds that depend on the state: located inside a step.
-CONTINUOUS = (BREAK_AWAY, LOCK_UP)
+CONTINUOUS = STATE_GUARDS
 
 
 class HybridFunctions:
@@ -136,8 +136,17 @@ def run_emitted(
     """Integrate the simulator's scenario with the emitted functions alone (module docstring).
 
     ``simulator`` supplies only the scenario: its inputs u(t), breakpoints, normal forces and
-    the from-gear initial state; ``s0`` is S(0) (states × sensitivity parameters)."""
+    the from-gear initial state; ``s0`` is S(0) (states × sensitivity parameters). The emitted u
+    has no entry for a one-way swapping element (the simulator's slot for it, 0, is dropped),
+    and its release and lock-up are state guards like break-away and lock-up."""
     hs = functions.hs
+    elements = hs.hybrid.elements
+    slots = [0, *(1 + k for k, e in enumerate(elements) if e not in hs.hybrid.one_way)]
+    slots.append(1 + len(elements))
+
+    def inputs(t: float) -> np.ndarray:
+        return simulator.inputs(t)[slots]
+
     functions.set_parameters(p)
     index = {m.mode.name: m.index for m in hs.modes}
     mode = index[hs.hybrid.from_mode]
@@ -149,7 +158,7 @@ def run_emitted(
     pending = list(enumerate(t_eval))
 
     def rhs(m: int, t: float, y: np.ndarray) -> np.ndarray:
-        return functions.call(f"m{m}_rhs", x=y, u=simulator.inputs(t))[0]
+        return functions.call(f"m{m}_rhs", x=y, u=inputs(t))[0]
 
     def rk4(m: int, t: float, y: np.ndarray, dt: float) -> np.ndarray:
         k1 = rhs(m, t, y)
@@ -159,11 +168,11 @@ def run_emitted(
         return y + dt / 6 * (k1 + 2 * (k2 + k3) + k4)
 
     def guards(m: int, t: float, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        g, c = functions.call(f"m{m}_guards", x=y, u=simulator.inputs(t))
+        g, c = functions.call(f"m{m}_guards", x=y, u=inputs(t))
         return g, c
 
     def jump(source: int, target: int, t: float, y: np.ndarray, rate: np.ndarray) -> np.ndarray:
-        return functions.call(f"jump_{source}_{target}", x=y, u=simulator.inputs(t), u_rate=rate)[0]
+        return functions.call(f"jump_{source}_{target}", x=y, u=inputs(t), u_rate=rate)[0]
 
     def record(t0: float, t1: float, m: int, y0: np.ndarray) -> None:
         # samples inside [t0, t1] by a Runge-Kutta step from t0 (a sample at a switch takes
@@ -175,7 +184,9 @@ def run_emitted(
     for ta, tb in zip(breakpoints[:-1], breakpoints[1:], strict=True):
         # switches at the breakpoint (opening, engagement), decided on the next segment
         forces = simulator.normal_forces((ta + tb) / 2)
-        for k, e in enumerate(hs.hybrid.elements):
+        for k, e in enumerate(elements):
+            if e in hs.hybrid.one_way:  # not pressed: its guards depend on the state
+                continue
             source = hs.modes[mode]
             status = source.mode.status[e][0]
             pressed = forces[k] > 0
@@ -194,7 +205,7 @@ def run_emitted(
             x = jump(mode, target, ta, x, np.zeros(len(hs.inputs)))
             events.append((ta, mode, target, kind))
             mode = target
-        rate = (simulator.inputs(tb) - simulator.inputs(ta)) / (tb - ta)
+        rate = (inputs(tb) - inputs(ta)) / (tb - ta)
         t = ta
         while t < tb - 1e-14:
             dt = min(h, tb - t)

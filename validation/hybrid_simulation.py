@@ -21,6 +21,11 @@ reference reads (2.69), and ∂/∂μ_e is a relative change of the whole map, a
 :mod:`gearsym.validation.sensitivity_run`. ``mu="constant"`` uses the parameter alone. The grade
 enters as ζ + Δζ(t), ζ the parameter and Δζ(t) the scenario's profile minus the description's ζ
 (zero without a profile), like the driven shift model of the sensitivity runs.
+
+A one-way clutch among the swapping elements (:mod:`gearsym.symbolic.hybrid`, module
+docstring) has no pressure, F_N or μ: its slot in u is 0, its guards (release, lock-up) are
+state guards like break-away and lock-up, and its torque signal is the reaction while it is
+locked and 0 while it overruns.
 """
 
 from __future__ import annotations
@@ -38,13 +43,13 @@ from gearsym.symbolic.dynamics import gearbox_dynamics
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.friction import load_mu_map
 from gearsym.symbolic.hybrid import (
-    BREAK_AWAY,
     ENGAGEMENT,
-    LOCK_UP,
     LOCKED,
     OPEN,
     OPENING,
+    RELEASE,
     SLIDING,
+    STATE_GUARDS,
     Guard,
     HybridShift,
     Mode,
@@ -113,8 +118,8 @@ class HybridResult:
 
 class CompiledMode:
     """A mode's right-hand side, guards, shaft speeds, slips and element torques as CasADi
-    functions of (x, u, p), u = [T_In, F_N per swapping element, Δζ], p the hybrid's
-    parameters (μ through the map with ``mu="map"``, module docstring)."""
+    functions of (x, u, p), u = [T_In, F_N per swapping element (0 for a one-way clutch), Δζ],
+    p the hybrid's parameters (μ through the map with ``mu="map"``, module docstring)."""
 
     def __init__(
         self,
@@ -135,7 +140,8 @@ class CompiledMode:
         mapping: dict[sp.Symbol, Any] = {s: self.x[i] for i, s in enumerate(model.state_symbols)}
         mapping[hybrid.inputs[0].symbol] = self.u[0]
         for k, e in enumerate(hybrid.elements):
-            mapping[hybrid.normal_force[e]] = self.u[1 + k]
+            if e in hybrid.normal_force:
+                mapping[hybrid.normal_force[e]] = self.u[1 + k]
         names = [v.name for v in hybrid.parameters]
         for k, v in enumerate(hybrid.parameters):
             mapping[v.symbol] = self.p[k]
@@ -146,6 +152,8 @@ class CompiledMode:
             p_grid, dw_grid, plane = mu_plane
             mu_nominal = quantity(d, "friction", "mu_nominal").value
             for k, e in enumerate(hybrid.elements):
+                if e in hybrid.one_way:
+                    continue
                 slip = to_casadi(mode.slip[e], mapping)
                 area = d.element(e).a_piston
                 if area is None:
@@ -166,9 +174,7 @@ class CompiledMode:
 
         self.rhs_sx = ca.vertcat(*[to_casadi(e, mapping) for e in model.rhs])
         self.f = ca.Function("f", [self.x, self.u, self.p], [self.rhs_sx])
-        self.continuous = [
-            g for g in hybrid.guards_from(mode.name) if g.kind in (BREAK_AWAY, LOCK_UP)
-        ]
+        self.continuous = [g for g in hybrid.guards_from(mode.name) if g.kind in STATE_GUARDS]
         self.guard_sx = [to_casadi(g.expression, mapping) for g in self.continuous]
         self.guard = [ca.Function("g", [self.x, self.u, self.p], [g]) for g in self.guard_sx]
         self._augmented: dict[tuple[int, ...], Any] = {}
@@ -187,12 +193,13 @@ class CompiledMode:
                 self.torque_exprs.append(sp.Integer(0))
         self.torques = function("torques", self.torque_exprs)
         self.slips = function("slips", [mode.slip[e] for e in hybrid.elements])
-        # μ as the mode uses it (the map's value scaled by the parameter, or the parameter)
-        self.mu = ca.Function(
-            "mu",
-            [self.x, self.u, self.p],
-            [ca.vertcat(*[mapping[hybrid.friction_coefficient[e]] for e in hybrid.elements])],
-        )
+        # μ as the mode uses it (the map's value scaled by the parameter, or the parameter;
+        # 0 for a one-way clutch)
+        mus = [
+            mapping[hybrid.friction_coefficient[e]] if e in hybrid.friction_coefficient else 0
+            for e in hybrid.elements
+        ]
+        self.mu = ca.Function("mu", [self.x, self.u, self.p], [ca.vertcat(*mus)])
 
     def rhs(self, x: np.ndarray, u: np.ndarray, p: np.ndarray) -> np.ndarray:
         return np.asarray(self.f(x, u, p).full(), dtype=float).ravel()
@@ -262,7 +269,7 @@ class HybridSimulator:
             for name, mode in self.hybrid.modes.items()
         }
         self.area = {}
-        for e in self.hybrid.elements:
+        for e in self.hybrid.friction_elements:
             area = d.element(e).a_piston
             if area is None:
                 raise GearsymError(
@@ -289,10 +296,16 @@ class HybridSimulator:
         return np.array([values[n] for n in self.parameter_names], dtype=float)
 
     def normal_forces(self, t: float) -> np.ndarray:
-        return np.array([self.scenario.pressure[e](t) * self.area[e] for e in self.hybrid.elements])
+        """F_N = p a_piston of each swapping element (0 for a one-way clutch)."""
+        return np.array(
+            [
+                self.scenario.pressure[e](t) * self.area[e] if e in self.area else 0.0
+                for e in self.hybrid.elements
+            ]
+        )
 
     def inputs(self, t: float) -> np.ndarray:
-        """u(t) = [T_In, F_N of each swapping element, Δζ]."""
+        """u(t) = [T_In, F_N of each swapping element (0 for a one-way clutch), Δζ]."""
         grade = self.scenario.grade
         deviation = 0.0 if grade is None else grade(t) - self.zeta0
         return np.array([self.scenario.input_torque(t), *self.normal_forces(t), deviation])
@@ -385,6 +398,8 @@ class HybridSimulator:
         middle = (t + t_next) / 2
         forces = self.normal_forces(middle)
         for k, e in enumerate(self.hybrid.elements):
+            if e in self.hybrid.one_way:  # not pressed: its guards depend on the state
+                continue
             status = self.hybrid.modes[mode].status[e][0]
             pressed = forces[k] > 0
             kind = ENGAGEMENT if status == OPEN and pressed else None
@@ -404,6 +419,34 @@ class HybridSimulator:
             switches.append((guard, target, matrix))
             mode = target
         return switches
+
+    def pending_releases(
+        self, mode: str, t: float, x: np.ndarray, p: np.ndarray
+    ) -> list[tuple[Guard, str, np.ndarray]]:
+        """One-way clutches that are locked in ``mode`` but would carry torque of the sign they
+        cannot carry at (t, x): their release is due now, not at a later zero crossing (the
+        start of a coast shift in a gear that locks a freewheel, or a switch after which the
+        reaction has the wrong sign). Returns (guard, target, map matrix) in order; empty
+        without one-way clutches."""
+        switches = []
+        done: set[str] = set()
+        while True:
+            compiled = self.modes[mode]
+            due = [
+                (k, g)
+                for k, g in enumerate(compiled.continuous)
+                if g.kind == RELEASE
+                and g.element not in done
+                and compiled.value(compiled.guard[k], x, self.inputs(t), p)[0] < 0
+            ]
+            if not due:
+                return switches
+            guard = due[0][1]
+            matrix = np.array(self.hybrid.maps[(mode, guard.target)].matrix, dtype=float)
+            x = matrix @ x
+            switches.append((guard, guard.target, matrix))
+            done.add(guard.element)
+            mode = guard.target
 
     def input_slope(self, ta: float, tb: float) -> np.ndarray:
         """du/dt inside the segment [ta, tb], where every profile is linear."""
@@ -470,10 +513,17 @@ class HybridSimulator:
         pieces: list[Piece] = []
         nfev = 0
         for ta, tb in zip(breakpoints[:-1], breakpoints[1:], strict=True):
-            for guard, target, matrix in self.normal_force_switches(mode, ta, tb, x, p):
+            switches = self.normal_force_switches(mode, ta, tb, x, p)
+            for guard, target, matrix in switches:
                 events.append(Event(ta, guard.kind, guard.element, mode, target))
                 tau_p.append(np.zeros(m))
                 mode, x, sens = target, matrix @ x, matrix @ sens
+            if ta == t_start or switches:
+                # a one-way clutch whose reaction has the wrong sign already releases now
+                for guard, target, matrix in self.pending_releases(mode, ta, x, p):
+                    events.append(Event(ta, guard.kind, guard.element, mode, target))
+                    tau_p.append(np.zeros(m))
+                    mode, x, sens = target, matrix @ x, matrix @ sens
             t = ta
             while t < tb:
                 compiled = self.modes[mode]
@@ -540,6 +590,10 @@ class HybridSimulator:
                 events.append(Event(t, guard.kind, guard.element, mode, target))
                 tau_p.append(dtau)
                 mode = target
+                for guard, target, matrix in self.pending_releases(mode, t, x, p):
+                    events.append(Event(t, guard.kind, guard.element, mode, target))
+                    tau_p.append(np.zeros(m))
+                    mode, x, sens = target, matrix @ x, matrix @ sens
                 if len(events) > EVENTS_MAX:
                     raise GearsymError(
                         scenario.file,
@@ -607,12 +661,10 @@ class HybridSimulator:
         signals = {k: np.zeros(len(grid)) for k in keys}
         sensitivities = {k: np.zeros((len(grid), m)) for k in keys} if m else {}
         for e in self.hybrid.elements:
-            for key in (
-                naming.slip_column(e),
-                naming.torque(e),
-                str(self.hybrid.normal_force[e]),
-                str(self.hybrid.friction_coefficient[e]),
-            ):
+            keys = [naming.slip_column(e), naming.torque(e)]
+            if e in self.hybrid.normal_force:
+                keys += [str(self.hybrid.normal_force[e]), str(self.hybrid.friction_coefficient[e])]
+            for key in keys:
                 signals[key] = np.zeros(len(grid))
         modes = [""] * len(grid)
         owner = np.full(len(grid), -1)
@@ -649,6 +701,8 @@ class HybridSimulator:
             for j, e in enumerate(self.hybrid.elements):
                 signals[naming.slip_column(e)][index] = slips[:, j]
                 signals[naming.torque(e)][index] = torques[:, j]
+                if e not in self.hybrid.normal_force:
+                    continue
                 signals[str(self.hybrid.normal_force[e])][index] = u[:, 1 + j]
                 signals[str(self.hybrid.friction_coefficient[e])][index] = mu[:, j]
             for i in index:

@@ -786,14 +786,17 @@ def detect_phases(
         raise fail(f"{on} never takes over the load")
     # the off-going element brought to slip also ends the from-gear (3.1): it slides once its
     # torque reaches the capacity 2 N_disc r_m μ F_N (2.69)
+    # (a one-way clutch never slides: it carries torque until it overruns by itself)
     element, short = d.element(off), element_short_name(d, off)
-    assert element.n_disc is not None and element.r_m is not None
-    force = signals[naming.normal_force(short)]
-    mu = signals[naming.friction_coefficient(short)]
-    capacity = 2 * element.n_disc * element.r_m.value * mu * force
-    slides = _first(
-        (force > 0) & (np.abs(signals[naming.torque(off)]) >= capacity_fraction * capacity)
-    )
+    slides = None
+    if not element.one_way:
+        assert element.n_disc is not None and element.r_m is not None
+        force = signals[naming.normal_force(short)]
+        mu = signals[naming.friction_coefficient(short)]
+        capacity = 2 * element.n_disc * element.r_m.value * mu * force
+        slides = _first(
+            (force > 0) & (np.abs(signals[naming.torque(off)]) >= capacity_fraction * capacity)
+        )
     i1 = takes_load if slides is None else min(takes_load, slides)
     progress = (ratio_from - ratio) / (ratio_from - ratio_to)
     i2 = _first(progress > ratio_fraction, i1)

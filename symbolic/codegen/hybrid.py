@@ -60,6 +60,21 @@ def hybrid_set_model(hs: HybridSensitivity) -> Model:
     """A stateless :class:`Model` with the set's name, inputs and parameters (what the parameter
     rows, the symbol names and the file names need)."""
     spec = hs.hybrid.spec
+    metadata = {
+        "equations": "3.7 in every mode; jumps of hybrid sensitivity analysis at switches",
+        "content": f"hybrid shift {spec.name}: sensitivities across lock-up and break-away",
+        "sensitivity_parameters": " ".join(v.name for v in hs.parameters),
+    }
+    for element, locks in hs.hybrid.one_way.items():
+        metadata[f"one_way_{element}"] = (
+            f"{element} is a one-way clutch (blocks slip sign {locks:+d}): locked or overrunning "
+            f"(torque 0, slip sign {-locks:+d}), never open or sliding; it has no F_N, so u has "
+            f"no entry for it. Its release (g = {locks:+d} * its reaction torque, falling) and "
+            "lock-up (g = its slip, crossing towards the blocked sign) depend on the state: "
+            "locate them inside the step like break-away and lock-up. A locked freewheel whose "
+            "g is already negative at the start or after a switch releases at once (the caller "
+            "switches)"
+        )
     return Model(
         name=hybrid_set_name(hs),
         states=(),
@@ -68,11 +83,7 @@ def hybrid_set_model(hs: HybridSensitivity) -> Model:
         outputs=(),
         rhs=sp.zeros(0, 1),
         output_expressions=sp.zeros(0, 1),
-        metadata={
-            "equations": "3.7 in every mode; jumps of hybrid sensitivity analysis at switches",
-            "content": f"hybrid shift {spec.name}: sensitivities across lock-up and break-away",
-            "sensitivity_parameters": " ".join(v.name for v in hs.parameters),
-        },
+        metadata=metadata,
     )
 
 

@@ -140,7 +140,7 @@ def analyze_modes(
         if err.key == "shift":
             raise GearsymError(err.file, "--shift", err.reason) from None
         raise
-    mus = {str(hybrid.friction_coefficient[e]): e for e in hybrid.elements}
+    mus = {str(mu): e for e, mu in hybrid.friction_coefficient.items()}
     known = {v.name for v in hybrid.parameters}
     requested = list(params) if params is not None else ["m_veh", *mus, "zeta"]
     stray = [p for p in requested if p not in known]
