@@ -306,3 +306,42 @@ def test_generate_command_refuses_with_exit_code_2(tmp_path):
     lines = [line for line in run.stderr.splitlines() if "torque and speed phase" in line]
     assert len(lines) == 1 and "invariant zero" in lines[0]
     assert not (tmp_path / "out").exists()
+
+
+def test_generate_check_compares_the_uio_and_sees_a_changed_number(emitted, tmp_path):
+    """``generate --check``'s comparison (validation/uio_check.py) passes on the emitted
+    files and fails when one printed gain of the unknown input moves by 1e-9 relative."""
+    import re
+
+    from gearsym.validation.generated_check import comparison_ok
+    from gearsym.validation.uio_check import compare_uio
+
+    d, files, _, _, _ = emitted
+    designs = shift_uio_designs(d, DEFAULT_SHIFT, (naming.RESISTANCE_INPUT,), SAMPLE_TIME)
+
+    def write(tree, root):
+        for name, text in tree.items():
+            path = root / name
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(text, encoding="utf-8")
+
+    write(files, tmp_path / "good")
+    reports = compare_uio(DEFAULT_SHIFT, designs, tmp_path / "good", tmp_path / "b1", 50)
+    assert [r.target for r in reports] == [
+        "uio_2_3: C double",
+        "uio_2_3: C single",
+        "uio_2_3: CasADi",
+    ]
+    assert all(comparison_ok(r) for r in reports)
+    assert len(reports[0].max_error) == 4 * len(designs)
+
+    source = files["c/gearsym_uio_2_3.c"]
+    match = re.search(r"gear_2_DY\[\d+\] = \{\n    GEARSYM_LIT\(([^)]+)\)", source)
+    assert match is not None
+    value = float(match.group(1))
+    changed = source[: match.start(1)] + repr(value * (1 + 1e-9)) + source[match.end(1) :]
+    write({**files, "c/gearsym_uio_2_3.c": changed}, tmp_path / "bad")
+    bad = compare_uio(DEFAULT_SHIFT, designs, tmp_path / "bad", tmp_path / "b2", 50)
+    assert not comparison_ok(bad[0])
+    assert bad[0].max_error["gear_2.unknown_input"] > 1e-12
+    assert bad[0].max_error["gear_2.step"] <= 1e-12
