@@ -676,14 +676,25 @@ def plot_euio_efficiency(mc: EuioMonteCarlo, path: Path) -> Path:
 
     names = mc.parameter_names
     phases = [p.name for p in mc.first.phases]
-    fig, ax = subplots(1, 1, (8, 4.2), {"top": 0.86, "bottom": 0.1, "left": 0.08, "right": 0.98})
+    fig, ax = subplots(1, 1, (8, 4.2), {"top": 0.84, "bottom": 0.1, "left": 0.08, "right": 0.98})
     width = 0.8 / len(phases)
+    marked = False
     for i, phase in enumerate(phases):
         for j, name in enumerate(names):
             s = mc.phase_stats[phase][name]
             x = j + (i - (len(phases) - 1) / 2) * width
             if s.identifiable and s.efficiency is not None:
                 ax.bar(x, s.efficiency, width * 0.9, color=f"C{i}", label=phase if j == 0 else None)
+                ax.plot(
+                    x,
+                    s.efficiency_process,
+                    "kD",
+                    ms=4,
+                    label="against the bound with the filter's process noise"
+                    if not marked
+                    else None,
+                )
+                marked = True
                 ax.annotate(
                     f"{s.efficiency:.2f}", (x, s.efficiency), ha="center", va="bottom", fontsize=6
                 )
@@ -699,8 +710,9 @@ def plot_euio_efficiency(mc: EuioMonteCarlo, path: Path) -> Path:
     first = mc.first
     fig.suptitle(
         f"Extended UIO efficiency, {first.shift} shift, {len(mc.trials)} runs, samples every "
-        f"{first.sample_time * 1e3:g} ms\nbound: road load unknown in every interval, the "
-        "filter's prior and process noise (n.i.: not identifiable in this phase)",
+        f"{first.sample_time * 1e3:g} ms (n.i.: not identifiable in this phase)\nbars: RMSE / "
+        "bound with the road load unknown in every interval, constant parameters; initial "
+        f"estimates {'drawn from the prior' if mc.prior_draw else 'fixed'}",
         fontsize=9,
     )
     return save(fig, path)
