@@ -131,6 +131,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
                     description=d,
                     linear_sets=tree.linear_sets,
                     hybrid_sets=tree.hybrid_sets,
+                    uio=(tree.uio_shift, tree.uio_designs) if tree.uio_shift else None,
                 )
             for line in report.summary():
                 print(line)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import sympy as sp
 from gearsym.symbolic import naming
@@ -184,6 +185,10 @@ class GeneratedTree:
     example_models: tuple[str, ...] = field(default=())
     linear_sets: tuple[EmittedLinearSet, ...] = field(default=())
     hybrid_sets: tuple[EmittedHybridSet, ...] = field(default=())
+    #: The UIO designs the ``gearsym_uio_<shift>`` files print (``generate --check`` compares
+    #: them) and their shift (``None``: no UIO emitted).
+    uio_designs: tuple[Any, ...] = field(default=())
+    uio_shift: str | None = None
 
 
 # ---------------------------------------------------------------------------------------------
@@ -821,18 +826,19 @@ def uio_files(
     progress: Callable[[str], None] | None = None,
     shifts: str = "adjacent",
     unknown: Sequence[str] = (naming.RESISTANCE_INPUT,),
-) -> tuple[dict[str, str], list[str]]:
-    """The UIO files (thesis 4.4) of the default shift, when it is emitted, and their README
-    rows. Only T_res* is unknown by default: with the clutch torques T_K38, T_B05 unknown too
-    the torque and speed phase has an invariant zero at s = 0 and no UIO exists, and
-    :func:`~gearsym.symbolic.estimators.uio.shift_uio_designs` refuses it (naming the phase and
-    the condition)."""
+) -> tuple[dict[str, str], list[str], tuple[Any, ...]]:
+    """The UIO files (thesis 4.4) of the default shift, when it is emitted, their README
+    rows and the designs they print. Only T_res* is unknown by default: with the clutch
+    torques T_K38, T_B05 unknown too the torque and speed phase has an invariant zero at
+    s = 0 and no UIO exists, and
+    :func:`~gearsym.symbolic.estimators.uio.shift_uio_designs` refuses it (naming the phase
+    and the condition)."""
     from gearsym.symbolic.codegen.uio import emit_uio_files, phase_identifier, uio_set_name
     from gearsym.symbolic.defaults import DEFAULT_SHIFT, SAMPLE_TIME
     from gearsym.symbolic.estimators.uio import shift_uio_designs
 
     if DEFAULT_SHIFT not in {spec.name for spec in selected_shifts(d, shifts)}:
-        return {}, []
+        return {}, [], ()
     say = progress or (lambda message: None)
     say(f"designing the UIO of shift {DEFAULT_SHIFT} ({', '.join(unknown)} unknown)")
     designs = shift_uio_designs(d, DEFAULT_SHIFT, unknown, SAMPLE_TIME)
@@ -853,7 +859,7 @@ def uio_files(
         f"{PYTHON_DIR}/{names['casadi']} |"
         for x in designs
     ]
-    return files, rows
+    return files, rows, tuple(designs)
 
 
 def generate_tree(
@@ -887,7 +893,7 @@ def generate_tree(
         ).items():
             folder = PYTHON_DIR if name.endswith(".py") else C_DIR
             files[f"{folder}/{name}"] = text
-    uio, uio_rows = uio_files(d, say, shifts, uio_unknown)
+    uio, uio_rows, uio_designs = uio_files(d, say, shifts, uio_unknown)
     files.update(uio)
     say("emitting the mu map and the example")
     mu_map = load_mu_map(d)
@@ -899,5 +905,12 @@ def generate_tree(
     )
     files[MANIFEST] = manifest_text({k: v.encode("utf-8") for k, v in files.items()}, "generate")
     return GeneratedTree(
-        files, tuple(models), mu_map, example.c_files, tuple(linear_sets), tuple(hybrid_sets)
+        files,
+        tuple(models),
+        mu_map,
+        example.c_files,
+        tuple(linear_sets),
+        tuple(hybrid_sets),
+        uio_designs=uio_designs,
+        uio_shift=DEFAULT_SHIFT if uio_designs else None,
     )

@@ -6,6 +6,8 @@
   SymPy (:func:`gearsym.validation.c_check.compare_with_sympy`) at ``n_points`` random points, and
   the emitted CasADi module against SymPy: ≤ 1e-12 in double, ≤ 1e-5 in single; the same for
   the linear forms (5.1) (:mod:`gearsym.validation.linear_check`);
+* the UIO of the default shift (every phase's init, step, estimate and unknown input) in C
+  (both precisions) and CasADi against its design (:mod:`gearsym.validation.uio_check`);
 * the μ map in C (both precisions) and in CasADi against :class:`gearsym.symbolic.friction.MuMap`,
   including points outside the grid (clamping) and negative slip;
 * ``main.c`` compiled alone with the strict flags in both precisions, run, exit code 0;
@@ -472,6 +474,7 @@ def check_tree(
     description: GearboxDescription | None = None,
     linear_sets: Sequence[EmittedLinearSet] = (),
     hybrid_sets: Sequence[EmittedHybridSet] = (),
+    uio: tuple[str, Sequence[Any]] | None = None,
 ) -> TreeReport:
     """Run every check on the generated directory ``root`` (see the module docstring).
 
@@ -479,7 +482,8 @@ def check_tree(
     ``build_dir``, never into ``root``. ``tools=False`` skips cppcheck and the cross compiler.
     With ``description`` (the gearbox of ``models``) the integration check runs too
     (:mod:`gearsym.validation.integration_check`: RK4 order 4, linearly implicit Euler order 1,
-    CVODES, on the 2-3 shift or else the first shift model).
+    CVODES, on the 2-3 shift or else the first shift model). ``uio`` = (shift, designs): the
+    emitted UIO of that shift against its designs (:mod:`gearsym.validation.uio_check`).
     """
     say = progress or (lambda message: None)
     report = TreeReport()
@@ -506,6 +510,15 @@ def check_tree(
                 build_dir / "hybrid",
                 n_points,
             )
+        except c_check.CompileError as err:
+            report.failures.append(f"compilation: {err}")
+            return report
+    if uio is not None:
+        from gearsym.validation.uio_check import compare_uio
+
+        say(f"validating the UIO of shift {uio[0]}")
+        try:
+            report.comparisons += compare_uio(uio[0], uio[1], root, build_dir / "uio", n_points)
         except c_check.CompileError as err:
             report.failures.append(f"compilation: {err}")
             return report

@@ -32,6 +32,7 @@ from scipy.integrate import solve_ivp
 __all__ = [
     "bound_sigma",
     "process_noise_bound",
+    "unknown_input_bound",
     "information_increments",
     "lambdified",
     "output_sensitivities",
@@ -170,5 +171,55 @@ def process_noise_bound(
         P = A @ P @ A.T + gain @ R @ gain.T
         P = 0.5 * (P + P.T)
         previous = flow[k]
+        out.append(np.sqrt(np.diag(P)))
+    return np.array(out)
+
+
+def _scaled_inverse(m: np.ndarray) -> np.ndarray:
+    """m⁻¹ as D (D m D)⁻¹ D, D = diag(m)^(-1/2) (scales differ by orders of magnitude)."""
+    diag = np.diag(m)
+    scale = 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0))
+    return scale[:, None] * np.linalg.inv(scale[:, None] * m * scale[None, :]) * scale[None, :]
+
+
+def unknown_input_bound(
+    F: np.ndarray,
+    H: np.ndarray,
+    load: np.ndarray | None,
+    variances: np.ndarray,
+    prior_covariance: np.ndarray,
+    process: np.ndarray,
+) -> np.ndarray:
+    """The posterior bound of z_k when, besides white process noise, an *unknown input* d_k
+    enters every sample interval along the column ``load[k]`` (n,) and nothing is assumed
+    about it: z_{k+1} = F_k z_k + e_k d_k + w_k, y_k = H_k z_k + v_k (the extended UIO's
+    premise, thesis 4.5: the road load is not modelled at all).
+
+    d_k with a flat prior is d_k ~ N(0, q_d) with q_d → ∞ (Kitanidis 1987; Gillijns & De Moor
+    2007: the unbiased minimum-variance filter is that limit of the Kalman filter). In
+    information form the limit is exact: with Y₀ = (F P Fᵀ + Q)⁻¹ the predicted information
+    is Y⁻ = Y₀ − Y₀ e (eᵀ Y₀ e)⁻¹ eᵀ Y₀ — the information along e projected out (the Schur
+    complement that marginalises d_k); then Y = Y⁻ + Hᵀ R⁻¹ H, P = Y⁻¹. Only e's direction
+    matters. ``F`` (N, n, n): F_k maps z_{k-1} to z_k (F[0] unused); ``process[k-1]`` and
+    ``load[k]`` over the same interval; ``variances`` (N, m), ``inf`` for no measurement at
+    a sample. Y must be invertible after each update (rank(C E) = rank(E), the matching
+    condition). ``load`` ``None``: no unknown input (the Kalman recursion along the truth).
+    Returns sqrt(diag P_k), shape (N, n)."""
+    F = np.asarray(F, dtype=float)
+    H = np.asarray(H, dtype=float)
+    P = np.asarray(prior_covariance, dtype=float).copy()
+    out = []
+    for k in range(len(H)):
+        if k > 0:
+            predicted = F[k] @ P @ F[k].T + process[k - 1]
+            Y = _scaled_inverse(0.5 * (predicted + predicted.T))
+            if load is not None:
+                e = np.asarray(load[k], dtype=float)
+                ey = Y @ e
+                Y = Y - np.outer(ey, ey) / float(e @ ey)
+        else:
+            Y = _scaled_inverse(P)
+        Y = Y + H[k].T @ (H[k] / np.asarray(variances[k], dtype=float)[:, None])
+        P = _scaled_inverse(0.5 * (Y + Y.T))
         out.append(np.sqrt(np.diag(P)))
     return np.array(out)

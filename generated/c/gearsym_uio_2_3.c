@@ -40,6 +40,28 @@ static const gearsym_real gear_2_T[9] = {
     GEARSYM_LIT(0.0), GEARSYM_LIT(1.0), GEARSYM_LIT(0.0),
     GEARSYM_LIT(-0.14023133577380484), GEARSYM_LIT(0.003100885130029634), GEARSYM_LIT(0.34674142163194344),
 };
+/* gear_2_DY: 1 x 3, column-major */
+static const gearsym_real gear_2_DY[3] = {
+    GEARSYM_LIT(-9167.959115339627),
+    GEARSYM_LIT(-2826.7873938963853),
+    GEARSYM_LIT(-13168.405649819422),
+};
+/* gear_2_DX: 1 x 3, column-major */
+static const gearsym_real gear_2_DX[3] = {
+    GEARSYM_LIT(-25851.246973424928),
+    GEARSYM_LIT(1800850.353898879),
+    GEARSYM_LIT(-29734.067020742496),
+};
+/* gear_2_DU0: 1 x 2, column-major */
+static const gearsym_real gear_2_DU0[2] = {
+    GEARSYM_LIT(-729.0291119637296),
+    GEARSYM_LIT(5804.1846),
+};
+/* gear_2_DU1: 1 x 2, column-major */
+static const gearsym_real gear_2_DU1[2] = {
+    GEARSYM_LIT(-378.29481605878226),
+    GEARSYM_LIT(2500.8124388529695),
+};
 
 void gearsym_uio_2_3_gear_2_init(const gearsym_real x0[3], gearsym_real z0[3])
 {
@@ -89,6 +111,27 @@ void gearsym_uio_2_3_gear_2_estimate(const gearsym_real z[3], const gearsym_real
     }
 }
 
+void gearsym_uio_2_3_gear_2_unknown_input(const gearsym_real x_hat[3],
+    const gearsym_real y_next[3], const gearsym_real u[2],
+    const gearsym_real u_next[2], gearsym_real d_hat[1])
+{
+    size_t i;
+    size_t j;
+    for (i = 0; i < 1u; ++i) {
+        gearsym_real acc = GEARSYM_LIT(0.0);
+        for (j = 0; j < 3u; ++j) {
+            acc += gear_2_DY[i + j * 1u] * y_next[j];
+        }
+        for (j = 0; j < 3u; ++j) {
+            acc -= gear_2_DX[i + j * 1u] * x_hat[j];
+        }
+        for (j = 0; j < 2u; ++j) {
+            acc -= gear_2_DU0[i + j * 1u] * u[j] + gear_2_DU1[i + j * 1u] * (u_next[j] - u[j]);
+        }
+        d_hat[i] = acc;
+    }
+}
+
 /* torque_and_speed_phase_F: 4 x 4, column-major */
 static const gearsym_real torque_and_speed_phase_F[16] = {
     GEARSYM_LIT(0.029829803844274694), GEARSYM_LIT(-0.10917162199097266), GEARSYM_LIT(0.0008351402513996574), GEARSYM_LIT(0.0027819700042094886),
@@ -128,6 +171,33 @@ static const gearsym_real torque_and_speed_phase_T[16] = {
     GEARSYM_LIT(-0.09744203329754435), GEARSYM_LIT(0.969789162015671), GEARSYM_LIT(0.0006679842350405489), GEARSYM_LIT(-0.1407238195880635),
     GEARSYM_LIT(0.0), GEARSYM_LIT(0.0), GEARSYM_LIT(1.0), GEARSYM_LIT(0.0),
     GEARSYM_LIT(-0.4538905912232771), GEARSYM_LIT(-0.1407238195880635), GEARSYM_LIT(0.003111508956761722), GEARSYM_LIT(0.34450036077363355),
+};
+/* torque_and_speed_phase_DY: 1 x 3, column-major */
+static const gearsym_real torque_and_speed_phase_DY[3] = {
+    GEARSYM_LIT(-9149.53977370755),
+    GEARSYM_LIT(-2836.7148588802957),
+    GEARSYM_LIT(-13213.58084244205),
+};
+/* torque_and_speed_phase_DX: 1 x 4, column-major */
+static const gearsym_real torque_and_speed_phase_DX[4] = {
+    GEARSYM_LIT(-9149.53977370755),
+    GEARSYM_LIT(3828.929282715666),
+    GEARSYM_LIT(1789086.2269343499),
+    GEARSYM_LIT(-29671.05622804248),
+};
+/* torque_and_speed_phase_DU0: 1 x 4, column-major */
+static const gearsym_real torque_and_speed_phase_DU0[4] = {
+    GEARSYM_LIT(-979.3983029840515),
+    GEARSYM_LIT(-255.07929309741758),
+    GEARSYM_LIT(-1559.123969114546),
+    GEARSYM_LIT(5804.184599999999),
+};
+/* torque_and_speed_phase_DU1: 1 x 4, column-major */
+static const gearsym_real torque_and_speed_phase_DU1[4] = {
+    GEARSYM_LIT(-503.31525954362144),
+    GEARSYM_LIT(-127.46432034699878),
+    GEARSYM_LIT(-793.0068966958913),
+    GEARSYM_LIT(2503.432902745184),
 };
 
 void gearsym_uio_2_3_torque_and_speed_phase_init(const gearsym_real x0[4], gearsym_real z0[4])
@@ -178,6 +248,27 @@ void gearsym_uio_2_3_torque_and_speed_phase_estimate(const gearsym_real z[4], co
     }
 }
 
+void gearsym_uio_2_3_torque_and_speed_phase_unknown_input(const gearsym_real x_hat[4],
+    const gearsym_real y_next[3], const gearsym_real u[4],
+    const gearsym_real u_next[4], gearsym_real d_hat[1])
+{
+    size_t i;
+    size_t j;
+    for (i = 0; i < 1u; ++i) {
+        gearsym_real acc = GEARSYM_LIT(0.0);
+        for (j = 0; j < 3u; ++j) {
+            acc += torque_and_speed_phase_DY[i + j * 1u] * y_next[j];
+        }
+        for (j = 0; j < 4u; ++j) {
+            acc -= torque_and_speed_phase_DX[i + j * 1u] * x_hat[j];
+        }
+        for (j = 0; j < 4u; ++j) {
+            acc -= torque_and_speed_phase_DU0[i + j * 1u] * u[j] + torque_and_speed_phase_DU1[i + j * 1u] * (u_next[j] - u[j]);
+        }
+        d_hat[i] = acc;
+    }
+}
+
 /* gear_3_F: 3 x 3, column-major */
 static const gearsym_real gear_3_F[9] = {
     GEARSYM_LIT(-0.32812214178264165), GEARSYM_LIT(0.007303636695958311), GEARSYM_LIT(0.3446464220736808),
@@ -211,6 +302,28 @@ static const gearsym_real gear_3_T[9] = {
     GEARSYM_LIT(0.8462552488970615), GEARSYM_LIT(0.004264770269202467), GEARSYM_LIT(-0.8888727902023852),
     GEARSYM_LIT(0.0), GEARSYM_LIT(1.0), GEARSYM_LIT(0.0),
     GEARSYM_LIT(-0.14637336640894386), GEARSYM_LIT(0.004060293289921698), GEARSYM_LIT(0.1537447511029384),
+};
+/* gear_3_DY: 1 x 3, column-major */
+static const gearsym_real gear_3_DY[3] = {
+    GEARSYM_LIT(-6645.706373100208),
+    GEARSYM_LIT(-2950.6936296564922),
+    GEARSYM_LIT(-17059.38746402537),
+};
+/* gear_3_DX: 1 x 3, column-major */
+static const gearsym_real gear_3_DX[3] = {
+    GEARSYM_LIT(-14967.723637716357),
+    GEARSYM_LIT(795409.3631601655),
+    GEARSYM_LIT(-24344.856219135505),
+};
+/* gear_3_DU0: 1 x 2, column-major */
+static const gearsym_real gear_3_DU0[2] = {
+    GEARSYM_LIT(-226.7168600948704),
+    GEARSYM_LIT(5804.1846),
+};
+/* gear_3_DU1: 1 x 2, column-major */
+static const gearsym_real gear_3_DU1[2] = {
+    GEARSYM_LIT(-116.71466441947462),
+    GEARSYM_LIT(2725.8124039744407),
 };
 
 void gearsym_uio_2_3_gear_3_init(const gearsym_real x0[3], gearsym_real z0[3])
@@ -258,5 +371,26 @@ void gearsym_uio_2_3_gear_3_estimate(const gearsym_real z[3], const gearsym_real
             acc += gear_3_H[i + j * 3u] * y[j];
         }
         x_hat[i] = acc;
+    }
+}
+
+void gearsym_uio_2_3_gear_3_unknown_input(const gearsym_real x_hat[3],
+    const gearsym_real y_next[3], const gearsym_real u[2],
+    const gearsym_real u_next[2], gearsym_real d_hat[1])
+{
+    size_t i;
+    size_t j;
+    for (i = 0; i < 1u; ++i) {
+        gearsym_real acc = GEARSYM_LIT(0.0);
+        for (j = 0; j < 3u; ++j) {
+            acc += gear_3_DY[i + j * 1u] * y_next[j];
+        }
+        for (j = 0; j < 3u; ++j) {
+            acc -= gear_3_DX[i + j * 1u] * x_hat[j];
+        }
+        for (j = 0; j < 2u; ++j) {
+            acc -= gear_3_DU0[i + j * 1u] * u[j] + gear_3_DU1[i + j * 1u] * (u_next[j] - u[j]);
+        }
+        d_hat[i] = acc;
     }
 }

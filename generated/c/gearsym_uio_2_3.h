@@ -13,6 +13,10 @@
  *   z_{k+1} = F z_k + G0 u_k + G1 (u_{k+1} - u_k) + K y_k,  x_hat_k = z_k + H y_k
  * with G0 = T B_d and G1 = T B_1 (formed in double at generation time),
  * so the estimation error obeys e_{k+1} = F e_k whatever the unknown inputs do.
+ * The unknown inputs over the sample from k to k+1 follow from the next measurement:
+ *   d_hat_k = DY y_{k+1} - DX x_hat_k - DU0 u_k - DU1 (u_{k+1} - u_k)
+ * with DY = L (L C E_d = I), DX = L C A_d, DU0 = L C B_d, DU1 = L C B_1: one sample
+ * late, and a differentiator: speed noise is amplified by about |DY|.
  * y are the measured speeds (3.31), u the known inputs of the phase; every vector is in
  * the order of the index macros below. gearsym_real is double; define
  * GEARSYM_SINGLE_PRECISION (for this file and the .c) for float.
@@ -42,6 +46,7 @@ typedef double gearsym_real;
 #define GEARSYM_UIO_2_3_GEAR_2_NX 3
 #define GEARSYM_UIO_2_3_GEAR_2_NY 3
 #define GEARSYM_UIO_2_3_GEAR_2_NU 2
+#define GEARSYM_UIO_2_3_GEAR_2_ND 1
 #define GEARSYM_UIO_2_3_GEAR_2_X_omega_2 0
 #define GEARSYM_UIO_2_3_GEAR_2_X_phi 1
 #define GEARSYM_UIO_2_3_GEAR_2_X_omega_C 2
@@ -50,6 +55,7 @@ typedef double gearsym_real;
 #define GEARSYM_UIO_2_3_GEAR_2_Y_y_omega_C 2
 #define GEARSYM_UIO_2_3_GEAR_2_U_T_In 0
 #define GEARSYM_UIO_2_3_GEAR_2_U_zeta 1
+#define GEARSYM_UIO_2_3_GEAR_2_D_T_res_star 0
 
 /* z0 = T x0 for a first guess x0 of the state (gear 2). */
 void gearsym_uio_2_3_gear_2_init(const gearsym_real x0[3], gearsym_real z0[3]);
@@ -60,11 +66,17 @@ void gearsym_uio_2_3_gear_2_step(const gearsym_real z[3], const gearsym_real y[3
 /* The state estimate x_hat = z + H y (gear 2). */
 void gearsym_uio_2_3_gear_2_estimate(const gearsym_real z[3], const gearsym_real y[3],
     gearsym_real x_hat[3]);
+/* The unknown inputs (T_res_star) over the sample from k to k+1
+   (gear 2): d_hat = DY y_next - DX x_hat - DU0 u - DU1 (u_next - u). */
+void gearsym_uio_2_3_gear_2_unknown_input(const gearsym_real x_hat[3],
+    const gearsym_real y_next[3], const gearsym_real u[2],
+    const gearsym_real u_next[2], gearsym_real d_hat[1]);
 
 /* Phase torque and speed phase: unknown T_res_star; spectral radius of F 0.381963. */
 #define GEARSYM_UIO_2_3_TORQUE_AND_SPEED_PHASE_NX 4
 #define GEARSYM_UIO_2_3_TORQUE_AND_SPEED_PHASE_NY 3
 #define GEARSYM_UIO_2_3_TORQUE_AND_SPEED_PHASE_NU 4
+#define GEARSYM_UIO_2_3_TORQUE_AND_SPEED_PHASE_ND 1
 #define GEARSYM_UIO_2_3_TORQUE_AND_SPEED_PHASE_X_omega_1 0
 #define GEARSYM_UIO_2_3_TORQUE_AND_SPEED_PHASE_X_omega_2 1
 #define GEARSYM_UIO_2_3_TORQUE_AND_SPEED_PHASE_X_phi 2
@@ -76,6 +88,7 @@ void gearsym_uio_2_3_gear_2_estimate(const gearsym_real z[3], const gearsym_real
 #define GEARSYM_UIO_2_3_TORQUE_AND_SPEED_PHASE_U_T_K38 1
 #define GEARSYM_UIO_2_3_TORQUE_AND_SPEED_PHASE_U_T_B05 2
 #define GEARSYM_UIO_2_3_TORQUE_AND_SPEED_PHASE_U_zeta 3
+#define GEARSYM_UIO_2_3_TORQUE_AND_SPEED_PHASE_D_T_res_star 0
 
 /* z0 = T x0 for a first guess x0 of the state (torque and speed phase). */
 void gearsym_uio_2_3_torque_and_speed_phase_init(const gearsym_real x0[4], gearsym_real z0[4]);
@@ -86,11 +99,17 @@ void gearsym_uio_2_3_torque_and_speed_phase_step(const gearsym_real z[4], const 
 /* The state estimate x_hat = z + H y (torque and speed phase). */
 void gearsym_uio_2_3_torque_and_speed_phase_estimate(const gearsym_real z[4], const gearsym_real y[3],
     gearsym_real x_hat[4]);
+/* The unknown inputs (T_res_star) over the sample from k to k+1
+   (torque and speed phase): d_hat = DY y_next - DX x_hat - DU0 u - DU1 (u_next - u). */
+void gearsym_uio_2_3_torque_and_speed_phase_unknown_input(const gearsym_real x_hat[4],
+    const gearsym_real y_next[3], const gearsym_real u[4],
+    const gearsym_real u_next[4], gearsym_real d_hat[1]);
 
 /* Phase gear 3: unknown T_res_star; spectral radius of F 0.00705339. */
 #define GEARSYM_UIO_2_3_GEAR_3_NX 3
 #define GEARSYM_UIO_2_3_GEAR_3_NY 3
 #define GEARSYM_UIO_2_3_GEAR_3_NU 2
+#define GEARSYM_UIO_2_3_GEAR_3_ND 1
 #define GEARSYM_UIO_2_3_GEAR_3_X_omega_2 0
 #define GEARSYM_UIO_2_3_GEAR_3_X_phi 1
 #define GEARSYM_UIO_2_3_GEAR_3_X_omega_C 2
@@ -99,6 +118,7 @@ void gearsym_uio_2_3_torque_and_speed_phase_estimate(const gearsym_real z[4], co
 #define GEARSYM_UIO_2_3_GEAR_3_Y_y_omega_C 2
 #define GEARSYM_UIO_2_3_GEAR_3_U_T_In 0
 #define GEARSYM_UIO_2_3_GEAR_3_U_zeta 1
+#define GEARSYM_UIO_2_3_GEAR_3_D_T_res_star 0
 
 /* z0 = T x0 for a first guess x0 of the state (gear 3). */
 void gearsym_uio_2_3_gear_3_init(const gearsym_real x0[3], gearsym_real z0[3]);
@@ -109,6 +129,11 @@ void gearsym_uio_2_3_gear_3_step(const gearsym_real z[3], const gearsym_real y[3
 /* The state estimate x_hat = z + H y (gear 3). */
 void gearsym_uio_2_3_gear_3_estimate(const gearsym_real z[3], const gearsym_real y[3],
     gearsym_real x_hat[3]);
+/* The unknown inputs (T_res_star) over the sample from k to k+1
+   (gear 3): d_hat = DY y_next - DX x_hat - DU0 u - DU1 (u_next - u). */
+void gearsym_uio_2_3_gear_3_unknown_input(const gearsym_real x_hat[3],
+    const gearsym_real y_next[3], const gearsym_real u[2],
+    const gearsym_real u_next[2], gearsym_real d_hat[1]);
 
 #ifdef __cplusplus
 }

@@ -11,8 +11,12 @@ parameter change needs a new ``generate``). Per phase ``<ph>`` the C file has
   z_{k+1} = F z_k + T B_d u_k + T B_1 (u_{k+1} − u_k) + K y_k (first-order hold of the known
   inputs; B_1 = 0 for a zero-order hold),
 * ``<prefix><ph>_estimate(z, y, x_hat)``: x̂_k = z_k + H y_k,
+* ``<prefix><ph>_unknown_input(x_hat, y_next, u, u_next, d_hat)``: the unknown inputs over the
+  sample from k to k+1, d̂_k = L (y_{k+1} − C A_d x̂_k − C B_d u_k − C B_1 (u_{k+1} − u_k))
+  (:meth:`~gearsym.symbolic.estimators.uio.UioDesign.unknown_input`; L C E_d = I),
 
-with the products T B_d and T B_1 formed in double precision at generation time. C99, no
+with the products T B_d, T B_1, L C A_d, L C B_d and L C B_1 formed in double precision at
+generation time. C99, no
 dynamic memory, no mutable static data (the matrices are ``static const``), const inputs.
 """
 
@@ -49,6 +53,10 @@ def _matrices(design: UioDesign) -> dict[str, np.ndarray]:
         "K": design.K,
         "H": design.H,
         "T": design.T,
+        "DY": design.left_inverse,
+        "DX": design.left_inverse @ design.C @ design.Ad,
+        "DU0": design.left_inverse @ design.C @ design.Bd,
+        "DU1": design.left_inverse @ design.C @ design.B1,
     }
 
 
@@ -92,6 +100,10 @@ def emit_uio_files(
         " *   z_{k+1} = F z_k + G0 u_k + G1 (u_{k+1} - u_k) + K y_k,  x_hat_k = z_k + H y_k",
         " * with G0 = T B_d and G1 = T B_1 (formed in double at generation time),",
         " * so the estimation error obeys e_{k+1} = F e_k whatever the unknown inputs do.",
+        " * The unknown inputs over the sample from k to k+1 follow from the next measurement:",
+        " *   d_hat_k = DY y_{k+1} - DX x_hat_k - DU0 u_k - DU1 (u_{k+1} - u_k)",
+        " * with DY = L (L C E_d = I), DX = L C A_d, DU0 = L C B_d, DU1 = L C B_1: one sample",
+        " * late, and a differentiator: speed noise is amplified by about |DY|.",
         " * y are the measured speeds (3.31), u the known inputs of the phase; every vector is in",
         " * the order of the index macros below. gearsym_real is double; define",
         " * GEARSYM_SINGLE_PRECISION (for this file and the .c) for float.",
@@ -131,6 +143,7 @@ def emit_uio_files(
         ph = phase_identifier(design.phase)
         pm = f"{macro}{ph.upper()}_"
         nx, ny, nu = len(design.states), len(design.outputs), len(design.known)
+        nd = len(design.unknown)
         rho = design.spectral_radius
         h += [
             "",
@@ -139,10 +152,12 @@ def emit_uio_files(
             f"#define {pm}NX {nx}",
             f"#define {pm}NY {ny}",
             f"#define {pm}NU {nu}",
+            f"#define {pm}ND {nd}",
         ]
         h += [f"#define {pm}X_{s} {i}" for i, s in enumerate(design.states)]
         h += [f"#define {pm}Y_{s} {i}" for i, s in enumerate(design.outputs)]
         h += [f"#define {pm}U_{s} {i}" for i, s in enumerate(design.known)]
+        h += [f"#define {pm}D_{s} {i}" for i, s in enumerate(design.unknown)]
         h += [
             "",
             f"/* z0 = T x0 for a first guess x0 of the state ({design.phase}). */",
@@ -154,10 +169,15 @@ def emit_uio_files(
             f"/* The state estimate x_hat = z + H y ({design.phase}). */",
             f"void {prefix}{ph}_estimate(const gearsym_real z[{nx}], const gearsym_real y[{ny}],",
             f"    gearsym_real x_hat[{nx}]);",
+            f"/* The unknown inputs ({', '.join(design.unknown)}) over the sample from k to k+1",
+            f"   ({design.phase}): d_hat = DY y_next - DX x_hat - DU0 u - DU1 (u_next - u). */",
+            f"void {prefix}{ph}_unknown_input(const gearsym_real x_hat[{nx}],",
+            f"    const gearsym_real y_next[{ny}], const gearsym_real u[{max(nu, 1)}],",
+            f"    const gearsym_real u_next[{max(nu, 1)}], gearsym_real d_hat[{nd}]);",
         ]
         mats = _matrices(design)
         c.append("")
-        for key in ("F", "G0", "G1", "K", "H", "T"):
+        for key in ("F", "G0", "G1", "K", "H", "T", "DY", "DX", "DU0", "DU1"):
             c += _c_array(f"{ph}_{key}", mats[key])
         c += [
             "",
@@ -209,6 +229,28 @@ def emit_uio_files(
             "        x_hat[i] = acc;",
             "    }",
             "}",
+            "",
+            f"void {prefix}{ph}_unknown_input(const gearsym_real x_hat[{nx}],",
+            f"    const gearsym_real y_next[{ny}], const gearsym_real u[{max(nu, 1)}],",
+            f"    const gearsym_real u_next[{max(nu, 1)}], gearsym_real d_hat[{nd}])",
+            "{",
+            "    size_t i;",
+            "    size_t j;",
+            f"    for (i = 0; i < {nd}u; ++i) {{",
+            "        gearsym_real acc = GEARSYM_LIT(0.0);",
+            f"        for (j = 0; j < {ny}u; ++j) {{",
+            f"            acc += {ph}_DY[i + j * {nd}u] * y_next[j];",
+            "        }",
+            f"        for (j = 0; j < {nx}u; ++j) {{",
+            f"            acc -= {ph}_DX[i + j * {nd}u] * x_hat[j];",
+            "        }",
+            f"        for (j = 0; j < {nu}u; ++j) {{",
+            f"            acc -= {ph}_DU0[i + j * {nd}u] * u[j]"
+            f" + {ph}_DU1[i + j * {nd}u] * (u_next[j] - u[j]);",
+            "        }",
+            "        d_hat[i] = acc;",
+            "    }",
+            "}",
         ]
 
         def py_matrix(m: np.ndarray) -> str:
@@ -235,8 +277,9 @@ def emit_uio_files(
         "gearsym. Do not edit.",
         "",
         f"The same numbers as {header} / {source} (designed at the description's parameters",
-        "and SAMPLE_TIME); per phase ``step(z, y, u, u_next) -> z_next`` and",
-        '``estimate(z, y) -> x_hat`` (see the C header for the equations)."""',
+        "and SAMPLE_TIME); per phase ``step(z, y, u, u_next) -> z_next``,",
+        "``estimate(z, y) -> x_hat`` and ``unknown_input(x_hat, y_next, u, u_next) -> d_hat``",
+        '(see the C header for the equations)."""',
         "",
         "from __future__ import annotations",
         "",
@@ -257,16 +300,22 @@ def emit_uio_files(
         "",
         "",
         "def functions() -> dict[str, dict[str, ca.Function]]:",
-        '    """Per phase ``{"init", "step", "estimate"}`` as ``casadi.Function`` (SX)."""',
+        '    """Per phase ``{"init", "step", "estimate", "unknown_input"}`` as'
+        ' ``casadi.Function`` (SX)."""',
         "    out = {}",
         "    for ph, data in PHASES.items():",
         "        nx, ny, nu = len(data['states']), len(data['outputs']), len(data['known'])",
         "        f, g0, g1 = _dm(data['F']), _dm(data['G0']), _dm(data['G1'])",
         "        k, h, t = _dm(data['K']), _dm(data['H']), _dm(data['T'])",
+        "        dy, dx = _dm(data['DY']), _dm(data['DX'])",
+        "        du0, du1 = _dm(data['DU0']), _dm(data['DU1'])",
         "        z, y = ca.SX.sym('z', nx), ca.SX.sym('y', ny)",
         "        u, u_next, x0 = ca.SX.sym('u', nu), ca.SX.sym('u_next', nu), ca.SX.sym('x0', nx)",
         "        z_next = ca.mtimes(f, z) + ca.mtimes(g0, u) + ca.mtimes(g1, u_next - u)",
         "        z_next = z_next + ca.mtimes(k, y)",
+        "        x_hat, y_next = ca.SX.sym('x_hat', nx), ca.SX.sym('y_next', ny)",
+        "        d_hat = ca.mtimes(dy, y_next) - ca.mtimes(dx, x_hat) - ca.mtimes(du0, u)",
+        "        d_hat = d_hat - ca.mtimes(du1, u_next - u)",
         "        out[ph] = {",
         "            'init': ca.Function(f'{ph}_init', [x0], [ca.mtimes(t, x0)], ['x0'], ['z0']),",
         "            'step': ca.Function(",
@@ -275,6 +324,13 @@ def emit_uio_files(
         "            ),",
         "            'estimate': ca.Function(",
         "                f'{ph}_estimate', [z, y], [z + ca.mtimes(h, y)], ['z', 'y'], ['x_hat']",
+        "            ),",
+        "            'unknown_input': ca.Function(",
+        "                f'{ph}_unknown_input',",
+        "                [x_hat, y_next, u, u_next],",
+        "                [d_hat],",
+        "                ['x_hat', 'y_next', 'u', 'u_next'],",
+        "                ['d_hat'],",
         "            ),",
         "        }",
         "    return out",

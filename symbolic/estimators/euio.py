@@ -45,8 +45,10 @@ if TYPE_CHECKING:
 
 __all__ = [
     "EuioExistence",
+    "EuioStep",
     "euio_existence",
     "euio_step",
+    "euio_step_full",
     "load_column",
     "ROAD_FREE",
 ]
@@ -205,6 +207,23 @@ def euio_existence(
     return out
 
 
+@dataclass(frozen=True)
+class EuioStep:
+    """One EUIO step's results: the corrected estimate and covariance, d̂ with σ_d, and the
+    NIS of the innovation with d̂ removed.
+
+    ν = C E_d d + ν₀ with ν₀ ~ N(0, R̃): the part of ν that d cannot explain is its
+    R̃-orthogonal complement of C E_d, so NIS = νᵀ R̃⁻¹ ν − d̂² / σ_d² ~ χ²(m − 1) whatever d
+    is (m outputs; d̂ = M ν, σ_d² = (E_dᵀ Cᵀ R̃⁻¹ C E_d)⁻¹)."""
+
+    z: np.ndarray
+    P: np.ndarray
+    d_hat: float
+    sigma_d: float
+    nis: float
+    nis_dof: int
+
+
 def euio_step(
     discrete: Any,
     z: np.ndarray,
@@ -223,7 +242,26 @@ def euio_step(
     correct with the measurement ``y`` (variances ``R``). ``held``: state indices whose
     estimate and variance stay unchanged (no random walk, zero gain row).
     Returns (z, P, d̂, σ_d); with a non-finite measurement only the prediction is done and
-    d̂ is NaN."""
+    d̂ is NaN. :func:`euio_step_full` also returns the NIS."""
+    s = euio_step_full(discrete, z, P, u_prev, u, y, R, h, p, q, e, held)
+    return s.z, s.P, s.d_hat, s.sigma_d
+
+
+def euio_step_full(
+    discrete: Any,
+    z: np.ndarray,
+    P: np.ndarray,
+    u_prev: Sequence[float],
+    u: Sequence[float],
+    y: np.ndarray,
+    R: np.ndarray,
+    h: float,
+    p: Sequence[float],
+    q: np.ndarray,
+    e: np.ndarray,
+    held: Sequence[int],
+) -> EuioStep:
+    """:func:`euio_step` with the NIS of :class:`EuioStep` (NaN, dof 0, without an update)."""
     import numpy as np
 
     z_pred, F = discrete.step(z, u_prev, h, p)
@@ -232,7 +270,7 @@ def euio_step(
     P_pred = F @ P @ F.T + np.diag(h * rates)
     P_pred = 0.5 * (P_pred + P_pred.T)
     if not np.all(np.isfinite(y)):
-        return z_pred, P_pred, float("nan"), float("nan")
+        return EuioStep(z_pred, P_pred, float("nan"), float("nan"), float("nan"), 0)
     a = np.asarray(discrete.J(z, u_prev, p), dtype=float)
     ha = h * a
     ed = h * (e + ha @ e / 2 + ha @ (ha @ e) / 6 + ha @ (ha @ (ha @ e)) / 24)
@@ -250,4 +288,7 @@ def euio_step(
     z_new = z_pred + L @ nu
     A = np.eye(len(z)) - L @ C
     P_new = A @ P_pred @ A.T + L @ np.diag(R) @ L.T
-    return z_new, 0.5 * (P_new + P_new.T), d_hat, float(np.sqrt(1.0 / info))
+    nis = float(nu @ rt_inv @ nu) - d_hat * d_hat * info
+    return EuioStep(
+        z_new, 0.5 * (P_new + P_new.T), d_hat, float(np.sqrt(1.0 / info)), nis, len(y) - 1
+    )

@@ -319,6 +319,19 @@ class UioDesign:
         x0 = np.zeros(len(self.states)) if x0_guess is None else np.asarray(x0_guess, float)
         return self.T @ x0
 
+    def unknown_input(
+        self, x_hat: np.ndarray, y_next: np.ndarray, u: np.ndarray, u_next: np.ndarray
+    ) -> np.ndarray:
+        """d̂_k = L (y_{k+1} − C A_d x̂_k − C B_d u_k − C B_1 (u_{k+1} − u_k)) (4.4): the unknown
+        inputs over the sample from k to k+1, one sample late (L C E_d = I: exact for a held
+        input and an exact x̂_k; a differentiator, so speed noise is amplified by about |L|).
+        What :meth:`run` returns per sample, and the emitted ``_unknown_input`` computes."""
+        import numpy as np
+
+        x_hat, u, u_next = (np.asarray(v, float) for v in (x_hat, u, u_next))
+        predicted = self.C @ (self.Ad @ x_hat + self.Bd @ u + self.B1 @ (u_next - u))
+        return self.left_inverse @ (np.asarray(y_next, float) - predicted)
+
     def run(
         self, y: np.ndarray, u: np.ndarray, x0_guess: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
