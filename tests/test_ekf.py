@@ -226,7 +226,20 @@ def _sliding_windows(result) -> dict[str, tuple[float, float]]:
     }
 
 
-def test_mu_is_frozen_while_its_element_does_not_slide(ekf_run, reference):
+@pytest.fixture(scope="module")
+def reference_modes_run(reference, aug, discrete):
+    """The run with the reference's element modes (``modes="reference"``): their sliding
+    windows are the scenario's; the filter's own modes are tested in tests/test_ekf_modes.py."""
+    from gearsym.validation.estimation import run_ekf
+
+    d, result = reference
+    return run_ekf(
+        d, result, sample_time=0.01, seed=0, aug=aug, discrete=discrete, modes="reference"
+    )
+
+
+def test_mu_is_frozen_while_its_element_does_not_slide(reference_modes_run, reference):
+    ekf_run = reference_modes_run
     names = list(ekf_run.state_names)
     for mu, slides in _sliding_windows(reference[1]).items():
         j = names.index(mu)
