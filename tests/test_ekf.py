@@ -309,6 +309,15 @@ def test_estimate_ekf_command(tmp_path):
     for key in ("truth", "initial", "estimate", "sigma", "rmse", "crb_sigma", "efficiency"):
         assert key in data["parameters"]["m_veh"]
     assert data["parameters"]["m_veh"]["initial"] == 1500.0
+    # the filter decided its element modes itself (default) and says how close it came
+    assert data["modes"] == "filter"
+    assert {(e["element"], e["kind"]) for e in data["events"]} >= {
+        ("K38", "break-away"),
+        ("B05", "lock-up"),
+    }
+    for event in data["events"]:
+        if event["t_reference"] is not None:
+            assert event["detected_runs"] == 1 and abs(event["error_ms_mean"]) <= 20.0
     assert "run 1 of 1" in run.stderr  # the Monte-Carlo progress bar (one run by default)
     for key in ("nees_mean", "nees_band", "nis_mean", "phases", "sample_time"):
         assert key in data
@@ -327,6 +336,7 @@ def test_estimate_ekf_command(tmp_path):
     ]
     header = (out / "ekf.csv").read_text().splitlines()[0].split(",")
     assert header[:5] == ["t", "phase", "omega_1_hat", "omega_1_sigma", "omega_1"]
+    assert header[-2:] == ["mode_K38", "mode_B05"]
     for bad, key in (
         (("--initial", "m_veh"), "--initial"),
         (("--initial", "m_car=3"), "--initial"),
@@ -334,6 +344,7 @@ def test_estimate_ekf_command(tmp_path):
         (("--noise", "0"), "--noise"),
         (("--runs", "0"), "--runs"),
         (("--runs", "2", "--filter", "uio"), "--runs"),
+        (("--modes", "filter", "--filter", "uio"), "--modes"),
     ):
         result = gearsym(*bad, "--out", str(tmp_path / "never"))
         assert result.returncode == 2 and key in result.stderr, (bad, result.stderr)

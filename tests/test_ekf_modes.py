@@ -181,10 +181,13 @@ def test_the_sticking_torque_agrees_with_the_constraint_it_replaces(logic, aug):
 
 # ------------------------------------------------------ the filter's modes on the 2-3 shift
 
-#: Samples (10 ms) by which a detected switch may differ from the truth's: the filter sees
-#: the shift only at its samples, so a switch between two samples shows at the next one (up
-#: to one sample late); one more either way for the noise on the estimated slip and torque.
-SAMPLES = 2
+#: Samples (10 ms) by which a detected switch may differ from the truth's, counted from the
+#: first sample at or after the truth's switch (the filter sees the shift only at its samples,
+#: so a switch between two samples can show at the next one at the earliest): at most this
+#: many samples late, at most one early (the noise on the estimated slip and torque).
+#: Measured over seeds 0-49: the lock-up of B05 is detected up to 2 samples late, every other
+#: switch at that first sample.
+SAMPLES_LATE = 2
 SEEDS = range(10)
 
 
@@ -210,7 +213,7 @@ def runs(setup):
     return [filter_run(setup, seed) for seed in SEEDS]
 
 
-def test_detected_switches_are_within_two_samples_of_the_reference(setup, runs):
+def test_detected_switches_are_within_two_samples_of_the_reference_ones(setup, runs):
     truth = setup.reference_switches
     # the truth of the power-on 2-3: K38 breaks away, B05 engages, K38 opens, B05 locks up
     assert sorted((m.element, m.kind) for m in truth) == sorted(
@@ -225,7 +228,9 @@ def test_detected_switches_are_within_two_samples_of_the_reference(setup, runs):
         assert len(events) == len(truth)
         for e in events:
             assert e["t_detected"] is not None, e
-            assert abs(e["t_detected"] - e["t_reference"]) <= SAMPLES * h + 1e-9, e
+            first = int(np.ceil(e["t_reference"] / h - 1e-9))  # first sample at or after it
+            late = round(e["t_detected"] / h) - first
+            assert -1 <= late <= SAMPLES_LATE, e
             assert e["error_ms"] == pytest.approx(1e3 * (e["t_detected"] - e["t_reference"]))
         data = run.to_dict()
         assert data["modes"] == "filter" and data["events"] == events
@@ -263,3 +268,24 @@ def test_reference_modes_remain_available_and_report_their_source(d, result, set
     gap = np.abs(run.estimates - runs[0].estimates) / runs[0].sigmas
     assert np.max(gap) > 0
     assert np.all(gap[-1, aug.n_x :] < 3)
+
+
+def test_estimate_command_with_the_reference_modes_says_so():
+    import json
+    import subprocess
+    import sys
+
+    run = subprocess.run(
+        [sys.executable, "-m", "gearsym", "estimate", "--filter", "ekf", "--modes", "reference"]
+        + ["--json"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert run.returncode == 0, run.stderr
+    data = json.loads(run.stdout)
+    assert data["modes"] == "reference"
+    truth = [e for e in data["events"] if e["t_reference"] is not None]
+    assert len(truth) == 4 and all(e["detected_runs"] == 1 for e in truth)
+    # the reference's own modes, sampled: each switch shows at the next sample at the latest
+    assert all(0 <= e["error_ms_mean"] < 10.0 + 1e-9 for e in truth)
