@@ -233,7 +233,10 @@ def augmented_model(
     flags = {
         e: (
             Variable(
-                slide_input(e), sp.Symbol(slide_input(e), real=True), "1", f"1 while {e} slides"
+                slide_input(e),
+                sp.Symbol(slide_input(e), real=True),
+                "1",
+                f"+1/-1 while {e} slides with/against its power-on slip sign",
             ),
             Variable(
                 stick_input(e), sp.Symbol(stick_input(e), real=True), "1", f"1 while {e} sticks"

@@ -39,6 +39,11 @@ Mode codes per element: :data:`OPEN` 0, :data:`SLIDE_POS` +1 / :data:`SLIDE_NEG`
 with, or against, the power-on slip sign :attr:`~.ekf.AugmentedModel.slip_sign`), and
 :data:`STICK` 2; the filter's inputs ``slide_<E>`` = ±1/0 and ``stick_<E>`` = 1/0 follow from
 them (:meth:`ModeLogic.inputs`).
+
+The same logic is emitted as C beside ``ekf_predict``/``ekf_update``
+(``ekf_mode_quantities``: slip, sticking torque and capacity per element from the same
+expressions; ``ekf_mode_update``: this function, the lock-up maps as constants;
+:func:`gearsym.symbolic.generate.ekf_model`), and ``tests/test_ekf_c.py`` holds the two equal.
 """
 
 from __future__ import annotations
