@@ -76,7 +76,7 @@ def sequence(seed: int = SEED, sample_time: float = SAMPLE_TIME) -> Sequence:
 
     d = load_description(None)
     result = simulate(d, load_scenario(d, None))
-    s = prepare_ekf(d, result, sample_time)
+    s = prepare_ekf(d, result, sample_time, modes="reference")  # the peers take u as given
     y = s.y_true + np.random.default_rng(seed).normal(0.0, 1.0, s.y_true.shape) * s.sigma_y
     z = s.initial.copy()
     for k, name in enumerate(s.outputs):

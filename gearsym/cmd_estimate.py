@@ -49,6 +49,10 @@ def cmd_estimate(args: argparse.Namespace) -> int:
             "--sample-time",
             f"must be in (0, {scenario.t_end / 4:g}] s, got {args.sample_time!r}",
         )
+    if args.modes is not None and args.filter != "ekf":
+        raise GearsymError("estimate", "--modes", "is for --filter ekf only")
+    if args.modes is None:
+        args.modes = "filter"
     if args.drive is not None:
         if args.filter != "ekf":
             raise GearsymError("estimate", "--drive", "is for --filter ekf only")
@@ -281,7 +285,14 @@ def _cmd_drive(args: argparse.Namespace, d: Any) -> int:
 
     results = [simulate_with_progress(d, sc) for sc in scenarios]
     _say("running the EKF through the shifts, m_veh and zeta carried")
-    runs = run_ekf_drive(d, results, seed=args.seed, sample_time=args.sample_time, initial=initial)
+    runs = run_ekf_drive(
+        d,
+        results,
+        seed=args.seed,
+        sample_time=args.sample_time,
+        initial=initial,
+        modes=args.modes,
+    )
     if args.json:
         data = {"filter": "ekf", "drive": [r.to_dict() for r in runs]}
         json.dump(data, sys.stdout, indent=2)
@@ -378,6 +389,7 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
             relative_noise=noise,
             initial=initial,
             aug=aug,
+            modes=args.modes,
         )
         bar = ProgressBar(f"EKF, {args.runs} run{'s' if args.runs > 1 else ''}")
         try:
@@ -499,6 +511,7 @@ def _cmd_measured(args: argparse.Namespace, d: Any, scenario: Any) -> int:
             initial=initial,
             aug=aug,
             measured={o: measurement.values[o] for o in outputs},
+            modes=args.modes or "filter",
         )
         _say("running the EKF on the recording")
         run = filter_run(setup, dropout=window, dropout_outputs=dropout_outputs)
@@ -509,8 +522,12 @@ def _cmd_measured(args: argparse.Namespace, d: Any, scenario: Any) -> int:
                 f"samples every {cmap.sample_time * 1e3:g} ms; {RESAMPLE_TEXT})",
                 "inputs: "
                 + ", ".join(f"{name} from the {where}" for name, where in sources.items()),
-                "element modes and phases: from the reference simulation driven by those "
-                "inputs (scenario "
+                (
+                    "element modes: decided by the filter from its estimate and F_N"
+                    if (args.modes or "filter") == "filter"
+                    else "element modes: from the reference simulation driven by those inputs"
+                )
+                + "; phases: from the reference simulation driven by those inputs (scenario "
                 f"{scenario.name}, {args.scenario or 'built-in'})",
             ]
         )
@@ -663,6 +680,17 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         help="ekf: run the filter through consecutive shifts (each its own scenario), "
         "carrying m_veh and zeta with their covariance; 'upshifts' is the shipped 1-2, 2-3, "
         "3-4",
+    )
+    p.add_argument(
+        "--modes",
+        choices=("filter", "reference"),
+        default=None,
+        help="ekf: where the element modes (stick, slide, open) come from: 'filter' (default) "
+        "decides them itself from its estimate and F_N, as a TCU must (lock-up when the "
+        "estimated slip reaches zero and the sticking torque is within 2 N r_m mu_hat F_N, "
+        "break-away when it exceeds it, open while F_N = 0); 'reference' takes the reference "
+        "simulation's (the truth), for comparison; the output reports the detected switch "
+        "times against the reference's",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG")
     p.add_argument("--json", action="store_true", help="machine-readable output")

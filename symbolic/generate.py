@@ -455,7 +455,10 @@ def ekf_model(
 ) -> EmittedModel:
     """The EKF (4.3) of a shift: its augmented model (4.1) with the predict and update rows;
     each μ state is frozen while its element's ``slide_<E>`` input is not set."""
-    from gearsym.symbolic.estimators.ekf import augmented_model, slide_input
+    from gearsym.symbolic.codegen import EkfModeElement
+    from gearsym.symbolic.drivetrain import element_short_name
+    from gearsym.symbolic.estimators.ekf import augmented_model, slide_input, stick_input
+    from gearsym.symbolic.estimators.ekf_modes import LOCK_UP_CONFIDENCE, lock_up_map
 
     if say is not None:
         say(f"deriving the augmented model of shift {spec.name} for the EKF (4.1, 4.3)")
@@ -463,6 +466,24 @@ def ekf_model(
     states, inputs = aug.state_names, aug.input_names
     frozen = tuple(
         (states.index(mu), inputs.index(slide_input(e))) for e, mu in aug.mu_state.items()
+    )
+    n = aug.n_x
+    modes = []
+    for e in aug.elements:
+        A = lock_up_map(d, aug, e)
+        modes.append(
+            EkfModeElement(
+                e,
+                inputs.index(naming.normal_force(element_short_name(d, e))),
+                inputs.index(slide_input(e)),
+                inputs.index(stick_input(e)),
+                aug.slip_sign[e],
+                states.index(aug.mu_state[e]) if e in aug.mu_state else -1,
+                tuple(tuple(A[i, j] for j in range(n)) for i in range(n)),
+            )
+        )
+    quantities = sp.ImmutableMatrix(
+        [q for e in aug.elements for q in (aug.slip[e], aug.sticking_torque[e], aug.capacity[e])]
     )
     what = f"shift {spec.name}: EKF of {', '.join(aug.parameters)} (4.1, 4.3)"
     return EmittedModel(
@@ -472,7 +493,7 @@ def ekf_model(
         what,
         spec,
         integrators=("rk4",),
-        ekf=EkfLayout(frozen),
+        ekf=EkfLayout(frozen, tuple(modes), quantities, LOCK_UP_CONFIDENCE),
     )
 
 

@@ -226,7 +226,20 @@ def _sliding_windows(result) -> dict[str, tuple[float, float]]:
     }
 
 
-def test_mu_is_frozen_while_its_element_does_not_slide(ekf_run, reference):
+@pytest.fixture(scope="module")
+def reference_modes_run(reference, aug, discrete):
+    """The run with the reference's element modes (``modes="reference"``): their sliding
+    windows are the scenario's; the filter's own modes are tested in tests/test_ekf_modes.py."""
+    from gearsym.validation.estimation import run_ekf
+
+    d, result = reference
+    return run_ekf(
+        d, result, sample_time=0.01, seed=0, aug=aug, discrete=discrete, modes="reference"
+    )
+
+
+def test_mu_is_frozen_while_its_element_does_not_slide(reference_modes_run, reference):
+    ekf_run = reference_modes_run
     names = list(ekf_run.state_names)
     for mu, slides in _sliding_windows(reference[1]).items():
         j = names.index(mu)
@@ -296,6 +309,15 @@ def test_estimate_ekf_command(tmp_path):
     for key in ("truth", "initial", "estimate", "sigma", "rmse", "crb_sigma", "efficiency"):
         assert key in data["parameters"]["m_veh"]
     assert data["parameters"]["m_veh"]["initial"] == 1500.0
+    # the filter decided its element modes itself (default) and says how close it came
+    assert data["modes"] == "filter"
+    assert {(e["element"], e["kind"]) for e in data["events"]} >= {
+        ("K38", "break-away"),
+        ("B05", "lock-up"),
+    }
+    for event in data["events"]:
+        if event["t_reference"] is not None:
+            assert event["detected_runs"] == 1 and abs(event["error_ms_mean"]) <= 20.0
     assert "run 1 of 1" in run.stderr  # the Monte-Carlo progress bar (one run by default)
     for key in ("nees_mean", "nees_band", "nis_mean", "phases", "sample_time"):
         assert key in data
@@ -314,6 +336,7 @@ def test_estimate_ekf_command(tmp_path):
     ]
     header = (out / "ekf.csv").read_text().splitlines()[0].split(",")
     assert header[:5] == ["t", "phase", "omega_1_hat", "omega_1_sigma", "omega_1"]
+    assert header[-2:] == ["mode_K38", "mode_B05"]
     for bad, key in (
         (("--initial", "m_veh"), "--initial"),
         (("--initial", "m_car=3"), "--initial"),
@@ -321,6 +344,7 @@ def test_estimate_ekf_command(tmp_path):
         (("--noise", "0"), "--noise"),
         (("--runs", "0"), "--runs"),
         (("--runs", "2", "--filter", "uio"), "--runs"),
+        (("--modes", "filter", "--filter", "uio"), "--modes"),
     ):
         result = gearsym(*bad, "--out", str(tmp_path / "never"))
         assert result.returncode == 2 and key in result.stderr, (bad, result.stderr)

@@ -192,3 +192,88 @@ def test_float_covariance_stays_symmetric_positive_definite_for_a_million_steps(
     # and the float filter still estimates: the mass of the harness' truth (1800 kg) within 3σ
     mass, sigma = float(words[3]), float(words[5])
     assert abs(mass - 1800.0) < 3 * sigma
+
+
+def test_emitted_mode_update_equals_the_reference_mode_logic(emitted, libraries):
+    """``ekf_mode_update`` in C against :func:`ekf_mode_update` (NumPy/CasADi) on the filter's
+    own run of the default shift and on states built around each element's lock-up and
+    break-away: the same modes and switch count; x and P to 1e-12 in double (scaled as above)
+    and 1e-5 in float, the float decisions compared where the deciding margin (slip against
+    zero, |torque| against the capacity) exceeds float rounding."""
+    from gearsym.symbolic.estimators.ekf_modes import ModeLogic, ekf_mode_update
+    from gearsym.validation.estimation import filter_run, prepare_ekf
+    from gearsym.validation.scenario import load_scenario
+    from gearsym.validation.simulate import simulate
+
+    d, m = emitted
+    libs, _, _ = libraries
+    result = simulate(d, load_scenario(d, None))
+    setup = prepare_ekf(d, result, sample_time=0.01)
+    logic: ModeLogic = setup.logic
+    aug = setup.aug
+    run = filter_run(setup, 2)
+    p = setup.p
+    rng = np.random.default_rng(5)
+    elements = list(logic.elements)
+    cases = []
+    for k in range(len(run.t)):
+        before = {e: int(run.modes[e][k - 1]) if k else logic.initial_modes()[e] for e in elements}
+        cases.append((run.estimates[k], run.sigmas[k], setup.u[k], before))
+    # around the lock-up of each element: slip just either side of zero, every mode of the other
+    for element in elements:
+        c = np.array([float(aug.slip[element].coeff(s)) for s in aug.model.state_symbols[:2]])
+        for k in rng.choice(len(run.t), 12, replace=False):
+            z = run.estimates[k].copy()
+            z[0] = (-c[1] * z[1] + rng.normal(0.0, 0.5)) / c[0]
+            u = setup.u[k].copy()
+            u[logic.normal_force[element]] = max(u[logic.normal_force[element]], 2000.0)
+            for code in (1, -1, 2):
+                other = elements[1 - elements.index(element)]
+                for other_code in (0, 1, 2) if code != 2 else (0, 1):
+                    cases.append((z, run.sigmas[k], u, {element: code, other: other_code}))
+    fn = {single: libs[single].gearsym_ekf_2_3_ekf_mode_update for single in libs}
+    checked = {False: 0, True: 0}
+    worst = {False: 0.0, True: 0.0}
+    switched = 0
+    for z, sigma, u, before in cases:
+        C = np.corrcoef(rng.normal(size=(len(z), 3 * len(z))))
+        P = C * np.outer(sigma, sigma)
+        z_ref, P_ref, after, events = ekf_mode_update(logic, z, P, u, p, before)
+        switched += len(events)
+        slip, torque, capacity = logic._evaluate(np.asarray(z), logic.inputs(u, before), p)
+        # relative margins of the decisions (float carries about 7 digits)
+        margin = min(
+            float(np.min(np.abs(slip))) / (abs(z[0]) + abs(z[1])),
+            float(np.min(np.abs(np.abs(torque) - capacity) / (np.abs(torque) + capacity + 1.0))),
+        )
+        for single, f in fn.items():
+            real = ctypes.c_float if single else ctypes.c_double
+            dtype = np.float32 if single else np.float64
+            x = np.array(z, dtype=dtype)
+            Pc = np.array(P, dtype=dtype).ravel(order="F")
+            ub = np.array(u, dtype=dtype)
+            modes = (ctypes.c_int * 2)(*[before[e] for e in elements])
+            Params = type(
+                "Params",
+                (ctypes.Structure,),
+                {"_fields_": [(f"p{i}", real) for i in range(len(p))]},
+            )
+            f.restype = ctypes.c_int
+            count = f(
+                x.ctypes.data_as(ctypes.POINTER(real)),
+                Pc.ctypes.data_as(ctypes.POINTER(real)),
+                ub.ctypes.data_as(ctypes.POINTER(real)),
+                ctypes.byref(Params(*p)),
+                modes,
+            )
+            if single and margin < 1e-5:
+                continue  # a float decision this close to its threshold may go either way
+            assert [modes[i] for i in range(2)] == [after[e] for e in elements], (single, before)
+            assert count == len(events)
+            P_c = Pc.reshape(len(z), len(z), order="F").astype(float)
+            worst[single] = max(worst[single], _scaled_error(x.astype(float), P_c, z_ref, P_ref))
+            checked[single] += 1
+    print(f"mode update: {checked} cases, {switched} switches, worst {worst}")
+    assert switched >= 20 and checked[False] == len(cases) and checked[True] > 0.9 * len(cases)
+    assert worst[False] < 1e-12, worst
+    assert worst[True] < 1e-5, worst

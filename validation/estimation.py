@@ -41,6 +41,11 @@ __all__ = [
     "EkfBound",
     "EkfMonteCarlo",
     "EkfSetup",
+    "MODE_SOURCES",
+    "ModeSwitch",
+    "match_switches",
+    "mode_switches",
+    "reference_switches",
     "ekf_bound",
     "filter_run",
     "format_measured_ekf_text",
@@ -421,10 +426,10 @@ def element_modes(
 ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Per swapping element, (slides, sticks) as 0/1 at the sample times ``t``.
 
-    Today from the reference's sliding masks (:func:`sliding_masks`: pressed and transmitting
-    its capacity); an element that does not slide sticks while it is pressed and is open
-    otherwise. The one place that decides the modes: the hybrid shift model (lock-up and
-    break-away events) replaces it.
+    From the reference's sliding masks (:func:`sliding_masks`: pressed and transmitting its
+    capacity); an element that does not slide sticks while it is pressed and is open
+    otherwise. These are the *truth's* modes (``--modes reference``); by default the filter
+    decides its modes itself (:func:`~gearsym.symbolic.estimators.ekf_modes.ekf_mode_update`).
     """
     from gearsym.validation.sensitivity_run import (
         driven_shift_model,
@@ -442,6 +447,105 @@ def element_modes(
         slides = masks[e][index]
         modes[e] = (slides.astype(float), ((~slides) & (force > 0)).astype(float))
     return modes
+
+
+#: Where the EKF's element modes come from: its own mode logic (the TCU's view, default) or
+#: the reference's sliding masks (the truth, for comparison).
+MODE_SOURCES = ("filter", "reference")
+
+
+@dataclass(frozen=True)
+class ModeSwitch:
+    """A mode switch of one element at time ``t``: ``kind`` break-away, lock-up, opening or
+    engagement (the hybrid model's guards); ``before``/``after`` are mode codes
+    (:mod:`gearsym.symbolic.estimators.ekf_modes`: 0 open, ±1 slide, 2 stick)."""
+
+    element: str
+    kind: str
+    t: float
+    before: int
+    after: int
+
+
+def _status_code(slides: np.ndarray, sticks: np.ndarray) -> np.ndarray:
+    """0 open, 1 slide, 2 stick per sample from 0/1 (or ±1) flags."""
+    return np.where(np.abs(slides) > 0.5, 1, np.where(sticks > 0.5, 2, 0))
+
+
+def mode_switches(
+    t: np.ndarray, codes: Mapping[str, np.ndarray], first: Mapping[str, int] | None = None
+) -> list[ModeSwitch]:
+    """The switches of per-sample mode codes (0 open, ±1 slide, 2 stick; the mode held from
+    sample k on), in time order: stick → slide is a break-away, slide → stick (or a slide
+    reversing its direction) a lock-up, → open an opening, open → slide or stick an
+    engagement. ``first``: the mode before the first sample (the from-gear), so that a switch
+    at the first sample counts too (without it the first sample's mode is the start)."""
+    from gearsym.symbolic.hybrid import BREAK_AWAY, ENGAGEMENT, LOCK_UP, OPENING
+
+    out = []
+    for e, code in codes.items():
+        before = int(code[0]) if first is None else int(first[e])
+        for k in range(len(t)):
+            now = int(code[k])
+            if now == before:
+                continue
+            if now == 0:
+                kind = OPENING
+            elif before == 0:
+                kind = ENGAGEMENT
+            elif before == 2:
+                kind = BREAK_AWAY
+            else:
+                kind = LOCK_UP
+            out.append(ModeSwitch(e, kind, float(t[k]), before, now))
+            before = now
+    return sorted(out, key=lambda m: (m.t, m.element))
+
+
+def reference_switches(d: GearboxDescription, result: SimulationResult) -> list[ModeSwitch]:
+    """The truth's mode switches on the reference simulation's own time grid (its sliding
+    masks, :func:`element_modes`): the times the filter's detected events are compared with."""
+    modes = element_modes(d, result, np.asarray(result.t, dtype=float))
+    codes = {e: _status_code(*flags) for e, flags in modes.items()}
+    return mode_switches(np.asarray(result.t, dtype=float), codes)
+
+
+def match_switches(
+    detected: Sequence[ModeSwitch], truth: Sequence[ModeSwitch]
+) -> list[dict[str, Any]]:
+    """Per truth switch (element, kind, in order) the detected one of the same element and
+    kind and rank, and the error t_detected − t_truth in ms (None: not detected); detected
+    switches without a truth counterpart follow with ``t_reference`` None."""
+    out: list[dict[str, Any]] = []
+    used: set[int] = set()
+    for e, kind in dict.fromkeys((m.element, m.kind) for m in truth):
+        mine = [i for i, m in enumerate(detected) if m.element == e and m.kind == kind]
+        theirs = [m for m in truth if m.element == e and m.kind == kind]
+        for rank, ref in enumerate(theirs):
+            hit = detected[mine[rank]] if rank < len(mine) else None
+            if hit is not None:
+                used.add(mine[rank])
+            out.append(
+                {
+                    "element": e,
+                    "kind": kind,
+                    "t_reference": ref.t,
+                    "t_detected": None if hit is None else hit.t,
+                    "error_ms": None if hit is None else 1e3 * (hit.t - ref.t),
+                }
+            )
+    for i, m in enumerate(detected):
+        if i not in used:
+            out.append(
+                {
+                    "element": m.element,
+                    "kind": m.kind,
+                    "t_reference": None,
+                    "t_detected": m.t,
+                    "error_ms": None,
+                }
+            )
+    return out
 
 
 @dataclass(frozen=True)
@@ -491,6 +595,16 @@ class EkfRun:
     parameters: tuple[ParameterEstimate, ...]
     min_eigenvalue: float  # smallest eigenvalue of P over the run (scaled), > 0: SPD
     covariance: np.ndarray | None = field(default=None, repr=False)  # P after the last sample
+    #: where the element modes came from (:data:`MODE_SOURCES`), the mode codes held from each
+    #: sample on (0 open, ±1 slide, 2 stick), the switches, and the truth's switches
+    mode_source: str = "reference"
+    modes: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    switches: tuple[ModeSwitch, ...] = ()
+    reference_switches: tuple[ModeSwitch, ...] = ()
+
+    def events(self) -> list[dict[str, Any]]:
+        """The detected switches against the truth's (:func:`match_switches`)."""
+        return match_switches(self.switches, self.reference_switches)
 
     @property
     def nees_mean(self) -> float:
@@ -528,6 +642,8 @@ class EkfRun:
             "nis_mean": float(np.mean(self.nis[used])) if used.any() else None,
             "nis_band": list(_chi2_mean_band(self.nis_dof[used])) if used.any() else None,
             "min_covariance_eigenvalue": self.min_eigenvalue,
+            "modes": self.mode_source,
+            "events": self.events(),
             "phases": [p.to_dict() for p in self.phases],
         }
 
@@ -569,6 +685,11 @@ class EkfSetup:
     #: The outputs are a recording's (``y_true`` holds them, noise included): no noise is
     #: drawn and there is no truth.
     measured: bool = False
+    #: :data:`MODE_SOURCES`: "filter" (its own mode logic, ``logic``) or "reference" (the
+    #: reference's modes in ``u``); the truth's switches on the reference's own grid
+    mode_source: str = "filter"
+    logic: Any = None
+    reference_switches: tuple[ModeSwitch, ...] = ()
 
     @property
     def names(self) -> list[str]:
@@ -602,8 +723,15 @@ def prepare_ekf(
     aug: Any = None,
     discrete: Any = None,
     measured: Mapping[str, np.ndarray] | None = None,
+    modes: str = "filter",
+    logic: Any = None,
 ) -> EkfSetup:
     """The seed-independent part of :func:`run_ekf` (its arguments of the same name).
+
+    ``modes``: "filter" (default), the filter decides the element modes itself
+    (:func:`~gearsym.symbolic.estimators.ekf_modes.ekf_mode_update`; ``logic`` reuses a built
+    :class:`~gearsym.symbolic.estimators.ekf_modes.ModeLogic`), or "reference", the
+    reference's modes (:func:`element_modes`: the truth, which a TCU does not have).
 
     ``measured``: per output of the filter its recorded values on the sample grid (a bench
     recording, :mod:`gearsym.validation.measurement`); they replace the reference's outputs,
@@ -612,6 +740,10 @@ def prepare_ekf(
     from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
 
     shift = result.scenario.shift.name
+    if modes not in MODE_SOURCES:
+        raise GearsymError(
+            "estimate", "--modes", f"expected one of {', '.join(MODE_SOURCES)}, got {modes!r}"
+        )
     if aug is None:
         aug = augmented_model(d, shift, parameters)
     if discrete is None:
@@ -621,6 +753,10 @@ def prepare_ekf(
         raise GearsymError(
             "estimate", "--sample-time", f"must be in (0, {span / 4:g}] s, got {sample_time!r}"
         )
+    if modes == "filter" and logic is None:
+        from gearsym.symbolic.estimators.ekf_modes import ModeLogic
+
+        logic = ModeLogic(d, aug)
     t = np.arange(result.t[0], result.t[-1] + 1e-12, sample_time)
     names = aug.state_names
     n = len(names)
@@ -653,12 +789,12 @@ def prepare_ekf(
     floor = EKF_FLOOR_FRACTION * np.nanmax(np.abs(y_true), axis=0)
     sigma_y = r[None, :] * np.maximum(np.abs(y_true), floor[None, :])
 
-    modes = element_modes(d, result, t)
+    reference_modes = element_modes(d, result, t)
     columns = []
     for name in aug.input_names:
         element = name.split("_", 1)[1] if name.startswith(("slide_", "stick_")) else None
         if element is not None:
-            columns.append(modes[element][0 if name.startswith("slide_") else 1])
+            columns.append(reference_modes[element][0 if name.startswith("slide_") else 1])
         else:
             columns.append(sampled(name))
     u = np.column_stack(columns)
@@ -678,7 +814,7 @@ def prepare_ekf(
             scored[:, j] = True
     for e, mu in aug.mu_state.items():
         j = names.index(mu)
-        scored[:, j] = modes[e][0] > 0.5  # μ is defined (and estimated) while it slides
+        scored[:, j] = reference_modes[e][0] > 0.5  # μ is defined while the truth slides
     if measured is not None:  # a recording: no state has a truth
         truth[:] = np.nan
         scored[:] = False
@@ -725,6 +861,9 @@ def prepare_ekf(
         outputs=outputs,
         phases=tuple(result.phases),
         measured=measured is not None,
+        mode_source=modes,
+        logic=logic,
+        reference_switches=tuple(reference_switches(d, result)),
     )
 
 
@@ -740,20 +879,22 @@ def run_ekf(
     aug: Any = None,
     discrete: Any = None,
     setup: EkfSetup | None = None,
+    modes: str = "filter",
 ) -> EkfRun:
     """The EKF (4.3) on the augmented model (4.1) along the reference shift of ``result``.
 
     Measurements: the reference's speeds (3.31) every ``sample_time`` s plus Gaussian noise of
     σ_i = r_i max(|y_i|, y_i^min) (3.26), drawn with ``seed``; ``dropout`` = (t0, t1) replaces
     every measurement in [t0, t1) by NaN (a sensor dropout: the updates are skipped). Known
-    inputs T_In, F_N at the samples, held; element modes from :func:`element_modes`.
+    inputs T_In, F_N at the samples, held; element modes decided by the filter (``modes``
+    "filter", default) or the reference's (:func:`element_modes`, ``modes`` "reference").
     ``initial`` overrides the default initial estimate (m_veh 30 % light, μ nominal, ζ 0, φ 0,
     the speeds from the first measurement). ``aug``/``discrete`` reuse a built model;
     ``setup`` (from :func:`prepare_ekf`) reuses everything but the noise draws.
     """
     if setup is None:
         setup = prepare_ekf(
-            d, result, sample_time, relative_noise, initial, parameters, aug, discrete
+            d, result, sample_time, relative_noise, initial, parameters, aug, discrete, modes=modes
         )
     return filter_run(setup, seed, dropout)
 
@@ -785,8 +926,18 @@ def filter_run(
 
     ``prior_draw``: the initial estimate of every unmeasured state (φ and the parameters) is
     the truth (:attr:`EkfSetup.truth0`) plus a draw from the prior N(0, σ0²) (a second stream
-    of ``seed``), the premise of the posterior bound, instead of the fixed initial estimate."""
+    of ``seed``), the premise of the posterior bound, instead of the fixed initial estimate.
+
+    Element modes (``setup.mode_source``): "reference" takes them from ``setup.u`` (the
+    truth's); "filter" starts in the from-gear and, after each update, lets
+    :func:`~gearsym.symbolic.estimators.ekf_modes.ekf_mode_update` decide the modes held over
+    the next interval from the posterior, the measured speeds' estimate and F_N (a lock-up
+    maps z and P through the hybrid model's state map). The estimate, σ and NEES recorded at
+    a sample are the update's; a switch decided there acts from the next prediction on (at a
+    lock-up the mapped covariance is singular in the slip until the prediction adds its
+    model error)."""
     from gearsym.symbolic.estimators.ekf import ekf_predict, ekf_update
+    from gearsym.symbolic.estimators.ekf_modes import ekf_mode_update
 
     s = setup
     t, names, n = s.t, s.names, len(s.names)
@@ -829,11 +980,21 @@ def filter_run(
     nees = np.zeros(len(t))
     min_eig = np.inf
     scale = np.maximum(sig0, 1e-12)
+    logic = s.logic if s.mode_source == "filter" else None
+    if logic is not None:
+        modes = logic.initial_modes()
+        codes = {e: np.zeros(len(t), dtype=int) for e in logic.elements}
+        switches: list[ModeSwitch] = []
+        held = logic.inputs(s.u[0], modes)
     for k in range(len(t)):
+        if logic is None:
+            u_before, u_now = s.u[k - 1], s.u[k]
+        else:  # the modes held since the previous sample, the known inputs of this one
+            u_before, u_now = held, logic.inputs(s.u[k], modes)
         if k > 0:
-            z, P = ekf_predict(s.discrete, z, P, s.u[k - 1], sample_time, s.p, s.q)
+            z, P = ekf_predict(s.discrete, z, P, u_before, sample_time, s.p, s.q)
         z, P, nis[k], nis_dof[k] = ekf_update(
-            s.discrete, z, P, s.u[k], y[k], s.p, s.relative, s.floor
+            s.discrete, z, P, u_now, y[k], s.p, s.relative, s.floor
         )
         estimates[k] = z
         sigmas[k] = np.sqrt(np.diag(P))
@@ -841,6 +1002,21 @@ def filter_run(
         idx = np.flatnonzero(scored[k])
         error = z[idx] - truth[k, idx]
         nees[k] = float(error @ np.linalg.solve(P[np.ix_(idx, idx)], error))
+        if logic is not None:
+            z, P, modes, decided = ekf_mode_update(logic, z, P, s.u[k], s.p, modes)
+            switches += [
+                ModeSwitch(ev.element, ev.kind, float(t[k]), ev.before, ev.after) for ev in decided
+            ]
+            for e, code in modes.items():
+                codes[e][k] = code
+            held = logic.inputs(s.u[k], modes)
+    if logic is None:
+        aug, inputs = s.aug, s.aug.input_names
+        codes = {
+            e: _status_code(s.u[:, inputs.index(f"slide_{e}")], s.u[:, inputs.index(f"stick_{e}")])
+            for e in aug.elements
+        }
+        switches = mode_switches(t, codes)
 
     estimates_by_parameter = []
     for name in s.aug.parameters:
@@ -878,6 +1054,10 @@ def filter_run(
         parameters=tuple(estimates_by_parameter),
         min_eigenvalue=min_eig,
         covariance=P,
+        mode_source=s.mode_source,
+        modes=codes,
+        switches=tuple(switches),
+        reference_switches=s.reference_switches,
     )
 
 
@@ -892,6 +1072,7 @@ def run_ekf_drive(
     seed: int = 0,
     sample_time: float = 0.01,
     initial: Mapping[str, float] | None = None,
+    modes: str = "filter",
 ) -> list[EkfRun]:
     """The EKF (4.3) through consecutive shifts, carrying m_veh and ζ (:data:`DRIVE_CARRIED`).
 
@@ -901,11 +1082,14 @@ def run_ekf_drive(
     model (4.1): the μ of its swapping elements) starts from the estimate and the covariance
     block of m_veh and ζ at the end of shift k; its other states start as in a single shift
     (μ at the prior: another element or another operating point). ``initial`` is the first
-    shift's initial estimate; shift k uses noise seed ``seed`` + k."""
+    shift's initial estimate; shift k uses noise seed ``seed`` + k. ``modes``: as
+    :func:`prepare_ekf` (each shift's filter starts in its from-gear)."""
     runs: list[EkfRun] = []
     carried = None
     for k, result in enumerate(results):
-        setup = prepare_ekf(d, result, sample_time, initial=initial if k == 0 else None)
+        setup = prepare_ekf(
+            d, result, sample_time, initial=initial if k == 0 else None, modes=modes
+        )
         run = filter_run(setup, seed + k, carried=carried)
         idx = [list(run.state_names).index(name) for name in DRIVE_CARRIED]
         assert run.covariance is not None
@@ -920,13 +1104,15 @@ def run_ekf_drive(
 
 def write_ekf_csv(run: EkfRun, path: Path) -> Path:
     """Every sample: t, phase, per augmented state its estimate, σ and truth (empty where none),
-    NEES with its dof, NIS with its dof."""
+    NEES with its dof, NIS with its dof, and per element the mode held from the sample on
+    (0 open, ±1 slide, 2 stick)."""
     from gearsym.validation.sensitivity_run import phase_of
 
     header = ["t", "phase"]
     for name in run.state_names:
         header += [f"{name}_hat", f"{name}_sigma", name]
     header += ["nees", "nees_dof", "nis", "nis_dof"]
+    header += [f"mode_{e}" for e in run.modes]
     lines = [",".join(header)]
 
     def num(v: float) -> str:
@@ -938,6 +1124,7 @@ def write_ekf_csv(run: EkfRun, path: Path) -> Path:
             truth = run.truth[k, j] if run.scored[k, j] else np.nan
             row += [num(run.estimates[k, j]), num(run.sigmas[k, j]), num(truth)]
         row += [num(run.nees[k]), f"{run.nees_dof[k]:g}", num(run.nis[k]), f"{run.nis_dof[k]:g}"]
+        row += [str(int(codes[k])) for codes in run.modes.values()]
         lines.append(",".join(row))
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return path
@@ -1030,7 +1217,41 @@ def format_ekf_text(run: EkfRun) -> str:
     lines.append(
         "  μ is scored while its element slides; outside that its estimate and σ are frozen"
     )
+    lines += _mode_lines(run.mode_source, run.events(), len(run.switches))
     return "\n".join(lines)
+
+
+_MODE_TEXT = {
+    "filter": "element modes decided by the filter (estimated slip, sticking torque against "
+    "2 N r_m μ̂ F_N, F_N; lock-ups mapped through the hybrid model's state map)",
+    "reference": "element modes from the reference's sliding masks (the truth, not a TCU's)",
+}
+
+
+def _mode_lines(source: str, events: Sequence[Mapping[str, Any]], detected: int) -> list[str]:
+    """The mode source and each switch against the truth's, one line each."""
+    lines = [f"  {_MODE_TEXT[source]}; {detected} switches"]
+    for ev in events:
+        head = f"    {ev['element']} {ev['kind']}:"
+        if ev["t_reference"] is None:
+            lines.append(f"{head} at {ev['t_detected']:.3f} s, none in the reference")
+        elif ev.get("t_detected") is None and ev.get("detected_runs") is None:
+            lines.append(f"{head} reference {ev['t_reference']:.4f} s, not detected")
+        elif "detected_runs" in ev:
+            if ev["detected_runs"] == 0:
+                lines.append(f"{head} reference {ev['t_reference']:.4f} s, not detected")
+                continue
+            lines.append(
+                f"{head} reference {ev['t_reference']:.4f} s; detected in "
+                f"{ev['detected_runs']} of {ev['runs']} runs, error mean "
+                f"{ev['error_ms_mean']:+.1f} ms, max |error| {ev['error_ms_max_abs']:.1f} ms"
+            )
+        else:
+            lines.append(
+                f"{head} at {ev['t_detected']:.3f} s, reference {ev['t_reference']:.4f} s "
+                f"({ev['error_ms']:+.1f} ms)"
+            )
+    return lines
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1310,6 +1531,8 @@ class EkfMonteCarlo:
             if used.any()
             else None,
             "min_covariance_eigenvalue": min(r.min_eigenvalue for r in self.runs),
+            "modes": first.mode_source,
+            "events": self.event_summary(),
             "phases": [
                 {
                     **phase.to_dict(),
@@ -1325,6 +1548,40 @@ class EkfMonteCarlo:
     @property
     def parameter_names(self) -> list[str]:
         return [p.name for p in self.first.parameters]
+
+    def event_summary(self) -> list[dict[str, Any]]:
+        """Per truth switch: in how many runs the filter detected it and the error
+        t_detected − t_truth over those runs (mean, largest magnitude, ms); then the mean
+        number per run of detected switches the truth does not have."""
+        per_run = [r.events() for r in self.runs]
+        out: list[dict[str, Any]] = []
+        for i, ev in enumerate(e for e in per_run[0] if e["t_reference"] is not None):
+            errors = [
+                events[i]["error_ms"] for events in per_run if events[i]["error_ms"] is not None
+            ]
+            out.append(
+                {
+                    "element": ev["element"],
+                    "kind": ev["kind"],
+                    "t_reference": ev["t_reference"],
+                    "runs": len(self.runs),
+                    "detected_runs": len(errors),
+                    "error_ms_mean": float(np.mean(errors)) if errors else None,
+                    "error_ms_max_abs": float(np.max(np.abs(errors))) if errors else None,
+                }
+            )
+        extra = [sum(e["t_reference"] is None for e in events) for events in per_run]
+        if any(extra):
+            out.append(
+                {
+                    "element": "any",
+                    "kind": "switches without a reference counterpart (mean per run)",
+                    "t_reference": None,
+                    "t_detected": None,
+                    "count_mean": float(np.mean(extra)),
+                }
+            )
+        return out
 
 
 def run_ekf_monte_carlo(
@@ -1460,6 +1717,11 @@ def format_monte_carlo_text(mc: EkfMonteCarlo) -> str:
             f"white: samples independent): "
             f"{'inside' if nis_lo <= d['nis_mean'] <= nis_hi else 'OUTSIDE'}"
         )
+    lines += _mode_lines(
+        first.mode_source,
+        [e for e in d["events"] if e["t_reference"] is not None],
+        len(first.switches),
+    )
     return "\n".join(lines)
 
 
@@ -1544,6 +1806,8 @@ def measured_ekf_dict(run: EkfRun) -> dict[str, Any]:
         "nis_band": list(_chi2_mean_band(run.nis_dof[used])) if used.any() else None,
         "skipped_updates": int(np.count_nonzero(~used)),
         "min_covariance_eigenvalue": run.min_eigenvalue,
+        "modes": run.mode_source,
+        "switches": [{"element": m.element, "kind": m.kind, "t": m.t} for m in run.switches],
         "phases": [p.to_dict() for p in run.phases],
     }
 

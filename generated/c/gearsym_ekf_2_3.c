@@ -15,15 +15,27 @@
 #ifndef GEARSYM_COS
 #define GEARSYM_COS(a) cosf(a)
 #endif
+#ifndef GEARSYM_FABS
+#define GEARSYM_FABS(a) fabsf(a)
+#endif
 #ifndef GEARSYM_SIN
 #define GEARSYM_SIN(a) sinf(a)
+#endif
+#ifndef GEARSYM_SQRT
+#define GEARSYM_SQRT(a) sqrtf(a)
 #endif
 #else
 #ifndef GEARSYM_COS
 #define GEARSYM_COS(a) cos(a)
 #endif
+#ifndef GEARSYM_FABS
+#define GEARSYM_FABS(a) fabs(a)
+#endif
 #ifndef GEARSYM_SIN
 #define GEARSYM_SIN(a) sin(a)
+#endif
+#ifndef GEARSYM_SQRT
+#define GEARSYM_SQRT(a) sqrt(a)
 #endif
 #endif
 
@@ -432,9 +444,9 @@ void gearsym_ekf_2_3_jac_outputs(
  * through the four stages with jac_x). q: process-noise intensities per state (unit^2/s;
  * random walks of the parameters, model error of the states); the entry of a state frozen by
  * its input (see the header) counts as 0. P is 8 x 8 column-major and symmetrised on return.
- * Frozen: mu_38 while slide_K38 <= 0.5, mu_05 while slide_B05 <= 0.5. Operations (about): 2780
- * add, 3224 mul, 12 div, 16 calls (cos 8, sin 8) (4 rhs + 4 jac_x + the stage tangents, F P
- * F^T and the symmetrisation); stack: 432 reals.
+ * Frozen: mu_38 while |slide_K38| <= 0.5, mu_05 while |slide_B05| <= 0.5. Operations (about):
+ * 2780 add, 3224 mul, 12 div, 16 calls (cos 8, sin 8) (4 rhs + 4 jac_x + the stage tangents, F
+ * P F^T and the symmetrisation); stack: 432 reals.
  */
 void gearsym_ekf_2_3_ekf_predict(
     gearsym_real *x,
@@ -462,10 +474,10 @@ void gearsym_ekf_2_3_ekf_predict(
     for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
         rate[i] = q[i];
     }
-    if (!(u[3] > GEARSYM_LIT(0.5))) {
+    if (!((u[3] > GEARSYM_LIT(0.5)) || (u[3] < GEARSYM_LIT(-0.5)))) {
         rate[5] = GEARSYM_LIT(0.0); /* frozen: its element does not slide */
     }
-    if (!(u[5] > GEARSYM_LIT(0.5))) {
+    if (!((u[5] > GEARSYM_LIT(0.5)) || (u[5] < GEARSYM_LIT(-0.5)))) {
         rate[6] = GEARSYM_LIT(0.0); /* frozen: its element does not slide */
     }
     /* Stage 1: k1 = f(x), K1 = J(x); F accumulates h/6 (K1 + 2 K2 + 2 K3 + K4). */
@@ -547,9 +559,9 @@ void gearsym_ekf_2_3_ekf_predict(
  * NaN or infinite y_i is skipped (no update); the gain entry of a frozen state is 0 (its
  * estimate and variance stay unchanged). *nis receives the sum of nu^2/s over the used
  * outputs. Returns the number of outputs used.
- * Frozen: mu_38 while slide_K38 <= 0.5, mu_05 while slide_B05 <= 0.5. Operations (about): 840
- * add, 876 mul, 0 div, 0 calls (3 x (outputs + jac_outputs + the Joseph update)); stack: 432
- * reals.
+ * Frozen: mu_38 while |slide_K38| <= 0.5, mu_05 while |slide_B05| <= 0.5. Operations (about):
+ * 840 add, 876 mul, 0 div, 0 calls (3 x (outputs + jac_outputs + the Joseph update)); stack:
+ * 432 reals.
  */
 int gearsym_ekf_2_3_ekf_update(
     gearsym_real *x,
@@ -611,10 +623,10 @@ int gearsym_ekf_2_3_ekf_update(
         for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
             gain[a] = v[a] / s;
         }
-        if (!(u[3] > GEARSYM_LIT(0.5))) {
+        if (!((u[3] > GEARSYM_LIT(0.5)) || (u[3] < GEARSYM_LIT(-0.5)))) {
             gain[5] = GEARSYM_LIT(0.0); /* frozen: a consider state */
         }
-        if (!(u[5] > GEARSYM_LIT(0.5))) {
+        if (!((u[5] > GEARSYM_LIT(0.5)) || (u[5] < GEARSYM_LIT(-0.5)))) {
             gain[6] = GEARSYM_LIT(0.0); /* frozen: a consider state */
         }
         innovation = y[i] - y_hat[i];
@@ -650,6 +662,327 @@ int gearsym_ekf_2_3_ekf_update(
         ++used;
     }
     return used;
+}
+
+/**
+ * Per swapping element, in the order of the mode array: its slip (2.59), the torque its
+ * sticking needs with the other element as u's flags say, and its capacity 2 N r_m mu F_N
+ * (2.60, 2.69) with mu the state where augmented: m[3 e + 0..2].
+ * Operations: 10 add, 22 mul, 0 div, 0 calls; 5 temporaries.
+ */
+void gearsym_ekf_2_3_ekf_mode_quantities(
+    const gearsym_real *restrict x,
+    const gearsym_real *restrict u,
+    const gearsym_ekf_2_3_params *restrict p,
+    gearsym_real *restrict m)
+{
+    const gearsym_real t0 = u[2]*x[6];
+    const gearsym_real t1 = x[3]*p->d_ss;
+    const gearsym_real t2 = x[1]*p->d_ss;
+    const gearsym_real t3 = x[2]*p->k_ss;
+    const gearsym_real t4 = u[1]*x[5];
+    m[0] = -x[0] + (GEARSYM_LIT(120.0)/GEARSYM_LIT(37.0))*x[1];
+    m[1] = -GEARSYM_LIT(0.984561434330364853118)*u[0] - GEARSYM_LIT(0.00385599385565343887287)*t3 - GEARSYM_LIT(0.00156176340852711173466)*t2 + GEARSYM_LIT(0.00385599385565343887287)*t1 + GEARSYM_LIT(2.93155983635187382235)*t0*u[5];
+    m[2] = (GEARSYM_LIT(4.0)/GEARSYM_LIT(5.0))*t4;
+    m[3] = -(GEARSYM_LIT(36.0)/GEARSYM_LIT(11.0))*x[0] + (GEARSYM_LIT(3000.0)/GEARSYM_LIT(407.0))*x[1];
+    m[4] = -GEARSYM_LIT(0.448194679666402760828)*u[0] - GEARSYM_LIT(0.0513015561808150337311)*t1 + GEARSYM_LIT(0.0513015561808150337311)*t3 + GEARSYM_LIT(0.0207782730582482923172)*t2 + GEARSYM_LIT(0.194235472757426228188)*t4*u[3];
+    m[5] = (GEARSYM_LIT(9.0)/GEARSYM_LIT(10.0))*t0;
+}
+
+/* The slide code (+1 or -1) whose slip sign (2.70) is the sign of value (+1 at zero). */
+static int gearsym_ekf_2_3_slide_direction(gearsym_real value, gearsym_real slip_sign)
+{
+    int direction = 1;
+
+    if ((value * slip_sign) < GEARSYM_LIT(0.0)) {
+        direction = -1;
+    }
+    return direction;
+}
+
+/**
+ * The filter's own mode logic (thesis 4.3 on the hybrid shift model), after ekf_update: from
+ * the posterior x, P, the known inputs u (T_In, F_N; its mode flags are ignored) and modes[e]
+ * (0 open, +1/-1 sliding with/against the power-on slip sign, 2 sticking), the modes held over
+ * the next sample, in place. F_N <= 0 opens; an open element with F_N > 0 slides in the
+ * direction of its slip; a sticking one breaks away when |sticking torque| > capacity, sliding
+ * in the torque's direction; a sliding one whose slip has reached zero locks up if |sticking
+ * torque| at A x is within the capacity with mu lowered by the stated sigma multiple (x = A x,
+ * P = A P A^T on the physical states, the parameter block untouched), else slides in the
+ * torque's direction. Then set u's slide_/stick_ flags from modes (slide = modes[e] if it is
+ * +-1, stick = 1 if it is 2) for the next ekf_predict and ekf_update. Returns the number of
+ * switches.
+ * Operations (at most): 200 add, 264 mul, 0 div, 0 calls (ekf_mode_quantities at most twice
+ * per element, the lock-up map of x and P: 160 add, 176 mul, 0 div, 0 calls); stack: 99 reals.
+ */
+int gearsym_ekf_2_3_ekf_mode_update(
+    gearsym_real *x,
+    gearsym_real *P,
+    const gearsym_real *u,
+    const gearsym_ekf_2_3_params *p,
+    int *modes)
+{
+    gearsym_real flags[GEARSYM_EKF_2_3_NU];
+    gearsym_real m[6]; /* ekf_mode_quantities */
+    gearsym_real z[GEARSYM_EKF_2_3_NX];
+    gearsym_real sure[GEARSYM_EKF_2_3_NX];
+    gearsym_real AP[4 * GEARSYM_EKF_2_3_NX]; /* A times the first rows of P */
+    gearsym_real Pn[GEARSYM_EKF_2_3_NX * GEARSYM_EKF_2_3_NX];
+    int switches = 0;
+    int i;
+    int a;
+    int b;
+    int c;
+
+    /* K38: its normal force, then its mode (see above) */
+    if (!(u[1] > GEARSYM_LIT(0.0))) {
+        if (modes[0] != 0) {
+            modes[0] = 0; /* opening */
+            ++switches;
+        }
+    } else {
+        const int code = modes[0];
+        gearsym_real slip;
+        gearsym_real torque;
+        gearsym_real capacity;
+
+        for (i = 0; i < GEARSYM_EKF_2_3_NU; ++i) {
+            flags[i] = u[i];
+        }
+        flags[3] = ((modes[0] == 1) || (modes[0] == -1)) ? (gearsym_real)modes[0] : GEARSYM_LIT(0.0);
+        flags[4] = (modes[0] == 2) ? GEARSYM_LIT(1.0) : GEARSYM_LIT(0.0);
+        flags[5] = ((modes[1] == 1) || (modes[1] == -1)) ? (gearsym_real)modes[1] : GEARSYM_LIT(0.0);
+        flags[6] = (modes[1] == 2) ? GEARSYM_LIT(1.0) : GEARSYM_LIT(0.0);
+        gearsym_ekf_2_3_ekf_mode_quantities(x, flags, p, m);
+        slip = m[0];
+        torque = m[1];
+        capacity = m[2];
+        if (code == 0) { /* engagement: slides the way it slips */
+            modes[0] = gearsym_ekf_2_3_slide_direction(slip, GEARSYM_LIT(-1.0));
+            ++switches;
+        } else if (code == 2) { /* break-away: in the direction of the torque it cannot hold */
+            if (GEARSYM_FABS(torque) > capacity) {
+                modes[0] = gearsym_ekf_2_3_slide_direction(torque, GEARSYM_LIT(-1.0));
+                ++switches;
+            }
+        } else if ((gearsym_real)code * GEARSYM_LIT(-1.0) * slip <= GEARSYM_LIT(0.0)) {
+            int direction;
+
+            if (modes[1] == 2) { /* the other sticks: no tie-up, it slides on */
+                direction = gearsym_ekf_2_3_slide_direction(torque, GEARSYM_LIT(-1.0));
+            } else {
+                static const gearsym_real A[4 * 4] = { /* lock-up map, row-major */
+                    GEARSYM_LIT(0.0154385656696351468818), GEARSYM_LIT(3.19317221944983195606), GEARSYM_LIT(0.0), GEARSYM_LIT(0.0),
+                    GEARSYM_LIT(0.00476022441480417028855), GEARSYM_LIT(0.984561434330364853118), GEARSYM_LIT(0.0), GEARSYM_LIT(0.0),
+                    GEARSYM_LIT(0.0), GEARSYM_LIT(0.0), GEARSYM_LIT(1.0), GEARSYM_LIT(0.0),
+                    GEARSYM_LIT(0.0), GEARSYM_LIT(0.0), GEARSYM_LIT(0.0), GEARSYM_LIT(1.0),
+                };
+                gearsym_real needed;
+
+                for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
+                    z[a] = x[a];
+                }
+                for (a = 0; a < 4; ++a) {
+                    gearsym_real sum = GEARSYM_LIT(0.0);
+                    for (b = 0; b < 4; ++b) {
+                        sum += A[b + a * 4] * x[b];
+                    }
+                    z[a] = sum;
+                }
+                /* P = A P A^T on the physical block, A P on its rows, the parameters' block as is */
+                for (c = 0; c < GEARSYM_EKF_2_3_NX; ++c) {
+                    for (a = 0; a < 4; ++a) {
+                        gearsym_real sum = GEARSYM_LIT(0.0);
+                        for (b = 0; b < 4; ++b) {
+                            sum += A[b + a * 4] * P[b + c * GEARSYM_EKF_2_3_NX];
+                        }
+                        AP[a + c * 4] = sum;
+                    }
+                }
+                for (c = 0; c < GEARSYM_EKF_2_3_NX; ++c) {
+                    for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
+                        Pn[a + c * GEARSYM_EKF_2_3_NX] = P[a + c * GEARSYM_EKF_2_3_NX];
+                    }
+                }
+                for (c = 4; c < GEARSYM_EKF_2_3_NX; ++c) {
+                    for (a = 0; a < 4; ++a) {
+                        Pn[a + c * GEARSYM_EKF_2_3_NX] = AP[a + c * 4];
+                        Pn[c + a * GEARSYM_EKF_2_3_NX] = AP[a + c * 4];
+                    }
+                }
+                for (c = 0; c < 4; ++c) {
+                    for (a = 0; a < 4; ++a) {
+                        gearsym_real sum = GEARSYM_LIT(0.0);
+                        for (b = 0; b < 4; ++b) {
+                            sum += AP[a + b * 4] * A[b + c * 4];
+                        }
+                        Pn[a + c * GEARSYM_EKF_2_3_NX] = sum;
+                    }
+                }
+                for (c = 0; c < 4; ++c) {
+                    for (a = c + 1; a < 4; ++a) {
+                        const gearsym_real mean = GEARSYM_LIT(0.5) * (Pn[a + c * GEARSYM_EKF_2_3_NX] + Pn[c + a * GEARSYM_EKF_2_3_NX]);
+                        Pn[a + c * GEARSYM_EKF_2_3_NX] = mean;
+                        Pn[c + a * GEARSYM_EKF_2_3_NX] = mean;
+                    }
+                }
+                for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
+                    sure[a] = z[a];
+                }
+                {
+                    const gearsym_real variance = Pn[5 + 5 * GEARSYM_EKF_2_3_NX];
+                    sure[5] -= GEARSYM_LIT(1.0) * GEARSYM_SQRT((variance > GEARSYM_LIT(0.0)) ? variance : GEARSYM_LIT(0.0));
+                }
+                flags[3] = GEARSYM_LIT(0.0);
+                flags[4] = GEARSYM_LIT(1.0);
+                gearsym_ekf_2_3_ekf_mode_quantities(z, flags, p, m);
+                needed = m[1];
+                gearsym_ekf_2_3_ekf_mode_quantities(sure, flags, p, m);
+                if (GEARSYM_FABS(needed) <= m[2]) { /* lock-up */
+                    for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
+                        x[a] = z[a];
+                    }
+                    for (a = 0; a < GEARSYM_EKF_2_3_NX * GEARSYM_EKF_2_3_NX; ++a) {
+                        P[a] = Pn[a];
+                    }
+                    direction = 2;
+                } else {
+                    direction = gearsym_ekf_2_3_slide_direction(needed, GEARSYM_LIT(-1.0));
+                }
+            }
+            if (direction != code) {
+                modes[0] = direction;
+                ++switches;
+            }
+        } else {
+            /* sliding, its slip not yet at zero: it slides on */
+        }
+    }
+    /* B05: its normal force, then its mode (see above) */
+    if (!(u[2] > GEARSYM_LIT(0.0))) {
+        if (modes[1] != 0) {
+            modes[1] = 0; /* opening */
+            ++switches;
+        }
+    } else {
+        const int code = modes[1];
+        gearsym_real slip;
+        gearsym_real torque;
+        gearsym_real capacity;
+
+        for (i = 0; i < GEARSYM_EKF_2_3_NU; ++i) {
+            flags[i] = u[i];
+        }
+        flags[3] = ((modes[0] == 1) || (modes[0] == -1)) ? (gearsym_real)modes[0] : GEARSYM_LIT(0.0);
+        flags[4] = (modes[0] == 2) ? GEARSYM_LIT(1.0) : GEARSYM_LIT(0.0);
+        flags[5] = ((modes[1] == 1) || (modes[1] == -1)) ? (gearsym_real)modes[1] : GEARSYM_LIT(0.0);
+        flags[6] = (modes[1] == 2) ? GEARSYM_LIT(1.0) : GEARSYM_LIT(0.0);
+        gearsym_ekf_2_3_ekf_mode_quantities(x, flags, p, m);
+        slip = m[3];
+        torque = m[4];
+        capacity = m[5];
+        if (code == 0) { /* engagement: slides the way it slips */
+            modes[1] = gearsym_ekf_2_3_slide_direction(slip, GEARSYM_LIT(-1.0));
+            ++switches;
+        } else if (code == 2) { /* break-away: in the direction of the torque it cannot hold */
+            if (GEARSYM_FABS(torque) > capacity) {
+                modes[1] = gearsym_ekf_2_3_slide_direction(torque, GEARSYM_LIT(-1.0));
+                ++switches;
+            }
+        } else if ((gearsym_real)code * GEARSYM_LIT(-1.0) * slip <= GEARSYM_LIT(0.0)) {
+            int direction;
+
+            if (modes[0] == 2) { /* the other sticks: no tie-up, it slides on */
+                direction = gearsym_ekf_2_3_slide_direction(torque, GEARSYM_LIT(-1.0));
+            } else {
+                static const gearsym_real A[4 * 4] = { /* lock-up map, row-major */
+                    -GEARSYM_LIT(0.466818951635499944529), GEARSYM_LIT(3.30364628746734221741), GEARSYM_LIT(0.0), GEARSYM_LIT(0.0),
+                    -GEARSYM_LIT(0.207267614526161975371), GEARSYM_LIT(1.46681895163549994453), GEARSYM_LIT(0.0), GEARSYM_LIT(0.0),
+                    GEARSYM_LIT(0.0), GEARSYM_LIT(0.0), GEARSYM_LIT(1.0), GEARSYM_LIT(0.0),
+                    GEARSYM_LIT(0.0), GEARSYM_LIT(0.0), GEARSYM_LIT(0.0), GEARSYM_LIT(1.0),
+                };
+                gearsym_real needed;
+
+                for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
+                    z[a] = x[a];
+                }
+                for (a = 0; a < 4; ++a) {
+                    gearsym_real sum = GEARSYM_LIT(0.0);
+                    for (b = 0; b < 4; ++b) {
+                        sum += A[b + a * 4] * x[b];
+                    }
+                    z[a] = sum;
+                }
+                /* P = A P A^T on the physical block, A P on its rows, the parameters' block as is */
+                for (c = 0; c < GEARSYM_EKF_2_3_NX; ++c) {
+                    for (a = 0; a < 4; ++a) {
+                        gearsym_real sum = GEARSYM_LIT(0.0);
+                        for (b = 0; b < 4; ++b) {
+                            sum += A[b + a * 4] * P[b + c * GEARSYM_EKF_2_3_NX];
+                        }
+                        AP[a + c * 4] = sum;
+                    }
+                }
+                for (c = 0; c < GEARSYM_EKF_2_3_NX; ++c) {
+                    for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
+                        Pn[a + c * GEARSYM_EKF_2_3_NX] = P[a + c * GEARSYM_EKF_2_3_NX];
+                    }
+                }
+                for (c = 4; c < GEARSYM_EKF_2_3_NX; ++c) {
+                    for (a = 0; a < 4; ++a) {
+                        Pn[a + c * GEARSYM_EKF_2_3_NX] = AP[a + c * 4];
+                        Pn[c + a * GEARSYM_EKF_2_3_NX] = AP[a + c * 4];
+                    }
+                }
+                for (c = 0; c < 4; ++c) {
+                    for (a = 0; a < 4; ++a) {
+                        gearsym_real sum = GEARSYM_LIT(0.0);
+                        for (b = 0; b < 4; ++b) {
+                            sum += AP[a + b * 4] * A[b + c * 4];
+                        }
+                        Pn[a + c * GEARSYM_EKF_2_3_NX] = sum;
+                    }
+                }
+                for (c = 0; c < 4; ++c) {
+                    for (a = c + 1; a < 4; ++a) {
+                        const gearsym_real mean = GEARSYM_LIT(0.5) * (Pn[a + c * GEARSYM_EKF_2_3_NX] + Pn[c + a * GEARSYM_EKF_2_3_NX]);
+                        Pn[a + c * GEARSYM_EKF_2_3_NX] = mean;
+                        Pn[c + a * GEARSYM_EKF_2_3_NX] = mean;
+                    }
+                }
+                for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
+                    sure[a] = z[a];
+                }
+                {
+                    const gearsym_real variance = Pn[6 + 6 * GEARSYM_EKF_2_3_NX];
+                    sure[6] -= GEARSYM_LIT(1.0) * GEARSYM_SQRT((variance > GEARSYM_LIT(0.0)) ? variance : GEARSYM_LIT(0.0));
+                }
+                flags[5] = GEARSYM_LIT(0.0);
+                flags[6] = GEARSYM_LIT(1.0);
+                gearsym_ekf_2_3_ekf_mode_quantities(z, flags, p, m);
+                needed = m[4];
+                gearsym_ekf_2_3_ekf_mode_quantities(sure, flags, p, m);
+                if (GEARSYM_FABS(needed) <= m[5]) { /* lock-up */
+                    for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
+                        x[a] = z[a];
+                    }
+                    for (a = 0; a < GEARSYM_EKF_2_3_NX * GEARSYM_EKF_2_3_NX; ++a) {
+                        P[a] = Pn[a];
+                    }
+                    direction = 2;
+                } else {
+                    direction = gearsym_ekf_2_3_slide_direction(needed, GEARSYM_LIT(-1.0));
+                }
+            }
+            if (direction != code) {
+                modes[1] = direction;
+                ++switches;
+            }
+        } else {
+            /* sliding, its slip not yet at zero: it slides on */
+        }
+    }
+    return switches;
 }
 
 /**

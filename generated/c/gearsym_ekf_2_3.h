@@ -72,9 +72,9 @@ typedef double gearsym_real;
 #define GEARSYM_EKF_2_3_U_T_In 0 /* [N*m]; input torque (engine + e-machine) */
 #define GEARSYM_EKF_2_3_U_F_N38 1 /* [N]; normal force on K38 (2.69) */
 #define GEARSYM_EKF_2_3_U_F_N05 2 /* [N]; normal force on B05 (2.69) */
-#define GEARSYM_EKF_2_3_U_slide_K38 3 /* [1]; 1 while K38 slides */
+#define GEARSYM_EKF_2_3_U_slide_K38 3 /* [1]; +1/-1 while K38 slides with/against its power-on slip sign */
 #define GEARSYM_EKF_2_3_U_stick_K38 4 /* [1]; 1 while K38 sticks */
-#define GEARSYM_EKF_2_3_U_slide_B05 5 /* [1]; 1 while B05 slides */
+#define GEARSYM_EKF_2_3_U_slide_B05 5 /* [1]; +1/-1 while B05 slides with/against its power-on slip sign */
 #define GEARSYM_EKF_2_3_U_stick_B05 6 /* [1]; 1 while B05 sticks */
 
 /* Index of each output in y. */
@@ -242,9 +242,9 @@ void gearsym_ekf_2_3_jac_outputs(
  * through the four stages with jac_x). q: process-noise intensities per state (unit^2/s;
  * random walks of the parameters, model error of the states); the entry of a state frozen by
  * its input (see the header) counts as 0. P is 8 x 8 column-major and symmetrised on return.
- * Frozen: mu_38 while slide_K38 <= 0.5, mu_05 while slide_B05 <= 0.5. Operations (about): 2780
- * add, 3224 mul, 12 div, 16 calls (cos 8, sin 8) (4 rhs + 4 jac_x + the stage tangents, F P
- * F^T and the symmetrisation); stack: 432 reals.
+ * Frozen: mu_38 while |slide_K38| <= 0.5, mu_05 while |slide_B05| <= 0.5. Operations (about):
+ * 2780 add, 3224 mul, 12 div, 16 calls (cos 8, sin 8) (4 rhs + 4 jac_x + the stage tangents, F
+ * P F^T and the symmetrisation); stack: 432 reals.
  */
 void gearsym_ekf_2_3_ekf_predict(
     gearsym_real *x,
@@ -260,9 +260,9 @@ void gearsym_ekf_2_3_ekf_predict(
  * NaN or infinite y_i is skipped (no update); the gain entry of a frozen state is 0 (its
  * estimate and variance stay unchanged). *nis receives the sum of nu^2/s over the used
  * outputs. Returns the number of outputs used.
- * Frozen: mu_38 while slide_K38 <= 0.5, mu_05 while slide_B05 <= 0.5. Operations (about): 840
- * add, 876 mul, 0 div, 0 calls (3 x (outputs + jac_outputs + the Joseph update)); stack: 432
- * reals.
+ * Frozen: mu_38 while |slide_K38| <= 0.5, mu_05 while |slide_B05| <= 0.5. Operations (about):
+ * 840 add, 876 mul, 0 div, 0 calls (3 x (outputs + jac_outputs + the Joseph update)); stack:
+ * 432 reals.
  */
 int gearsym_ekf_2_3_ekf_update(
     gearsym_real *x,
@@ -273,6 +273,40 @@ int gearsym_ekf_2_3_ekf_update(
     const gearsym_real *r,
     const gearsym_real *y_floor,
     gearsym_real *nis);
+
+/**
+ * Per swapping element, in the order of the mode array: its slip (2.59), the torque its
+ * sticking needs with the other element as u's flags say, and its capacity 2 N r_m mu F_N
+ * (2.60, 2.69) with mu the state where augmented: m[3 e + 0..2].
+ * Operations: 10 add, 22 mul, 0 div, 0 calls; 5 temporaries.
+ */
+void gearsym_ekf_2_3_ekf_mode_quantities(
+    const gearsym_real *x,
+    const gearsym_real *u,
+    const gearsym_ekf_2_3_params *p,
+    gearsym_real *m);
+
+/**
+ * The filter's own mode logic (thesis 4.3 on the hybrid shift model), after ekf_update: from
+ * the posterior x, P, the known inputs u (T_In, F_N; its mode flags are ignored) and modes[e]
+ * (0 open, +1/-1 sliding with/against the power-on slip sign, 2 sticking), the modes held over
+ * the next sample, in place. F_N <= 0 opens; an open element with F_N > 0 slides in the
+ * direction of its slip; a sticking one breaks away when |sticking torque| > capacity, sliding
+ * in the torque's direction; a sliding one whose slip has reached zero locks up if |sticking
+ * torque| at A x is within the capacity with mu lowered by the stated sigma multiple (x = A x,
+ * P = A P A^T on the physical states, the parameter block untouched), else slides in the
+ * torque's direction. Then set u's slide_/stick_ flags from modes (slide = modes[e] if it is
+ * +-1, stick = 1 if it is 2) for the next ekf_predict and ekf_update. Returns the number of
+ * switches.
+ * Operations (at most): 200 add, 264 mul, 0 div, 0 calls (ekf_mode_quantities at most twice
+ * per element, the lock-up map of x and P: 160 add, 176 mul, 0 div, 0 calls); stack: 99 reals.
+ */
+int gearsym_ekf_2_3_ekf_mode_update(
+    gearsym_real *x,
+    gearsym_real *P,
+    const gearsym_real *u,
+    const gearsym_ekf_2_3_params *p,
+    int *modes);
 
 /**
  * Fill p with the model's default parameter values. Parameters without a default are set to

@@ -174,6 +174,23 @@ def _jac_outputs(x: Any, u: Any, p: Any) -> list[Any]:
     dhdx[2, 3] = 1.0
     return [dhdx]
 
+
+def _ekf_mode_quantities(x: Any, u: Any, p: Any) -> list[Any]:
+    """Per swapping element, in the order of the mode array: its slip (2.59), the torque its sticking needs with the other element as u's flags say, and its capacity 2 N r_m mu F_N (2.60, 2.69) with mu the state where augmented: m[3 e + 0..2]."""
+    t0 = u[2]*x[6]
+    t1 = x[3]*p[1]
+    t2 = x[1]*p[1]
+    t3 = x[2]*p[0]
+    t4 = u[1]*x[5]
+    m = ca.SX(6, 1)
+    m[0, 0] = -x[0] + (120.0/37.0)*x[1]
+    m[1, 0] = -0.984561434330364853118*u[0] - 0.00385599385565343887287*t3 - 0.00156176340852711173466*t2 + 0.00385599385565343887287*t1 + 2.93155983635187382235*t0*u[5]
+    m[2, 0] = (4.0/5.0)*t4
+    m[3, 0] = -(36.0/11.0)*x[0] + (3000.0/407.0)*x[1]
+    m[4, 0] = -0.448194679666402760828*u[0] - 0.0513015561808150337311*t1 + 0.0513015561808150337311*t3 + 0.0207782730582482923172*t2 + 0.194235472757426228188*t4*u[3]
+    m[5, 0] = (9.0/10.0)*t0
+    return [m]
+
 _BUILDERS = {
     "rhs": (_rhs, ["xdot"]),
     "outputs": (_outputs, ["y"]),
@@ -181,6 +198,7 @@ _BUILDERS = {
     "jac_u": (_jac_u, ["jac_u"]),
     "jac_p": (_jac_p, ["jac_p"]),
     "jac_outputs": (_jac_outputs, ["dhdx"]),
+    "ekf_mode_quantities": (_ekf_mode_quantities, ["m"]),
 }
 
 

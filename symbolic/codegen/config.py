@@ -11,13 +11,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 __all__ = [
     "INTEGRATORS",
     "Bounds",
     "CodegenConfig",
     "EkfLayout",
+    "EkfModeElement",
     "Precision",
     "Sparsity",
     "as_config",
@@ -75,13 +76,38 @@ class Sparsity:
 
 
 @dataclass(frozen=True)
+class EkfModeElement:
+    """One swapping element of the EKF's own mode logic
+    (:mod:`gearsym.symbolic.estimators.ekf_modes`) as the emitted ``ekf_mode_update`` needs it:
+    input indices of its normal force and mode flags, the power-on slip sign, the state index
+    of its μ (−1: not augmented) and the lock-up map's gearbox block A (``n`` x ``n``,
+    row-major, ``n`` the physical states), exact rationals or floats."""
+
+    name: str
+    normal_force: int
+    slide: int
+    stick: int
+    slip_sign: int
+    mu: int
+    lock_map: tuple[tuple[Any, ...], ...]
+
+
+@dataclass(frozen=True)
 class EkfLayout:
     """What the EKF rows (thesis 4.3) need beyond the model: which states are frozen by which
     input. ``frozen`` holds (state index, input index) pairs: while ``u[input] > 0.5`` is false
     (the element does not slide), that state's process noise and gain entry are zero (a
-    Schmidt consider state: its estimate and variance stay unchanged)."""
+    Schmidt consider state: its estimate and variance stay unchanged).
+
+    ``modes`` (optional) emits the filter's own mode logic: ``mode_quantities`` are, per
+    element in ``modes`` order, its slip, its sticking torque and its capacity (an
+    ``ImmutableMatrix`` of 3 x len(modes) rows in the model's symbols), ``lock_up_confidence``
+    the σ multiples of μ̂ the lock-up test takes off."""
 
     frozen: tuple[tuple[int, int], ...] = ()
+    modes: tuple[EkfModeElement, ...] = ()
+    mode_quantities: Any = None
+    lock_up_confidence: float = 1.0
 
 
 @dataclass(frozen=True)

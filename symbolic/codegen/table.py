@@ -269,6 +269,36 @@ ROWS: tuple[Row, ...] = (
         when="ekf",
     ),
     Row(
+        "ekf_mode_quantities",
+        "expr",
+        _XUP,
+        (("m", "nm", "1", "real"),),
+        "Per swapping element, in the order of the mode array: its slip (2.59), the torque its "
+        "sticking needs with the other element as u's flags say, and its capacity 2 N r_m mu "
+        "F_N (2.60, 2.69) with mu the state where augmented: m[3 e + 0..2].",
+        when="ekf_modes",
+    ),
+    Row(
+        "ekf_mode_update",
+        "ekf_mode_update",
+        ("x_io", "P_io", "u", "p"),
+        (("modes", "ne", "1", "int"),),
+        "The filter's own mode logic (thesis 4.3 on the hybrid shift model), after "
+        "ekf_update: from the posterior x, P, the known inputs u (T_In, F_N; its mode flags are "
+        "ignored) and modes[e] (0 open, +1/-1 sliding with/against the power-on slip sign, 2 "
+        "sticking), the modes held over the next sample, in place. F_N <= 0 opens; an open "
+        "element with F_N > 0 slides in the direction of its slip; a sticking one breaks away "
+        "when |sticking torque| > capacity, sliding in the torque's direction; a sliding one "
+        "whose slip has reached zero locks up if |sticking torque| at A x is within the "
+        "capacity with mu lowered by the stated sigma multiple (x = A x, P = A P A^T on the "
+        "physical states, the parameter block untouched), else slides in the torque's "
+        "direction. Then set u's slide_/stick_ flags from modes (slide = modes[e] if it is "
+        "+-1, stick = 1 if it is 2) for the next ekf_predict and ekf_update. Returns the number "
+        "of switches.",
+        returns="int",
+        when="ekf_modes",
+    ),
+    Row(
         "params_default",
         "params_default",
         (),
@@ -297,6 +327,7 @@ def _selected(row: Row, config: CodegenConfig) -> bool:
         "rk4": config.rk4_step,
         "implicit": config.implicit_step,
         "ekf": config.ekf is not None,
+        "ekf_modes": config.ekf is not None and bool(config.ekf.modes),
     }[row.when]
 
 
@@ -445,6 +476,8 @@ def build_function_table(
         "nu": len(us),
         "np": len(ps),
         "ny": len(model.outputs),
+        "ne": len(config.ekf.modes) if config.ekf is not None else 0,
+        "nm": 3 * len(config.ekf.modes) if config.ekf is not None else 0,
         "1": 1,
     }
 
@@ -496,6 +529,12 @@ def build_function_table(
             expressions = (h,)
         elif row.name == "jac_outputs":
             expressions = (output_jacobian,)
+        elif row.name == "ekf_mode_quantities":
+            assert config.ekf is not None
+            quantities = sp.ImmutableMatrix(config.ekf.mode_quantities)
+            expressions = (
+                sp.ImmutableMatrix(quantities.xreplace(changed) if changed else quantities),
+            )
         elif row.jacobian and row.name.endswith("_sparse"):
             assert pattern is not None
             expressions = (pattern.nonzeros(jac[row.jacobian]),)

@@ -10,6 +10,7 @@ from gearsym.symbolic.estimators.ekf import (
     DiscreteModel,
     augmented_model,
 )
+from gearsym.symbolic.estimators.ekf_modes import ModeLogic, ekf_mode_update
 from gearsym.symbolic.estimators.euio import EuioExistence, euio_existence
 from gearsym.symbolic.estimators.uio import (
     LinearMode,
@@ -24,6 +25,8 @@ __all__ = [
     "AugmentedModel",
     "DiscreteModel",
     "augmented_model",
+    "ModeLogic",
+    "ekf_mode_update",
     "EuioExistence",
     "euio_existence",
     "LinearMode",

@@ -9,8 +9,9 @@ z = [x; p] and ż = [f(x, u, p); 0]. The states get model-error intensities
 
 **Element modes.** (3.14)/(3.15) hold only while an element slides. Each swapping element is,
 per sample, *sliding* (torque k_sign 2 N r μ F_N, 3.14), *sticking* (torque is the constraint
-force that keeps its slip rate at zero) or *open* (torque 0). The mode comes in as two 0/1
-inputs per element, ``slide_<E>`` and ``stick_<E>``, so that one expression serves every phase
+force that keeps its slip rate at zero) or *open* (torque 0). The mode comes in as two
+inputs per element, ``slide_<E>`` (0, or ±1: sliding in the power-on slip direction (2.70) or
+against it) and ``stick_<E>`` (0/1), so that one expression serves every phase
 (the TCU or a hybrid model decides the mode; at most one element sticks at a time in a
 single-swap shift, else the gearbox would be tied up). The sticking torque follows from the
 slip rate σ̇_e = a_e0 + a_ee T_e + a_eo T_o, affine in both element torques (2.39):
@@ -128,6 +129,14 @@ class AugmentedModel:
     mu_state: dict[str, str]  # element -> its μ state, if augmented
     intensities: dict[str, float]  # per state of z (unit²/s)
     jacobian: sp.Matrix = field(repr=False)  # ∂f/∂z, exact (SymPy)
+    #: per element: its slip Δω_e = ω_a − ω_b (2.59) in the states, linear in the measured
+    #: speeds; the constraint torque its sticking needs (the other element as its flags say);
+    #: its capacity 2 N r_m μ F_N (2.60, 2.69) with μ the state where augmented; and the slip
+    #: sign (2.70) of the power-on direction that a slide flag of +1 means (−1: the other way)
+    slip: dict[str, sp.Expr] = field(default_factory=dict, repr=False)
+    sticking_torque: dict[str, sp.Expr] = field(default_factory=dict, repr=False)
+    capacity: dict[str, sp.Expr] = field(default_factory=dict, repr=False)
+    slip_sign: dict[str, int] = field(default_factory=dict)
 
     @property
     def state_names(self) -> list[str]:
@@ -152,11 +161,14 @@ class AugmentedModel:
         return values
 
     def frozen_states(self, u: Sequence[float]) -> list[int]:
-        """Indices of the μ states whose element does not slide under the inputs ``u``."""
+        """Indices of the μ states whose element does not slide under the inputs ``u`` (a
+        slide flag of +1 or −1, either direction, slides)."""
         names = self.input_names
         index = {name: i for i, name in enumerate(self.state_names)}
         return [
-            index[mu] for e, mu in self.mu_state.items() if not u[names.index(slide_input(e))] > 0.5
+            index[mu]
+            for e, mu in self.mu_state.items()
+            if not abs(u[names.index(slide_input(e))]) > 0.5
         ]
 
 
@@ -221,7 +233,10 @@ def augmented_model(
     flags = {
         e: (
             Variable(
-                slide_input(e), sp.Symbol(slide_input(e), real=True), "1", f"1 while {e} slides"
+                slide_input(e),
+                sp.Symbol(slide_input(e), real=True),
+                "1",
+                f"+1/-1 while {e} slides with/against its power-on slip sign",
             ),
             Variable(
                 stick_input(e), sp.Symbol(stick_input(e), real=True), "1", f"1 while {e} sticks"
@@ -231,6 +246,7 @@ def augmented_model(
     }
     zero = {torque_symbols[e]: 0 for e in elements}
     torque = {}
+    sticking_torque = {}
     for e, o in (elements, elements[::-1]):
         rate = slip_rate[e]
         a_ee = rate.coeff(torque_symbols[e])
@@ -238,6 +254,7 @@ def augmented_model(
         a_e0 = rate.xreplace(zero)
         sliding_other = flags[o][0].symbol * friction[o]
         sticking = -(a_e0 + a_eo * sliding_other) / a_ee
+        sticking_torque[e] = sticking
         torque[e] = flags[e][0].symbol * friction[e] + flags[e][1].symbol * sticking
     rhs_x = torque_model.rhs.xreplace({torque_symbols[e]: torque[e] for e in elements})
 
@@ -301,6 +318,10 @@ def augmented_model(
         mu_state=mu_state,
         intensities=rates,
         jacobian=smart_jacobian(rhs, model.state_symbols),
+        slip=slip,
+        sticking_torque=sticking_torque,
+        capacity={e: sp.expand(signs[e] * friction[e]) for e in elements},
+        slip_sign={e: int(signs[e]) for e in elements},
     )
 
 

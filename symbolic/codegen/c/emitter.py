@@ -98,6 +98,21 @@ class PatternView:
 
 
 @dataclass(frozen=True)
+class ModeElementView:
+    """One element of the emitted EKF mode logic (see ``EkfModeElement``)."""
+
+    index: int  # in the modes array
+    other: int
+    name: str
+    normal_force: int
+    slide: int
+    stick: int
+    slip_sign: int
+    mu: int  # state index of its μ, -1 if not augmented
+    lock_map: tuple[str, ...]  # lines of the row-major gearbox block of A, printed
+
+
+@dataclass(frozen=True)
 class CFunctionView:
     """One function as the C templates print it (fields beyond ``doc`` belong to one kind)."""
 
@@ -114,6 +129,9 @@ class CFunctionView:
     checks: tuple[ParamCheck, ...] = ()
     spread: Spread | None = None
     frozen: tuple[tuple[int, int], ...] = ()  # EKF: (state, input) pairs, see EkfLayout
+    mode_elements: tuple[ModeElementView, ...] = ()  # EKF mode logic
+    n_physical: int = 0  # states the lock-up map acts on
+    confidence: str = ""  # σ multiples of μ̂ off the capacity at lock-up, printed
 
 
 @dataclass(frozen=True)
@@ -248,7 +266,7 @@ def _function_views(
             assert table.config.ekf is not None
             extra["frozen"] = table.config.ekf.frozen
             frozen = ", ".join(
-                f"{table.model.states[i].name} while {table.model.inputs[j].name} <= 0.5"
+                f"{table.model.states[i].name} while |{table.model.inputs[j].name}| <= 0.5"
                 for i, j in table.config.ekf.frozen
             )
             if spec.kind == "ekf_predict":
@@ -265,6 +283,40 @@ def _function_views(
             op_text = (
                 f"Frozen: {frozen or 'none'}. Operations (about): {total.format()} ({what}); "
                 f"stack: {6 * nx * nx + 6 * nx} reals."
+            )
+        elif spec.kind == "ekf_mode_update":
+            layout = table.config.ekf
+            assert layout is not None
+            used_macros |= {"fabs", "sqrt"}
+            elements = []
+            for k, element in enumerate(layout.modes):
+                rows = tuple(
+                    ", ".join(printer.code(sp.sympify(v)) for v in row) for row in element.lock_map
+                )
+                elements.append(
+                    ModeElementView(
+                        k,
+                        1 - k,
+                        element.name,
+                        element.normal_force,
+                        element.slide,
+                        element.stick,
+                        element.slip_sign,
+                        element.mu,
+                        rows,
+                    )
+                )
+            extra["mode_elements"] = tuple(elements)
+            extra["n_physical"] = len(layout.modes[0].lock_map)
+            extra["confidence"] = printer.code(sp.Float(layout.lock_up_confidence))
+            n = len(layout.modes[0].lock_map)
+            quantities = counts["ekf_mode_quantities"]
+            own = OpCount(mul=2 * n * n * n + n * n + n * nx, add=2 * n * n * n + n * nx)
+            total = quantities.scaled(2 * len(layout.modes)) + own
+            op_text = (
+                f"Operations (at most): {total.format()} (ekf_mode_quantities at most twice per "
+                f"element, the lock-up map of x and P: {own.format()}); stack: "
+                f"{nx * nx + 2 * nx + 6 * len(layout.modes) + len(table.inputs)} reals."
             )
         elif spec.kind == "params_default":
             (defaults,) = spec.expressions
