@@ -6,6 +6,12 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import sympy as sp
+from gearsym.symbolic.codegen.c.ekf_code import (
+    EkfPredictCode,
+    output_selection,
+    predict_code,
+    selection_update_ops,
+)
 from gearsym.symbolic.codegen.c.printer import GearsymCPrinter
 from gearsym.symbolic.codegen.cse import (
     CseForm,
@@ -114,6 +120,9 @@ class CFunctionView:
     checks: tuple[ParamCheck, ...] = ()
     spread: Spread | None = None
     frozen: tuple[tuple[int, int], ...] = ()  # EKF: (state, input) pairs, see EkfLayout
+    declarations: tuple[str, ...] = ()  # EKF predict: unrolled from the sparsity (ekf_code)
+    statements: tuple[str, ...] = ()
+    selection: tuple[int, ...] = ()  # EKF update: the state each output is (H a selection)
 
 
 @dataclass(frozen=True)
@@ -185,6 +194,39 @@ def _spread(spec: FunctionSpec, pattern: SparsityPattern) -> Spread:
     )
 
 
+def _predict_code(table: FunctionTable) -> EkfPredictCode:
+    """The unrolled predict body of the table's model (see :mod:`.ekf_code`)."""
+    n = len(table.states)
+    names = table.names()
+    if "jac_x_sparse" in names:
+        pattern = table["jac_x"].pattern
+        assert pattern is not None
+        fn = "jac_x_sparse"
+        entries = [
+            (pattern.rowind[k], j)
+            for j in range(pattern.ncol)
+            for k in range(pattern.colptr[j], pattern.colptr[j + 1])
+        ]
+        index = {e: k for k, e in enumerate(entries)}
+        size = pattern.nnz
+    else:
+        fn = "jac_x"
+        dense = table["jac_x"].expressions[0]
+        entries = [(i, j) for j in range(n) for i in range(n) if dense[i, j] != 0]
+        index = {(i, j): i + j * n for i, j in entries}
+        size = n * n
+    rhs = table["rhs"].expressions[0]
+    return predict_code(
+        n,
+        entries,
+        f"{table.prefix}{fn}({{x}}, u, p, {{out}});",
+        index,
+        size,
+        [i for i in range(n) if rhs[i] == 0],
+        f"{table.prefix}rhs",
+    )
+
+
 def _function_views(
     table: FunctionTable, forms: Mapping[str, CseForm]
 ) -> tuple[list[CFunctionView], set[str], set[str]]:
@@ -252,19 +294,40 @@ def _function_views(
                 for i, j in table.config.ekf.frozen
             )
             if spec.kind == "ekf_predict":
-                own = OpCount(mul=4 * nx**3 + 10 * nx * nx + 8 * nx, add=4 * nx**3 + 8 * nx * nx)
+                code = _predict_code(table)
+                extra["declarations"] = code.declarations
+                extra["statements"] = code.statements
                 jac_ops = counts.get("jac_x_sparse", counts.get("jac_x"))
                 assert jac_ops is not None
+                own = code.ops + OpCount(compare=len(table.config.ekf.frozen))
                 total = counts["rhs"].scaled(4) + jac_ops.scaled(4) + own
-                what = "4 rhs + 4 jac_x + the stage tangents, F P F^T and the symmetrisation"
+                what = (
+                    f"4 rhs + 4 jac_x + {own.format()} for the stage tangents over the "
+                    "structural nonzeros of jac_x, x and F P F^T blockwise"
+                )
+                stack = code.stack + nx
             else:
                 ny = len(table.model.outputs)
-                own = OpCount(mul=ny * (4 * nx * nx + 4 * nx + 4), add=ny * (4 * nx * nx + 3 * nx))
-                total = (counts["outputs"] + counts["jac_outputs"]).scaled(ny) + own
-                what = f"{ny} x (outputs + jac_outputs + the Joseph update)"
+                selection = output_selection(table["jac_outputs"].expressions[0])
+                if selection is not None:
+                    extra["selection"] = selection
+                    own = selection_update_ops(nx, ny, len(table.config.ekf.frozen))
+                    total = counts["outputs"].scaled(ny) + own
+                    what = (
+                        f"{ny} x (outputs + the Joseph update with H a selection of states: "
+                        "no product with H, upper triangle)"
+                    )
+                    stack = ny + 3 * nx
+                else:
+                    own = OpCount(
+                        mul=ny * (4 * nx * nx + 4 * nx + 4), add=ny * (4 * nx * nx + 3 * nx)
+                    )
+                    total = (counts["outputs"] + counts["jac_outputs"]).scaled(ny) + own
+                    what = f"{ny} x (outputs + jac_outputs + the Joseph update)"
+                    stack = 6 * nx * nx + 6 * nx
             op_text = (
-                f"Frozen: {frozen or 'none'}. Operations (about): {total.format()} ({what}); "
-                f"stack: {6 * nx * nx + 6 * nx} reals."
+                f"Frozen: {frozen or 'none'}. Operations: {total.format()} ({what}); "
+                f"stack: {stack} reals."
             )
         elif spec.kind == "params_default":
             (defaults,) = spec.expressions
