@@ -60,7 +60,7 @@ OPS_GOAL = 600
 AGREE_DOUBLE = 1e-10
 AGREE_FLOAT = 5e-4  # 150 steps of float rounding (measured about 5e-5)
 #: The functions one emitted step runs (ekf_predict, ekf_update and what they call).
-STEP_FUNCTIONS = ("ekf_predict", "ekf_update", "rhs", "jac_x", "outputs", "jac_outputs")
+STEP_FUNCTIONS = ("ekf_predict", "ekf_update", "rhs", "jac_x_sparse", "outputs")
 
 
 def check_agreement(
@@ -211,7 +211,8 @@ def main() -> int:
     print(
         f"operations per step (stated in the emitted header, all 3 speeds used): predict "
         f"{sum(predict.values())} + update {sum(update.values())} = {ops} ({total['add']} add, "
-        f"{total['mul']} mul, {total['div']} div, {total['calls']} calls); CasADi's step "
+        f"{total['mul']} mul, {total['div']} div, {total['calls']} calls, {total['cmp']} cmp); "
+        f"CasADi's step "
         f"function: {casadi_operations(cas_step)} arithmetic instructions"
     )
     print(f"  goal <= {OPS_GOAL}: {'met' if met else 'MISSED'}")

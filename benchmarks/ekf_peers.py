@@ -585,6 +585,10 @@ def stated_operations(header: str, function: str) -> dict[str, int]:
         at = header.index(f"int {PREFIX}{function}(")
     comment = header[header.rindex("/**", 0, at) : at]
     text = " ".join(comment.replace("*", " ").split())
-    found = re.search(r"Operations \(about\): (\d+) add, (\d+) mul, (\d+) div, (\d+) calls", text)
-    add, mul, div, calls = (int(v) for v in found.groups())
-    return {"add": add, "mul": mul, "div": div, "calls": calls}
+    found = re.search(
+        r"Operations(?: \(about\))?: (\d+) add, (\d+) mul, (\d+) div, (\d+) calls"
+        r"(?: \([^)]*\))?(?:, (\d+) select)?(?:, (\d+) cmp)?",
+        text,
+    )
+    add, mul, div, calls, select, cmp = (int(v or 0) for v in found.groups())
+    return {"add": add, "mul": mul, "div": div, "calls": calls, "select": select, "cmp": cmp}

@@ -360,8 +360,10 @@ void gearsym_ekf_2_3_jac_p(
 /**
  * One classical explicit Runge-Kutta step (order 4) of size h, u held constant over the step.
  * x_next may alias x (in-place stepping).
- * Operations: 168 add, 246 mul, 4 div, 8 calls (cos 4, sin 4) (4 rhs calls + 56 add, 42 mul, 0
- * div, 0 calls).
+ * The right-hand side is inlined: its terms in u and p only are computed once (0 add, 9 mul, 0
+ * div, 0 calls), the rest in each of the 4 stages (28 add, 42 mul, 1 div, 2 calls (cos 1, sin
+ * 1)). Operations: 168 add, 219 mul, 4 div, 8 calls (cos 4, sin 4) (with 56 add, 42 mul, 0
+ * div, 0 calls of the step itself).
  */
 void gearsym_ekf_2_3_rk4_step(
     const gearsym_real *x,
@@ -370,31 +372,58 @@ void gearsym_ekf_2_3_rk4_step(
     gearsym_real h,
     gearsym_real *x_next)
 {
-    gearsym_real k1[GEARSYM_EKF_2_3_NX];
-    gearsym_real k2[GEARSYM_EKF_2_3_NX];
-    gearsym_real k3[GEARSYM_EKF_2_3_NX];
-    gearsym_real k4[GEARSYM_EKF_2_3_NX];
+    gearsym_real k[4][GEARSYM_EKF_2_3_NX];
     gearsym_real stage[GEARSYM_EKF_2_3_NX];
     const gearsym_real half_h = GEARSYM_LIT(0.5) * h;
     const gearsym_real sixth_h = h * (GEARSYM_LIT(1.0) / GEARSYM_LIT(6.0));
+    const gearsym_real *xs = x;
     int i;
+    int s;
+    /* The right-hand side's terms in u and p only: u is held over the step, so once. */
+    const gearsym_real hp0 = -GEARSYM_LIT(0.448194679666402760828)*u[0];
+    const gearsym_real hp1 = -GEARSYM_LIT(0.984561434330364853118)*u[0];
+    const gearsym_real hp2 = GEARSYM_LIT(10.6903700874655741645)*u[0];
+    const gearsym_real hp3 = GEARSYM_LIT(2.43657355346023132632)*u[0];
+    const gearsym_real hp4 = GEARSYM_LIT(2.0)*p->d_ss;
+    const gearsym_real hp5 = -GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air;
+    const gearsym_real hp6 = -GEARSYM_LIT(1.05990859890000000000)*p->f_roll;
 
-    gearsym_ekf_2_3_rhs(x, u, p, k1);
-    for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
-        stage[i] = x[i] + half_h * k1[i];
+    for (s = 0; s < 4; ++s) {
+        /* k_s = f(xs, u, p), xs = x, x + h/2 k1, x + h/2 k2, x + h k3 */
+        const gearsym_real t0 = GEARSYM_SIN(xs[7]);
+        const gearsym_real t1 = GEARSYM_COS(xs[7]);
+        const gearsym_real t2 = p->d_ss*xs[3];
+        const gearsym_real t3 = u[2]*xs[6];
+        const gearsym_real t4 = u[1]*xs[5];
+        const gearsym_real t5 = u[5]*t3;
+        const gearsym_real t6 = u[3]*t4;
+        const gearsym_real t7 = p->k_ss*xs[2];
+        const gearsym_real t8 = p->d_ss*xs[1];
+        const gearsym_real t9 = hp0 - GEARSYM_LIT(0.0513015561808150337311)*t2 + GEARSYM_LIT(0.0513015561808150337311)*t7 + GEARSYM_LIT(0.0207782730582482923172)*t8 + GEARSYM_LIT(0.194235472757426228188)*t6;
+        const gearsym_real t10 = u[6]*t9;
+        const gearsym_real t11 = hp1 - GEARSYM_LIT(0.00385599385565343887287)*t7 - GEARSYM_LIT(0.00156176340852711173466)*t8 + GEARSYM_LIT(0.00385599385565343887287)*t2 + GEARSYM_LIT(2.93155983635187382235)*t5;
+        const gearsym_real t12 = u[4]*t11;
+        const gearsym_real t13 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        k[s][0] = hp2 - GEARSYM_LIT(15.3239977064154931876)*t5 - GEARSYM_LIT(2.23037549883239967414)*t6 - GEARSYM_LIT(1.97373313362513675684)*t7 - GEARSYM_LIT(0.799405886441934692928)*t8 + GEARSYM_LIT(1.97373313362513675684)*t2 + GEARSYM_LIT(2.78796937354049959268)*t12 + GEARSYM_LIT(17.0266641182394368751)*t10;
+        k[s][1] = hp3 - GEARSYM_LIT(2.16534456830660372097)*t5 - GEARSYM_LIT(0.611934397368056522974)*t7 - GEARSYM_LIT(0.247847062522501629394)*t8 - GEARSYM_LIT(0.0134794634614955199919)*t12 + GEARSYM_LIT(0.0107835707691964159936)*t6 + GEARSYM_LIT(0.611934397368056522974)*t2 + GEARSYM_LIT(2.40593840922955968997)*t10;
+        k[s][2] = t13;
+        k[s][3] = (GEARSYM_LIT(2.0)*t7 + hp4*t13 - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*xs[4] + hp5*(xs[3]*xs[3]) + hp6*t1*xs[3]*xs[4])/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*xs[4]);
+        k[s][4] = GEARSYM_LIT(0.0);
+        k[s][5] = GEARSYM_LIT(0.0);
+        k[s][6] = GEARSYM_LIT(0.0);
+        k[s][7] = GEARSYM_LIT(0.0);
+        if (s < 3) {
+            const gearsym_real c = (s == 2) ? h : half_h;
+
+            for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
+                stage[i] = x[i] + c * k[s][i];
+            }
+            xs = stage;
+        }
     }
-    gearsym_ekf_2_3_rhs(stage, u, p, k2);
-    for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
-        stage[i] = x[i] + half_h * k2[i];
-    }
-    gearsym_ekf_2_3_rhs(stage, u, p, k3);
-    for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
-        stage[i] = x[i] + h * k3[i];
-    }
-    gearsym_ekf_2_3_rhs(stage, u, p, k4);
     /* x is read at index i only before x_next[i] is written, so x_next may alias x. */
     for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
-        x_next[i] = x[i] + sixth_h * (k1[i] + GEARSYM_LIT(2.0) * (k2[i] + k3[i]) + k4[i]);
+        x_next[i] = x[i] + sixth_h * (k[0][i] + GEARSYM_LIT(2.0) * (k[1][i] + k[2][i]) + k[3][i]);
     }
 }
 
@@ -443,10 +472,12 @@ void gearsym_ekf_2_3_jac_outputs(
  * with u held, P = F P F^T + h diag(q), F the exact Jacobian of that RK4 step (chain rule
  * through the four stages with jac_x). q: process-noise intensities per state (unit^2/s;
  * random walks of the parameters, model error of the states); the entry of a state frozen by
- * its input (see the header) counts as 0. P is 8 x 8 column-major and symmetrised on return.
- * Frozen: mu_38 while |slide_K38| <= 0.5, mu_05 while |slide_B05| <= 0.5. Operations (about):
- * 2780 add, 3224 mul, 12 div, 16 calls (cos 8, sin 8) (4 rhs + 4 jac_x + the stage tangents, F
- * P F^T and the symmetrisation); stack: 432 reals.
+ * its input (see the header) counts as 0. P is 8 x 8 column-major, symmetric on entry, and
+ * exactly symmetric on return (each mirrored pair computed once).
+ * Frozen: mu_38 while |slide_K38| <= 0.5, mu_05 while |slide_B05| <= 0.5. Operations: 742 add,
+ * 1065 mul, 12 div, 16 calls (cos 8, sin 8), 4 cmp (4 rhs + 4 jac_x + 522 add, 593 mul, 0 div,
+ * 0 calls, 4 cmp for the stage tangents over the structural nonzeros of jac_x, x and F P F^T
+ * blockwise); stack: 215 reals.
  */
 void gearsym_ekf_2_3_ekf_predict(
     gearsym_real *x,
@@ -456,20 +487,20 @@ void gearsym_ekf_2_3_ekf_predict(
     gearsym_real h,
     const gearsym_real *q)
 {
-    gearsym_real slopes[4][GEARSYM_EKF_2_3_NX]; /* k1 .. k4 */
-    gearsym_real stage[GEARSYM_EKF_2_3_NX];
-    gearsym_real rate[GEARSYM_EKF_2_3_NX];
-    gearsym_real jac[GEARSYM_EKF_2_3_NX * GEARSYM_EKF_2_3_NX];
-    gearsym_real tangent[GEARSYM_EKF_2_3_NX * GEARSYM_EKF_2_3_NX]; /* K_i = J(stage_i) (I + c h K_(i-1)) */
-    gearsym_real dstage[GEARSYM_EKF_2_3_NX * GEARSYM_EKF_2_3_NX]; /* I + c h K_(i-1) */
-    gearsym_real F[GEARSYM_EKF_2_3_NX * GEARSYM_EKF_2_3_NX];
-    gearsym_real FP[GEARSYM_EKF_2_3_NX * GEARSYM_EKF_2_3_NX];
     const gearsym_real half_h = GEARSYM_LIT(0.5) * h;
     const gearsym_real sixth_h = h * (GEARSYM_LIT(1.0) / GEARSYM_LIT(6.0));
+    const gearsym_real third_h = h * (GEARSYM_LIT(1.0) / GEARSYM_LIT(3.0));
+    gearsym_real slopes[4][8]; /* k1 .. k4 */
+    gearsym_real stage[8];
+    gearsym_real j1[17]; /* K1 = J(x), 17 structural nonzeros */
+    gearsym_real js[17]; /* J(stage_i) */
+    gearsym_real tan2[28]; /* K2 */
+    gearsym_real tan3[28]; /* K3 */
+    gearsym_real cj[17]; /* c J(stage_i) */
+    gearsym_real F[28]; /* F on the tangents' pattern */
+    gearsym_real A[32]; /* F[R, :] P */
+    gearsym_real rate[GEARSYM_EKF_2_3_NX];
     int i;
-    int j;
-    int k;
-    int stage_no;
 
     for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
         rate[i] = q[i];
@@ -480,77 +511,253 @@ void gearsym_ekf_2_3_ekf_predict(
     if (!((u[5] > GEARSYM_LIT(0.5)) || (u[5] < GEARSYM_LIT(-0.5)))) {
         rate[6] = GEARSYM_LIT(0.0); /* frozen: its element does not slide */
     }
-    /* Stage 1: k1 = f(x), K1 = J(x); F accumulates h/6 (K1 + 2 K2 + 2 K3 + K4). */
+    /*
+     * Chain rule through the RK4 stages (K1 = J(x), K_i = J(stage_i) (I + c K_(i-1))) and
+     * P = F P F^T + h diag(rate), unrolled over the structural nonzeros of jac_x known at
+     * generation time (see the header).
+     */
     gearsym_ekf_2_3_rhs(x, u, p, slopes[0]);
-    gearsym_ekf_2_3_jac_x(x, u, p, tangent);
-    for (i = 0; i < GEARSYM_EKF_2_3_NX * GEARSYM_EKF_2_3_NX; ++i) {
-        F[i] = tangent[i];
-    }
-    for (stage_no = 2; stage_no <= 4; ++stage_no) {
-        const gearsym_real c = (stage_no == 4) ? h : half_h;
-        const gearsym_real weight = (stage_no == 4) ? GEARSYM_LIT(1.0) : GEARSYM_LIT(2.0);
-
-        for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
-            stage[i] = x[i] + c * slopes[stage_no - 2][i];
-        }
-        gearsym_ekf_2_3_rhs(stage, u, p, slopes[stage_no - 1]);
-        gearsym_ekf_2_3_jac_x(stage, u, p, jac);
-        /* d stage / d x = I + c K_(i-1) */
-        for (j = 0; j < GEARSYM_EKF_2_3_NX; ++j) {
-            for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
-                dstage[i + j * GEARSYM_EKF_2_3_NX] = c * tangent[i + j * GEARSYM_EKF_2_3_NX];
-            }
-            dstage[j + j * GEARSYM_EKF_2_3_NX] += GEARSYM_LIT(1.0);
-        }
-        /* K_i = J(stage) d stage / d x */
-        for (j = 0; j < GEARSYM_EKF_2_3_NX; ++j) {
-            for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
-                gearsym_real sum = GEARSYM_LIT(0.0);
-                for (k = 0; k < GEARSYM_EKF_2_3_NX; ++k) {
-                    sum += jac[i + k * GEARSYM_EKF_2_3_NX] * dstage[k + j * GEARSYM_EKF_2_3_NX];
-                }
-                tangent[i + j * GEARSYM_EKF_2_3_NX] = sum;
-            }
-        }
-        for (i = 0; i < GEARSYM_EKF_2_3_NX * GEARSYM_EKF_2_3_NX; ++i) {
-            F[i] += weight * tangent[i];
-        }
-    }
-    /* F = I + h/6 (K1 + 2 K2 + 2 K3 + K4), x = x + h/6 (k1 + 2 (k2 + k3) + k4) */
-    for (i = 0; i < GEARSYM_EKF_2_3_NX * GEARSYM_EKF_2_3_NX; ++i) {
-        F[i] *= sixth_h;
-    }
-    for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
-        F[i + i * GEARSYM_EKF_2_3_NX] += GEARSYM_LIT(1.0);
-        x[i] = x[i] + sixth_h * (slopes[0][i] + GEARSYM_LIT(2.0) * (slopes[1][i] + slopes[2][i]) + slopes[3][i]);
-    }
-    /* P = F P F^T + h diag(rate), then (P + P^T) / 2 against rounding drift */
-    for (j = 0; j < GEARSYM_EKF_2_3_NX; ++j) {
-        for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
-            gearsym_real sum = GEARSYM_LIT(0.0);
-            for (k = 0; k < GEARSYM_EKF_2_3_NX; ++k) {
-                sum += F[i + k * GEARSYM_EKF_2_3_NX] * P[k + j * GEARSYM_EKF_2_3_NX];
-            }
-            FP[i + j * GEARSYM_EKF_2_3_NX] = sum;
-        }
-    }
-    for (j = 0; j < GEARSYM_EKF_2_3_NX; ++j) {
-        for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
-            gearsym_real sum = GEARSYM_LIT(0.0);
-            for (k = 0; k < GEARSYM_EKF_2_3_NX; ++k) {
-                sum += FP[i + k * GEARSYM_EKF_2_3_NX] * F[j + k * GEARSYM_EKF_2_3_NX];
-            }
-            P[i + j * GEARSYM_EKF_2_3_NX] = sum;
-        }
-        P[j + j * GEARSYM_EKF_2_3_NX] += h * rate[j];
-    }
-    for (j = 0; j < GEARSYM_EKF_2_3_NX; ++j) {
-        for (i = j + 1; i < GEARSYM_EKF_2_3_NX; ++i) {
-            const gearsym_real mean = GEARSYM_LIT(0.5) * (P[i + j * GEARSYM_EKF_2_3_NX] + P[j + i * GEARSYM_EKF_2_3_NX]);
-            P[i + j * GEARSYM_EKF_2_3_NX] = mean;
-            P[j + i * GEARSYM_EKF_2_3_NX] = mean;
-        }
-    }
+    gearsym_ekf_2_3_jac_x_sparse(x, u, p, j1);
+    stage[4] = x[4]; /* its right-hand side is 0 */
+    stage[5] = x[5]; /* its right-hand side is 0 */
+    stage[6] = x[6]; /* its right-hand side is 0 */
+    stage[7] = x[7]; /* its right-hand side is 0 */
+    /* stage 2: stage = x + half_h k1 */
+    stage[0] = x[0] + half_h * slopes[0][0];
+    stage[1] = x[1] + half_h * slopes[0][1];
+    stage[2] = x[2] + half_h * slopes[0][2];
+    stage[3] = x[3] + half_h * slopes[0][3];
+    gearsym_ekf_2_3_rhs(stage, u, p, slopes[1]);
+    gearsym_ekf_2_3_jac_x_sparse(stage, u, p, js);
+    /* K2 = J + half_h J K1, over structural nonzeros */
+    cj[0] = half_h * js[0];
+    cj[1] = half_h * js[1];
+    cj[2] = half_h * js[2];
+    cj[3] = half_h * js[3];
+    cj[4] = half_h * js[4];
+    cj[5] = half_h * js[5];
+    cj[6] = half_h * js[6];
+    cj[7] = half_h * js[7];
+    cj[8] = half_h * js[8];
+    cj[9] = half_h * js[9];
+    cj[10] = half_h * js[10];
+    tan2[0] = js[0] + cj[0] * j1[1] + cj[4] * j1[2] + cj[7] * j1[3];
+    tan2[1] = js[1] + cj[1] * j1[1] + cj[5] * j1[2] + cj[8] * j1[3];
+    tan2[2] = js[2] + cj[2] * j1[1] + cj[9] * j1[3];
+    tan2[3] = js[3] + cj[3] * j1[1] + cj[6] * j1[2] + cj[10] * j1[3];
+    tan2[4] = js[4] + cj[0] * j1[5] + cj[7] * j1[6];
+    tan2[5] = js[5] + cj[1] * j1[5] + cj[8] * j1[6];
+    tan2[6] = cj[2] * j1[5] + cj[9] * j1[6];
+    tan2[7] = js[6] + cj[3] * j1[5] + cj[10] * j1[6];
+    tan2[8] = js[7] + cj[0] * j1[8] + cj[4] * j1[9] + cj[7] * j1[10];
+    tan2[9] = js[8] + cj[1] * j1[8] + cj[5] * j1[9] + cj[8] * j1[10];
+    tan2[10] = js[9] + cj[2] * j1[8] + cj[9] * j1[10];
+    tan2[11] = js[10] + cj[3] * j1[8] + cj[6] * j1[9] + cj[10] * j1[10];
+    tan2[12] = cj[7] * j1[11];
+    tan2[13] = cj[8] * j1[11];
+    tan2[14] = cj[9] * j1[11];
+    tan2[15] = js[11] + cj[10] * j1[11];
+    tan2[16] = js[12] + cj[0] * j1[13];
+    tan2[17] = js[13] + cj[1] * j1[13];
+    tan2[18] = cj[2] * j1[13];
+    tan2[19] = cj[3] * j1[13];
+    tan2[20] = js[14] + cj[0] * j1[15];
+    tan2[21] = js[15] + cj[1] * j1[15];
+    tan2[22] = cj[2] * j1[15];
+    tan2[23] = cj[3] * j1[15];
+    tan2[24] = cj[7] * j1[16];
+    tan2[25] = cj[8] * j1[16];
+    tan2[26] = cj[9] * j1[16];
+    tan2[27] = js[16] + cj[10] * j1[16];
+    /* stage 3: stage = x + half_h k2 */
+    stage[0] = x[0] + half_h * slopes[1][0];
+    stage[1] = x[1] + half_h * slopes[1][1];
+    stage[2] = x[2] + half_h * slopes[1][2];
+    stage[3] = x[3] + half_h * slopes[1][3];
+    gearsym_ekf_2_3_rhs(stage, u, p, slopes[2]);
+    gearsym_ekf_2_3_jac_x_sparse(stage, u, p, js);
+    /* K3 = J + half_h J K2, over structural nonzeros */
+    cj[0] = half_h * js[0];
+    cj[1] = half_h * js[1];
+    cj[2] = half_h * js[2];
+    cj[3] = half_h * js[3];
+    cj[4] = half_h * js[4];
+    cj[5] = half_h * js[5];
+    cj[6] = half_h * js[6];
+    cj[7] = half_h * js[7];
+    cj[8] = half_h * js[8];
+    cj[9] = half_h * js[9];
+    cj[10] = half_h * js[10];
+    tan3[0] = js[0] + cj[0] * tan2[1] + cj[4] * tan2[2] + cj[7] * tan2[3];
+    tan3[1] = js[1] + cj[1] * tan2[1] + cj[5] * tan2[2] + cj[8] * tan2[3];
+    tan3[2] = js[2] + cj[2] * tan2[1] + cj[9] * tan2[3];
+    tan3[3] = js[3] + cj[3] * tan2[1] + cj[6] * tan2[2] + cj[10] * tan2[3];
+    tan3[4] = js[4] + cj[0] * tan2[5] + cj[4] * tan2[6] + cj[7] * tan2[7];
+    tan3[5] = js[5] + cj[1] * tan2[5] + cj[5] * tan2[6] + cj[8] * tan2[7];
+    tan3[6] = cj[2] * tan2[5] + cj[9] * tan2[7];
+    tan3[7] = js[6] + cj[3] * tan2[5] + cj[6] * tan2[6] + cj[10] * tan2[7];
+    tan3[8] = js[7] + cj[0] * tan2[9] + cj[4] * tan2[10] + cj[7] * tan2[11];
+    tan3[9] = js[8] + cj[1] * tan2[9] + cj[5] * tan2[10] + cj[8] * tan2[11];
+    tan3[10] = js[9] + cj[2] * tan2[9] + cj[9] * tan2[11];
+    tan3[11] = js[10] + cj[3] * tan2[9] + cj[6] * tan2[10] + cj[10] * tan2[11];
+    tan3[12] = cj[0] * tan2[13] + cj[4] * tan2[14] + cj[7] * tan2[15];
+    tan3[13] = cj[1] * tan2[13] + cj[5] * tan2[14] + cj[8] * tan2[15];
+    tan3[14] = cj[2] * tan2[13] + cj[9] * tan2[15];
+    tan3[15] = js[11] + cj[3] * tan2[13] + cj[6] * tan2[14] + cj[10] * tan2[15];
+    tan3[16] = js[12] + cj[0] * tan2[17] + cj[4] * tan2[18] + cj[7] * tan2[19];
+    tan3[17] = js[13] + cj[1] * tan2[17] + cj[5] * tan2[18] + cj[8] * tan2[19];
+    tan3[18] = cj[2] * tan2[17] + cj[9] * tan2[19];
+    tan3[19] = cj[3] * tan2[17] + cj[6] * tan2[18] + cj[10] * tan2[19];
+    tan3[20] = js[14] + cj[0] * tan2[21] + cj[4] * tan2[22] + cj[7] * tan2[23];
+    tan3[21] = js[15] + cj[1] * tan2[21] + cj[5] * tan2[22] + cj[8] * tan2[23];
+    tan3[22] = cj[2] * tan2[21] + cj[9] * tan2[23];
+    tan3[23] = cj[3] * tan2[21] + cj[6] * tan2[22] + cj[10] * tan2[23];
+    tan3[24] = cj[0] * tan2[25] + cj[4] * tan2[26] + cj[7] * tan2[27];
+    tan3[25] = cj[1] * tan2[25] + cj[5] * tan2[26] + cj[8] * tan2[27];
+    tan3[26] = cj[2] * tan2[25] + cj[9] * tan2[27];
+    tan3[27] = js[16] + cj[3] * tan2[25] + cj[6] * tan2[26] + cj[10] * tan2[27];
+    /* stage 4: stage = x + h k3 */
+    stage[0] = x[0] + h * slopes[2][0];
+    stage[1] = x[1] + h * slopes[2][1];
+    stage[2] = x[2] + h * slopes[2][2];
+    stage[3] = x[3] + h * slopes[2][3];
+    gearsym_ekf_2_3_rhs(stage, u, p, slopes[3]);
+    gearsym_ekf_2_3_jac_x_sparse(stage, u, p, js);
+    /* K4 = J + h J K3, over structural nonzeros */
+    cj[0] = h * js[0];
+    cj[1] = h * js[1];
+    cj[2] = h * js[2];
+    cj[3] = h * js[3];
+    cj[4] = h * js[4];
+    cj[5] = h * js[5];
+    cj[6] = h * js[6];
+    cj[7] = h * js[7];
+    cj[8] = h * js[8];
+    cj[9] = h * js[9];
+    cj[10] = h * js[10];
+    /* F = I + h/6 (K1 + K4) + h/3 (K2 + K3): its rows outside R are unit rows */
+    F[0] = sixth_h * (j1[0] + (js[0] + cj[0] * tan3[1] + cj[4] * tan3[2] + cj[7] * tan3[3])) + third_h * (tan2[0] + tan3[0]);
+    F[1] = GEARSYM_LIT(1.0) + sixth_h * (j1[1] + (js[1] + cj[1] * tan3[1] + cj[5] * tan3[2] + cj[8] * tan3[3])) + third_h * (tan2[1] + tan3[1]);
+    F[2] = sixth_h * (j1[2] + (js[2] + cj[2] * tan3[1] + cj[9] * tan3[3])) + third_h * (tan2[2] + tan3[2]);
+    F[3] = sixth_h * (j1[3] + (js[3] + cj[3] * tan3[1] + cj[6] * tan3[2] + cj[10] * tan3[3])) + third_h * (tan2[3] + tan3[3]);
+    F[4] = sixth_h * (j1[4] + (js[4] + cj[0] * tan3[5] + cj[4] * tan3[6] + cj[7] * tan3[7])) + third_h * (tan2[4] + tan3[4]);
+    F[5] = sixth_h * (j1[5] + (js[5] + cj[1] * tan3[5] + cj[5] * tan3[6] + cj[8] * tan3[7])) + third_h * (tan2[5] + tan3[5]);
+    F[6] = GEARSYM_LIT(1.0) + sixth_h * (cj[2] * tan3[5] + cj[9] * tan3[7]) + third_h * (tan2[6] + tan3[6]);
+    F[7] = sixth_h * (j1[6] + (js[6] + cj[3] * tan3[5] + cj[6] * tan3[6] + cj[10] * tan3[7])) + third_h * (tan2[7] + tan3[7]);
+    F[8] = sixth_h * (j1[7] + (js[7] + cj[0] * tan3[9] + cj[4] * tan3[10] + cj[7] * tan3[11])) + third_h * (tan2[8] + tan3[8]);
+    F[9] = sixth_h * (j1[8] + (js[8] + cj[1] * tan3[9] + cj[5] * tan3[10] + cj[8] * tan3[11])) + third_h * (tan2[9] + tan3[9]);
+    F[10] = sixth_h * (j1[9] + (js[9] + cj[2] * tan3[9] + cj[9] * tan3[11])) + third_h * (tan2[10] + tan3[10]);
+    F[11] = GEARSYM_LIT(1.0) + sixth_h * (j1[10] + (js[10] + cj[3] * tan3[9] + cj[6] * tan3[10] + cj[10] * tan3[11])) + third_h * (tan2[11] + tan3[11]);
+    F[12] = sixth_h * (cj[0] * tan3[13] + cj[4] * tan3[14] + cj[7] * tan3[15]) + third_h * (tan2[12] + tan3[12]);
+    F[13] = sixth_h * (cj[1] * tan3[13] + cj[5] * tan3[14] + cj[8] * tan3[15]) + third_h * (tan2[13] + tan3[13]);
+    F[14] = sixth_h * (cj[2] * tan3[13] + cj[9] * tan3[15]) + third_h * (tan2[14] + tan3[14]);
+    F[15] = sixth_h * (j1[11] + (js[11] + cj[3] * tan3[13] + cj[6] * tan3[14] + cj[10] * tan3[15])) + third_h * (tan2[15] + tan3[15]);
+    F[16] = sixth_h * (j1[12] + (js[12] + cj[0] * tan3[17] + cj[4] * tan3[18] + cj[7] * tan3[19])) + third_h * (tan2[16] + tan3[16]);
+    F[17] = sixth_h * (j1[13] + (js[13] + cj[1] * tan3[17] + cj[5] * tan3[18] + cj[8] * tan3[19])) + third_h * (tan2[17] + tan3[17]);
+    F[18] = sixth_h * (cj[2] * tan3[17] + cj[9] * tan3[19]) + third_h * (tan2[18] + tan3[18]);
+    F[19] = sixth_h * (cj[3] * tan3[17] + cj[6] * tan3[18] + cj[10] * tan3[19]) + third_h * (tan2[19] + tan3[19]);
+    F[20] = sixth_h * (j1[14] + (js[14] + cj[0] * tan3[21] + cj[4] * tan3[22] + cj[7] * tan3[23])) + third_h * (tan2[20] + tan3[20]);
+    F[21] = sixth_h * (j1[15] + (js[15] + cj[1] * tan3[21] + cj[5] * tan3[22] + cj[8] * tan3[23])) + third_h * (tan2[21] + tan3[21]);
+    F[22] = sixth_h * (cj[2] * tan3[21] + cj[9] * tan3[23]) + third_h * (tan2[22] + tan3[22]);
+    F[23] = sixth_h * (cj[3] * tan3[21] + cj[6] * tan3[22] + cj[10] * tan3[23]) + third_h * (tan2[23] + tan3[23]);
+    F[24] = sixth_h * (cj[0] * tan3[25] + cj[4] * tan3[26] + cj[7] * tan3[27]) + third_h * (tan2[24] + tan3[24]);
+    F[25] = sixth_h * (cj[1] * tan3[25] + cj[5] * tan3[26] + cj[8] * tan3[27]) + third_h * (tan2[25] + tan3[25]);
+    F[26] = sixth_h * (cj[2] * tan3[25] + cj[9] * tan3[27]) + third_h * (tan2[26] + tan3[26]);
+    F[27] = sixth_h * (j1[16] + (js[16] + cj[3] * tan3[25] + cj[6] * tan3[26] + cj[10] * tan3[27])) + third_h * (tan2[27] + tan3[27]);
+    /* x = x + h/6 (k1 + 2 (k2 + k3) + k4) */
+    x[0] = x[0] + sixth_h * (slopes[0][0] + GEARSYM_LIT(2.0) * (slopes[1][0] + slopes[2][0]) + slopes[3][0]);
+    x[1] = x[1] + sixth_h * (slopes[0][1] + GEARSYM_LIT(2.0) * (slopes[1][1] + slopes[2][1]) + slopes[3][1]);
+    x[2] = x[2] + sixth_h * (slopes[0][2] + GEARSYM_LIT(2.0) * (slopes[1][2] + slopes[2][2]) + slopes[3][2]);
+    x[3] = x[3] + sixth_h * (slopes[0][3] + GEARSYM_LIT(2.0) * (slopes[1][3] + slopes[2][3]) + slopes[3][3]);
+    /* A = F[R, :] P with R = {0, 1, 2, 3} (A[r + j*4]) */
+    A[0] = P[0] + F[0] * P[1] + F[4] * P[2] + F[8] * P[3] + F[12] * P[4] + F[16] * P[5] + F[20] * P[6] + F[24] * P[7];
+    A[4] = P[8] + F[0] * P[9] + F[4] * P[10] + F[8] * P[11] + F[12] * P[12] + F[16] * P[13] + F[20] * P[14] + F[24] * P[15];
+    A[5] = F[1] * P[9] + F[5] * P[10] + F[9] * P[11] + F[13] * P[12] + F[17] * P[13] + F[21] * P[14] + F[25] * P[15];
+    A[6] = F[2] * P[9] + F[6] * P[10] + F[10] * P[11] + F[14] * P[12] + F[18] * P[13] + F[22] * P[14] + F[26] * P[15];
+    A[7] = F[3] * P[9] + F[7] * P[10] + F[11] * P[11] + F[15] * P[12] + F[19] * P[13] + F[23] * P[14] + F[27] * P[15];
+    A[8] = P[16] + F[0] * P[17] + F[4] * P[18] + F[8] * P[19] + F[12] * P[20] + F[16] * P[21] + F[20] * P[22] + F[24] * P[23];
+    A[9] = F[1] * P[17] + F[5] * P[18] + F[9] * P[19] + F[13] * P[20] + F[17] * P[21] + F[21] * P[22] + F[25] * P[23];
+    A[10] = F[2] * P[17] + F[6] * P[18] + F[10] * P[19] + F[14] * P[20] + F[18] * P[21] + F[22] * P[22] + F[26] * P[23];
+    A[11] = F[3] * P[17] + F[7] * P[18] + F[11] * P[19] + F[15] * P[20] + F[19] * P[21] + F[23] * P[22] + F[27] * P[23];
+    A[12] = P[24] + F[0] * P[25] + F[4] * P[26] + F[8] * P[27] + F[12] * P[28] + F[16] * P[29] + F[20] * P[30] + F[24] * P[31];
+    A[13] = F[1] * P[25] + F[5] * P[26] + F[9] * P[27] + F[13] * P[28] + F[17] * P[29] + F[21] * P[30] + F[25] * P[31];
+    A[14] = F[2] * P[25] + F[6] * P[26] + F[10] * P[27] + F[14] * P[28] + F[18] * P[29] + F[22] * P[30] + F[26] * P[31];
+    A[15] = F[3] * P[25] + F[7] * P[26] + F[11] * P[27] + F[15] * P[28] + F[19] * P[29] + F[23] * P[30] + F[27] * P[31];
+    A[16] = P[32] + F[0] * P[33] + F[4] * P[34] + F[8] * P[35] + F[12] * P[36] + F[16] * P[37] + F[20] * P[38] + F[24] * P[39];
+    A[17] = F[1] * P[33] + F[5] * P[34] + F[9] * P[35] + F[13] * P[36] + F[17] * P[37] + F[21] * P[38] + F[25] * P[39];
+    A[18] = F[2] * P[33] + F[6] * P[34] + F[10] * P[35] + F[14] * P[36] + F[18] * P[37] + F[22] * P[38] + F[26] * P[39];
+    A[19] = F[3] * P[33] + F[7] * P[34] + F[11] * P[35] + F[15] * P[36] + F[19] * P[37] + F[23] * P[38] + F[27] * P[39];
+    A[20] = P[40] + F[0] * P[41] + F[4] * P[42] + F[8] * P[43] + F[12] * P[44] + F[16] * P[45] + F[20] * P[46] + F[24] * P[47];
+    A[21] = F[1] * P[41] + F[5] * P[42] + F[9] * P[43] + F[13] * P[44] + F[17] * P[45] + F[21] * P[46] + F[25] * P[47];
+    A[22] = F[2] * P[41] + F[6] * P[42] + F[10] * P[43] + F[14] * P[44] + F[18] * P[45] + F[22] * P[46] + F[26] * P[47];
+    A[23] = F[3] * P[41] + F[7] * P[42] + F[11] * P[43] + F[15] * P[44] + F[19] * P[45] + F[23] * P[46] + F[27] * P[47];
+    A[24] = P[48] + F[0] * P[49] + F[4] * P[50] + F[8] * P[51] + F[12] * P[52] + F[16] * P[53] + F[20] * P[54] + F[24] * P[55];
+    A[25] = F[1] * P[49] + F[5] * P[50] + F[9] * P[51] + F[13] * P[52] + F[17] * P[53] + F[21] * P[54] + F[25] * P[55];
+    A[26] = F[2] * P[49] + F[6] * P[50] + F[10] * P[51] + F[14] * P[52] + F[18] * P[53] + F[22] * P[54] + F[26] * P[55];
+    A[27] = F[3] * P[49] + F[7] * P[50] + F[11] * P[51] + F[15] * P[52] + F[19] * P[53] + F[23] * P[54] + F[27] * P[55];
+    A[28] = P[56] + F[0] * P[57] + F[4] * P[58] + F[8] * P[59] + F[12] * P[60] + F[16] * P[61] + F[20] * P[62] + F[24] * P[63];
+    A[29] = F[1] * P[57] + F[5] * P[58] + F[9] * P[59] + F[13] * P[60] + F[17] * P[61] + F[21] * P[62] + F[25] * P[63];
+    A[30] = F[2] * P[57] + F[6] * P[58] + F[10] * P[59] + F[14] * P[60] + F[18] * P[61] + F[22] * P[62] + F[26] * P[63];
+    A[31] = F[3] * P[57] + F[7] * P[58] + F[11] * P[59] + F[15] * P[60] + F[19] * P[61] + F[23] * P[62] + F[27] * P[63];
+    /* P = F P F^T + h diag(rate), blockwise, symmetric by construction */
+    P[0] = A[0] + F[0] * A[4] + F[4] * A[8] + F[8] * A[12] + F[12] * A[16] + F[16] * A[20] + F[20] * A[24] + F[24] * A[28] + h * rate[0];
+    P[8] = F[1] * A[4] + F[5] * A[8] + F[9] * A[12] + F[13] * A[16] + F[17] * A[20] + F[21] * A[24] + F[25] * A[28];
+    P[1] = P[8];
+    P[9] = F[1] * A[5] + F[5] * A[9] + F[9] * A[13] + F[13] * A[17] + F[17] * A[21] + F[21] * A[25] + F[25] * A[29] + h * rate[1];
+    P[16] = F[2] * A[4] + F[6] * A[8] + F[10] * A[12] + F[14] * A[16] + F[18] * A[20] + F[22] * A[24] + F[26] * A[28];
+    P[2] = P[16];
+    P[17] = F[2] * A[5] + F[6] * A[9] + F[10] * A[13] + F[14] * A[17] + F[18] * A[21] + F[22] * A[25] + F[26] * A[29];
+    P[10] = P[17];
+    P[18] = F[2] * A[6] + F[6] * A[10] + F[10] * A[14] + F[14] * A[18] + F[18] * A[22] + F[22] * A[26] + F[26] * A[30] + h * rate[2];
+    P[24] = F[3] * A[4] + F[7] * A[8] + F[11] * A[12] + F[15] * A[16] + F[19] * A[20] + F[23] * A[24] + F[27] * A[28];
+    P[3] = P[24];
+    P[25] = F[3] * A[5] + F[7] * A[9] + F[11] * A[13] + F[15] * A[17] + F[19] * A[21] + F[23] * A[25] + F[27] * A[29];
+    P[11] = P[25];
+    P[26] = F[3] * A[6] + F[7] * A[10] + F[11] * A[14] + F[15] * A[18] + F[19] * A[22] + F[23] * A[26] + F[27] * A[30];
+    P[19] = P[26];
+    P[27] = F[3] * A[7] + F[7] * A[11] + F[11] * A[15] + F[15] * A[19] + F[19] * A[23] + F[23] * A[27] + F[27] * A[31] + h * rate[3];
+    P[32] = A[16];
+    P[4] = P[32];
+    P[33] = A[17];
+    P[12] = P[33];
+    P[34] = A[18];
+    P[20] = P[34];
+    P[35] = A[19];
+    P[28] = P[35];
+    P[40] = A[20];
+    P[5] = P[40];
+    P[41] = A[21];
+    P[13] = P[41];
+    P[42] = A[22];
+    P[21] = P[42];
+    P[43] = A[23];
+    P[29] = P[43];
+    P[48] = A[24];
+    P[6] = P[48];
+    P[49] = A[25];
+    P[14] = P[49];
+    P[50] = A[26];
+    P[22] = P[50];
+    P[51] = A[27];
+    P[30] = P[51];
+    P[56] = A[28];
+    P[7] = P[56];
+    P[57] = A[29];
+    P[15] = P[57];
+    P[58] = A[30];
+    P[23] = P[58];
+    P[59] = A[31];
+    P[31] = P[59];
+    P[36] += h * rate[4]; /* a unit row of F: no product */
+    P[37] = P[44]; /* exactly symmetric */
+    P[45] += h * rate[5]; /* a unit row of F: no product */
+    P[38] = P[52]; /* exactly symmetric */
+    P[46] = P[53]; /* exactly symmetric */
+    P[54] += h * rate[6]; /* a unit row of F: no product */
+    P[39] = P[60]; /* exactly symmetric */
+    P[47] = P[61]; /* exactly symmetric */
+    P[55] = P[62]; /* exactly symmetric */
+    P[63] += h * rate[7]; /* a unit row of F: no product */
 }
 
 /**
@@ -558,10 +765,11 @@ void gearsym_ekf_2_3_ekf_predict(
  * form P = (I - k h) P (I - k h)^T + R k k^T with R = (r_i max(|y_i|, y_floor_i))^2 (3.26). A
  * NaN or infinite y_i is skipped (no update); the gain entry of a frozen state is 0 (its
  * estimate and variance stay unchanged). *nis receives the sum of nu^2/s over the used
- * outputs. Returns the number of outputs used.
- * Frozen: mu_38 while |slide_K38| <= 0.5, mu_05 while |slide_B05| <= 0.5. Operations (about):
- * 840 add, 876 mul, 0 div, 0 calls (3 x (outputs + jac_outputs + the Joseph update)); stack:
- * 432 reals.
+ * outputs. Returns the number of outputs used. P is symmetric on entry and exactly symmetric
+ * on return.
+ * Frozen: mu_38 while |slide_K38| <= 0.5, mu_05 while |slide_B05| <= 0.5. Operations: 273 add,
+ * 300 mul, 3 div, 0 calls, 27 cmp (3 x (outputs + the Joseph update with H a selection of
+ * states: no product with H, upper triangle)); stack: 27 reals.
  */
 int gearsym_ekf_2_3_ekf_update(
     gearsym_real *x,
@@ -573,13 +781,12 @@ int gearsym_ekf_2_3_ekf_update(
     const gearsym_real *y_floor,
     gearsym_real *nis)
 {
+    /* H is a selection: output i is state measured[i], so P h^T is a column of P. */
+    static const int measured[GEARSYM_EKF_2_3_NY] = { 0, 1, 3 };
     gearsym_real y_hat[GEARSYM_EKF_2_3_NY];
-    gearsym_real H[GEARSYM_EKF_2_3_NY * GEARSYM_EKF_2_3_NX];
     gearsym_real v[GEARSYM_EKF_2_3_NX]; /* P h^T */
-    gearsym_real w[GEARSYM_EKF_2_3_NX]; /* h P */
     gearsym_real gain[GEARSYM_EKF_2_3_NX];
-    gearsym_real M[GEARSYM_EKF_2_3_NX * GEARSYM_EKF_2_3_NX]; /* (I - k h) P */
-    gearsym_real Mh[GEARSYM_EKF_2_3_NX]; /* M h^T */
+    gearsym_real g[GEARSYM_EKF_2_3_NX]; /* s k - v */
     int i;
     int a;
     int b;
@@ -587,41 +794,33 @@ int gearsym_ekf_2_3_ekf_update(
 
     *nis = GEARSYM_LIT(0.0);
     for (i = 0; i < GEARSYM_EKF_2_3_NY; ++i) {
+        const int m = measured[i];
         gearsym_real level;
         gearsym_real noise;
         gearsym_real s;
+        gearsym_real inv_s;
         gearsym_real innovation;
 
         if (!isfinite(y[i])) {
             continue; /* dropout: no update from this output */
         }
         gearsym_ekf_2_3_outputs(x, u, p, y_hat);
-        gearsym_ekf_2_3_jac_outputs(x, u, p, H);
         level = (y[i] < GEARSYM_LIT(0.0)) ? -y[i] : y[i];
         if (level < y_floor[i]) {
             level = y_floor[i];
         }
         noise = r[i] * level;
         noise = noise * noise; /* R_i (3.26) */
-        s = noise;
         for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
-            gearsym_real sum_v = GEARSYM_LIT(0.0);
-            gearsym_real sum_w = GEARSYM_LIT(0.0);
-            for (b = 0; b < GEARSYM_EKF_2_3_NX; ++b) {
-                sum_v += P[a + b * GEARSYM_EKF_2_3_NX] * H[i + b * GEARSYM_EKF_2_3_NY];
-                sum_w += H[i + b * GEARSYM_EKF_2_3_NY] * P[b + a * GEARSYM_EKF_2_3_NX];
-            }
-            v[a] = sum_v;
-            w[a] = sum_w;
+            v[a] = P[a + m * GEARSYM_EKF_2_3_NX];
         }
-        for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
-            s += H[i + a * GEARSYM_EKF_2_3_NY] * v[a];
-        }
+        s = v[m] + noise;
         if (!(s > GEARSYM_LIT(0.0)) || !isfinite(s)) {
             continue; /* no usable innovation variance: leave x and P as they are */
         }
+        inv_s = GEARSYM_LIT(1.0) / s;
         for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
-            gain[a] = v[a] / s;
+            gain[a] = v[a] * inv_s;
         }
         if (!((u[3] > GEARSYM_LIT(0.5)) || (u[3] < GEARSYM_LIT(-0.5)))) {
             gain[5] = GEARSYM_LIT(0.0); /* frozen: a consider state */
@@ -632,33 +831,21 @@ int gearsym_ekf_2_3_ekf_update(
         innovation = y[i] - y_hat[i];
         for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
             x[a] += gain[a] * innovation;
+            g[a] = s * gain[a] - v[a];
         }
-        /* Joseph form: M = (I - k h) P, P = M (I - k h)^T + R k k^T */
+        /*
+         * Joseph form expanded: (I - k h) P (I - k h)^T + R k k^T = P - k v^T - v k^T + s k k^T
+         * for any gain k (v = P h^T, s = h v + R), i.e. P_ab + k_a g_b - v_a k_b, on the upper
+         * triangle and mirrored.
+         */
         for (b = 0; b < GEARSYM_EKF_2_3_NX; ++b) {
-            for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
-                M[a + b * GEARSYM_EKF_2_3_NX] = P[a + b * GEARSYM_EKF_2_3_NX] - gain[a] * w[b];
+            for (a = 0; a <= b; ++a) {
+                const gearsym_real value = P[a + b * GEARSYM_EKF_2_3_NX] + (gain[a] * g[b] - v[a] * gain[b]);
+                P[a + b * GEARSYM_EKF_2_3_NX] = value;
+                P[b + a * GEARSYM_EKF_2_3_NX] = value;
             }
         }
-        for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
-            gearsym_real sum = GEARSYM_LIT(0.0);
-            for (b = 0; b < GEARSYM_EKF_2_3_NX; ++b) {
-                sum += M[a + b * GEARSYM_EKF_2_3_NX] * H[i + b * GEARSYM_EKF_2_3_NY];
-            }
-            Mh[a] = sum;
-        }
-        for (b = 0; b < GEARSYM_EKF_2_3_NX; ++b) {
-            for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
-                P[a + b * GEARSYM_EKF_2_3_NX] = M[a + b * GEARSYM_EKF_2_3_NX] - Mh[a] * gain[b] + noise * gain[a] * gain[b];
-            }
-        }
-        for (b = 0; b < GEARSYM_EKF_2_3_NX; ++b) {
-            for (a = b + 1; a < GEARSYM_EKF_2_3_NX; ++a) {
-                const gearsym_real mean = GEARSYM_LIT(0.5) * (P[a + b * GEARSYM_EKF_2_3_NX] + P[b + a * GEARSYM_EKF_2_3_NX]);
-                P[a + b * GEARSYM_EKF_2_3_NX] = mean;
-                P[b + a * GEARSYM_EKF_2_3_NX] = mean;
-            }
-        }
-        *nis += innovation * innovation / s;
+        *nis += innovation * innovation * inv_s;
         ++used;
     }
     return used;

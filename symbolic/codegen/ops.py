@@ -17,7 +17,13 @@ from gearsym.symbolic.codegen.expressions import (
 )
 from sympy.logic.boolalg import BooleanAtom
 
-__all__ = ["OpCount", "count_operations", "implicit_step_ops", "rk4_step_ops"]
+__all__ = [
+    "OpCount",
+    "count_operations",
+    "count_split",
+    "implicit_step_ops",
+    "rk4_step_ops",
+]
 
 
 @dataclass
@@ -152,6 +158,22 @@ def count_operations(form: CseForm, config: CodegenConfig | None = None) -> OpCo
         for expr in matrix:
             _count(expr, acc, definitions, max_power)
     return acc
+
+
+def count_split(
+    form: CseForm, once: frozenset[sp.Symbol], config: CodegenConfig | None = None
+) -> tuple[OpCount, OpCount]:
+    """Operations of the temporaries in ``once`` and of the rest of the form (the other
+    temporaries and the outputs), counted by the rules of :func:`count_operations`."""
+    max_power = (config or CodegenConfig()).precision.max_inline_power
+    definitions = boolean_definitions(form)
+    first, rest = OpCount(), OpCount()
+    for symbol, expr in form.temporaries:
+        _count(expr, first if symbol in once else rest, definitions, max_power)
+    for matrix in form.outputs:
+        for expr in matrix:
+            _count(expr, rest, definitions, max_power)
+    return first, rest
 
 
 def rk4_step_ops(n: int) -> OpCount:

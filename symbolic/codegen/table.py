@@ -252,7 +252,8 @@ ROWS: tuple[Row, ...] = (
         "(chain rule through the four stages with jac_x). q: process-noise intensities per "
         "state (unit^2/s; random walks of the parameters, model error of the states); the "
         "entry of a state frozen by its input (see the header) counts as 0. P is "
-        "{nx} x {nx} column-major and symmetrised on return.",
+        "{nx} x {nx} column-major, symmetric on entry, and exactly symmetric on return (each "
+        "mirrored pair computed once).",
         when="ekf",
     ),
     Row(
@@ -264,7 +265,8 @@ ROWS: tuple[Row, ...] = (
         "Joseph form P = (I - k h) P (I - k h)^T + R k k^T with R = (r_i max(|y_i|, "
         "y_floor_i))^2 (3.26). A NaN or infinite y_i is skipped (no update); the gain entry "
         "of a frozen state is 0 (its estimate and variance stay unchanged). *nis receives the "
-        "sum of nu^2/s over the used outputs. Returns the number of outputs used.",
+        "sum of nu^2/s over the used outputs. Returns the number of outputs used. P is "
+        "symmetric on entry and exactly symmetric on return.",
         returns="int",
         when="ekf",
     ),

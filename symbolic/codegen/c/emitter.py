@@ -6,6 +6,12 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import sympy as sp
+from gearsym.symbolic.codegen.c.ekf_code import (
+    EkfPredictCode,
+    output_selection,
+    predict_code,
+    selection_update_ops,
+)
 from gearsym.symbolic.codegen.c.printer import GearsymCPrinter
 from gearsym.symbolic.codegen.cse import (
     CseForm,
@@ -17,6 +23,7 @@ from gearsym.symbolic.codegen.jacobian import SparsityPattern
 from gearsym.symbolic.codegen.ops import (
     OpCount,
     count_operations,
+    count_split,
     implicit_step_ops,
     rk4_step_ops,
 )
@@ -24,6 +31,7 @@ from gearsym.symbolic.codegen.printing import comment_text, wrap
 from gearsym.symbolic.codegen.render import render
 from gearsym.symbolic.codegen.table import Arg, FunctionSpec, FunctionTable, Output, file_names
 from gearsym.symbolic.codegen.views import ModelView, model_view
+from sympy.logic.boolalg import Boolean
 
 __all__ = [
     "CFunctionView",
@@ -132,6 +140,10 @@ class CFunctionView:
     mode_elements: tuple[ModeElementView, ...] = ()  # EKF mode logic
     n_physical: int = 0  # states the lock-up map acts on
     confidence: str = ""  # σ multiples of μ̂ off the capacity at lock-up, printed
+    declarations: tuple[str, ...] = ()  # EKF predict: unrolled from the sparsity (ekf_code)
+    statements: tuple[str, ...] = ()
+    selection: tuple[int, ...] = ()  # EKF update: the state each output is (H a selection)
+    stage_temporaries: tuple[Temporary, ...] = ()  # RK4: the rhs terms that depend on x
 
 
 @dataclass(frozen=True)
@@ -203,6 +215,128 @@ def _spread(spec: FunctionSpec, pattern: SparsityPattern) -> Spread:
     )
 
 
+def _hoist(
+    expr: sp.Basic, varying: set[sp.Symbol], new: list[tuple[sp.Symbol, sp.Basic]]
+) -> sp.Basic:
+    """``expr`` with its subexpressions free of ``varying`` symbols moved into ``new``
+    temporaries (``hp0, hp1, ...``): whole invariant subtrees, and the invariant terms of a sum
+    and factors of a product grouped into one. Piecewise and boolean nodes stay as they are."""
+
+    def invariant(e: sp.Basic) -> bool:
+        return not (e.free_symbols & varying)
+
+    def temporary(e: sp.Basic) -> sp.Basic:
+        if e.is_Atom:
+            return e
+        symbol = sp.Symbol(f"hp{len(new)}", real=True)
+        new.append((symbol, e))
+        return symbol
+
+    if expr.is_Atom or isinstance(expr, (sp.Piecewise, Boolean)):
+        return expr
+    if invariant(expr):
+        return temporary(expr)
+    if expr.is_Add or expr.is_Mul:
+        fixed = [a for a in expr.args if invariant(a)]
+        moving = [_hoist(a, varying, new) for a in expr.args if not invariant(a)]
+        grouped = expr.func(*fixed) if fixed else None
+        if grouped is not None and not grouped.is_Atom:
+            symbol = sp.Symbol(f"hp{len(new)}", real=True)
+            new.append((symbol, grouped))
+            grouped = symbol
+        return expr.func(*([grouped] if grouped is not None else []), *moving, evaluate=False)
+    if expr.is_Pow or isinstance(expr, sp.Function):
+        return expr.func(*(_hoist(a, varying, new) for a in expr.args), evaluate=False)
+    return expr
+
+
+def _rk4_hoisted(
+    table: FunctionTable, form: CseForm
+) -> tuple[OpCount, OpCount, GearsymCPrinter, dict] | None:
+    """The RK4 step with the right-hand side inlined and its terms that depend on u and p only
+    (held over the step) computed once, not in each of the four stages (CasADi's CSE of the
+    whole step shares them the same way): the CSE temporaries free of x, and within the
+    others and the outputs the invariant terms of sums and factors of products. None if nothing
+    is invariant or nothing depends on x."""
+    states = set(table.states)
+    varying: set[sp.Symbol] = set(states)
+    new: list[tuple[sp.Symbol, sp.Basic]] = []
+    stage_temps: list[tuple[sp.Symbol, sp.Basic]] = []
+    once_temps: list[tuple[sp.Symbol, sp.Basic]] = []
+    for symbol, expr in form.temporaries:
+        if expr.free_symbols & varying:
+            varying.add(symbol)
+            stage_temps.append((symbol, _hoist(expr, varying, new)))
+        else:
+            once_temps.append((symbol, expr))
+    outputs = tuple(
+        sp.ImmutableMatrix(m.rows, m.cols, [_hoist(e, varying, new) for e in m])
+        for m in form.outputs
+    )
+    uses_x = any(e.free_symbols & varying for m in outputs for e in m)
+    once = frozenset(s for s, _ in once_temps + new)
+    if not once or not uses_x:
+        return None
+    form = CseForm(tuple(once_temps + new + stage_temps), outputs)
+    spec = table["rhs"]
+    mapping = _symbol_map(spec)
+    for i, symbol in enumerate(table.states):
+        mapping[symbol] = f"xs[{i}]"
+    printer = GearsymCPrinter(
+        mapping, table.prefix, boolean_definitions(form), table.config.precision
+    )
+
+    def temporary(symbol: sp.Symbol, expr: sp.Basic) -> Temporary:
+        ctype = "_Bool" if is_condition(expr) else "gearsym_real"
+        return Temporary(ctype, printer.code(symbol), printer.code(expr))
+
+    used = _used_args(spec, form)
+    extra = {
+        "temporaries": tuple(temporary(s, e) for s, e in once_temps + new),
+        "stage_temporaries": tuple(temporary(s, e) for s, e in stage_temps),
+        "assignments": tuple(
+            Assignment(str(k), printer.code(expr))
+            for k, expr in enumerate(flatten_column_major(form.outputs[0]))
+        ),
+        "unused": tuple(a for a in ("u", "p") if a not in used),
+    }
+    first, rest = count_split(form, once, table.config)
+    return first, rest, printer, extra
+
+
+def _predict_code(table: FunctionTable) -> EkfPredictCode:
+    """The unrolled predict body of the table's model (see :mod:`.ekf_code`)."""
+    n = len(table.states)
+    names = table.names()
+    if "jac_x_sparse" in names:
+        pattern = table["jac_x"].pattern
+        assert pattern is not None
+        fn = "jac_x_sparse"
+        entries = [
+            (pattern.rowind[k], j)
+            for j in range(pattern.ncol)
+            for k in range(pattern.colptr[j], pattern.colptr[j + 1])
+        ]
+        index = {e: k for k, e in enumerate(entries)}
+        size = pattern.nnz
+    else:
+        fn = "jac_x"
+        dense = table["jac_x"].expressions[0]
+        entries = [(i, j) for j in range(n) for i in range(n) if dense[i, j] != 0]
+        index = {(i, j): i + j * n for i, j in entries}
+        size = n * n
+    rhs = table["rhs"].expressions[0]
+    return predict_code(
+        n,
+        entries,
+        f"{table.prefix}{fn}({{x}}, u, p, {{out}});",
+        index,
+        size,
+        [i for i in range(n) if rhs[i] == 0],
+        f"{table.prefix}rhs",
+    )
+
+
 def _function_views(
     table: FunctionTable, forms: Mapping[str, CseForm]
 ) -> tuple[list[CFunctionView], set[str], set[str]]:
@@ -250,8 +384,20 @@ def _function_views(
             )
         elif spec.kind == "rk4":
             own = rk4_step_ops(nx)
-            total = counts["rhs"].scaled(4) + own
-            op_text = f"Operations: {total.format()} (4 rhs calls + {own.format()})."
+            hoisted = _rk4_hoisted(table, forms["rhs"])
+            if hoisted is None:
+                total = counts["rhs"].scaled(4) + own
+                op_text = f"Operations: {total.format()} (4 rhs calls + {own.format()})."
+            else:
+                once, per_stage, printer, rk4_extra = hoisted
+                extra.update(rk4_extra)
+                total = once + per_stage.scaled(4) + own
+                op_text = (
+                    f"The right-hand side is inlined: its terms in u and p only are computed "
+                    f"once ({once.format()}), the rest in each of the 4 stages "
+                    f"({per_stage.format()}). Operations: {total.format()} (with "
+                    f"{own.format()} of the step itself)."
+                )
         elif spec.kind == "linearly_implicit_euler":
             used_macros.add("fabs")
             own = implicit_step_ops(nx, len(table.inputs))
@@ -270,19 +416,40 @@ def _function_views(
                 for i, j in table.config.ekf.frozen
             )
             if spec.kind == "ekf_predict":
-                own = OpCount(mul=4 * nx**3 + 10 * nx * nx + 8 * nx, add=4 * nx**3 + 8 * nx * nx)
+                code = _predict_code(table)
+                extra["declarations"] = code.declarations
+                extra["statements"] = code.statements
                 jac_ops = counts.get("jac_x_sparse", counts.get("jac_x"))
                 assert jac_ops is not None
+                own = code.ops + OpCount(compare=2 * len(table.config.ekf.frozen))
                 total = counts["rhs"].scaled(4) + jac_ops.scaled(4) + own
-                what = "4 rhs + 4 jac_x + the stage tangents, F P F^T and the symmetrisation"
+                what = (
+                    f"4 rhs + 4 jac_x + {own.format()} for the stage tangents over the "
+                    "structural nonzeros of jac_x, x and F P F^T blockwise"
+                )
+                stack = code.stack + nx
             else:
                 ny = len(table.model.outputs)
-                own = OpCount(mul=ny * (4 * nx * nx + 4 * nx + 4), add=ny * (4 * nx * nx + 3 * nx))
-                total = (counts["outputs"] + counts["jac_outputs"]).scaled(ny) + own
-                what = f"{ny} x (outputs + jac_outputs + the Joseph update)"
+                selection = output_selection(table["jac_outputs"].expressions[0])
+                if selection is not None:
+                    extra["selection"] = selection
+                    own = selection_update_ops(nx, ny, len(table.config.ekf.frozen))
+                    total = counts["outputs"].scaled(ny) + own
+                    what = (
+                        f"{ny} x (outputs + the Joseph update with H a selection of states: "
+                        "no product with H, upper triangle)"
+                    )
+                    stack = ny + 3 * nx
+                else:
+                    own = OpCount(
+                        mul=ny * (4 * nx * nx + 4 * nx + 4), add=ny * (4 * nx * nx + 3 * nx)
+                    )
+                    total = (counts["outputs"] + counts["jac_outputs"]).scaled(ny) + own
+                    what = f"{ny} x (outputs + jac_outputs + the Joseph update)"
+                    stack = 6 * nx * nx + 6 * nx
             op_text = (
-                f"Frozen: {frozen or 'none'}. Operations (about): {total.format()} ({what}); "
-                f"stack: {6 * nx * nx + 6 * nx} reals."
+                f"Frozen: {frozen or 'none'}. Operations: {total.format()} ({what}); "
+                f"stack: {stack} reals."
             )
         elif spec.kind == "ekf_mode_update":
             layout = table.config.ekf

@@ -1,0 +1,156 @@
+"""The emitted EKF's unrolled predict and selection update (gearsym_ekf_2_3.c, thesis 4.3).
+
+Expected values: the structure derived by hand from the 2-3 model (states omega_1, omega_2,
+phi, omega_C, m_veh, mu_38, mu_05, zeta; the rows of ∂f/∂z of the four parameters are zero, the
+outputs are omega_1, omega_2, omega_C), the operators counted in the emitted C text (an
+independent count of what the header states), and the NumPy reference filter for the dense
+Jacobian layout (the sparse layout is tests/test_ekf_c.py).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import re
+
+import numpy as np
+import pytest
+import sympy as sp
+from gearsym.symbolic.codegen import emit_all
+from gearsym.symbolic.codegen.c.ekf_code import output_selection
+from gearsym.symbolic.drivetrain import shift_spec
+from gearsym.symbolic.generate import ekf_model
+from gearsym.symbolic.loader import load_description
+
+PREFIX = "gearsym_ekf_2_3_"
+
+
+@pytest.fixture(scope="module")
+def emitted():
+    d = load_description()
+    m = ekf_model(d, shift_spec(d, "2-3"))
+    return d, m, emit_all(m.model, m.config)
+
+
+def _body(source: str, function: str) -> str:
+    start = source.index(f"{PREFIX}{function}(\n")
+    start = source.index("{\n", start)
+    return source[start : source.index("\n}\n", start)]
+
+
+def _doc(header: str, function: str) -> str:
+    at = header.index(f"{PREFIX}{function}(")
+    comment = header[header.rindex("/**", 0, at) : at]
+    return " ".join(comment.replace("*", " ").split())
+
+
+def test_predict_structure_follows_the_zero_parameter_rows(emitted):
+    _, _, files = emitted
+    body = _body(files["gearsym_ekf_2_3.c"], "ekf_predict")
+    # ∂f/∂z: 17 nonzeros in rows 0..3 (columns 1..3 among the states, m_veh, mu, zeta); by hand
+    # J K1 fills rows 0..3 x columns 1..7, so F - I has 28 entries and A = F[R, :] P 4 rows
+    assert "gearsym_real F[28];" in body
+    assert "gearsym_real A[32];" in body
+    assert "R = {0, 1, 2, 3}" in body
+    assert "jac_x_sparse(stage, u, p, js);" in body
+    # no dense loop over k: the products are unrolled
+    assert "for (k = 0" not in body
+    # the parameter block P[4..7, 4..7] is untouched but for the rate on its diagonal and the
+    # copy of its upper triangle to the lower one (exact symmetry)
+    for j1 in range(4, 8):
+        for j2 in range(4, 8):
+            writes = re.findall(rf"\bP\[{j1 + 8 * j2}\] (\+?= [^;]*);", body)
+            if j1 == j2:
+                expected = [f"+= h * rate[{j1}]"]
+            elif j1 > j2:
+                expected = [f"= P[{j2 + 8 * j1}]"]
+            else:
+                expected = []
+            assert writes == expected, (j1, j2, writes)
+
+
+def test_predict_states_the_operations_its_code_performs(emitted):
+    _, _, files = emitted
+    body = _body(files["gearsym_ekf_2_3.c"], "ekf_predict")
+    text = re.sub(r"/\*.*?\*/", "", body, flags=re.S)
+    # the unrolled part (after the rate loop), and the step-size constants among the declarations
+    unrolled = text[text.index("slopes[0]);") :]
+    constants = "\n".join(ln for ln in text.splitlines() if "_h = " in ln)
+    adds = len(re.findall(r" \+ |\+= ", unrolled))
+    muls = len(re.findall(r" \* ", unrolled)) + len(re.findall(r" \* ", constants))
+    compares = len(re.findall(r" > GEARSYM_LIT\(0\.5\)| < GEARSYM_LIT\(-0\.5\)", text))
+    doc = _doc(files["gearsym_ekf_2_3.h"], "ekf_predict")
+    stated = re.search(r"4 jac_x \+ (\d+) add, (\d+) mul, 0 div, 0 calls, (\d+) cmp", doc)
+    assert stated is not None, doc
+    assert (adds, muls, compares) == tuple(int(v) for v in stated.groups())
+
+
+def test_update_uses_the_outputs_as_a_selection(emitted):
+    _, m, files = emitted
+    # outputs omega_1, omega_2, omega_C: states 0, 1, 3
+    assert "measured[GEARSYM_EKF_2_3_NY] = { 0, 1, 3 }" in files["gearsym_ekf_2_3.c"]
+    body = _body(files["gearsym_ekf_2_3.c"], "ekf_update")
+    assert "jac_outputs" not in body
+    x, y = sp.symbols("x y", real=True)
+    assert output_selection(sp.Matrix([[0, 1], [1, 0]])) == (1, 0)
+    assert output_selection(sp.Matrix([[0, 2]])) is None
+    assert output_selection(sp.Matrix([[1, 1]])) is None
+    assert output_selection(sp.Matrix([[x, 0]])) is None
+    # per output, by hand: R 2 mul; s 1 add; 1/s 1 div; k 8 mul; innovation 1 add; x 8 mul +
+    # 8 add; s k - v 8 mul + 8 add; 36 upper-triangle entries 2 mul + 2 add; NIS 2 mul + 1 add;
+    # compares: isfinite(y), y < 0, level < floor, s > 0, isfinite(s), the 2 frozen flags
+    # (two compares each: a slide flag of +1 or -1 slides)
+    doc = _doc(files["gearsym_ekf_2_3.h"], "ekf_update")
+    per = {"add": 1 + 1 + 8 + 8 + 72 + 1, "mul": 2 + 8 + 8 + 8 + 72 + 2, "div": 1, "cmp": 9}
+    expected = f"{3 * per['add']} add, {3 * per['mul']} mul, {3 * per['div']} div, 0 calls, "
+    assert f"Operations: {expected}{3 * per['cmp']} cmp" in doc
+
+
+def test_dense_layout_predict_equals_the_reference(emitted, tmp_path):
+    """The predict unrolled over the dense jac_x (Sparsity("dense")) against the NumPy
+    reference (CasADi's chain rule, dense F P F^T) at random symmetric P."""
+    import dataclasses
+
+    from gearsym.symbolic.codegen import config as cfg
+    from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model, ekf_predict
+    from gearsym.validation.c_check import compile_shared
+
+    d, m, _ = emitted
+    config = dataclasses.replace(m.config, sparsity=cfg.Sparsity("dense"))
+    files = {k: v for k, v in emit_all(m.model, config).items() if not k.endswith(".py")}
+    assert "jac_x(stage, u, p, js);" in files["gearsym_ekf_2_3.c"]
+    lib = ctypes.CDLL(str(compile_shared(files, tmp_path, single=False)))
+    aug = augmented_model(d, "2-3")
+    discrete = DiscreteModel(aug)
+    p = aug.parameter_values()
+    q = np.array([aug.intensities[n] for n in aug.state_names])
+    n = len(aug.state_names)
+    Params = type(
+        "Params",
+        (ctypes.Structure,),
+        {"_fields_": [(f"p{i}", ctypes.c_double) for i in range(len(p))]},
+    )
+    ptr = ctypes.POINTER(ctypes.c_double)
+    rng = np.random.default_rng(11)
+    z0 = np.array([194.89, 60.09, 0.0578, 24.34, 1500.0, 0.12, 0.1, 0.01])
+    sigma = np.array([1.95, 0.6, 0.05, 0.25, 300.0, 0.03, 0.03, 0.05])
+    for u in ([80.0, 3000.0, 2000.0, 1.0, 0.0, 1.0, 0.0], [50.0, 0.0, 5000.0, 0.0, 0.0, 1.0, 0.0]):
+        for _ in range(5):
+            z = z0 * (1 + 0.05 * rng.normal(size=n))
+            C = np.corrcoef(rng.normal(size=(n, 3 * n)))
+            P = C * np.outer(sigma, sigma)
+            z_ref, P_ref = ekf_predict(discrete, z, P, u, 0.01, p, q)
+            x_c = z.copy()
+            P_c = P.ravel(order="F").copy()
+            lib[f"{PREFIX}ekf_predict"](
+                x_c.ctypes.data_as(ptr),
+                P_c.ctypes.data_as(ptr),
+                np.array(u).ctypes.data_as(ptr),
+                ctypes.byref(Params(*p)),
+                ctypes.c_double(0.01),
+                q.ctypes.data_as(ptr),
+            )
+            P_c = P_c.reshape(n, n, order="F")
+            s = np.sqrt(np.diag(P_ref))
+            assert np.max(np.abs(x_c - z_ref) / (np.abs(z_ref) + s)) < 1e-12
+            assert np.max(np.abs(P_c - P_ref) / np.outer(s, s)) < 1e-12
+            assert np.array_equal(P_c, P_c.T)
