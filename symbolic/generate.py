@@ -409,7 +409,7 @@ def _model_plan(
         def build(say: Callable[[str], None]) -> EmittedModel:
             say(f"deriving shift model {spec.name} (2.55-2.58)")
             m = shift_model(d, spec.name)
-            off, on = ", ".join(spec.off_elements), ", ".join(spec.on_elements)
+            off, on = " and ".join(spec.off_elements), " and ".join(spec.on_elements)
             what = f"shift {spec.name}: {off} off, {on} on, torque inputs"
             return EmittedModel(m, _bounds(d, m), "shift", what, spec)
 
@@ -780,7 +780,7 @@ class ReadmeView:
     linear_sets: tuple[LinearSetRow, ...]
     hybrid_sets: tuple[LinearSetRow, ...] = ()
     uio_rows: tuple[str, ...] = ()  # Markdown table rows of the emitted UIOs
-    double_swaps: tuple[str, ...] = ()  # "`shift_1_5`: K38, B06 off, K81, K27 on"
+    double_swaps: tuple[str, ...] = ()  # "`shift_1_5`: K38 and B06 off, K81 and K27 on"
     double_swap_note: str = DOUBLE_SWAP_NOTE
 
 
@@ -830,8 +830,8 @@ def _readme(
         hybrid_sets=tuple(_hybrid_set_row(emitted) for emitted in hybrid_sets),
         uio_rows=tuple(uio_rows),
         double_swaps=tuple(
-            f"`{m.model.name}`: {', '.join(m.shift.off_elements)} off, "
-            f"{', '.join(m.shift.on_elements)} on"
+            f"`{m.model.name}`: {' and '.join(m.shift.off_elements)} off, "
+            f"{' and '.join(m.shift.on_elements)} on"
             for m in models
             if m.role == "shift" and m.shift is not None and not m.shift.single
         ),

@@ -285,7 +285,7 @@ def test_emitted_double_swap_compiles_and_equals_sympy(d, tmp_path):
     assert [m.model.name for m in shift_models] == ["shift_1_5"]  # no mu form, no sensitivities
     assert {e.set.name for e in tree.linear_sets} == {"linear_gears"}
     readme = tree.files["README.md"]
-    assert "`shift_1_5`: K38, B06 off, K81, K27 on" in readme
+    assert "`shift_1_5`: K38 and B06 off, K81 and K27 on" in readme
     assert "torque-input model only" in readme
     root = tmp_path / "gen"
     for relative, text in tree.files.items():
