@@ -282,7 +282,11 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "inputs, parameters with defaults, right-hand side, and A, B of (5.1) at the defaults.",
         common,
     )
-    p.add_argument("--shift", help="e.g. 2-3 (default: the full model, every element a torque)")
+    p.add_argument(
+        "--shift",
+        help="e.g. 2-3, or a double swap such as 1-5 (torque inputs only) (default: the full "
+        "model, every element a torque)",
+    )
     p.add_argument(
         "--gear",
         help="e.g. 3: the gear with all its elements locked, inputs T_In, T_res*, zeta (5.3)",

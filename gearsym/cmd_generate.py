@@ -52,8 +52,8 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         default="adjacent",
         metavar="WHICH",
         help="shift models to emit: adjacent (default: the upshifts between adjacent forward "
-        "gears), all (every single-swap shift: downshifts, skip shifts, reverse engagements) or "
-        "a list such as 3-2,5-3",
+        "gears), all (every single-swap shift: downshifts, skip shifts, reverse engagements; and "
+        "the torque-input model of every double swap) or a list such as 3-2,5-3,1-5",
     )
     p.add_argument(
         "--hybrid-shifts",

@@ -64,7 +64,14 @@ SIGNED_PARAMETERS = ("zeta", "f_R0", "f_R1", "f_R2")
 
 @dataclass(frozen=True)
 class ShiftSpec:
-    """A single-swap shift: common elements stay locked, one element off, one on (3.1)."""
+    """A shift: the common elements stay locked, the others swap (3.1).
+
+    A single swap has one off-going and one on-coming element (``off_going``, ``on_coming``).
+    A double swap (from :func:`shift_spec` with ``max_swaps=2`` only) has two of each in
+    ``off_elements``, ``on_elements``; its ``off_going`` and ``on_coming`` are ``""``, and
+    every analysis that needs a single swap takes its spec from :func:`shift_spec` with the
+    default ``max_swaps=1``, which refuses a double swap with a one-line error.
+    """
 
     name: str
     from_gear: str
@@ -72,10 +79,35 @@ class ShiftSpec:
     locked: tuple[str, ...]
     off_going: str
     on_coming: str
+    #: Every off-going / on-coming element, in the gear table's order (one each for a single
+    #: swap: filled from ``off_going`` / ``on_coming`` when not given).
+    off_elements: tuple[str, ...] = ()
+    on_elements: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not self.off_elements and self.off_going:
+            object.__setattr__(self, "off_elements", (self.off_going,))
+        if not self.on_elements and self.on_coming:
+            object.__setattr__(self, "on_elements", (self.on_coming,))
+
+    @property
+    def single(self) -> bool:
+        """True for a single swap (one element off, one on)."""
+        return len(self.off_elements) == 1 and len(self.on_elements) == 1
+
+    @property
+    def swapping(self) -> tuple[str, ...]:
+        """The elements that act as input torques in the shift model: off-going, then
+        on-coming."""
+        return (*self.off_elements, *self.on_elements)
 
 
-def shift_spec(d: GearboxDescription, name: str) -> ShiftSpec:
-    """Parse ``"2-3"`` into the elements that stay locked, go off and come on."""
+def shift_spec(d: GearboxDescription, name: str, max_swaps: int = 1) -> ShiftSpec:
+    """Parse ``"2-3"`` into the elements that stay locked, go off and come on.
+
+    ``max_swaps`` is the most off-going (and on-coming) elements accepted: 1 (every analysis
+    of a single-swap shift) or 2 (the torque-input shift model of a double swap,
+    :func:`shift_model`)."""
     parts = name.split("-")
     if len(parts) != 2:
         raise GearsymError(d.file, "shift", f"expected FROM-TO (e.g. 2-3), got {name!r}")
@@ -89,14 +121,51 @@ def shift_spec(d: GearboxDescription, name: str) -> ShiftSpec:
     common = tuple(e for e in g_from.closed if e in g_to.closed)
     off = [e for e in g_from.closed if e not in g_to.closed]
     on = [e for e in g_to.closed if e not in g_from.closed]
+    if len(off) == len(on) == 2 and max_swaps >= 2:
+        return ShiftSpec(name, g_from.name, g_to.name, common, "", "", tuple(off), tuple(on))
     if len(off) != 1 or len(on) != 1:
+        double = len(off) == len(on) == 2
         raise GearsymError(
             d.file,
             "shift",
             f"gears {g_from.name!r} and {g_to.name!r} differ by {len(off)} off-going and "
-            f"{len(on)} on-coming elements; a shift model needs exactly one of each",
+            f"{len(on)} on-coming elements; a shift model needs exactly one of each"
+            + (
+                " (a double swap has the torque-input model only, no mu form, hybrid modes "
+                "or sensitivities: gearsym model --shift, gearsym generate --shifts)"
+                if double
+                else ""
+            ),
         )
     return ShiftSpec(name, g_from.name, g_to.name, common, off[0], on[0])
+
+
+def shift_keep(d: GearboxDescription, spec: ShiftSpec) -> tuple[str, ...] | None:
+    """The shafts whose speeds are the gearbox states of ``spec``'s shift model: ``None`` (the
+    default of :func:`drivetrain_parts`: input and output shaft, idle shafts as needed) for a
+    single swap; for a double swap, whose common elements leave one more degree of freedom,
+    input and output shaft, then idle shafts and then the description's generalized
+    coordinates, in order, each taken while it adds a motion the others do not fix (2.55)."""
+    if spec.single:
+        return None
+    from gearsym.symbolic.ratios import idle_shafts
+
+    f = len(d.coordinates)
+    dyn = gearbox_dynamics(d)
+    transform = dyn.kinematics.transform
+    index = {b: i for i, b in enumerate(d.body_names)}
+    rows = slip_rows(d, dyn, spec.locked)
+    rank = sp.Matrix.vstack(*rows).rank() if rows else 0
+    keep: list[str] = []
+    for shaft in (d.input_shaft, d.output_shaft, *idle_shafts(d), *d.coordinates):
+        if shaft in keep or rank >= f:
+            continue
+        candidate = sp.Matrix.vstack(*rows, transform[index[shaft], :])
+        if candidate.rank() > rank:
+            rows.append(transform[index[shaft], :])
+            rank += 1
+            keep.append(shaft)
+    return tuple(keep)
 
 
 def element_short_name(d: GearboxDescription, element: str) -> str:
@@ -138,7 +207,9 @@ def power_on_slip_signs(d: GearboxDescription, spec: ShiftSpec) -> dict[str, int
 
 
 def adjacent_shifts(d: GearboxDescription) -> list[ShiftSpec]:
-    """Shifts between forward gears adjacent by ratio (largest ratio first)."""
+    """Shifts between forward gears adjacent by ratio (largest ratio first); a double swap
+    among them (the overdrive engagement 3-4 of tests/data/simpson_overdrive_idle.toml) has
+    ``single`` False."""
     from gearsym.symbolic.ratios import gear_ratio
 
     forward = []
@@ -149,7 +220,7 @@ def adjacent_shifts(d: GearboxDescription) -> list[ShiftSpec]:
         if ratio is not None and ratio > 0:
             forward.append((ratio, g.name))
     forward.sort(reverse=True)
-    return [shift_spec(d, f"{a}-{b}") for (_, a), (_, b) in pairwise(forward)]
+    return [shift_spec(d, f"{a}-{b}", max_swaps=2) for (_, a), (_, b) in pairwise(forward)]
 
 
 def quantity(d: GearboxDescription, section: str, key: str) -> Quantity:
@@ -598,19 +669,26 @@ def shift_model(
     with_wheel_acceleration: bool = False,
     friction_inputs: bool = False,
 ) -> Model:
-    """Reduced model of a single-swap shift (2.55–2.58); for 2-3: x = [ω1, ω2, φ, ω_C],
+    """Reduced model of a shift (2.55–2.58); for 2-3: x = [ω1, ω2, φ, ω_C],
     u = [T_In, T_K38, T_B05].
+
+    A double swap (two elements off, two on, e.g. 1-5 of the built-in box) has the torque-input
+    form only: its common elements locked, the four swapping elements' torques as inputs
+    (off-going first), one more shaft speed as a state (:func:`shift_keep`); for 1-5
+    x = [ω1, ω2, ω3, φ, ω_C], u = [T_In, T_K38, T_B06, T_K81, T_K27].
 
     With ``friction_inputs`` the two element torques are sliding friction, k_sign 2 N r μ F_N
     (2.69, 3.14), with the slip directions of a power-on shift (:func:`power_on_slip_signs`),
     μ_<element> as parameters and the normal forces as inputs: u = [T_In, F_N38, F_N05].
     """
-    spec = shift_spec(d, shift)
+    # the μ form needs each element's power-on slip direction: a single swap only
+    spec = shift_spec(d, shift, max_swaps=1 if friction_inputs else 2)
     return drivetrain_model(
         d,
         naming.shift_model_name(spec.from_gear, spec.to_gear, friction_inputs),
         locked=spec.locked,
-        torque_elements=(spec.off_going, spec.on_coming),
+        torque_elements=spec.swapping,
+        keep=shift_keep(d, spec),
         with_wheel_acceleration=with_wheel_acceleration,
         slip_signs=power_on_slip_signs(d, spec) if friction_inputs else None,
     )
@@ -719,11 +797,11 @@ def gear_linear_form(d: GearboxDescription, gear: str) -> LinearForm:
 
 def shift_linear_form(d: GearboxDescription, shift: str) -> LinearForm:
     """(5.1) of a shift model (2.55–2.58): the shared elements locked; inputs [T_In, T_res*,
-    the two swapping elements' torques in description order, ζ]
+    the swapping elements' torques (two, or four for a double swap) in description order, ζ]
     (:func:`linear_shift_form` gives B in the column order of the printed (5.5))."""
-    spec = shift_spec(d, shift)
+    spec = shift_spec(d, shift, max_swaps=2)
     name = naming.shift_model_name(spec.from_gear, spec.to_gear)
-    return linear_form(d, name, spec.locked, (spec.off_going, spec.on_coming), None)
+    return linear_form(d, name, spec.locked, spec.swapping, shift_keep(d, spec))
 
 
 def mode_linear_form(d: GearboxDescription, shift: str, mode: str) -> LinearForm:

@@ -43,8 +43,8 @@ from gearsym.symbolic.drivetrain import (
     ShiftSpec,
     adjacent_shifts,
     element_short_name,
+    element_slip_in_gear,
     full_model,
-    power_on_slip_signs,
     shift_model,
     shift_spec,
 )
@@ -308,8 +308,17 @@ def sensitivity_parameters(d: GearboxDescription, spec: ShiftSpec) -> list[str]:
     return ["m_veh", "k_ss", "d_ss", mu, "zeta"]
 
 
-#: ``--shifts`` keywords: the adjacent upshifts (default) or every single-swap shift.
+#: ``--shifts`` keywords: the adjacent upshifts (default) or every single- and double-swap shift.
 SHIFT_SELECTIONS = ("adjacent", "all")
+
+#: What a double swap gets instead of the models and sets of a single swap, and why (the
+#: generated README lists each double swap with it).
+DOUBLE_SWAP_NOTE = (
+    "torque-input model only (2.55-2.58, the four swapping elements' torques as inputs); no mu "
+    "form, sensitivities, linear forms of hybrid modes or hybrid model: each needs the slip "
+    "direction or lock state of every swapping element, which the gear table fixes for one "
+    "element off and one on but not for two sliding at once"
+)
 
 
 def selected_shifts(
@@ -320,14 +329,17 @@ def selected_shifts(
     ``"adjacent"``: the upshifts between forward gears adjacent by ratio (the thesis' shifts);
     ``"all"``: every ordered pair of gears with a drive path that swaps exactly one element
     (upshifts, downshifts, skip shifts such as 5-3, and reverse engagements where they are
-    single swaps), adjacent upshifts first; otherwise a comma-separated list such as
-    ``"3-2,5-3"`` (each a single swap, else a one-line error naming it).
+    single swaps), adjacent upshifts first, then every pair that swaps two elements each way
+    (double swaps such as 1-5: their torque-input model only, :data:`DOUBLE_SWAP_NOTE`);
+    otherwise a comma-separated list such as ``"3-2,5-3,1-5"`` (each a single or double swap,
+    else a one-line error naming it).
     """
     adjacent = adjacent_shifts(d)
     if shifts == "adjacent":
         return adjacent
     if shifts == "all":
         names = [spec.name for spec in adjacent]
+        doubles = []
         driven = [g.name for g in d.gears if not g.neutral]
         for a in driven:
             for b in driven:
@@ -338,14 +350,16 @@ def selected_shifts(
                 on = set(gear_b.closed) - set(gear_a.closed)
                 if len(off) == 1 and len(on) == 1:
                     names.append(f"{a}-{b}")
-        return [shift_spec(d, name) for name in names]
+                elif len(off) == 2 and len(on) == 2:
+                    doubles.append(f"{a}-{b}")
+        return [shift_spec(d, name, max_swaps=2) for name in names + doubles]
     names = [part.strip() for part in shifts.split(",") if part.strip()]
     if not names:
         raise GearsymError(d.file, key, "expected adjacent, all or a list such as 3-2,5-3")
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise GearsymError(d.file, key, f"shift {twice[0]} listed twice")
-    return [shift_spec(d, name) for name in names]
+    return [shift_spec(d, name, max_swaps=2) for name in names]
 
 
 def check_generatable(d: GearboxDescription) -> None:
@@ -400,7 +414,8 @@ def _model_plan(
         def build(say: Callable[[str], None]) -> EmittedModel:
             say(f"deriving shift model {spec.name} (2.55-2.58)")
             m = shift_model(d, spec.name)
-            what = f"shift {spec.name}: {spec.off_going} off, {spec.on_coming} on, torque inputs"
+            off, on = " and ".join(spec.off_elements), " and ".join(spec.on_elements)
+            what = f"shift {spec.name}: {off} off, {on} on, torque inputs"
             return EmittedModel(m, _bounds(d, m), "shift", what, spec)
 
         return build
@@ -438,7 +453,7 @@ def _model_plan(
     ]
     for spec in shifts:
         plan.append((naming.shift_model_name(spec.from_gear, spec.to_gear), torque_shift(spec)))
-        if friction:
+        if friction and spec.single:  # a double swap: the torque-input model only
             mu_name = naming.shift_model_name(spec.from_gear, spec.to_gear, True)
             plan.append((mu_name, mu_shift(spec)))
             plan.append((naming.sensitivity_model_name(mu_name), sensitivity(spec)))
@@ -508,6 +523,8 @@ def linear_system_sets(
     say("deriving the linear forms (5.1) of the full model and every gear")
     groups = [gear_linear_forms(d)]
     for spec in selected_shifts(d, shifts):
+        if not spec.single:  # no hybrid modes for a double swap (DOUBLE_SWAP_NOTE)
+            continue
         say(f"deriving the linear forms (5.1) of the modes of shift {spec.name}")
         groups.append(shift_linear_forms(d, spec))
     sets = []
@@ -544,7 +561,8 @@ def hybrid_shift_names(d: GearboxDescription, hybrid_shifts: str | None = None) 
     :func:`selected_shifts` reads it, ``"none"``, or by default the thesis' shift
     (:data:`~gearsym.symbolic.defaults.DEFAULT_SHIFT`) where the gearbox has it as a single
     swap and friction data (each set is about 110 kB of object code, so not every shift by
-    default)."""
+    default). ``all`` and ``adjacent`` leave out double swaps (:data:`DOUBLE_SWAP_NOTE`); a
+    list that names one is the one-line error of a double swap."""
     if hybrid_shifts == "none":
         return []
     if hybrid_shifts is None:
@@ -552,7 +570,16 @@ def hybrid_shift_names(d: GearboxDescription, hybrid_shifts: str | None = None) 
             return []
         names = {spec.name for spec in selected_shifts(d, "all")}
         return [DEFAULT_SHIFT] if DEFAULT_SHIFT in names else []
-    return [spec.name for spec in selected_shifts(d, hybrid_shifts, "--hybrid-shifts")]
+    specs = selected_shifts(d, hybrid_shifts, "--hybrid-shifts")
+    if hybrid_shifts not in SHIFT_SELECTIONS:
+        for spec in specs:
+            if not spec.single:
+                raise GearsymError(
+                    d.file,
+                    "--hybrid-shifts",
+                    f"shift {spec.name} swaps two elements each way: {DOUBLE_SWAP_NOTE}",
+                )
+    return [spec.name for spec in specs if spec.single]
 
 
 def hybrid_sensitivity_sets(
@@ -603,7 +630,11 @@ def _example_shift(models: Sequence[EmittedModel]) -> EmittedModel:
     shifts = [m for m in models if m.role in ("shift", "shift_mu")]
     if not shifts:
         raise ValueError("no shift model to show in the example")
-    preferred = [m for m in shifts if m.shift is not None and m.shift.name == "2-3"] or shifts
+    preferred = (
+        [m for m in shifts if m.shift is not None and m.shift.name == "2-3"]
+        or [m for m in shifts if m.shift is not None and m.shift.single]
+        or shifts
+    )
     with_mu = [m for m in preferred if m.role == "shift_mu"]
     return (with_mu or preferred)[0]
 
@@ -697,14 +728,24 @@ def _example_view(d: GearboxDescription, models: Sequence[EmittedModel]) -> Exam
                 inputs.append(ExampleInput(force, f"P_APPLY * {area}", f"{role} {e.name}: p_N A"))
             mu_settings.append((naming.friction_coefficient(short), f"{role} {e.name}"))
     else:
-        # Sliding torque of the on-coming element with the sign of its slip (2.70).
-        sign = power_on_slip_signs(d, spec)[spec.on_coming]
-        off, on = naming.torque(spec.off_going), naming.torque(spec.on_coming)
-        inputs.append(ExampleInput(off, "GEARSYM_LIT(0.0)", "off-going element open"))
-        inputs.append(ExampleInput(on, f"GEARSYM_LIT({300.0 * sign})", "on-coming element sliding"))
+        # Sliding torque of each on-coming element with the sign of its slip in the from-gear
+        # (2.70; power_on_slip_signs for a single swap).
+        for name in spec.off_elements:
+            inputs.append(
+                ExampleInput(naming.torque(name), "GEARSYM_LIT(0.0)", "off-going element open")
+            )
+        for name in spec.on_elements:
+            sign = int(sp.sign(element_slip_in_gear(d, spec.from_gear, name)))
+            inputs.append(
+                ExampleInput(
+                    naming.torque(name),
+                    f"GEARSYM_LIT({300.0 * sign})",
+                    "on-coming element sliding",
+                )
+            )
     element_view = None
     if element is not None:
-        e = d.element(spec.on_coming)
+        e = d.element(spec.on_elements[0])
         element_view = ExampleElement(
             name=e.name,
             n_disc=float_repr(float(e.n_disc or 0)),
@@ -765,6 +806,8 @@ class ReadmeView:
     linear_sets: tuple[LinearSetRow, ...]
     hybrid_sets: tuple[LinearSetRow, ...] = ()
     uio_rows: tuple[str, ...] = ()  # Markdown table rows of the emitted UIOs
+    double_swaps: tuple[str, ...] = ()  # "`shift_1_5`: K38 and B06 off, K81 and K27 on"
+    double_swap_note: str = DOUBLE_SWAP_NOTE
 
 
 @dataclass(frozen=True)
@@ -812,6 +855,12 @@ def _readme(
         linear_sets=tuple(_linear_set_row(emitted.set) for emitted in linear_sets),
         hybrid_sets=tuple(_hybrid_set_row(emitted) for emitted in hybrid_sets),
         uio_rows=tuple(uio_rows),
+        double_swaps=tuple(
+            f"`{m.model.name}`: {' and '.join(m.shift.off_elements)} off, "
+            f"{' and '.join(m.shift.on_elements)} on"
+            for m in models
+            if m.role == "shift" and m.shift is not None and not m.shift.single
+        ),
     )
     return render("generated_readme.md.j2", view)
 

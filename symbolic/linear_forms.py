@@ -28,6 +28,7 @@ from gearsym.symbolic.drivetrain import (
     full_linear_form,
     gear_linear_form,
     linear_form,
+    shift_spec,
 )
 from gearsym.symbolic.dynamics import gearbox_dynamics
 from gearsym.symbolic.model import Variable
@@ -123,6 +124,8 @@ def shift_linear_forms(d: GearboxDescription, spec: ShiftSpec) -> LinearFormSet:
     """
     from gearsym.symbolic.hybrid import mode_coordinates, mode_name
 
+    if not spec.single:  # the hybrid modes are those of one element off and one on
+        shift_spec(d, spec.name)  # the one-line error of a double swap
     dyn = gearbox_dynamics(d)
     elements = (spec.off_going, spec.on_coming)
     forms = []

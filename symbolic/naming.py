@@ -436,13 +436,15 @@ def check_names(d: GearboxDescription) -> None:
             if a == b:
                 continue
             try:
-                shift_spec(d, f"{a}-{b}")
+                spec = shift_spec(d, f"{a}-{b}", max_swaps=2)
             except GearsymError:
-                continue  # not a single-swap shift: no model is ever made for it
+                continue  # neither a single nor a double swap: no model is ever made for it
             key = f'gear[name="{b}"].name'
             torque_model = shift_model_name(a, b)
             mu_model = shift_model_name(a, b, friction_inputs=True)
             models.add(torque_model, f"model of shift {a}-{b}", key, identifier=False)
+            if not spec.single:
+                continue  # a double swap has the torque-input model only
             models.add(mu_model, f"model of shift {a}-{b} with friction inputs", key, False)
             models.add(
                 sensitivity_model_name(mu_model), f"sensitivity system of shift {a}-{b}", key, False

@@ -570,7 +570,8 @@ def _integration(
     shifts = [m.shift.name for m in models if m.shift is not None]
     if not shifts:
         return [], []
-    shift = "2-3" if "2-3" in shifts else shifts[0]
+    single = [m.shift.name for m in models if m.shift is not None and m.shift.single]
+    shift = "2-3" if "2-3" in shifts else (single or shifts)[0]
     report = integration_check(d, root, build_dir / "integration", shift=shift)
     problems = []
     rk4 = report.orders(report.rk4)[-1]

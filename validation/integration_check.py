@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 import sympy as sp
+from gearsym.symbolic import naming
 from gearsym.symbolic.codegen import file_names
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import full_model, shift_model
@@ -325,10 +326,11 @@ def _run(
     rk4_steps: Sequence[float],
     lie_steps: Sequence[float],
 ) -> IntegrationReport:
-    from_gear = shift.split("-")[0]
-    sm = shift_model(d, shift, friction_inputs=True)
-    if not (root / "c" / file_names(sm)["source"]).is_file():  # no friction data: torque inputs
-        sm = shift_model(d, shift)
+    from_gear, to_gear = shift.split("-")
+    mu_name = naming.shift_model_name(from_gear, to_gear, friction_inputs=True)
+    # no friction data or a double swap: the torque-input model
+    with_mu = (root / "c" / naming.model_file_names(mu_name)["source"]).is_file()
+    sm = shift_model(d, shift, friction_inputs=with_mu)
     fm = full_model(d)
     scales = _scales(sm)
     report = IntegrationReport(
