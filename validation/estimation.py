@@ -1150,10 +1150,11 @@ def plot_ekf(run: EkfRun, path: Path) -> Path:
     for ax in axes:
         for k, phase in enumerate(run.phases):
             ax.axvspan(phase.t_start, phase.t_end, color="0.93" if k % 2 else "0.85", lw=0)
-    for phase in run.phases:
+    for k, phase in enumerate(run.phases):
+        # short phases sit side by side: alternate two heights so their names never overlap
         axes[0].annotate(
             phase.name,
-            ((phase.t_start + phase.t_end) / 2, 1.03),
+            ((phase.t_start + phase.t_end) / 2, 1.03 + 0.1 * (k % 2)),
             xycoords=("data", "axes fraction"),
             ha="center",
             fontsize=7,
@@ -2071,10 +2072,11 @@ def plot_euio(run: EuioRun, path: Path) -> Path:
     for ax in axes:
         for k, phase in enumerate(run.phases):
             ax.axvspan(phase.t_start, phase.t_end, color="0.93" if k % 2 else "0.85", lw=0)
-    for phase in run.phases:
+    for k, phase in enumerate(run.phases):
+        # short phases sit side by side: alternate two heights so their names never overlap
         axes[0].annotate(
             phase.name,
-            ((phase.t_start + phase.t_end) / 2, 1.03),
+            ((phase.t_start + phase.t_end) / 2, 1.03 + 0.1 * (k % 2)),
             xycoords=("data", "axes fraction"),
             ha="center",
             fontsize=7,
