@@ -250,7 +250,17 @@ def test_ekf_on_the_recording_reproduces_the_synthetic_run_of_the_same_seed(tmp_
     )
     assert measured.returncode == 0, measured.stderr
     synthetic = gearsym_cli(
-        "estimate", "--filter", "ekf", "--scenario", str(SCENARIO), "--seed", "0", "--json"
+        "estimate",
+        "--filter",
+        "ekf",
+        "--scenario",
+        str(SCENARIO),
+        "--seed",
+        "0",
+        "--json",
+        "--out",
+        str(tmp_path / "synthetic"),
+        "--no-plots",
     )
     assert synthetic.returncode == 0, synthetic.stderr
     a, b = json.loads(measured.stdout), json.loads(synthetic.stdout)
@@ -258,9 +268,27 @@ def test_ekf_on_the_recording_reproduces_the_synthetic_run_of_the_same_seed(tmp_
     assert a["measurement"]["format"] == "mdf4" and a["measurement"]["samples"] == 151
     assert set(a["input_sources"]) >= {"T_In", "p_K38", "p_B05"}
     assert a["input_sources"]["p_K38"] == "recording"
-    for name, p in a["parameters"].items():
-        q = b["parameters"][name]
-        assert abs(p["estimate"] - q["estimate"]) < 0.02 * q["sigma"], (name, p, q)
+    assert a["modes"] == b["modes"] == "filter"
+    # Sample by sample from the CSVs: the JSON "estimate" of the synthetic run is read at the
+    # truth's last sliding sample, the recording's (no truth) at the end, so those two differ
+    # by design. The filter decides its modes from each run's own inputs: the recording's
+    # resampled pressure may engage B05 one sample earlier (tolerated: at most one sample).
+    import csv
+
+    def rows(path: Path) -> list[dict[str, str]]:
+        with path.open(newline="") as f:
+            return list(csv.DictReader(f))
+
+    ra, rb = rows(tmp_path / "ekf" / "ekf.csv"), rows(tmp_path / "synthetic" / "ekf.csv")
+    assert len(ra) == len(rb) == 151
+    modes = [c for c in ra[0] if c.startswith("mode_")]
+    assert modes
+    assert sum(any(x[c] != y[c] for c in modes) for x, y in zip(ra, rb, strict=True)) <= 1
+    for name in a["parameters"]:
+        for x, y in zip(ra, rb, strict=True):
+            sigma = float(y[f"{name}_sigma"])
+            error = abs(float(x[f"{name}_hat"]) - float(y[f"{name}_hat"]))
+            assert error < 0.02 * sigma, (name, x["t"], error / sigma)
     lo, hi = a["nis_band"]
     assert lo <= a["nis_mean"] <= hi  # the filter is consistent with the recording
     assert (tmp_path / "ekf" / "ekf.json").exists()
