@@ -47,6 +47,8 @@ __all__ = [
     "EuioExistence",
     "EuioStep",
     "euio_existence",
+    "euio_filter_model",
+    "euio_model_name",
     "euio_step",
     "euio_step_full",
     "load_column",
@@ -71,6 +73,62 @@ def load_column(
     m = float(z[names.index("m_veh")]) if "m_veh" in names else float("nan")
     e[names.index("omega_C")] = -1.0 / (i_wheel + m * r_dyn**2)
     return e
+
+
+def euio_model_name(shift: str) -> str:
+    """``euio_2_3`` for the shift ``2-3`` (files gearsym_euio_2_3.{c,h})."""
+    return "euio_" + shift.replace("-", "_")
+
+
+def euio_filter_model(d: Any, shift: str = "2-3") -> tuple[Any, tuple[tuple[int, int], ...], Any]:
+    """The filter's model as ``gearsym generate`` emits it (module text): the augmented model
+    (4.1) with the parameters of :func:`.ekf.default_parameters` but ζ, and the parameters of
+    :data:`ROAD_FREE` substituted by 0 (no road model; the road load is the unknown input).
+    Returns (model, frozen (μ state, slide input) pairs, the load column E of
+    :func:`load_column` as a SymPy column in the model's symbols)."""
+    import dataclasses
+
+    import sympy as sp
+    from gearsym.symbolic import naming
+    from gearsym.symbolic.estimators.ekf import augmented_model, default_parameters, slide_input
+
+    parameters = [name for name in default_parameters(d, shift) if name != naming.GRADE]
+    aug = augmented_model(d, shift, parameters)
+    model = aug.model
+    road = {v.symbol: sp.Integer(0) for v in model.parameters if v.name in ROAD_FREE}
+    symbols = {v.name: v.symbol for v in (*model.states, *model.parameters)}
+    r_dyn = symbols.get("r_dyn")
+    if r_dyn is None:  # a gearbox whose model has r_dyn folded in: its value
+        from gearsym.symbolic.drivetrain import quantity
+
+        r_dyn = sp.Float(quantity(d, "vehicle", "r_dyn").value)
+    names = aug.state_names
+    column = sp.zeros(len(names), 1)
+    column[names.index(naming.WHEEL_SPEED)] = -1 / (
+        symbols["I_wheel"] + symbols["m_veh"] * r_dyn**2
+    )
+    rhs = sp.Matrix(model.rhs.xreplace(road))
+    outputs = sp.Matrix(model.output_expressions.xreplace(road))
+    column = sp.Matrix(column.xreplace(road))
+    used = rhs.free_symbols | outputs.free_symbols | column.free_symbols
+    filtered = dataclasses.replace(
+        model,
+        name=euio_model_name(aug.shift),
+        # those of the road model drop out with it (rho_air, A_front act through c_W only)
+        parameters=tuple(v for v in model.parameters if v.symbol in used),
+        rhs=rhs,
+        output_expressions=outputs,
+        metadata={
+            **model.metadata,
+            "equations": "2.55-2.58, 2.69, 3.14, 4.1, 4.5",
+            "road load": "unknown input T_res* (2.48); zeta, f_roll, c_W are 0 in the filter",
+        },
+    )
+    inputs = aug.input_names
+    frozen = tuple(
+        (names.index(mu), inputs.index(slide_input(e))) for e, mu in aug.mu_state.items()
+    )
+    return filtered, frozen, sp.ImmutableMatrix(column)
 
 
 def _rank(m: np.ndarray) -> int:
