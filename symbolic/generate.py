@@ -509,7 +509,7 @@ def euio_model(
     """The extended UIO (4.5) of a shift: the EKF's augmented model (4.1) without ζ and
     without a road model (ζ, f_roll, c_W are 0: the road load T_res* is the unknown input),
     with the rows jac_outputs, euio_load_column and euio_step."""
-    from gearsym.symbolic.estimators.euio import euio_filter_model
+    from gearsym.symbolic.estimators.euio import euio_filter_model, euio_phase_masks
 
     if say is not None:
         say(f"deriving the augmented model of shift {spec.name} for the extended UIO (4.5)")
@@ -522,7 +522,7 @@ def euio_model(
         what,
         spec,
         integrators=("rk4",),
-        euio=EuioLayout(frozen, column),
+        euio=EuioLayout(frozen, column, euio_phase_masks(d, spec.name)),
     )
 
 

@@ -88,7 +88,18 @@ def run(emitted):
         s = euio_step_full(discrete, z, P, setup.u[k - 1], setup.u[k], y[k], R, H, p, q, e, hold)
         steps.append((z, P, setup.u[k - 1], setup.u[k], y[k], reference.held[k], s))
         z, P = s.z, s.P
-    return {"steps": steps, "p": p_c, "q": q, "r": setup.relative, "floor": setup.floor}
+    masks = {
+        phase: {x.parameter for x in ex if not x.exists}
+        for phase, ex in reference.existence.items()
+    }
+    return {
+        "steps": steps,
+        "p": p_c,
+        "q": q,
+        "r": setup.relative,
+        "floor": setup.floor,
+        "masks": masks,
+    }
 
 
 def _step(lib, single, z, P, u_prev, u, p, q, y, r, floor, held):
@@ -204,3 +215,13 @@ def test_a_covariance_that_is_not_positive_definite_is_refused(libraries, run):
         )
         assert status == ERR_SINGULAR and np.all(np.isnan(load))
         assert np.all(np.isfinite(x_c))
+
+
+def test_the_header_masks_are_those_of_the_reference_run(emitted, run):
+    """The per-phase held masks the header states (existence at a generic operating point)
+    equal those of run_euio (existence at each phase's midpoint of the reference simulation)."""
+    _, m = emitted
+    names = [v.name for v in m.model.states]
+    stated = {phase: {names[i] for i in held} for phase, held, _ in m.euio.held_phases}
+    assert stated == run["masks"]
+    assert all("m_veh" in held for held in stated.values())

@@ -54,12 +54,22 @@ def euio_step_extra(
         + own
     )
     phases = "; ".join(
-        f"{phase}: {', '.join(names[i] for i in held) or 'none'}" + (f" ({why})" if why else "")
-        for phase, held, why in layout.held_phases
+        f"{phase}: {', '.join(names[i] for i in held) or 'none'}"
+        for phase, held, _ in layout.held_phases
+    )
+    reasons = list(
+        dict.fromkeys(
+            r for _, _, why in layout.held_phases for r in why.replace("μ", "mu").split("; ") if r
+        )
     )
     text = (
         f"Held by the element modes: {frozen or 'none'}. "
-        + (f"Held per phase (the library's existence result, 4.4): {phases}. " if phases else "")
+        + (
+            f"Pass held[] per phase as the library's existence result (4.4, "
+            f"euio_phase_masks) says: {phases}; because {'; '.join(reasons)}. "
+            if phases
+            else ""
+        )
         + f"Operations (about): {total.format()} (4 rhs + 4 jac_x + outputs + jac_outputs + "
         f"the load column + {own.format()}); stack: {7 * nx * nx + 10 * nx + 4 * ny * nx} reals."
     )
