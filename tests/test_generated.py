@@ -122,6 +122,7 @@ def test_every_model_is_emitted(tree: Any) -> None:
         | {f"shift_{s}_mu" for s in shifts}
         | {f"shift_{s}_mu_sens" for s in shifts}
         | {"ekf_2_3"}  # the EKF (4.3) of the thesis' shift
+        | {"euio_2_3"}  # its extended UIO (4.5)
     )
     for name in names:
         for path in (
