@@ -2,9 +2,9 @@
 deviation (validation/misra.py), and the README's table lists exactly those rules.
 
 The files checked cover every template path: the full model, a torque-input and a μ-form
-shift model, a sensitivity system, the EKF, the EUIO, the UIO, the friction element, the μ map and the
-example; the other shift models come from the same templates. In CI a missing cppcheck fails
-the test.
+shift model, a sensitivity system, the EKF, the extended UIO, the UIO, the friction element,
+the μ map and the example; the other shift models come from the same templates. In CI a
+missing cppcheck fails the test.
 """
 
 from __future__ import annotations
