@@ -173,7 +173,7 @@ def comparisons(tree: Any, tmp_path_factory: pytest.TempPathFactory) -> list:
 
 
 def test_c_and_casadi_match_sympy_for_every_model(comparisons: list) -> None:
-    assert len(comparisons) == 3 * 27  # 27 models (with the EKF): C double, C single, CasADi
+    assert len(comparisons) == 3 * 28  # 28 models (with the EKF, EUIO): C double, C single, CasADi
     for report in comparisons:
         print(report)
     failed = [str(r) for r in comparisons if not generated_check.comparison_ok(r)]
