@@ -225,3 +225,38 @@ def test_the_header_masks_are_those_of_the_reference_run(emitted, run):
     stated = {phase: {names[i] for i in held} for phase, held, _ in m.euio.held_phases}
     assert stated == run["masks"]
     assert all("m_veh" in held for held in stated.values())
+
+
+def test_casadi_euio_step_equals_the_library(emitted, run, tmp_path):
+    """The CasADi module's euio_step (symbolic inverse of S, SX graph) against the library
+    (NumPy inverse) along the same run: 1e-12 in the scales above; a dropout gives the
+    prediction and a NaN load."""
+    from gearsym.validation.c_binding import load_casadi_module
+
+    _, m = emitted
+    name = f"gearsym_{m.model.name}_casadi.py"
+    (tmp_path / name).write_text(emit_all(m.model, m.config)[name], encoding="utf-8")
+    step = load_casadi_module(tmp_path / name).euio_step()
+    worst = 0.0
+    for z, P, u_prev, u, y, held, s in run["steps"]:
+        args = (z, P, u_prev, u, run["p"], H, run["q"], y, run["r"], run["floor"], held)
+        x_n, P_n, load = (np.asarray(v, dtype=float) for v in step(*args))
+        x_n = x_n.ravel()
+        load = load.ravel()
+        sigma = np.sqrt(np.diag(s.P))
+        worst = max(
+            worst,
+            float(np.max(np.abs(x_n - s.z) / (np.abs(s.z) + sigma))),
+            float(np.max(np.abs(P_n - s.P) / np.outer(sigma, sigma))),
+        )
+        if np.all(np.isfinite(y)):
+            worst = max(
+                worst,
+                abs(load[0] - s.d_hat) / (abs(s.d_hat) + s.sigma_d),
+                abs(load[1] - s.sigma_d**2) / s.sigma_d**2,
+                abs(load[2] - s.nis) / (abs(s.nis) + s.d_hat**2 / s.sigma_d**2 + 1.0),
+            )
+        else:
+            assert np.all(np.isnan(load))
+    print(f"CasADi: worst scaled difference {worst:.3g}")
+    assert worst < 1e-12, worst

@@ -219,3 +219,95 @@ def held_input_simulator(
     one step, restarted at every sample (``Function.mapaccum``).
     """
     return integrator(h, options).mapaccum(f"gearsym_{MODEL_NAME}_held_input_simulator", n)
+
+
+# ---------------------------------------------------------------------------------------------
+# The extended UIO (thesis 4.5): the C code's euio_step as one CasADi function
+# ---------------------------------------------------------------------------------------------
+
+#: (state index, input index): that state is held while |u_prev[input]| <= 0.5 (its element
+#: does not slide), as in the C code's euio_step.
+EUIO_FROZEN: tuple[tuple[int, int], ...] = ((5, 3), (6, 5))
+#: The held states per phase from the library's existence result (4.4), as the C header says.
+EUIO_HELD_PHASES: dict[str, tuple[int, ...]] = {'gear 2': (4, 5, 6), 'torque phase': (4,), 'speed phase': (4, 5), 'gear 3': (4, 5, 6)}
+
+
+def _finite(v: Any) -> Any:
+    """1 where v is finite (NaN fails both comparisons)."""
+    return ca.logic_and(v <= ca.inf, v >= -ca.inf)
+
+
+def euio_step() -> ca.Function:
+    """One extended-UIO step (thesis 4.5) as the C code's euio_step (see its header):
+    ``(x, P, u_prev, u, p, h, q, y, r, y_floor, held) -> (x_next, P_next, load)``, P and
+    P_next NX x NX, load = [d, sigma_d^2, NIS]. Predict with u_prev held (RK4 and its exact
+    Jacobian F by the chain rule through the stages), E_d = h (I + hA/2 + h^2A^2/6 +
+    h^3A^3/24) E, the decoupled gain L with the rows of held states 0, the Joseph update. With
+    a y that is NaN or infinite: the prediction and a NaN load. S is inverted symbolically; a
+    non-positive-definite S is not detected here (the C returns ERR_SINGULAR)."""
+    fns = functions()
+    x = ca.SX.sym("x", NX)
+    P = ca.SX.sym("P", NX, NX)
+    u_prev = ca.SX.sym("u_prev", NU)
+    u = ca.SX.sym("u", NU)
+    p = ca.SX.sym("p", NP)
+    h = ca.SX.sym("h")
+    q = ca.SX.sym("q", NX)
+    y = ca.SX.sym("y", NY)
+    r = ca.SX.sym("r", NY)
+    y_floor = ca.SX.sym("y_floor", NY)
+    held = ca.SX.sym("held", NX)
+    hold = [held[i] > 0.5 for i in range(NX)]
+    for state, flag in EUIO_FROZEN:
+        sliding = ca.logic_or(u_prev[flag] > 0.5, u_prev[flag] < -0.5)
+        hold[state] = ca.logic_or(hold[state], ca.logic_not(sliding))
+    keep = ca.vertcat(*[1 - v for v in hold])
+
+    def rhs(z: Any) -> Any:
+        return fns["rhs"](z, u_prev, p)
+
+    def jac(z: Any) -> Any:
+        return fns["jac_x"](z, u_prev, p)
+
+    eye = ca.SX.eye(NX)
+    k1, a = rhs(x), jac(x)
+    k2 = rhs(x + 0.5 * h * k1)
+    d2 = jac(x + 0.5 * h * k1) @ (eye + 0.5 * h * a)
+    k3 = rhs(x + 0.5 * h * k2)
+    d3 = jac(x + 0.5 * h * k2) @ (eye + 0.5 * h * d2)
+    k4 = rhs(x + h * k3)
+    d4 = jac(x + h * k3) @ (eye + h * d3)
+    x_pred = x + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
+    F = eye + (h / 6.0) * (a + 2.0 * (d2 + d3) + d4)
+    P_pred = F @ P @ F.T + ca.diag(h * q * keep)
+    P_pred = 0.5 * (P_pred + P_pred.T)
+    e = fns["euio_load_column"](x, u_prev, p)
+    ha = h * a
+    Ed = h * (e + ha @ e / 2 + ha @ (ha @ e) / 6 + ha @ (ha @ (ha @ e)) / 24)
+    C = fns["jac_outputs"](x_pred, u, p)
+    nu = y - fns["outputs"](x_pred, u, p)
+    R = (r * ca.fmax(ca.fabs(y), y_floor)) ** 2
+    Si = ca.inv(C @ P_pred @ C.T + ca.diag(R))
+    ce = C @ Ed
+    info = ce.T @ Si @ ce
+    M = (Si @ ce).T / info
+    d = M @ nu
+    L = ca.diag(keep) @ ((P_pred @ C.T @ Si) @ (ca.SX.eye(NY) - ce @ M) + Ed @ M)
+    B = eye - L @ C
+    P_new = B @ P_pred @ B.T + L @ ca.diag(R) @ L.T
+    nis = nu.T @ Si @ nu - d * d * info
+    ok = _finite(y[0])
+    for i in range(1, NY):
+        ok = ca.logic_and(ok, _finite(y[i]))
+    nan = float("nan")
+    return ca.Function(
+        f"gearsym_{MODEL_NAME}_euio_step",
+        [x, P, u_prev, u, p, h, q, y, r, y_floor, held],
+        [
+            ca.if_else(ok, x_pred + L @ nu, x_pred),
+            ca.if_else(ok, 0.5 * (P_new + P_new.T), P_pred),
+            ca.if_else(ok, ca.vertcat(d, 1 / info, nis), ca.vertcat(nan, nan, nan)),
+        ],
+        ["x", "P", "u_prev", "u", "p", "h", "q", "y", "r", "y_floor", "held"],
+        ["x_next", "P_next", "load"],
+    )

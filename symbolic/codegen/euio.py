@@ -9,12 +9,29 @@ The rows themselves (``jac_outputs``, ``euio_load_column``, ``euio_step``) are i
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 from gearsym.symbolic.codegen.ops import OpCount
 from gearsym.symbolic.codegen.table import FunctionTable
 
-__all__ = ["euio_own_ops", "euio_step_extra"]
+__all__ = ["CasadiEuioView", "casadi_euio_view", "euio_own_ops", "euio_step_extra"]
+
+
+@dataclass(frozen=True)
+class CasadiEuioView:
+    """What ``templates/casadi_euio.py.j2`` prints: Python source of the constants."""
+
+    frozen: str
+    phases: str
+
+
+def casadi_euio_view(table: FunctionTable) -> CasadiEuioView:
+    """The view of the CasADi ``euio_step`` appended to the model's CasADi module."""
+    layout = table.config.euio
+    assert layout is not None
+    phases = ", ".join(f"{phase!r}: {tuple(held)!r}" for phase, held, _ in layout.held_phases)
+    return CasadiEuioView(frozen=repr(tuple(layout.frozen)), phases="{" + phases + "}")
 
 
 def euio_own_ops(nx: int, ny: int) -> OpCount:
