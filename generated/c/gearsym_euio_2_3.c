@@ -421,7 +421,7 @@ void gearsym_euio_2_3_euio_load_column(
  * (indistinguishable from the road load); mu_38: its element does not slide in this phase (mu
  * has no effect); mu_05: its element does not slide in this phase (mu has no effect).
  * Operations (about): 3570 add, 3899 mul, 17 div, 0 calls (4 rhs + 4 jac_x + outputs +
- * jac_outputs + the load column + 3393 add, 3554 mul, 4 div, 0 calls); stack: 497 reals.
+ * jac_outputs + the load column + 3393 add, 3554 mul, 4 div, 0 calls); stack: 403 reals.
  */
 int gearsym_euio_2_3_euio_step(
     gearsym_real *x,
@@ -437,17 +437,13 @@ int gearsym_euio_2_3_euio_step(
     const gearsym_real *held,
     gearsym_real *load)
 {
-    gearsym_real slopes[4][GEARSYM_EUIO_2_3_NX]; /* k1 .. k4 */
-    gearsym_real start[GEARSYM_EUIO_2_3_NX]; /* x before the step */
+    gearsym_real slopes[4][GEARSYM_EUIO_2_3_NX]; /* k1 .. k4; first (h A)^k E and the next term */
     gearsym_real stage[GEARSYM_EUIO_2_3_NX];
     gearsym_real rate[GEARSYM_EUIO_2_3_NX];
     gearsym_real column[GEARSYM_EUIO_2_3_NX]; /* E (euio_load_column) at the start */
-    gearsym_real series[GEARSYM_EUIO_2_3_NX]; /* (h A)^k E */
-    gearsym_real next_term[GEARSYM_EUIO_2_3_NX];
     gearsym_real Ed[GEARSYM_EUIO_2_3_NX]; /* E_d = h (I + hA/2 + h^2A^2/6 + h^3A^3/24) E */
-    gearsym_real A[GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX]; /* jac_x at the start */
+    gearsym_real A[GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX]; /* jac_x at the start; then K_i = J(stage_i) (I + c h K_(i-1)) */
     gearsym_real jac[GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX];
-    gearsym_real tangent[GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX]; /* K_i = J(stage_i) (I + c h K_(i-1)) */
     gearsym_real dstage[GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX]; /* I + c h K_(i-1); later I - L C */
     gearsym_real F[GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX];
     gearsym_real FP[GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX]; /* F P; later (I - L C) P */
@@ -461,8 +457,7 @@ int gearsym_euio_2_3_euio_step(
     gearsym_real g[GEARSYM_EUIO_2_3_NY]; /* S^-1 C E_d */
     gearsym_real m_row[GEARSYM_EUIO_2_3_NY]; /* M = sigma_d^2 (C E_d)^T S^-1 */
     gearsym_real Sinu[GEARSYM_EUIO_2_3_NY]; /* S^-1 nu */
-    gearsym_real K[GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NY]; /* P C^T S^-1 */
-    gearsym_real L[GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NY];
+    gearsym_real KL[GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NY]; /* K = P C^T S^-1, then in place the gain L */
     int hold[GEARSYM_EUIO_2_3_NX];
     const gearsym_real half_h = GEARSYM_LIT(0.5) * h;
     const gearsym_real sixth_h = h * (GEARSYM_LIT(1.0) / GEARSYM_LIT(6.0));
@@ -490,17 +485,39 @@ int gearsym_euio_2_3_euio_step(
         hold[6] = 1; /* its element does not slide */
     }
     for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
-        start[i] = x[i];
         rate[i] = (hold[i] != 0) ? GEARSYM_LIT(0.0) : q[i];
     }
-    /* A = jac_x and E at the start, with the inputs of the step */
+    /* A = jac_x and E at the start (x is unchanged until the end of the prediction) */
     gearsym_euio_2_3_jac_x(x, u_prev, p, A);
     gearsym_euio_2_3_euio_load_column(x, u_prev, p, column);
+    /* E_d = h (E + hA E / 2 + hA (hA E) / 6 + hA (hA (hA E)) / 24), the RK4 series of Gamma E;
+       slopes[0] holds (hA)^k E, slopes[1] the next term, before the stages need them */
+    for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
+        slopes[0][i] = column[i];
+        Ed[i] = column[i];
+    }
+    for (stage_no = 1; stage_no <= 3; ++stage_no) {
+        const gearsym_real divisor = (stage_no == 1) ? GEARSYM_LIT(2.0) : ((stage_no == 2) ? GEARSYM_LIT(6.0) : GEARSYM_LIT(24.0));
+
+        for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
+            gearsym_real sum = GEARSYM_LIT(0.0);
+            for (k = 0; k < GEARSYM_EUIO_2_3_NX; ++k) {
+                sum += (h * A[i + k * GEARSYM_EUIO_2_3_NX]) * slopes[0][k];
+            }
+            slopes[1][i] = sum;
+        }
+        for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
+            slopes[0][i] = slopes[1][i];
+            Ed[i] += slopes[0][i] / divisor;
+        }
+    }
+    for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
+        Ed[i] = h * Ed[i];
+    }
 
     /* Predict (as ekf_predict): stage 1: k1 = f(x), K1 = A; F accumulates h/6 (K1 + 2 K2 + 2 K3 + K4). */
     gearsym_euio_2_3_rhs(x, u_prev, p, slopes[0]);
     for (i = 0; i < GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX; ++i) {
-        tangent[i] = A[i];
         F[i] = A[i];
     }
     for (stage_no = 2; stage_no <= 4; ++stage_no) {
@@ -508,13 +525,13 @@ int gearsym_euio_2_3_euio_step(
         const gearsym_real weight = (stage_no == 4) ? GEARSYM_LIT(1.0) : GEARSYM_LIT(2.0);
 
         for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
-            stage[i] = start[i] + c * slopes[stage_no - 2][i];
+            stage[i] = x[i] + c * slopes[stage_no - 2][i];
         }
         gearsym_euio_2_3_rhs(stage, u_prev, p, slopes[stage_no - 1]);
         gearsym_euio_2_3_jac_x(stage, u_prev, p, jac);
         for (j = 0; j < GEARSYM_EUIO_2_3_NX; ++j) {
             for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
-                dstage[i + j * GEARSYM_EUIO_2_3_NX] = c * tangent[i + j * GEARSYM_EUIO_2_3_NX];
+                dstage[i + j * GEARSYM_EUIO_2_3_NX] = c * A[i + j * GEARSYM_EUIO_2_3_NX];
             }
             dstage[j + j * GEARSYM_EUIO_2_3_NX] += GEARSYM_LIT(1.0);
         }
@@ -524,11 +541,11 @@ int gearsym_euio_2_3_euio_step(
                 for (k = 0; k < GEARSYM_EUIO_2_3_NX; ++k) {
                     sum += jac[i + k * GEARSYM_EUIO_2_3_NX] * dstage[k + j * GEARSYM_EUIO_2_3_NX];
                 }
-                tangent[i + j * GEARSYM_EUIO_2_3_NX] = sum;
+                A[i + j * GEARSYM_EUIO_2_3_NX] = sum;
             }
         }
         for (i = 0; i < GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX; ++i) {
-            F[i] += weight * tangent[i];
+            F[i] += weight * A[i];
         }
     }
     for (i = 0; i < GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX; ++i) {
@@ -536,7 +553,7 @@ int gearsym_euio_2_3_euio_step(
     }
     for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
         F[i + i * GEARSYM_EUIO_2_3_NX] += GEARSYM_LIT(1.0);
-        x[i] = start[i] + sixth_h * (slopes[0][i] + GEARSYM_LIT(2.0) * (slopes[1][i] + slopes[2][i]) + slopes[3][i]);
+        x[i] = x[i] + sixth_h * (slopes[0][i] + GEARSYM_LIT(2.0) * (slopes[1][i] + slopes[2][i]) + slopes[3][i]);
     }
     /* P = F P F^T + h diag(rate), then (P + P^T) / 2 */
     for (j = 0; j < GEARSYM_EUIO_2_3_NX; ++j) {
@@ -575,29 +592,6 @@ int gearsym_euio_2_3_euio_step(
     if (status == GEARSYM_EUIO_2_3_OK) {
         gearsym_real y_hat[GEARSYM_EUIO_2_3_NY];
 
-        /* E_d = h (E + hA E / 2 + hA (hA E) / 6 + hA (hA (hA E)) / 24), the RK4 series of Gamma E */
-        for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
-            series[i] = column[i];
-            Ed[i] = column[i];
-        }
-        for (stage_no = 1; stage_no <= 3; ++stage_no) {
-            const gearsym_real divisor = (stage_no == 1) ? GEARSYM_LIT(2.0) : ((stage_no == 2) ? GEARSYM_LIT(6.0) : GEARSYM_LIT(24.0));
-
-            for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
-                gearsym_real sum = GEARSYM_LIT(0.0);
-                for (k = 0; k < GEARSYM_EUIO_2_3_NX; ++k) {
-                    sum += (h * A[i + k * GEARSYM_EUIO_2_3_NX]) * series[k];
-                }
-                next_term[i] = sum;
-            }
-            for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
-                series[i] = next_term[i];
-                Ed[i] += series[i] / divisor;
-            }
-        }
-        for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
-            Ed[i] = h * Ed[i];
-        }
         /* y_hat, C at the predicted x with the inputs of the sample; R (3.26) */
         gearsym_euio_2_3_outputs(x, u, p, y_hat);
         gearsym_euio_2_3_jac_outputs(x, u, p, C);
@@ -721,29 +715,29 @@ int gearsym_euio_2_3_euio_step(
         nis += nu[i] * Sinu[i];
     }
     nis -= d_hat * d_hat * info;
-    /* K = P C^T S^-1 (P C^T = (C P)^T, P symmetric); L = K (I - c M) + E_d M, held rows 0 */
+    /* K = P C^T S^-1 (P C^T = (C P)^T, P symmetric); in place L = K (I - c M) + E_d M, held rows 0 */
     for (i = 0; i < GEARSYM_EUIO_2_3_NY; ++i) {
         for (j = 0; j < GEARSYM_EUIO_2_3_NX; ++j) {
             gearsym_real sum = GEARSYM_LIT(0.0);
             for (k = 0; k < GEARSYM_EUIO_2_3_NY; ++k) {
                 sum += CP[k + j * GEARSYM_EUIO_2_3_NY] * Si[k + i * GEARSYM_EUIO_2_3_NY];
             }
-            K[j + i * GEARSYM_EUIO_2_3_NX] = sum;
+            KL[j + i * GEARSYM_EUIO_2_3_NX] = sum;
         }
     }
     for (j = 0; j < GEARSYM_EUIO_2_3_NX; ++j) {
         gearsym_real Kc = GEARSYM_LIT(0.0);
         for (k = 0; k < GEARSYM_EUIO_2_3_NY; ++k) {
-            Kc += K[j + k * GEARSYM_EUIO_2_3_NX] * ce[k];
+            Kc += KL[j + k * GEARSYM_EUIO_2_3_NX] * ce[k];
         }
         for (i = 0; i < GEARSYM_EUIO_2_3_NY; ++i) {
-            L[j + i * GEARSYM_EUIO_2_3_NX] = (hold[j] != 0) ? GEARSYM_LIT(0.0) : (K[j + i * GEARSYM_EUIO_2_3_NX] - Kc * m_row[i] + Ed[j] * m_row[i]);
+            KL[j + i * GEARSYM_EUIO_2_3_NX] = (hold[j] != 0) ? GEARSYM_LIT(0.0) : (KL[j + i * GEARSYM_EUIO_2_3_NX] - Kc * m_row[i] + Ed[j] * m_row[i]);
         }
     }
     for (j = 0; j < GEARSYM_EUIO_2_3_NX; ++j) {
         gearsym_real sum = GEARSYM_LIT(0.0);
         for (i = 0; i < GEARSYM_EUIO_2_3_NY; ++i) {
-            sum += L[j + i * GEARSYM_EUIO_2_3_NX] * nu[i];
+            sum += KL[j + i * GEARSYM_EUIO_2_3_NX] * nu[i];
         }
         x[j] += sum;
     }
@@ -752,7 +746,7 @@ int gearsym_euio_2_3_euio_step(
         for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
             gearsym_real sum = (i == j) ? GEARSYM_LIT(1.0) : GEARSYM_LIT(0.0);
             for (k = 0; k < GEARSYM_EUIO_2_3_NY; ++k) {
-                sum -= L[i + k * GEARSYM_EUIO_2_3_NX] * C[k + j * GEARSYM_EUIO_2_3_NY];
+                sum -= KL[i + k * GEARSYM_EUIO_2_3_NX] * C[k + j * GEARSYM_EUIO_2_3_NY];
             }
             dstage[i + j * GEARSYM_EUIO_2_3_NX] = sum;
         }
@@ -773,7 +767,7 @@ int gearsym_euio_2_3_euio_step(
                 sum += FP[i + k * GEARSYM_EUIO_2_3_NX] * dstage[j + k * GEARSYM_EUIO_2_3_NX];
             }
             for (k = 0; k < GEARSYM_EUIO_2_3_NY; ++k) {
-                sum += L[i + k * GEARSYM_EUIO_2_3_NX] * noise[k] * L[j + k * GEARSYM_EUIO_2_3_NX];
+                sum += KL[i + k * GEARSYM_EUIO_2_3_NX] * noise[k] * KL[j + k * GEARSYM_EUIO_2_3_NX];
             }
             P[i + j * GEARSYM_EUIO_2_3_NX] = sum;
         }

@@ -265,7 +265,7 @@ void gearsym_euio_2_3_euio_load_column(
  * (indistinguishable from the road load); mu_38: its element does not slide in this phase (mu
  * has no effect); mu_05: its element does not slide in this phase (mu has no effect).
  * Operations (about): 3570 add, 3899 mul, 17 div, 0 calls (4 rhs + 4 jac_x + outputs +
- * jac_outputs + the load column + 3393 add, 3554 mul, 4 div, 0 calls); stack: 497 reals.
+ * jac_outputs + the load column + 3393 add, 3554 mul, 4 div, 0 calls); stack: 403 reals.
  */
 int gearsym_euio_2_3_euio_step(
     gearsym_real *x,

@@ -79,6 +79,8 @@ def euio_step_extra(
             r for _, _, why in layout.held_phases for r in why.replace("μ", "mu").split("; ") if r
         )
     )
+    # slopes, stage, rate, E, E_d; A, jac, dstage, F, FP; C, CP, K/L; S, S^-1; 7 of size NY
+    stack = 8 * nx + 5 * nx * nx + 3 * nx * ny + 2 * ny * ny + 7 * ny
     text = (
         f"Held by the element modes: {frozen or 'none'}. "
         + (
@@ -88,6 +90,6 @@ def euio_step_extra(
             else ""
         )
         + f"Operations (about): {total.format()} (4 rhs + 4 jac_x + outputs + jac_outputs + "
-        f"the load column + {own.format()}); stack: {7 * nx * nx + 10 * nx + 4 * ny * nx} reals."
+        f"the load column + {own.format()}); stack: {stack} reals."
     )
     return {"frozen": layout.frozen}, text
