@@ -28,6 +28,7 @@ from gearsym.symbolic.codegen import (
     INTEGRATORS,
     CodegenConfig,
     EkfLayout,
+    EuioLayout,
     emit_all,
     file_names,
     float_repr,
@@ -143,16 +144,19 @@ class EmittedModel:
 
     model: Model
     bounds: dict[str, tuple[float | None, float | None]]
-    role: str  # "full", "shift", "shift_mu", "sensitivity", "ekf" or "shift_element"
+    role: str  # "full", "shift", "shift_mu", "sensitivity", "ekf", "euio" or "shift_element"
     summary: str
     shift: ShiftSpec | None = None
     integrators: tuple[str, ...] = INTEGRATORS
     ekf: EkfLayout | None = None
+    euio: EuioLayout | None = None
 
     @property
     def config(self) -> CodegenConfig:
-        """The emitters' decisions for this model (bounds, integrator steps, EKF rows)."""
-        return CodegenConfig(bounds=self.bounds, integrators=self.integrators, ekf=self.ekf)
+        """The emitters' decisions for this model (bounds, integrator steps, EKF/EUIO rows)."""
+        return CodegenConfig(
+            bounds=self.bounds, integrators=self.integrators, ekf=self.ekf, euio=self.euio
+        )
 
 
 @dataclass(frozen=True)
@@ -399,6 +403,7 @@ def _model_plan(
     """(name, builder) of every emitted model: the names come from the naming rules, so a
     caller can pick one model before any derivation."""
     from gearsym.symbolic.estimators.ekf import ekf_model_name
+    from gearsym.symbolic.estimators.euio import euio_model_name
 
     if not adjacent_shifts(d):
         check_generatable(d)  # the one-line error (missing data fails in full_model below)
@@ -460,6 +465,7 @@ def _model_plan(
     ekf_shift = next((spec for spec in shifts if spec.name == "2-3"), None)
     if friction and ekf_shift is not None:
         plan.append((ekf_model_name(ekf_shift.name), lambda say: ekf_model(d, ekf_shift, say)))
+        plan.append((euio_model_name(ekf_shift.name), lambda say: euio_model(d, ekf_shift, say)))
     if friction:
         plan.append((naming.SHIFT_ELEMENT_MODEL, element))
     return plan
@@ -509,6 +515,29 @@ def ekf_model(
         spec,
         integrators=("rk4",),
         ekf=EkfLayout(frozen, tuple(modes), quantities, LOCK_UP_CONFIDENCE),
+    )
+
+
+def euio_model(
+    d: GearboxDescription, spec: ShiftSpec, say: Callable[[str], None] | None = None
+) -> EmittedModel:
+    """The extended UIO (4.5) of a shift: the EKF's augmented model (4.1) without ζ and
+    without a road model (ζ, f_roll, c_W are 0: the road load T_res* is the unknown input),
+    with the rows jac_outputs, euio_load_column and euio_step."""
+    from gearsym.symbolic.estimators.euio import euio_filter_model, euio_phase_masks
+
+    if say is not None:
+        say(f"deriving the augmented model of shift {spec.name} for the extended UIO (4.5)")
+    model, frozen, column = euio_filter_model(d, spec.name)
+    what = f"shift {spec.name}: extended UIO of {model.metadata['augmented']} (4.5)"
+    return EmittedModel(
+        model,
+        _bounds(d, model),
+        "euio",
+        what,
+        spec,
+        integrators=("rk4",),
+        euio=EuioLayout(frozen, column, euio_phase_masks(d, spec.name)),
     )
 
 

@@ -122,6 +122,7 @@ def test_every_model_is_emitted(tree: Any) -> None:
         | {f"shift_{s}_mu" for s in shifts}
         | {f"shift_{s}_mu_sens" for s in shifts}
         | {"ekf_2_3"}  # the EKF (4.3) of the thesis' shift
+        | {"euio_2_3"}  # its extended UIO (4.5)
     )
     for name in names:
         for path in (
@@ -172,7 +173,7 @@ def comparisons(tree: Any, tmp_path_factory: pytest.TempPathFactory) -> list:
 
 
 def test_c_and_casadi_match_sympy_for_every_model(comparisons: list) -> None:
-    assert len(comparisons) == 3 * 27  # 27 models (with the EKF): C double, C single, CasADi
+    assert len(comparisons) == 3 * 28  # 28 models (with the EKF, EUIO): C double, C single, CasADi
     for report in comparisons:
         print(report)
     failed = [str(r) for r in comparisons if not generated_check.comparison_ok(r)]

@@ -52,12 +52,12 @@ def test_emitted_c_under_asan_and_ubsan_keeps_the_nan_contract(
 ) -> None:
     _require_sanitizers(tmp_path)
     models, mu_map = checked
-    assert len(models) == 27  # with the EKF of the 2-3 shift
+    assert len(models) == 28  # with the EKF and the extended UIO of the 2-3 shift
     sources = generated_check.library_sources(GENERATED / C_DIR)
     report = nan_check.run(models, sources, tmp_path / "build", mu_map)
     print(report.calls)
     assert report.ok, "\n".join(report.failures[:50])
-    # every precision ran to the end: 27 models x 3 base points x (1 + 9 (n + 1)) argument
+    # every precision ran to the end: 28 models x 3 base points x (1 + 9 (n + 1)) argument
     # sets x 8 or 9 functions, and the μ map
     assert set(report.calls) == {"double", "single"}
     assert report.calls["double"] == report.calls["single"] > 150_000

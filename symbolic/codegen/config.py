@@ -19,6 +19,7 @@ __all__ = [
     "CodegenConfig",
     "EkfLayout",
     "EkfModeElement",
+    "EuioLayout",
     "Precision",
     "Sparsity",
     "as_config",
@@ -111,6 +112,20 @@ class EkfLayout:
 
 
 @dataclass(frozen=True)
+class EuioLayout:
+    """What the extended UIO rows (thesis 4.5, :mod:`gearsym.symbolic.estimators.euio`) need
+    beyond the model: ``frozen`` as in :class:`EkfLayout` (a μ state is held while its element
+    does not slide under the inputs of the predict), ``load_column`` the road-load column
+    E = ∂ż/∂d (an ``ImmutableMatrix`` of NX x 1 in the model's symbols), and ``held_phases``
+    the per-phase held masks of the library's existence result as (phase name, state indices
+    held there, reason) for the header."""
+
+    frozen: tuple[tuple[int, int], ...] = ()
+    load_column: Any = None
+    held_phases: tuple[tuple[str, tuple[int, ...], str], ...] = ()
+
+
+@dataclass(frozen=True)
 class CodegenConfig:
     """The decisions one emission of a model makes (see the module docstring).
 
@@ -137,6 +152,8 @@ class CodegenConfig:
     restrict_pointers: bool = True
     #: Emit the EKF rows (output Jacobian, ekf_predict, ekf_update) for an augmented model.
     ekf: EkfLayout | None = None
+    #: Emit the extended UIO rows (output Jacobian, load column, euio_step).
+    euio: EuioLayout | None = None
 
     def __post_init__(self) -> None:
         unknown = [name for name in self.integrators if name not in INTEGRATORS]

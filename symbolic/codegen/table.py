@@ -300,6 +300,50 @@ ROWS: tuple[Row, ...] = (
         returns="int",
         when="ekf_modes",
     ),
+    # The extended UIO (thesis 4.5): its own rows, beside the EKF's (symbolic/codegen/euio.py)
+    Row(
+        "jac_outputs",
+        "expr",
+        _XUP,
+        (("dhdx", "ny", "nx", "real"),),
+        "Jacobian of the outputs with respect to the states, d y / d x ({ny} x {nx}), dense "
+        "column-major: dhdx[i + j*{ny}] = d y_i / d x_j (the EUIO's C).",
+        when="euio_only",
+    ),
+    Row(
+        "euio_load_column",
+        "expr",
+        _XUP,
+        (("e", "nx", "1", "real"),),
+        "Column E = d xdot / d d of the unknown road load d = T_res* (2.45, 2.46, 2.48): "
+        "-1 / (I_wheel + m_veh r_dyn^2) in the wheel-speed row, m_veh the state (thesis 4.5).",
+        when="euio",
+    ),
+    Row(
+        "euio_step",
+        "euio_step",
+        ("x_io", "P_io", "u_prev", "u", "p", "h", "q", "y", "r", "y_floor", "held"),
+        (("load", "3", "1", "real"),),
+        "One extended-UIO step (thesis 4.5, the unbiased minimum-variance filter of Gillijns & "
+        "De Moor 2007 on the linearisation of each step), in place. Predict as ekf_predict "
+        "with u_prev held: x = RK4 step of size h, P = F P F^T + h diag(q) with F the exact "
+        "Jacobian of that step; a held state's q counts as 0. Then, with A = jac_x and "
+        "E = euio_load_column at the x before the step (u_prev), E_d = h (I + hA/2 + h^2A^2/6 + "
+        "h^3A^3/24) E, C = jac_outputs and nu = y - outputs at the predicted x (u), R = "
+        "diag((r_i max(|y_i|, y_floor_i))^2) (3.26), S = C P C^T + R ({ny} x {ny}, LDL^T), "
+        "c = C E_d: sigma_d^2 = 1 / (c^T S^-1 c), M = sigma_d^2 c^T S^-1, d = M nu, "
+        "L = P C^T S^-1 (I - c M) + E_d M with the rows of held states 0, x += L nu, "
+        "P = (I - L C) P (I - L C)^T + L R L^T (Joseph), symmetrised. A state is held where "
+        "held[i] > 0.5, or where it is a mu whose element does not slide under u_prev (see the "
+        "header for the per-phase masks). load receives d (the road load T_res*, N m), "
+        "sigma_d^2 and the NIS nu^T S^-1 nu - d^2 / sigma_d^2 (chi^2 with {ny} - 1 dof). "
+        "Returns OK after the update; ERR_NONFINITE if a y_i is NaN or infinite (dropout: "
+        "x and P hold the prediction, load is NaN); ERR_SINGULAR if S is not positive "
+        "definite (a pivot of its LDL^T not > 0) or c^T S^-1 c is not > 0 (x and P hold the "
+        "prediction, load is NaN).",
+        returns="int",
+        when="euio",
+    ),
     Row(
         "params_default",
         "params_default",
@@ -330,6 +374,8 @@ def _selected(row: Row, config: CodegenConfig) -> bool:
         "implicit": config.implicit_step,
         "ekf": config.ekf is not None,
         "ekf_modes": config.ekf is not None and bool(config.ekf.modes),
+        "euio": config.euio is not None,
+        "euio_only": config.euio is not None and config.ekf is None,
     }[row.when]
 
 
@@ -481,6 +527,7 @@ def build_function_table(
         "ne": len(config.ekf.modes) if config.ekf is not None else 0,
         "nm": 3 * len(config.ekf.modes) if config.ekf is not None else 0,
         "1": 1,
+        "3": 3,
     }
 
     args = {
@@ -493,6 +540,8 @@ def build_function_table(
         "q": Arg("q", len(xs), True, "vector"),
         "y": Arg("y", len(model.outputs), True, "vector"),
         "r": Arg("r", len(model.outputs), True, "vector"),
+        "u_prev": Arg("u_prev", len(us), True, "vector"),
+        "held": Arg("held", len(xs), True, "vector"),
         "y_floor": Arg("y_floor", len(model.outputs), True, "vector"),
     }
     defaults = sp.ImmutableMatrix(
@@ -537,6 +586,10 @@ def build_function_table(
             expressions = (
                 sp.ImmutableMatrix(quantities.xreplace(changed) if changed else quantities),
             )
+        elif row.name == "euio_load_column":
+            assert config.euio is not None
+            column = sp.ImmutableMatrix(config.euio.load_column)
+            expressions = (sp.ImmutableMatrix(column.xreplace(changed) if changed else column),)
         elif row.jacobian and row.name.endswith("_sparse"):
             assert pattern is not None
             expressions = (pattern.nonzeros(jac[row.jacobian]),)

@@ -47,6 +47,9 @@ __all__ = [
     "EuioExistence",
     "EuioStep",
     "euio_existence",
+    "euio_filter_model",
+    "euio_phase_masks",
+    "euio_model_name",
     "euio_step",
     "euio_step_full",
     "load_column",
@@ -71,6 +74,137 @@ def load_column(
     m = float(z[names.index("m_veh")]) if "m_veh" in names else float("nan")
     e[names.index("omega_C")] = -1.0 / (i_wheel + m * r_dyn**2)
     return e
+
+
+def euio_model_name(shift: str) -> str:
+    """``euio_2_3`` for the shift ``2-3`` (files gearsym_euio_2_3.{c,h})."""
+    return "euio_" + shift.replace("-", "_")
+
+
+def euio_filter_model(d: Any, shift: str = "2-3") -> tuple[Any, tuple[tuple[int, int], ...], Any]:
+    """The filter's model as ``gearsym generate`` emits it (module text): the augmented model
+    (4.1) with the parameters of :func:`.ekf.default_parameters` but ζ, and the parameters of
+    :data:`ROAD_FREE` substituted by 0 (no road model; the road load is the unknown input).
+    Returns (model, frozen (μ state, slide input) pairs, the load column E of
+    :func:`load_column` as a SymPy column in the model's symbols)."""
+    import dataclasses
+
+    import sympy as sp
+    from gearsym.symbolic import naming
+    from gearsym.symbolic.estimators.ekf import augmented_model, default_parameters, slide_input
+
+    parameters = [name for name in default_parameters(d, shift) if name != naming.GRADE]
+    aug = augmented_model(d, shift, parameters)
+    model = aug.model
+    road = {v.symbol: sp.Integer(0) for v in model.parameters if v.name in ROAD_FREE}
+    symbols = {v.name: v.symbol for v in (*model.states, *model.parameters)}
+    r_dyn = symbols.get("r_dyn")
+    if r_dyn is None:  # a gearbox whose model has r_dyn folded in: its value
+        from gearsym.symbolic.drivetrain import quantity
+
+        r_dyn = sp.Float(quantity(d, "vehicle", "r_dyn").value)
+    names = aug.state_names
+    column = sp.zeros(len(names), 1)
+    column[names.index(naming.WHEEL_SPEED)] = -1 / (
+        symbols["I_wheel"] + symbols["m_veh"] * r_dyn**2
+    )
+    rhs = sp.Matrix(model.rhs.xreplace(road))
+    outputs = sp.Matrix(model.output_expressions.xreplace(road))
+    column = sp.Matrix(column.xreplace(road))
+    used = rhs.free_symbols | outputs.free_symbols | column.free_symbols
+    filtered = dataclasses.replace(
+        model,
+        name=euio_model_name(aug.shift),
+        # those of the road model drop out with it (rho_air, A_front act through c_W only)
+        parameters=tuple(v for v in model.parameters if v.symbol in used),
+        rhs=rhs,
+        output_expressions=outputs,
+        metadata={
+            **model.metadata,
+            "equations": "2.55-2.58, 2.69, 3.14, 4.1, 4.5",
+            "road load": "unknown input T_res* (2.48); zeta, f_roll, c_W are 0 in the filter",
+        },
+    )
+    inputs = aug.input_names
+    frozen = tuple(
+        (names.index(mu), inputs.index(slide_input(e))) for e, mu in aug.mu_state.items()
+    )
+    return filtered, frozen, sp.ImmutableMatrix(column)
+
+
+#: A generic operating point of the structural existence test (:func:`euio_phase_masks`):
+#: speeds (rad/s) and twist (rad) of a car moving under load, input torque (N m) and the
+#: normal force (N) of a sliding element; the tests are of rank, so any point where the
+#: states, the torque and the force are nonzero serves (the tests check them against the
+#: reference's phase midpoints).
+GENERIC_POINT: dict[str, float] = {
+    "omega_1": 300.0,
+    "omega_2": 200.0,
+    "phi": 0.01,
+    "omega_C": 50.0,
+    "T_In": 100.0,
+    "F_N": 5000.0,
+}
+
+
+def euio_phase_masks(d: Any, shift: str = "2-3") -> tuple[tuple[str, tuple[int, ...], str], ...]:
+    """The held mask of the extended UIO per phase of a single-swap power-on shift, from
+    :func:`euio_existence` (4.4) on the filter's model at :data:`GENERIC_POINT` with each
+    phase's element modes: the from-gear (off-going sticks, on-coming open), the torque phase
+    (both slide), the speed phase (on-coming slides) and the to-gear (on-coming sticks).
+    Returns (phase name, held state indices, the reasons) per phase; the state indices are
+    those of :func:`euio_filter_model`'s model."""
+    import numpy as np
+    from gearsym.symbolic import naming
+    from gearsym.symbolic.drivetrain import element_short_name, shift_spec
+    from gearsym.symbolic.estimators.ekf import (
+        DiscreteModel,
+        augmented_model,
+        default_parameters,
+        slide_input,
+        stick_input,
+    )
+
+    spec = shift_spec(d, shift)
+    parameters = [name for name in default_parameters(d, shift) if name != naming.GRADE]
+    aug = augmented_model(d, shift, parameters)
+    discrete = DiscreteModel(aug)
+    p = aug.parameter_values(ROAD_FREE)
+    pnames = [v.name for v in aug.model.parameters]
+    from gearsym.symbolic.drivetrain import quantity
+
+    r_dyn = float(quantity(d, "vehicle", "r_dyn").value)
+    i_wheel = p[pnames.index("I_wheel")]
+    names = aug.state_names
+    z = np.array(
+        [
+            GENERIC_POINT.get(name, float(aug.model.states[k].default or 0.0))
+            for k, name in enumerate(names)
+        ]
+    )
+    off, on = spec.off_going, spec.on_coming
+    phases = (
+        (f"gear {spec.from_gear}", {off: "stick", on: "open"}),
+        ("torque phase", {off: "slide", on: "slide"}),
+        ("speed phase", {off: "open", on: "slide"}),
+        (f"gear {spec.to_gear}", {off: "open", on: "stick"}),
+    )
+    inputs = aug.input_names
+    out = []
+    for phase, modes in phases:
+        u = np.zeros(len(inputs))
+        u[inputs.index("T_In")] = GENERIC_POINT["T_In"]
+        for element, mode in modes.items():
+            force = naming.normal_force(element_short_name(d, element))
+            u[inputs.index(force)] = GENERIC_POINT["F_N"] if mode != "open" else 0.0
+            u[inputs.index(slide_input(element))] = 1.0 if mode == "slide" else 0.0
+            u[inputs.index(stick_input(element))] = 1.0 if mode == "stick" else 0.0
+        e = load_column(discrete, z, r_dyn, p, i_wheel)
+        result = euio_existence(discrete, phase, z, u, p, e)
+        held = tuple(names.index(x.parameter) for x in result if not x.exists)
+        why = "; ".join(f"{x.parameter}: {x.reason()}" for x in result if not x.exists)
+        out.append((phase, held, why))
+    return tuple(out)
 
 
 def _rank(m: np.ndarray) -> int:

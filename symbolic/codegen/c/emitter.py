@@ -485,6 +485,11 @@ def _function_views(
                 f"element, the lock-up map of x and P: {own.format()}); stack: "
                 f"{nx * nx + 2 * nx + 6 * len(layout.modes) + len(table.inputs)} reals."
             )
+        elif spec.kind == "euio_step":
+            from gearsym.symbolic.codegen.euio import euio_step_extra
+
+            euio_extra, op_text = euio_step_extra(table, counts)
+            extra.update(euio_extra)
         elif spec.kind == "params_default":
             (defaults,) = spec.expressions
             extra["defaults"] = tuple(

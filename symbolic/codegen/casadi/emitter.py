@@ -139,4 +139,9 @@ def emit_casadi_files(table: FunctionTable, forms: Mapping[str, CseForm]) -> dic
             outputs=python_tuple([repr(v.name) for v in model.outputs]),
         ),
     )
-    return {file_names(model)["casadi"]: render("casadi_module.py.j2", view)}
+    text = render("casadi_module.py.j2", view)
+    if table.config.euio is not None:
+        from gearsym.symbolic.codegen.euio import casadi_euio_view
+
+        text += render("casadi_euio.py.j2", casadi_euio_view(table))
+    return {file_names(model)["casadi"]: text}
