@@ -1133,6 +1133,22 @@ def write_ekf_csv(run: EkfRun, path: Path) -> Path:
 _LABELS = {"m_veh": "m_veh / kg", "mu_38": "μ₃₈", "mu_05": "μ₀₅", "zeta": "ζ / rad"}
 
 
+def shade_phases(axes: Sequence[Any], phases: Sequence[Phase]) -> None:
+    """Shade each phase on every axis and name it above the first; short phases sit side by
+    side, so their names alternate between two heights and never overlap."""
+    for ax in axes:
+        for k, phase in enumerate(phases):
+            ax.axvspan(phase.t_start, phase.t_end, color="0.93" if k % 2 else "0.85", lw=0)
+    for k, phase in enumerate(phases):
+        axes[0].annotate(
+            phase.name,
+            ((phase.t_start + phase.t_end) / 2, 1.03 + 0.1 * (k % 2)),
+            xycoords=("data", "axes fraction"),
+            ha="center",
+            fontsize=7,
+        )
+
+
 def plot_ekf(run: EkfRun, path: Path) -> Path:
     """Each augmented parameter's estimate against the truth with ±3σ, the phases shaded, and
     the NEES against its per-sample 95 % χ² interval."""
@@ -1147,18 +1163,7 @@ def plot_ekf(run: EkfRun, path: Path) -> Path:
         {"top": 0.93, "bottom": 0.05, "hspace": 0.12, "left": 0.1},
         sharex=True,
     )
-    for ax in axes:
-        for k, phase in enumerate(run.phases):
-            ax.axvspan(phase.t_start, phase.t_end, color="0.93" if k % 2 else "0.85", lw=0)
-    for k, phase in enumerate(run.phases):
-        # short phases sit side by side: alternate two heights so their names never overlap
-        axes[0].annotate(
-            phase.name,
-            ((phase.t_start + phase.t_end) / 2, 1.03 + 0.1 * (k % 2)),
-            xycoords=("data", "axes fraction"),
-            ha="center",
-            fontsize=7,
-        )
+    shade_phases(axes, run.phases)
     for ax, name in zip(axes, names, strict=False):
         j = run.state_names.index(name)
         est, sig = run.estimates[:, j], run.sigmas[:, j]
@@ -2069,18 +2074,7 @@ def plot_euio(run: EuioRun, path: Path) -> Path:
         {"top": 0.93, "bottom": 0.05, "hspace": 0.12, "left": 0.1},
         sharex=True,
     )
-    for ax in axes:
-        for k, phase in enumerate(run.phases):
-            ax.axvspan(phase.t_start, phase.t_end, color="0.93" if k % 2 else "0.85", lw=0)
-    for k, phase in enumerate(run.phases):
-        # short phases sit side by side: alternate two heights so their names never overlap
-        axes[0].annotate(
-            phase.name,
-            ((phase.t_start + phase.t_end) / 2, 1.03 + 0.1 * (k % 2)),
-            xycoords=("data", "axes fraction"),
-            ha="center",
-            fontsize=7,
-        )
+    shade_phases(axes, run.phases)
     for ax, name in zip(axes, names, strict=False):
         j = run.state_names.index(name)
         est, sig = run.estimates[:, j], run.sigmas[:, j]
