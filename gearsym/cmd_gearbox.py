@@ -20,6 +20,7 @@ from gearsym.symbolic.description import PLANET_COUNT_MAX, TEETH_MAX
 
 if TYPE_CHECKING:
     from gearsym.commands import Subparsers
+    from gearsym.symbolic.ratios import GearRatio
 
 __all__ = [
     "SHOW_ITEMS",
@@ -28,11 +29,23 @@ __all__ = [
     "cmd_ratios",
     "cmd_show",
     "print_ratio_table",
+    "ratio_json",
     "register",
 ]
 
 
 # ----------------------------------------------------------------------------- ratios
+
+
+def ratio_json(table: Sequence[GearRatio]) -> dict[str, Any]:
+    """``{gear: ratio or null}``, plus ``"_free_shafts": {gear: [shaft, ...]}`` when some
+    gear leaves a shaft idle; the one shape ``ratios --json`` prints and ``run`` writes."""
+    data: dict[str, Any] = {r.gear: (None if r.ratio is None else float(r.ratio)) for r in table}
+    idle = {r.gear: list(r.free_shafts) for r in table if r.free_shafts and not r.neutral}
+    if idle:
+        # "_" cannot start a gear name: the key never clashes with a gear (README)
+        data["_free_shafts"] = idle
+    return data
 
 
 def cmd_ratios(args: argparse.Namespace) -> int:
@@ -47,14 +60,7 @@ def cmd_ratios(args: argparse.Namespace) -> int:
     differ = _differing_gears(d, table)
     source = f" ({d.gear_table_source})" if d.gear_table_source else ""
     if args.json:
-        data: dict[str, Any] = {
-            r.gear: (None if r.ratio is None else float(r.ratio)) for r in table
-        }
-        idle = {r.gear: list(r.free_shafts) for r in table if r.free_shafts and not r.neutral}
-        if idle:
-            # "_" cannot start a gear name: the key never clashes with a gear (README)
-            data["_free_shafts"] = idle
-        emit_json(data)
+        emit_json(ratio_json(table))
         if differ:
             first = next(r for r in table if r.gear == differ[0])
             print(

@@ -13,7 +13,7 @@ import json
 import time
 from typing import TYPE_CHECKING, Any
 
-from gearsym.cmd_gearbox import print_ratio_table
+from gearsym.cmd_gearbox import print_ratio_table, ratio_json
 from gearsym.commands import add_command, load
 from gearsym.interrupts import check
 from gearsym.symbolic.errors import GearsymError
@@ -68,8 +68,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         print()
         table = ratio_table(d)  # once: printed and written
         status = print_ratio_table(d, table)
-        ratios = {r.gear: (None if r.ratio is None else float(r.ratio)) for r in table}
-        (out.path / "ratios.json").write_text(json.dumps(ratios, indent=2) + "\n")
+        (out.path / "ratios.json").write_text(json.dumps(ratio_json(table), indent=2) + "\n")
         from gearsym.validation.drawing_render import write_pictures
 
         # stick diagram, lever analogy, speed plans, drivetrain: drawn beside the analyses

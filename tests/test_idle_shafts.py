@@ -269,3 +269,15 @@ def test_idle_note_passes_the_ecu_source_scan() -> None:
     note = gear_model(d, "1").metadata["idle"]
     assert "sun_od" in note and "0.002" in note
     assert not re.search(r"\b(malloc|calloc|realloc|free|alloca)\b", note)
+
+
+def test_run_writes_the_idle_shafts_into_ratios_json(tmp_path: Path) -> None:
+    """`gearsym run` writes the same shape `ratios --json` prints, `_free_shafts` included
+    (the 2-3 scenario does not fit this box, so the run stops after ratios and observability)."""
+    out = tmp_path / "run"
+    assert main(["run", str(OVERDRIVE), "--out", str(out)]) == 0
+    data = json.loads((out / "ratios.json").read_text())
+    # the same idle shafts the text and --json of `ratios` name (test above)
+    assert data["_free_shafts"]["1"] == ["sun_od", "ring_od"]
+    assert data["_free_shafts"]["4"] == ["ring_f", "sun", "carrier_r"]
+    assert data["1"] == pytest.approx(26 / 11)
