@@ -194,25 +194,22 @@ def test_float_covariance_stays_symmetric_positive_definite_for_a_million_steps(
     assert abs(mass - 1800.0) < 3 * sigma
 
 
-def test_emitted_mode_update_equals_the_reference_mode_logic(emitted, libraries):
-    """``ekf_mode_update`` in C against :func:`ekf_mode_update` (NumPy/CasADi) on the filter's
-    own run of the default shift and on states built around each element's lock-up and
-    break-away: the same modes and switch count; x and P to 1e-12 in double (scaled as above)
-    and 1e-5 in float, the float decisions compared where the deciding margin (slip against
-    zero, |torque| against the capacity) exceeds float rounding."""
-    from gearsym.symbolic.estimators.ekf_modes import ModeLogic, ekf_mode_update
+@pytest.fixture(scope="module")
+def mode_cases(emitted):
+    """(setup, logic, cases) of the mode-update tests: (z, P, u, modes before) on the filter's
+    own run of the default shift (seed 2) and on states built around each element's lock-up
+    and break-away (slip just either side of zero, every mode of the other element), P with a
+    random correlation and the run's σ."""
     from gearsym.validation.estimation import filter_run, prepare_ekf
     from gearsym.validation.scenario import load_scenario
     from gearsym.validation.simulate import simulate
 
-    d, m = emitted
-    libs, _, _ = libraries
+    d, _ = emitted
     result = simulate(d, load_scenario(d, None))
     setup = prepare_ekf(d, result, sample_time=0.01)
-    logic: ModeLogic = setup.logic
+    logic = setup.logic
     aug = setup.aug
     run = filter_run(setup, 2)
-    p = setup.p
     rng = np.random.default_rng(5)
     elements = list(logic.elements)
     cases = []
@@ -231,13 +228,30 @@ def test_emitted_mode_update_equals_the_reference_mode_logic(emitted, libraries)
                 other = elements[1 - elements.index(element)]
                 for other_code in (0, 1, 2) if code != 2 else (0, 1):
                     cases.append((z, run.sigmas[k], u, {element: code, other: other_code}))
+    with_P = []
+    for z, sigma, u, before in cases:
+        C = np.corrcoef(rng.normal(size=(len(z), 3 * len(z))))
+        with_P.append((z, C * np.outer(sigma, sigma), u, before))
+    return setup, logic, with_P
+
+
+def test_emitted_mode_update_equals_the_reference_mode_logic(libraries, mode_cases):
+    """``ekf_mode_update`` in C against :func:`ekf_mode_update` (NumPy/CasADi) on the filter's
+    own run of the default shift and on states built around each element's lock-up and
+    break-away: the same modes and switch count; x and P to 1e-12 in double (scaled as above)
+    and 1e-5 in float, the float decisions compared where the deciding margin (slip against
+    zero, |torque| against the capacity) exceeds float rounding."""
+    from gearsym.symbolic.estimators.ekf_modes import ekf_mode_update
+
+    libs, _, _ = libraries
+    setup, logic, cases = mode_cases
+    p = setup.p
+    elements = list(logic.elements)
     fn = {single: libs[single].gearsym_ekf_2_3_ekf_mode_update for single in libs}
     checked = {False: 0, True: 0}
     worst = {False: 0.0, True: 0.0}
     switched = 0
-    for z, sigma, u, before in cases:
-        C = np.corrcoef(rng.normal(size=(len(z), 3 * len(z))))
-        P = C * np.outer(sigma, sigma)
+    for z, P, u, before in cases:
         z_ref, P_ref, after, events = ekf_mode_update(logic, z, P, u, p, before)
         switched += len(events)
         slip, torque, capacity = logic._evaluate(np.asarray(z), logic.inputs(u, before), p)
@@ -277,3 +291,49 @@ def test_emitted_mode_update_equals_the_reference_mode_logic(emitted, libraries)
     assert switched >= 20 and checked[False] == len(cases) and checked[True] > 0.9 * len(cases)
     assert worst[False] < 1e-12, worst
     assert worst[True] < 1e-5, worst
+
+
+def test_emitted_casadi_mode_update_equals_the_reference_mode_logic(emitted, mode_cases, tmp_path):
+    """The emitted CasADi module's ``ekf_mode_update`` (if_else logic in SX, the lock-up maps
+    as constants) against :func:`ekf_mode_update` of the library on the cases of the C test:
+    the same modes and switch count, x and P to 1e-12 (scaled as above)."""
+    import importlib.util
+
+    from gearsym.symbolic.estimators.ekf_modes import STICK, ekf_mode_update
+    from gearsym.symbolic.hybrid import BREAK_AWAY, ENGAGEMENT, LOCK_UP, OPENING
+
+    _, m = emitted
+    files = emit_all(m.model, m.config)
+    name = next(k for k in files if k.endswith("_casadi.py"))
+    path = tmp_path / Path(name).name
+    path.write_text(files[name])
+    spec = importlib.util.spec_from_file_location("emitted_ekf_casadi", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    f = module.ekf_mode_update()
+    setup, logic, cases = mode_cases
+    p = setup.p
+    elements = list(logic.elements)
+    assert [e["name"] for e in module.EKF_MODE_ELEMENTS] == elements
+    worst, switched, kinds, locked = 0.0, 0, set(), 0
+    for z, P, u, before in cases:
+        z_ref, P_ref, after, events = ekf_mode_update(logic, z, P, u, p, before)
+        x, P_new, modes, count = f(z, P, u, p, [before[e] for e in elements])
+        assert [int(v) for v in np.asarray(modes).ravel()] == [after[e] for e in elements], before
+        assert int(count) == len(events)
+        switched += len(events)
+        kinds |= {ev.kind for ev in events}
+        locked += any(ev.kind == LOCK_UP and ev.after == STICK for ev in events)
+        worst = max(
+            worst,
+            _scaled_error(np.asarray(x).ravel(), np.asarray(P_new), z_ref, P_ref),
+        )
+    print(
+        f"CasADi mode update: {len(cases)} cases, {switched} switches ({locked} mapping "
+        f"lock-ups), worst {worst:.2e}"
+    )
+    # every kind of switch taken, including lock-ups that map x and P
+    assert kinds == {BREAK_AWAY, LOCK_UP, OPENING, ENGAGEMENT}, kinds
+    assert locked >= 5, locked  # lock-ups that map x and P through A
+    assert switched >= 20
+    assert worst < 1e-12, worst

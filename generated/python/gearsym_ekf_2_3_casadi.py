@@ -252,3 +252,144 @@ def held_input_simulator(
     one step, restarted at every sample (``Function.mapaccum``).
     """
     return integrator(h, options).mapaccum(f"gearsym_{MODEL_NAME}_held_input_simulator", n)
+
+
+# ---------------------------------------------------------------------------------------------
+# The EKF's own mode logic (thesis 4.3 on the hybrid shift model): the C code's ekf_mode_update
+# as one CasADi function
+# ---------------------------------------------------------------------------------------------
+
+#: Per swapping element, in the order of the modes vector (off-going first): input indices of
+#: its normal force and its slide/stick flags, the power-on slip sign (2.70), the state index
+#: of its mu (-1: not augmented) and the lock-up map's block A on the first EKF_MODE_PHYSICAL
+#: states (row-major; the hybrid model's M-metric projection onto the locked set, 2.34).
+EKF_MODE_ELEMENTS: tuple[dict[str, Any], ...] = (
+    {
+        "name": 'K38',
+        "normal_force": 1,
+        "slide": 3,
+        "stick": 4,
+        "slip_sign": -1,
+        "mu": 5,
+        "lock_map": (
+            (0.015438565669635147, 3.1931722194498318, 0.0, 0.0),
+            (0.004760224414804171, 0.9845614343303648, 0.0, 0.0),
+            (0.0, 0.0, 1.0, 0.0),
+            (0.0, 0.0, 0.0, 1.0),
+        ),
+    },
+    {
+        "name": 'B05',
+        "normal_force": 2,
+        "slide": 5,
+        "stick": 6,
+        "slip_sign": -1,
+        "mu": 6,
+        "lock_map": (
+            (-0.46681895163549997, 3.303646287467342, 0.0, 0.0),
+            (-0.20726761452616196, 1.4668189516355, 0.0, 0.0),
+            (0.0, 0.0, 1.0, 0.0),
+            (0.0, 0.0, 0.0, 1.0),
+        ),
+    },
+)
+EKF_MODE_PHYSICAL = 4
+#: sigma multiples of mu taken off the capacity in the lock-up test (a break-away tests mu)
+EKF_LOCK_UP_CONFIDENCE = 1.0
+
+
+def _slide_direction(value: Any, slip_sign: float) -> Any:
+    """-1 where value has the opposite sign of slip_sign, else +1 (as the C's slide_direction)."""
+    return ca.if_else(value * slip_sign < 0, -1.0, 1.0)
+
+
+def _flags(u: Any, modes: Sequence[Any]) -> Any:
+    """u with every element's slide flag (the mode if +-1, else 0) and stick flag (1 if 2)."""
+    out = [u[i] for i in range(NU)]
+    for e, code in zip(EKF_MODE_ELEMENTS, modes, strict=True):
+        out[e["slide"]] = ca.if_else(ca.logic_or(code == 1, code == -1), code, 0.0)
+        out[e["stick"]] = ca.if_else(code == 2, 1.0, 0.0)
+    return ca.vertcat(*out)
+
+
+def _lock_up(A: Any, x: Any, P: Any) -> tuple[Any, Any]:
+    """x+ = A x, P+ = A P A^T on the physical block (symmetrised), A P on its rows, the
+    parameters' block copied (as the C code)."""
+    n = EKF_MODE_PHYSICAL
+    x_new = ca.vertcat(A @ x[:n], x[n:])
+    block = A @ P[:n, :n] @ A.T
+    block = 0.5 * (block + block.T)
+    cross = A @ P[:n, n:]
+    return x_new, ca.vertcat(ca.horzcat(block, cross), ca.horzcat(cross.T, P[n:, n:]))
+
+
+def ekf_mode_update() -> ca.Function:
+    """The EKF's own mode logic after a measurement update, as the C code's ekf_mode_update
+    (see its header): ``(x, P, u, p, modes) -> (x_next, P_next, modes_next, switches)``, P
+    NX x NX, ``p`` the fixed parameters, ``modes`` one code per element (0 open, +-1 sliding,
+    2 sticking) as a real vector; u's mode flags are ignored (set from ``modes``). Opening and
+    engagement from F_N, break-away when the sticking torque exceeds 2 N r_m mu F_N, lock-up
+    when the slip reaches zero: x and P through the lock-up map if the mapped state's
+    sticking torque is within the capacity with mu lowered by EKF_LOCK_UP_CONFIDENCE sigma,
+    else it slides on in the direction of that torque. The elements in turn, each seeing the
+    other's mode as already decided."""
+    quantities = functions()["ekf_mode_quantities"]
+    x = ca.SX.sym("x", NX)
+    P = ca.SX.sym("P", NX, NX)
+    u = ca.SX.sym("u", NU)
+    p = ca.SX.sym("p", NP)
+    modes_in = ca.SX.sym("modes", len(EKF_MODE_ELEMENTS))
+    modes = [modes_in[i] for i in range(len(EKF_MODE_ELEMENTS))]
+    x_now, P_now = x, P
+    switches = ca.SX(0.0)
+    for i, e in enumerate(EKF_MODE_ELEMENTS):
+        other = modes[1 - i]
+        code = modes[i]
+        sign = float(e["slip_sign"])
+        m = quantities(x_now, _flags(u, modes), p)
+        slip, torque, capacity = m[3 * i], m[3 * i + 1], m[3 * i + 2]
+        # lock-up candidate: the mapped state, its needed torque and the capacity with mu - k sigma
+        x_plus, P_plus = _lock_up(ca.DM(e["lock_map"]), x_now, P_now)
+        candidate = list(modes)
+        candidate[i] = ca.SX(2.0)
+        sure = x_plus
+        if e["mu"] >= 0:
+            j = e["mu"]
+            lowered = x_plus[j] - EKF_LOCK_UP_CONFIDENCE * ca.sqrt(ca.fmax(P_plus[j, j], 0.0))
+            sure = ca.vertcat(x_plus[:j], lowered, x_plus[j + 1 :])
+        needed = quantities(x_plus, _flags(u, candidate), p)[3 * i + 1]
+        holds = ca.fabs(needed) <= quantities(sure, _flags(u, candidate), p)[3 * i + 2]
+        other_sticks = other == 2
+        locks = ca.logic_and(ca.logic_not(other_sticks), holds)
+        slides_on = ca.if_else(
+            other_sticks, _slide_direction(torque, sign), _slide_direction(needed, sign)
+        )
+        opens = ca.logic_not(u[e["normal_force"]] > 0)
+        engages = code == 0
+        breaks = ca.logic_and(code == 2, ca.fabs(torque) > capacity)
+        reaches = ca.logic_and(ca.logic_or(code == 1, code == -1), code * sign * slip <= 0)
+        new = ca.if_else(
+            opens,
+            0.0,
+            ca.if_else(
+                engages,
+                _slide_direction(slip, sign),
+                ca.if_else(
+                    breaks,
+                    _slide_direction(torque, sign),
+                    ca.if_else(reaches, ca.if_else(locks, 2.0, slides_on), code),
+                ),
+            ),
+        )
+        mapped = ca.logic_and(ca.logic_not(opens), ca.logic_and(reaches, locks))
+        x_now = ca.if_else(mapped, x_plus, x_now)
+        P_now = ca.if_else(mapped, P_plus, P_now)
+        switches = switches + ca.if_else(new != code, 1.0, 0.0)
+        modes[i] = new
+    return ca.Function(
+        f"gearsym_{MODEL_NAME}_ekf_mode_update",
+        [x, P, u, p, modes_in],
+        [x_now, P_now, ca.vertcat(*modes), switches],
+        ["x", "P", "u", "p", "modes"],
+        ["x_next", "P_next", "modes_next", "switches"],
+    )

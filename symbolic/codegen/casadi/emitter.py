@@ -1,8 +1,11 @@
 """The CasADi emitter: a function table and its CSE'd forms in, ``gearsym_<model>_casadi.py`` out.
 
 Only the expression functions (rhs, outputs, the Jacobians) are emitted; step and parameter
-functions are C-only (CasADi has its own integrators). A Jacobian is a sparse SX matrix holding
-exactly the structural nonzeros of the C code's pattern.
+functions are C-only (CasADi has its own integrators). Two exceptions, appended as whole
+CasADi functions: the extended UIO's ``euio_step`` (``templates/casadi_euio.py.j2``) and the
+EKF's own mode logic ``ekf_mode_update`` (``templates/casadi_ekf_modes.py.j2``, if_else logic
+in SX with the lock-up maps as constants; the C code's ``ekf_mode_update``). A Jacobian is
+a sparse SX matrix holding exactly the structural nonzeros of the C code's pattern.
 """
 
 from __future__ import annotations
@@ -106,6 +109,57 @@ def _function_view(
     return view, printer.used_helpers
 
 
+@dataclass(frozen=True)
+class CasadiModeElement:
+    """One element of ``templates/casadi_ekf_modes.py.j2``: Python source of its constants."""
+
+    name: str
+    normal_force: int
+    slide: int
+    stick: int
+    slip_sign: int
+    mu: int
+    lock_map: tuple[str, ...]  # rows of the lock-up map's gearbox block, comma-separated
+
+
+@dataclass(frozen=True)
+class CasadiModeView:
+    """What ``templates/casadi_ekf_modes.py.j2`` prints (the EKF's own mode logic)."""
+
+    elements: tuple[CasadiModeElement, ...]
+    n_physical: int
+    confidence: str
+
+
+def _python_row(row: tuple[object, ...]) -> str:
+    """The entries of a tuple literal (a one-entry tuple keeps its comma)."""
+    text = ", ".join(float_repr(float(sp.sympify(v))) for v in row)
+    return text + "," if len(row) == 1 else text
+
+
+def casadi_mode_view(table: FunctionTable) -> CasadiModeView:
+    """The constants of the CasADi ``ekf_mode_update`` appended to the EKF's CasADi module: the
+    same :class:`~gearsym.symbolic.codegen.config.EkfLayout` the C ``ekf_mode_update`` is
+    printed from, the lock-up maps as Python floats (exact rationals rounded once)."""
+    layout = table.config.ekf
+    assert layout is not None and layout.modes
+    elements = tuple(
+        CasadiModeElement(
+            repr(e.name),
+            e.normal_force,
+            e.slide,
+            e.stick,
+            e.slip_sign,
+            e.mu,
+            tuple(_python_row(row) for row in e.lock_map),
+        )
+        for e in layout.modes
+    )
+    return CasadiModeView(
+        elements, len(layout.modes[0].lock_map), float_repr(float(layout.lock_up_confidence))
+    )
+
+
 def emit_casadi_files(table: FunctionTable, forms: Mapping[str, CseForm]) -> dict[str, str]:
     """``{"gearsym_<name>_casadi.py": ...}`` of one model."""
     model = table.model
@@ -144,4 +198,6 @@ def emit_casadi_files(table: FunctionTable, forms: Mapping[str, CseForm]) -> dic
         from gearsym.symbolic.codegen.euio import casadi_euio_view
 
         text += render("casadi_euio.py.j2", casadi_euio_view(table))
+    if table.config.ekf is not None and table.config.ekf.modes:
+        text += render("casadi_ekf_modes.py.j2", casadi_mode_view(table))
     return {file_names(model)["casadi"]: text}
