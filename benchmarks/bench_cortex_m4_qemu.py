@@ -1,17 +1,18 @@
-"""Instructions per step and code size of the emitted float EKF and 2-3 RK4 step on an emulated
-Cortex-M4F (QEMU ``mps2-an386``), with a CasADi peer for the RK4 step.
+"""Instructions per step and code size of the emitted float EKF, extended UIO and 2-3 RK4 step
+on an emulated Cortex-M4F (QEMU ``mps2-an386``), with a CasADi peer for the RK4 step.
 
 Measured: ``qemu-system-arm -M mps2-an386 -icount shift=0`` (every instruction advances the
 virtual clock by exactly 1 ns, so the count is deterministic and independent of the host);
 the driver of :mod:`gearsym.validation.qemu_m4` reads SysTick (processor clock) around each
 step, calibrated by a loop of two instructions per turn (40 instructions per tick on this
-board), on the reference shift (150 EKF steps, 3001 RK4 steps at the simulation's 0.5 ms;
-the RK4 steps of the 2-3 μ form and of the full model are reported too).
+board), on the reference shift (150 EKF steps, 150 EUIO steps, 3001 RK4 steps at the
+simulation's 0.5 ms; the RK4 steps of the 2-3 μ form and of the full model are reported too).
 Build: ``arm-none-eabi-gcc -mcpu=cortex-m4 -mfpu=fpv4-sp-d16 -mfloat-abi=hard -mthumb -O2
 -std=c99 -ffp-contract=off -DGEARSYM_SINGLE_PRECISION``, newlib's libm.
 
-Code size: ``arm-none-eabi-size`` of the EKF object (every function of gearsym_ekf_2_3.c)
-and ``arm-none-eabi-nm -S`` of the linked functions of each step.
+Code size: ``arm-none-eabi-size`` of the EKF and EUIO objects (every function of
+gearsym_ekf_2_3.c, gearsym_euio_2_3.c) and ``arm-none-eabi-nm -S`` of the linked functions of
+each step.
 
 Peer, same compiler, flags, board and data in the same run: the 2-3 RK4 step written in
 CasADi (SX, four calls of CasADi's own right-hand side built from the raw SymPy model,
@@ -163,6 +164,20 @@ def main() -> int:
             ]
         )
         ekf_text = int(run(["arm-none-eabi-size", str(obj)]).splitlines()[-1].split()[0])
+        euio_obj = out / "euio.o"
+        run(
+            [
+                "arm-none-eabi-gcc",
+                *qemu_m4.COMMON_FLAGS,
+                *qemu_m4.TARGET_FLAGS,
+                f"-I{c_dir}",
+                "-c",
+                str(c_dir / "gearsym_euio_2_3.c"),
+                "-o",
+                str(euio_obj),
+            ]
+        )
+        euio_text = int(run(["arm-none-eabi-size", str(euio_obj)]).splitlines()[-1].split()[0])
         ours = qemu_m4.function_sizes(elf, ("gearsym_",))
         predict = ours.get("gearsym_ekf_2_3_ekf_predict", 0)
         update = ours.get("gearsym_ekf_2_3_ekf_update", 0)
@@ -170,6 +185,12 @@ def main() -> int:
             v
             for k, v in ours.items()
             if k.startswith("gearsym_ekf_2_3_") and not k.endswith(("_colptr", "_rowind"))
+        )
+        euio_step = ours.get("gearsym_euio_2_3_euio_step", 0)
+        linked_euio = sum(
+            v
+            for k, v in ours.items()
+            if k.startswith("gearsym_euio_2_3_") and not k.endswith(("_colptr", "_rowind"))
         )
         math = qemu_m4.function_sizes(elf, ("sinf", "cosf", "__kernel_", "__ieee754_rem_pio2f"))
         rk4_size = sum(
@@ -188,6 +209,12 @@ def main() -> int:
             f"  EKF code: gearsym_ekf_2_3.o {ekf_text} bytes of .text (arm-none-eabi-size); "
             f"linked EKF functions {linked_ekf} bytes (ekf_predict {predict}, ekf_update "
             f"{update}), + newlib sinf/cosf {sum(math.values())} bytes"
+        )
+        print(
+            f"  extended UIO 2-3 step (euio_step: predict, decoupling, update; 7 states, 3 "
+            f"outputs), {t.euio_steps} steps: {t.euio:.0f} instructions per step; "
+            f"gearsym_euio_2_3.o {euio_text} bytes of .text, linked EUIO functions "
+            f"{linked_euio} bytes (euio_step {euio_step}); no peer run (reported only)"
         )
 
         # the peer

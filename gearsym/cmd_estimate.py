@@ -49,8 +49,8 @@ def cmd_estimate(args: argparse.Namespace) -> int:
             "--sample-time",
             f"must be in (0, {scenario.t_end / 4:g}] s, got {args.sample_time!r}",
         )
-    if args.modes is not None and args.filter != "ekf":
-        raise GearsymError("estimate", "--modes", "is for --filter ekf only")
+    if args.modes is not None and args.filter not in ("ekf", "euio"):
+        raise GearsymError("estimate", "--modes", "is for --filter ekf or euio only")
     if args.modes is None:
         args.modes = "filter"
     if args.drive is not None:
@@ -132,18 +132,20 @@ def _cmd_euio(args: argparse.Namespace, d: Any, scenario: Any) -> int:
 
     def work(folder: Any) -> Any:
         from gearsym.cmd_dynamics import simulate_with_progress
-        from gearsym.validation.estimation import plot_euio, run_euio, write_euio_csv
+        from gearsym.validation.estimation import plot_euio, write_euio_csv
+        from gearsym.validation.euio_evaluation import euio_filter_run, prepare_euio
 
         result = simulate_with_progress(d, scenario)
         _say("running the extended UIO")
-        run = run_euio(
+        setup = prepare_euio(
             d,
             result,
             sample_time=args.sample_time,
             relative_noise=noise,
-            seed=args.seed,
             initial=initial,
+            modes=args.modes,
         )
+        run = euio_filter_run(setup, args.seed).run  # run_euio's loop (tested to the bit)
         if folder is not None:
             write_euio_csv(run, folder / "euio.csv")
             (folder / "euio.json").write_text(json.dumps(run.to_dict(), indent=2) + "\n")
@@ -173,7 +175,12 @@ def _cmd_euio_monte_carlo(
 
         result = simulate_with_progress(d, scenario)
         setup = prepare_euio(
-            d, result, sample_time=args.sample_time, relative_noise=noise, initial=initial
+            d,
+            result,
+            sample_time=args.sample_time,
+            relative_noise=noise,
+            initial=initial,
+            modes=args.modes,
         )
         bar = ProgressBar(f"EUIO, {args.runs} runs")
         try:
@@ -685,7 +692,8 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "--modes",
         choices=("filter", "reference"),
         default=None,
-        help="ekf: where the element modes (stick, slide, open) come from: 'filter' (default) "
+        help="ekf, euio: where the element modes (stick, slide, open) come from: 'filter' "
+        "(default) "
         "decides them itself from its estimate and F_N, as a TCU must (lock-up when the "
         "estimated slip reaches zero and the sticking torque is within 2 N r_m mu_hat F_N, "
         "break-away when it exceeds it, open while F_N = 0); 'reference' takes the reference "

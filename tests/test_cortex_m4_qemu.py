@@ -1,4 +1,5 @@
-"""The emitted float EKF and models (2-3 shift, its μ form, full) bare-metal on a Cortex-M4F.
+"""The emitted float EKF, extended UIO and models (2-3 shift, its μ form, full) bare-metal on a
+Cortex-M4F.
 
 QEMU's ``mps2-an386`` board (Cortex-M4F) runs the project's harness (validation/cortex_m4/:
 start-up, linker script, semihosting, driver) built with arm-none-eabi-gcc and newlib; the same
@@ -7,7 +8,10 @@ bit for bit (both builds IEEE single with ``-ffp-contract=off``; see gearsym.val
 for why equality is a fair expectation). That the runs are not trivially equal is checked
 against physics and an independent integrator: the filter's estimates stay within 4σ of the
 reference simulation's truth, and the RK4 trajectories of the 2-3 and the full model within 1 %
-of the reference simulation's (the hybrid model, integrated by CVODES) states. Without the
+of the reference simulation's (the hybrid model, integrated by CVODES) states; the float EUIO,
+run on its own state, ends within a tenth of its σ of the library's double filter
+(:func:`~gearsym.symbolic.estimators.euio.euio_step_full`) and its estimates stay within 4σ of
+the truth. Without the
 tools the tests skip, except under CI, where they fail (.ci/run installs them).
 """
 
@@ -42,9 +46,16 @@ def test_the_emulated_target_prints_the_hosts_float_results_bit_for_bit(runs) ->
     ours, theirs = qemu_m4.result_lines(host), qemu_m4.result_lines(target)
     n_ekf, n_rk4 = len(case.u) - 1, len(case.shift_u)
     assert sum(ln.startswith("ekf ") for ln in ours) == n_ekf
+    assert sum(ln.startswith("euio ") for ln in ours) == len(case.euio_u) - 1
     for tag in qemu_m4.RK4_TAGS:
         assert sum(ln.startswith(tag + " ") for ln in ours) == n_rk4
-    words = {"ekf": 3 + 1 + 8 + 64, "rk4": 2 + 4, "rk4mu": 2 + 4, "rk4full": 2 + 6}
+    words = {
+        "ekf": 3 + 1 + 8 + 64,
+        "euio": 3 + 3 + 7 + 49,
+        "rk4": 2 + 4,
+        "rk4mu": 2 + 4,
+        "rk4full": 2 + 6,
+    }
     assert all(len(ln.split()) == words[ln.split()[0]] for ln in ours)  # none cut short
     assert len(theirs) == len(ours)
     differing = [(a, b) for a, b in zip(ours, theirs, strict=True) if a != b]
@@ -71,6 +82,30 @@ def test_the_runs_estimate_and_integrate_the_reference_shift(runs) -> None:
     assert np.all(np.isfinite(mu))
 
 
+def test_the_euio_run_follows_the_library_and_the_truth(runs) -> None:
+    """The float EUIO on its own state: the update is skipped exactly at the dropouts, its
+    covariance stays symmetric positive definite, the estimate ends within 0.1 σ of the
+    library's double filter and never leaves 4 σ of the truth (μ where its element slides)."""
+    case, host, _ = runs
+    lines = [ln for ln in qemu_m4.result_lines(host) if ln.startswith("euio ")]
+    status = np.array([int(ln.split()[2], 16) for ln in lines])
+    values = np.array([qemu_m4.floats(ln) for ln in lines])
+    load, x = values[:, :3], values[:, 3:10]
+    P = values[:, 10:].reshape(-1, 7, 7, order="F")
+    dropped = ~np.all(np.isfinite(case.euio_y[1:]), axis=1)
+    assert dropped.sum() >= 5
+    assert np.array_equal(status != 0, dropped) and np.all(status[dropped] == 1)
+    assert np.all(np.isnan(load[dropped])) and np.all(np.isfinite(load[~dropped]))
+    for Pk in P:
+        assert np.array_equal(Pk, Pk.T)
+        np.linalg.cholesky(Pk)
+    sigma = np.sqrt(np.diagonal(P, axis1=1, axis2=2))
+    lib, lib_sigma = case.euio_library, case.euio_library_sigma
+    assert np.all(np.abs(x[-1] - lib[-1]) < 0.1 * lib_sigma[-1] + 1e-6 * np.abs(lib[-1]))
+    scored = np.isfinite(case.euio_truth)
+    assert np.all(np.abs(x - case.euio_truth)[scored] < 4 * sigma[scored])
+
+
 def test_systick_counts_instructions_and_the_timed_loop_repeats_the_printed_run(runs) -> None:
     """Under ``-icount shift=0`` one instruction is 1 ns of virtual time; SysTick runs on the
     board's 25 MHz processor clock, so a tick is 40 instructions (calibrated by a loop of two
@@ -84,6 +119,6 @@ def test_systick_counts_instructions_and_the_timed_loop_repeats_the_printed_run(
         assert check.split()[1:] == last.split()[2:]
     print(
         f"instructions per step: EKF {t.ekf_step:.0f} (predict {t.ekf_predict:.0f}, update "
-        f"{t.ekf_update:.0f}), RK4: 2-3 {t.rk4:.0f}, 2-3 μ form {t.rk4mu:.0f}, full "
-        f"{t.rk4full:.0f}"
+        f"{t.ekf_update:.0f}), EUIO {t.euio:.0f} ({t.euio_steps} steps), RK4: 2-3 "
+        f"{t.rk4:.0f}, 2-3 μ form {t.rk4mu:.0f}, full {t.rk4full:.0f}"
     )

@@ -172,6 +172,12 @@ def test_cli_json_keys(tmp_path, capsys):
     assert "rmse" in out["unknown_inputs"]["T_res_star"]
     assert [p["name"] for p in out["phases"]] == ["gear 2", "torque phase", "speed phase", "gear 3"]
     assert {p.name for p in (tmp_path / "o").iterdir()} >= {"euio.csv", "euio.png", "euio.json"}
+    assert out["modes"] == "filter"  # the filter decides the element modes by default
+    assert main(["estimate", "--filter", "euio", "--modes", "reference", "--json"]) == 0
+    reference = json.loads(capsys.readouterr().out)
+    assert reference["modes"] == "reference"
+    # seed 0: the modes differ at B05's lock-up only (README), so μ38 is the same
+    assert reference["parameters"]["mu_38"] == out["parameters"]["mu_38"]
 
 
 def test_cli_refuses_bad_initial_in_one_line():

@@ -14,6 +14,9 @@ What the expectations rest on, none of them the code under test:
   element does not slide (its equations do not contain it there).
 * The runs: the same loop as ``run_euio`` (compared to the bit), the seeds differ only in
   the noise.
+* With the filter's own element modes (the EKF's mode logic, the default): the same χ² bands;
+  the sliding intervals it decides (where it estimates a μ) against the reference
+  simulation's sliding masks; m_veh held in every mode combination it meets.
 """
 
 from __future__ import annotations
@@ -42,9 +45,10 @@ def result(d):
 
 @pytest.fixture(scope="module")
 def setup(d, result):
+    """The reference's element modes (the truth): the runs are run_euio's."""
     from gearsym.validation.euio_evaluation import prepare_euio
 
-    return prepare_euio(d, result, sample_time=0.01)
+    return prepare_euio(d, result, sample_time=0.01, modes="reference")
 
 
 @pytest.fixture(scope="module")
@@ -210,3 +214,56 @@ def test_cli_refuses_initial_from_prior_without_runs():
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "--initial-from-prior" in lines[0] and "Traceback" not in lines[0]
+
+
+@pytest.fixture(scope="module")
+def setup_filter(d, result):
+    from gearsym.validation.euio_evaluation import prepare_euio
+
+    out = prepare_euio(d, result, sample_time=0.01)
+    assert out.mode_source == "filter"  # the default
+    return out
+
+
+@pytest.fixture(scope="module")
+def mc_filter(setup_filter, mc):
+    from gearsym.validation.euio_evaluation import run_euio_monte_carlo
+
+    return run_euio_monte_carlo(setup_filter, RUNS, seed=0, bound=mc.bound)
+
+
+def test_own_modes_nees_and_nis_are_inside_their_chi2_bands(mc_filter):
+    lo, hi = mc_filter.nees_band()
+    assert lo <= mc_filter.nees_mean <= hi, (mc_filter.nees_mean, lo, hi)
+    mean, band = mc_filter.nis()
+    assert mean is not None and band is not None
+    assert band[0] <= mean <= band[1], (mean, band)
+    assert mc_filter.to_dict()["modes"] == "filter"
+
+
+def test_own_modes_find_the_sliding_intervals_of_the_reference(mc_filter, setup_filter):
+    """Where the filter estimates a μ (its element slides in the filter's own modes) against
+    where the reference simulation's element slides: they agree but for a sample or two at
+    each switch (the filter decides after the update, from noisy speeds)."""
+    s = setup_filter.ekf
+    disagree = []
+    for tr in mc_filter.trials:
+        assert tr.switches >= 3  # break-away, engagement, lock-up at least
+        for element, mu in s.aug.mu_state.items():
+            j = s.names.index(mu)
+            truth = s.u[:-1, s.aug.input_names.index(f"slide_{element}")] > 0.5
+            estimated = ~tr.run.held[1:, j]
+            disagree.append(int(np.count_nonzero(truth != estimated)))
+            assert estimated.any()
+    print(f"samples whose sliding differs, per run and element: max {max(disagree)}")
+    assert max(disagree) <= 4
+
+
+def test_own_modes_hold_the_mass_in_every_mode_combination(mc_filter, setup_filter):
+    j = setup_filter.names.index("m_veh")
+    assert setup_filter.mode_existence  # the combinations met
+    for ex in setup_filter.mode_existence.values():
+        (mass,) = [x for x in ex if x.parameter == "m_veh"]
+        assert not mass.exists and any(abs(z) < 1e-9 for z in mass.unstable_zeros)
+    for tr in mc_filter.trials[:5]:
+        assert np.all(tr.run.sigmas[:, j] == setup_filter.ekf.prior_sigma[j])

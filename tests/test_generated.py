@@ -447,6 +447,9 @@ def test_changed_tooth_counts_regenerate_compile_and_validate_in_one_command(
     emitted = len(list(out.glob("c/gearsym_*.h"))) - 1
     assert list(out.glob("c/gearsym_uio_*.h"))  # the UIO is among them
     assert re.search(r"uio_2_3: C single .*max error .* at 1000 points", result.stdout)
+    # the extended UIO's step along the default shift against the library (euio_check.py)
+    for target in ("C double", "C single", "CasADi"):
+        assert re.search(rf"euio_2_3 step: {target} +max error .* at 1\d\d points", result.stdout)
     assert len(re.findall(r"max error .* at 1000 points", result.stdout)) == 3 * emitted
     assert "main.c: compiled strictly and ran in double, single" in result.stdout
     assert "integration check:" in result.stdout

@@ -1868,6 +1868,9 @@ class EuioRun:
     phases: tuple[Phase, ...]
     existence: dict[str, list[Any]]  # phase name -> per parameter EuioExistence
     parameters: tuple[ParameterEstimate, ...]
+    #: where the element modes came from: "reference" (run_euio) or "filter" (the EKF's
+    #: mode logic, :func:`gearsym.validation.euio_evaluation.euio_filter_run`)
+    mode_source: str = "reference"
 
     def load_rmse(self, phase: Phase | None = None) -> float:
         """RMS of d̂ − T_res over the samples (of ``phase``) where d̂ exists."""
@@ -1894,6 +1897,7 @@ class EuioRun:
             "filter": "euio",
             "shift": self.shift,
             "runs": 1,
+            "modes": self.mode_source,
             "seed": self.seed,
             "sample_time": self.sample_time,
             "parameters": params,

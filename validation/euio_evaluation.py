@@ -96,10 +96,37 @@ class EuioSetup:
     held_by_phase: dict[str, list[int]]
     phase_at: list[str]  # per sample: the phase its step is held by
     load_truth: np.ndarray  # (N,) T_res at mid-interval (sample 0: at t0)
+    #: filter modes: existence per combination of element modes (the mode flags of u), at
+    #: the generic point (:func:`~gearsym.symbolic.estimators.euio.euio_mode_existence`)
+    mode_existence: dict[tuple[float, ...], list[Any]] = field(default_factory=dict)
 
     @property
     def names(self) -> list[str]:
         return self.ekf.names
+
+    @property
+    def mode_source(self) -> str:
+        """ "filter" (the EKF's mode logic decides the element modes) or "reference"."""
+        return self.ekf.mode_source
+
+    def held_for_modes(self, u_before: Sequence[float]) -> list[int]:
+        """State indices held over a step whose element modes are those of ``u_before``
+        (the filter's own): the parameters without a UIO for that mode combination
+        (existence 4.4 at the generic point, as the emitted header's masks) and the μ of a
+        non-sliding element."""
+        from gearsym.symbolic.estimators.euio import euio_mode_existence
+
+        s = self.ekf
+        flags = [
+            j for j, name in enumerate(s.aug.input_names) if name.startswith(("slide_", "stick_"))
+        ]
+        key = tuple(float(u_before[j]) for j in flags)
+        if key not in self.mode_existence:
+            self.mode_existence[key] = euio_mode_existence(
+                s.discrete, u_before, self.p, self.r_dyn, self.i_wheel, s.logic.normal_force
+            )
+        failing = [self.names.index(x.parameter) for x in self.mode_existence[key] if not x.exists]
+        return sorted(set(failing) | set(s.aug.frozen_states(u_before)))
 
     def held(self, k: int) -> list[int]:
         """State indices held over the step into sample k (k ≥ 1): the phase's parameters
@@ -116,16 +143,19 @@ def prepare_euio(
     sample_time: float = 0.01,
     relative_noise: Sequence[float] | float = EKF_RELATIVE_NOISE,
     initial: Mapping[str, float] | None = None,
+    modes: str = "filter",
 ) -> EuioSetup:
     """As :func:`~gearsym.validation.estimation.run_euio` before its loop: the EKF's setup for
     m_veh and the μ of the swapping elements, existence per phase on the linearisation at the
-    phase's midpoint (truth states, the truth's parameters)."""
+    phase's midpoint (truth states, the truth's parameters). ``modes``: "filter" (default),
+    the EKF's mode logic (:func:`~gearsym.symbolic.estimators.ekf_modes.ekf_mode_update`)
+    decides the element modes in each run, or "reference", the reference's (the truth)."""
     from gearsym.symbolic.estimators.ekf import default_parameters
     from gearsym.symbolic.estimators.euio import ROAD_FREE, euio_existence, load_column
 
     shift = result.scenario.shift.name
     parameters = [name for name in default_parameters(d, shift) if name != naming.GRADE]
-    setup = prepare_ekf(d, result, sample_time, relative_noise, initial, parameters)
+    setup = prepare_ekf(d, result, sample_time, relative_noise, initial, parameters, modes=modes)
     aug, discrete = setup.aug, setup.discrete
     p = aug.parameter_values(ROAD_FREE)
     r_dyn = float(quantity(d, "vehicle", "r_dyn").value)
@@ -175,6 +205,7 @@ class EuioTrial:
     nis: np.ndarray = field(repr=False)  # NaN at sample 0 (no update: the initial estimate)
     nis_dof: np.ndarray = field(repr=False)
     min_eigenvalue: float
+    switches: int = 0  # mode switches the filter decided (its own modes only)
 
 
 def euio_filter_run(
@@ -183,7 +214,17 @@ def euio_filter_run(
     """One EUIO run on ``setup`` with the speed noise (3.26) drawn from ``seed`` (``noise``
     False: the true outputs). ``prior_draw``: φ and the parameters start at the truth
     (:attr:`EkfSetup.truth0`) plus a draw from the prior (a second stream of ``seed``), the
-    bound's premise, instead of the fixed initial estimate."""
+    bound's premise, instead of the fixed initial estimate.
+
+    Element modes (``setup.mode_source``): "reference" takes them from the reference (``u``)
+    and the held masks from the reference's phases (:meth:`EuioSetup.held`); "filter" starts
+    in the from-gear and lets the EKF's mode logic
+    (:func:`~gearsym.symbolic.estimators.ekf_modes.ekf_mode_update`, from the posterior and
+    F_N; a lock-up maps z and P through the hybrid model's state map) decide after each
+    sample the modes held over the next interval, with the held mask of that mode combination
+    (:meth:`EuioSetup.held_for_modes`), as :func:`~gearsym.validation.estimation.filter_run`
+    does for the EKF. The estimate and NEES recorded at a sample are the update's."""
+    from gearsym.symbolic.estimators.ekf_modes import ekf_mode_update
     from gearsym.symbolic.estimators.euio import euio_step_full, load_column
 
     s = setup.ekf
@@ -214,15 +255,22 @@ def euio_filter_run(
     nees = np.zeros(len(t))
     min_eig = float(np.linalg.eigvalsh(P / np.outer(scale, scale))[0])
     estimates[0], sigmas[0] = z, np.sqrt(np.diag(P))
+    logic = s.logic if s.mode_source == "filter" else None
+    if logic is not None:
+        modes = logic.initial_modes()
+        u_held = logic.inputs(s.u[0], modes)
+        switches = 0
     for k in range(len(t)):
         if k > 0:
-            hold = setup.held(k)
+            if logic is None:
+                u_before, u_now, hold = s.u[k - 1], s.u[k], setup.held(k)
+            else:  # the modes held since the previous sample, the known inputs of this one
+                u_before, u_now = u_held, logic.inputs(s.u[k], modes)
+                hold = setup.held_for_modes(u_before)
             held[k, hold] = True
             R = (s.relative * np.maximum(np.abs(y[k]), s.floor)) ** 2
             e = load_column(discrete, z, setup.r_dyn, setup.p, setup.i_wheel)
-            step = euio_step_full(
-                discrete, z, P, s.u[k - 1], s.u[k], y[k], R, h, setup.p, q, e, hold
-            )
+            step = euio_step_full(discrete, z, P, u_before, u_now, y[k], R, h, setup.p, q, e, hold)
             z, P = step.z, step.P
             load[k], load_sigma[k] = step.d_hat, step.sigma_d
             nis[k], nis_dof[k] = step.nis, step.nis_dof
@@ -231,6 +279,10 @@ def euio_filter_run(
         idx = np.flatnonzero(s.scored[k])
         error = z[idx] - s.truth[k, idx]
         nees[k] = float(error @ np.linalg.solve(P[np.ix_(idx, idx)], error))
+        if logic is not None:  # as the EKF (filter_run): decided after the update at k
+            z, P, modes, events = ekf_mode_update(logic, z, P, s.u[k], setup.p, modes)
+            switches += len(events)
+            u_held = logic.inputs(s.u[k], modes)
 
     by_parameter = []
     for name in s.aug.parameters:
@@ -266,6 +318,7 @@ def euio_filter_run(
         phases=s.phases,
         existence=setup.existence,
         parameters=tuple(by_parameter),
+        mode_source=s.mode_source,
     )
     return EuioTrial(
         run=run,
@@ -274,6 +327,7 @@ def euio_filter_run(
         nis=nis,
         nis_dof=nis_dof,
         min_eigenvalue=min_eig,
+        switches=switches if logic is not None else 0,
     )
 
 
@@ -408,6 +462,7 @@ class EuioMonteCarlo:
     phase_stats: dict[str, dict[str, EuioPhaseStats]]
     relative_noise: tuple[float, ...]
     prior_draw: bool = False
+    mode_source: str = "reference"
 
     @property
     def first(self) -> EuioRun:
@@ -519,6 +574,8 @@ class EuioMonteCarlo:
             "initial_estimate": "drawn from the prior around the truth"
             if self.prior_draw
             else "fixed",
+            "modes": self.mode_source,
+            "mode_switches_mean": float(np.mean([tr.switches for tr in self.trials])),
             "parameters": {name: self.parameter_summary(name) for name in self.parameter_names},
             "unknown_inputs": {naming.RESISTANCE_INPUT: self.load_summary()},
             "bound": EUIO_BOUND_ASSUMPTION,
@@ -609,6 +666,7 @@ def run_euio_monte_carlo(
         phase_stats=stats,
         relative_noise=tuple(float(v) for v in setup.ekf.relative),
         prior_draw=prior_draw,
+        mode_source=setup.mode_source,
     )
 
 
@@ -624,6 +682,14 @@ def format_euio_monte_carlo_text(mc: EuioMonteCarlo) -> str:
         f"{', '.join(f'{v:g}' for v in sorted(set(mc.relative_noise)))}; "
         f"{mc.seconds_per_run * 1e3:.0f} ms per run; initial estimates "
         f"{'drawn from the prior around the truth' if mc.prior_draw else 'fixed'}",
+        "  element modes: "
+        + (
+            "decided by the filter (the EKF's mode logic: estimated slip, sticking torque "
+            f"against capacity, F_N; {np.mean([tr.switches for tr in mc.trials]):.1f} "
+            "switches per run); the bound keeps the reference's"
+            if mc.mode_source == "filter"
+            else "from the reference's sliding masks (the truth, not a TCU's)"
+        ),
         f"  bound: {EUIO_BOUND_ASSUMPTION}",
         "  the second bound adds the filter's own process noise (random walks 4.1, model error);"
         " the third is that one with the road load known",

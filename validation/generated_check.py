@@ -8,6 +8,8 @@
   the linear forms (5.1) (:mod:`gearsym.validation.linear_check`);
 * the UIO of the default shift (every phase's init, step, estimate and unknown input) in C
   (both precisions) and CasADi against its design (:mod:`gearsym.validation.uio_check`);
+* with the description, the extended UIO's ``euio_step`` (C double, C single, CasADi) along
+  the default shift against the library's step (:mod:`gearsym.validation.euio_check`);
 * the μ map in C (both precisions) and in CasADi against :class:`gearsym.symbolic.friction.MuMap`,
   including points outside the grid (clamping) and negative slip;
 * ``main.c`` compiled alone with the strict flags in both precisions, run, exit code 0;
@@ -522,6 +524,13 @@ def check_tree(
         except c_check.CompileError as err:
             report.failures.append(f"compilation: {err}")
             return report
+    euio = [m for m in models if m.role == "euio" and m.shift is not None]
+    if description is not None and euio:
+        try:
+            report.comparisons += _euio_comparisons(description, euio, root, build_dir, say)
+        except c_check.CompileError as err:
+            report.failures.append(f"compilation: {err}")
+            return report
     for r in report.comparisons:
         if not comparison_ok(r):
             report.failures.append(f"{r.target}: error {r.worst():.3e}\n{r}")
@@ -559,6 +568,29 @@ def check_tree(
         if report.m4_sizes is None and not any("M4F" in f for f in report.failures):
             report.skipped.append(f"Cortex-M4F cross-compilation ({M4_COMPILER} not installed)")
     return report
+
+
+def _euio_comparisons(
+    d: GearboxDescription,
+    models: Sequence[EmittedModel],
+    root: Path,
+    build_dir: Path,
+    say: Callable[[str], None],
+) -> list[c_check.ComparisonReport]:
+    """The emitted EUIO step of the default scenario's shift against the library's filter
+    along that shift (:mod:`gearsym.validation.euio_check`)."""
+    from gearsym.validation.euio_check import compare_euio, reference_steps
+    from gearsym.validation.scenario import load_scenario
+    from gearsym.validation.simulate import simulate
+
+    scenario = load_scenario(d, None)
+    chosen = [m for m in models if m.shift is not None and m.shift.name == scenario.shift.name]
+    if not chosen:
+        return []
+    m = chosen[0]
+    say(f"validating the extended UIO step of shift {scenario.shift.name} along the shift")
+    case = reference_steps(d, m.model, result=simulate(d, scenario))
+    return compare_euio(m.model.name, case, root, build_dir / "euio")
 
 
 def _integration(

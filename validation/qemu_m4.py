@@ -3,7 +3,9 @@
 The harness in ``validation/cortex_m4/`` (start-up with vector table and FPU enable, linker
 script of the board's memory map, semihosting output, a driver) runs the emitted float EKF of
 the 2-3 shift (predict + update, thesis 4.3, on the augmented model 4.1) along the reference
-shift with noisy measurements, and RK4 steps of the emitted 2-3 shift model (2.42-2.58) on the
+shift with noisy measurements, the emitted float extended UIO's ``euio_step`` (4.5) along the
+run of :func:`gearsym.validation.euio_check.reference_steps` (on its own state), and RK4
+steps of the emitted 2-3 shift model (2.42-2.58) on the
 reference simulation's torques. The same driver compiled for the host prints the same lines;
 every float is printed as its bit pattern, so the two outputs are compared exactly.
 
@@ -58,6 +60,7 @@ TARGET_FLAGS: tuple[str, ...] = (
 #: The emitted sources the driver links.
 SOURCES = (
     "gearsym_ekf_2_3.c",
+    "gearsym_euio_2_3.c",
     "gearsym_shift_2_3.c",
     "gearsym_shift_2_3_mu.c",
     "gearsym_full.c",
@@ -99,6 +102,18 @@ class Case:
     full_truth: np.ndarray  # (steps + 1, 6)
     truth: np.ndarray  # (samples, 8) the augmented state along the shift, at the EKF samples
     shift_truth: np.ndarray  # (steps + 1, 4) the reference simulation's 2-3 model states
+    # the extended UIO (4.5) of the 2-3 shift: validation/euio_check.py's run (float32)
+    euio_x0: np.ndarray  # (7,)
+    euio_P0: np.ndarray  # (7, 7)
+    euio_q: np.ndarray
+    euio_r: np.ndarray
+    euio_floor: np.ndarray
+    euio_u: np.ndarray  # (samples, 7) inputs with the reference's element modes
+    euio_y: np.ndarray  # (samples, 3) measurements (NaN: a dropout)
+    euio_held: np.ndarray  # (samples, 7) 1.0 where a state is held over the step into k
+    euio_library: np.ndarray  # (samples - 1, 7) the library's double estimate after each step
+    euio_library_sigma: np.ndarray  # (samples - 1, 7) its σ
+    euio_truth: np.ndarray  # (samples - 1, 7) the truth after each step (NaN where none)
 
 
 def reference_case(description: Any, seed: int = 11, noise: float = 0.01) -> Case:
@@ -109,6 +124,7 @@ def reference_case(description: Any, seed: int = 11, noise: float = 0.01) -> Cas
     simulation's own step."""
     from gearsym.symbolic.estimators.ekf import augmented_model
     from gearsym.validation.estimation import element_modes, run_ekf
+    from gearsym.validation.euio_check import reference_steps
     from gearsym.validation.scenario import load_scenario
     from gearsym.validation.simulate import simulate
 
@@ -130,6 +146,13 @@ def reference_case(description: Any, seed: int = 11, noise: float = 0.01) -> Cas
     shift_states = ("omega_1", "omega_2", "phi", "omega_C")
     shift_truth = np.column_stack([result.signals[n] for n in shift_states])
     full_truth = np.column_stack([result.signals[n] for n in FULL_STATES])
+    euio = reference_steps(description, result=result)
+    s = euio.setup.ekf
+    euio_held = np.zeros((len(s.t), len(s.names)))
+    euio_y = np.full((len(s.t), len(s.outputs)), np.nan)
+    for k, st in enumerate(euio.steps, start=1):
+        euio_held[k], euio_y[k] = st.held, st.y
+    scored = s.scored[1:]
     return Case(
         x0=np.asarray(run.estimates[0], dtype=f32),
         P0=np.diag(np.asarray(run.sigmas[0]) ** 2).astype(f32),
@@ -149,6 +172,17 @@ def reference_case(description: Any, seed: int = 11, noise: float = 0.01) -> Cas
         full_truth=full_truth,
         truth=run.truth,
         shift_truth=shift_truth,
+        euio_x0=np.asarray(euio.steps[0].z, dtype=f32),
+        euio_P0=np.asarray(euio.steps[0].P, dtype=f32),
+        euio_q=euio.q.astype(f32),
+        euio_r=euio.r.astype(f32),
+        euio_floor=euio.floor.astype(f32),
+        euio_u=np.asarray(s.u, dtype=f32),
+        euio_y=euio_y.astype(f32),
+        euio_held=euio_held.astype(f32),
+        euio_library=np.array([st.result.z for st in euio.steps]),
+        euio_library_sigma=np.array([np.sqrt(np.diag(st.result.P)) for st in euio.steps]),
+        euio_truth=np.where(scored, s.truth[1:], np.nan),
     )
 
 
@@ -190,6 +224,15 @@ def case_header(case: Case) -> str:
         _array("case_mu_u", case.mu_u),
         _array("case_full_x0", case.full_x0),
         _array("case_full_u", case.full_u),
+        f"#define CASE_EUIO_STEPS {len(case.euio_u)}\n",
+        _array("case_euio_x0", case.euio_x0),
+        _array("case_euio_P0", case.euio_P0.ravel(order="F")),
+        _array("case_euio_q", case.euio_q),
+        _array("case_euio_r", case.euio_r),
+        _array("case_euio_floor", case.euio_floor),
+        _array("case_euio_u", case.euio_u),
+        _array("case_euio_y", case.euio_y),
+        _array("case_euio_held", case.euio_held),
         "#endif\n",
     ]
     return "".join(parts)
@@ -289,14 +332,14 @@ def run_host(exe: Path) -> str:
 
 def result_lines(text: str) -> list[str]:
     """The lines holding results (EKF and RK4 steps), in order."""
-    tags = ("ekf ", *(t + " " for t in RK4_TAGS))
+    tags = ("ekf ", "euio ", *(t + " " for t in RK4_TAGS))
     return [ln for ln in text.splitlines() if ln.startswith(tags)]
 
 
 def floats(line: str) -> np.ndarray:
     """The float32 values of a result line (after its tag and step counters)."""
     words = line.split()
-    skip = 3 if words[0] == "ekf" else 2
+    skip = 3 if words[0] in ("ekf", "euio") else 2
     bits = np.array([int(w, 16) for w in words[skip:]], dtype=np.uint32)
     return bits.view(np.float32).astype(float)
 
@@ -313,6 +356,8 @@ class Timing:
     rk4full: float
     ekf_steps: int
     rk4_steps: int
+    euio: float  # instructions per EUIO step (euio_step: predict, decoupling, update)
+    euio_steps: int
 
     @property
     def ekf_step(self) -> float:
@@ -324,7 +369,7 @@ def reports(text: str) -> dict[str, int]:
     found = {}
     for ln in text.splitlines():
         words = ln.split()
-        if len(words) == 2 and words[0] not in ("ekf", *RK4_TAGS):
+        if len(words) == 2 and words[0] not in ("ekf", "euio", *RK4_TAGS):
             found[words[0]] = int(words[1], 16)
     return found
 
@@ -354,6 +399,8 @@ def timing(text: str) -> Timing:
         rk4full=instructions(text, "rk4full_total", n_rk4),
         ekf_steps=n_ekf,
         rk4_steps=n_rk4,
+        euio=v["euio_step"] * per_tick / v["euio_steps"] - read,
+        euio_steps=v["euio_steps"],
     )
 
 

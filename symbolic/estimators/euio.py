@@ -36,7 +36,7 @@ decoupled.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -48,6 +48,7 @@ __all__ = [
     "EuioStep",
     "euio_existence",
     "euio_filter_model",
+    "euio_mode_existence",
     "euio_phase_masks",
     "euio_model_name",
     "euio_step",
@@ -205,6 +206,45 @@ def euio_phase_masks(d: Any, shift: str = "2-3") -> tuple[tuple[str, tuple[int, 
         why = "; ".join(f"{x.parameter}: {x.reason()}" for x in result if not x.exists)
         out.append((phase, held, why))
     return tuple(out)
+
+
+def euio_mode_existence(
+    discrete: Any,
+    u: Sequence[float],
+    p: Sequence[float],
+    r_dyn: float,
+    i_wheel: float,
+    normal_force: Mapping[str, int],
+    phase: str = "",
+) -> list[EuioExistence]:
+    """:func:`euio_existence` for the element modes of ``u`` (its ``slide_<E>``/``stick_<E>``
+    flags, as :meth:`.ekf_modes.ModeLogic.inputs` sets them) at :data:`GENERIC_POINT`, as
+    :func:`euio_phase_masks` tests a phase: the held mask a filter that decides its modes
+    itself (:func:`.ekf_modes.ekf_mode_update`) uses, without the reference's phases. The
+    torque is the generic one, and an element that is not open gets the generic normal
+    force (an engaged element with F_N = 0 would make its μ inactive); ``normal_force``: the
+    input index of each element's F_N (:attr:`.ekf_modes.ModeLogic.normal_force`)."""
+    import numpy as np
+    from gearsym.symbolic.estimators.ekf import slide_input, stick_input
+
+    aug = discrete.aug
+    names = aug.state_names
+    z = np.array(
+        [
+            GENERIC_POINT.get(name, float(aug.model.states[k].default or 0.0))
+            for k, name in enumerate(names)
+        ]
+    )
+    inputs = aug.input_names
+    v = np.array(u, dtype=float)
+    v[inputs.index("T_In")] = GENERIC_POINT["T_In"]
+    for element in aug.elements:
+        engaged = abs(v[inputs.index(slide_input(element))]) > 0.5 or (
+            v[inputs.index(stick_input(element))] > 0.5
+        )
+        v[normal_force[element]] = GENERIC_POINT["F_N"] if engaged else 0.0
+    e = load_column(discrete, z, r_dyn, p, i_wheel)
+    return euio_existence(discrete, phase, z, v, p, e)
 
 
 def _rank(m: np.ndarray) -> int:

@@ -1,6 +1,7 @@
 /*
  * gearsym's Cortex-M4F driver: the emitted float EKF of the 2-3 shift (predict + update, thesis
- * 4.3) along a measured shift, and RK4 steps of the emitted 2-3 shift model (2.42-2.58), of its
+ * 4.3) along a measured shift, the emitted float extended UIO's euio_step (4.5) along the same
+ * shift (on its own state, with the library run's held masks and dropouts), and RK4 steps of the emitted 2-3 shift model (2.42-2.58), of its
  * mu form (2.69) and of the full model, on the data of case_data.h (written by gearsym.validation.qemu_m4). Every result is printed as the
  * bit pattern of its float, so that the host build and the emulated target can be compared
  * exactly. On the target, SysTick counts the time of each step (instructions under
@@ -11,6 +12,7 @@
 
 #include "case_data.h"
 #include "gearsym_ekf_2_3.h"
+#include "gearsym_euio_2_3.h"
 #include "gearsym_full.h"
 #include "gearsym_shift_2_3.h"
 #include "gearsym_shift_2_3_mu.h"
@@ -19,6 +21,7 @@
 #define NX GEARSYM_EKF_2_3_NX
 #define NS GEARSYM_SHIFT_2_3_NX
 #define NF GEARSYM_FULL_NX
+#define NE GEARSYM_EUIO_2_3_NX
 
 /* One model's RK4 run along CASE_SHIFT_STEPS samples, every state printed after each step. */
 #define RUN_RK4(tag, step, n, params, x0, u)                      \
@@ -157,6 +160,44 @@ int main(void)
             put_real(P[i]);
         }
         flush();
+    }
+    {
+        float xe[NE], Pe[NE * NE], load[3];
+        gearsym_euio_2_3_params pu;
+        gearsym_euio_2_3_params_default(&pu);
+        memcpy(xe, case_euio_x0, sizeof xe);
+        memcpy(Pe, case_euio_P0, sizeof Pe);
+#ifdef GEARSYM_M4_TARGET
+        uint32_t t_euio = 0u;
+#endif
+        for (int k = 1; k < CASE_EUIO_STEPS; ++k) {
+#ifdef GEARSYM_M4_TARGET
+            const uint32_t t0 = TICKS();
+#endif
+            const int status = gearsym_euio_2_3_euio_step(
+                xe, Pe, case_euio_u[k - 1], case_euio_u[k], &pu, CASE_H, case_euio_q,
+                case_euio_y[k], case_euio_r, case_euio_floor, case_euio_held[k], load);
+#ifdef GEARSYM_M4_TARGET
+            t_euio += ELAPSED(t0, TICKS());
+#endif
+            put_word("euio");
+            put_hex((uint32_t)k);
+            put_hex((uint32_t)status);
+            for (int i = 0; i < 3; ++i) {
+                put_real(load[i]);
+            }
+            for (int i = 0; i < NE; ++i) {
+                put_real(xe[i]);
+            }
+            for (int i = 0; i < NE * NE; ++i) {
+                put_real(Pe[i]);
+            }
+            flush();
+        }
+#ifdef GEARSYM_M4_TARGET
+        report("euio_steps", (uint32_t)(CASE_EUIO_STEPS - 1));
+        report("euio_step", t_euio);
+#endif
     }
     RUN_RK4("rk4", gearsym_shift_2_3_rk4_step, NS, &ps, case_shift_x0, case_shift_u);
     RUN_RK4("rk4mu", gearsym_shift_2_3_mu_rk4_step, NS, &pm, case_shift_x0, case_mu_u);
