@@ -95,14 +95,17 @@ def test_update_uses_the_outputs_as_a_selection(emitted):
     assert output_selection(sp.Matrix([[0, 2]])) is None
     assert output_selection(sp.Matrix([[1, 1]])) is None
     assert output_selection(sp.Matrix([[x, 0]])) is None
-    # per output, by hand: R 2 mul; s 1 add; 1/s 1 div; k 8 mul; innovation 1 add; x 8 mul +
-    # 8 add; s k - v 8 mul + 8 add; 36 upper-triangle entries 2 mul + 2 add; NIS 2 mul + 1 add;
-    # compares: isfinite(y), y < 0, level < floor, s > 0, isfinite(s), the 2 frozen flags
-    # (two compares each: a slide flag of +1 or -1 slides)
+    # per output, by hand: R 2 mul; s 1 add; 1/s 1 div; w = v/s 8 mul; innovation 1 add;
+    # x 8 mul + 8 add; 36 upper-triangle entries P - v w^T 1 mul + 1 add; NIS 2 mul + 1 add;
+    # compares: isfinite(y), y < 0, level < floor, s > 0, isfinite(s); once per call the 2
+    # frozen flags (two compares each: a slide flag of +1 or -1 slides)
     doc = _doc(files["gearsym_ekf_2_3.h"], "ekf_update")
-    per = {"add": 1 + 1 + 8 + 8 + 72 + 1, "mul": 2 + 8 + 8 + 8 + 72 + 2, "div": 1, "cmp": 9}
+    per = {"add": 1 + 1 + 8 + 36 + 1, "mul": 2 + 8 + 8 + 36 + 2, "div": 1, "cmp": 5}
     expected = f"{3 * per['add']} add, {3 * per['mul']} mul, {3 * per['div']} div, 0 calls, "
-    assert f"Operations: {expected}{3 * per['cmp']} cmp" in doc
+    assert f"Operations: {expected}{3 * per['cmp'] + 4} cmp" in doc
+    # the frozen condition is written once, one flag per frozen state
+    assert body.count("frozen[5] = ") == 1 and body.count("frozen[6] = ") == 1
+    assert body.count("GEARSYM_LIT(0.5)") == 2
 
 
 def test_dense_layout_predict_equals_the_reference(emitted, tmp_path):
@@ -149,6 +152,67 @@ def test_dense_layout_predict_equals_the_reference(emitted, tmp_path):
                 ctypes.c_double(0.01),
                 q.ctypes.data_as(ptr),
             )
+            P_c = P_c.reshape(n, n, order="F")
+            s = np.sqrt(np.diag(P_ref))
+            assert np.max(np.abs(x_c - z_ref) / (np.abs(z_ref) + s)) < 1e-12
+            assert np.max(np.abs(P_c - P_ref) / np.outer(s, s)) < 1e-12
+            assert np.array_equal(P_c, P_c.T)
+
+
+def test_joseph_update_form_equals_the_reference(emitted, tmp_path):
+    """``update_form="joseph"`` (the expanded Joseph form, selectable) against the NumPy
+    reference's Joseph update at random symmetric P, with frozen μ states; and an unknown form
+    is refused."""
+    import dataclasses
+
+    from gearsym.symbolic.codegen.config import EkfLayout
+    from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model, ekf_update
+    from gearsym.validation.c_check import compile_shared
+
+    with pytest.raises(ValueError, match="update_form"):
+        EkfLayout(update_form="ud")
+    d, m, _ = emitted
+    config = dataclasses.replace(
+        m.config, ekf=dataclasses.replace(m.config.ekf, update_form="joseph")
+    )
+    files = {k: v for k, v in emit_all(m.model, config).items() if not k.endswith(".py")}
+    assert "Joseph form expanded" in files["gearsym_ekf_2_3.c"]
+    lib = ctypes.CDLL(str(compile_shared(files, tmp_path, single=False)))
+    aug = augmented_model(d, "2-3")
+    discrete = DiscreteModel(aug)
+    p = aug.parameter_values()
+    n = len(aug.state_names)
+    Params = type(
+        "Params",
+        (ctypes.Structure,),
+        {"_fields_": [(f"p{i}", ctypes.c_double) for i in range(len(p))]},
+    )
+    ptr = ctypes.POINTER(ctypes.c_double)
+    fn = lib[f"{PREFIX}ekf_update"]
+    fn.restype = ctypes.c_int
+    rng = np.random.default_rng(12)
+    z0 = np.array([194.89, 60.09, 0.0578, 24.34, 1500.0, 0.12, 0.1, 0.01])
+    sigma = np.array([1.95, 0.6, 0.05, 0.25, 300.0, 0.03, 0.03, 0.05])
+    r, floor = np.array([0.01] * 3), np.array([2.0, 0.7, 0.27])
+    for u in ([80.0, 3000.0, 2000.0, 1.0, 0.0, 1.0, 0.0], [50.0, 0.0, 5000.0, 0.0, 0.0, 1.0, 0.0]):
+        for _ in range(5):
+            z = z0 * (1 + 0.05 * rng.normal(size=n))
+            C = np.corrcoef(rng.normal(size=(n, 3 * n)))
+            P = C * np.outer(sigma, sigma)
+            y = z[[0, 1, 3]] * (1 + 0.01 * rng.normal(size=3))
+            z_ref, P_ref, _, used = ekf_update(discrete, z, P, u, y, p, r, floor)
+            x_c, P_c, nis = z.copy(), P.ravel(order="F").copy(), ctypes.c_double(0.0)
+            count = fn(
+                x_c.ctypes.data_as(ptr),
+                P_c.ctypes.data_as(ptr),
+                np.array(u).ctypes.data_as(ptr),
+                ctypes.byref(Params(*p)),
+                y.ctypes.data_as(ptr),
+                r.ctypes.data_as(ptr),
+                floor.ctypes.data_as(ptr),
+                ctypes.byref(nis),
+            )
+            assert count == used == 3
             P_c = P_c.reshape(n, n, order="F")
             s = np.sqrt(np.diag(P_ref))
             assert np.max(np.abs(x_c - z_ref) / (np.abs(z_ref) + s)) < 1e-12

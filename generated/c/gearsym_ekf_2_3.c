@@ -761,15 +761,16 @@ void gearsym_ekf_2_3_ekf_predict(
 }
 
 /**
- * EKF measurement update (thesis 4.3), in place, one output at a time (diagonal R), Joseph
- * form P = (I - k h) P (I - k h)^T + R k k^T with R = (r_i max(|y_i|, y_floor_i))^2 (3.26). A
- * NaN or infinite y_i is skipped (no update); the gain entry of a frozen state is 0 (its
- * estimate and variance stay unchanged). *nis receives the sum of nu^2/s over the used
- * outputs. Returns the number of outputs used. P is symmetric on entry and exactly symmetric
- * on return.
- * Frozen: mu_38 while |slide_K38| <= 0.5, mu_05 while |slide_B05| <= 0.5. Operations: 273 add,
- * 300 mul, 3 div, 0 calls, 27 cmp (3 x (outputs + the Joseph update with H a selection of
- * states: no product with H, upper triangle)); stack: 27 reals.
+ * EKF measurement update (thesis 4.3), in place, one output at a time (diagonal R), P = (I - k
+ * h) P (I - k h)^T + R k k^T (the Joseph form's value, evaluated as stated below) with R =
+ * (r_i max(|y_i|, y_floor_i))^2 (3.26). A NaN or infinite y_i is skipped (no update); the gain
+ * entry of a frozen state is 0 (its estimate and variance stay unchanged). *nis receives the
+ * sum of nu^2/s over the used outputs. Returns the number of outputs used. P is symmetric on
+ * entry and exactly symmetric on return.
+ * Frozen: mu_38 while |slide_K38| <= 0.5, mu_05 while |slide_B05| <= 0.5. Operations: 141 add,
+ * 168 mul, 3 div, 0 calls, 19 cmp (3 x (outputs + the Schmidt update P - v w^T, equal to the
+ * Joseph form of the Schmidt gain, with H a selection of states: no product with H, upper
+ * triangle), the frozen flags once); stack: 27 reals.
  */
 int gearsym_ekf_2_3_ekf_update(
     gearsym_real *x,
@@ -785,13 +786,15 @@ int gearsym_ekf_2_3_ekf_update(
     static const int measured[GEARSYM_EKF_2_3_NY] = { 0, 1, 3 };
     gearsym_real y_hat[GEARSYM_EKF_2_3_NY];
     gearsym_real v[GEARSYM_EKF_2_3_NX]; /* P h^T */
-    gearsym_real gain[GEARSYM_EKF_2_3_NX];
-    gearsym_real g[GEARSYM_EKF_2_3_NX]; /* s k - v */
+    gearsym_real w[GEARSYM_EKF_2_3_NX]; /* v / s: the gain before the frozen entries are zeroed */
+    int frozen[GEARSYM_EKF_2_3_NX] = { 0 }; /* a consider state while its element does not slide */
     int i;
     int a;
     int b;
     int used = 0;
 
+    frozen[5] = !((u[3] > GEARSYM_LIT(0.5)) || (u[3] < GEARSYM_LIT(-0.5)));
+    frozen[6] = !((u[5] > GEARSYM_LIT(0.5)) || (u[5] < GEARSYM_LIT(-0.5)));
     *nis = GEARSYM_LIT(0.0);
     for (i = 0; i < GEARSYM_EKF_2_3_NY; ++i) {
         const int m = measured[i];
@@ -819,30 +822,25 @@ int gearsym_ekf_2_3_ekf_update(
             continue; /* no usable innovation variance: leave x and P as they are */
         }
         inv_s = GEARSYM_LIT(1.0) / s;
-        for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
-            gain[a] = v[a] * inv_s;
-        }
-        if (!((u[3] > GEARSYM_LIT(0.5)) || (u[3] < GEARSYM_LIT(-0.5)))) {
-            gain[5] = GEARSYM_LIT(0.0); /* frozen: a consider state */
-        }
-        if (!((u[5] > GEARSYM_LIT(0.5)) || (u[5] < GEARSYM_LIT(-0.5)))) {
-            gain[6] = GEARSYM_LIT(0.0); /* frozen: a consider state */
-        }
         innovation = y[i] - y_hat[i];
         for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
-            x[a] += gain[a] * innovation;
-            g[a] = s * gain[a] - v[a];
+            w[a] = v[a] * inv_s;
+            if (!frozen[a]) {
+                x[a] += w[a] * innovation;
+            }
         }
         /*
-         * Joseph form expanded: (I - k h) P (I - k h)^T + R k k^T = P - k v^T - v k^T + s k k^T
-         * for any gain k (v = P h^T, s = h v + R), i.e. P_ab + k_a g_b - v_a k_b, on the upper
-         * triangle and mirrored.
+         * Schmidt update in the symmetric form: with the Schmidt gain (w, frozen entries 0) the
+         * Joseph form equals P_ab - v_a w_b for every pair but two frozen states, whose block
+         * stays as it is (see the header); on the upper triangle and mirrored.
          */
         for (b = 0; b < GEARSYM_EKF_2_3_NX; ++b) {
             for (a = 0; a <= b; ++a) {
-                const gearsym_real value = P[a + b * GEARSYM_EKF_2_3_NX] + (gain[a] * g[b] - v[a] * gain[b]);
-                P[a + b * GEARSYM_EKF_2_3_NX] = value;
-                P[b + a * GEARSYM_EKF_2_3_NX] = value;
+                if (!(frozen[a] && frozen[b])) {
+                    const gearsym_real value = P[a + b * GEARSYM_EKF_2_3_NX] - v[a] * w[b];
+                    P[a + b * GEARSYM_EKF_2_3_NX] = value;
+                    P[b + a * GEARSYM_EKF_2_3_NX] = value;
+                }
             }
         }
         *nis += innovation * innovation * inv_s;

@@ -278,8 +278,23 @@ def output_selection(jacobian: sp.MatrixBase) -> tuple[int, ...] | None:
     return tuple(selection)
 
 
-def selection_update_ops(n: int, ny: int, n_frozen: int) -> OpCount:
-    """Operations of the selection update's statements (see the template), all outputs used."""
+def selection_update_ops(n: int, ny: int, n_frozen: int, form: str = "symmetric") -> OpCount:
+    """Operations of the selection update's statements (see the template), all outputs used.
+
+    ``form`` ``"symmetric"``: the Schmidt update P_ab - v_a w_b (w = v/s) on the upper
+    triangle, whose equality with the Joseph form of the Schmidt gain (thesis 4.3) is this
+    block algebra. Split the states into free ones F and frozen ones Z; the Schmidt gain is
+    k_F = v_F / s, k_Z = 0, and the Joseph form (I - k h) P (I - k h)^T + R k k^T expands to
+    P - k v^T - v k^T + s k k^T (v = P h^T, s = h v + R) for any k. Blockwise:
+
+    - FF: P_FF - 2 v_F v_F^T / s + s v_F v_F^T / s^2 = P_FF - v_F v_F^T / s;
+    - FZ (and ZF mirrored): P_FZ - k_F v_Z^T - v_F k_Z^T + s k_F k_Z^T = P_FZ - v_F v_Z^T / s;
+    - ZZ: every term carries k_Z = 0, so P_ZZ is unchanged.
+
+    So P_ab - v_a v_b / s for every pair but two frozen states: 1 mul + 1 add per entry
+    instead of the expanded Joseph form's 2 + 2 (``"joseph"``). The frozen flags are
+    evaluated once per call, not per output.
+    """
     per = OpCount()
     per.compare += 2  # isfinite(y), y < 0
     per.compare += 1  # level < floor
@@ -287,16 +302,22 @@ def selection_update_ops(n: int, ny: int, n_frozen: int) -> OpCount:
     per.add += 1  # s = P[s, s] + R
     per.compare += 2  # s > 0, isfinite(s)
     per.div += 1  # 1 / s
-    per.mul += n  # gain
-    per.compare += 2 * n_frozen  # slide flag above +0.5 or below -0.5 (either slip sign)
     per.add += 1  # innovation
-    per.mul += n  # x += gain innovation
-    per.add += n
-    per.mul += n  # g = s gain - v
-    per.add += n
     entries = n * (n + 1) // 2
-    per.mul += 2 * entries  # P + (gain_a g_b - v_a gain_b)
-    per.add += 2 * entries
+    if form == "joseph":
+        per.mul += n  # gain
+        per.mul += n  # x += gain innovation
+        per.add += n
+        per.mul += n  # g = s gain - v
+        per.add += n
+        per.mul += 2 * entries  # P + (gain_a g_b - v_a gain_b)
+        per.add += 2 * entries
+    else:
+        per.mul += n  # w = v / s
+        per.mul += n  # x += w innovation (at most: not for a frozen state)
+        per.add += n
+        per.mul += entries  # P - v_a w_b (at most: not for two frozen states)
+        per.add += entries
     per.mul += 2  # nis
     per.add += 1
-    return per.scaled(ny)
+    return per.scaled(ny) + OpCount(compare=2 * n_frozen)  # the frozen flags, once

@@ -143,6 +143,7 @@ class CFunctionView:
     declarations: tuple[str, ...] = ()  # EKF predict: unrolled from the sparsity (ekf_code)
     statements: tuple[str, ...] = ()
     selection: tuple[int, ...] = ()  # EKF update: the state each output is (H a selection)
+    update_form: str = ""  # EKF update with a selection: "symmetric" or "joseph"
     stage_temporaries: tuple[Temporary, ...] = ()  # RK4: the rhs terms that depend on x
 
 
@@ -432,12 +433,20 @@ def _function_views(
                 ny = len(table.model.outputs)
                 selection = output_selection(table["jac_outputs"].expressions[0])
                 if selection is not None:
+                    form = table.config.ekf.update_form
                     extra["selection"] = selection
-                    own = selection_update_ops(nx, ny, len(table.config.ekf.frozen))
+                    extra["update_form"] = form
+                    own = selection_update_ops(nx, ny, len(table.config.ekf.frozen), form)
                     total = counts["outputs"].scaled(ny) + own
+                    update = (
+                        "the Joseph form expanded"
+                        if form == "joseph"
+                        else "the Schmidt update P - v w^T, equal to the Joseph form of the "
+                        "Schmidt gain"
+                    )
                     what = (
-                        f"{ny} x (outputs + the Joseph update with H a selection of states: "
-                        "no product with H, upper triangle)"
+                        f"{ny} x (outputs + {update}, with H a selection of states: "
+                        "no product with H, upper triangle), the frozen flags once"
                     )
                     stack = ny + 3 * nx
                 else:
