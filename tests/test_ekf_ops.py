@@ -51,7 +51,10 @@ def test_predict_structure_follows_the_zero_parameter_rows(emitted):
     assert "gearsym_real F[28];" in body
     assert "gearsym_real A[32];" in body
     assert "R = {0, 1, 2, 3}" in body
-    assert "jac_x_sparse(stage, u, p, js);" in body
+    # f and J inlined: no call inside the step
+    code = re.sub(r"/\*.*?\*/", "", body, flags=re.S)
+    assert not re.search(r"\b\w+\((x|stage), u, p\b", code)
+    assert "_rhs(" not in body and "_jac_x" not in body
     # no dense loop over k: the products are unrolled
     assert "for (k = 0" not in body
     # the parameter block P[4..7, 4..7] is untouched but for the rate on its diagonal and the
@@ -68,20 +71,81 @@ def test_predict_structure_follows_the_zero_parameter_rows(emitted):
             assert writes == expected, (j1, j2, writes)
 
 
+def test_predict_computes_the_entries_free_of_the_moving_states_once(emitted):
+    """By hand from the 2-3 model: only omega_1, omega_2, phi, omega_C move within a step (the
+    four parameters' right-hand sides are 0), and of ∂f/∂z only the wheel row's entries in
+    omega_C (drag), m_veh (1/(I_wheel + c m_veh) times the moving numerator) and zeta
+    (cos zeta omega_C) depend on them: those three are evaluated in each stage, the other 14
+    once per step."""
+    _, m, files = emitted
+    body = _body(files["gearsym_ekf_2_3.c"], "ekf_predict")
+    jac = m.model.rhs.jacobian(m.model.state_symbols)
+    entries = [(i, j) for j in range(8) for i in range(8) if jac[i, j] != 0]
+    assert len(entries) == 17
+    moving_entries = {entries.index(e) for e in ((3, 3), (3, 4), (3, 7))}
+    once = {int(k) for k in re.findall(r"^    j1\[(\d+)\] = ", body, flags=re.M)}
+    staged = [int(k) for k in re.findall(r"^        j(?:1|s)\[(\d+)\] = ", body, flags=re.M)]
+    assert once == set(range(17)) - moving_entries
+    assert sorted(staged) == sorted(list(moving_entries) * 4)
+    # the four stages: one block each, the moving rows of f written in each
+    assert body.count("const gearsym_real *const xs = ") == 4
+    for s in range(4):
+        assert sorted(re.findall(rf"slopes\[{s}\]\[(\d)\] = ", body)) == ["0", "1", "2", "3"]
+    # sin and cos of zeta (not moving) once per step, not per stage
+    assert body.count("GEARSYM_SIN(") == 1 and body.count("GEARSYM_COS(") == 1
+
+
+def _own_and_fused(body: str) -> tuple[str, str]:
+    """The predict's own statements and the printer's (the fused f and J: the temporaries
+    computed once, the J entries stored once, the four stage blocks)."""
+    text = re.sub(r"/\*.*?\*/", "", body, flags=re.S)
+    own, fused, depth = [], [], 0
+    for line in text.splitlines()[1:]:  # after the function's opening brace
+        stripped = line.strip()
+        if stripped == "{":
+            depth += 1
+        elif stripped == "}" and depth:
+            depth -= 1
+        elif depth or re.match(r"(const gearsym_real h[cpq]\d+|j1\[\d+\]) = ", stripped):
+            fused.append(stripped)
+        else:
+            own.append(stripped)
+    return "\n".join(own), "\n".join(fused)
+
+
 def test_predict_states_the_operations_its_code_performs(emitted):
     _, _, files = emitted
     body = _body(files["gearsym_ekf_2_3.c"], "ekf_predict")
-    text = re.sub(r"/\*.*?\*/", "", body, flags=re.S)
-    # the unrolled part (after the rate loop), and the step-size constants among the declarations
-    unrolled = text[text.index("slopes[0]);") :]
-    constants = "\n".join(ln for ln in text.splitlines() if "_h = " in ln)
-    adds = len(re.findall(r" \+ |\+= ", unrolled))
-    muls = len(re.findall(r" \* ", unrolled)) + len(re.findall(r" \* ", constants))
-    compares = len(re.findall(r" > GEARSYM_LIT\(0\.5\)| < GEARSYM_LIT\(-0\.5\)", text))
+    own, fused = _own_and_fused(body)
+    # the predict's own statements: binary operators written with spaces
+    adds = len(re.findall(r" \+ |\+= ", own))
+    muls = len(re.findall(r" \* ", own))
+    compares = len(re.findall(r" > GEARSYM_LIT\(0\.5\)| < GEARSYM_LIT\(-0\.5\)", own))
     doc = _doc(files["gearsym_ekf_2_3.h"], "ekf_predict")
-    stated = re.search(r"4 jac_x \+ (\d+) add, (\d+) mul, 0 div, 0 calls, (\d+) cmp", doc)
+    stated = re.search(r"\); (\d+) add, (\d+) mul, 0 div, 0 calls, (\d+) cmp for the stage", doc)
     assert stated is not None, doc
     assert (adds, muls, compares) == tuple(int(v) for v in stated.groups())
+    # the printed f and J (operators without spaces, constant quotients folded): the stated
+    # once + 4 x per stage
+    folded = re.sub(r"GEARSYM_LIT\([^)]*\)/GEARSYM_LIT\([^)]*\)", "c", fused)
+    folded = folded.replace("*const xs", "")
+    counted = (
+        len(re.findall(r" [+-] ", folded)),
+        folded.count("*"),
+        folded.count("/"),
+        len(re.findall(r"GEARSYM_(?:SIN|COS)\(", folded)),
+    )
+    once = re.search(r"once \((\d+) add, (\d+) mul, (\d+) div, (\d+) calls", doc)
+    stage = re.search(r"4 stages \((\d+) add, (\d+) mul, (\d+) div, (\d+) calls", doc)
+    assert once is not None and stage is not None, doc
+    expected = tuple(
+        int(a) + 4 * int(b) for a, b in zip(once.groups(), stage.groups(), strict=True)
+    )
+    assert counted == expected
+    total = re.search(r"Operations: (\d+) add, (\d+) mul, (\d+) div", doc)
+    assert total is not None
+    assert int(total.group(1)) == adds + expected[0]
+    assert int(total.group(2)) == muls + expected[1]
 
 
 def test_update_uses_the_outputs_as_a_selection(emitted):
@@ -120,7 +184,7 @@ def test_dense_layout_predict_equals_the_reference(emitted, tmp_path):
     d, m, _ = emitted
     config = dataclasses.replace(m.config, sparsity=cfg.Sparsity("dense"))
     files = {k: v for k, v in emit_all(m.model, config).items() if not k.endswith(".py")}
-    assert "jac_x(stage, u, p, js);" in files["gearsym_ekf_2_3.c"]
+    assert "_jac_x(" not in _body(files["gearsym_ekf_2_3.c"], "ekf_predict")
     lib = ctypes.CDLL(str(compile_shared(files, tmp_path, single=False)))
     aug = augmented_model(d, "2-3")
     discrete = DiscreteModel(aug)
