@@ -270,14 +270,19 @@ def _rk4_hoisted(
     return first, rest, printer, extra
 
 
-def _predict_code(table: FunctionTable) -> tuple[EkfPredictCode, FusedStage, set[str], set[str]]:
+def predict_body(
+    table: FunctionTable, inputs: str = "u"
+) -> tuple[EkfPredictCode, FusedStage, set[str], set[str]]:
     """The unrolled predict body of the table's model (see :mod:`.ekf_code`), its fused
-    stage (:mod:`.ekf_stage`), and the math macros and helpers the printed code uses."""
+    stage (:mod:`.ekf_stage`), and the math macros and helpers the printed code uses; the
+    inputs read from the C array ``inputs``. One emitter for ``ekf_predict`` and the
+    prediction of ``euio_step``."""
     n = len(table.states)
     dense = table["jac_x"].expressions[0]
     entries = [(i, j) for j in range(n) for i in range(n) if dense[i, j] != 0]
     rhs = table["rhs"].expressions[0]
     base = _symbol_map(table["rhs"])
+    base.update({s: f"{inputs}[{i}]" for i, s in enumerate(table.inputs)})
     printers: list[GearsymCPrinter] = []
 
     def printer_for(extra: dict[sp.Symbol, str]):  # noqa: ANN202 - a printing function
@@ -378,7 +383,7 @@ def _function_views(
                 for i, j in table.config.ekf.frozen
             )
             if spec.kind == "ekf_predict":
-                code, fused, macros, helpers = _predict_code(table)
+                code, fused, macros, helpers = predict_body(table)
                 used_macros |= macros
                 used_helpers |= helpers
                 extra["declarations"] = code.declarations
@@ -460,8 +465,10 @@ def _function_views(
         elif spec.kind == "euio_step":
             from gearsym.symbolic.codegen.euio import euio_step_extra
 
-            euio_extra, op_text = euio_step_extra(table, counts)
+            euio_extra, op_text, macros, helpers = euio_step_extra(table, counts)
             extra.update(euio_extra)
+            used_macros |= macros
+            used_helpers |= helpers
         elif spec.kind == "params_default":
             (defaults,) = spec.expressions
             extra["defaults"] = tuple(
