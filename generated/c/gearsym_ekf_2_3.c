@@ -376,9 +376,7 @@ void gearsym_ekf_2_3_rk4_step(
     gearsym_real stage[GEARSYM_EKF_2_3_NX];
     const gearsym_real half_h = GEARSYM_LIT(0.5) * h;
     const gearsym_real sixth_h = h * (GEARSYM_LIT(1.0) / GEARSYM_LIT(6.0));
-    const gearsym_real *xs = x;
     int i;
-    int s;
     /* The right-hand side's terms in u and p only: u is held over the step, so once. */
     const gearsym_real hp0 = -GEARSYM_LIT(0.448194679666402760828)*u[0];
     const gearsym_real hp1 = -GEARSYM_LIT(0.984561434330364853118)*u[0];
@@ -388,8 +386,8 @@ void gearsym_ekf_2_3_rk4_step(
     const gearsym_real hp5 = -GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air;
     const gearsym_real hp6 = -GEARSYM_LIT(1.05990859890000000000)*p->f_roll;
 
-    for (s = 0; s < 4; ++s) {
-        /* k_s = f(xs, u, p), xs = x, x + h/2 k1, x + h/2 k2, x + h k3 */
+    { /* k1 = f(x, u, p) */
+        const gearsym_real *const xs = x;
         const gearsym_real t0 = GEARSYM_SIN(xs[7]);
         const gearsym_real t1 = GEARSYM_COS(xs[7]);
         const gearsym_real t2 = p->d_ss*xs[3];
@@ -404,22 +402,98 @@ void gearsym_ekf_2_3_rk4_step(
         const gearsym_real t11 = hp1 - GEARSYM_LIT(0.00385599385565343887287)*t7 - GEARSYM_LIT(0.00156176340852711173466)*t8 + GEARSYM_LIT(0.00385599385565343887287)*t2 + GEARSYM_LIT(2.93155983635187382235)*t5;
         const gearsym_real t12 = u[4]*t11;
         const gearsym_real t13 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
-        k[s][0] = hp2 - GEARSYM_LIT(15.3239977064154931876)*t5 - GEARSYM_LIT(2.23037549883239967414)*t6 - GEARSYM_LIT(1.97373313362513675684)*t7 - GEARSYM_LIT(0.799405886441934692928)*t8 + GEARSYM_LIT(1.97373313362513675684)*t2 + GEARSYM_LIT(2.78796937354049959268)*t12 + GEARSYM_LIT(17.0266641182394368751)*t10;
-        k[s][1] = hp3 - GEARSYM_LIT(2.16534456830660372097)*t5 - GEARSYM_LIT(0.611934397368056522974)*t7 - GEARSYM_LIT(0.247847062522501629394)*t8 - GEARSYM_LIT(0.0134794634614955199919)*t12 + GEARSYM_LIT(0.0107835707691964159936)*t6 + GEARSYM_LIT(0.611934397368056522974)*t2 + GEARSYM_LIT(2.40593840922955968997)*t10;
-        k[s][2] = t13;
-        k[s][3] = (GEARSYM_LIT(2.0)*t7 + hp4*t13 - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*xs[4] + hp5*(xs[3]*xs[3]) + hp6*t1*xs[3]*xs[4])/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*xs[4]);
-        k[s][4] = GEARSYM_LIT(0.0);
-        k[s][5] = GEARSYM_LIT(0.0);
-        k[s][6] = GEARSYM_LIT(0.0);
-        k[s][7] = GEARSYM_LIT(0.0);
-        if (s < 3) {
-            const gearsym_real c = (s == 2) ? h : half_h;
-
-            for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
-                stage[i] = x[i] + c * k[s][i];
-            }
-            xs = stage;
-        }
+        k[0][0] = hp2 - GEARSYM_LIT(15.3239977064154931876)*t5 - GEARSYM_LIT(2.23037549883239967414)*t6 - GEARSYM_LIT(1.97373313362513675684)*t7 - GEARSYM_LIT(0.799405886441934692928)*t8 + GEARSYM_LIT(1.97373313362513675684)*t2 + GEARSYM_LIT(2.78796937354049959268)*t12 + GEARSYM_LIT(17.0266641182394368751)*t10;
+        k[0][1] = hp3 - GEARSYM_LIT(2.16534456830660372097)*t5 - GEARSYM_LIT(0.611934397368056522974)*t7 - GEARSYM_LIT(0.247847062522501629394)*t8 - GEARSYM_LIT(0.0134794634614955199919)*t12 + GEARSYM_LIT(0.0107835707691964159936)*t6 + GEARSYM_LIT(0.611934397368056522974)*t2 + GEARSYM_LIT(2.40593840922955968997)*t10;
+        k[0][2] = t13;
+        k[0][3] = (GEARSYM_LIT(2.0)*t7 + hp4*t13 - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*xs[4] + hp5*(xs[3]*xs[3]) + hp6*t1*xs[3]*xs[4])/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*xs[4]);
+        k[0][4] = GEARSYM_LIT(0.0);
+        k[0][5] = GEARSYM_LIT(0.0);
+        k[0][6] = GEARSYM_LIT(0.0);
+        k[0][7] = GEARSYM_LIT(0.0);
+    }
+    for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
+        stage[i] = x[i] + half_h * k[0][i];
+    }
+    { /* k2 = f(x + h/2 k1, u, p) */
+        const gearsym_real *const xs = stage;
+        const gearsym_real t0 = GEARSYM_SIN(xs[7]);
+        const gearsym_real t1 = GEARSYM_COS(xs[7]);
+        const gearsym_real t2 = p->d_ss*xs[3];
+        const gearsym_real t3 = u[2]*xs[6];
+        const gearsym_real t4 = u[1]*xs[5];
+        const gearsym_real t5 = u[5]*t3;
+        const gearsym_real t6 = u[3]*t4;
+        const gearsym_real t7 = p->k_ss*xs[2];
+        const gearsym_real t8 = p->d_ss*xs[1];
+        const gearsym_real t9 = hp0 - GEARSYM_LIT(0.0513015561808150337311)*t2 + GEARSYM_LIT(0.0513015561808150337311)*t7 + GEARSYM_LIT(0.0207782730582482923172)*t8 + GEARSYM_LIT(0.194235472757426228188)*t6;
+        const gearsym_real t10 = u[6]*t9;
+        const gearsym_real t11 = hp1 - GEARSYM_LIT(0.00385599385565343887287)*t7 - GEARSYM_LIT(0.00156176340852711173466)*t8 + GEARSYM_LIT(0.00385599385565343887287)*t2 + GEARSYM_LIT(2.93155983635187382235)*t5;
+        const gearsym_real t12 = u[4]*t11;
+        const gearsym_real t13 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        k[1][0] = hp2 - GEARSYM_LIT(15.3239977064154931876)*t5 - GEARSYM_LIT(2.23037549883239967414)*t6 - GEARSYM_LIT(1.97373313362513675684)*t7 - GEARSYM_LIT(0.799405886441934692928)*t8 + GEARSYM_LIT(1.97373313362513675684)*t2 + GEARSYM_LIT(2.78796937354049959268)*t12 + GEARSYM_LIT(17.0266641182394368751)*t10;
+        k[1][1] = hp3 - GEARSYM_LIT(2.16534456830660372097)*t5 - GEARSYM_LIT(0.611934397368056522974)*t7 - GEARSYM_LIT(0.247847062522501629394)*t8 - GEARSYM_LIT(0.0134794634614955199919)*t12 + GEARSYM_LIT(0.0107835707691964159936)*t6 + GEARSYM_LIT(0.611934397368056522974)*t2 + GEARSYM_LIT(2.40593840922955968997)*t10;
+        k[1][2] = t13;
+        k[1][3] = (GEARSYM_LIT(2.0)*t7 + hp4*t13 - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*xs[4] + hp5*(xs[3]*xs[3]) + hp6*t1*xs[3]*xs[4])/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*xs[4]);
+        k[1][4] = GEARSYM_LIT(0.0);
+        k[1][5] = GEARSYM_LIT(0.0);
+        k[1][6] = GEARSYM_LIT(0.0);
+        k[1][7] = GEARSYM_LIT(0.0);
+    }
+    for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
+        stage[i] = x[i] + half_h * k[1][i];
+    }
+    { /* k3 = f(x + h/2 k2, u, p) */
+        const gearsym_real *const xs = stage;
+        const gearsym_real t0 = GEARSYM_SIN(xs[7]);
+        const gearsym_real t1 = GEARSYM_COS(xs[7]);
+        const gearsym_real t2 = p->d_ss*xs[3];
+        const gearsym_real t3 = u[2]*xs[6];
+        const gearsym_real t4 = u[1]*xs[5];
+        const gearsym_real t5 = u[5]*t3;
+        const gearsym_real t6 = u[3]*t4;
+        const gearsym_real t7 = p->k_ss*xs[2];
+        const gearsym_real t8 = p->d_ss*xs[1];
+        const gearsym_real t9 = hp0 - GEARSYM_LIT(0.0513015561808150337311)*t2 + GEARSYM_LIT(0.0513015561808150337311)*t7 + GEARSYM_LIT(0.0207782730582482923172)*t8 + GEARSYM_LIT(0.194235472757426228188)*t6;
+        const gearsym_real t10 = u[6]*t9;
+        const gearsym_real t11 = hp1 - GEARSYM_LIT(0.00385599385565343887287)*t7 - GEARSYM_LIT(0.00156176340852711173466)*t8 + GEARSYM_LIT(0.00385599385565343887287)*t2 + GEARSYM_LIT(2.93155983635187382235)*t5;
+        const gearsym_real t12 = u[4]*t11;
+        const gearsym_real t13 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        k[2][0] = hp2 - GEARSYM_LIT(15.3239977064154931876)*t5 - GEARSYM_LIT(2.23037549883239967414)*t6 - GEARSYM_LIT(1.97373313362513675684)*t7 - GEARSYM_LIT(0.799405886441934692928)*t8 + GEARSYM_LIT(1.97373313362513675684)*t2 + GEARSYM_LIT(2.78796937354049959268)*t12 + GEARSYM_LIT(17.0266641182394368751)*t10;
+        k[2][1] = hp3 - GEARSYM_LIT(2.16534456830660372097)*t5 - GEARSYM_LIT(0.611934397368056522974)*t7 - GEARSYM_LIT(0.247847062522501629394)*t8 - GEARSYM_LIT(0.0134794634614955199919)*t12 + GEARSYM_LIT(0.0107835707691964159936)*t6 + GEARSYM_LIT(0.611934397368056522974)*t2 + GEARSYM_LIT(2.40593840922955968997)*t10;
+        k[2][2] = t13;
+        k[2][3] = (GEARSYM_LIT(2.0)*t7 + hp4*t13 - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*xs[4] + hp5*(xs[3]*xs[3]) + hp6*t1*xs[3]*xs[4])/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*xs[4]);
+        k[2][4] = GEARSYM_LIT(0.0);
+        k[2][5] = GEARSYM_LIT(0.0);
+        k[2][6] = GEARSYM_LIT(0.0);
+        k[2][7] = GEARSYM_LIT(0.0);
+    }
+    for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
+        stage[i] = x[i] + h * k[2][i];
+    }
+    { /* k4 = f(x + h k3, u, p) */
+        const gearsym_real *const xs = stage;
+        const gearsym_real t0 = GEARSYM_SIN(xs[7]);
+        const gearsym_real t1 = GEARSYM_COS(xs[7]);
+        const gearsym_real t2 = p->d_ss*xs[3];
+        const gearsym_real t3 = u[2]*xs[6];
+        const gearsym_real t4 = u[1]*xs[5];
+        const gearsym_real t5 = u[5]*t3;
+        const gearsym_real t6 = u[3]*t4;
+        const gearsym_real t7 = p->k_ss*xs[2];
+        const gearsym_real t8 = p->d_ss*xs[1];
+        const gearsym_real t9 = hp0 - GEARSYM_LIT(0.0513015561808150337311)*t2 + GEARSYM_LIT(0.0513015561808150337311)*t7 + GEARSYM_LIT(0.0207782730582482923172)*t8 + GEARSYM_LIT(0.194235472757426228188)*t6;
+        const gearsym_real t10 = u[6]*t9;
+        const gearsym_real t11 = hp1 - GEARSYM_LIT(0.00385599385565343887287)*t7 - GEARSYM_LIT(0.00156176340852711173466)*t8 + GEARSYM_LIT(0.00385599385565343887287)*t2 + GEARSYM_LIT(2.93155983635187382235)*t5;
+        const gearsym_real t12 = u[4]*t11;
+        const gearsym_real t13 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        k[3][0] = hp2 - GEARSYM_LIT(15.3239977064154931876)*t5 - GEARSYM_LIT(2.23037549883239967414)*t6 - GEARSYM_LIT(1.97373313362513675684)*t7 - GEARSYM_LIT(0.799405886441934692928)*t8 + GEARSYM_LIT(1.97373313362513675684)*t2 + GEARSYM_LIT(2.78796937354049959268)*t12 + GEARSYM_LIT(17.0266641182394368751)*t10;
+        k[3][1] = hp3 - GEARSYM_LIT(2.16534456830660372097)*t5 - GEARSYM_LIT(0.611934397368056522974)*t7 - GEARSYM_LIT(0.247847062522501629394)*t8 - GEARSYM_LIT(0.0134794634614955199919)*t12 + GEARSYM_LIT(0.0107835707691964159936)*t6 + GEARSYM_LIT(0.611934397368056522974)*t2 + GEARSYM_LIT(2.40593840922955968997)*t10;
+        k[3][2] = t13;
+        k[3][3] = (GEARSYM_LIT(2.0)*t7 + hp4*t13 - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*xs[4] + hp5*(xs[3]*xs[3]) + hp6*t1*xs[3]*xs[4])/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*xs[4]);
+        k[3][4] = GEARSYM_LIT(0.0);
+        k[3][5] = GEARSYM_LIT(0.0);
+        k[3][6] = GEARSYM_LIT(0.0);
+        k[3][7] = GEARSYM_LIT(0.0);
     }
     /* x is read at index i only before x_next[i] is written, so x_next may alias x. */
     for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
