@@ -550,7 +550,7 @@ void gearsym_ekf_2_3_jac_outputs(
  * exactly symmetric on return (each mirrored pair computed once).
  * Frozen: mu_38 while |slide_K38| <= 0.5, mu_05 while |slide_B05| <= 0.5. Operations: 620 add,
  * 741 mul, 2 div, 2 calls (cos 1, sin 1), 4 cmp (f and jac_x fused and inlined: their terms
- * free of the moving states once (30 add, 86 mul, 2 div, 2 calls (cos 1, sin 1)), the rest in
+ * without the moving states once (30 add, 86 mul, 2 div, 2 calls (cos 1, sin 1)), the rest in
  * each of the 4 stages (17 add, 18 mul, 0 div, 0 calls); 522 add, 583 mul, 0 div, 0 calls, 4
  * cmp for the stage tangents over the structural nonzeros of jac_x, x and F P F^T blockwise);
  * stack: 249 reals.
@@ -570,7 +570,7 @@ void gearsym_ekf_2_3_ekf_predict(
     gearsym_real stage[8];
     gearsym_real j1[17]; /* K1 = J(x), 17 structural nonzeros */
     gearsym_real js[17]; /* J(stage_i), its moving entries */
-    /* f and J: their terms free of the moving states, once per step */
+    /* f and J: their terms without the moving states, once per step */
     const gearsym_real hq0 = u[6]*p->d_ss;
     const gearsym_real hq1 = u[4]*p->d_ss;
     const gearsym_real hq2 = u[6]*p->k_ss;
@@ -627,8 +627,8 @@ void gearsym_ekf_2_3_ekf_predict(
     gearsym_real tan2[28]; /* K2 */
     gearsym_real tan3[28]; /* K3 */
     gearsym_real cj[17]; /* c J(stage_i) */
-    gearsym_real cjh[17]; /* h/2 J, J free of the moving states */
-    gearsym_real cjf[17]; /* h J, J free of the moving states */
+    gearsym_real cjh[17]; /* h/2 J, the entries without moving states */
+    gearsym_real cjf[17]; /* h J, the entries without moving states */
     gearsym_real F[28]; /* F on the tangents' pattern */
     gearsym_real A[32]; /* F[R, :] P */
     gearsym_real rate[GEARSYM_EKF_2_3_NX];
@@ -963,7 +963,6 @@ int gearsym_ekf_2_3_ekf_update(
     int frozen[GEARSYM_EKF_2_3_NX] = { 0 }; /* a consider state while its element does not slide */
     int i;
     int a;
-    int b;
     int used = 0;
 
     frozen[5] = !((u[3] > GEARSYM_LIT(0.5)) || (u[3] < GEARSYM_LIT(-0.5)));
@@ -1005,17 +1004,78 @@ int gearsym_ekf_2_3_ekf_update(
         /*
          * Schmidt update in the symmetric form: with the Schmidt gain (w, frozen entries 0) the
          * Joseph form equals P_ab - v_a w_b for every pair but two frozen states, whose block
-         * stays as it is (see the header); on the upper triangle and mirrored.
+         * stays as it is (see the header); on the upper triangle and mirrored, unrolled.
          */
-        for (b = 0; b < GEARSYM_EKF_2_3_NX; ++b) {
-            for (a = 0; a <= b; ++a) {
-                if (!(frozen[a] && frozen[b])) {
-                    const gearsym_real value = P[a + b * GEARSYM_EKF_2_3_NX] - v[a] * w[b];
-                    P[a + b * GEARSYM_EKF_2_3_NX] = value;
-                    P[b + a * GEARSYM_EKF_2_3_NX] = value;
-                }
-            }
+        P[0] -= v[0] * w[0];
+        P[8] -= v[0] * w[1];
+        P[1] = P[8];
+        P[9] -= v[1] * w[1];
+        P[16] -= v[0] * w[2];
+        P[2] = P[16];
+        P[17] -= v[1] * w[2];
+        P[10] = P[17];
+        P[18] -= v[2] * w[2];
+        P[24] -= v[0] * w[3];
+        P[3] = P[24];
+        P[25] -= v[1] * w[3];
+        P[11] = P[25];
+        P[26] -= v[2] * w[3];
+        P[19] = P[26];
+        P[27] -= v[3] * w[3];
+        P[32] -= v[0] * w[4];
+        P[4] = P[32];
+        P[33] -= v[1] * w[4];
+        P[12] = P[33];
+        P[34] -= v[2] * w[4];
+        P[20] = P[34];
+        P[35] -= v[3] * w[4];
+        P[28] = P[35];
+        P[36] -= v[4] * w[4];
+        P[40] -= v[0] * w[5];
+        P[5] = P[40];
+        P[41] -= v[1] * w[5];
+        P[13] = P[41];
+        P[42] -= v[2] * w[5];
+        P[21] = P[42];
+        P[43] -= v[3] * w[5];
+        P[29] = P[43];
+        P[44] -= v[4] * w[5];
+        P[37] = P[44];
+        if (!(frozen[5])) {
+            P[45] -= v[5] * w[5];
         }
+        P[48] -= v[0] * w[6];
+        P[6] = P[48];
+        P[49] -= v[1] * w[6];
+        P[14] = P[49];
+        P[50] -= v[2] * w[6];
+        P[22] = P[50];
+        P[51] -= v[3] * w[6];
+        P[30] = P[51];
+        P[52] -= v[4] * w[6];
+        P[38] = P[52];
+        if (!(frozen[5] && frozen[6])) {
+            P[53] -= v[5] * w[6];
+            P[46] = P[53];
+        }
+        if (!(frozen[6])) {
+            P[54] -= v[6] * w[6];
+        }
+        P[56] -= v[0] * w[7];
+        P[7] = P[56];
+        P[57] -= v[1] * w[7];
+        P[15] = P[57];
+        P[58] -= v[2] * w[7];
+        P[23] = P[58];
+        P[59] -= v[3] * w[7];
+        P[31] = P[59];
+        P[60] -= v[4] * w[7];
+        P[39] = P[60];
+        P[61] -= v[5] * w[7];
+        P[47] = P[61];
+        P[62] -= v[6] * w[7];
+        P[55] = P[62];
+        P[63] -= v[7] * w[7];
         *nis += innovation * innovation * inv_s;
         ++used;
     }

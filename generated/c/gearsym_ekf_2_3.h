@@ -247,7 +247,7 @@ void gearsym_ekf_2_3_jac_outputs(
  * exactly symmetric on return (each mirrored pair computed once).
  * Frozen: mu_38 while |slide_K38| <= 0.5, mu_05 while |slide_B05| <= 0.5. Operations: 620 add,
  * 741 mul, 2 div, 2 calls (cos 1, sin 1), 4 cmp (f and jac_x fused and inlined: their terms
- * free of the moving states once (30 add, 86 mul, 2 div, 2 calls (cos 1, sin 1)), the rest in
+ * without the moving states once (30 add, 86 mul, 2 div, 2 calls (cos 1, sin 1)), the rest in
  * each of the 4 stages (17 add, 18 mul, 0 div, 0 calls); 522 add, 583 mul, 0 div, 0 calls, 4
  * cmp for the stage tangents over the structural nonzeros of jac_x, x and F P F^T blockwise);
  * stack: 249 reals.

@@ -612,7 +612,7 @@ int gearsym_euio_2_3_euio_step(
         gearsym_real stage[7];
         gearsym_real j1[16]; /* K1 = J(x), 16 structural nonzeros */
         gearsym_real js[16]; /* J(stage_i), its moving entries */
-        /* f and J: their terms free of the moving states, once per step */
+        /* f and J: their terms without the moving states, once per step */
         const gearsym_real hq0 = u_prev[6]*p->d_ss;
         const gearsym_real hq1 = u_prev[4]*p->d_ss;
         const gearsym_real hq2 = u_prev[6]*p->k_ss;
@@ -652,8 +652,8 @@ int gearsym_euio_2_3_euio_step(
         const gearsym_real hc13 = GEARSYM_LIT(0.216087380000000000000)*hq16;
         gearsym_real tan2[24]; /* K2 */
         gearsym_real tan3[24]; /* K3 */
-        gearsym_real cjh[16]; /* h/2 J, J free of the moving states */
-        gearsym_real cjf[16]; /* h J, J free of the moving states */
+        gearsym_real cjh[16]; /* h/2 J, the entries without moving states */
+        gearsym_real cjf[16]; /* h J, the entries without moving states */
         gearsym_real F[24]; /* F on the tangents' pattern */
         gearsym_real A[28]; /* F[R, :] P */
 

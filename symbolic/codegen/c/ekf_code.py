@@ -130,7 +130,7 @@ def predict_code(
     if J - invariant:
         declarations.append(f"gearsym_real js[{js}]; /* J(stage_i), its moving entries */")
         stack += js
-    declarations.append("/* f and J: their terms free of the moving states, once per step */")
+    declarations.append("/* f and J: their terms without the moving states, once per step */")
     declarations += [line for line in fused.once if line.startswith("const ")]
     body: list[str] = [line for line in fused.once if not line.startswith("const ")]
     ops.mul += 3  # half_h, sixth_h, third_h
@@ -210,8 +210,8 @@ def predict_code(
             stack += nt
     for name, what in (
         ("cj", "c J(stage_i)"),
-        ("cjh", "h/2 J, J free of the moving states"),
-        ("cjf", "h J, J free of the moving states"),
+        ("cjh", "h/2 J, the entries without moving states"),
+        ("cjf", "h J, the entries without moving states"),
     ):
         if name in used_cj:
             declarations.append(f"gearsym_real {name}[{js}]; /* {what} */")

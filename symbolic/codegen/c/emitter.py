@@ -391,7 +391,7 @@ def _function_views(
                 own = code.ops + OpCount(compare=2 * len(table.config.ekf.frozen))
                 total = fused.once_ops + fused.stage_ops.scaled(4) + own
                 what = (
-                    f"f and jac_x fused and inlined: their terms free of the moving states "
+                    f"f and jac_x fused and inlined: their terms without the moving states "
                     f"once ({fused.once_ops.format()}), the rest in each of the 4 stages "
                     f"({fused.stage_ops.format()}); {own.format()} for the stage tangents over "
                     "the structural nonzeros of jac_x, x and F P F^T blockwise"
