@@ -51,7 +51,10 @@ def test_predict_structure_follows_the_zero_parameter_rows(emitted):
     assert "gearsym_real F[28];" in body
     assert "gearsym_real A[32];" in body
     assert "R = {0, 1, 2, 3}" in body
-    assert "jac_x_sparse(stage, u, p, js);" in body
+    # f and J inlined: no call inside the step
+    code = re.sub(r"/\*.*?\*/", "", body, flags=re.S)
+    assert not re.search(r"\b\w+\((x|stage), u, p\b", code)
+    assert "_rhs(" not in body and "_jac_x" not in body
     # no dense loop over k: the products are unrolled
     assert "for (k = 0" not in body
     # the parameter block P[4..7, 4..7] is untouched but for the rate on its diagonal and the
@@ -68,20 +71,81 @@ def test_predict_structure_follows_the_zero_parameter_rows(emitted):
             assert writes == expected, (j1, j2, writes)
 
 
+def test_predict_computes_the_entries_free_of_the_moving_states_once(emitted):
+    """By hand from the 2-3 model: only omega_1, omega_2, phi, omega_C move within a step (the
+    four parameters' right-hand sides are 0), and of ∂f/∂z only the wheel row's entries in
+    omega_C (drag), m_veh (1/(I_wheel + c m_veh) times the moving numerator) and zeta
+    (cos zeta omega_C) depend on them: those three are evaluated in each stage, the other 14
+    once per step."""
+    _, m, files = emitted
+    body = _body(files["gearsym_ekf_2_3.c"], "ekf_predict")
+    jac = m.model.rhs.jacobian(m.model.state_symbols)
+    entries = [(i, j) for j in range(8) for i in range(8) if jac[i, j] != 0]
+    assert len(entries) == 17
+    moving_entries = {entries.index(e) for e in ((3, 3), (3, 4), (3, 7))}
+    once = {int(k) for k in re.findall(r"^    j1\[(\d+)\] = ", body, flags=re.M)}
+    staged = [int(k) for k in re.findall(r"^        j(?:1|s)\[(\d+)\] = ", body, flags=re.M)]
+    assert once == set(range(17)) - moving_entries
+    assert sorted(staged) == sorted(list(moving_entries) * 4)
+    # the four stages: one block each, the moving rows of f written in each
+    assert body.count("const gearsym_real *const xs = ") == 4
+    for s in range(4):
+        assert sorted(re.findall(rf"slopes\[{s}\]\[(\d)\] = ", body)) == ["0", "1", "2", "3"]
+    # sin and cos of zeta (not moving) once per step, not per stage
+    assert body.count("GEARSYM_SIN(") == 1 and body.count("GEARSYM_COS(") == 1
+
+
+def _own_and_fused(body: str) -> tuple[str, str]:
+    """The predict's own statements and the printer's (the fused f and J: the temporaries
+    computed once, the J entries stored once, the four stage blocks)."""
+    text = re.sub(r"/\*.*?\*/", "", body, flags=re.S)
+    own, fused, depth = [], [], 0
+    for line in text.splitlines()[1:]:  # after the function's opening brace
+        stripped = line.strip()
+        if stripped == "{":
+            depth += 1
+        elif stripped == "}" and depth:
+            depth -= 1
+        elif depth or re.match(r"(const gearsym_real h[cpq]\d+|j1\[\d+\]) = ", stripped):
+            fused.append(stripped)
+        else:
+            own.append(stripped)
+    return "\n".join(own), "\n".join(fused)
+
+
 def test_predict_states_the_operations_its_code_performs(emitted):
     _, _, files = emitted
     body = _body(files["gearsym_ekf_2_3.c"], "ekf_predict")
-    text = re.sub(r"/\*.*?\*/", "", body, flags=re.S)
-    # the unrolled part (after the rate loop), and the step-size constants among the declarations
-    unrolled = text[text.index("slopes[0]);") :]
-    constants = "\n".join(ln for ln in text.splitlines() if "_h = " in ln)
-    adds = len(re.findall(r" \+ |\+= ", unrolled))
-    muls = len(re.findall(r" \* ", unrolled)) + len(re.findall(r" \* ", constants))
-    compares = len(re.findall(r" > GEARSYM_LIT\(0\.5\)| < GEARSYM_LIT\(-0\.5\)", text))
+    own, fused = _own_and_fused(body)
+    # the predict's own statements: binary operators written with spaces
+    adds = len(re.findall(r" \+ |\+= ", own))
+    muls = len(re.findall(r" \* ", own))
+    compares = len(re.findall(r" > GEARSYM_LIT\(0\.5\)| < GEARSYM_LIT\(-0\.5\)", own))
     doc = _doc(files["gearsym_ekf_2_3.h"], "ekf_predict")
-    stated = re.search(r"4 jac_x \+ (\d+) add, (\d+) mul, 0 div, 0 calls, (\d+) cmp", doc)
+    stated = re.search(r"\); (\d+) add, (\d+) mul, 0 div, 0 calls, (\d+) cmp for the stage", doc)
     assert stated is not None, doc
     assert (adds, muls, compares) == tuple(int(v) for v in stated.groups())
+    # the printed f and J (operators without spaces, constant quotients folded): the stated
+    # once + 4 x per stage
+    folded = re.sub(r"GEARSYM_LIT\([^)]*\)/GEARSYM_LIT\([^)]*\)", "c", fused)
+    folded = folded.replace("*const xs", "")
+    counted = (
+        len(re.findall(r" [+-] ", folded)),
+        folded.count("*"),
+        folded.count("/"),
+        len(re.findall(r"GEARSYM_(?:SIN|COS)\(", folded)),
+    )
+    once = re.search(r"once \((\d+) add, (\d+) mul, (\d+) div, (\d+) calls", doc)
+    stage = re.search(r"4 stages \((\d+) add, (\d+) mul, (\d+) div, (\d+) calls", doc)
+    assert once is not None and stage is not None, doc
+    expected = tuple(
+        int(a) + 4 * int(b) for a, b in zip(once.groups(), stage.groups(), strict=True)
+    )
+    assert counted == expected
+    total = re.search(r"Operations: (\d+) add, (\d+) mul, (\d+) div", doc)
+    assert total is not None
+    assert int(total.group(1)) == adds + expected[0]
+    assert int(total.group(2)) == muls + expected[1]
 
 
 def test_update_uses_the_outputs_as_a_selection(emitted):
@@ -95,14 +159,17 @@ def test_update_uses_the_outputs_as_a_selection(emitted):
     assert output_selection(sp.Matrix([[0, 2]])) is None
     assert output_selection(sp.Matrix([[1, 1]])) is None
     assert output_selection(sp.Matrix([[x, 0]])) is None
-    # per output, by hand: R 2 mul; s 1 add; 1/s 1 div; k 8 mul; innovation 1 add; x 8 mul +
-    # 8 add; s k - v 8 mul + 8 add; 36 upper-triangle entries 2 mul + 2 add; NIS 2 mul + 1 add;
-    # compares: isfinite(y), y < 0, level < floor, s > 0, isfinite(s), the 2 frozen flags
-    # (two compares each: a slide flag of +1 or -1 slides)
+    # per output, by hand: R 2 mul; s 1 add; 1/s 1 div; w = v/s 8 mul; innovation 1 add;
+    # x 8 mul + 8 add; 36 upper-triangle entries P - v w^T 1 mul + 1 add; NIS 2 mul + 1 add;
+    # compares: isfinite(y), y < 0, level < floor, s > 0, isfinite(s); once per call the 2
+    # frozen flags (two compares each: a slide flag of +1 or -1 slides)
     doc = _doc(files["gearsym_ekf_2_3.h"], "ekf_update")
-    per = {"add": 1 + 1 + 8 + 8 + 72 + 1, "mul": 2 + 8 + 8 + 8 + 72 + 2, "div": 1, "cmp": 9}
+    per = {"add": 1 + 1 + 8 + 36 + 1, "mul": 2 + 8 + 8 + 36 + 2, "div": 1, "cmp": 5}
     expected = f"{3 * per['add']} add, {3 * per['mul']} mul, {3 * per['div']} div, 0 calls, "
-    assert f"Operations: {expected}{3 * per['cmp']} cmp" in doc
+    assert f"Operations: {expected}{3 * per['cmp'] + 4} cmp" in doc
+    # the frozen condition is written once, one flag per frozen state
+    assert body.count("frozen[5] = ") == 1 and body.count("frozen[6] = ") == 1
+    assert body.count("GEARSYM_LIT(0.5)") == 2
 
 
 def test_dense_layout_predict_equals_the_reference(emitted, tmp_path):
@@ -117,7 +184,7 @@ def test_dense_layout_predict_equals_the_reference(emitted, tmp_path):
     d, m, _ = emitted
     config = dataclasses.replace(m.config, sparsity=cfg.Sparsity("dense"))
     files = {k: v for k, v in emit_all(m.model, config).items() if not k.endswith(".py")}
-    assert "jac_x(stage, u, p, js);" in files["gearsym_ekf_2_3.c"]
+    assert "_jac_x(" not in _body(files["gearsym_ekf_2_3.c"], "ekf_predict")
     lib = ctypes.CDLL(str(compile_shared(files, tmp_path, single=False)))
     aug = augmented_model(d, "2-3")
     discrete = DiscreteModel(aug)
@@ -154,3 +221,115 @@ def test_dense_layout_predict_equals_the_reference(emitted, tmp_path):
             assert np.max(np.abs(x_c - z_ref) / (np.abs(z_ref) + s)) < 1e-12
             assert np.max(np.abs(P_c - P_ref) / np.outer(s, s)) < 1e-12
             assert np.array_equal(P_c, P_c.T)
+
+
+def test_joseph_update_form_equals_the_reference(emitted, tmp_path):
+    """``update_form="joseph"`` (the expanded Joseph form, selectable) against the NumPy
+    reference's Joseph update at random symmetric P, with frozen μ states; and an unknown form
+    is refused."""
+    import dataclasses
+
+    from gearsym.symbolic.codegen.config import EkfLayout
+    from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model, ekf_update
+    from gearsym.validation.c_check import compile_shared
+
+    with pytest.raises(ValueError, match="update_form"):
+        EkfLayout(update_form="ud")
+    d, m, _ = emitted
+    config = dataclasses.replace(
+        m.config, ekf=dataclasses.replace(m.config.ekf, update_form="joseph")
+    )
+    files = {k: v for k, v in emit_all(m.model, config).items() if not k.endswith(".py")}
+    assert "Joseph form expanded" in files["gearsym_ekf_2_3.c"]
+    lib = ctypes.CDLL(str(compile_shared(files, tmp_path, single=False)))
+    aug = augmented_model(d, "2-3")
+    discrete = DiscreteModel(aug)
+    p = aug.parameter_values()
+    n = len(aug.state_names)
+    Params = type(
+        "Params",
+        (ctypes.Structure,),
+        {"_fields_": [(f"p{i}", ctypes.c_double) for i in range(len(p))]},
+    )
+    ptr = ctypes.POINTER(ctypes.c_double)
+    fn = lib[f"{PREFIX}ekf_update"]
+    fn.restype = ctypes.c_int
+    rng = np.random.default_rng(12)
+    z0 = np.array([194.89, 60.09, 0.0578, 24.34, 1500.0, 0.12, 0.1, 0.01])
+    sigma = np.array([1.95, 0.6, 0.05, 0.25, 300.0, 0.03, 0.03, 0.05])
+    r, floor = np.array([0.01] * 3), np.array([2.0, 0.7, 0.27])
+    for u in ([80.0, 3000.0, 2000.0, 1.0, 0.0, 1.0, 0.0], [50.0, 0.0, 5000.0, 0.0, 0.0, 1.0, 0.0]):
+        for _ in range(5):
+            z = z0 * (1 + 0.05 * rng.normal(size=n))
+            C = np.corrcoef(rng.normal(size=(n, 3 * n)))
+            P = C * np.outer(sigma, sigma)
+            y = z[[0, 1, 3]] * (1 + 0.01 * rng.normal(size=3))
+            z_ref, P_ref, _, used = ekf_update(discrete, z, P, u, y, p, r, floor)
+            x_c, P_c, nis = z.copy(), P.ravel(order="F").copy(), ctypes.c_double(0.0)
+            count = fn(
+                x_c.ctypes.data_as(ptr),
+                P_c.ctypes.data_as(ptr),
+                np.array(u).ctypes.data_as(ptr),
+                ctypes.byref(Params(*p)),
+                y.ctypes.data_as(ptr),
+                r.ctypes.data_as(ptr),
+                floor.ctypes.data_as(ptr),
+                ctypes.byref(nis),
+            )
+            assert count == used == 3
+            P_c = P_c.reshape(n, n, order="F")
+            s = np.sqrt(np.diag(P_ref))
+            assert np.max(np.abs(x_c - z_ref) / (np.abs(z_ref) + s)) < 1e-12
+            assert np.max(np.abs(P_c - P_ref) / np.outer(s, s)) < 1e-12
+            assert np.array_equal(P_c, P_c.T)
+
+
+@pytest.mark.parametrize("shift", ["1-2", "8-9"])
+def test_fused_predict_of_other_shifts_equals_the_reference(shift, tmp_path):
+    """The fused predict is decided from the expressions' free symbols, not from the 2-3: the
+    EKF of other shifts against the NumPy reference's predict (CasADi's chain rule, dense
+    F P F^T) at random states, inputs and symmetric P, to 1e-12."""
+    from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model, ekf_predict
+    from gearsym.validation.c_check import compile_shared
+
+    d = load_description()
+    m = ekf_model(d, shift_spec(d, shift))
+    files = {k: v for k, v in emit_all(m.model, m.config).items() if not k.endswith(".py")}
+    lib = ctypes.CDLL(str(compile_shared(files, tmp_path, single=False)))
+    aug = augmented_model(d, shift)
+    discrete = DiscreteModel(aug)
+    p = aug.parameter_values()
+    q = np.array([aug.intensities[n] for n in aug.state_names])
+    n = len(aug.state_names)
+    Params = type(
+        "Params",
+        (ctypes.Structure,),
+        {"_fields_": [(f"p{i}", ctypes.c_double) for i in range(len(p))]},
+    )
+    ptr = ctypes.POINTER(ctypes.c_double)
+    predict = lib[f"gearsym_ekf_{shift.replace('-', '_')}_ekf_predict"]
+    rng = np.random.default_rng(1)
+    z0 = np.array([100.0, 50.0, 0.05, 20.0, 1500.0, 0.12, 0.1, 0.01])[:n]
+    for _ in range(5):
+        z = z0 * (1 + 0.05 * rng.normal(size=n))
+        sigma = np.abs(z) * 0.05 + 0.01
+        P = np.corrcoef(rng.normal(size=(n, 3 * n))) * np.outer(sigma, sigma)
+        u = np.abs(rng.normal(size=len(aug.input_names))) * 100.0
+        for k, name in enumerate(aug.input_names):
+            if name.startswith(("slide_", "stick_")):
+                u[k] = float(rng.integers(0, 2))
+        z_ref, P_ref = ekf_predict(discrete, z, P, u, 0.01, p, q)
+        x_c, P_c = z.copy(), P.ravel(order="F").copy()
+        predict(
+            x_c.ctypes.data_as(ptr),
+            P_c.ctypes.data_as(ptr),
+            u.ctypes.data_as(ptr),
+            ctypes.byref(Params(*p)),
+            ctypes.c_double(0.01),
+            q.ctypes.data_as(ptr),
+        )
+        P_c = P_c.reshape(n, n, order="F")
+        s = np.sqrt(np.diag(P_ref))
+        assert np.max(np.abs(x_c - z_ref) / (np.abs(z_ref) + s)) < 1e-12
+        assert np.max(np.abs(P_c - P_ref) / np.outer(s, s)) < 1e-12
+        assert np.array_equal(P_c, P_c.T)

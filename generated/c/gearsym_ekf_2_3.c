@@ -376,9 +376,7 @@ void gearsym_ekf_2_3_rk4_step(
     gearsym_real stage[GEARSYM_EKF_2_3_NX];
     const gearsym_real half_h = GEARSYM_LIT(0.5) * h;
     const gearsym_real sixth_h = h * (GEARSYM_LIT(1.0) / GEARSYM_LIT(6.0));
-    const gearsym_real *xs = x;
     int i;
-    int s;
     /* The right-hand side's terms in u and p only: u is held over the step, so once. */
     const gearsym_real hp0 = -GEARSYM_LIT(0.448194679666402760828)*u[0];
     const gearsym_real hp1 = -GEARSYM_LIT(0.984561434330364853118)*u[0];
@@ -388,8 +386,8 @@ void gearsym_ekf_2_3_rk4_step(
     const gearsym_real hp5 = -GEARSYM_LIT(0.0177569804515000000000)*p->A_front*p->c_W*p->rho_air;
     const gearsym_real hp6 = -GEARSYM_LIT(1.05990859890000000000)*p->f_roll;
 
-    for (s = 0; s < 4; ++s) {
-        /* k_s = f(xs, u, p), xs = x, x + h/2 k1, x + h/2 k2, x + h k3 */
+    { /* k1 = f(x, u, p) */
+        const gearsym_real *const xs = x;
         const gearsym_real t0 = GEARSYM_SIN(xs[7]);
         const gearsym_real t1 = GEARSYM_COS(xs[7]);
         const gearsym_real t2 = p->d_ss*xs[3];
@@ -404,22 +402,98 @@ void gearsym_ekf_2_3_rk4_step(
         const gearsym_real t11 = hp1 - GEARSYM_LIT(0.00385599385565343887287)*t7 - GEARSYM_LIT(0.00156176340852711173466)*t8 + GEARSYM_LIT(0.00385599385565343887287)*t2 + GEARSYM_LIT(2.93155983635187382235)*t5;
         const gearsym_real t12 = u[4]*t11;
         const gearsym_real t13 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
-        k[s][0] = hp2 - GEARSYM_LIT(15.3239977064154931876)*t5 - GEARSYM_LIT(2.23037549883239967414)*t6 - GEARSYM_LIT(1.97373313362513675684)*t7 - GEARSYM_LIT(0.799405886441934692928)*t8 + GEARSYM_LIT(1.97373313362513675684)*t2 + GEARSYM_LIT(2.78796937354049959268)*t12 + GEARSYM_LIT(17.0266641182394368751)*t10;
-        k[s][1] = hp3 - GEARSYM_LIT(2.16534456830660372097)*t5 - GEARSYM_LIT(0.611934397368056522974)*t7 - GEARSYM_LIT(0.247847062522501629394)*t8 - GEARSYM_LIT(0.0134794634614955199919)*t12 + GEARSYM_LIT(0.0107835707691964159936)*t6 + GEARSYM_LIT(0.611934397368056522974)*t2 + GEARSYM_LIT(2.40593840922955968997)*t10;
-        k[s][2] = t13;
-        k[s][3] = (GEARSYM_LIT(2.0)*t7 + hp4*t13 - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*xs[4] + hp5*(xs[3]*xs[3]) + hp6*t1*xs[3]*xs[4])/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*xs[4]);
-        k[s][4] = GEARSYM_LIT(0.0);
-        k[s][5] = GEARSYM_LIT(0.0);
-        k[s][6] = GEARSYM_LIT(0.0);
-        k[s][7] = GEARSYM_LIT(0.0);
-        if (s < 3) {
-            const gearsym_real c = (s == 2) ? h : half_h;
-
-            for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
-                stage[i] = x[i] + c * k[s][i];
-            }
-            xs = stage;
-        }
+        k[0][0] = hp2 - GEARSYM_LIT(15.3239977064154931876)*t5 - GEARSYM_LIT(2.23037549883239967414)*t6 - GEARSYM_LIT(1.97373313362513675684)*t7 - GEARSYM_LIT(0.799405886441934692928)*t8 + GEARSYM_LIT(1.97373313362513675684)*t2 + GEARSYM_LIT(2.78796937354049959268)*t12 + GEARSYM_LIT(17.0266641182394368751)*t10;
+        k[0][1] = hp3 - GEARSYM_LIT(2.16534456830660372097)*t5 - GEARSYM_LIT(0.611934397368056522974)*t7 - GEARSYM_LIT(0.247847062522501629394)*t8 - GEARSYM_LIT(0.0134794634614955199919)*t12 + GEARSYM_LIT(0.0107835707691964159936)*t6 + GEARSYM_LIT(0.611934397368056522974)*t2 + GEARSYM_LIT(2.40593840922955968997)*t10;
+        k[0][2] = t13;
+        k[0][3] = (GEARSYM_LIT(2.0)*t7 + hp4*t13 - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*xs[4] + hp5*(xs[3]*xs[3]) + hp6*t1*xs[3]*xs[4])/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*xs[4]);
+        k[0][4] = GEARSYM_LIT(0.0);
+        k[0][5] = GEARSYM_LIT(0.0);
+        k[0][6] = GEARSYM_LIT(0.0);
+        k[0][7] = GEARSYM_LIT(0.0);
+    }
+    for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
+        stage[i] = x[i] + half_h * k[0][i];
+    }
+    { /* k2 = f(x + h/2 k1, u, p) */
+        const gearsym_real *const xs = stage;
+        const gearsym_real t0 = GEARSYM_SIN(xs[7]);
+        const gearsym_real t1 = GEARSYM_COS(xs[7]);
+        const gearsym_real t2 = p->d_ss*xs[3];
+        const gearsym_real t3 = u[2]*xs[6];
+        const gearsym_real t4 = u[1]*xs[5];
+        const gearsym_real t5 = u[5]*t3;
+        const gearsym_real t6 = u[3]*t4;
+        const gearsym_real t7 = p->k_ss*xs[2];
+        const gearsym_real t8 = p->d_ss*xs[1];
+        const gearsym_real t9 = hp0 - GEARSYM_LIT(0.0513015561808150337311)*t2 + GEARSYM_LIT(0.0513015561808150337311)*t7 + GEARSYM_LIT(0.0207782730582482923172)*t8 + GEARSYM_LIT(0.194235472757426228188)*t6;
+        const gearsym_real t10 = u[6]*t9;
+        const gearsym_real t11 = hp1 - GEARSYM_LIT(0.00385599385565343887287)*t7 - GEARSYM_LIT(0.00156176340852711173466)*t8 + GEARSYM_LIT(0.00385599385565343887287)*t2 + GEARSYM_LIT(2.93155983635187382235)*t5;
+        const gearsym_real t12 = u[4]*t11;
+        const gearsym_real t13 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        k[1][0] = hp2 - GEARSYM_LIT(15.3239977064154931876)*t5 - GEARSYM_LIT(2.23037549883239967414)*t6 - GEARSYM_LIT(1.97373313362513675684)*t7 - GEARSYM_LIT(0.799405886441934692928)*t8 + GEARSYM_LIT(1.97373313362513675684)*t2 + GEARSYM_LIT(2.78796937354049959268)*t12 + GEARSYM_LIT(17.0266641182394368751)*t10;
+        k[1][1] = hp3 - GEARSYM_LIT(2.16534456830660372097)*t5 - GEARSYM_LIT(0.611934397368056522974)*t7 - GEARSYM_LIT(0.247847062522501629394)*t8 - GEARSYM_LIT(0.0134794634614955199919)*t12 + GEARSYM_LIT(0.0107835707691964159936)*t6 + GEARSYM_LIT(0.611934397368056522974)*t2 + GEARSYM_LIT(2.40593840922955968997)*t10;
+        k[1][2] = t13;
+        k[1][3] = (GEARSYM_LIT(2.0)*t7 + hp4*t13 - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*xs[4] + hp5*(xs[3]*xs[3]) + hp6*t1*xs[3]*xs[4])/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*xs[4]);
+        k[1][4] = GEARSYM_LIT(0.0);
+        k[1][5] = GEARSYM_LIT(0.0);
+        k[1][6] = GEARSYM_LIT(0.0);
+        k[1][7] = GEARSYM_LIT(0.0);
+    }
+    for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
+        stage[i] = x[i] + half_h * k[1][i];
+    }
+    { /* k3 = f(x + h/2 k2, u, p) */
+        const gearsym_real *const xs = stage;
+        const gearsym_real t0 = GEARSYM_SIN(xs[7]);
+        const gearsym_real t1 = GEARSYM_COS(xs[7]);
+        const gearsym_real t2 = p->d_ss*xs[3];
+        const gearsym_real t3 = u[2]*xs[6];
+        const gearsym_real t4 = u[1]*xs[5];
+        const gearsym_real t5 = u[5]*t3;
+        const gearsym_real t6 = u[3]*t4;
+        const gearsym_real t7 = p->k_ss*xs[2];
+        const gearsym_real t8 = p->d_ss*xs[1];
+        const gearsym_real t9 = hp0 - GEARSYM_LIT(0.0513015561808150337311)*t2 + GEARSYM_LIT(0.0513015561808150337311)*t7 + GEARSYM_LIT(0.0207782730582482923172)*t8 + GEARSYM_LIT(0.194235472757426228188)*t6;
+        const gearsym_real t10 = u[6]*t9;
+        const gearsym_real t11 = hp1 - GEARSYM_LIT(0.00385599385565343887287)*t7 - GEARSYM_LIT(0.00156176340852711173466)*t8 + GEARSYM_LIT(0.00385599385565343887287)*t2 + GEARSYM_LIT(2.93155983635187382235)*t5;
+        const gearsym_real t12 = u[4]*t11;
+        const gearsym_real t13 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        k[2][0] = hp2 - GEARSYM_LIT(15.3239977064154931876)*t5 - GEARSYM_LIT(2.23037549883239967414)*t6 - GEARSYM_LIT(1.97373313362513675684)*t7 - GEARSYM_LIT(0.799405886441934692928)*t8 + GEARSYM_LIT(1.97373313362513675684)*t2 + GEARSYM_LIT(2.78796937354049959268)*t12 + GEARSYM_LIT(17.0266641182394368751)*t10;
+        k[2][1] = hp3 - GEARSYM_LIT(2.16534456830660372097)*t5 - GEARSYM_LIT(0.611934397368056522974)*t7 - GEARSYM_LIT(0.247847062522501629394)*t8 - GEARSYM_LIT(0.0134794634614955199919)*t12 + GEARSYM_LIT(0.0107835707691964159936)*t6 + GEARSYM_LIT(0.611934397368056522974)*t2 + GEARSYM_LIT(2.40593840922955968997)*t10;
+        k[2][2] = t13;
+        k[2][3] = (GEARSYM_LIT(2.0)*t7 + hp4*t13 - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*xs[4] + hp5*(xs[3]*xs[3]) + hp6*t1*xs[3]*xs[4])/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*xs[4]);
+        k[2][4] = GEARSYM_LIT(0.0);
+        k[2][5] = GEARSYM_LIT(0.0);
+        k[2][6] = GEARSYM_LIT(0.0);
+        k[2][7] = GEARSYM_LIT(0.0);
+    }
+    for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
+        stage[i] = x[i] + h * k[2][i];
+    }
+    { /* k4 = f(x + h k3, u, p) */
+        const gearsym_real *const xs = stage;
+        const gearsym_real t0 = GEARSYM_SIN(xs[7]);
+        const gearsym_real t1 = GEARSYM_COS(xs[7]);
+        const gearsym_real t2 = p->d_ss*xs[3];
+        const gearsym_real t3 = u[2]*xs[6];
+        const gearsym_real t4 = u[1]*xs[5];
+        const gearsym_real t5 = u[5]*t3;
+        const gearsym_real t6 = u[3]*t4;
+        const gearsym_real t7 = p->k_ss*xs[2];
+        const gearsym_real t8 = p->d_ss*xs[1];
+        const gearsym_real t9 = hp0 - GEARSYM_LIT(0.0513015561808150337311)*t2 + GEARSYM_LIT(0.0513015561808150337311)*t7 + GEARSYM_LIT(0.0207782730582482923172)*t8 + GEARSYM_LIT(0.194235472757426228188)*t6;
+        const gearsym_real t10 = u[6]*t9;
+        const gearsym_real t11 = hp1 - GEARSYM_LIT(0.00385599385565343887287)*t7 - GEARSYM_LIT(0.00156176340852711173466)*t8 + GEARSYM_LIT(0.00385599385565343887287)*t2 + GEARSYM_LIT(2.93155983635187382235)*t5;
+        const gearsym_real t12 = u[4]*t11;
+        const gearsym_real t13 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        k[3][0] = hp2 - GEARSYM_LIT(15.3239977064154931876)*t5 - GEARSYM_LIT(2.23037549883239967414)*t6 - GEARSYM_LIT(1.97373313362513675684)*t7 - GEARSYM_LIT(0.799405886441934692928)*t8 + GEARSYM_LIT(1.97373313362513675684)*t2 + GEARSYM_LIT(2.78796937354049959268)*t12 + GEARSYM_LIT(17.0266641182394368751)*t10;
+        k[3][1] = hp3 - GEARSYM_LIT(2.16534456830660372097)*t5 - GEARSYM_LIT(0.611934397368056522974)*t7 - GEARSYM_LIT(0.247847062522501629394)*t8 - GEARSYM_LIT(0.0134794634614955199919)*t12 + GEARSYM_LIT(0.0107835707691964159936)*t6 + GEARSYM_LIT(0.611934397368056522974)*t2 + GEARSYM_LIT(2.40593840922955968997)*t10;
+        k[3][2] = t13;
+        k[3][3] = (GEARSYM_LIT(2.0)*t7 + hp4*t13 - (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*xs[4] + hp5*(xs[3]*xs[3]) + hp6*t1*xs[3]*xs[4])/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*xs[4]);
+        k[3][4] = GEARSYM_LIT(0.0);
+        k[3][5] = GEARSYM_LIT(0.0);
+        k[3][6] = GEARSYM_LIT(0.0);
+        k[3][7] = GEARSYM_LIT(0.0);
     }
     /* x is read at index i only before x_next[i] is written, so x_next may alias x. */
     for (i = 0; i < GEARSYM_EKF_2_3_NX; ++i) {
@@ -474,10 +548,12 @@ void gearsym_ekf_2_3_jac_outputs(
  * random walks of the parameters, model error of the states); the entry of a state frozen by
  * its input (see the header) counts as 0. P is 8 x 8 column-major, symmetric on entry, and
  * exactly symmetric on return (each mirrored pair computed once).
- * Frozen: mu_38 while |slide_K38| <= 0.5, mu_05 while |slide_B05| <= 0.5. Operations: 742 add,
- * 1065 mul, 12 div, 16 calls (cos 8, sin 8), 4 cmp (4 rhs + 4 jac_x + 522 add, 593 mul, 0 div,
- * 0 calls, 4 cmp for the stage tangents over the structural nonzeros of jac_x, x and F P F^T
- * blockwise); stack: 215 reals.
+ * Frozen: mu_38 while |slide_K38| <= 0.5, mu_05 while |slide_B05| <= 0.5. Operations: 620 add,
+ * 741 mul, 2 div, 2 calls (cos 1, sin 1), 4 cmp (f and jac_x fused and inlined: their terms
+ * without the moving states once (30 add, 86 mul, 2 div, 2 calls (cos 1, sin 1)), the rest in
+ * each of the 4 stages (17 add, 18 mul, 0 div, 0 calls); 522 add, 583 mul, 0 div, 0 calls, 4
+ * cmp for the stage tangents over the structural nonzeros of jac_x, x and F P F^T blockwise);
+ * stack: 249 reals.
  */
 void gearsym_ekf_2_3_ekf_predict(
     gearsym_real *x,
@@ -490,13 +566,69 @@ void gearsym_ekf_2_3_ekf_predict(
     const gearsym_real half_h = GEARSYM_LIT(0.5) * h;
     const gearsym_real sixth_h = h * (GEARSYM_LIT(1.0) / GEARSYM_LIT(6.0));
     const gearsym_real third_h = h * (GEARSYM_LIT(1.0) / GEARSYM_LIT(3.0));
-    gearsym_real slopes[4][8]; /* k1 .. k4 */
+    gearsym_real slopes[4][8]; /* k1 .. k4 (the moving rows) */
     gearsym_real stage[8];
     gearsym_real j1[17]; /* K1 = J(x), 17 structural nonzeros */
-    gearsym_real js[17]; /* J(stage_i) */
+    gearsym_real js[17]; /* J(stage_i), its moving entries */
+    /* f and J: their terms without the moving states, once per step */
+    const gearsym_real hq0 = u[6]*p->d_ss;
+    const gearsym_real hq1 = u[4]*p->d_ss;
+    const gearsym_real hq2 = u[6]*p->k_ss;
+    const gearsym_real hq3 = u[4]*p->k_ss;
+    const gearsym_real hq4 = u[2]*u[5];
+    const gearsym_real hq6 = u[1]*u[3];
+    const gearsym_real hq12 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*x[4];
+    const gearsym_real hq14 = p->A_front*p->c_W*p->rho_air;
+    const gearsym_real hq16 = GEARSYM_COS(x[7]);
+    const gearsym_real hq18 = GEARSYM_LIT(1.05990859890000000000)*p->f_roll;
+    const gearsym_real hq20 = GEARSYM_SIN(x[7]);
+    const gearsym_real hq5 = GEARSYM_LIT(15.3239977064154931876)*hq4;
+    const gearsym_real hq7 = GEARSYM_LIT(2.23037549883239967414)*hq6;
+    const gearsym_real hq8 = u[6]*(-GEARSYM_LIT(0.448194679666402760828)*u[0] + GEARSYM_LIT(0.194235472757426228188)*hq6*x[5]);
+    const gearsym_real hq9 = u[4]*(-GEARSYM_LIT(0.984561434330364853118)*u[0] + GEARSYM_LIT(2.93155983635187382235)*hq4*x[6]);
+    const gearsym_real hq10 = GEARSYM_LIT(2.16534456830660372097)*hq4;
+    const gearsym_real hq11 = GEARSYM_LIT(0.0107835707691964159936)*hq6;
+    const gearsym_real hq13 = (GEARSYM_LIT(1.0)/hq12);
+    const gearsym_real hq17 = hq16*x[4];
+    const gearsym_real hq23 = (GEARSYM_LIT(1.0)/(hq12*hq12));
+    const gearsym_real hq25 = hq20*x[4];
+    const gearsym_real hq26 = hq6*u[6];
+    const gearsym_real hq27 = hq4*u[4];
+    const gearsym_real hc0 = -GEARSYM_LIT(0.353784676319857407504)*hq0 + GEARSYM_LIT(0.799405886441934692928)*p->d_ss + GEARSYM_LIT(0.00435414855168980704254)*hq1;
+    const gearsym_real hc1 = -GEARSYM_LIT(0.873494365833727939126)*hq2 + GEARSYM_LIT(1.97373313362513675684)*p->k_ss + GEARSYM_LIT(0.0107503927741221335880)*hq3;
+    const gearsym_real hc2 = -GEARSYM_LIT(0.873494365833727939126)*hq0 + GEARSYM_LIT(1.97373313362513675684)*p->d_ss + GEARSYM_LIT(0.0107503927741221335880)*hq1;
+    const gearsym_real hc4 = -GEARSYM_LIT(0.247847062522501629394)*p->d_ss + GEARSYM_LIT(0.0000210517328007419034468)*hq1 + GEARSYM_LIT(0.0499912452282993146659)*hq0;
+    const gearsym_real hc5 = -GEARSYM_LIT(0.611934397368056522974)*p->k_ss + GEARSYM_LIT(0.0000519767282850317596101)*hq3 + GEARSYM_LIT(0.123428384468671007910)*hq2;
+    const gearsym_real hc6 = -GEARSYM_LIT(0.611934397368056522974)*p->d_ss + GEARSYM_LIT(0.0000519767282850317596101)*hq1 + GEARSYM_LIT(0.123428384468671007910)*hq0;
+    const gearsym_real hq15 = hq13*hq14;
+    const gearsym_real hq19 = -GEARSYM_LIT(2.0)*p->d_ss - hq17*hq18;
+    const gearsym_real hq21 = (GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*hq13;
+    const gearsym_real hq24 = hq13*hq18;
+    const gearsym_real hc3 = GEARSYM_LIT(2.78796937354049959268)*hq9 + GEARSYM_LIT(10.6903700874655741645)*u[0] + GEARSYM_LIT(17.0266641182394368751)*hq8 - hq5*x[6] - hq7*x[5];
+    const gearsym_real hc7 = -GEARSYM_LIT(0.0134794634614955199919)*hq9 + GEARSYM_LIT(2.40593840922955968997)*hq8 + GEARSYM_LIT(2.43657355346023132632)*u[0] + hq11*x[5] - hq10*x[6];
+    const gearsym_real hc8 = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*hq13*p->d_ss;
+    const gearsym_real hc9 = GEARSYM_LIT(2.0)*hq13*p->k_ss;
+    const gearsym_real hc14 = GEARSYM_LIT(0.0875202025111381125962)*hq23*p->d_ss;
+    const gearsym_real hc15 = GEARSYM_LIT(0.216087380000000000000)*hq23*p->k_ss;
+    const gearsym_real hc16 = GEARSYM_LIT(0.00191852969123792603500)*hq14*hq23;
+    const gearsym_real hc19 = -hq7 + GEARSYM_LIT(3.30718215448814281217)*hq26;
+    const gearsym_real hc20 = hq11 + GEARSYM_LIT(0.467318584341953537290)*hq26;
+    const gearsym_real hc21 = -hq5 + GEARSYM_LIT(8.17309904045042316533)*hq27;
+    const gearsym_real hc22 = hq10 + GEARSYM_LIT(0.0395158536992928692338)*hq27;
+    const gearsym_real hq22 = hq20*hq21;
+    const gearsym_real hc10 = GEARSYM_LIT(0.0177569804515000000000)*hq15;
+    const gearsym_real hc11 = hq13*hq19;
+    const gearsym_real hc13 = GEARSYM_LIT(0.0355139609030000000000)*hq15;
+    const gearsym_real hc17 = hq16*hq24 + GEARSYM_LIT(0.108043690000000000000)*hq19*hq23;
+    const gearsym_real hc23 = hq24*hq25;
+    const gearsym_real hc24 = hq17*hq21;
+    const gearsym_real hc12 = hq22*x[4];
+    const gearsym_real hc18 = -hq22 + GEARSYM_LIT(0.348391956458430000000)*hq23*hq25;
     gearsym_real tan2[28]; /* K2 */
     gearsym_real tan3[28]; /* K3 */
     gearsym_real cj[17]; /* c J(stage_i) */
+    gearsym_real cjh[17]; /* h/2 J, the entries without moving states */
+    gearsym_real cjf[17]; /* h J, the entries without moving states */
     gearsym_real F[28]; /* F on the tangents' pattern */
     gearsym_real A[32]; /* F[R, :] P */
     gearsym_real rate[GEARSYM_EKF_2_3_NX];
@@ -516,8 +648,32 @@ void gearsym_ekf_2_3_ekf_predict(
      * P = F P F^T + h diag(rate), unrolled over the structural nonzeros of jac_x known at
      * generation time (see the header).
      */
-    gearsym_ekf_2_3_rhs(x, u, p, slopes[0]);
-    gearsym_ekf_2_3_jac_x_sparse(x, u, p, j1);
+    j1[0] = -hc0;
+    j1[1] = hc4;
+    j1[2] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
+    j1[3] = hc8;
+    j1[4] = -hc1;
+    j1[5] = hc5;
+    j1[6] = hc9;
+    j1[7] = hc2;
+    j1[8] = -hc6;
+    j1[9] = -GEARSYM_LIT(1.0);
+    j1[12] = hc19;
+    j1[13] = hc20;
+    j1[14] = hc21;
+    j1[15] = -hc22;
+    /* stage 1: f and the moving entries of J at x (one CSE, inline) */
+    {
+        const gearsym_real *const xs = x;
+        const gearsym_real t0 = (xs[3]*xs[3]);
+        slopes[0][0] = hc3 + hc2*xs[3] + (-hc0)*xs[1] + (-hc1)*xs[2];
+        slopes[0][1] = hc7 + hc4*xs[1] + hc5*xs[2] + (-hc6)*xs[3];
+        slopes[0][2] = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        slopes[0][3] = -hc12 + hc11*xs[3] + hc8*xs[1] + hc9*xs[2] - hc10*t0;
+        j1[10] = hc11 + (-hc13)*xs[3];
+        j1[11] = hc18 + hc16*t0 + (-hc14)*xs[1] + (-hc15)*xs[2] + (-hc17)*xs[3];
+        j1[16] = -hc24 + hc23*xs[3];
+    }
     stage[4] = x[4]; /* its right-hand side is 0 */
     stage[5] = x[5]; /* its right-hand side is 0 */
     stage[6] = x[6]; /* its right-hand side is 0 */
@@ -527,143 +683,160 @@ void gearsym_ekf_2_3_ekf_predict(
     stage[1] = x[1] + half_h * slopes[0][1];
     stage[2] = x[2] + half_h * slopes[0][2];
     stage[3] = x[3] + half_h * slopes[0][3];
-    gearsym_ekf_2_3_rhs(stage, u, p, slopes[1]);
-    gearsym_ekf_2_3_jac_x_sparse(stage, u, p, js);
+    {
+        const gearsym_real *const xs = stage;
+        const gearsym_real t0 = (xs[3]*xs[3]);
+        slopes[1][0] = hc3 + hc2*xs[3] + (-hc0)*xs[1] + (-hc1)*xs[2];
+        slopes[1][1] = hc7 + hc4*xs[1] + hc5*xs[2] + (-hc6)*xs[3];
+        slopes[1][2] = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        slopes[1][3] = -hc12 + hc11*xs[3] + hc8*xs[1] + hc9*xs[2] - hc10*t0;
+        js[10] = hc11 + (-hc13)*xs[3];
+        js[11] = hc18 + hc16*t0 + (-hc14)*xs[1] + (-hc15)*xs[2] + (-hc17)*xs[3];
+        js[16] = -hc24 + hc23*xs[3];
+    }
     /* K2 = J + half_h J K1, over structural nonzeros */
-    cj[0] = half_h * js[0];
-    cj[1] = half_h * js[1];
-    cj[2] = half_h * js[2];
-    cj[3] = half_h * js[3];
-    cj[4] = half_h * js[4];
-    cj[5] = half_h * js[5];
-    cj[6] = half_h * js[6];
-    cj[7] = half_h * js[7];
-    cj[8] = half_h * js[8];
-    cj[9] = half_h * js[9];
+    cjh[0] = half_h * j1[0];
+    cjh[1] = half_h * j1[1];
+    cjh[2] = half_h * j1[2];
+    cjh[3] = half_h * j1[3];
+    cjh[4] = half_h * j1[4];
+    cjh[5] = half_h * j1[5];
+    cjh[6] = half_h * j1[6];
+    cjh[7] = half_h * j1[7];
+    cjh[8] = half_h * j1[8];
+    cjh[9] = half_h * j1[9];
     cj[10] = half_h * js[10];
-    tan2[0] = js[0] + cj[0] * j1[1] + cj[4] * j1[2] + cj[7] * j1[3];
-    tan2[1] = js[1] + cj[1] * j1[1] + cj[5] * j1[2] + cj[8] * j1[3];
-    tan2[2] = js[2] + cj[2] * j1[1] + cj[9] * j1[3];
-    tan2[3] = js[3] + cj[3] * j1[1] + cj[6] * j1[2] + cj[10] * j1[3];
-    tan2[4] = js[4] + cj[0] * j1[5] + cj[7] * j1[6];
-    tan2[5] = js[5] + cj[1] * j1[5] + cj[8] * j1[6];
-    tan2[6] = cj[2] * j1[5] + cj[9] * j1[6];
-    tan2[7] = js[6] + cj[3] * j1[5] + cj[10] * j1[6];
-    tan2[8] = js[7] + cj[0] * j1[8] + cj[4] * j1[9] + cj[7] * j1[10];
-    tan2[9] = js[8] + cj[1] * j1[8] + cj[5] * j1[9] + cj[8] * j1[10];
-    tan2[10] = js[9] + cj[2] * j1[8] + cj[9] * j1[10];
-    tan2[11] = js[10] + cj[3] * j1[8] + cj[6] * j1[9] + cj[10] * j1[10];
-    tan2[12] = cj[7] * j1[11];
-    tan2[13] = cj[8] * j1[11];
-    tan2[14] = cj[9] * j1[11];
+    tan2[0] = j1[0] + cjh[0] * j1[1] + cjh[4] * j1[2] + cjh[7] * j1[3];
+    tan2[1] = j1[1] + cjh[1] * j1[1] + cjh[5] * j1[2] + cjh[8] * j1[3];
+    tan2[2] = j1[2] + cjh[2] * j1[1] + cjh[9] * j1[3];
+    tan2[3] = j1[3] + cjh[3] * j1[1] + cjh[6] * j1[2] + cj[10] * j1[3];
+    tan2[4] = j1[4] + cjh[0] * j1[5] + cjh[7] * j1[6];
+    tan2[5] = j1[5] + cjh[1] * j1[5] + cjh[8] * j1[6];
+    tan2[6] = cjh[2] * j1[5] + cjh[9] * j1[6];
+    tan2[7] = j1[6] + cjh[3] * j1[5] + cj[10] * j1[6];
+    tan2[8] = j1[7] + cjh[0] * j1[8] + cjh[4] * j1[9] + cjh[7] * j1[10];
+    tan2[9] = j1[8] + cjh[1] * j1[8] + cjh[5] * j1[9] + cjh[8] * j1[10];
+    tan2[10] = j1[9] + cjh[2] * j1[8] + cjh[9] * j1[10];
+    tan2[11] = js[10] + cjh[3] * j1[8] + cjh[6] * j1[9] + cj[10] * j1[10];
+    tan2[12] = cjh[7] * j1[11];
+    tan2[13] = cjh[8] * j1[11];
+    tan2[14] = cjh[9] * j1[11];
     tan2[15] = js[11] + cj[10] * j1[11];
-    tan2[16] = js[12] + cj[0] * j1[13];
-    tan2[17] = js[13] + cj[1] * j1[13];
-    tan2[18] = cj[2] * j1[13];
-    tan2[19] = cj[3] * j1[13];
-    tan2[20] = js[14] + cj[0] * j1[15];
-    tan2[21] = js[15] + cj[1] * j1[15];
-    tan2[22] = cj[2] * j1[15];
-    tan2[23] = cj[3] * j1[15];
-    tan2[24] = cj[7] * j1[16];
-    tan2[25] = cj[8] * j1[16];
-    tan2[26] = cj[9] * j1[16];
+    tan2[16] = j1[12] + cjh[0] * j1[13];
+    tan2[17] = j1[13] + cjh[1] * j1[13];
+    tan2[18] = cjh[2] * j1[13];
+    tan2[19] = cjh[3] * j1[13];
+    tan2[20] = j1[14] + cjh[0] * j1[15];
+    tan2[21] = j1[15] + cjh[1] * j1[15];
+    tan2[22] = cjh[2] * j1[15];
+    tan2[23] = cjh[3] * j1[15];
+    tan2[24] = cjh[7] * j1[16];
+    tan2[25] = cjh[8] * j1[16];
+    tan2[26] = cjh[9] * j1[16];
     tan2[27] = js[16] + cj[10] * j1[16];
     /* stage 3: stage = x + half_h k2 */
     stage[0] = x[0] + half_h * slopes[1][0];
     stage[1] = x[1] + half_h * slopes[1][1];
     stage[2] = x[2] + half_h * slopes[1][2];
     stage[3] = x[3] + half_h * slopes[1][3];
-    gearsym_ekf_2_3_rhs(stage, u, p, slopes[2]);
-    gearsym_ekf_2_3_jac_x_sparse(stage, u, p, js);
+    {
+        const gearsym_real *const xs = stage;
+        const gearsym_real t0 = (xs[3]*xs[3]);
+        slopes[2][0] = hc3 + hc2*xs[3] + (-hc0)*xs[1] + (-hc1)*xs[2];
+        slopes[2][1] = hc7 + hc4*xs[1] + hc5*xs[2] + (-hc6)*xs[3];
+        slopes[2][2] = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        slopes[2][3] = -hc12 + hc11*xs[3] + hc8*xs[1] + hc9*xs[2] - hc10*t0;
+        js[10] = hc11 + (-hc13)*xs[3];
+        js[11] = hc18 + hc16*t0 + (-hc14)*xs[1] + (-hc15)*xs[2] + (-hc17)*xs[3];
+        js[16] = -hc24 + hc23*xs[3];
+    }
     /* K3 = J + half_h J K2, over structural nonzeros */
-    cj[0] = half_h * js[0];
-    cj[1] = half_h * js[1];
-    cj[2] = half_h * js[2];
-    cj[3] = half_h * js[3];
-    cj[4] = half_h * js[4];
-    cj[5] = half_h * js[5];
-    cj[6] = half_h * js[6];
-    cj[7] = half_h * js[7];
-    cj[8] = half_h * js[8];
-    cj[9] = half_h * js[9];
     cj[10] = half_h * js[10];
-    tan3[0] = js[0] + cj[0] * tan2[1] + cj[4] * tan2[2] + cj[7] * tan2[3];
-    tan3[1] = js[1] + cj[1] * tan2[1] + cj[5] * tan2[2] + cj[8] * tan2[3];
-    tan3[2] = js[2] + cj[2] * tan2[1] + cj[9] * tan2[3];
-    tan3[3] = js[3] + cj[3] * tan2[1] + cj[6] * tan2[2] + cj[10] * tan2[3];
-    tan3[4] = js[4] + cj[0] * tan2[5] + cj[4] * tan2[6] + cj[7] * tan2[7];
-    tan3[5] = js[5] + cj[1] * tan2[5] + cj[5] * tan2[6] + cj[8] * tan2[7];
-    tan3[6] = cj[2] * tan2[5] + cj[9] * tan2[7];
-    tan3[7] = js[6] + cj[3] * tan2[5] + cj[6] * tan2[6] + cj[10] * tan2[7];
-    tan3[8] = js[7] + cj[0] * tan2[9] + cj[4] * tan2[10] + cj[7] * tan2[11];
-    tan3[9] = js[8] + cj[1] * tan2[9] + cj[5] * tan2[10] + cj[8] * tan2[11];
-    tan3[10] = js[9] + cj[2] * tan2[9] + cj[9] * tan2[11];
-    tan3[11] = js[10] + cj[3] * tan2[9] + cj[6] * tan2[10] + cj[10] * tan2[11];
-    tan3[12] = cj[0] * tan2[13] + cj[4] * tan2[14] + cj[7] * tan2[15];
-    tan3[13] = cj[1] * tan2[13] + cj[5] * tan2[14] + cj[8] * tan2[15];
-    tan3[14] = cj[2] * tan2[13] + cj[9] * tan2[15];
-    tan3[15] = js[11] + cj[3] * tan2[13] + cj[6] * tan2[14] + cj[10] * tan2[15];
-    tan3[16] = js[12] + cj[0] * tan2[17] + cj[4] * tan2[18] + cj[7] * tan2[19];
-    tan3[17] = js[13] + cj[1] * tan2[17] + cj[5] * tan2[18] + cj[8] * tan2[19];
-    tan3[18] = cj[2] * tan2[17] + cj[9] * tan2[19];
-    tan3[19] = cj[3] * tan2[17] + cj[6] * tan2[18] + cj[10] * tan2[19];
-    tan3[20] = js[14] + cj[0] * tan2[21] + cj[4] * tan2[22] + cj[7] * tan2[23];
-    tan3[21] = js[15] + cj[1] * tan2[21] + cj[5] * tan2[22] + cj[8] * tan2[23];
-    tan3[22] = cj[2] * tan2[21] + cj[9] * tan2[23];
-    tan3[23] = cj[3] * tan2[21] + cj[6] * tan2[22] + cj[10] * tan2[23];
-    tan3[24] = cj[0] * tan2[25] + cj[4] * tan2[26] + cj[7] * tan2[27];
-    tan3[25] = cj[1] * tan2[25] + cj[5] * tan2[26] + cj[8] * tan2[27];
-    tan3[26] = cj[2] * tan2[25] + cj[9] * tan2[27];
-    tan3[27] = js[16] + cj[3] * tan2[25] + cj[6] * tan2[26] + cj[10] * tan2[27];
+    tan3[0] = j1[0] + cjh[0] * tan2[1] + cjh[4] * tan2[2] + cjh[7] * tan2[3];
+    tan3[1] = j1[1] + cjh[1] * tan2[1] + cjh[5] * tan2[2] + cjh[8] * tan2[3];
+    tan3[2] = j1[2] + cjh[2] * tan2[1] + cjh[9] * tan2[3];
+    tan3[3] = j1[3] + cjh[3] * tan2[1] + cjh[6] * tan2[2] + cj[10] * tan2[3];
+    tan3[4] = j1[4] + cjh[0] * tan2[5] + cjh[4] * tan2[6] + cjh[7] * tan2[7];
+    tan3[5] = j1[5] + cjh[1] * tan2[5] + cjh[5] * tan2[6] + cjh[8] * tan2[7];
+    tan3[6] = cjh[2] * tan2[5] + cjh[9] * tan2[7];
+    tan3[7] = j1[6] + cjh[3] * tan2[5] + cjh[6] * tan2[6] + cj[10] * tan2[7];
+    tan3[8] = j1[7] + cjh[0] * tan2[9] + cjh[4] * tan2[10] + cjh[7] * tan2[11];
+    tan3[9] = j1[8] + cjh[1] * tan2[9] + cjh[5] * tan2[10] + cjh[8] * tan2[11];
+    tan3[10] = j1[9] + cjh[2] * tan2[9] + cjh[9] * tan2[11];
+    tan3[11] = js[10] + cjh[3] * tan2[9] + cjh[6] * tan2[10] + cj[10] * tan2[11];
+    tan3[12] = cjh[0] * tan2[13] + cjh[4] * tan2[14] + cjh[7] * tan2[15];
+    tan3[13] = cjh[1] * tan2[13] + cjh[5] * tan2[14] + cjh[8] * tan2[15];
+    tan3[14] = cjh[2] * tan2[13] + cjh[9] * tan2[15];
+    tan3[15] = js[11] + cjh[3] * tan2[13] + cjh[6] * tan2[14] + cj[10] * tan2[15];
+    tan3[16] = j1[12] + cjh[0] * tan2[17] + cjh[4] * tan2[18] + cjh[7] * tan2[19];
+    tan3[17] = j1[13] + cjh[1] * tan2[17] + cjh[5] * tan2[18] + cjh[8] * tan2[19];
+    tan3[18] = cjh[2] * tan2[17] + cjh[9] * tan2[19];
+    tan3[19] = cjh[3] * tan2[17] + cjh[6] * tan2[18] + cj[10] * tan2[19];
+    tan3[20] = j1[14] + cjh[0] * tan2[21] + cjh[4] * tan2[22] + cjh[7] * tan2[23];
+    tan3[21] = j1[15] + cjh[1] * tan2[21] + cjh[5] * tan2[22] + cjh[8] * tan2[23];
+    tan3[22] = cjh[2] * tan2[21] + cjh[9] * tan2[23];
+    tan3[23] = cjh[3] * tan2[21] + cjh[6] * tan2[22] + cj[10] * tan2[23];
+    tan3[24] = cjh[0] * tan2[25] + cjh[4] * tan2[26] + cjh[7] * tan2[27];
+    tan3[25] = cjh[1] * tan2[25] + cjh[5] * tan2[26] + cjh[8] * tan2[27];
+    tan3[26] = cjh[2] * tan2[25] + cjh[9] * tan2[27];
+    tan3[27] = js[16] + cjh[3] * tan2[25] + cjh[6] * tan2[26] + cj[10] * tan2[27];
     /* stage 4: stage = x + h k3 */
     stage[0] = x[0] + h * slopes[2][0];
     stage[1] = x[1] + h * slopes[2][1];
     stage[2] = x[2] + h * slopes[2][2];
     stage[3] = x[3] + h * slopes[2][3];
-    gearsym_ekf_2_3_rhs(stage, u, p, slopes[3]);
-    gearsym_ekf_2_3_jac_x_sparse(stage, u, p, js);
+    {
+        const gearsym_real *const xs = stage;
+        const gearsym_real t0 = (xs[3]*xs[3]);
+        slopes[3][0] = hc3 + hc2*xs[3] + (-hc0)*xs[1] + (-hc1)*xs[2];
+        slopes[3][1] = hc7 + hc4*xs[1] + hc5*xs[2] + (-hc6)*xs[3];
+        slopes[3][2] = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        slopes[3][3] = -hc12 + hc11*xs[3] + hc8*xs[1] + hc9*xs[2] - hc10*t0;
+        js[10] = hc11 + (-hc13)*xs[3];
+        js[11] = hc18 + hc16*t0 + (-hc14)*xs[1] + (-hc15)*xs[2] + (-hc17)*xs[3];
+        js[16] = -hc24 + hc23*xs[3];
+    }
     /* K4 = J + h J K3, over structural nonzeros */
-    cj[0] = h * js[0];
-    cj[1] = h * js[1];
-    cj[2] = h * js[2];
-    cj[3] = h * js[3];
-    cj[4] = h * js[4];
-    cj[5] = h * js[5];
-    cj[6] = h * js[6];
-    cj[7] = h * js[7];
-    cj[8] = h * js[8];
-    cj[9] = h * js[9];
+    cjf[0] = h * j1[0];
+    cjf[1] = h * j1[1];
+    cjf[2] = h * j1[2];
+    cjf[3] = h * j1[3];
+    cjf[4] = h * j1[4];
+    cjf[5] = h * j1[5];
+    cjf[6] = h * j1[6];
+    cjf[7] = h * j1[7];
+    cjf[8] = h * j1[8];
+    cjf[9] = h * j1[9];
     cj[10] = h * js[10];
     /* F = I + h/6 (K1 + K4) + h/3 (K2 + K3): its rows outside R are unit rows */
-    F[0] = sixth_h * (j1[0] + (js[0] + cj[0] * tan3[1] + cj[4] * tan3[2] + cj[7] * tan3[3])) + third_h * (tan2[0] + tan3[0]);
-    F[1] = GEARSYM_LIT(1.0) + sixth_h * (j1[1] + (js[1] + cj[1] * tan3[1] + cj[5] * tan3[2] + cj[8] * tan3[3])) + third_h * (tan2[1] + tan3[1]);
-    F[2] = sixth_h * (j1[2] + (js[2] + cj[2] * tan3[1] + cj[9] * tan3[3])) + third_h * (tan2[2] + tan3[2]);
-    F[3] = sixth_h * (j1[3] + (js[3] + cj[3] * tan3[1] + cj[6] * tan3[2] + cj[10] * tan3[3])) + third_h * (tan2[3] + tan3[3]);
-    F[4] = sixth_h * (j1[4] + (js[4] + cj[0] * tan3[5] + cj[4] * tan3[6] + cj[7] * tan3[7])) + third_h * (tan2[4] + tan3[4]);
-    F[5] = sixth_h * (j1[5] + (js[5] + cj[1] * tan3[5] + cj[5] * tan3[6] + cj[8] * tan3[7])) + third_h * (tan2[5] + tan3[5]);
-    F[6] = GEARSYM_LIT(1.0) + sixth_h * (cj[2] * tan3[5] + cj[9] * tan3[7]) + third_h * (tan2[6] + tan3[6]);
-    F[7] = sixth_h * (j1[6] + (js[6] + cj[3] * tan3[5] + cj[6] * tan3[6] + cj[10] * tan3[7])) + third_h * (tan2[7] + tan3[7]);
-    F[8] = sixth_h * (j1[7] + (js[7] + cj[0] * tan3[9] + cj[4] * tan3[10] + cj[7] * tan3[11])) + third_h * (tan2[8] + tan3[8]);
-    F[9] = sixth_h * (j1[8] + (js[8] + cj[1] * tan3[9] + cj[5] * tan3[10] + cj[8] * tan3[11])) + third_h * (tan2[9] + tan3[9]);
-    F[10] = sixth_h * (j1[9] + (js[9] + cj[2] * tan3[9] + cj[9] * tan3[11])) + third_h * (tan2[10] + tan3[10]);
-    F[11] = GEARSYM_LIT(1.0) + sixth_h * (j1[10] + (js[10] + cj[3] * tan3[9] + cj[6] * tan3[10] + cj[10] * tan3[11])) + third_h * (tan2[11] + tan3[11]);
-    F[12] = sixth_h * (cj[0] * tan3[13] + cj[4] * tan3[14] + cj[7] * tan3[15]) + third_h * (tan2[12] + tan3[12]);
-    F[13] = sixth_h * (cj[1] * tan3[13] + cj[5] * tan3[14] + cj[8] * tan3[15]) + third_h * (tan2[13] + tan3[13]);
-    F[14] = sixth_h * (cj[2] * tan3[13] + cj[9] * tan3[15]) + third_h * (tan2[14] + tan3[14]);
-    F[15] = sixth_h * (j1[11] + (js[11] + cj[3] * tan3[13] + cj[6] * tan3[14] + cj[10] * tan3[15])) + third_h * (tan2[15] + tan3[15]);
-    F[16] = sixth_h * (j1[12] + (js[12] + cj[0] * tan3[17] + cj[4] * tan3[18] + cj[7] * tan3[19])) + third_h * (tan2[16] + tan3[16]);
-    F[17] = sixth_h * (j1[13] + (js[13] + cj[1] * tan3[17] + cj[5] * tan3[18] + cj[8] * tan3[19])) + third_h * (tan2[17] + tan3[17]);
-    F[18] = sixth_h * (cj[2] * tan3[17] + cj[9] * tan3[19]) + third_h * (tan2[18] + tan3[18]);
-    F[19] = sixth_h * (cj[3] * tan3[17] + cj[6] * tan3[18] + cj[10] * tan3[19]) + third_h * (tan2[19] + tan3[19]);
-    F[20] = sixth_h * (j1[14] + (js[14] + cj[0] * tan3[21] + cj[4] * tan3[22] + cj[7] * tan3[23])) + third_h * (tan2[20] + tan3[20]);
-    F[21] = sixth_h * (j1[15] + (js[15] + cj[1] * tan3[21] + cj[5] * tan3[22] + cj[8] * tan3[23])) + third_h * (tan2[21] + tan3[21]);
-    F[22] = sixth_h * (cj[2] * tan3[21] + cj[9] * tan3[23]) + third_h * (tan2[22] + tan3[22]);
-    F[23] = sixth_h * (cj[3] * tan3[21] + cj[6] * tan3[22] + cj[10] * tan3[23]) + third_h * (tan2[23] + tan3[23]);
-    F[24] = sixth_h * (cj[0] * tan3[25] + cj[4] * tan3[26] + cj[7] * tan3[27]) + third_h * (tan2[24] + tan3[24]);
-    F[25] = sixth_h * (cj[1] * tan3[25] + cj[5] * tan3[26] + cj[8] * tan3[27]) + third_h * (tan2[25] + tan3[25]);
-    F[26] = sixth_h * (cj[2] * tan3[25] + cj[9] * tan3[27]) + third_h * (tan2[26] + tan3[26]);
-    F[27] = sixth_h * (j1[16] + (js[16] + cj[3] * tan3[25] + cj[6] * tan3[26] + cj[10] * tan3[27])) + third_h * (tan2[27] + tan3[27]);
+    F[0] = sixth_h * (j1[0] + (j1[0] + cjf[0] * tan3[1] + cjf[4] * tan3[2] + cjf[7] * tan3[3])) + third_h * (tan2[0] + tan3[0]);
+    F[1] = GEARSYM_LIT(1.0) + sixth_h * (j1[1] + (j1[1] + cjf[1] * tan3[1] + cjf[5] * tan3[2] + cjf[8] * tan3[3])) + third_h * (tan2[1] + tan3[1]);
+    F[2] = sixth_h * (j1[2] + (j1[2] + cjf[2] * tan3[1] + cjf[9] * tan3[3])) + third_h * (tan2[2] + tan3[2]);
+    F[3] = sixth_h * (j1[3] + (j1[3] + cjf[3] * tan3[1] + cjf[6] * tan3[2] + cj[10] * tan3[3])) + third_h * (tan2[3] + tan3[3]);
+    F[4] = sixth_h * (j1[4] + (j1[4] + cjf[0] * tan3[5] + cjf[4] * tan3[6] + cjf[7] * tan3[7])) + third_h * (tan2[4] + tan3[4]);
+    F[5] = sixth_h * (j1[5] + (j1[5] + cjf[1] * tan3[5] + cjf[5] * tan3[6] + cjf[8] * tan3[7])) + third_h * (tan2[5] + tan3[5]);
+    F[6] = GEARSYM_LIT(1.0) + sixth_h * (cjf[2] * tan3[5] + cjf[9] * tan3[7]) + third_h * (tan2[6] + tan3[6]);
+    F[7] = sixth_h * (j1[6] + (j1[6] + cjf[3] * tan3[5] + cjf[6] * tan3[6] + cj[10] * tan3[7])) + third_h * (tan2[7] + tan3[7]);
+    F[8] = sixth_h * (j1[7] + (j1[7] + cjf[0] * tan3[9] + cjf[4] * tan3[10] + cjf[7] * tan3[11])) + third_h * (tan2[8] + tan3[8]);
+    F[9] = sixth_h * (j1[8] + (j1[8] + cjf[1] * tan3[9] + cjf[5] * tan3[10] + cjf[8] * tan3[11])) + third_h * (tan2[9] + tan3[9]);
+    F[10] = sixth_h * (j1[9] + (j1[9] + cjf[2] * tan3[9] + cjf[9] * tan3[11])) + third_h * (tan2[10] + tan3[10]);
+    F[11] = GEARSYM_LIT(1.0) + sixth_h * (j1[10] + (js[10] + cjf[3] * tan3[9] + cjf[6] * tan3[10] + cj[10] * tan3[11])) + third_h * (tan2[11] + tan3[11]);
+    F[12] = sixth_h * (cjf[0] * tan3[13] + cjf[4] * tan3[14] + cjf[7] * tan3[15]) + third_h * (tan2[12] + tan3[12]);
+    F[13] = sixth_h * (cjf[1] * tan3[13] + cjf[5] * tan3[14] + cjf[8] * tan3[15]) + third_h * (tan2[13] + tan3[13]);
+    F[14] = sixth_h * (cjf[2] * tan3[13] + cjf[9] * tan3[15]) + third_h * (tan2[14] + tan3[14]);
+    F[15] = sixth_h * (j1[11] + (js[11] + cjf[3] * tan3[13] + cjf[6] * tan3[14] + cj[10] * tan3[15])) + third_h * (tan2[15] + tan3[15]);
+    F[16] = sixth_h * (j1[12] + (j1[12] + cjf[0] * tan3[17] + cjf[4] * tan3[18] + cjf[7] * tan3[19])) + third_h * (tan2[16] + tan3[16]);
+    F[17] = sixth_h * (j1[13] + (j1[13] + cjf[1] * tan3[17] + cjf[5] * tan3[18] + cjf[8] * tan3[19])) + third_h * (tan2[17] + tan3[17]);
+    F[18] = sixth_h * (cjf[2] * tan3[17] + cjf[9] * tan3[19]) + third_h * (tan2[18] + tan3[18]);
+    F[19] = sixth_h * (cjf[3] * tan3[17] + cjf[6] * tan3[18] + cj[10] * tan3[19]) + third_h * (tan2[19] + tan3[19]);
+    F[20] = sixth_h * (j1[14] + (j1[14] + cjf[0] * tan3[21] + cjf[4] * tan3[22] + cjf[7] * tan3[23])) + third_h * (tan2[20] + tan3[20]);
+    F[21] = sixth_h * (j1[15] + (j1[15] + cjf[1] * tan3[21] + cjf[5] * tan3[22] + cjf[8] * tan3[23])) + third_h * (tan2[21] + tan3[21]);
+    F[22] = sixth_h * (cjf[2] * tan3[21] + cjf[9] * tan3[23]) + third_h * (tan2[22] + tan3[22]);
+    F[23] = sixth_h * (cjf[3] * tan3[21] + cjf[6] * tan3[22] + cj[10] * tan3[23]) + third_h * (tan2[23] + tan3[23]);
+    F[24] = sixth_h * (cjf[0] * tan3[25] + cjf[4] * tan3[26] + cjf[7] * tan3[27]) + third_h * (tan2[24] + tan3[24]);
+    F[25] = sixth_h * (cjf[1] * tan3[25] + cjf[5] * tan3[26] + cjf[8] * tan3[27]) + third_h * (tan2[25] + tan3[25]);
+    F[26] = sixth_h * (cjf[2] * tan3[25] + cjf[9] * tan3[27]) + third_h * (tan2[26] + tan3[26]);
+    F[27] = sixth_h * (j1[16] + (js[16] + cjf[3] * tan3[25] + cjf[6] * tan3[26] + cj[10] * tan3[27])) + third_h * (tan2[27] + tan3[27]);
     /* x = x + h/6 (k1 + 2 (k2 + k3) + k4) */
     x[0] = x[0] + sixth_h * (slopes[0][0] + GEARSYM_LIT(2.0) * (slopes[1][0] + slopes[2][0]) + slopes[3][0]);
     x[1] = x[1] + sixth_h * (slopes[0][1] + GEARSYM_LIT(2.0) * (slopes[1][1] + slopes[2][1]) + slopes[3][1]);
@@ -761,15 +934,16 @@ void gearsym_ekf_2_3_ekf_predict(
 }
 
 /**
- * EKF measurement update (thesis 4.3), in place, one output at a time (diagonal R), Joseph
- * form P = (I - k h) P (I - k h)^T + R k k^T with R = (r_i max(|y_i|, y_floor_i))^2 (3.26). A
- * NaN or infinite y_i is skipped (no update); the gain entry of a frozen state is 0 (its
- * estimate and variance stay unchanged). *nis receives the sum of nu^2/s over the used
- * outputs. Returns the number of outputs used. P is symmetric on entry and exactly symmetric
- * on return.
- * Frozen: mu_38 while |slide_K38| <= 0.5, mu_05 while |slide_B05| <= 0.5. Operations: 273 add,
- * 300 mul, 3 div, 0 calls, 27 cmp (3 x (outputs + the Joseph update with H a selection of
- * states: no product with H, upper triangle)); stack: 27 reals.
+ * EKF measurement update (thesis 4.3), in place, one output at a time (diagonal R), P = (I - k
+ * h) P (I - k h)^T + R k k^T (the Joseph form's value, evaluated as stated below) with R =
+ * (r_i max(|y_i|, y_floor_i))^2 (3.26). A NaN or infinite y_i is skipped (no update); the gain
+ * entry of a frozen state is 0 (its estimate and variance stay unchanged). *nis receives the
+ * sum of nu^2/s over the used outputs. Returns the number of outputs used. P is symmetric on
+ * entry and exactly symmetric on return.
+ * Frozen: mu_38 while |slide_K38| <= 0.5, mu_05 while |slide_B05| <= 0.5. Operations: 141 add,
+ * 168 mul, 3 div, 0 calls, 19 cmp (3 x (outputs + the Schmidt update P - v w^T, equal to the
+ * Joseph form of the Schmidt gain, with H a selection of states: no product with H, upper
+ * triangle), the frozen flags once); stack: 27 reals.
  */
 int gearsym_ekf_2_3_ekf_update(
     gearsym_real *x,
@@ -785,13 +959,14 @@ int gearsym_ekf_2_3_ekf_update(
     static const int measured[GEARSYM_EKF_2_3_NY] = { 0, 1, 3 };
     gearsym_real y_hat[GEARSYM_EKF_2_3_NY];
     gearsym_real v[GEARSYM_EKF_2_3_NX]; /* P h^T */
-    gearsym_real gain[GEARSYM_EKF_2_3_NX];
-    gearsym_real g[GEARSYM_EKF_2_3_NX]; /* s k - v */
+    gearsym_real w[GEARSYM_EKF_2_3_NX]; /* v / s: the gain before the frozen entries are zeroed */
+    int frozen[GEARSYM_EKF_2_3_NX] = { 0 }; /* a consider state while its element does not slide */
     int i;
     int a;
-    int b;
     int used = 0;
 
+    frozen[5] = !((u[3] > GEARSYM_LIT(0.5)) || (u[3] < GEARSYM_LIT(-0.5)));
+    frozen[6] = !((u[5] > GEARSYM_LIT(0.5)) || (u[5] < GEARSYM_LIT(-0.5)));
     *nis = GEARSYM_LIT(0.0);
     for (i = 0; i < GEARSYM_EKF_2_3_NY; ++i) {
         const int m = measured[i];
@@ -819,32 +994,88 @@ int gearsym_ekf_2_3_ekf_update(
             continue; /* no usable innovation variance: leave x and P as they are */
         }
         inv_s = GEARSYM_LIT(1.0) / s;
-        for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
-            gain[a] = v[a] * inv_s;
-        }
-        if (!((u[3] > GEARSYM_LIT(0.5)) || (u[3] < GEARSYM_LIT(-0.5)))) {
-            gain[5] = GEARSYM_LIT(0.0); /* frozen: a consider state */
-        }
-        if (!((u[5] > GEARSYM_LIT(0.5)) || (u[5] < GEARSYM_LIT(-0.5)))) {
-            gain[6] = GEARSYM_LIT(0.0); /* frozen: a consider state */
-        }
         innovation = y[i] - y_hat[i];
         for (a = 0; a < GEARSYM_EKF_2_3_NX; ++a) {
-            x[a] += gain[a] * innovation;
-            g[a] = s * gain[a] - v[a];
-        }
-        /*
-         * Joseph form expanded: (I - k h) P (I - k h)^T + R k k^T = P - k v^T - v k^T + s k k^T
-         * for any gain k (v = P h^T, s = h v + R), i.e. P_ab + k_a g_b - v_a k_b, on the upper
-         * triangle and mirrored.
-         */
-        for (b = 0; b < GEARSYM_EKF_2_3_NX; ++b) {
-            for (a = 0; a <= b; ++a) {
-                const gearsym_real value = P[a + b * GEARSYM_EKF_2_3_NX] + (gain[a] * g[b] - v[a] * gain[b]);
-                P[a + b * GEARSYM_EKF_2_3_NX] = value;
-                P[b + a * GEARSYM_EKF_2_3_NX] = value;
+            w[a] = v[a] * inv_s;
+            if (!frozen[a]) {
+                x[a] += w[a] * innovation;
             }
         }
+        /*
+         * Schmidt update in the symmetric form: with the Schmidt gain (w, frozen entries 0) the
+         * Joseph form equals P_ab - v_a w_b for every pair but two frozen states, whose block
+         * stays as it is (see the header); on the upper triangle and mirrored, unrolled.
+         */
+        P[0] -= v[0] * w[0];
+        P[8] -= v[0] * w[1];
+        P[1] = P[8];
+        P[9] -= v[1] * w[1];
+        P[16] -= v[0] * w[2];
+        P[2] = P[16];
+        P[17] -= v[1] * w[2];
+        P[10] = P[17];
+        P[18] -= v[2] * w[2];
+        P[24] -= v[0] * w[3];
+        P[3] = P[24];
+        P[25] -= v[1] * w[3];
+        P[11] = P[25];
+        P[26] -= v[2] * w[3];
+        P[19] = P[26];
+        P[27] -= v[3] * w[3];
+        P[32] -= v[0] * w[4];
+        P[4] = P[32];
+        P[33] -= v[1] * w[4];
+        P[12] = P[33];
+        P[34] -= v[2] * w[4];
+        P[20] = P[34];
+        P[35] -= v[3] * w[4];
+        P[28] = P[35];
+        P[36] -= v[4] * w[4];
+        P[40] -= v[0] * w[5];
+        P[5] = P[40];
+        P[41] -= v[1] * w[5];
+        P[13] = P[41];
+        P[42] -= v[2] * w[5];
+        P[21] = P[42];
+        P[43] -= v[3] * w[5];
+        P[29] = P[43];
+        P[44] -= v[4] * w[5];
+        P[37] = P[44];
+        if (!(frozen[5])) {
+            P[45] -= v[5] * w[5];
+        }
+        P[48] -= v[0] * w[6];
+        P[6] = P[48];
+        P[49] -= v[1] * w[6];
+        P[14] = P[49];
+        P[50] -= v[2] * w[6];
+        P[22] = P[50];
+        P[51] -= v[3] * w[6];
+        P[30] = P[51];
+        P[52] -= v[4] * w[6];
+        P[38] = P[52];
+        if (!(frozen[5] && frozen[6])) {
+            P[53] -= v[5] * w[6];
+            P[46] = P[53];
+        }
+        if (!(frozen[6])) {
+            P[54] -= v[6] * w[6];
+        }
+        P[56] -= v[0] * w[7];
+        P[7] = P[56];
+        P[57] -= v[1] * w[7];
+        P[15] = P[57];
+        P[58] -= v[2] * w[7];
+        P[23] = P[58];
+        P[59] -= v[3] * w[7];
+        P[31] = P[59];
+        P[60] -= v[4] * w[7];
+        P[39] = P[60];
+        P[61] -= v[5] * w[7];
+        P[47] = P[61];
+        P[62] -= v[6] * w[7];
+        P[55] = P[62];
+        P[63] -= v[7] * w[7];
         *nis += innovation * innovation * inv_s;
         ++used;
     }

@@ -319,9 +319,7 @@ void gearsym_euio_2_3_rk4_step(
     gearsym_real stage[GEARSYM_EUIO_2_3_NX];
     const gearsym_real half_h = GEARSYM_LIT(0.5) * h;
     const gearsym_real sixth_h = h * (GEARSYM_LIT(1.0) / GEARSYM_LIT(6.0));
-    const gearsym_real *xs = x;
     int i;
-    int s;
     /* The right-hand side's terms in u and p only: u is held over the step, so once. */
     const gearsym_real hp0 = -GEARSYM_LIT(0.448194679666402760828)*u[0];
     const gearsym_real hp1 = -GEARSYM_LIT(0.984561434330364853118)*u[0];
@@ -329,8 +327,8 @@ void gearsym_euio_2_3_rk4_step(
     const gearsym_real hp3 = GEARSYM_LIT(2.43657355346023132632)*u[0];
     const gearsym_real hp4 = GEARSYM_LIT(2.0)*p->d_ss;
 
-    for (s = 0; s < 4; ++s) {
-        /* k_s = f(xs, u, p), xs = x, x + h/2 k1, x + h/2 k2, x + h k3 */
+    { /* k1 = f(x, u, p) */
+        const gearsym_real *const xs = x;
         const gearsym_real t0 = p->d_ss*xs[3];
         const gearsym_real t1 = u[2]*xs[6];
         const gearsym_real t2 = u[1]*xs[5];
@@ -343,21 +341,88 @@ void gearsym_euio_2_3_rk4_step(
         const gearsym_real t9 = hp1 - GEARSYM_LIT(0.00385599385565343887287)*t6 - GEARSYM_LIT(0.00156176340852711173466)*t5 + GEARSYM_LIT(0.00385599385565343887287)*t0 + GEARSYM_LIT(2.93155983635187382235)*t3;
         const gearsym_real t10 = u[4]*t9;
         const gearsym_real t11 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
-        k[s][0] = hp2 - GEARSYM_LIT(15.3239977064154931876)*t3 - GEARSYM_LIT(2.23037549883239967414)*t4 - GEARSYM_LIT(1.97373313362513675684)*t6 - GEARSYM_LIT(0.799405886441934692928)*t5 + GEARSYM_LIT(1.97373313362513675684)*t0 + GEARSYM_LIT(2.78796937354049959268)*t10 + GEARSYM_LIT(17.0266641182394368751)*t8;
-        k[s][1] = hp3 - GEARSYM_LIT(2.16534456830660372097)*t3 - GEARSYM_LIT(0.611934397368056522974)*t6 - GEARSYM_LIT(0.247847062522501629394)*t5 - GEARSYM_LIT(0.0134794634614955199919)*t10 + GEARSYM_LIT(0.0107835707691964159936)*t4 + GEARSYM_LIT(0.611934397368056522974)*t0 + GEARSYM_LIT(2.40593840922955968997)*t8;
-        k[s][2] = t11;
-        k[s][3] = (GEARSYM_LIT(2.0)*t6 + hp4*t11)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*xs[4]);
-        k[s][4] = GEARSYM_LIT(0.0);
-        k[s][5] = GEARSYM_LIT(0.0);
-        k[s][6] = GEARSYM_LIT(0.0);
-        if (s < 3) {
-            const gearsym_real c = (s == 2) ? h : half_h;
-
-            for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
-                stage[i] = x[i] + c * k[s][i];
-            }
-            xs = stage;
-        }
+        k[0][0] = hp2 - GEARSYM_LIT(15.3239977064154931876)*t3 - GEARSYM_LIT(2.23037549883239967414)*t4 - GEARSYM_LIT(1.97373313362513675684)*t6 - GEARSYM_LIT(0.799405886441934692928)*t5 + GEARSYM_LIT(1.97373313362513675684)*t0 + GEARSYM_LIT(2.78796937354049959268)*t10 + GEARSYM_LIT(17.0266641182394368751)*t8;
+        k[0][1] = hp3 - GEARSYM_LIT(2.16534456830660372097)*t3 - GEARSYM_LIT(0.611934397368056522974)*t6 - GEARSYM_LIT(0.247847062522501629394)*t5 - GEARSYM_LIT(0.0134794634614955199919)*t10 + GEARSYM_LIT(0.0107835707691964159936)*t4 + GEARSYM_LIT(0.611934397368056522974)*t0 + GEARSYM_LIT(2.40593840922955968997)*t8;
+        k[0][2] = t11;
+        k[0][3] = (GEARSYM_LIT(2.0)*t6 + hp4*t11)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*xs[4]);
+        k[0][4] = GEARSYM_LIT(0.0);
+        k[0][5] = GEARSYM_LIT(0.0);
+        k[0][6] = GEARSYM_LIT(0.0);
+    }
+    for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
+        stage[i] = x[i] + half_h * k[0][i];
+    }
+    { /* k2 = f(x + h/2 k1, u, p) */
+        const gearsym_real *const xs = stage;
+        const gearsym_real t0 = p->d_ss*xs[3];
+        const gearsym_real t1 = u[2]*xs[6];
+        const gearsym_real t2 = u[1]*xs[5];
+        const gearsym_real t3 = u[5]*t1;
+        const gearsym_real t4 = u[3]*t2;
+        const gearsym_real t5 = p->d_ss*xs[1];
+        const gearsym_real t6 = p->k_ss*xs[2];
+        const gearsym_real t7 = hp0 - GEARSYM_LIT(0.0513015561808150337311)*t0 + GEARSYM_LIT(0.0513015561808150337311)*t6 + GEARSYM_LIT(0.0207782730582482923172)*t5 + GEARSYM_LIT(0.194235472757426228188)*t4;
+        const gearsym_real t8 = u[6]*t7;
+        const gearsym_real t9 = hp1 - GEARSYM_LIT(0.00385599385565343887287)*t6 - GEARSYM_LIT(0.00156176340852711173466)*t5 + GEARSYM_LIT(0.00385599385565343887287)*t0 + GEARSYM_LIT(2.93155983635187382235)*t3;
+        const gearsym_real t10 = u[4]*t9;
+        const gearsym_real t11 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        k[1][0] = hp2 - GEARSYM_LIT(15.3239977064154931876)*t3 - GEARSYM_LIT(2.23037549883239967414)*t4 - GEARSYM_LIT(1.97373313362513675684)*t6 - GEARSYM_LIT(0.799405886441934692928)*t5 + GEARSYM_LIT(1.97373313362513675684)*t0 + GEARSYM_LIT(2.78796937354049959268)*t10 + GEARSYM_LIT(17.0266641182394368751)*t8;
+        k[1][1] = hp3 - GEARSYM_LIT(2.16534456830660372097)*t3 - GEARSYM_LIT(0.611934397368056522974)*t6 - GEARSYM_LIT(0.247847062522501629394)*t5 - GEARSYM_LIT(0.0134794634614955199919)*t10 + GEARSYM_LIT(0.0107835707691964159936)*t4 + GEARSYM_LIT(0.611934397368056522974)*t0 + GEARSYM_LIT(2.40593840922955968997)*t8;
+        k[1][2] = t11;
+        k[1][3] = (GEARSYM_LIT(2.0)*t6 + hp4*t11)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*xs[4]);
+        k[1][4] = GEARSYM_LIT(0.0);
+        k[1][5] = GEARSYM_LIT(0.0);
+        k[1][6] = GEARSYM_LIT(0.0);
+    }
+    for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
+        stage[i] = x[i] + half_h * k[1][i];
+    }
+    { /* k3 = f(x + h/2 k2, u, p) */
+        const gearsym_real *const xs = stage;
+        const gearsym_real t0 = p->d_ss*xs[3];
+        const gearsym_real t1 = u[2]*xs[6];
+        const gearsym_real t2 = u[1]*xs[5];
+        const gearsym_real t3 = u[5]*t1;
+        const gearsym_real t4 = u[3]*t2;
+        const gearsym_real t5 = p->d_ss*xs[1];
+        const gearsym_real t6 = p->k_ss*xs[2];
+        const gearsym_real t7 = hp0 - GEARSYM_LIT(0.0513015561808150337311)*t0 + GEARSYM_LIT(0.0513015561808150337311)*t6 + GEARSYM_LIT(0.0207782730582482923172)*t5 + GEARSYM_LIT(0.194235472757426228188)*t4;
+        const gearsym_real t8 = u[6]*t7;
+        const gearsym_real t9 = hp1 - GEARSYM_LIT(0.00385599385565343887287)*t6 - GEARSYM_LIT(0.00156176340852711173466)*t5 + GEARSYM_LIT(0.00385599385565343887287)*t0 + GEARSYM_LIT(2.93155983635187382235)*t3;
+        const gearsym_real t10 = u[4]*t9;
+        const gearsym_real t11 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        k[2][0] = hp2 - GEARSYM_LIT(15.3239977064154931876)*t3 - GEARSYM_LIT(2.23037549883239967414)*t4 - GEARSYM_LIT(1.97373313362513675684)*t6 - GEARSYM_LIT(0.799405886441934692928)*t5 + GEARSYM_LIT(1.97373313362513675684)*t0 + GEARSYM_LIT(2.78796937354049959268)*t10 + GEARSYM_LIT(17.0266641182394368751)*t8;
+        k[2][1] = hp3 - GEARSYM_LIT(2.16534456830660372097)*t3 - GEARSYM_LIT(0.611934397368056522974)*t6 - GEARSYM_LIT(0.247847062522501629394)*t5 - GEARSYM_LIT(0.0134794634614955199919)*t10 + GEARSYM_LIT(0.0107835707691964159936)*t4 + GEARSYM_LIT(0.611934397368056522974)*t0 + GEARSYM_LIT(2.40593840922955968997)*t8;
+        k[2][2] = t11;
+        k[2][3] = (GEARSYM_LIT(2.0)*t6 + hp4*t11)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*xs[4]);
+        k[2][4] = GEARSYM_LIT(0.0);
+        k[2][5] = GEARSYM_LIT(0.0);
+        k[2][6] = GEARSYM_LIT(0.0);
+    }
+    for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
+        stage[i] = x[i] + h * k[2][i];
+    }
+    { /* k4 = f(x + h k3, u, p) */
+        const gearsym_real *const xs = stage;
+        const gearsym_real t0 = p->d_ss*xs[3];
+        const gearsym_real t1 = u[2]*xs[6];
+        const gearsym_real t2 = u[1]*xs[5];
+        const gearsym_real t3 = u[5]*t1;
+        const gearsym_real t4 = u[3]*t2;
+        const gearsym_real t5 = p->d_ss*xs[1];
+        const gearsym_real t6 = p->k_ss*xs[2];
+        const gearsym_real t7 = hp0 - GEARSYM_LIT(0.0513015561808150337311)*t0 + GEARSYM_LIT(0.0513015561808150337311)*t6 + GEARSYM_LIT(0.0207782730582482923172)*t5 + GEARSYM_LIT(0.194235472757426228188)*t4;
+        const gearsym_real t8 = u[6]*t7;
+        const gearsym_real t9 = hp1 - GEARSYM_LIT(0.00385599385565343887287)*t6 - GEARSYM_LIT(0.00156176340852711173466)*t5 + GEARSYM_LIT(0.00385599385565343887287)*t0 + GEARSYM_LIT(2.93155983635187382235)*t3;
+        const gearsym_real t10 = u[4]*t9;
+        const gearsym_real t11 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        k[3][0] = hp2 - GEARSYM_LIT(15.3239977064154931876)*t3 - GEARSYM_LIT(2.23037549883239967414)*t4 - GEARSYM_LIT(1.97373313362513675684)*t6 - GEARSYM_LIT(0.799405886441934692928)*t5 + GEARSYM_LIT(1.97373313362513675684)*t0 + GEARSYM_LIT(2.78796937354049959268)*t10 + GEARSYM_LIT(17.0266641182394368751)*t8;
+        k[3][1] = hp3 - GEARSYM_LIT(2.16534456830660372097)*t3 - GEARSYM_LIT(0.611934397368056522974)*t6 - GEARSYM_LIT(0.247847062522501629394)*t5 - GEARSYM_LIT(0.0134794634614955199919)*t10 + GEARSYM_LIT(0.0107835707691964159936)*t4 + GEARSYM_LIT(0.611934397368056522974)*t0 + GEARSYM_LIT(2.40593840922955968997)*t8;
+        k[3][2] = t11;
+        k[3][3] = (GEARSYM_LIT(2.0)*t6 + hp4*t11)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*xs[4]);
+        k[3][4] = GEARSYM_LIT(0.0);
+        k[3][5] = GEARSYM_LIT(0.0);
+        k[3][6] = GEARSYM_LIT(0.0);
     }
     /* x is read at index i only before x_next[i] is written, so x_next may alias x. */
     for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
@@ -445,8 +510,9 @@ void gearsym_euio_2_3_euio_load_column(
  * mu_38, mu_05; because m_veh: not strongly detectable: invariant zero(s) 0+0j with Re s >= 0
  * (indistinguishable from the road load); mu_38: its element does not slide in this phase (mu
  * has no effect); mu_05: its element does not slide in this phase (mu has no effect).
- * Operations (about): 3570 add, 3899 mul, 17 div, 0 calls (4 rhs + 4 jac_x + outputs +
- * jac_outputs + the load column + 3393 add, 3554 mul, 4 div, 0 calls); stack: 403 reals.
+ * Operations (about): 2155 add, 2283 mul, 9 div, 0 calls (the prediction as ekf_predict: 506
+ * add, 600 mul, 2 div, 0 calls; jac_x + outputs + jac_outputs + the load column + 1629 add,
+ * 1636 mul, 4 div, 0 calls); stack: 483 reals.
  */
 int gearsym_euio_2_3_euio_step(
     gearsym_real *x,
@@ -462,16 +528,13 @@ int gearsym_euio_2_3_euio_step(
     const gearsym_real *held,
     gearsym_real *load)
 {
-    gearsym_real slopes[4][GEARSYM_EUIO_2_3_NX]; /* k1 .. k4; first (h A)^k E and the next term */
-    gearsym_real stage[GEARSYM_EUIO_2_3_NX];
+    gearsym_real series[2][GEARSYM_EUIO_2_3_NX]; /* (h J)^k E and the next term */
     gearsym_real rate[GEARSYM_EUIO_2_3_NX];
     gearsym_real column[GEARSYM_EUIO_2_3_NX]; /* E (euio_load_column) at the start */
     gearsym_real Ed[GEARSYM_EUIO_2_3_NX]; /* E_d = h (I + hA/2 + h^2A^2/6 + h^3A^3/24) E */
-    gearsym_real A[GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX]; /* jac_x at the start; then K_i = J(stage_i) (I + c h K_(i-1)) */
-    gearsym_real jac[GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX];
-    gearsym_real dstage[GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX]; /* I + c h K_(i-1); later I - L C */
-    gearsym_real F[GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX];
-    gearsym_real FP[GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX]; /* F P; later (I - L C) P */
+    gearsym_real Ja[GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX]; /* jac_x at the start */
+    gearsym_real dstage[GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX]; /* I - L C */
+    gearsym_real FP[GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX]; /* (I - L C) P */
     gearsym_real C[GEARSYM_EUIO_2_3_NY * GEARSYM_EUIO_2_3_NX];
     gearsym_real CP[GEARSYM_EUIO_2_3_NY * GEARSYM_EUIO_2_3_NX]; /* C P = (P C^T)^T */
     gearsym_real S[GEARSYM_EUIO_2_3_NY * GEARSYM_EUIO_2_3_NY]; /* C P C^T + R, then its LDL^T (D on the diagonal) */
@@ -484,8 +547,6 @@ int gearsym_euio_2_3_euio_step(
     gearsym_real Sinu[GEARSYM_EUIO_2_3_NY]; /* S^-1 nu */
     gearsym_real KL[GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NY]; /* K = P C^T S^-1, then in place the gain L */
     int hold[GEARSYM_EUIO_2_3_NX];
-    const gearsym_real half_h = GEARSYM_LIT(0.5) * h;
-    const gearsym_real sixth_h = h * (GEARSYM_LIT(1.0) / GEARSYM_LIT(6.0));
     gearsym_real info = GEARSYM_LIT(0.0);
     gearsym_real sigma2;
     gearsym_real d_hat = GEARSYM_LIT(0.0);
@@ -512,13 +573,12 @@ int gearsym_euio_2_3_euio_step(
     for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
         rate[i] = (hold[i] != 0) ? GEARSYM_LIT(0.0) : q[i];
     }
-    /* A = jac_x and E at the start (x is unchanged until the end of the prediction) */
-    gearsym_euio_2_3_jac_x(x, u_prev, p, A);
+    /* J = jac_x and E at the start (x is unchanged until the end of the prediction) */
+    gearsym_euio_2_3_jac_x(x, u_prev, p, Ja);
     gearsym_euio_2_3_euio_load_column(x, u_prev, p, column);
-    /* E_d = h (E + hA E / 2 + hA (hA E) / 6 + hA (hA (hA E)) / 24), the RK4 series of Gamma E;
-       slopes[0] holds (hA)^k E, slopes[1] the next term, before the stages need them */
+    /* E_d = h (E + hJ E / 2 + hJ (hJ E) / 6 + hJ (hJ (hJ E)) / 24), the RK4 series of Gamma E */
     for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
-        slopes[0][i] = column[i];
+        series[0][i] = column[i];
         Ed[i] = column[i];
     }
     for (stage_no = 1; stage_no <= 3; ++stage_no) {
@@ -527,85 +587,318 @@ int gearsym_euio_2_3_euio_step(
         for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
             gearsym_real sum = GEARSYM_LIT(0.0);
             for (k = 0; k < GEARSYM_EUIO_2_3_NX; ++k) {
-                sum += (h * A[i + k * GEARSYM_EUIO_2_3_NX]) * slopes[0][k];
+                sum += (h * Ja[i + k * GEARSYM_EUIO_2_3_NX]) * series[0][k];
             }
-            slopes[1][i] = sum;
+            series[1][i] = sum;
         }
         for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
-            slopes[0][i] = slopes[1][i];
-            Ed[i] += slopes[0][i] / divisor;
+            series[0][i] = series[1][i];
+            Ed[i] += series[0][i] / divisor;
         }
     }
     for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
         Ed[i] = h * Ed[i];
     }
 
-    /* Predict (as ekf_predict): stage 1: k1 = f(x), K1 = A; F accumulates h/6 (K1 + 2 K2 + 2 K3 + K4). */
-    gearsym_euio_2_3_rhs(x, u_prev, p, slopes[0]);
-    for (i = 0; i < GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX; ++i) {
-        F[i] = A[i];
-    }
-    for (stage_no = 2; stage_no <= 4; ++stage_no) {
-        const gearsym_real c = (stage_no == 4) ? h : half_h;
-        const gearsym_real weight = (stage_no == 4) ? GEARSYM_LIT(1.0) : GEARSYM_LIT(2.0);
+    /*
+     * Predict with u_prev: the same code as ekf_predict (symbolic/codegen/c/ekf_code.py, one
+     * emitter for both): x = RK4 step, P = F P F^T + h diag(rate), exactly symmetric.
+     */
+    {
+        const gearsym_real half_h = GEARSYM_LIT(0.5) * h;
+        const gearsym_real sixth_h = h * (GEARSYM_LIT(1.0) / GEARSYM_LIT(6.0));
+        const gearsym_real third_h = h * (GEARSYM_LIT(1.0) / GEARSYM_LIT(3.0));
+        gearsym_real slopes[4][7]; /* k1 .. k4 (the moving rows) */
+        gearsym_real stage[7];
+        gearsym_real j1[16]; /* K1 = J(x), 16 structural nonzeros */
+        gearsym_real js[16]; /* J(stage_i), its moving entries */
+        /* f and J: their terms without the moving states, once per step */
+        const gearsym_real hq0 = u_prev[6]*p->d_ss;
+        const gearsym_real hq1 = u_prev[4]*p->d_ss;
+        const gearsym_real hq2 = u_prev[6]*p->k_ss;
+        const gearsym_real hq3 = u_prev[4]*p->k_ss;
+        const gearsym_real hq4 = u_prev[2]*u_prev[5];
+        const gearsym_real hq6 = u_prev[1]*u_prev[3];
+        const gearsym_real hq12 = p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*x[4];
+        const gearsym_real hq5 = GEARSYM_LIT(15.3239977064154931876)*hq4;
+        const gearsym_real hq7 = GEARSYM_LIT(2.23037549883239967414)*hq6;
+        const gearsym_real hq8 = u_prev[6]*(-GEARSYM_LIT(0.448194679666402760828)*u_prev[0] + GEARSYM_LIT(0.194235472757426228188)*hq6*x[5]);
+        const gearsym_real hq9 = u_prev[4]*(-GEARSYM_LIT(0.984561434330364853118)*u_prev[0] + GEARSYM_LIT(2.93155983635187382235)*hq4*x[6]);
+        const gearsym_real hq10 = GEARSYM_LIT(2.16534456830660372097)*hq4;
+        const gearsym_real hq11 = GEARSYM_LIT(0.0107835707691964159936)*hq6;
+        const gearsym_real hq13 = (GEARSYM_LIT(1.0)/hq12);
+        const gearsym_real hq15 = (GEARSYM_LIT(1.0)/(hq12*hq12));
+        const gearsym_real hq17 = hq6*u_prev[6];
+        const gearsym_real hq18 = hq4*u_prev[4];
+        const gearsym_real hc0 = -GEARSYM_LIT(0.353784676319857407504)*hq0 + GEARSYM_LIT(0.799405886441934692928)*p->d_ss + GEARSYM_LIT(0.00435414855168980704254)*hq1;
+        const gearsym_real hc1 = -GEARSYM_LIT(0.873494365833727939126)*hq2 + GEARSYM_LIT(1.97373313362513675684)*p->k_ss + GEARSYM_LIT(0.0107503927741221335880)*hq3;
+        const gearsym_real hc2 = -GEARSYM_LIT(0.873494365833727939126)*hq0 + GEARSYM_LIT(1.97373313362513675684)*p->d_ss + GEARSYM_LIT(0.0107503927741221335880)*hq1;
+        const gearsym_real hc4 = -GEARSYM_LIT(0.247847062522501629394)*p->d_ss + GEARSYM_LIT(0.0000210517328007419034468)*hq1 + GEARSYM_LIT(0.0499912452282993146659)*hq0;
+        const gearsym_real hc5 = -GEARSYM_LIT(0.611934397368056522974)*p->k_ss + GEARSYM_LIT(0.0000519767282850317596101)*hq3 + GEARSYM_LIT(0.123428384468671007910)*hq2;
+        const gearsym_real hc6 = -GEARSYM_LIT(0.611934397368056522974)*p->d_ss + GEARSYM_LIT(0.0000519767282850317596101)*hq1 + GEARSYM_LIT(0.123428384468671007910)*hq0;
+        const gearsym_real hq14 = hq13*p->d_ss;
+        const gearsym_real hq16 = hq15*p->d_ss;
+        const gearsym_real hc3 = GEARSYM_LIT(2.78796937354049959268)*hq9 + GEARSYM_LIT(10.6903700874655741645)*u_prev[0] + GEARSYM_LIT(17.0266641182394368751)*hq8 - hq5*x[6] - hq7*x[5];
+        const gearsym_real hc7 = -GEARSYM_LIT(0.0134794634614955199919)*hq9 + GEARSYM_LIT(2.40593840922955968997)*hq8 + GEARSYM_LIT(2.43657355346023132632)*u_prev[0] + hq11*x[5] - hq10*x[6];
+        const gearsym_real hc9 = GEARSYM_LIT(2.0)*hq13*p->k_ss;
+        const gearsym_real hc12 = GEARSYM_LIT(0.216087380000000000000)*hq15*p->k_ss;
+        const gearsym_real hc14 = -hq7 + GEARSYM_LIT(3.30718215448814281217)*hq17;
+        const gearsym_real hc15 = hq11 + GEARSYM_LIT(0.467318584341953537290)*hq17;
+        const gearsym_real hc16 = -hq5 + GEARSYM_LIT(8.17309904045042316533)*hq18;
+        const gearsym_real hc17 = hq10 + GEARSYM_LIT(0.0395158536992928692338)*hq18;
+        const gearsym_real hc8 = (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*hq14;
+        const gearsym_real hc10 = GEARSYM_LIT(2.0)*hq14;
+        const gearsym_real hc11 = GEARSYM_LIT(0.0875202025111381125962)*hq16;
+        const gearsym_real hc13 = GEARSYM_LIT(0.216087380000000000000)*hq16;
+        gearsym_real tan2[24]; /* K2 */
+        gearsym_real tan3[24]; /* K3 */
+        gearsym_real cjh[16]; /* h/2 J, the entries without moving states */
+        gearsym_real cjf[16]; /* h J, the entries without moving states */
+        gearsym_real F[24]; /* F on the tangents' pattern */
+        gearsym_real A[28]; /* F[R, :] P */
 
-        for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
-            stage[i] = x[i] + c * slopes[stage_no - 2][i];
+        j1[0] = -hc0;
+        j1[1] = hc4;
+        j1[2] = (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0));
+        j1[3] = hc8;
+        j1[4] = -hc1;
+        j1[5] = hc5;
+        j1[6] = hc9;
+        j1[7] = hc2;
+        j1[8] = -hc6;
+        j1[9] = -GEARSYM_LIT(1.0);
+        j1[10] = -hc10;
+        j1[12] = hc14;
+        j1[13] = hc15;
+        j1[14] = hc16;
+        j1[15] = -hc17;
+        /* stage 1: f and the moving entries of J at x (one CSE, inline) */
+        {
+            const gearsym_real *const xs = x;
+            slopes[0][0] = hc3 + hc2*xs[3] + (-hc0)*xs[1] + (-hc1)*xs[2];
+            slopes[0][1] = hc7 + hc4*xs[1] + hc5*xs[2] + (-hc6)*xs[3];
+            slopes[0][2] = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+            slopes[0][3] = hc8*xs[1] + hc9*xs[2] + (-hc10)*xs[3];
+            j1[11] = hc13*xs[3] + (-hc11)*xs[1] + (-hc12)*xs[2];
         }
-        gearsym_euio_2_3_rhs(stage, u_prev, p, slopes[stage_no - 1]);
-        gearsym_euio_2_3_jac_x(stage, u_prev, p, jac);
-        for (j = 0; j < GEARSYM_EUIO_2_3_NX; ++j) {
-            for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
-                dstage[i + j * GEARSYM_EUIO_2_3_NX] = c * A[i + j * GEARSYM_EUIO_2_3_NX];
-            }
-            dstage[j + j * GEARSYM_EUIO_2_3_NX] += GEARSYM_LIT(1.0);
+        stage[4] = x[4]; /* its right-hand side is 0 */
+        stage[5] = x[5]; /* its right-hand side is 0 */
+        stage[6] = x[6]; /* its right-hand side is 0 */
+        /* stage 2: stage = x + half_h k1 */
+        stage[0] = x[0] + half_h * slopes[0][0];
+        stage[1] = x[1] + half_h * slopes[0][1];
+        stage[2] = x[2] + half_h * slopes[0][2];
+        stage[3] = x[3] + half_h * slopes[0][3];
+        {
+            const gearsym_real *const xs = stage;
+            slopes[1][0] = hc3 + hc2*xs[3] + (-hc0)*xs[1] + (-hc1)*xs[2];
+            slopes[1][1] = hc7 + hc4*xs[1] + hc5*xs[2] + (-hc6)*xs[3];
+            slopes[1][2] = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+            slopes[1][3] = hc8*xs[1] + hc9*xs[2] + (-hc10)*xs[3];
+            js[11] = hc13*xs[3] + (-hc11)*xs[1] + (-hc12)*xs[2];
         }
-        for (j = 0; j < GEARSYM_EUIO_2_3_NX; ++j) {
-            for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
-                gearsym_real sum = GEARSYM_LIT(0.0);
-                for (k = 0; k < GEARSYM_EUIO_2_3_NX; ++k) {
-                    sum += jac[i + k * GEARSYM_EUIO_2_3_NX] * dstage[k + j * GEARSYM_EUIO_2_3_NX];
-                }
-                A[i + j * GEARSYM_EUIO_2_3_NX] = sum;
-            }
+        /* K2 = J + half_h J K1, over structural nonzeros */
+        cjh[0] = half_h * j1[0];
+        cjh[1] = half_h * j1[1];
+        cjh[2] = half_h * j1[2];
+        cjh[3] = half_h * j1[3];
+        cjh[4] = half_h * j1[4];
+        cjh[5] = half_h * j1[5];
+        cjh[6] = half_h * j1[6];
+        cjh[7] = half_h * j1[7];
+        cjh[8] = half_h * j1[8];
+        cjh[9] = half_h * j1[9];
+        cjh[10] = half_h * j1[10];
+        tan2[0] = j1[0] + cjh[0] * j1[1] + cjh[4] * j1[2] + cjh[7] * j1[3];
+        tan2[1] = j1[1] + cjh[1] * j1[1] + cjh[5] * j1[2] + cjh[8] * j1[3];
+        tan2[2] = j1[2] + cjh[2] * j1[1] + cjh[9] * j1[3];
+        tan2[3] = j1[3] + cjh[3] * j1[1] + cjh[6] * j1[2] + cjh[10] * j1[3];
+        tan2[4] = j1[4] + cjh[0] * j1[5] + cjh[7] * j1[6];
+        tan2[5] = j1[5] + cjh[1] * j1[5] + cjh[8] * j1[6];
+        tan2[6] = cjh[2] * j1[5] + cjh[9] * j1[6];
+        tan2[7] = j1[6] + cjh[3] * j1[5] + cjh[10] * j1[6];
+        tan2[8] = j1[7] + cjh[0] * j1[8] + cjh[4] * j1[9] + cjh[7] * j1[10];
+        tan2[9] = j1[8] + cjh[1] * j1[8] + cjh[5] * j1[9] + cjh[8] * j1[10];
+        tan2[10] = j1[9] + cjh[2] * j1[8] + cjh[9] * j1[10];
+        tan2[11] = j1[10] + cjh[3] * j1[8] + cjh[6] * j1[9] + cjh[10] * j1[10];
+        tan2[12] = cjh[7] * j1[11];
+        tan2[13] = cjh[8] * j1[11];
+        tan2[14] = cjh[9] * j1[11];
+        tan2[15] = js[11] + cjh[10] * j1[11];
+        tan2[16] = j1[12] + cjh[0] * j1[13];
+        tan2[17] = j1[13] + cjh[1] * j1[13];
+        tan2[18] = cjh[2] * j1[13];
+        tan2[19] = cjh[3] * j1[13];
+        tan2[20] = j1[14] + cjh[0] * j1[15];
+        tan2[21] = j1[15] + cjh[1] * j1[15];
+        tan2[22] = cjh[2] * j1[15];
+        tan2[23] = cjh[3] * j1[15];
+        /* stage 3: stage = x + half_h k2 */
+        stage[0] = x[0] + half_h * slopes[1][0];
+        stage[1] = x[1] + half_h * slopes[1][1];
+        stage[2] = x[2] + half_h * slopes[1][2];
+        stage[3] = x[3] + half_h * slopes[1][3];
+        {
+            const gearsym_real *const xs = stage;
+            slopes[2][0] = hc3 + hc2*xs[3] + (-hc0)*xs[1] + (-hc1)*xs[2];
+            slopes[2][1] = hc7 + hc4*xs[1] + hc5*xs[2] + (-hc6)*xs[3];
+            slopes[2][2] = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+            slopes[2][3] = hc8*xs[1] + hc9*xs[2] + (-hc10)*xs[3];
+            js[11] = hc13*xs[3] + (-hc11)*xs[1] + (-hc12)*xs[2];
         }
-        for (i = 0; i < GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX; ++i) {
-            F[i] += weight * A[i];
+        /* K3 = J + half_h J K2, over structural nonzeros */
+        tan3[0] = j1[0] + cjh[0] * tan2[1] + cjh[4] * tan2[2] + cjh[7] * tan2[3];
+        tan3[1] = j1[1] + cjh[1] * tan2[1] + cjh[5] * tan2[2] + cjh[8] * tan2[3];
+        tan3[2] = j1[2] + cjh[2] * tan2[1] + cjh[9] * tan2[3];
+        tan3[3] = j1[3] + cjh[3] * tan2[1] + cjh[6] * tan2[2] + cjh[10] * tan2[3];
+        tan3[4] = j1[4] + cjh[0] * tan2[5] + cjh[4] * tan2[6] + cjh[7] * tan2[7];
+        tan3[5] = j1[5] + cjh[1] * tan2[5] + cjh[5] * tan2[6] + cjh[8] * tan2[7];
+        tan3[6] = cjh[2] * tan2[5] + cjh[9] * tan2[7];
+        tan3[7] = j1[6] + cjh[3] * tan2[5] + cjh[6] * tan2[6] + cjh[10] * tan2[7];
+        tan3[8] = j1[7] + cjh[0] * tan2[9] + cjh[4] * tan2[10] + cjh[7] * tan2[11];
+        tan3[9] = j1[8] + cjh[1] * tan2[9] + cjh[5] * tan2[10] + cjh[8] * tan2[11];
+        tan3[10] = j1[9] + cjh[2] * tan2[9] + cjh[9] * tan2[11];
+        tan3[11] = j1[10] + cjh[3] * tan2[9] + cjh[6] * tan2[10] + cjh[10] * tan2[11];
+        tan3[12] = cjh[0] * tan2[13] + cjh[4] * tan2[14] + cjh[7] * tan2[15];
+        tan3[13] = cjh[1] * tan2[13] + cjh[5] * tan2[14] + cjh[8] * tan2[15];
+        tan3[14] = cjh[2] * tan2[13] + cjh[9] * tan2[15];
+        tan3[15] = js[11] + cjh[3] * tan2[13] + cjh[6] * tan2[14] + cjh[10] * tan2[15];
+        tan3[16] = j1[12] + cjh[0] * tan2[17] + cjh[4] * tan2[18] + cjh[7] * tan2[19];
+        tan3[17] = j1[13] + cjh[1] * tan2[17] + cjh[5] * tan2[18] + cjh[8] * tan2[19];
+        tan3[18] = cjh[2] * tan2[17] + cjh[9] * tan2[19];
+        tan3[19] = cjh[3] * tan2[17] + cjh[6] * tan2[18] + cjh[10] * tan2[19];
+        tan3[20] = j1[14] + cjh[0] * tan2[21] + cjh[4] * tan2[22] + cjh[7] * tan2[23];
+        tan3[21] = j1[15] + cjh[1] * tan2[21] + cjh[5] * tan2[22] + cjh[8] * tan2[23];
+        tan3[22] = cjh[2] * tan2[21] + cjh[9] * tan2[23];
+        tan3[23] = cjh[3] * tan2[21] + cjh[6] * tan2[22] + cjh[10] * tan2[23];
+        /* stage 4: stage = x + h k3 */
+        stage[0] = x[0] + h * slopes[2][0];
+        stage[1] = x[1] + h * slopes[2][1];
+        stage[2] = x[2] + h * slopes[2][2];
+        stage[3] = x[3] + h * slopes[2][3];
+        {
+            const gearsym_real *const xs = stage;
+            slopes[3][0] = hc3 + hc2*xs[3] + (-hc0)*xs[1] + (-hc1)*xs[2];
+            slopes[3][1] = hc7 + hc4*xs[1] + hc5*xs[2] + (-hc6)*xs[3];
+            slopes[3][2] = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+            slopes[3][3] = hc8*xs[1] + hc9*xs[2] + (-hc10)*xs[3];
+            js[11] = hc13*xs[3] + (-hc11)*xs[1] + (-hc12)*xs[2];
         }
-    }
-    for (i = 0; i < GEARSYM_EUIO_2_3_NX * GEARSYM_EUIO_2_3_NX; ++i) {
-        F[i] *= sixth_h;
-    }
-    for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
-        F[i + i * GEARSYM_EUIO_2_3_NX] += GEARSYM_LIT(1.0);
-        x[i] = x[i] + sixth_h * (slopes[0][i] + GEARSYM_LIT(2.0) * (slopes[1][i] + slopes[2][i]) + slopes[3][i]);
-    }
-    /* P = F P F^T + h diag(rate), then (P + P^T) / 2 */
-    for (j = 0; j < GEARSYM_EUIO_2_3_NX; ++j) {
-        for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
-            gearsym_real sum = GEARSYM_LIT(0.0);
-            for (k = 0; k < GEARSYM_EUIO_2_3_NX; ++k) {
-                sum += F[i + k * GEARSYM_EUIO_2_3_NX] * P[k + j * GEARSYM_EUIO_2_3_NX];
-            }
-            FP[i + j * GEARSYM_EUIO_2_3_NX] = sum;
-        }
-    }
-    for (j = 0; j < GEARSYM_EUIO_2_3_NX; ++j) {
-        for (i = 0; i < GEARSYM_EUIO_2_3_NX; ++i) {
-            gearsym_real sum = GEARSYM_LIT(0.0);
-            for (k = 0; k < GEARSYM_EUIO_2_3_NX; ++k) {
-                sum += FP[i + k * GEARSYM_EUIO_2_3_NX] * F[j + k * GEARSYM_EUIO_2_3_NX];
-            }
-            P[i + j * GEARSYM_EUIO_2_3_NX] = sum;
-        }
-        P[j + j * GEARSYM_EUIO_2_3_NX] += h * rate[j];
-    }
-    for (j = 0; j < GEARSYM_EUIO_2_3_NX; ++j) {
-        for (i = j + 1; i < GEARSYM_EUIO_2_3_NX; ++i) {
-            const gearsym_real mean = GEARSYM_LIT(0.5) * (P[i + j * GEARSYM_EUIO_2_3_NX] + P[j + i * GEARSYM_EUIO_2_3_NX]);
-            P[i + j * GEARSYM_EUIO_2_3_NX] = mean;
-            P[j + i * GEARSYM_EUIO_2_3_NX] = mean;
-        }
+        /* K4 = J + h J K3, over structural nonzeros */
+        cjf[0] = h * j1[0];
+        cjf[1] = h * j1[1];
+        cjf[2] = h * j1[2];
+        cjf[3] = h * j1[3];
+        cjf[4] = h * j1[4];
+        cjf[5] = h * j1[5];
+        cjf[6] = h * j1[6];
+        cjf[7] = h * j1[7];
+        cjf[8] = h * j1[8];
+        cjf[9] = h * j1[9];
+        cjf[10] = h * j1[10];
+        /* F = I + h/6 (K1 + K4) + h/3 (K2 + K3): its rows outside R are unit rows */
+        F[0] = sixth_h * (j1[0] + (j1[0] + cjf[0] * tan3[1] + cjf[4] * tan3[2] + cjf[7] * tan3[3])) + third_h * (tan2[0] + tan3[0]);
+        F[1] = GEARSYM_LIT(1.0) + sixth_h * (j1[1] + (j1[1] + cjf[1] * tan3[1] + cjf[5] * tan3[2] + cjf[8] * tan3[3])) + third_h * (tan2[1] + tan3[1]);
+        F[2] = sixth_h * (j1[2] + (j1[2] + cjf[2] * tan3[1] + cjf[9] * tan3[3])) + third_h * (tan2[2] + tan3[2]);
+        F[3] = sixth_h * (j1[3] + (j1[3] + cjf[3] * tan3[1] + cjf[6] * tan3[2] + cjf[10] * tan3[3])) + third_h * (tan2[3] + tan3[3]);
+        F[4] = sixth_h * (j1[4] + (j1[4] + cjf[0] * tan3[5] + cjf[4] * tan3[6] + cjf[7] * tan3[7])) + third_h * (tan2[4] + tan3[4]);
+        F[5] = sixth_h * (j1[5] + (j1[5] + cjf[1] * tan3[5] + cjf[5] * tan3[6] + cjf[8] * tan3[7])) + third_h * (tan2[5] + tan3[5]);
+        F[6] = GEARSYM_LIT(1.0) + sixth_h * (cjf[2] * tan3[5] + cjf[9] * tan3[7]) + third_h * (tan2[6] + tan3[6]);
+        F[7] = sixth_h * (j1[6] + (j1[6] + cjf[3] * tan3[5] + cjf[6] * tan3[6] + cjf[10] * tan3[7])) + third_h * (tan2[7] + tan3[7]);
+        F[8] = sixth_h * (j1[7] + (j1[7] + cjf[0] * tan3[9] + cjf[4] * tan3[10] + cjf[7] * tan3[11])) + third_h * (tan2[8] + tan3[8]);
+        F[9] = sixth_h * (j1[8] + (j1[8] + cjf[1] * tan3[9] + cjf[5] * tan3[10] + cjf[8] * tan3[11])) + third_h * (tan2[9] + tan3[9]);
+        F[10] = sixth_h * (j1[9] + (j1[9] + cjf[2] * tan3[9] + cjf[9] * tan3[11])) + third_h * (tan2[10] + tan3[10]);
+        F[11] = GEARSYM_LIT(1.0) + sixth_h * (j1[10] + (j1[10] + cjf[3] * tan3[9] + cjf[6] * tan3[10] + cjf[10] * tan3[11])) + third_h * (tan2[11] + tan3[11]);
+        F[12] = sixth_h * (cjf[0] * tan3[13] + cjf[4] * tan3[14] + cjf[7] * tan3[15]) + third_h * (tan2[12] + tan3[12]);
+        F[13] = sixth_h * (cjf[1] * tan3[13] + cjf[5] * tan3[14] + cjf[8] * tan3[15]) + third_h * (tan2[13] + tan3[13]);
+        F[14] = sixth_h * (cjf[2] * tan3[13] + cjf[9] * tan3[15]) + third_h * (tan2[14] + tan3[14]);
+        F[15] = sixth_h * (j1[11] + (js[11] + cjf[3] * tan3[13] + cjf[6] * tan3[14] + cjf[10] * tan3[15])) + third_h * (tan2[15] + tan3[15]);
+        F[16] = sixth_h * (j1[12] + (j1[12] + cjf[0] * tan3[17] + cjf[4] * tan3[18] + cjf[7] * tan3[19])) + third_h * (tan2[16] + tan3[16]);
+        F[17] = sixth_h * (j1[13] + (j1[13] + cjf[1] * tan3[17] + cjf[5] * tan3[18] + cjf[8] * tan3[19])) + third_h * (tan2[17] + tan3[17]);
+        F[18] = sixth_h * (cjf[2] * tan3[17] + cjf[9] * tan3[19]) + third_h * (tan2[18] + tan3[18]);
+        F[19] = sixth_h * (cjf[3] * tan3[17] + cjf[6] * tan3[18] + cjf[10] * tan3[19]) + third_h * (tan2[19] + tan3[19]);
+        F[20] = sixth_h * (j1[14] + (j1[14] + cjf[0] * tan3[21] + cjf[4] * tan3[22] + cjf[7] * tan3[23])) + third_h * (tan2[20] + tan3[20]);
+        F[21] = sixth_h * (j1[15] + (j1[15] + cjf[1] * tan3[21] + cjf[5] * tan3[22] + cjf[8] * tan3[23])) + third_h * (tan2[21] + tan3[21]);
+        F[22] = sixth_h * (cjf[2] * tan3[21] + cjf[9] * tan3[23]) + third_h * (tan2[22] + tan3[22]);
+        F[23] = sixth_h * (cjf[3] * tan3[21] + cjf[6] * tan3[22] + cjf[10] * tan3[23]) + third_h * (tan2[23] + tan3[23]);
+        /* x = x + h/6 (k1 + 2 (k2 + k3) + k4) */
+        x[0] = x[0] + sixth_h * (slopes[0][0] + GEARSYM_LIT(2.0) * (slopes[1][0] + slopes[2][0]) + slopes[3][0]);
+        x[1] = x[1] + sixth_h * (slopes[0][1] + GEARSYM_LIT(2.0) * (slopes[1][1] + slopes[2][1]) + slopes[3][1]);
+        x[2] = x[2] + sixth_h * (slopes[0][2] + GEARSYM_LIT(2.0) * (slopes[1][2] + slopes[2][2]) + slopes[3][2]);
+        x[3] = x[3] + sixth_h * (slopes[0][3] + GEARSYM_LIT(2.0) * (slopes[1][3] + slopes[2][3]) + slopes[3][3]);
+        /* A = F[R, :] P with R = {0, 1, 2, 3} (A[r + j*4]) */
+        A[0] = P[0] + F[0] * P[1] + F[4] * P[2] + F[8] * P[3] + F[12] * P[4] + F[16] * P[5] + F[20] * P[6];
+        A[4] = P[7] + F[0] * P[8] + F[4] * P[9] + F[8] * P[10] + F[12] * P[11] + F[16] * P[12] + F[20] * P[13];
+        A[5] = F[1] * P[8] + F[5] * P[9] + F[9] * P[10] + F[13] * P[11] + F[17] * P[12] + F[21] * P[13];
+        A[6] = F[2] * P[8] + F[6] * P[9] + F[10] * P[10] + F[14] * P[11] + F[18] * P[12] + F[22] * P[13];
+        A[7] = F[3] * P[8] + F[7] * P[9] + F[11] * P[10] + F[15] * P[11] + F[19] * P[12] + F[23] * P[13];
+        A[8] = P[14] + F[0] * P[15] + F[4] * P[16] + F[8] * P[17] + F[12] * P[18] + F[16] * P[19] + F[20] * P[20];
+        A[9] = F[1] * P[15] + F[5] * P[16] + F[9] * P[17] + F[13] * P[18] + F[17] * P[19] + F[21] * P[20];
+        A[10] = F[2] * P[15] + F[6] * P[16] + F[10] * P[17] + F[14] * P[18] + F[18] * P[19] + F[22] * P[20];
+        A[11] = F[3] * P[15] + F[7] * P[16] + F[11] * P[17] + F[15] * P[18] + F[19] * P[19] + F[23] * P[20];
+        A[12] = P[21] + F[0] * P[22] + F[4] * P[23] + F[8] * P[24] + F[12] * P[25] + F[16] * P[26] + F[20] * P[27];
+        A[13] = F[1] * P[22] + F[5] * P[23] + F[9] * P[24] + F[13] * P[25] + F[17] * P[26] + F[21] * P[27];
+        A[14] = F[2] * P[22] + F[6] * P[23] + F[10] * P[24] + F[14] * P[25] + F[18] * P[26] + F[22] * P[27];
+        A[15] = F[3] * P[22] + F[7] * P[23] + F[11] * P[24] + F[15] * P[25] + F[19] * P[26] + F[23] * P[27];
+        A[16] = P[28] + F[0] * P[29] + F[4] * P[30] + F[8] * P[31] + F[12] * P[32] + F[16] * P[33] + F[20] * P[34];
+        A[17] = F[1] * P[29] + F[5] * P[30] + F[9] * P[31] + F[13] * P[32] + F[17] * P[33] + F[21] * P[34];
+        A[18] = F[2] * P[29] + F[6] * P[30] + F[10] * P[31] + F[14] * P[32] + F[18] * P[33] + F[22] * P[34];
+        A[19] = F[3] * P[29] + F[7] * P[30] + F[11] * P[31] + F[15] * P[32] + F[19] * P[33] + F[23] * P[34];
+        A[20] = P[35] + F[0] * P[36] + F[4] * P[37] + F[8] * P[38] + F[12] * P[39] + F[16] * P[40] + F[20] * P[41];
+        A[21] = F[1] * P[36] + F[5] * P[37] + F[9] * P[38] + F[13] * P[39] + F[17] * P[40] + F[21] * P[41];
+        A[22] = F[2] * P[36] + F[6] * P[37] + F[10] * P[38] + F[14] * P[39] + F[18] * P[40] + F[22] * P[41];
+        A[23] = F[3] * P[36] + F[7] * P[37] + F[11] * P[38] + F[15] * P[39] + F[19] * P[40] + F[23] * P[41];
+        A[24] = P[42] + F[0] * P[43] + F[4] * P[44] + F[8] * P[45] + F[12] * P[46] + F[16] * P[47] + F[20] * P[48];
+        A[25] = F[1] * P[43] + F[5] * P[44] + F[9] * P[45] + F[13] * P[46] + F[17] * P[47] + F[21] * P[48];
+        A[26] = F[2] * P[43] + F[6] * P[44] + F[10] * P[45] + F[14] * P[46] + F[18] * P[47] + F[22] * P[48];
+        A[27] = F[3] * P[43] + F[7] * P[44] + F[11] * P[45] + F[15] * P[46] + F[19] * P[47] + F[23] * P[48];
+        /* P = F P F^T + h diag(rate), blockwise, symmetric by construction */
+        P[0] = A[0] + F[0] * A[4] + F[4] * A[8] + F[8] * A[12] + F[12] * A[16] + F[16] * A[20] + F[20] * A[24] + h * rate[0];
+        P[7] = F[1] * A[4] + F[5] * A[8] + F[9] * A[12] + F[13] * A[16] + F[17] * A[20] + F[21] * A[24];
+        P[1] = P[7];
+        P[8] = F[1] * A[5] + F[5] * A[9] + F[9] * A[13] + F[13] * A[17] + F[17] * A[21] + F[21] * A[25] + h * rate[1];
+        P[14] = F[2] * A[4] + F[6] * A[8] + F[10] * A[12] + F[14] * A[16] + F[18] * A[20] + F[22] * A[24];
+        P[2] = P[14];
+        P[15] = F[2] * A[5] + F[6] * A[9] + F[10] * A[13] + F[14] * A[17] + F[18] * A[21] + F[22] * A[25];
+        P[9] = P[15];
+        P[16] = F[2] * A[6] + F[6] * A[10] + F[10] * A[14] + F[14] * A[18] + F[18] * A[22] + F[22] * A[26] + h * rate[2];
+        P[21] = F[3] * A[4] + F[7] * A[8] + F[11] * A[12] + F[15] * A[16] + F[19] * A[20] + F[23] * A[24];
+        P[3] = P[21];
+        P[22] = F[3] * A[5] + F[7] * A[9] + F[11] * A[13] + F[15] * A[17] + F[19] * A[21] + F[23] * A[25];
+        P[10] = P[22];
+        P[23] = F[3] * A[6] + F[7] * A[10] + F[11] * A[14] + F[15] * A[18] + F[19] * A[22] + F[23] * A[26];
+        P[17] = P[23];
+        P[24] = F[3] * A[7] + F[7] * A[11] + F[11] * A[15] + F[15] * A[19] + F[19] * A[23] + F[23] * A[27] + h * rate[3];
+        P[28] = A[16];
+        P[4] = P[28];
+        P[29] = A[17];
+        P[11] = P[29];
+        P[30] = A[18];
+        P[18] = P[30];
+        P[31] = A[19];
+        P[25] = P[31];
+        P[35] = A[20];
+        P[5] = P[35];
+        P[36] = A[21];
+        P[12] = P[36];
+        P[37] = A[22];
+        P[19] = P[37];
+        P[38] = A[23];
+        P[26] = P[38];
+        P[42] = A[24];
+        P[6] = P[42];
+        P[43] = A[25];
+        P[13] = P[43];
+        P[44] = A[26];
+        P[20] = P[44];
+        P[45] = A[27];
+        P[27] = P[45];
+        P[32] += h * rate[4]; /* a unit row of F: no product */
+        P[33] = P[39]; /* exactly symmetric */
+        P[40] += h * rate[5]; /* a unit row of F: no product */
+        P[34] = P[46]; /* exactly symmetric */
+        P[41] = P[47]; /* exactly symmetric */
+        P[48] += h * rate[6]; /* a unit row of F: no product */
     }
 
     /* A measurement that is NaN or infinite: a dropout, the prediction stands (as the library). */

@@ -334,9 +334,7 @@ void gearsym_shift_6_7_mu_rk4_step(
     gearsym_real stage[GEARSYM_SHIFT_6_7_MU_NX];
     const gearsym_real half_h = GEARSYM_LIT(0.5) * h;
     const gearsym_real sixth_h = h * (GEARSYM_LIT(1.0) / GEARSYM_LIT(6.0));
-    const gearsym_real *xs = x;
     int i;
-    int s;
     /* The right-hand side's terms in u and p only: u is held over the step, so once. */
     const gearsym_real t0 = GEARSYM_SIN(p->zeta);
     const gearsym_real t1 = GEARSYM_COS(p->zeta);
@@ -350,24 +348,58 @@ void gearsym_shift_6_7_mu_rk4_step(
     const gearsym_real hp5 = -(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*p->m_veh;
     const gearsym_real hp6 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*p->m_veh));
 
-    for (s = 0; s < 4; ++s) {
-        /* k_s = f(xs, u, p), xs = x, x + h/2 k1, x + h/2 k2, x + h k3 */
+    { /* k1 = f(x, u, p) */
+        const gearsym_real *const xs = x;
         const gearsym_real t3 = p->d_ss*xs[3];
         const gearsym_real t4 = p->k_ss*xs[2];
         const gearsym_real t6 = p->d_ss*xs[1];
         const gearsym_real t7 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
-        k[s][0] = hp0 - GEARSYM_LIT(1.66444901376985388155)*t6 - GEARSYM_LIT(4.10952461499776923356)*t4 + GEARSYM_LIT(4.10952461499776923356)*t3;
-        k[s][1] = hp1 - GEARSYM_LIT(5.00459337605401915750)*t4 - GEARSYM_LIT(2.02697180075091905934)*t6 + GEARSYM_LIT(5.00459337605401915750)*t3;
-        k[s][2] = t7;
-        k[s][3] = hp6*(hp5 + GEARSYM_LIT(2.0)*t4 + hp2*t7 + hp3*(xs[3]*xs[3]) + hp4*xs[3]);
-        if (s < 3) {
-            const gearsym_real c = (s == 2) ? h : half_h;
-
-            for (i = 0; i < GEARSYM_SHIFT_6_7_MU_NX; ++i) {
-                stage[i] = x[i] + c * k[s][i];
-            }
-            xs = stage;
-        }
+        k[0][0] = hp0 - GEARSYM_LIT(1.66444901376985388155)*t6 - GEARSYM_LIT(4.10952461499776923356)*t4 + GEARSYM_LIT(4.10952461499776923356)*t3;
+        k[0][1] = hp1 - GEARSYM_LIT(5.00459337605401915750)*t4 - GEARSYM_LIT(2.02697180075091905934)*t6 + GEARSYM_LIT(5.00459337605401915750)*t3;
+        k[0][2] = t7;
+        k[0][3] = hp6*(hp5 + GEARSYM_LIT(2.0)*t4 + hp2*t7 + hp3*(xs[3]*xs[3]) + hp4*xs[3]);
+    }
+    for (i = 0; i < GEARSYM_SHIFT_6_7_MU_NX; ++i) {
+        stage[i] = x[i] + half_h * k[0][i];
+    }
+    { /* k2 = f(x + h/2 k1, u, p) */
+        const gearsym_real *const xs = stage;
+        const gearsym_real t3 = p->d_ss*xs[3];
+        const gearsym_real t4 = p->k_ss*xs[2];
+        const gearsym_real t6 = p->d_ss*xs[1];
+        const gearsym_real t7 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        k[1][0] = hp0 - GEARSYM_LIT(1.66444901376985388155)*t6 - GEARSYM_LIT(4.10952461499776923356)*t4 + GEARSYM_LIT(4.10952461499776923356)*t3;
+        k[1][1] = hp1 - GEARSYM_LIT(5.00459337605401915750)*t4 - GEARSYM_LIT(2.02697180075091905934)*t6 + GEARSYM_LIT(5.00459337605401915750)*t3;
+        k[1][2] = t7;
+        k[1][3] = hp6*(hp5 + GEARSYM_LIT(2.0)*t4 + hp2*t7 + hp3*(xs[3]*xs[3]) + hp4*xs[3]);
+    }
+    for (i = 0; i < GEARSYM_SHIFT_6_7_MU_NX; ++i) {
+        stage[i] = x[i] + half_h * k[1][i];
+    }
+    { /* k3 = f(x + h/2 k2, u, p) */
+        const gearsym_real *const xs = stage;
+        const gearsym_real t3 = p->d_ss*xs[3];
+        const gearsym_real t4 = p->k_ss*xs[2];
+        const gearsym_real t6 = p->d_ss*xs[1];
+        const gearsym_real t7 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        k[2][0] = hp0 - GEARSYM_LIT(1.66444901376985388155)*t6 - GEARSYM_LIT(4.10952461499776923356)*t4 + GEARSYM_LIT(4.10952461499776923356)*t3;
+        k[2][1] = hp1 - GEARSYM_LIT(5.00459337605401915750)*t4 - GEARSYM_LIT(2.02697180075091905934)*t6 + GEARSYM_LIT(5.00459337605401915750)*t3;
+        k[2][2] = t7;
+        k[2][3] = hp6*(hp5 + GEARSYM_LIT(2.0)*t4 + hp2*t7 + hp3*(xs[3]*xs[3]) + hp4*xs[3]);
+    }
+    for (i = 0; i < GEARSYM_SHIFT_6_7_MU_NX; ++i) {
+        stage[i] = x[i] + h * k[2][i];
+    }
+    { /* k4 = f(x + h k3, u, p) */
+        const gearsym_real *const xs = stage;
+        const gearsym_real t3 = p->d_ss*xs[3];
+        const gearsym_real t4 = p->k_ss*xs[2];
+        const gearsym_real t6 = p->d_ss*xs[1];
+        const gearsym_real t7 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        k[3][0] = hp0 - GEARSYM_LIT(1.66444901376985388155)*t6 - GEARSYM_LIT(4.10952461499776923356)*t4 + GEARSYM_LIT(4.10952461499776923356)*t3;
+        k[3][1] = hp1 - GEARSYM_LIT(5.00459337605401915750)*t4 - GEARSYM_LIT(2.02697180075091905934)*t6 + GEARSYM_LIT(5.00459337605401915750)*t3;
+        k[3][2] = t7;
+        k[3][3] = hp6*(hp5 + GEARSYM_LIT(2.0)*t4 + hp2*t7 + hp3*(xs[3]*xs[3]) + hp4*xs[3]);
     }
     /* x is read at index i only before x_next[i] is written, so x_next may alias x. */
     for (i = 0; i < GEARSYM_SHIFT_6_7_MU_NX; ++i) {

@@ -614,9 +614,7 @@ void gearsym_shift_7_8_mu_sens_rk4_step(
     gearsym_real stage[GEARSYM_SHIFT_7_8_MU_SENS_NX];
     const gearsym_real half_h = GEARSYM_LIT(0.5) * h;
     const gearsym_real sixth_h = h * (GEARSYM_LIT(1.0) / GEARSYM_LIT(6.0));
-    const gearsym_real *xs = x;
     int i;
-    int s;
     /* The right-hand side's terms in u and p only: u is held over the step, so once. */
     const gearsym_real t0 = GEARSYM_SIN(p->zeta);
     const gearsym_real t1 = GEARSYM_COS(p->zeta);
@@ -653,8 +651,8 @@ void gearsym_shift_7_8_mu_sens_rk4_step(
     const gearsym_real hp16 = t0*p->m_veh;
     const gearsym_real hp17 = -(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t17;
 
-    for (s = 0; s < 4; ++s) {
-        /* k_s = f(xs, u, p), xs = x, x + h/2 k1, x + h/2 k2, x + h k3 */
+    { /* k1 = f(x, u, p) */
+        const gearsym_real *const xs = x;
         const gearsym_real t7 = GEARSYM_LIT(1.66444901376985388155)*xs[1];
         const gearsym_real t8 = GEARSYM_LIT(4.10952461499776923356)*xs[2];
         const gearsym_real t10 = GEARSYM_LIT(2.02697180075091905934)*xs[1];
@@ -673,38 +671,174 @@ void gearsym_shift_7_8_mu_sens_rk4_step(
         const gearsym_real t31 = p->k_ss*xs[18];
         const gearsym_real t32 = p->d_ss*xs[21];
         const gearsym_real t33 = p->k_ss*xs[22];
-        k[s][0] = hp8 + t2*xs[3] + hp6*t7 + hp7*t8;
-        k[s][1] = hp11 + t3*xs[3] + hp9*t10 + hp10*t11;
-        k[s][2] = t12;
-        k[s][3] = t14*t21;
-        k[s][4] = -GEARSYM_LIT(1.66444901376985388155)*t22 - GEARSYM_LIT(4.10952461499776923356)*t23 + t2*xs[7];
-        k[s][5] = -GEARSYM_LIT(5.00459337605401915750)*t23 - GEARSYM_LIT(2.02697180075091905934)*t22 + t3*xs[7];
-        k[s][6] = -xs[7] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[5];
-        k[s][7] = t14*(hp13 + hp12*t19) + t15*t23 + t24*t22 + t25*xs[7] + hp14*t21;
-        k[s][8] = -t8 - GEARSYM_LIT(1.66444901376985388155)*t26 - GEARSYM_LIT(4.10952461499776923356)*t27 + t2*xs[11];
-        k[s][9] = -t11 - GEARSYM_LIT(5.00459337605401915750)*t27 - GEARSYM_LIT(2.02697180075091905934)*t26 + t3*xs[11];
-        k[s][10] = -xs[11] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[9];
-        k[s][11] = t15*t27 + t15*xs[2] + t24*t26 + t25*xs[11];
-        k[s][12] = -t7 - GEARSYM_LIT(1.66444901376985388155)*t28 - GEARSYM_LIT(4.10952461499776923356)*t29 + GEARSYM_LIT(4.10952461499776923356)*xs[3] + t2*xs[15];
-        k[s][13] = -t10 - GEARSYM_LIT(5.00459337605401915750)*t29 - GEARSYM_LIT(2.02697180075091905934)*t28 + GEARSYM_LIT(5.00459337605401915750)*xs[3] + t3*xs[15];
-        k[s][14] = -xs[15] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[13];
-        k[s][15] = t14*(-GEARSYM_LIT(2.0)*xs[3] + (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*xs[1]) + t15*t29 + t24*t28 + t25*xs[15];
-        k[s][16] = hp15 - GEARSYM_LIT(1.66444901376985388155)*t30 - GEARSYM_LIT(4.10952461499776923356)*t31 + t2*xs[19];
-        k[s][17] = t9 - GEARSYM_LIT(5.00459337605401915750)*t31 - GEARSYM_LIT(2.02697180075091905934)*t30 + t3*xs[19];
-        k[s][18] = -xs[19] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[17];
-        k[s][19] = t15*t31 + t24*t30 + t25*xs[19];
-        k[s][20] = -GEARSYM_LIT(1.66444901376985388155)*t32 - GEARSYM_LIT(4.10952461499776923356)*t33 + t2*xs[23];
-        k[s][21] = -GEARSYM_LIT(5.00459337605401915750)*t33 - GEARSYM_LIT(2.02697180075091905934)*t32 + t3*xs[23];
-        k[s][22] = -xs[23] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[21];
-        k[s][23] = t14*(hp17 + hp16*t19) + t15*t33 + t24*t32 + t25*xs[23];
-        if (s < 3) {
-            const gearsym_real c = (s == 2) ? h : half_h;
-
-            for (i = 0; i < GEARSYM_SHIFT_7_8_MU_SENS_NX; ++i) {
-                stage[i] = x[i] + c * k[s][i];
-            }
-            xs = stage;
-        }
+        k[0][0] = hp8 + t2*xs[3] + hp6*t7 + hp7*t8;
+        k[0][1] = hp11 + t3*xs[3] + hp9*t10 + hp10*t11;
+        k[0][2] = t12;
+        k[0][3] = t14*t21;
+        k[0][4] = -GEARSYM_LIT(1.66444901376985388155)*t22 - GEARSYM_LIT(4.10952461499776923356)*t23 + t2*xs[7];
+        k[0][5] = -GEARSYM_LIT(5.00459337605401915750)*t23 - GEARSYM_LIT(2.02697180075091905934)*t22 + t3*xs[7];
+        k[0][6] = -xs[7] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[5];
+        k[0][7] = t14*(hp13 + hp12*t19) + t15*t23 + t24*t22 + t25*xs[7] + hp14*t21;
+        k[0][8] = -t8 - GEARSYM_LIT(1.66444901376985388155)*t26 - GEARSYM_LIT(4.10952461499776923356)*t27 + t2*xs[11];
+        k[0][9] = -t11 - GEARSYM_LIT(5.00459337605401915750)*t27 - GEARSYM_LIT(2.02697180075091905934)*t26 + t3*xs[11];
+        k[0][10] = -xs[11] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[9];
+        k[0][11] = t15*t27 + t15*xs[2] + t24*t26 + t25*xs[11];
+        k[0][12] = -t7 - GEARSYM_LIT(1.66444901376985388155)*t28 - GEARSYM_LIT(4.10952461499776923356)*t29 + GEARSYM_LIT(4.10952461499776923356)*xs[3] + t2*xs[15];
+        k[0][13] = -t10 - GEARSYM_LIT(5.00459337605401915750)*t29 - GEARSYM_LIT(2.02697180075091905934)*t28 + GEARSYM_LIT(5.00459337605401915750)*xs[3] + t3*xs[15];
+        k[0][14] = -xs[15] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[13];
+        k[0][15] = t14*(-GEARSYM_LIT(2.0)*xs[3] + (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*xs[1]) + t15*t29 + t24*t28 + t25*xs[15];
+        k[0][16] = hp15 - GEARSYM_LIT(1.66444901376985388155)*t30 - GEARSYM_LIT(4.10952461499776923356)*t31 + t2*xs[19];
+        k[0][17] = t9 - GEARSYM_LIT(5.00459337605401915750)*t31 - GEARSYM_LIT(2.02697180075091905934)*t30 + t3*xs[19];
+        k[0][18] = -xs[19] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[17];
+        k[0][19] = t15*t31 + t24*t30 + t25*xs[19];
+        k[0][20] = -GEARSYM_LIT(1.66444901376985388155)*t32 - GEARSYM_LIT(4.10952461499776923356)*t33 + t2*xs[23];
+        k[0][21] = -GEARSYM_LIT(5.00459337605401915750)*t33 - GEARSYM_LIT(2.02697180075091905934)*t32 + t3*xs[23];
+        k[0][22] = -xs[23] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[21];
+        k[0][23] = t14*(hp17 + hp16*t19) + t15*t33 + t24*t32 + t25*xs[23];
+    }
+    for (i = 0; i < GEARSYM_SHIFT_7_8_MU_SENS_NX; ++i) {
+        stage[i] = x[i] + half_h * k[0][i];
+    }
+    { /* k2 = f(x + h/2 k1, u, p) */
+        const gearsym_real *const xs = stage;
+        const gearsym_real t7 = GEARSYM_LIT(1.66444901376985388155)*xs[1];
+        const gearsym_real t8 = GEARSYM_LIT(4.10952461499776923356)*xs[2];
+        const gearsym_real t10 = GEARSYM_LIT(2.02697180075091905934)*xs[1];
+        const gearsym_real t11 = GEARSYM_LIT(5.00459337605401915750)*xs[2];
+        const gearsym_real t12 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        const gearsym_real t19 = t18*xs[3];
+        const gearsym_real t21 = hp3 + t4*t12 + hp0*t19 + hp1*xs[2] + hp2*(xs[3]*xs[3]);
+        const gearsym_real t22 = p->d_ss*xs[5];
+        const gearsym_real t23 = p->k_ss*xs[6];
+        const gearsym_real t25 = t14*(hp5 + hp4*xs[3]);
+        const gearsym_real t26 = p->d_ss*xs[9];
+        const gearsym_real t27 = p->k_ss*xs[10];
+        const gearsym_real t28 = p->d_ss*xs[13];
+        const gearsym_real t29 = p->k_ss*xs[14];
+        const gearsym_real t30 = p->d_ss*xs[17];
+        const gearsym_real t31 = p->k_ss*xs[18];
+        const gearsym_real t32 = p->d_ss*xs[21];
+        const gearsym_real t33 = p->k_ss*xs[22];
+        k[1][0] = hp8 + t2*xs[3] + hp6*t7 + hp7*t8;
+        k[1][1] = hp11 + t3*xs[3] + hp9*t10 + hp10*t11;
+        k[1][2] = t12;
+        k[1][3] = t14*t21;
+        k[1][4] = -GEARSYM_LIT(1.66444901376985388155)*t22 - GEARSYM_LIT(4.10952461499776923356)*t23 + t2*xs[7];
+        k[1][5] = -GEARSYM_LIT(5.00459337605401915750)*t23 - GEARSYM_LIT(2.02697180075091905934)*t22 + t3*xs[7];
+        k[1][6] = -xs[7] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[5];
+        k[1][7] = t14*(hp13 + hp12*t19) + t15*t23 + t24*t22 + t25*xs[7] + hp14*t21;
+        k[1][8] = -t8 - GEARSYM_LIT(1.66444901376985388155)*t26 - GEARSYM_LIT(4.10952461499776923356)*t27 + t2*xs[11];
+        k[1][9] = -t11 - GEARSYM_LIT(5.00459337605401915750)*t27 - GEARSYM_LIT(2.02697180075091905934)*t26 + t3*xs[11];
+        k[1][10] = -xs[11] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[9];
+        k[1][11] = t15*t27 + t15*xs[2] + t24*t26 + t25*xs[11];
+        k[1][12] = -t7 - GEARSYM_LIT(1.66444901376985388155)*t28 - GEARSYM_LIT(4.10952461499776923356)*t29 + GEARSYM_LIT(4.10952461499776923356)*xs[3] + t2*xs[15];
+        k[1][13] = -t10 - GEARSYM_LIT(5.00459337605401915750)*t29 - GEARSYM_LIT(2.02697180075091905934)*t28 + GEARSYM_LIT(5.00459337605401915750)*xs[3] + t3*xs[15];
+        k[1][14] = -xs[15] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[13];
+        k[1][15] = t14*(-GEARSYM_LIT(2.0)*xs[3] + (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*xs[1]) + t15*t29 + t24*t28 + t25*xs[15];
+        k[1][16] = hp15 - GEARSYM_LIT(1.66444901376985388155)*t30 - GEARSYM_LIT(4.10952461499776923356)*t31 + t2*xs[19];
+        k[1][17] = t9 - GEARSYM_LIT(5.00459337605401915750)*t31 - GEARSYM_LIT(2.02697180075091905934)*t30 + t3*xs[19];
+        k[1][18] = -xs[19] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[17];
+        k[1][19] = t15*t31 + t24*t30 + t25*xs[19];
+        k[1][20] = -GEARSYM_LIT(1.66444901376985388155)*t32 - GEARSYM_LIT(4.10952461499776923356)*t33 + t2*xs[23];
+        k[1][21] = -GEARSYM_LIT(5.00459337605401915750)*t33 - GEARSYM_LIT(2.02697180075091905934)*t32 + t3*xs[23];
+        k[1][22] = -xs[23] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[21];
+        k[1][23] = t14*(hp17 + hp16*t19) + t15*t33 + t24*t32 + t25*xs[23];
+    }
+    for (i = 0; i < GEARSYM_SHIFT_7_8_MU_SENS_NX; ++i) {
+        stage[i] = x[i] + half_h * k[1][i];
+    }
+    { /* k3 = f(x + h/2 k2, u, p) */
+        const gearsym_real *const xs = stage;
+        const gearsym_real t7 = GEARSYM_LIT(1.66444901376985388155)*xs[1];
+        const gearsym_real t8 = GEARSYM_LIT(4.10952461499776923356)*xs[2];
+        const gearsym_real t10 = GEARSYM_LIT(2.02697180075091905934)*xs[1];
+        const gearsym_real t11 = GEARSYM_LIT(5.00459337605401915750)*xs[2];
+        const gearsym_real t12 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        const gearsym_real t19 = t18*xs[3];
+        const gearsym_real t21 = hp3 + t4*t12 + hp0*t19 + hp1*xs[2] + hp2*(xs[3]*xs[3]);
+        const gearsym_real t22 = p->d_ss*xs[5];
+        const gearsym_real t23 = p->k_ss*xs[6];
+        const gearsym_real t25 = t14*(hp5 + hp4*xs[3]);
+        const gearsym_real t26 = p->d_ss*xs[9];
+        const gearsym_real t27 = p->k_ss*xs[10];
+        const gearsym_real t28 = p->d_ss*xs[13];
+        const gearsym_real t29 = p->k_ss*xs[14];
+        const gearsym_real t30 = p->d_ss*xs[17];
+        const gearsym_real t31 = p->k_ss*xs[18];
+        const gearsym_real t32 = p->d_ss*xs[21];
+        const gearsym_real t33 = p->k_ss*xs[22];
+        k[2][0] = hp8 + t2*xs[3] + hp6*t7 + hp7*t8;
+        k[2][1] = hp11 + t3*xs[3] + hp9*t10 + hp10*t11;
+        k[2][2] = t12;
+        k[2][3] = t14*t21;
+        k[2][4] = -GEARSYM_LIT(1.66444901376985388155)*t22 - GEARSYM_LIT(4.10952461499776923356)*t23 + t2*xs[7];
+        k[2][5] = -GEARSYM_LIT(5.00459337605401915750)*t23 - GEARSYM_LIT(2.02697180075091905934)*t22 + t3*xs[7];
+        k[2][6] = -xs[7] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[5];
+        k[2][7] = t14*(hp13 + hp12*t19) + t15*t23 + t24*t22 + t25*xs[7] + hp14*t21;
+        k[2][8] = -t8 - GEARSYM_LIT(1.66444901376985388155)*t26 - GEARSYM_LIT(4.10952461499776923356)*t27 + t2*xs[11];
+        k[2][9] = -t11 - GEARSYM_LIT(5.00459337605401915750)*t27 - GEARSYM_LIT(2.02697180075091905934)*t26 + t3*xs[11];
+        k[2][10] = -xs[11] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[9];
+        k[2][11] = t15*t27 + t15*xs[2] + t24*t26 + t25*xs[11];
+        k[2][12] = -t7 - GEARSYM_LIT(1.66444901376985388155)*t28 - GEARSYM_LIT(4.10952461499776923356)*t29 + GEARSYM_LIT(4.10952461499776923356)*xs[3] + t2*xs[15];
+        k[2][13] = -t10 - GEARSYM_LIT(5.00459337605401915750)*t29 - GEARSYM_LIT(2.02697180075091905934)*t28 + GEARSYM_LIT(5.00459337605401915750)*xs[3] + t3*xs[15];
+        k[2][14] = -xs[15] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[13];
+        k[2][15] = t14*(-GEARSYM_LIT(2.0)*xs[3] + (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*xs[1]) + t15*t29 + t24*t28 + t25*xs[15];
+        k[2][16] = hp15 - GEARSYM_LIT(1.66444901376985388155)*t30 - GEARSYM_LIT(4.10952461499776923356)*t31 + t2*xs[19];
+        k[2][17] = t9 - GEARSYM_LIT(5.00459337605401915750)*t31 - GEARSYM_LIT(2.02697180075091905934)*t30 + t3*xs[19];
+        k[2][18] = -xs[19] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[17];
+        k[2][19] = t15*t31 + t24*t30 + t25*xs[19];
+        k[2][20] = -GEARSYM_LIT(1.66444901376985388155)*t32 - GEARSYM_LIT(4.10952461499776923356)*t33 + t2*xs[23];
+        k[2][21] = -GEARSYM_LIT(5.00459337605401915750)*t33 - GEARSYM_LIT(2.02697180075091905934)*t32 + t3*xs[23];
+        k[2][22] = -xs[23] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[21];
+        k[2][23] = t14*(hp17 + hp16*t19) + t15*t33 + t24*t32 + t25*xs[23];
+    }
+    for (i = 0; i < GEARSYM_SHIFT_7_8_MU_SENS_NX; ++i) {
+        stage[i] = x[i] + h * k[2][i];
+    }
+    { /* k4 = f(x + h k3, u, p) */
+        const gearsym_real *const xs = stage;
+        const gearsym_real t7 = GEARSYM_LIT(1.66444901376985388155)*xs[1];
+        const gearsym_real t8 = GEARSYM_LIT(4.10952461499776923356)*xs[2];
+        const gearsym_real t10 = GEARSYM_LIT(2.02697180075091905934)*xs[1];
+        const gearsym_real t11 = GEARSYM_LIT(5.00459337605401915750)*xs[2];
+        const gearsym_real t12 = -xs[3] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[1];
+        const gearsym_real t19 = t18*xs[3];
+        const gearsym_real t21 = hp3 + t4*t12 + hp0*t19 + hp1*xs[2] + hp2*(xs[3]*xs[3]);
+        const gearsym_real t22 = p->d_ss*xs[5];
+        const gearsym_real t23 = p->k_ss*xs[6];
+        const gearsym_real t25 = t14*(hp5 + hp4*xs[3]);
+        const gearsym_real t26 = p->d_ss*xs[9];
+        const gearsym_real t27 = p->k_ss*xs[10];
+        const gearsym_real t28 = p->d_ss*xs[13];
+        const gearsym_real t29 = p->k_ss*xs[14];
+        const gearsym_real t30 = p->d_ss*xs[17];
+        const gearsym_real t31 = p->k_ss*xs[18];
+        const gearsym_real t32 = p->d_ss*xs[21];
+        const gearsym_real t33 = p->k_ss*xs[22];
+        k[3][0] = hp8 + t2*xs[3] + hp6*t7 + hp7*t8;
+        k[3][1] = hp11 + t3*xs[3] + hp9*t10 + hp10*t11;
+        k[3][2] = t12;
+        k[3][3] = t14*t21;
+        k[3][4] = -GEARSYM_LIT(1.66444901376985388155)*t22 - GEARSYM_LIT(4.10952461499776923356)*t23 + t2*xs[7];
+        k[3][5] = -GEARSYM_LIT(5.00459337605401915750)*t23 - GEARSYM_LIT(2.02697180075091905934)*t22 + t3*xs[7];
+        k[3][6] = -xs[7] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[5];
+        k[3][7] = t14*(hp13 + hp12*t19) + t15*t23 + t24*t22 + t25*xs[7] + hp14*t21;
+        k[3][8] = -t8 - GEARSYM_LIT(1.66444901376985388155)*t26 - GEARSYM_LIT(4.10952461499776923356)*t27 + t2*xs[11];
+        k[3][9] = -t11 - GEARSYM_LIT(5.00459337605401915750)*t27 - GEARSYM_LIT(2.02697180075091905934)*t26 + t3*xs[11];
+        k[3][10] = -xs[11] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[9];
+        k[3][11] = t15*t27 + t15*xs[2] + t24*t26 + t25*xs[11];
+        k[3][12] = -t7 - GEARSYM_LIT(1.66444901376985388155)*t28 - GEARSYM_LIT(4.10952461499776923356)*t29 + GEARSYM_LIT(4.10952461499776923356)*xs[3] + t2*xs[15];
+        k[3][13] = -t10 - GEARSYM_LIT(5.00459337605401915750)*t29 - GEARSYM_LIT(2.02697180075091905934)*t28 + GEARSYM_LIT(5.00459337605401915750)*xs[3] + t3*xs[15];
+        k[3][14] = -xs[15] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[13];
+        k[3][15] = t14*(-GEARSYM_LIT(2.0)*xs[3] + (GEARSYM_LIT(2000.0)/GEARSYM_LIT(2469.0))*xs[1]) + t15*t29 + t24*t28 + t25*xs[15];
+        k[3][16] = hp15 - GEARSYM_LIT(1.66444901376985388155)*t30 - GEARSYM_LIT(4.10952461499776923356)*t31 + t2*xs[19];
+        k[3][17] = t9 - GEARSYM_LIT(5.00459337605401915750)*t31 - GEARSYM_LIT(2.02697180075091905934)*t30 + t3*xs[19];
+        k[3][18] = -xs[19] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[17];
+        k[3][19] = t15*t31 + t24*t30 + t25*xs[19];
+        k[3][20] = -GEARSYM_LIT(1.66444901376985388155)*t32 - GEARSYM_LIT(4.10952461499776923356)*t33 + t2*xs[23];
+        k[3][21] = -GEARSYM_LIT(5.00459337605401915750)*t33 - GEARSYM_LIT(2.02697180075091905934)*t32 + t3*xs[23];
+        k[3][22] = -xs[23] + (GEARSYM_LIT(1000.0)/GEARSYM_LIT(2469.0))*xs[21];
+        k[3][23] = t14*(hp17 + hp16*t19) + t15*t33 + t24*t32 + t25*xs[23];
     }
     /* x is read at index i only before x_next[i] is written, so x_next may alias x. */
     for (i = 0; i < GEARSYM_SHIFT_7_8_MU_SENS_NX; ++i) {

@@ -355,9 +355,7 @@ void gearsym_shift_element_rk4_step(
     gearsym_real stage[GEARSYM_SHIFT_ELEMENT_NX];
     const gearsym_real half_h = GEARSYM_LIT(0.5) * h;
     const gearsym_real sixth_h = h * (GEARSYM_LIT(1.0) / GEARSYM_LIT(6.0));
-    const gearsym_real *xs = x;
     int i;
-    int s;
     /* The right-hand side's terms in u and p only: u is held over the step, so once. */
     const gearsym_real t1 = gearsym_shift_element_max(p->t_ss_min, GEARSYM_LIT(2.0)*u[1]*u[2]*p->n_disc*p->r_m);
     const gearsym_real t2 = (GEARSYM_LIT(1.0)/p->sigma0);
@@ -365,18 +363,34 @@ void gearsym_shift_element_rk4_step(
     const gearsym_real t4 = t3*p->z_ba_ratio;
     const gearsym_real hp0 = -p->sigma0/t1;
 
-    for (s = 0; s < 4; ++s) {
-        /* k_s = f(xs, u, p), xs = x, x + h/2 k1, x + h/2 k2, x + h k3 */
+    { /* k1 = f(x, u, p) */
+        const gearsym_real *const xs = x;
         const gearsym_real t0 = GEARSYM_FABS(xs[0]);
-        k[s][0] = u[0]*(GEARSYM_LIT(1.0) + hp0*t0*((isnan(t0) || isnan(t4) || isnan(u[0]*xs[0]) || isnan(t3)) ? ((gearsym_real)NAN) : (((t0 <= t4) || (u[0]*xs[0] <= GEARSYM_LIT(0.0))) ? GEARSYM_LIT(0.0) : ((t0 < t3) ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*GEARSYM_SIN(GEARSYM_LIT(3.14159265358979323846)*(t0 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t3 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t4)/(-t4 + t1*t2)) : GEARSYM_LIT(1.0)))));
-        if (s < 3) {
-            const gearsym_real c = (s == 2) ? h : half_h;
-
-            for (i = 0; i < GEARSYM_SHIFT_ELEMENT_NX; ++i) {
-                stage[i] = x[i] + c * k[s][i];
-            }
-            xs = stage;
-        }
+        k[0][0] = u[0]*(GEARSYM_LIT(1.0) + hp0*t0*((isnan(t0) || isnan(t4) || isnan(u[0]*xs[0]) || isnan(t3)) ? ((gearsym_real)NAN) : (((t0 <= t4) || (u[0]*xs[0] <= GEARSYM_LIT(0.0))) ? GEARSYM_LIT(0.0) : ((t0 < t3) ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*GEARSYM_SIN(GEARSYM_LIT(3.14159265358979323846)*(t0 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t3 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t4)/(-t4 + t1*t2)) : GEARSYM_LIT(1.0)))));
+    }
+    for (i = 0; i < GEARSYM_SHIFT_ELEMENT_NX; ++i) {
+        stage[i] = x[i] + half_h * k[0][i];
+    }
+    { /* k2 = f(x + h/2 k1, u, p) */
+        const gearsym_real *const xs = stage;
+        const gearsym_real t0 = GEARSYM_FABS(xs[0]);
+        k[1][0] = u[0]*(GEARSYM_LIT(1.0) + hp0*t0*((isnan(t0) || isnan(t4) || isnan(u[0]*xs[0]) || isnan(t3)) ? ((gearsym_real)NAN) : (((t0 <= t4) || (u[0]*xs[0] <= GEARSYM_LIT(0.0))) ? GEARSYM_LIT(0.0) : ((t0 < t3) ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*GEARSYM_SIN(GEARSYM_LIT(3.14159265358979323846)*(t0 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t3 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t4)/(-t4 + t1*t2)) : GEARSYM_LIT(1.0)))));
+    }
+    for (i = 0; i < GEARSYM_SHIFT_ELEMENT_NX; ++i) {
+        stage[i] = x[i] + half_h * k[1][i];
+    }
+    { /* k3 = f(x + h/2 k2, u, p) */
+        const gearsym_real *const xs = stage;
+        const gearsym_real t0 = GEARSYM_FABS(xs[0]);
+        k[2][0] = u[0]*(GEARSYM_LIT(1.0) + hp0*t0*((isnan(t0) || isnan(t4) || isnan(u[0]*xs[0]) || isnan(t3)) ? ((gearsym_real)NAN) : (((t0 <= t4) || (u[0]*xs[0] <= GEARSYM_LIT(0.0))) ? GEARSYM_LIT(0.0) : ((t0 < t3) ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*GEARSYM_SIN(GEARSYM_LIT(3.14159265358979323846)*(t0 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t3 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t4)/(-t4 + t1*t2)) : GEARSYM_LIT(1.0)))));
+    }
+    for (i = 0; i < GEARSYM_SHIFT_ELEMENT_NX; ++i) {
+        stage[i] = x[i] + h * k[2][i];
+    }
+    { /* k4 = f(x + h k3, u, p) */
+        const gearsym_real *const xs = stage;
+        const gearsym_real t0 = GEARSYM_FABS(xs[0]);
+        k[3][0] = u[0]*(GEARSYM_LIT(1.0) + hp0*t0*((isnan(t0) || isnan(t4) || isnan(u[0]*xs[0]) || isnan(t3)) ? ((gearsym_real)NAN) : (((t0 <= t4) || (u[0]*xs[0] <= GEARSYM_LIT(0.0))) ? GEARSYM_LIT(0.0) : ((t0 < t3) ? (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0)) + (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*GEARSYM_SIN(GEARSYM_LIT(3.14159265358979323846)*(t0 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t3 - (GEARSYM_LIT(1.0)/GEARSYM_LIT(2.0))*t4)/(-t4 + t1*t2)) : GEARSYM_LIT(1.0)))));
     }
     /* x is read at index i only before x_next[i] is written, so x_next may alias x. */
     for (i = 0; i < GEARSYM_SHIFT_ELEMENT_NX; ++i) {

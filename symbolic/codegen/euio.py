@@ -35,23 +35,24 @@ def casadi_euio_view(table: FunctionTable) -> CasadiEuioView:
 
 
 def euio_own_ops(nx: int, ny: int) -> OpCount:
-    """Operations of ``euio_step`` beyond its calls (rhs, jac_x, outputs, jac_outputs, the load
-    column), counted from the template's loops: the RK4 tangents and F P F^T as ekf_predict
-    (4 n³ + 10 n² + 8 n multiplications, 4 n³ + 8 n² additions), the series E_d (3 n² + 4 n),
+    """Operations of ``euio_step`` beyond its calls (jac_x, outputs, jac_outputs, the load
+    column) and its prediction (the code of ekf_predict, counted by :mod:`.c.ekf_code`),
+    counted from the template's loops: the series E_d (3 n² + 4 n),
     C P C^T (m n² + m² n), the LDL^T of S and S^-1 (about 2 m³), P C^T S^-1 (n m²), the gain
     L (n m² + 2 n m), I - L C (n² m), the Joseph form (2 n³ + n² m), the symmetrisations."""
     n, m = nx, ny
-    mul = (4 * n**3 + 10 * n * n + 8 * n) + (3 * n * n + 4 * n) + (m * n * n + m * m * n)
+    mul = (3 * n * n + 4 * n) + (m * n * n + m * m * n)
     mul += 2 * m**3 + 2 * n * m * m + 2 * n * m + 2 * n * n * m + 2 * n**3 + n * n
-    add = (4 * n**3 + 8 * n * n) + (3 * n * n + 3 * n) + (m * n * n + m * m * n)
+    add = (3 * n * n + 3 * n) + (m * n * n + m * m * n)
     add += 2 * m**3 + 2 * n * m * m + 2 * n * m + 2 * n * n * m + 2 * n**3 + n * n
     return OpCount(mul=mul, add=add, div=m + 1)
 
 
 def euio_step_extra(
     table: FunctionTable, counts: Mapping[str, OpCount]
-) -> tuple[dict[str, Any], str]:
-    """(the view fields of ``euio_step``, its operation text for the doc comment)."""
+) -> tuple[dict[str, Any], str, set[str], set[str]]:
+    """(the view fields of ``euio_step``, its operation text for the doc comment, the math
+    macros and helpers its printed prediction uses)."""
     layout = table.config.euio
     assert layout is not None
     nx, ny = len(table.states), len(table.model.outputs)
@@ -59,12 +60,16 @@ def euio_step_extra(
     frozen = ", ".join(
         f"{names[i]} while |{table.model.inputs[j].name}| <= 0.5" for i, j in layout.frozen
     )
+    from gearsym.symbolic.codegen.c.emitter import predict_body
+
     jac_ops = counts.get("jac_x_sparse", counts.get("jac_x"))
     assert jac_ops is not None
+    code, fused, macros, helpers = predict_body(table, inputs="u_prev")
+    predict = fused.once_ops + fused.stage_ops.scaled(4) + code.ops
     own = euio_own_ops(nx, ny)
     total = (
-        counts["rhs"].scaled(4)
-        + jac_ops.scaled(4)
+        predict
+        + jac_ops
         + counts["outputs"]
         + counts["jac_outputs"]
         + counts["euio_load_column"]
@@ -79,8 +84,8 @@ def euio_step_extra(
             r for _, _, why in layout.held_phases for r in why.replace("μ", "mu").split("; ") if r
         )
     )
-    # slopes, stage, rate, E, E_d; A, jac, dstage, F, FP; C, CP, K/L; S, S^-1; 7 of size NY
-    stack = 8 * nx + 5 * nx * nx + 3 * nx * ny + 2 * ny * ny + 7 * ny
+    # series, rate, E, E_d; J, dstage, FP; C, CP, K/L; S, S^-1; 7 of size NY; the prediction's
+    stack = 5 * nx + 3 * nx * nx + 3 * nx * ny + 2 * ny * ny + 7 * ny + code.stack
     text = (
         f"Held by the element modes: {frozen or 'none'}. "
         + (
@@ -89,7 +94,13 @@ def euio_step_extra(
             if phases
             else ""
         )
-        + f"Operations (about): {total.format()} (4 rhs + 4 jac_x + outputs + jac_outputs + "
-        f"the load column + {own.format()}); stack: {stack} reals."
+        + f"Operations (about): {total.format()} (the prediction as ekf_predict: "
+        f"{predict.format()}; jac_x + outputs + jac_outputs + the load column + "
+        f"{own.format()}); stack: {stack} reals."
     )
-    return {"frozen": layout.frozen}, text
+    extra = {
+        "frozen": layout.frozen,
+        "declarations": code.declarations,
+        "statements": code.statements,
+    }
+    return extra, text, macros, helpers

@@ -262,7 +262,8 @@ ROWS: tuple[Row, ...] = (
         ("x_io", "P_io", "u", "p", "y", "r", "y_floor"),
         (("nis", "1", "1", "real"),),
         "EKF measurement update (thesis 4.3), in place, one output at a time (diagonal R), "
-        "Joseph form P = (I - k h) P (I - k h)^T + R k k^T with R = (r_i max(|y_i|, "
+        "P = (I - k h) P (I - k h)^T + R k k^T (the Joseph form's value, evaluated as "
+        "stated below) with R = (r_i max(|y_i|, "
         "y_floor_i))^2 (3.26). A NaN or infinite y_i is skipped (no update); the gain entry "
         "of a frozen state is 0 (its estimate and variance stay unchanged). *nis receives the "
         "sum of nu^2/s over the used outputs. Returns the number of outputs used. P is "

@@ -31,6 +31,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import sympy as sp
+from gearsym.symbolic.codegen.c.ekf_stage import JAC, SLOPE, FusedStage
 from gearsym.symbolic.codegen.ops import OpCount
 
 __all__ = ["EkfPredictCode", "output_selection", "predict_code", "selection_update_ops"]
@@ -45,7 +46,8 @@ class EkfPredictCode:
     """The unrolled body of ``ekf_predict`` after the process-noise rates are set.
 
     ``declarations`` and ``statements`` are C lines (without indentation); ``ops`` counts the
-    statements' own floating-point operations (the rhs and Jacobian calls not included);
+    statements' own floating-point operations (those of the fused stage, once and per stage,
+    not included: see :class:`~.ekf_stage.FusedStage`);
     ``stack`` is the number of reals the declarations put on the stack.
     """
 
@@ -84,24 +86,24 @@ def _sum(terms: Sequence[tuple[str | None, str]], ops: OpCount) -> str:
 def predict_code(
     n: int,
     jac_entries: Sequence[Entry],
-    jac_call: str,
-    jac_index: dict[Entry, int],
-    jac_size: int,
     zero_rhs: Sequence[int],
-    rhs: str,
+    fused: FusedStage,
 ) -> EkfPredictCode:
     """The stage tangents, x+ and P+ = F P F^T + h diag(rate) of one RK4 step, unrolled.
 
-    ``jac_entries``: the structural nonzeros (row, column) of ∂f/∂z; ``jac_call`` the C call
-    that fills an array with its values, ``{x}`` and ``{out}`` standing for the point and the
-    array; ``jac_index`` the position of each entry in that array, ``jac_size`` its length;
-    ``zero_rhs`` the states whose right-hand side is identically 0 (their stage values are x);
-    ``rhs`` the emitted right-hand side's C name.
+    ``jac_entries``: the structural nonzeros (row, column) of ∂f/∂z, in the order of the
+    ``j1``/``js`` arrays the ``fused`` stage (:mod:`.ekf_stage`) writes; ``zero_rhs`` the states
+    whose right-hand side is identically 0 (their stage values are x). The J entries the fused
+    stage computes once (``fused.invariant``) are the same in all four stages: their products
+    with the stage coefficients c (h/2 for stages 2 and 3, h for stage 4) are formed once each.
     The statements expect ``x``, ``P``, ``u``, ``p``, ``h`` and ``rate[n]`` (the process-noise
     intensities with frozen states set to 0) in scope; chain rule (4.3) through the RK4 stages.
     """
     ops = OpCount()
     J = set(jac_entries)
+    jac_index = {e: k for k, e in enumerate(jac_entries)}
+    jac_size = len(jac_entries)
+    invariant = fused.invariant
     moving = [i for i in range(n) if i not in set(zero_rhs)]
     # the stage tangents' patterns: K_1 = J, K_i = J + J K_(i-1) (growing)
     patterns = [set(J)]
@@ -120,28 +122,43 @@ def predict_code(
         "const gearsym_real half_h = GEARSYM_LIT(0.5) * h;",
         "const gearsym_real sixth_h = h * (GEARSYM_LIT(1.0) / GEARSYM_LIT(6.0));",
         "const gearsym_real third_h = h * (GEARSYM_LIT(1.0) / GEARSYM_LIT(3.0));",
-        f"gearsym_real slopes[4][{n}]; /* k1 .. k4 */",
+        f"gearsym_real slopes[4][{n}]; /* k1 .. k4 (the moving rows) */",
         f"gearsym_real stage[{n}];",
         f"gearsym_real j1[{js}]; /* K1 = J(x), {len(J)} structural nonzeros */",
-        f"gearsym_real js[{js}]; /* J(stage_i) */",
     ]
-    stack = 5 * n + 2 * js
-    body: list[str] = []
+    stack = 5 * n + js
+    if J - invariant:
+        declarations.append(f"gearsym_real js[{js}]; /* J(stage_i), its moving entries */")
+        stack += js
+    declarations.append("/* f and J: their terms without the moving states, once per step */")
+    declarations += [line for line in fused.once if line.startswith("const ")]
+    body: list[str] = [line for line in fused.once if not line.startswith("const ")]
     ops.mul += 3  # half_h, sixth_h, third_h
-    body.append(f"{rhs}(x, u, p, slopes[0]);")
-    body.append(f"{jac_call.format(x='x', out='j1')}")
+
+    def stage_block(source: str, slope: int, jac: str) -> None:
+        body.append("{")
+        body.append(f"    const gearsym_real *const xs = {source};")
+        for line in fused.stage:
+            body.append("    " + line.replace(SLOPE, f"slopes[{slope}]").replace(JAC, jac))
+        body.append("}")
+
+    body.append("/* stage 1: f and the moving entries of J at x (one CSE, inline) */")
+    stage_block("x", 0, "j1")
     for i in range(n):
         if i not in moving:
             body.append(f"stage[{i}] = x[{i}]; /* its right-hand side is 0 */")
 
-    def jac_value(array: str, e: Entry) -> str:
+    def jac_value(stage_no: int, e: Entry) -> str:
+        array = "j1" if stage_no == 1 or e in invariant else "js"
         return f"{array}[{jac_index[e]}]"
 
     def tangent(array: str, stage_no: int, e: Entry) -> str:
-        """K_(stage_no) at entry e: j1 for stage 1, else the stored tan array."""
-        return jac_value("j1", e) if stage_no == 1 else f"{array}{stage_no}[{index[e]}]"
+        """K_(stage_no) at entry e: J(x) for stage 1, else the stored tan array."""
+        return jac_value(1, e) if stage_no == 1 else f"{array}{stage_no}[{index[e]}]"
 
-    used_cj: set[Entry] = set()
+    cj_names = {"half_h": "cjh", "h": "cjf"}
+    formed: set[tuple[str, Entry]] = set()
+    used_cj: set[str] = set()
     g_terms: dict[Entry, str] = {}
     for stage_no in (2, 3, 4):
         c = "h" if stage_no == 4 else "half_h"
@@ -150,26 +167,39 @@ def predict_code(
             ops.add += 1
             ops.mul += 1
             body.append(f"stage[{i}] = x[{i}] + {c} * slopes[{stage_no - 2}][{i}];")
-        body.append(f"{rhs}(stage, u, p, slopes[{stage_no - 1}]);")
-        body.append(f"{jac_call.format(x='stage', out='js')}")
+        stage_block("stage", stage_no - 1, "js")
         previous = patterns[stage_no - 2]
         by_row: dict[int, list[int]] = {}
         for k, j in previous:
             by_row.setdefault(k, []).append(j)
         needed = sorted((e for e in J if e[1] in by_row), key=lambda e: jac_index[e])
         body.append(f"/* K{stage_no} = J + {c} J K{stage_no - 1}, over structural nonzeros */")
+
+        def cj(e: Entry, c: str = c) -> str:
+            if e in invariant:
+                return f"{cj_names[c]}[{jac_index[e]}]"
+            return f"cj[{jac_index[e]}]"
+
         for e in needed:
-            ops.mul += 1
-            used_cj.add(e)
-            body.append(f"cj[{jac_index[e]}] = {c} * js[{jac_index[e]}];")
+            if e in invariant:
+                if (c, e) in formed:
+                    continue  # J(stage) = J(x) here: c J formed in an earlier stage
+                formed.add((c, e))
+                used_cj.add(cj_names[c])
+                ops.mul += 1
+                body.append(f"{cj(e)} = {c} * j1[{jac_index[e]}];")
+            else:
+                used_cj.add("cj")
+                ops.mul += 1
+                body.append(f"cj[{jac_index[e]}] = {c} * js[{jac_index[e]}];")
         for e in _column_major(patterns[stage_no - 1]):
             r, j = e
             terms: list[tuple[str | None, str]] = []
             if e in J:
-                terms.append((None, jac_value("js", e)))
+                terms.append((None, jac_value(stage_no, e)))
             for k in sorted(k for rr, k in J if rr == r):
                 if (k, j) in previous:
-                    terms.append((f"cj[{jac_index[(r, k)]}]", tangent("tan", stage_no - 1, (k, j))))
+                    terms.append((cj((r, k)), tangent("tan", stage_no - 1, (k, j))))
             value = _sum(terms, ops)
             if stage_no < 4:
                 body.append(f"tan{stage_no}[{index[e]}] = {value};")
@@ -178,8 +208,14 @@ def predict_code(
         if stage_no < 4 and patterns[stage_no - 1]:
             declarations.append(f"gearsym_real tan{stage_no}[{nt}]; /* K{stage_no} */")
             stack += nt
-    declarations.append(f"gearsym_real cj[{js}]; /* c J(stage_i) */")
-    stack += js
+    for name, what in (
+        ("cj", "c J(stage_i)"),
+        ("cjh", "h/2 J, the entries without moving states"),
+        ("cjf", "h J, the entries without moving states"),
+    ):
+        if name in used_cj:
+            declarations.append(f"gearsym_real {name}[{js}]; /* {what} */")
+            stack += js
     # F = I + h/6 (K1 + K4) + h/3 (K2 + K3), on the joined pattern
     body.append("/* F = I + h/6 (K1 + K4) + h/3 (K2 + K3): its rows outside R are unit rows */")
     if order:
@@ -188,7 +224,7 @@ def predict_code(
     for e in order:
         outer = []
         if e in patterns[0]:
-            outer.append((None, jac_value("j1", e)))
+            outer.append((None, jac_value(1, e)))
         if e in g_terms:
             outer.append((None, f"({g_terms[e]})" if "+" in g_terms[e] else g_terms[e]))
         inner = [(None, f"tan{s}[{index[e]}]") for s in (2, 3) if e in patterns[s - 1]]
@@ -260,9 +296,6 @@ def predict_code(
         ops.add += 1
         ops.mul += 1
         body.append(f"P[{j2 + j2 * n}] += h * rate[{j2}]; /* a unit row of F: no product */")
-    if not used_cj:
-        declarations = [d for d in declarations if not d.startswith("gearsym_real cj[")]
-        stack -= js
     return EkfPredictCode(tuple(declarations), tuple(body), ops, stack)
 
 
@@ -278,8 +311,23 @@ def output_selection(jacobian: sp.MatrixBase) -> tuple[int, ...] | None:
     return tuple(selection)
 
 
-def selection_update_ops(n: int, ny: int, n_frozen: int) -> OpCount:
-    """Operations of the selection update's statements (see the template), all outputs used."""
+def selection_update_ops(n: int, ny: int, n_frozen: int, form: str = "symmetric") -> OpCount:
+    """Operations of the selection update's statements (see the template), all outputs used.
+
+    ``form`` ``"symmetric"``: the Schmidt update P_ab - v_a w_b (w = v/s) on the upper
+    triangle, whose equality with the Joseph form of the Schmidt gain (thesis 4.3) is this
+    block algebra. Split the states into free ones F and frozen ones Z; the Schmidt gain is
+    k_F = v_F / s, k_Z = 0, and the Joseph form (I - k h) P (I - k h)^T + R k k^T expands to
+    P - k v^T - v k^T + s k k^T (v = P h^T, s = h v + R) for any k. Blockwise:
+
+    - FF: P_FF - 2 v_F v_F^T / s + s v_F v_F^T / s^2 = P_FF - v_F v_F^T / s;
+    - FZ (and ZF mirrored): P_FZ - k_F v_Z^T - v_F k_Z^T + s k_F k_Z^T = P_FZ - v_F v_Z^T / s;
+    - ZZ: every term carries k_Z = 0, so P_ZZ is unchanged.
+
+    So P_ab - v_a v_b / s for every pair but two frozen states: 1 mul + 1 add per entry
+    instead of the expanded Joseph form's 2 + 2 (``"joseph"``). The frozen flags are
+    evaluated once per call, not per output.
+    """
     per = OpCount()
     per.compare += 2  # isfinite(y), y < 0
     per.compare += 1  # level < floor
@@ -287,16 +335,22 @@ def selection_update_ops(n: int, ny: int, n_frozen: int) -> OpCount:
     per.add += 1  # s = P[s, s] + R
     per.compare += 2  # s > 0, isfinite(s)
     per.div += 1  # 1 / s
-    per.mul += n  # gain
-    per.compare += 2 * n_frozen  # slide flag above +0.5 or below -0.5 (either slip sign)
     per.add += 1  # innovation
-    per.mul += n  # x += gain innovation
-    per.add += n
-    per.mul += n  # g = s gain - v
-    per.add += n
     entries = n * (n + 1) // 2
-    per.mul += 2 * entries  # P + (gain_a g_b - v_a gain_b)
-    per.add += 2 * entries
+    if form == "joseph":
+        per.mul += n  # gain
+        per.mul += n  # x += gain innovation
+        per.add += n
+        per.mul += n  # g = s gain - v
+        per.add += n
+        per.mul += 2 * entries  # P + (gain_a g_b - v_a gain_b)
+        per.add += 2 * entries
+    else:
+        per.mul += n  # w = v / s
+        per.mul += n  # x += w innovation (at most: not for a frozen state)
+        per.add += n
+        per.mul += entries  # P - v_a w_b (at most: not for two frozen states)
+        per.add += entries
     per.mul += 2  # nis
     per.add += 1
-    return per.scaled(ny)
+    return per.scaled(ny) + OpCount(compare=2 * n_frozen)  # the frozen flags, once

@@ -12,6 +12,7 @@ from gearsym.symbolic.codegen.c.ekf_code import (
     predict_code,
     selection_update_ops,
 )
+from gearsym.symbolic.codegen.c.ekf_stage import FusedStage, fused_stage, hoist
 from gearsym.symbolic.codegen.c.printer import GearsymCPrinter
 from gearsym.symbolic.codegen.cse import (
     CseForm,
@@ -31,7 +32,6 @@ from gearsym.symbolic.codegen.printing import comment_text, wrap
 from gearsym.symbolic.codegen.render import render
 from gearsym.symbolic.codegen.table import Arg, FunctionSpec, FunctionTable, Output, file_names
 from gearsym.symbolic.codegen.views import ModelView, model_view
-from sympy.logic.boolalg import Boolean
 
 __all__ = [
     "CFunctionView",
@@ -143,6 +143,7 @@ class CFunctionView:
     declarations: tuple[str, ...] = ()  # EKF predict: unrolled from the sparsity (ekf_code)
     statements: tuple[str, ...] = ()
     selection: tuple[int, ...] = ()  # EKF update: the state each output is (H a selection)
+    update_form: str = ""  # EKF update with a selection: "symmetric" or "joseph"
     stage_temporaries: tuple[Temporary, ...] = ()  # RK4: the rhs terms that depend on x
 
 
@@ -215,41 +216,6 @@ def _spread(spec: FunctionSpec, pattern: SparsityPattern) -> Spread:
     )
 
 
-def _hoist(
-    expr: sp.Basic, varying: set[sp.Symbol], new: list[tuple[sp.Symbol, sp.Basic]]
-) -> sp.Basic:
-    """``expr`` with its subexpressions free of ``varying`` symbols moved into ``new``
-    temporaries (``hp0, hp1, ...``): whole invariant subtrees, and the invariant terms of a sum
-    and factors of a product grouped into one. Piecewise and boolean nodes stay as they are."""
-
-    def invariant(e: sp.Basic) -> bool:
-        return not (e.free_symbols & varying)
-
-    def temporary(e: sp.Basic) -> sp.Basic:
-        if e.is_Atom:
-            return e
-        symbol = sp.Symbol(f"hp{len(new)}", real=True)
-        new.append((symbol, e))
-        return symbol
-
-    if expr.is_Atom or isinstance(expr, (sp.Piecewise, Boolean)):
-        return expr
-    if invariant(expr):
-        return temporary(expr)
-    if expr.is_Add or expr.is_Mul:
-        fixed = [a for a in expr.args if invariant(a)]
-        moving = [_hoist(a, varying, new) for a in expr.args if not invariant(a)]
-        grouped = expr.func(*fixed) if fixed else None
-        if grouped is not None and not grouped.is_Atom:
-            symbol = sp.Symbol(f"hp{len(new)}", real=True)
-            new.append((symbol, grouped))
-            grouped = symbol
-        return expr.func(*([grouped] if grouped is not None else []), *moving, evaluate=False)
-    if expr.is_Pow or isinstance(expr, sp.Function):
-        return expr.func(*(_hoist(a, varying, new) for a in expr.args), evaluate=False)
-    return expr
-
-
 def _rk4_hoisted(
     table: FunctionTable, form: CseForm
 ) -> tuple[OpCount, OpCount, GearsymCPrinter, dict] | None:
@@ -266,11 +232,11 @@ def _rk4_hoisted(
     for symbol, expr in form.temporaries:
         if expr.free_symbols & varying:
             varying.add(symbol)
-            stage_temps.append((symbol, _hoist(expr, varying, new)))
+            stage_temps.append((symbol, hoist(expr, varying, new)))
         else:
             once_temps.append((symbol, expr))
     outputs = tuple(
-        sp.ImmutableMatrix(m.rows, m.cols, [_hoist(e, varying, new) for e in m])
+        sp.ImmutableMatrix(m.rows, m.cols, [hoist(e, varying, new) for e in m])
         for m in form.outputs
     )
     uses_x = any(e.free_symbols & varying for m in outputs for e in m)
@@ -304,37 +270,38 @@ def _rk4_hoisted(
     return first, rest, printer, extra
 
 
-def _predict_code(table: FunctionTable) -> EkfPredictCode:
-    """The unrolled predict body of the table's model (see :mod:`.ekf_code`)."""
+def predict_body(
+    table: FunctionTable, inputs: str = "u"
+) -> tuple[EkfPredictCode, FusedStage, set[str], set[str]]:
+    """The unrolled predict body of the table's model (see :mod:`.ekf_code`), its fused
+    stage (:mod:`.ekf_stage`), and the math macros and helpers the printed code uses; the
+    inputs read from the C array ``inputs``. One emitter for ``ekf_predict`` and the
+    prediction of ``euio_step``."""
     n = len(table.states)
-    names = table.names()
-    if "jac_x_sparse" in names:
-        pattern = table["jac_x"].pattern
-        assert pattern is not None
-        fn = "jac_x_sparse"
-        entries = [
-            (pattern.rowind[k], j)
-            for j in range(pattern.ncol)
-            for k in range(pattern.colptr[j], pattern.colptr[j + 1])
-        ]
-        index = {e: k for k, e in enumerate(entries)}
-        size = pattern.nnz
-    else:
-        fn = "jac_x"
-        dense = table["jac_x"].expressions[0]
-        entries = [(i, j) for j in range(n) for i in range(n) if dense[i, j] != 0]
-        index = {(i, j): i + j * n for i, j in entries}
-        size = n * n
+    dense = table["jac_x"].expressions[0]
+    entries = [(i, j) for j in range(n) for i in range(n) if dense[i, j] != 0]
     rhs = table["rhs"].expressions[0]
-    return predict_code(
-        n,
+    base = _symbol_map(table["rhs"])
+    base.update({s: f"{inputs}[{i}]" for i, s in enumerate(table.inputs)})
+    printers: list[GearsymCPrinter] = []
+
+    def printer_for(extra: dict[sp.Symbol, str]):  # noqa: ANN202 - a printing function
+        printer = GearsymCPrinter({**base, **extra}, table.prefix, {}, table.config.precision)
+        printers.append(printer)
+        return printer.code
+
+    fused = fused_stage(
+        list(table.states),
+        [rhs[i] for i in range(n)],
         entries,
-        f"{table.prefix}{fn}({{x}}, u, p, {{out}});",
-        index,
-        size,
-        [i for i in range(n) if rhs[i] == 0],
-        f"{table.prefix}rhs",
+        lambda e: sp.diff(rhs[e[0]], table.states[e[1]]),
+        printer_for,
+        table.config,
     )
+    code = predict_code(n, entries, [i for i in range(n) if rhs[i] == 0], fused)
+    macros = set().union(*(p.used_macros for p in printers))
+    helpers = set().union(*(p.used_helpers for p in printers))
+    return code, fused, macros, helpers
 
 
 def _function_views(
@@ -416,28 +383,38 @@ def _function_views(
                 for i, j in table.config.ekf.frozen
             )
             if spec.kind == "ekf_predict":
-                code = _predict_code(table)
+                code, fused, macros, helpers = predict_body(table)
+                used_macros |= macros
+                used_helpers |= helpers
                 extra["declarations"] = code.declarations
                 extra["statements"] = code.statements
-                jac_ops = counts.get("jac_x_sparse", counts.get("jac_x"))
-                assert jac_ops is not None
                 own = code.ops + OpCount(compare=2 * len(table.config.ekf.frozen))
-                total = counts["rhs"].scaled(4) + jac_ops.scaled(4) + own
+                total = fused.once_ops + fused.stage_ops.scaled(4) + own
                 what = (
-                    f"4 rhs + 4 jac_x + {own.format()} for the stage tangents over the "
-                    "structural nonzeros of jac_x, x and F P F^T blockwise"
+                    f"f and jac_x fused and inlined: their terms without the moving states "
+                    f"once ({fused.once_ops.format()}), the rest in each of the 4 stages "
+                    f"({fused.stage_ops.format()}); {own.format()} for the stage tangents over "
+                    "the structural nonzeros of jac_x, x and F P F^T blockwise"
                 )
                 stack = code.stack + nx
             else:
                 ny = len(table.model.outputs)
                 selection = output_selection(table["jac_outputs"].expressions[0])
                 if selection is not None:
+                    form = table.config.ekf.update_form
                     extra["selection"] = selection
-                    own = selection_update_ops(nx, ny, len(table.config.ekf.frozen))
+                    extra["update_form"] = form
+                    own = selection_update_ops(nx, ny, len(table.config.ekf.frozen), form)
                     total = counts["outputs"].scaled(ny) + own
+                    update = (
+                        "the Joseph form expanded"
+                        if form == "joseph"
+                        else "the Schmidt update P - v w^T, equal to the Joseph form of the "
+                        "Schmidt gain"
+                    )
                     what = (
-                        f"{ny} x (outputs + the Joseph update with H a selection of states: "
-                        "no product with H, upper triangle)"
+                        f"{ny} x (outputs + {update}, with H a selection of states: "
+                        "no product with H, upper triangle), the frozen flags once"
                     )
                     stack = ny + 3 * nx
                 else:
@@ -488,8 +465,10 @@ def _function_views(
         elif spec.kind == "euio_step":
             from gearsym.symbolic.codegen.euio import euio_step_extra
 
-            euio_extra, op_text = euio_step_extra(table, counts)
+            euio_extra, op_text, macros, helpers = euio_step_extra(table, counts)
             extra.update(euio_extra)
+            used_macros |= macros
+            used_helpers |= helpers
         elif spec.kind == "params_default":
             (defaults,) = spec.expressions
             extra["defaults"] = tuple(
