@@ -82,7 +82,11 @@ def sequence(seed: int = SEED, sample_time: float = SAMPLE_TIME) -> Sequence:
     for k, name in enumerate(s.outputs):
         z[s.names.index(name)] = y[0, k]
     P = np.diag(s.prior_sigma**2)
-    z, P, _, _ = ekf_update(s.discrete, z, P, s.u[0], y[0], s.p, s.relative, s.floor)
+    # the first speeds are the initial estimate (σ0 = their σ): used once, as filter_run does,
+    # so the first update skips them (NaN) instead of counting that noise draw twice
+    first = y[0].copy()
+    first[[k for k, name in enumerate(s.outputs) if name in s.names]] = np.nan
+    z, P, _, _ = ekf_update(s.discrete, z, P, s.u[0], first, s.p, s.relative, s.floor)
     run = filter_run(s, seed)
     return Sequence(
         aug=s.aug,

@@ -957,11 +957,17 @@ def filter_run(
         unmeasured = np.array([name not in s.outputs for name in names])
         draw = np.random.default_rng([seed, 1]).normal(0.0, 1.0, len(z)) * sig0
         z[unmeasured] = s.truth0[unmeasured] + draw[unmeasured]
+    # The first measurement of a speed *is* its initial estimate (variance R, the prior of
+    # sig0): it is used once, so the update at the first sample skips it (NaN). Updating with
+    # it again would count one noise draw twice (the speed's σ halved for an error of one σ)
+    # and add innovations that are 0 by construction to the NIS (3 of its dof per run).
+    first = y[0].copy()
     for k, name in enumerate(s.outputs):
         if name in names:
             j = names.index(name)
             if np.isfinite(y[0, k]):
                 z[j] = y[0, k]
+                first[k] = np.nan
             else:
                 z[j], sig0[j] = 0.0, 1e3
     P = np.diag(sig0**2)
@@ -994,7 +1000,7 @@ def filter_run(
         if k > 0:
             z, P = ekf_predict(s.discrete, z, P, u_before, sample_time, s.p, s.q)
         z, P, nis[k], nis_dof[k] = ekf_update(
-            s.discrete, z, P, u_now, y[k], s.p, s.relative, s.floor
+            s.discrete, z, P, u_now, first if k == 0 else y[k], s.p, s.relative, s.floor
         )
         estimates[k] = z
         sigmas[k] = np.sqrt(np.diag(P))
@@ -1328,7 +1334,11 @@ def ekf_bound(setup: EkfSetup, relative_step: float = 1e-5) -> EkfBound:
     steps = relative_step * np.maximum(np.abs(z0), setup.prior_sigma)
     variances = setup.sigma_y**2
     _, S, z, flow = output_sensitivities(f, h, z0, setup.t, setup.u, steps, return_flow=True)
-    J = posterior_information(S, variances, np.diag(setup.prior_sigma**2))
+    # the speeds' prior (σ of their first measurement) *is* that measurement (filter_run
+    # initialises them from it and skips it in the first update): counted once, as the prior
+    used_once = variances.copy()
+    used_once[0, [k for k, name in enumerate(setup.outputs) if name in names]] = np.inf
+    J = posterior_information(S, used_once, np.diag(setup.prior_sigma**2))
     # the filter's process noise over each sample interval: h q, a μ's zero while its
     # element does not slide (its random walk is switched off there, ekf_predict)
     h_step = float(setup.t[1] - setup.t[0]) if len(setup.t) > 1 else 0.0
@@ -1337,7 +1347,7 @@ def ekf_bound(setup: EkfSetup, relative_step: float = 1e-5) -> EkfBound:
         rates = np.array(setup.q, dtype=float)
         rates[setup.aug.frozen_states(setup.u[k])] = 0.0
         process[k] = np.diag(h_step * rates)
-    sigma_process = process_noise_bound(flow, S, variances, np.diag(setup.prior_sigma**2), process)
+    sigma_process = process_noise_bound(flow, S, used_once, np.diag(setup.prior_sigma**2), process)
     parameters = list(setup.aug.parameters)
     values = {name: float(z0[names.index(name)]) for name in parameters}
     scales = nominal_scales(parameters, values)
@@ -1810,7 +1820,8 @@ def measured_ekf_dict(run: EkfRun) -> dict[str, Any]:
         },
         "nis_mean": float(np.mean(run.nis[used])) if used.any() else None,
         "nis_band": list(_chi2_mean_band(run.nis_dof[used])) if used.any() else None,
-        "skipped_updates": int(np.count_nonzero(~used)),
+        # after the first sample, whose speeds are the initial estimate (filter_run)
+        "skipped_updates": int(np.count_nonzero(~used[1:])),
         "min_covariance_eigenvalue": run.min_eigenvalue,
         "modes": run.mode_source,
         "switches": [{"element": m.element, "kind": m.kind, "t": m.t} for m in run.switches],
@@ -1836,7 +1847,8 @@ def format_measured_ekf_text(run: EkfRun) -> str:
         lines.append(
             f"  NIS mean {data['nis_mean']:.2f} (95 % band {lo:.2f}..{hi:.2f}): "
             f"{'inside' if lo <= data['nis_mean'] <= hi else 'OUTSIDE'}; "
-            f"{data['skipped_updates']} samples without an update (NaN speeds)"
+            f"{data['skipped_updates']} later samples without an update (NaN speeds; the first "
+            "sample's speeds are the initial estimate)"
         )
     lines.append(f"  {NO_TRUTH}")
     return "\n".join(lines)

@@ -152,7 +152,9 @@ def process_noise_bound(
     truth, P⁻ = F P Fᵀ + Q, P = (P⁻⁻¹ + Hᵀ R⁻¹ H)⁻¹ (here in Joseph form).
 
     F_k = Φ_{k+1} Φ_k⁻¹ and H_k = S_k Φ_k⁻¹ come from the flow Φ_k = ∂z(t_k)/∂z0 and the
-    output sensitivities of :func:`output_sensitivities` (no other model access). With
+    output sensitivities of :func:`output_sensitivities` (no other model access); an output
+    whose variance is infinite at a sample carries no information there (it is skipped, as
+    :func:`information_increments` gives it 0). With
     ``process`` = 0 it equals :func:`posterior_information`'s bound for the parameters (whose
     z_k is z0). Returns sqrt(diag P_k) after each sample's update, shape (N, n)."""
     flow = np.asarray(flow, dtype=float)
@@ -164,8 +166,13 @@ def process_noise_bound(
         if k > 0:
             F = np.linalg.solve(previous.T, flow[k].T).T  # Φ_k Φ_{k-1}⁻¹
             P = F @ P @ F.T + process[k - 1]
-        H = np.linalg.solve(flow[k].T, S[k].T).T  # S_k Φ_k⁻¹
-        R = np.diag(variances[k])
+        used = np.isfinite(variances[k])  # an infinite variance: no information (unused)
+        H = np.linalg.solve(flow[k].T, S[k].T).T[used]  # S_k Φ_k⁻¹
+        if not used.any():
+            previous = flow[k]
+            out.append(np.sqrt(np.diag(P)))
+            continue
+        R = np.diag(variances[k][used])
         gain = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
         A = np.eye(n) - gain @ H
         P = A @ P @ A.T + gain @ R @ gain.T

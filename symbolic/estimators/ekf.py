@@ -75,17 +75,24 @@ SAMPLE_TIMES: tuple[float, ...] = (0.001, 0.005, 0.01)
 RANDOM_WALK: dict[str, float] = {"m_veh": 1.0, "mu": 4.0e-3, "zeta": 2.5e-5}
 
 #: Model-error intensities q_x (unit²/s) of the states: the filter's rigid model misses the
-#: bristle compliance of the elements (2.66) and the ZOH of inputs that ramp. Chosen by
-#: measurement on the default 2-3 shift at 10 ms (the thesis' sample time), seeds 0-9, and
-#: re-measured on the current 1.5 s scenario (`run_ekf`, NEES and NIS summed over the seeds
-#: and samples, each divided by its summed dof): these values give NEES/dof 1.07 and NIS/dof
-#: 0.97 (all four ten times larger: 0.54 and 0.85, a filter that distrusts its model; a
-#: hundred times smaller: NEES/dof 3.5, NIS/dof 1.03, an overconfident one).
+#: bristle compliance of the elements (2.66) and the ZOH of inputs that ramp. Tuned on the
+#: default 2-3 shift at 10 ms (the thesis' sample time), filter's own modes, with the first
+#: measurement used once (filter_run), on tuning seeds 100-199 (disjoint from the evaluation
+#: seeds 0-49 of tests/test_ekf_montecarlo.py): one common factor c on the previous values
+#: (12, 0.3, 3e-6, 0.03), grid c = 1, 0.7, 0.5, 0.35, 0.25, 0.15; criterion NEES/dof and
+#: NIS/dof (each summed over seeds and samples, divided by its summed dof) both near 1, the
+#: smallest (ln NEES/dof)² + (ln NIS/dof)². c = 0.5: NEES/dof 0.99, NIS/dof 0.998 (c = 1:
+#: 0.79, 0.98; c = 0.25: 1.24, 1.01). A first grid on seeds 100-119 alone chose c = 0.06
+#: (1.00, 1.02), which gave NEES mean 9.7 on the evaluation seeds: twenty runs miss the heavy
+#: tail of the NEES (a few runs whose m_veh converges overconfidently), hence the hundred.
+#: Per-state factors (ω1 × 2 or × 0.5, φ × 0.5 at c = 0.05) moved the criterion by less than
+#: the seed scatter. Evaluated on seeds 0-49 (run_ekf_monte_carlo): NEES mean 5.42 (band
+#: 5.36-7.33), NIS mean 2.965 for 3 dof (band 2.945-3.056).
 MODEL_ERROR: dict[str, float] = {
-    "omega_1": 12.0,
-    "omega_2": 0.3,
-    naming.TWIST: 3.0e-6,
-    naming.WHEEL_SPEED: 0.03,
+    "omega_1": 6.0,
+    "omega_2": 0.15,
+    naming.TWIST: 1.5e-6,
+    naming.WHEEL_SPEED: 0.015,
 }
 
 
