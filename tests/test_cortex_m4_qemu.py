@@ -28,8 +28,7 @@ from gearsym.validation import qemu_m4
 GENERATED_C = Path(__file__).resolve().parents[1] / "generated" / "c"
 
 
-@pytest.fixture(scope="module")
-def runs(tmp_path_factory: pytest.TempPathFactory):
+def _runs(tmp_path_factory: pytest.TempPathFactory, same_trig: bool):
     missing = qemu_m4.missing_tools()
     if missing:
         reason = f"not installed: {', '.join(missing)} (CI installs them: .ci/run)"
@@ -37,8 +36,48 @@ def runs(tmp_path_factory: pytest.TempPathFactory):
             pytest.fail(reason)
         pytest.skip(reason)
     case = qemu_m4.reference_case(load_description())
-    elf, host = qemu_m4.build(GENERATED_C, case, tmp_path_factory.mktemp("m4"))
+    out = tmp_path_factory.mktemp("m4")
+    elf, host = qemu_m4.build(GENERATED_C, case, out, same_trig=same_trig)
     return case, qemu_m4.run_host(host), qemu_m4.run_qemu(elf)
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory):
+    """Both sides with the harness' sine and cosine: equal by construction."""
+    return _runs(tmp_path_factory, same_trig=True)
+
+
+@pytest.fixture(scope="module")
+def library_runs(tmp_path_factory: pytest.TempPathFactory):
+    """Each side with its own C library's sinf/cosf (newlib, glibc), as the benchmark builds."""
+    return _runs(tmp_path_factory, same_trig=False)
+
+
+def _largest_line_difference(ours: list[str], theirs: list[str]) -> float:
+    """max over lines of max |a - b| / max |a| (the line's own scale), the floats of each."""
+    assert len(ours) == len(theirs)
+    worst = 0.0
+    for a, b in zip(ours, theirs, strict=True):
+        if a == b:
+            continue
+        assert a.split()[:2] == b.split()[:2]  # same tag and step
+        fa, fb = qemu_m4.floats(a), qemu_m4.floats(b)
+        scale = max(float(np.max(np.abs(fa[np.isfinite(fa)]), initial=0.0)), 1e-30)
+        same_nan = np.isnan(fa) == np.isnan(fb)
+        assert same_nan.all(), (a, b)
+        ok = ~np.isnan(fa)
+        worst = max(worst, float(np.max(np.abs(fa[ok] - fb[ok]), initial=0.0)) / scale)
+    return worst
+
+
+def test_with_each_sides_own_sinf_the_results_agree_to_float_precision(runs, library_runs) -> None:
+    """glibc's and newlib's sinf/cosf may differ in the last bit (qemu_m4's docstring): with
+    them the target still follows the host to float precision, and the harness' stand-in
+    sine/cosine changes the host's results by no more than that either."""
+    _, host, target = library_runs
+    ours, theirs = qemu_m4.result_lines(host), qemu_m4.result_lines(target)
+    assert _largest_line_difference(ours, theirs) < 1e-5
+    assert _largest_line_difference(ours, qemu_m4.result_lines(runs[1])) < 1e-5
 
 
 def test_the_emulated_target_prints_the_hosts_float_results_bit_for_bit(runs) -> None:
