@@ -178,49 +178,26 @@ def test_dense_layout_predict_equals_the_reference(emitted, tmp_path):
     import dataclasses
 
     from gearsym.symbolic.codegen import config as cfg
-    from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model, ekf_predict
-    from gearsym.validation.c_check import compile_shared
 
     d, m, _ = emitted
     config = dataclasses.replace(m.config, sparsity=cfg.Sparsity("dense"))
     files = {k: v for k, v in emit_all(m.model, config).items() if not k.endswith(".py")}
     assert "_jac_x(" not in _body(files["gearsym_ekf_2_3.c"], "ekf_predict")
-    lib = ctypes.CDLL(str(compile_shared(files, tmp_path, single=False)))
-    aug = augmented_model(d, "2-3")
-    discrete = DiscreteModel(aug)
-    p = aug.parameter_values()
-    q = np.array([aug.intensities[n] for n in aug.state_names])
-    n = len(aug.state_names)
-    Params = type(
-        "Params",
-        (ctypes.Structure,),
-        {"_fields_": [(f"p{i}", ctypes.c_double) for i in range(len(p))]},
-    )
-    ptr = ctypes.POINTER(ctypes.c_double)
-    rng = np.random.default_rng(11)
-    z0 = np.array([194.89, 60.09, 0.0578, 24.34, 1500.0, 0.12, 0.1, 0.01])
-    sigma = np.array([1.95, 0.6, 0.05, 0.25, 300.0, 0.03, 0.03, 0.05])
-    for u in ([80.0, 3000.0, 2000.0, 1.0, 0.0, 1.0, 0.0], [50.0, 0.0, 5000.0, 0.0, 0.0, 1.0, 0.0]):
-        for _ in range(5):
-            z = z0 * (1 + 0.05 * rng.normal(size=n))
-            C = np.corrcoef(rng.normal(size=(n, 3 * n)))
-            P = C * np.outer(sigma, sigma)
-            z_ref, P_ref = ekf_predict(discrete, z, P, u, 0.01, p, q)
-            x_c = z.copy()
-            P_c = P.ravel(order="F").copy()
-            lib[f"{PREFIX}ekf_predict"](
-                x_c.ctypes.data_as(ptr),
-                P_c.ctypes.data_as(ptr),
-                np.array(u).ctypes.data_as(ptr),
-                ctypes.byref(Params(*p)),
-                ctypes.c_double(0.01),
-                q.ctypes.data_as(ptr),
-            )
-            P_c = P_c.reshape(n, n, order="F")
-            s = np.sqrt(np.diag(P_ref))
-            assert np.max(np.abs(x_c - z_ref) / (np.abs(z_ref) + s)) < 1e-12
-            assert np.max(np.abs(P_c - P_ref) / np.outer(s, s)) < 1e-12
-            assert np.array_equal(P_c, P_c.T)
+
+    def cases(n, _inputs):
+        rng = np.random.default_rng(11)
+        z0 = np.array([194.89, 60.09, 0.0578, 24.34, 1500.0, 0.12, 0.1, 0.01])
+        sigma = np.array([1.95, 0.6, 0.05, 0.25, 300.0, 0.03, 0.03, 0.05])
+        for u in (
+            [80.0, 3000.0, 2000.0, 1.0, 0.0, 1.0, 0.0],
+            [50.0, 0.0, 5000.0, 0.0, 0.0, 1.0, 0.0],
+        ):
+            for _ in range(5):
+                z = z0 * (1 + 0.05 * rng.normal(size=n))
+                C = np.corrcoef(rng.normal(size=(n, 3 * n)))
+                yield z, C * np.outer(sigma, sigma), u
+
+    _predict_matches_the_reference(files, d, "2-3", cases, tmp_path)
 
 
 def test_joseph_update_form_equals_the_reference(emitted, tmp_path):
@@ -289,12 +266,33 @@ def test_fused_predict_of_other_shifts_equals_the_reference(shift, tmp_path):
     """The fused predict is decided from the expressions' free symbols, not from the 2-3: the
     EKF of other shifts against the NumPy reference's predict (CasADi's chain rule, dense
     F P F^T) at random states, inputs and symmetric P, to 1e-12."""
-    from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model, ekf_predict
-    from gearsym.validation.c_check import compile_shared
-
     d = load_description()
     m = ekf_model(d, shift_spec(d, shift))
     files = {k: v for k, v in emit_all(m.model, m.config).items() if not k.endswith(".py")}
+
+    def cases(n, inputs):
+        rng = np.random.default_rng(1)
+        z0 = np.array([100.0, 50.0, 0.05, 20.0, 1500.0, 0.12, 0.1, 0.01])[:n]
+        for _ in range(5):
+            z = z0 * (1 + 0.05 * rng.normal(size=n))
+            sigma = np.abs(z) * 0.05 + 0.01
+            P = np.corrcoef(rng.normal(size=(n, 3 * n))) * np.outer(sigma, sigma)
+            u = np.abs(rng.normal(size=len(inputs))) * 100.0
+            for k, name in enumerate(inputs):
+                if name.startswith(("slide_", "stick_")):
+                    u[k] = float(rng.integers(0, 2))
+            yield z, P, u
+
+    _predict_matches_the_reference(files, d, shift, cases, tmp_path)
+
+
+def _predict_matches_the_reference(files: dict[str, str], d, shift: str, cases, tmp_path) -> None:
+    """Compile ``files`` (double), run the emitted ``ekf_predict`` of ``shift`` on each
+    ``(z, P, u)`` of ``cases(n, input_names)`` and compare with the NumPy reference's predict
+    (CasADi's chain rule, dense F P F^T) to 1e-12; P must come out exactly symmetric."""
+    from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model, ekf_predict
+    from gearsym.validation.c_check import compile_shared
+
     lib = ctypes.CDLL(str(compile_shared(files, tmp_path, single=False)))
     aug = augmented_model(d, shift)
     discrete = DiscreteModel(aug)
@@ -308,16 +306,9 @@ def test_fused_predict_of_other_shifts_equals_the_reference(shift, tmp_path):
     )
     ptr = ctypes.POINTER(ctypes.c_double)
     predict = lib[f"gearsym_ekf_{shift.replace('-', '_')}_ekf_predict"]
-    rng = np.random.default_rng(1)
-    z0 = np.array([100.0, 50.0, 0.05, 20.0, 1500.0, 0.12, 0.1, 0.01])[:n]
-    for _ in range(5):
-        z = z0 * (1 + 0.05 * rng.normal(size=n))
-        sigma = np.abs(z) * 0.05 + 0.01
-        P = np.corrcoef(rng.normal(size=(n, 3 * n))) * np.outer(sigma, sigma)
-        u = np.abs(rng.normal(size=len(aug.input_names))) * 100.0
-        for k, name in enumerate(aug.input_names):
-            if name.startswith(("slide_", "stick_")):
-                u[k] = float(rng.integers(0, 2))
+    checked = 0
+    for z, P, u in cases(n, aug.input_names):
+        u = np.asarray(u, dtype=float)
         z_ref, P_ref = ekf_predict(discrete, z, P, u, 0.01, p, q)
         x_c, P_c = z.copy(), P.ravel(order="F").copy()
         predict(
@@ -333,3 +324,5 @@ def test_fused_predict_of_other_shifts_equals_the_reference(shift, tmp_path):
         assert np.max(np.abs(x_c - z_ref) / (np.abs(z_ref) + s)) < 1e-12
         assert np.max(np.abs(P_c - P_ref) / np.outer(s, s)) < 1e-12
         assert np.array_equal(P_c, P_c.T)
+        checked += 1
+    assert checked > 0
