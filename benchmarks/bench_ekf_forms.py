@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import ctypes
 import dataclasses
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -46,16 +45,9 @@ def _files(form: str) -> dict[str, str]:
 
 def spd_run(files: dict[str, str], out: Path) -> str:
     """The harness' output line ("ok <min pivot> m_veh ..." or "fail ...")."""
-    from gearsym.validation.c_check import STRICT_FLAGS, write_files
+    from gearsym.validation.c_check import run_with_harness
 
-    write_files(files, out)
-    exe = out / "spd"
-    cmd = ["gcc", *STRICT_FLAGS, "-O2", "-DGEARSYM_SINGLE_PRECISION", f"-I{out}"]
-    cmd += ["-Wno-float-conversion", "-Wno-conversion", "-Wno-double-promotion"]
-    cmd += ["-o", str(exe), str(HARNESS), str(out / "gearsym_ekf_2_3.c"), "-lm"]
-    subprocess.run(cmd, check=True, capture_output=True, text=True)
-    result = subprocess.run([str(exe)], capture_output=True, text=True, timeout=600, check=False)
-    return result.stdout.strip()
+    return run_with_harness(files, out, HARNESS, "gearsym_ekf_2_3.c").stdout.strip()
 
 
 def free_run(lib: ctypes.CDLL, single: bool, seq: Sequence) -> tuple[np.ndarray, np.ndarray]:

@@ -10,7 +10,6 @@ keep P exactly symmetric and positive definite.
 from __future__ import annotations
 
 import ctypes
-import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +19,7 @@ from gearsym.symbolic.drivetrain import shift_spec
 from gearsym.symbolic.estimators.ekf import DiscreteModel, ekf_predict, ekf_update
 from gearsym.symbolic.generate import ekf_model
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.c_check import STRICT_FLAGS, compile_shared, write_files
+from gearsym.validation.c_check import compile_shared, run_with_harness
 
 HARNESS = Path(__file__).parent / "data" / "ekf_spd_harness.c"
 
@@ -180,13 +179,7 @@ def _inputs(d, aug, run):
 
 def test_float_covariance_stays_symmetric_positive_definite_for_a_million_steps(libraries):
     _, files, out = libraries
-    write_files(files, out)
-    exe = out / "ekf_spd_float"
-    compile_cmd = ["gcc", *STRICT_FLAGS, "-O2", "-DGEARSYM_SINGLE_PRECISION", f"-I{out}"]
-    compile_cmd += ["-Wno-float-conversion", "-Wno-conversion", "-Wno-double-promotion"]
-    compile_cmd += ["-o", str(exe), str(HARNESS), str(out / "gearsym_ekf_2_3.c"), "-lm"]
-    subprocess.run(compile_cmd, check=True, capture_output=True, text=True)
-    result = subprocess.run([str(exe)], capture_output=True, text=True, timeout=300, check=False)
+    result = run_with_harness(files, out, HARNESS, "gearsym_ekf_2_3.c", timeout=300)
     assert result.returncode == 0 and result.stdout.startswith("ok"), result.stdout
     words = result.stdout.split()
     # and the float filter still estimates: the mass of the harness' truth (1800 kg) within 3σ

@@ -207,8 +207,7 @@ def test_joseph_update_form_equals_the_reference(emitted, tmp_path):
     import dataclasses
 
     from gearsym.symbolic.codegen.config import EkfLayout
-    from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model, ekf_update
-    from gearsym.validation.c_check import compile_shared
+    from gearsym.symbolic.estimators.ekf import ekf_update
 
     with pytest.raises(ValueError, match="update_form"):
         EkfLayout(update_form="ud")
@@ -218,16 +217,8 @@ def test_joseph_update_form_equals_the_reference(emitted, tmp_path):
     )
     files = {k: v for k, v in emit_all(m.model, config).items() if not k.endswith(".py")}
     assert "Joseph form expanded" in files["gearsym_ekf_2_3.c"]
-    lib = ctypes.CDLL(str(compile_shared(files, tmp_path, single=False)))
-    aug = augmented_model(d, "2-3")
-    discrete = DiscreteModel(aug)
-    p = aug.parameter_values()
-    n = len(aug.state_names)
-    Params = type(
-        "Params",
-        (ctypes.Structure,),
-        {"_fields_": [(f"p{i}", ctypes.c_double) for i in range(len(p))]},
-    )
+    lib, discrete, p, params = _compiled_filter(files, d, "2-3", tmp_path)
+    n = len(discrete.aug.state_names)
     ptr = ctypes.POINTER(ctypes.c_double)
     fn = lib[f"{PREFIX}ekf_update"]
     fn.restype = ctypes.c_int
@@ -247,7 +238,7 @@ def test_joseph_update_form_equals_the_reference(emitted, tmp_path):
                 x_c.ctypes.data_as(ptr),
                 P_c.ctypes.data_as(ptr),
                 np.array(u).ctypes.data_as(ptr),
-                ctypes.byref(Params(*p)),
+                ctypes.byref(params),
                 y.ctypes.data_as(ptr),
                 r.ctypes.data_as(ptr),
                 floor.ctypes.data_as(ptr),
@@ -290,20 +281,12 @@ def _predict_matches_the_reference(files: dict[str, str], d, shift: str, cases, 
     """Compile ``files`` (double), run the emitted ``ekf_predict`` of ``shift`` on each
     ``(z, P, u)`` of ``cases(n, input_names)`` and compare with the NumPy reference's predict
     (CasADi's chain rule, dense F P F^T) to 1e-12; P must come out exactly symmetric."""
-    from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model, ekf_predict
-    from gearsym.validation.c_check import compile_shared
+    from gearsym.symbolic.estimators.ekf import ekf_predict
 
-    lib = ctypes.CDLL(str(compile_shared(files, tmp_path, single=False)))
-    aug = augmented_model(d, shift)
-    discrete = DiscreteModel(aug)
-    p = aug.parameter_values()
+    lib, discrete, p, params = _compiled_filter(files, d, shift, tmp_path)
+    aug = discrete.aug
     q = np.array([aug.intensities[n] for n in aug.state_names])
     n = len(aug.state_names)
-    Params = type(
-        "Params",
-        (ctypes.Structure,),
-        {"_fields_": [(f"p{i}", ctypes.c_double) for i in range(len(p))]},
-    )
     ptr = ctypes.POINTER(ctypes.c_double)
     predict = lib[f"gearsym_ekf_{shift.replace('-', '_')}_ekf_predict"]
     checked = 0
@@ -315,7 +298,7 @@ def _predict_matches_the_reference(files: dict[str, str], d, shift: str, cases, 
             x_c.ctypes.data_as(ptr),
             P_c.ctypes.data_as(ptr),
             u.ctypes.data_as(ptr),
-            ctypes.byref(Params(*p)),
+            ctypes.byref(params),
             ctypes.c_double(0.01),
             q.ctypes.data_as(ptr),
         )
@@ -326,3 +309,20 @@ def _predict_matches_the_reference(files: dict[str, str], d, shift: str, cases, 
         assert np.array_equal(P_c, P_c.T)
         checked += 1
     assert checked > 0
+
+
+def _compiled_filter(files: dict[str, str], d, shift: str, tmp_path):
+    """The emitted filter compiled in double, the library's discrete model of ``shift``, its
+    parameter values and them as the emitted parameter struct."""
+    from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
+    from gearsym.validation.c_check import compile_shared
+
+    lib = ctypes.CDLL(str(compile_shared(files, tmp_path, single=False)))
+    discrete = DiscreteModel(augmented_model(d, shift))
+    p = discrete.aug.parameter_values()
+    Params = type(
+        "Params",
+        (ctypes.Structure,),
+        {"_fields_": [(f"p{i}", ctypes.c_double) for i in range(len(p))]},
+    )
+    return lib, discrete, p, Params(*p)

@@ -87,6 +87,27 @@ def _run_compiler(cmd: list[str], cwd: Path) -> None:
         raise CompileError(f"{' '.join(cmd)}\n{proc.stdout}{proc.stderr}")
 
 
+def run_with_harness(
+    files: Mapping[str, str],
+    out_dir: Path,
+    harness: Path,
+    source: str,
+    single: bool = True,
+    timeout: float = 600.0,
+) -> subprocess.CompletedProcess[str]:
+    """Write ``files`` into ``out_dir``, build the C program ``harness`` with the emitted
+    ``source`` (strict flags, ``-O2``; single precision by default, the harness' own
+    float/double mixing allowed) and run it; its completed process (stdout, return code)."""
+    write_files(files, out_dir)
+    exe = out_dir / (harness.stem + ("_float" if single else "_double"))
+    cmd = ["gcc", *STRICT_FLAGS, "-O2", f"-I{out_dir}"]
+    cmd += ["-DGEARSYM_SINGLE_PRECISION"] if single else []
+    cmd += ["-Wno-float-conversion", "-Wno-conversion", "-Wno-double-promotion"]
+    cmd += ["-o", str(exe), str(harness), str(out_dir / source), "-lm"]
+    _run_compiler(cmd, out_dir)
+    return subprocess.run([str(exe)], capture_output=True, text=True, timeout=timeout, check=False)
+
+
 def compile_shared(
     files: Mapping[str, str],
     out_dir: Path,
