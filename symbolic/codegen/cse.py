@@ -21,6 +21,7 @@ __all__ = [
     "cse_function",
     "cse_of",
     "flatten_column_major",
+    "hoist",
     "is_condition",
     "share_products",
 ]
@@ -271,6 +272,51 @@ def schedule_calls(
         placed.add(item[0])
         place_ready_calls()
     return result, outputs
+
+
+def hoist(
+    expr: sp.Basic,
+    varying: set[sp.Symbol],
+    new: list[tuple[sp.Symbol, sp.Basic]],
+    keep_negations: bool = False,
+) -> sp.Basic:
+    """``expr`` with its subexpressions free of ``varying`` symbols moved into ``new``
+    temporaries (``hp0, hp1, ...``): whole invariant subtrees, and the invariant terms of a sum
+    and factors of a product grouped into one. Piecewise and boolean nodes stay as they are.
+    ``keep_negations``: a negated symbol is left in place (a negation costs nothing where it
+    is used), not made a temporary."""
+
+    def invariant(e: sp.Basic) -> bool:
+        return not (e.free_symbols & varying)
+
+    def temporary(e: sp.Basic) -> sp.Basic:
+        if e.is_Atom or (keep_negations and (-e).is_Atom):
+            return e
+        symbol = sp.Symbol(f"hp{len(new)}", real=True)
+        new.append((symbol, e))
+        return symbol
+
+    if expr.is_Atom or isinstance(expr, (sp.Piecewise, Boolean)):
+        return expr
+    if invariant(expr):
+        return temporary(expr)
+    if expr.is_Add or expr.is_Mul:
+        fixed = [a for a in expr.args if invariant(a)]
+        moving = [hoist(a, varying, new, keep_negations) for a in expr.args if not invariant(a)]
+        grouped = expr.func(*fixed) if fixed else None
+        if (
+            grouped is not None
+            and not grouped.is_Atom
+            and not (keep_negations and (-grouped).is_Atom)
+        ):
+            symbol = sp.Symbol(f"hp{len(new)}", real=True)
+            new.append((symbol, grouped))
+            grouped = symbol
+        return expr.func(*([grouped] if grouped is not None else []), *moving, evaluate=False)
+    if expr.is_Pow or isinstance(expr, sp.Function):
+        args = (hoist(a, varying, new, keep_negations) for a in expr.args)
+        return expr.func(*args, evaluate=False)
+    return expr
 
 
 def boolean_definitions(form: CseForm) -> dict[sp.Symbol, sp.Basic]:

@@ -149,15 +149,7 @@ def _count(
 
 def count_operations(form: CseForm, config: CodegenConfig | None = None) -> OpCount:
     """Operations of the CSE'd form, as printed by the C printer."""
-    max_power = (config or CodegenConfig()).precision.max_inline_power
-    acc = OpCount()
-    definitions = boolean_definitions(form)
-    for _, expr in form.temporaries:
-        _count(expr, acc, definitions, max_power)
-    for matrix in form.outputs:
-        for expr in matrix:
-            _count(expr, acc, definitions, max_power)
-    return acc
+    return count_split(form, frozenset(), config)[1]  # nothing set apart: all in the rest
 
 
 def count_split(

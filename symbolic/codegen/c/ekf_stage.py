@@ -10,7 +10,7 @@ generation time from its free symbols:
   c_m (free of the moving states) computed once per step; the coefficients of all expressions
   are CSE'd together;
 - any other expression keeps its form, and its subexpressions free of the moving states are
-  hoisted the way ``rk4_step`` hoists the u/p-only terms (``_hoist`` of the emitter).
+  hoisted the way ``rk4_step`` hoists the u/p-only terms (:func:`..cse.hoist`).
 
 A J entry free of the moving states is then the same in all four stages: it is computed once.
 What remains per stage (the moving rows of f and the J entries that depend on the moving
@@ -25,11 +25,10 @@ from dataclasses import dataclass
 
 import sympy as sp
 from gearsym.symbolic.codegen.config import CodegenConfig
-from gearsym.symbolic.codegen.cse import CseForm, cse_of
+from gearsym.symbolic.codegen.cse import CseForm, cse_of, hoist
 from gearsym.symbolic.codegen.ops import OpCount, count_operations
-from sympy.logic.boolalg import Boolean
 
-__all__ = ["FusedStage", "fused_stage", "hoist"]
+__all__ = ["FusedStage", "fused_stage"]
 
 Entry = tuple[int, int]
 
@@ -55,51 +54,6 @@ class FusedStage:
     stage: tuple[str, ...]
     stage_ops: OpCount
     invariant: frozenset[Entry]
-
-
-def hoist(
-    expr: sp.Basic,
-    varying: set[sp.Symbol],
-    new: list[tuple[sp.Symbol, sp.Basic]],
-    keep_negations: bool = False,
-) -> sp.Basic:
-    """``expr`` with its subexpressions free of ``varying`` symbols moved into ``new``
-    temporaries (``hp0, hp1, ...``): whole invariant subtrees, and the invariant terms of a sum
-    and factors of a product grouped into one. Piecewise and boolean nodes stay as they are.
-    ``keep_negations``: a negated symbol is left in place (a negation costs nothing where it
-    is used), not made a temporary."""
-
-    def invariant(e: sp.Basic) -> bool:
-        return not (e.free_symbols & varying)
-
-    def temporary(e: sp.Basic) -> sp.Basic:
-        if e.is_Atom or (keep_negations and (-e).is_Atom):
-            return e
-        symbol = sp.Symbol(f"hp{len(new)}", real=True)
-        new.append((symbol, e))
-        return symbol
-
-    if expr.is_Atom or isinstance(expr, (sp.Piecewise, Boolean)):
-        return expr
-    if invariant(expr):
-        return temporary(expr)
-    if expr.is_Add or expr.is_Mul:
-        fixed = [a for a in expr.args if invariant(a)]
-        moving = [hoist(a, varying, new, keep_negations) for a in expr.args if not invariant(a)]
-        grouped = expr.func(*fixed) if fixed else None
-        if (
-            grouped is not None
-            and not grouped.is_Atom
-            and not (keep_negations and (-grouped).is_Atom)
-        ):
-            symbol = sp.Symbol(f"hp{len(new)}", real=True)
-            new.append((symbol, grouped))
-            grouped = symbol
-        return expr.func(*([grouped] if grouped is not None else []), *moving, evaluate=False)
-    if expr.is_Pow or isinstance(expr, sp.Function):
-        args = (hoist(a, varying, new, keep_negations) for a in expr.args)
-        return expr.func(*args, evaluate=False)
-    return expr
 
 
 def _polynomial(

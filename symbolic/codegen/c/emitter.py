@@ -12,12 +12,13 @@ from gearsym.symbolic.codegen.c.ekf_code import (
     predict_code,
     selection_update_ops,
 )
-from gearsym.symbolic.codegen.c.ekf_stage import FusedStage, fused_stage, hoist
+from gearsym.symbolic.codegen.c.ekf_stage import FusedStage, fused_stage
 from gearsym.symbolic.codegen.c.printer import GearsymCPrinter
 from gearsym.symbolic.codegen.cse import (
     CseForm,
     boolean_definitions,
     flatten_column_major,
+    hoist,
     is_condition,
 )
 from gearsym.symbolic.codegen.jacobian import SparsityPattern
@@ -216,9 +217,7 @@ def _spread(spec: FunctionSpec, pattern: SparsityPattern) -> Spread:
     )
 
 
-def _rk4_hoisted(
-    table: FunctionTable, form: CseForm
-) -> tuple[OpCount, OpCount, GearsymCPrinter, dict] | None:
+def _rk4_hoisted(table: FunctionTable, form: CseForm) -> tuple[OpCount, OpCount, dict] | None:
     """The RK4 step with the right-hand side inlined and its terms that depend on u and p only
     (held over the step) computed once, not in each of the four stages (CasADi's CSE of the
     whole step shares them the same way): the CSE temporaries free of x, and within the
@@ -267,7 +266,7 @@ def _rk4_hoisted(
         "unused": tuple(a for a in ("u", "p") if a not in used),
     }
     first, rest = count_split(form, once, table.config)
-    return first, rest, printer, extra
+    return first, rest, extra
 
 
 def predict_body(
@@ -294,6 +293,8 @@ def predict_body(
         list(table.states),
         [rhs[i] for i in range(n)],
         entries,
+        # the pattern is jac_x's; the entries are differentiated again from rhs because the
+        # table's simplified jac_x form costs 3 more operations here once fused (measured)
         lambda e: sp.diff(rhs[e[0]], table.states[e[1]]),
         printer_for,
         table.config,
@@ -356,7 +357,7 @@ def _function_views(
                 total = counts["rhs"].scaled(4) + own
                 op_text = f"Operations: {total.format()} (4 rhs calls + {own.format()})."
             else:
-                once, per_stage, printer, rk4_extra = hoisted
+                once, per_stage, rk4_extra = hoisted
                 extra.update(rk4_extra)
                 total = once + per_stage.scaled(4) + own
                 op_text = (
