@@ -53,8 +53,25 @@ def library_runs(tmp_path_factory: pytest.TempPathFactory):
     return _runs(tmp_path_factory, same_trig=False)
 
 
+#: Per tag: leading values (NIS, load ...) and the filter's state count (P follows the state).
+_FILTER_LINES = {"ekf": (1, 8), "euio": (3, 7)}
+
+
+def _value_scales(tag: str, values: np.ndarray) -> np.ndarray:
+    """Each value's own scale: a filter state |x| + σ and a covariance entry σ_i σ_j (σ from
+    the line's own P), a leading statistic |v| + 1, an RK4 state |x| + 1e-6."""
+    if tag not in _FILTER_LINES:
+        return np.abs(values) + 1e-6
+    lead, n = _FILTER_LINES[tag]
+    x, P = values[lead : lead + n], values[lead + n :].reshape(n, n)
+    sigma = np.sqrt(np.abs(np.diag(P)))
+    return np.concatenate(
+        [np.abs(values[:lead]) + 1.0, np.abs(x) + sigma, np.outer(sigma, sigma).ravel()]
+    )
+
+
 def _largest_line_difference(ours: list[str], theirs: list[str]) -> float:
-    """max over lines of max |a - b| / max |a| (the line's own scale), the floats of each."""
+    """max over every value of |a - b| / its own scale (:func:`_value_scales`)."""
     assert len(ours) == len(theirs)
     worst = 0.0
     for a, b in zip(ours, theirs, strict=True):
@@ -62,11 +79,10 @@ def _largest_line_difference(ours: list[str], theirs: list[str]) -> float:
             continue
         assert a.split()[:2] == b.split()[:2]  # same tag and step
         fa, fb = qemu_m4.floats(a), qemu_m4.floats(b)
-        scale = max(float(np.max(np.abs(fa[np.isfinite(fa)]), initial=0.0)), 1e-30)
-        same_nan = np.isnan(fa) == np.isnan(fb)
-        assert same_nan.all(), (a, b)
+        assert (np.isnan(fa) == np.isnan(fb)).all(), (a, b)
         ok = ~np.isnan(fa)
-        worst = max(worst, float(np.max(np.abs(fa[ok] - fb[ok]), initial=0.0)) / scale)
+        scale = _value_scales(a.split()[0], np.where(ok, fa, 0.0))
+        worst = max(worst, float(np.max(np.abs(fa[ok] - fb[ok]) / scale[ok], initial=0.0)))
     return worst
 
 
@@ -76,8 +92,10 @@ def test_with_each_sides_own_sinf_the_results_agree_to_float_precision(runs, lib
     sine/cosine changes the host's results by no more than that either."""
     _, host, target = library_runs
     ours, theirs = qemu_m4.result_lines(host), qemu_m4.result_lines(target)
-    assert _largest_line_difference(ours, theirs) < 1e-5
-    assert _largest_line_difference(ours, qemu_m4.result_lines(runs[1])) < 1e-5
+    # 1e-4 of each value's own scale: a last-bit difference of sinf grows by float rounding
+    # over the 150 filter steps (measured: the stand-in against glibc's 3.7e-5 of a σ)
+    assert _largest_line_difference(ours, theirs) < 1e-4
+    assert _largest_line_difference(ours, qemu_m4.result_lines(runs[1])) < 1e-4
 
 
 def test_the_emulated_target_prints_the_hosts_float_results_bit_for_bit(runs) -> None:
