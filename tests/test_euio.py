@@ -176,8 +176,10 @@ def test_cli_json_keys(tmp_path, capsys):
     assert main(["estimate", "--filter", "euio", "--modes", "reference", "--json"]) == 0
     reference = json.loads(capsys.readouterr().out)
     assert reference["modes"] == "reference"
-    # seed 0: the modes differ at B05's lock-up only (README), so μ38 is the same
-    assert reference["parameters"]["mu_38"] == out["parameters"]["mu_38"]
+    for run in (out, reference):  # either way μ38 is estimated: closer to the truth than
+        mu = run["parameters"]["mu_38"]  # its initial value, and within 3σ of it
+        assert abs(mu["estimate"] - mu["truth"]) < abs(mu["initial"] - mu["truth"])
+        assert abs(mu["estimate"] - mu["truth"]) < 3.0 * mu["sigma"]
 
 
 def test_cli_refuses_bad_initial_in_one_line():
