@@ -70,7 +70,11 @@ def sequence(seed: int = SEED, sample_time: float = SAMPLE_TIME) -> Sequence:
     :func:`gearsym.validation.estimation.filter_run` draws them, and that run's estimates."""
     from gearsym.symbolic.estimators.ekf import ekf_update
     from gearsym.symbolic.loader import load_description
-    from gearsym.validation.estimation import filter_run, prepare_ekf
+    from gearsym.validation.estimation import (
+        filter_run,
+        prepare_ekf,
+        start_from_first_measurement,
+    )
     from gearsym.validation.scenario import load_scenario
     from gearsym.validation.simulate import simulate
 
@@ -78,14 +82,9 @@ def sequence(seed: int = SEED, sample_time: float = SAMPLE_TIME) -> Sequence:
     result = simulate(d, load_scenario(d, None))
     s = prepare_ekf(d, result, sample_time, modes="reference")  # the peers take u as given
     y = s.y_true + np.random.default_rng(seed).normal(0.0, 1.0, s.y_true.shape) * s.sigma_y
-    z = s.initial.copy()
-    for k, name in enumerate(s.outputs):
-        z[s.names.index(name)] = y[0, k]
-    P = np.diag(s.prior_sigma**2)
-    # the first speeds are the initial estimate (σ0 = their σ): used once, as filter_run does,
-    # so the first update skips them (NaN) instead of counting that noise draw twice
-    first = y[0].copy()
-    first[[k for k, name in enumerate(s.outputs) if name in s.names]] = np.nan
+    z, sig0 = s.initial.copy(), s.prior_sigma.copy()
+    first = start_from_first_measurement(s, y[0], z, sig0)  # as filter_run starts
+    P = np.diag(sig0**2)
     z, P, _, _ = ekf_update(s.discrete, z, P, s.u[0], first, s.p, s.relative, s.floor)
     run = filter_run(s, seed)
     return Sequence(

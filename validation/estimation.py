@@ -68,6 +68,7 @@ __all__ = [
     "format_text",
     "plot_uio",
     "run_uio",
+    "start_from_first_measurement",
     "write_csv",
 ]
 
@@ -906,6 +907,28 @@ def noisy_outputs(setup: EkfSetup, seed: int) -> np.ndarray:
     return setup.y_true + rng.normal(0.0, 1.0, setup.y_true.shape) * setup.sigma_y
 
 
+def start_from_first_measurement(
+    s: EkfSetup, y0: np.ndarray, z: np.ndarray, sig0: np.ndarray
+) -> np.ndarray:
+    """Set the measured states of ``z`` to the first measurement ``y0`` (in place; a missing
+    one: 0 with σ 1e3 in ``sig0``) and return what the first update may still use.
+
+    The first measurement of a speed *is* its initial estimate (variance R, the prior of
+    sig0): it is used once, so the update at the first sample skips it (NaN). Updating with it
+    again would count one noise draw twice (the speed's σ halved for an error of one σ) and
+    add innovations that are 0 by construction to the NIS (3 of its dof per run)."""
+    first = np.array(y0, dtype=float)
+    for k, name in enumerate(s.outputs):
+        if name in s.names:
+            j = s.names.index(name)
+            if np.isfinite(y0[k]):
+                z[j] = y0[k]
+                first[k] = np.nan
+            else:
+                z[j], sig0[j] = 0.0, 1e3
+    return first
+
+
 def filter_run(
     setup: EkfSetup,
     seed: int = 0,
@@ -957,19 +980,7 @@ def filter_run(
         unmeasured = np.array([name not in s.outputs for name in names])
         draw = np.random.default_rng([seed, 1]).normal(0.0, 1.0, len(z)) * sig0
         z[unmeasured] = s.truth0[unmeasured] + draw[unmeasured]
-    # The first measurement of a speed *is* its initial estimate (variance R, the prior of
-    # sig0): it is used once, so the update at the first sample skips it (NaN). Updating with
-    # it again would count one noise draw twice (the speed's σ halved for an error of one σ)
-    # and add innovations that are 0 by construction to the NIS (3 of its dof per run).
-    first = y[0].copy()
-    for k, name in enumerate(s.outputs):
-        if name in names:
-            j = names.index(name)
-            if np.isfinite(y[0, k]):
-                z[j] = y[0, k]
-                first[k] = np.nan
-            else:
-                z[j], sig0[j] = 0.0, 1e3
+    first = start_from_first_measurement(s, y[0], z, sig0)
     P = np.diag(sig0**2)
     if carried is not None:
         idx = [names.index(name) for name in carried[0]]
