@@ -92,3 +92,21 @@ def test_a_perturbed_constant_is_caught(emitted, tmp_path, file, old, new, caugh
     failing = {t for t, r in reports.items() if not comparison_ok(r)}
     print(file, {t: f"{r.worst():.2g}" for t, r in reports.items()})
     assert failing == (caught if caught is not None else set(targets))
+
+
+def test_the_checks_library_run_is_the_evaluations_reference_path():
+    """reference_steps writes the EUIO loop out step by step for the check; without dropouts
+    it must end where the evaluation's own loop (euio_filter_run, the reference's modes) ends
+    on the same seed, so a change to one loop cannot leave the check on another filter."""
+    import numpy as np
+    from gearsym.validation.euio_evaluation import euio_filter_run, prepare_euio
+    from gearsym.validation.scenario import load_scenario
+    from gearsym.validation.simulate import simulate
+
+    d = load_description()
+    result = simulate(d, load_scenario(d, None))
+    last = reference_steps(d, seed=5, dropout_every=0, result=result).steps[-1].result
+    trial = euio_filter_run(prepare_euio(d, result, modes="reference"), 5)
+    sigma = np.sqrt(np.diag(last.P))
+    assert np.max(np.abs(trial.run.estimates[-1] - last.z) / (np.abs(last.z) + sigma)) < 1e-8
+    assert np.max(np.abs(trial.run.sigmas[-1] - sigma) / sigma) < 1e-8

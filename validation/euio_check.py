@@ -83,7 +83,8 @@ def reference_steps(
 
     if result is None:
         result = simulate(d, load_scenario(d, None))
-    setup = prepare_euio(d, result, sample_time)  # s.u holds the reference's element modes
+    # the reference path: s.u holds the reference's element modes, held(k) its phases' masks
+    setup = prepare_euio(d, result, sample_time, modes="reference")
     s = setup.ekf
     aug, discrete = s.aug, s.discrete
     names = [v.name for v in aug.model.parameters]
@@ -95,7 +96,7 @@ def reference_steps(
         p_names = tuple(names)
     p_c = np.array([setup.p[names.index(name)] for name in p_names])
     y = noisy_outputs(s, seed)
-    for k in range(17, len(y), dropout_every):
+    for k in range(17, len(y), dropout_every) if dropout_every > 0 else ():  # 0: none
         y[k, k % y.shape[1]] = np.nan
     z = s.initial.copy()
     for j, name in enumerate(s.outputs):
