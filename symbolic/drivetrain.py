@@ -150,22 +150,8 @@ def shift_keep(d: GearboxDescription, spec: ShiftSpec) -> tuple[str, ...] | None
         return None
     from gearsym.symbolic.ratios import idle_shafts
 
-    f = len(d.coordinates)
-    dyn = gearbox_dynamics(d)
-    transform = dyn.kinematics.transform
-    index = {b: i for i, b in enumerate(d.body_names)}
-    rows = slip_rows(d, dyn, spec.locked)
-    rank = sp.Matrix.vstack(*rows).rank() if rows else 0
-    keep: list[str] = []
-    for shaft in (d.input_shaft, d.output_shaft, *idle_shafts(d), *d.coordinates):
-        if shaft in keep or rank >= f:
-            continue
-        candidate = sp.Matrix.vstack(*rows, transform[index[shaft], :])
-        if candidate.rank() > rank:
-            rows.append(transform[index[shaft], :])
-            rank += 1
-            keep.append(shaft)
-    return tuple(keep)
+    shafts = (d.input_shaft, d.output_shaft, *idle_shafts(d), *d.coordinates)
+    return _extend_keep(d, gearbox_dynamics(d), spec.locked, (), shafts)
 
 
 def element_short_name(d: GearboxDescription, element: str) -> str:
@@ -364,17 +350,31 @@ def keep_with_idle(
     from gearsym.symbolic.ratios import idle_shafts
 
     idle = [s for s in idle_shafts(d) if s not in keep]
-    f = len(d.coordinates)
-    if not idle or len(locked) + len(keep) >= f:
+    if not idle or len(locked) + len(keep) >= len(d.coordinates):
         return keep
+    return _extend_keep(d, dyn, locked, keep, tuple(idle))
+
+
+def _extend_keep(
+    d: GearboxDescription,
+    dyn: GearboxDynamics,
+    locked: tuple[str, ...],
+    keep: tuple[str, ...],
+    candidates: tuple[str, ...],
+) -> tuple[str, ...]:
+    """``keep`` extended by the ``candidates`` (in order) whose speed adds a motion that the
+    locked elements' slips and the speeds kept so far do not fix, until they fix all (2.55)."""
+    f = len(d.coordinates)
     transform = dyn.kinematics.transform
     index = {b: i for i, b in enumerate(d.body_names)}
     rows = [*slip_rows(d, dyn, locked), *(transform[index[s], :] for s in keep)]
     rank = sp.Matrix.vstack(*rows).rank() if rows else 0
     extended = list(keep)
-    for shaft in idle:
-        if rank == f:
+    for shaft in candidates:
+        if rank >= f:
             break
+        if shaft in extended:
+            continue
         candidate = sp.Matrix.vstack(*rows, transform[index[shaft], :])
         if candidate.rank() > rank:
             rows.append(transform[index[shaft], :])
