@@ -17,13 +17,13 @@ import math
 import re
 from dataclasses import dataclass, field
 from fractions import Fraction
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from gearsym.symbolic import set_kinds
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.input_files import parse_toml, shown, unknown_key_reason
+from gearsym.symbolic.package_data import data_file
 
 #: Names end up in C identifiers, always behind a prefix (``omega_<shaft>``, ``T_<element>``,
 #: ``shift_<gear>_<gear>``), so they may hold letters, digits and underscores only; a leading
@@ -346,7 +346,7 @@ class GearboxDescription:
 
 def default_config_path() -> Path:
     """Path of the built-in description (the thesis' 9-speed gearbox)."""
-    return Path(str(resources.files("gearsym") / "data" / DEFAULT_CONFIG_NAME))
+    return data_file(DEFAULT_CONFIG_NAME)
 
 
 def default_config_text() -> str:

@@ -63,6 +63,7 @@ import numpy as np
 import sympy as sp
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.input_files import parse_toml, read_text
+from gearsym.symbolic.package_data import data_file
 from numpy.typing import ArrayLike
 
 if TYPE_CHECKING:
@@ -76,8 +77,8 @@ Sym = sp.Expr | float
 T_SS_MIN = 1e-3
 """Floor of the steady-state torque magnitude in (2.68) [N m]; see the module docstring."""
 
-DEFAULT_MU_MAP = Path(__file__).resolve().parent.parent / "gearsym" / "data" / "mu_map_default.toml"
-"""The default friction-coefficient map shipped with the project."""
+DEFAULT_MU_MAP = data_file("mu_map_default.toml")
+"""The default friction-coefficient map shipped with the project (package data)."""
 
 MU_MAP = sp.Function("mu_map")
 """Placeholder ``mu_map(p_N, T_oil, dw)`` for code generation; evaluated with ``|dw|``."""

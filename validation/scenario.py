@@ -40,7 +40,6 @@ import bisect
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +48,7 @@ from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import ShiftSpec, shift_spec
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.input_files import parse_toml, read_text, shown, unknown_key_reason
+from gearsym.symbolic.package_data import data_file
 from gearsym.validation.measurement import ChannelMap, parse_channel_map
 
 DEFAULT_SCENARIO = "scenario_2_3.toml"
@@ -117,7 +117,7 @@ class Scenario:
 
 
 def default_scenario_path() -> Path:
-    return Path(str(resources.files("gearsym") / "data" / DEFAULT_SCENARIO))
+    return data_file(DEFAULT_SCENARIO)
 
 
 def load_scenario(d: GearboxDescription, path: str | Path | None = None) -> Scenario:

@@ -9,15 +9,15 @@ from __future__ import annotations
 
 import dataclasses
 from functools import lru_cache
-from pathlib import Path
 from typing import Any
 
 import jinja2
+from gearsym.symbolic.package_data import template_dir
 
 __all__ = ["TEMPLATE_DIR", "render"]
 
-#: ``templates/`` beside ``symbolic/`` in the source tree, ``gearsym/templates`` when installed.
-TEMPLATE_DIR = Path(__file__).resolve().parents[2] / "templates"
+#: ``templates/`` in the source tree, ``gearsym/templates`` when installed (package data).
+TEMPLATE_DIR = template_dir()
 
 
 @lru_cache(maxsize=1)
