@@ -1,5 +1,5 @@
-# Quick start: `make run` (main job on the built-in gearbox) and `make test` (lint + tests).
-# Both create .venv and install gearsym with pinned dependencies on first use: every package
+# Quick start: `make run` (main job on the built-in gearbox) and `make test` (lint + the fast
+# tests); `make check` runs everything (what CI runs). All create .venv and install gearsym with pinned dependencies on first use: every package
 # of the tree at the version in requirements.lock (`make lock` re-resolves it from the pins in
 # pyproject.toml).
 PYTHON ?= python3.11
@@ -9,7 +9,7 @@ STAMP  := $(VENV)/.installed
 
 PIP    := pip==26.3
 
-.PHONY: run test lint format bench fuzz lock clean sketches
+.PHONY: run test check check-installed lint format bench fuzz lock clean sketches
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null || { echo "make: $(PYTHON) not found (need Python 3.11+; set PYTHON=...)"; exit 2; }
@@ -41,8 +41,21 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 
+# Tests run on both cores (pytest-xdist; PYTEST_WORKERS=1 for one). The fast tier leaves out
+# the tests marked slow (Monte-Carlo runs, QEMU, every-shift builds, the larger fuzz budget,
+# compile-and-compare of whole trees); `make check` runs them all, then the installed-wheel run.
+PYTEST_WORKERS ?= 2
+PYTEST := $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile
+
 test: lint
-	$(BIN)/python -m pytest -q
+	$(PYTEST) -m "not slow"
+
+check: lint
+	$(PYTEST)
+	bash .ci/check-installed
+
+check-installed:
+	bash .ci/check-installed
 
 # The nightly hostile-input run: the property suite with a larger budget (fixed seed).
 fuzz: $(STAMP)

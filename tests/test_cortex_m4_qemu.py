@@ -25,6 +25,8 @@ import pytest
 from gearsym.symbolic.loader import load_description
 from gearsym.validation import qemu_m4
 
+pytestmark = pytest.mark.slow  # QEMU runs on the emulated Cortex-M4F: `make check`
+
 GENERATED_C = Path(__file__).resolve().parents[1] / "generated" / "c"
 
 

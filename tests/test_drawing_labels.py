@@ -260,6 +260,7 @@ def _svg(figure: object) -> bytes:
     return to_bytes(figure, "svg")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("config", [None, SIMPSON], ids=["built-in", "simpson_3speed"])
 def test_no_label_overlaps_in_any_picture(config):
     failures = []

@@ -19,6 +19,8 @@ import numpy as np
 import pytest
 from gearsym.symbolic.loader import load_description
 
+pytestmark = pytest.mark.slow  # Monte-Carlo runs of the EKF: `make check`
+
 RUNS = 50
 
 

@@ -27,6 +27,8 @@ import numpy as np
 import pytest
 from gearsym.symbolic.loader import load_description
 
+pytestmark = pytest.mark.slow  # Monte-Carlo runs of the extended UIO: `make check`
+
 RUNS = 50
 
 

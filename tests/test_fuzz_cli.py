@@ -433,6 +433,7 @@ def _strict_compile(c_dir: Path, build: Path) -> None:
         assert result.returncode == 0, f"{source.name}: {result.stderr[-3000:]}"
 
 
+@pytest.mark.slow
 @SLOW
 @given(data=st.data())
 def test_changed_descriptions_generate_compilable_code_or_one_line(data: st.DataObject) -> None:

@@ -83,6 +83,7 @@ def test_all_is_every_single_swap_once_adjacent_upshifts_first(d):
     assert {"3-2", "5-3", "2-1"} <= set(chosen)  # a downshift, a kick-down skip, into 1st
 
 
+@pytest.mark.slow
 def test_emitted_downshift_and_skip_shift_compile_and_equal_sympy(d, tmp_path):
     tree = generate_tree(d, shifts="3-2,5-3")
     names = sorted(m.model.name for m in tree.models if m.shift is not None)

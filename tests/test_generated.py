@@ -49,8 +49,8 @@ ALT_TEETH = REPO / "tests" / "data" / "thesis_9speed_alt_teeth.toml"
 
 
 @pytest.fixture(scope="module")
-def tree() -> Any:
-    return generate_tree(load_description(None))
+def tree(generated_tree: Any) -> Any:
+    return generated_tree  # derived once per run (tests/conftest.py)
 
 
 def _diff(expected: dict[str, str], actual: dict[str, str]) -> str:
@@ -85,6 +85,7 @@ def test_generated_directory_is_up_to_date(tree: Any) -> None:
     )
 
 
+@pytest.mark.slow
 def test_generate_is_byte_identical_across_hash_seeds(tmp_path: Path) -> None:
     trees = []
     for seed in ("0", "4242"):
@@ -172,6 +173,7 @@ def comparisons(tree: Any, tmp_path_factory: pytest.TempPathFactory) -> list:
     )
 
 
+@pytest.mark.slow
 def test_c_and_casadi_match_sympy_for_every_model(comparisons: list) -> None:
     assert len(comparisons) == 3 * 28  # 28 models (with the EKF, EUIO): C double, C single, CasADi
     for report in comparisons:
@@ -292,6 +294,7 @@ def test_example_main_compiles_alone_and_runs(tmp_path: Path) -> None:
     )
 
 
+@pytest.mark.slow
 def test_ecu_rules_hold(tmp_path: Path) -> None:
     assert generated_check.ecu_rule_violations(GENERATED, tmp_path) == []
 
@@ -305,6 +308,7 @@ def test_single_build_has_no_double_literals(tmp_path: Path) -> None:
     assert not re.search(r"\b(sin|cos|exp|sqrt|fabs|fmin|fmax|pow)\(", code)
 
 
+@pytest.mark.slow
 def test_cppcheck_is_clean() -> None:
     findings = generated_check.cppcheck(GENERATED / C_DIR)
     if findings is None:
@@ -312,6 +316,7 @@ def test_cppcheck_is_clean() -> None:
     assert findings == []
 
 
+@pytest.mark.slow
 def test_cross_compiles_for_cortex_m4f(tmp_path: Path) -> None:
     sizes = generated_check.cortex_m4_sizes(GENERATED / C_DIR, tmp_path)
     if sizes is None:
@@ -397,6 +402,7 @@ def _fake_tree(out: Path) -> None:
     (out / "MANIFEST").write_text(f"{MANIFEST_MARKER}\n# 1 files\n{digest}  old.txt\n")
 
 
+@pytest.mark.slow
 def test_failure_while_writing_leaves_the_old_output(tmp_path: Path, capsys: Any) -> None:
     out = tmp_path / "gen"
     _fake_tree(out)
@@ -434,6 +440,7 @@ def test_failed_check_leaves_the_old_output(tmp_path: Path, capsys: Any) -> None
 # ---------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_changed_tooth_counts_regenerate_compile_and_validate_in_one_command(
     tmp_path: Path,
 ) -> None:

@@ -424,6 +424,7 @@ def test_observability_per_mode_of_the_freewheel_shift(capsys):
     assert out.count("\n== hybrid_1_2__") == 7 and "F1 overrun" in out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("shift", ["1-2", "2-1"])
 def test_emitted_hybrid_sensitivities_of_the_freewheel_shift(box, shift, tmp_path):
     """The emitted C of the hybrid sensitivities (``generate --hybrid-shifts 1-2``), compiled

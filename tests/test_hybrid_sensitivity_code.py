@@ -92,6 +92,7 @@ def _columns(hs, mode_index, y):
     }
 
 
+@pytest.mark.slow
 def test_the_run_crosses_every_kind_of_switch_at_the_reference_times(hs, runs):
     reference, emitted, *_ = runs
     index = {m.mode.name: m.index for m in hs.modes}

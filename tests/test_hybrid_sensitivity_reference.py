@@ -85,6 +85,7 @@ def worst_difference(description, hybrid, sigma0_factor):
     return worst
 
 
+@pytest.mark.slow
 def test_hybrid_sensitivities_are_the_rigid_limit_of_the_reference(description, hybrid):
     nominal = worst_difference(description, hybrid, 1.0)
     stiffer = worst_difference(description, hybrid, 10.0)

@@ -230,6 +230,7 @@ def test_recorded_speed_noise_follows_3_26(scenario, reference):
 # ----------------------------------------------------------------------------- the analyses
 
 
+@pytest.mark.slow
 def test_ekf_on_the_recording_reproduces_the_synthetic_run_of_the_same_seed(tmp_path):
     """estimate --measurement example.mf4 (recorded speeds and inputs, resampled, simulation
     driven by the recorded inputs) against estimate on the scenario with the filter's own
@@ -294,6 +295,7 @@ def test_ekf_on_the_recording_reproduces_the_synthetic_run_of_the_same_seed(tmp_
     assert (tmp_path / "ekf" / "ekf.json").exists()
 
 
+@pytest.mark.slow
 def test_ekf_trajectories_agree_sample_by_sample_for_mdf4_and_csv(
     tmp_path, box, scenario, reference
 ):
@@ -508,6 +510,7 @@ def test_measurement_options_are_checked(tmp_path):
     assert "missing table [measurement]" in line and not (tmp_path / "x.mf4").exists()
 
 
+@pytest.mark.slow
 def test_fim_along_the_recorded_inputs_is_the_scenarios(tmp_path):
     """The example records the scenario's inputs on the 10 ms grid, where every breakpoint of
     its profiles lies: linear between the samples they are the same inputs (to float32), so
@@ -527,6 +530,7 @@ def test_fim_along_the_recorded_inputs_is_the_scenarios(tmp_path):
     assert "--measurement" in line and "needs --scenario" in line
 
 
+@pytest.mark.slow
 def test_sensitivities_along_the_recorded_inputs_are_the_scenarios(tmp_path):
     """As the FIM above: the sensitivities (3.7) along the recorded inputs are the scenario's,
     per column within 1e-3 of its largest value."""

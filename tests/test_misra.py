@@ -31,6 +31,7 @@ FILES = [
 ]
 
 
+@pytest.mark.slow
 def test_every_misra_finding_is_a_documented_deviation():
     try:
         counts = misra_rules([ROOT / "generated" / "c" / name for name in FILES])

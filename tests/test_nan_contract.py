@@ -47,6 +47,7 @@ def _require_sanitizers(tmp_path: Path) -> None:
         pytest.skip(reason)
 
 
+@pytest.mark.slow
 def test_emitted_c_under_asan_and_ubsan_keeps_the_nan_contract(
     checked: tuple[list[nan_check.CheckedModel], Any], tmp_path: Path
 ) -> None:

@@ -32,6 +32,7 @@ def gearsym(*args: str) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(SCENARIOS))
 def test_simulate_sensitivity_and_fim_run_end_to_end(tmp_path, name):
     scenario = str(DATA / name)
