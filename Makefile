@@ -50,8 +50,9 @@ PYTEST := $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile
 test: lint
 	$(PYTEST) -m "not slow"
 
-check: lint
-	$(PYTEST)
+# Everything: the fast tier (`make test`), then the tests marked slow, then the installed wheel.
+check: test
+	$(PYTEST) -m slow
 	bash .ci/check-installed
 
 check-installed:
