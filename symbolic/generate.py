@@ -577,7 +577,8 @@ def linear_system_sets(
                 f"systems that lock a one-way clutch ({', '.join(e.name for e in one_way)}) "
                 "hold only while it carries reaction torque of its blocking sign; when that "
                 "torque would change sign the caller switches to the system with it released "
-                "(a state-dependent switch, see gearsym README: one-way clutches)"
+                "(a state-dependent switch, see the gearsym documentation: docs/description.md, "
+                "One-way clutches)"
             )
         s = LinearSystemSet(group.name, group.parameters, systems, metadata)
         # the parameter ranges params_validate enforces are those of the models

@@ -42,8 +42,8 @@ DEVIATIONS: dict[str, tuple[str, str]] = {
     "8.14": (
         "required",
         "`restrict` on the non-overlapping argument arrays: measured 2-13 % faster at -O2 "
-        "(README, emitted C against CasADi and SymForce); the API states that arguments "
-        "never alias",
+        "(docs/benchmarks.md, emitted C against CasADi and SymForce); the API states that "
+        "arguments never alias",
     ),
     "9.3": ("required", "the example main.c initialises demo arrays partially (not TCU code)"),
     "12.1": (
