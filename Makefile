@@ -33,9 +33,9 @@ run: $(STAMP)
 	$(BIN)/gearsym estimate --filter ekf --out out/ekf
 	$(BIN)/gearsym export-fmu --model shift_2_3 --out out/fmu/gearsym_shift_2_3.fmu
 	$(BIN)/gearsym export-a2l --out out/a2l/gearsym.a2l
-	@echo "EKF (4.3) on the 2-3 shift: out/ekf/ekf.png (estimates against the truth, ±3σ, phases shaded), ekf_efficiency.png, ekf.csv (README: estimators)"
-	@echo "FMU (FMI 2.0 Model Exchange + Co-Simulation, sources): out/fmu/gearsym_shift_2_3.fmu; A2L for INCA/CANape: out/a2l/gearsym.a2l (README: FMU, A2L)"
-	@echo "Parameter sweeps (Sobol indices on Dask, slower, not run here): $(BIN)/gearsym sweep --param mu_05=0.108:0.132 --param m_veh=1620:1980 --out out/sweep  (results: out/sweep/indices.csv, samples.parquet, sobol_*.png; README: Global sensitivity sweeps)"
+	@echo "EKF (4.3) on the 2-3 shift: out/ekf/ekf.png (estimates against the truth, ±3σ, phases shaded), ekf_efficiency.png, ekf.csv (docs/ekf.md)"
+	@echo "FMU (FMI 2.0 Model Exchange + Co-Simulation, sources): out/fmu/gearsym_shift_2_3.fmu; A2L for INCA/CANape: out/a2l/gearsym.a2l (docs/fmu.md, docs/a2l.md)"
+	@echo "Parameter sweeps (Sobol indices on Dask, slower, not run here): $(BIN)/gearsym sweep --param mu_05=0.108:0.132 --param m_veh=1620:1980 --out out/sweep  (results: out/sweep/indices.csv, samples.parquet, sobol_*.png; docs/sweeps.md)"
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
@@ -50,10 +50,12 @@ PYTEST := $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile
 test: lint
 	$(PYTEST) -m "not slow"
 
-# Everything: the fast tier (`make test`), then the tests marked slow, then the installed wheel.
+# Everything: the fast tier (`make test`), then the tests marked slow, the installed wheel and
+# the documentation site (its tutorial notebook executed).
 check: test
 	$(PYTEST) -m slow
 	bash .ci/check-installed
+	$(MAKE) docs
 
 check-installed:
 	bash .ci/check-installed
@@ -66,7 +68,7 @@ format: $(STAMP)
 	$(BIN)/ruff format .
 	$(BIN)/ruff check --fix .
 
-# The README's set-kind sketches: one stick diagram per planetary set kind, drawn by gearsym
+# The set-kind sketches (docs/set-kinds.md): one stick diagram per planetary set kind, drawn by gearsym
 # from the minimal descriptions in docs/set_kinds/ (deterministic SVG bytes).
 SET_KINDS := simple double_pinion ravigneaux ravigneaux_two_rings stepped_planet
 sketches: $(STAMP)
@@ -95,4 +97,4 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/run_all.py
 
 clean:
-	rm -rf $(VENV) .lock-venv build *.egg-info .pytest_cache .ruff_cache
+	rm -rf $(VENV) .lock-venv build site *.egg-info .pytest_cache .ruff_cache
