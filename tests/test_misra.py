@@ -1,5 +1,5 @@
 """MISRA C:2012 through cppcheck's add-on: every rule the emitted C breaks is a documented
-deviation (validation/misra.py), and the README's table lists exactly those rules.
+deviation (validation/checks/misra.py), and the README's table lists exactly those rules.
 
 The files checked cover every template path: the full model, a torque-input and a μ-form
 shift model, a sensitivity system, the EKF, the extended UIO, the UIO, the friction element,
@@ -14,7 +14,7 @@ import re
 from pathlib import Path
 
 import pytest
-from gearsym.validation.misra import DEVIATIONS, MisraUnavailable, misra_rules
+from gearsym.validation.checks.misra import DEVIATIONS, MisraUnavailable, misra_rules
 
 ROOT = Path(__file__).resolve().parents[1]
 FILES = [
