@@ -15,8 +15,8 @@ latter twice: with ``-ffp-contract=off`` and ``=fast`` for every unit, since g++
 otherwise contract into FMAs where gcc -std=c99 does not) and ``-DNDEBUG`` (Eigen's index
 checks off, as in a release build); one C++ program times all of them. Inputs: 256 random
 points (states, inputs and parameters uniform in the physical ranges of
-``gearsym.symbolic.generate.sample_ranges`` and the parameter bounds, so the road grade is not
-0 and sin/cos leave their fast paths), cycled through call by call. Each round
+``gearsym.symbolic.export.generate.sample_ranges`` and the parameter bounds, so the road grade is
+not 0 and sin/cos leave their fast paths), cycled through call by call. Each round
 times every implementation over the same number of calls (about 4 ms), in an order rotated
 from round to round; reported: the median over the rounds and the min-max spread. Before
 timing, the three results at one point are compared (the Jacobians spread by their own
@@ -47,9 +47,9 @@ from codegen_peers import (
     write_tree,
 )
 from gearsym.symbolic.codegen import build_function_table
-from gearsym.symbolic.generate import sample_ranges, sensitivity_parameters
+from gearsym.symbolic.export.generate import sample_ranges, sensitivity_parameters
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.c_check import sample_points
+from gearsym.validation.checks.c_check import sample_points
 
 #: ``-ffp-contract``: g++ (the SymForce peer) contracts a*b + c into FMA instructions by
 #: default, gcc in ISO C mode (gearsym's and CasADi's -std=c99) does not; with -march=native
@@ -87,7 +87,7 @@ class Case:
 
 def problems() -> tuple[list[Problem], dict]:
     d = load_description(None)
-    from gearsym.symbolic.generate import gearbox_models
+    from gearsym.symbolic.export.generate import gearbox_models
 
     models = {m.model.name: m for m in gearbox_models(d)}
     full, shift = models["full"], models["shift_2_3_mu"]

@@ -3,7 +3,7 @@ on an emulated Cortex-M4F (QEMU ``mps2-an386``), with a CasADi peer for the RK4 
 
 Measured: ``qemu-system-arm -M mps2-an386 -icount shift=0`` (every instruction advances the
 virtual clock by exactly 1 ns, so the count is deterministic and independent of the host);
-the driver of :mod:`gearsym.validation.qemu_m4` reads SysTick (processor clock) around each
+the driver of :mod:`gearsym.validation.checks.qemu_m4` reads SysTick (processor clock) around each
 step, calibrated by a loop of two instructions per turn (40 instructions per tick on this
 board), on the reference shift (150 EKF steps, 150 EUIO steps, 3001 RK4 steps at the
 simulation's 0.5 ms; the RK4 steps of the 2-3 μ form and of the full model are reported too).
@@ -134,9 +134,9 @@ def casadi_rk4(base, out: Path) -> Path:
 
 
 def main() -> int:
-    from gearsym.symbolic.generate import gearbox_models
+    from gearsym.symbolic.export.generate import gearbox_models
     from gearsym.symbolic.loader import load_description
-    from gearsym.validation import qemu_m4
+    from gearsym.validation.checks import qemu_m4
 
     missing = qemu_m4.missing_tools()
     if missing:

@@ -33,7 +33,7 @@ PREFIX = "gearsym_ekf_2_3_"
 def _files(form: str) -> dict[str, str]:
     from gearsym.symbolic.codegen import emit_all
     from gearsym.symbolic.drivetrain import shift_spec
-    from gearsym.symbolic.generate import ekf_model
+    from gearsym.symbolic.export.generate import ekf_model
     from gearsym.symbolic.loader import load_description
 
     d = load_description()
@@ -45,7 +45,7 @@ def _files(form: str) -> dict[str, str]:
 
 def spd_run(files: dict[str, str], out: Path) -> str:
     """The harness' output line ("ok <min pivot> m_veh ..." or "fail ...")."""
-    from gearsym.validation.c_check import run_with_harness
+    from gearsym.validation.checks.c_check import run_with_harness
 
     return run_with_harness(files, out, HARNESS, "gearsym_ekf_2_3.c").stdout.strip()
 
@@ -82,7 +82,7 @@ def free_run(lib: ctypes.CDLL, single: bool, seq: Sequence) -> tuple[np.ndarray,
 
 
 def main() -> int:
-    from gearsym.validation.c_check import compile_shared
+    from gearsym.validation.checks.c_check import compile_shared
 
     seq = sequence()
     failed = False

@@ -15,9 +15,10 @@ alternately with 5 runs of the new code, which took the median stated beside it
 carries the load of both moments; the alternating pair is the like-for-like comparison.
 
 Peer, measured in the same run: the textbook SymPy route for the same models: the same
-derivation (:func:`gearsym.symbolic.generate.gearbox_models`), then per model ``Matrix.jacobian``
-for ∂f/∂x, ∂f/∂u, ∂f/∂p, ``sympy.cse`` and ``sympy.ccode`` per function into one C file, compiled
-the same way (no step functions, no parameter struct, no CasADi module: it does less).
+derivation (:func:`gearsym.symbolic.export.generate.gearbox_models`), then per model
+``Matrix.jacobian`` for ∂f/∂x, ∂f/∂u, ∂f/∂p, ``sympy.cse`` and ``sympy.ccode`` per function into one
+C file, compiled the same way (no step functions, no parameter struct, no CasADi module: it does
+less).
 """
 
 from __future__ import annotations
@@ -33,9 +34,9 @@ from pathlib import Path
 
 import sympy as sp
 from codegen_peers import REPO, run
-from gearsym.symbolic.generate import gearbox_models
+from gearsym.symbolic.export.generate import gearbox_models
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.c_check import STRICT_FLAGS
+from gearsym.validation.checks.c_check import STRICT_FLAGS
 
 TARGET_S = 10.0
 #: ``gearsym generate`` at e19b1f9 (see the module docstring): median wall clock, and the median
@@ -61,7 +62,7 @@ def compile_all(c_dir: Path, strict: bool = True) -> int:
 def ours_in_process(out: Path) -> tuple[float, float, int]:
     """Derive and emit in this process (like the peer), then compile."""
     from gearsym.symbolic.codegen import clear_caches
-    from gearsym.symbolic.generate import generate_tree
+    from gearsym.symbolic.export.generate import generate_tree
 
     from gearsym.cmd_generate import write_files
 

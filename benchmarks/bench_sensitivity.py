@@ -16,7 +16,7 @@ import time
 import sympy as sp
 from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.sensitivity import sensitivity_equations
-from gearsym.validation.sensitivity_run import (
+from gearsym.validation.studies.sensitivity_run import (
     CompiledModel,
     Interpolated,
     driven_shift_model,

@@ -18,7 +18,7 @@ import time
 import sympy as sp
 from gearsym.symbolic.drivetrain import adjacent_shifts, full_model, shift_model
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.simulate import simulate
+from gearsym.validation.sim.simulate import simulate
 
 
 def rotated(runs: dict, rounds: int = 3) -> dict[str, list[float]]:

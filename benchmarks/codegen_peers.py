@@ -27,7 +27,7 @@ from typing import Any
 import casadi as ca
 import sympy as sp
 from gearsym.symbolic.codegen import build_function_table, count_operations, cse_function
-from gearsym.symbolic.generate import generate_tree
+from gearsym.symbolic.export.generate import generate_tree
 from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.model import Model
 from gearsym.symbolic.numeric import to_casadi

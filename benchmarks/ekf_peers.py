@@ -67,16 +67,17 @@ class Sequence:
 
 def sequence(seed: int = SEED, sample_time: float = SAMPLE_TIME) -> Sequence:
     """The default 2-3 shift, speeds with 1 % noise drawn from ``seed`` as
-    :func:`gearsym.validation.estimation.filter_run` draws them, and that run's estimates."""
+    :func:`gearsym.validation.studies.estimation.filter_run` draws them, and that run's
+    estimates."""
     from gearsym.symbolic.estimators.ekf import ekf_update
     from gearsym.symbolic.loader import load_description
-    from gearsym.validation.estimation import (
+    from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.sim.simulate import simulate
+    from gearsym.validation.studies.estimation import (
         filter_run,
         prepare_ekf,
         start_from_first_measurement,
     )
-    from gearsym.validation.scenario import load_scenario
-    from gearsym.validation.simulate import simulate
 
     d = load_description(None)
     result = simulate(d, load_scenario(d, None))
@@ -487,7 +488,7 @@ def build_driver(seq: Sequence, build: Path, flags: tuple[str, ...] = ("-O2",)) 
 
     from gearsym.symbolic.codegen import emit_all
     from gearsym.symbolic.drivetrain import shift_spec
-    from gearsym.symbolic.generate import ekf_model
+    from gearsym.symbolic.export.generate import ekf_model
     from gearsym.symbolic.loader import load_description
 
     d = load_description(None)

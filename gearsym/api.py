@@ -75,7 +75,7 @@ class Gearbox:
 
     def scenario(self, path: str | Path | None = None) -> Any:
         """A shift scenario (default: the built-in 2-3 power-on upshift)."""
-        from gearsym.validation.scenario import load_scenario
+        from gearsym.validation.sim.scenario import load_scenario
 
         return load_scenario(self.description, path)
 
@@ -83,9 +83,9 @@ class Gearbox:
         """A bench recording (MDF4 or CSV) read with the ``[measurement]`` channel map of
         ``scenario`` (a path, a loaded scenario, or None: the built-in one, which has no map),
         in SI units on the analysis grid
-        (:func:`gearsym.validation.measurement.read_measurement`)."""
+        (:func:`gearsym.validation.sim.measurement.read_measurement`)."""
         from gearsym.symbolic.errors import GearsymError
-        from gearsym.validation.measurement import read_measurement
+        from gearsym.validation.sim.measurement import read_measurement
 
         if scenario is None or isinstance(scenario, str | Path):
             scenario = self.scenario(scenario)
@@ -98,14 +98,14 @@ class Gearbox:
     def simulate(self, scenario: Any = None, measurement: Any = None, **options: Any) -> Any:
         """Reference simulation (thesis 3.1): ``scenario`` a path or a loaded scenario;
         ``measurement`` a recording (path, or from :meth:`measurement`) whose inputs drive
-        it; ``options`` go to :func:`gearsym.validation.simulate.simulate` (``method``,
+        it; ``options`` go to :func:`gearsym.validation.sim.simulate.simulate` (``method``,
         ``rtol``, ``sample_time``, ``check_models``, ``progress``)."""
-        from gearsym.validation.simulate import simulate
+        from gearsym.validation.sim.simulate import simulate
 
         if scenario is None or isinstance(scenario, str | Path):
             scenario = self.scenario(scenario)
         if measurement is not None:
-            from gearsym.validation.measurement import with_measured_inputs
+            from gearsym.validation.sim.measurement import with_measured_inputs
 
             if isinstance(measurement, str | Path):
                 measurement = self.measurement(measurement, scenario)
@@ -117,7 +117,10 @@ class Gearbox:
     ) -> Any:
         """Sensitivities (3.5)-(3.7) along the reference shift (``result`` reuses a
         simulation; default parameters: the thesis' set (3.2) for the shift)."""
-        from gearsym.validation.sensitivity_run import reference_from_result, run_sensitivities
+        from gearsym.validation.studies.sensitivity_run import (
+            reference_from_result,
+            run_sensitivities,
+        )
 
         data = reference_from_result(result) if result is not None else None
         return run_sensitivities(self.description, parameters, data=data, **options)
@@ -125,8 +128,8 @@ class Gearbox:
     def fim(self, parameters: list[str] | None = None, result: Any = None, **options: Any) -> Any:
         """Fisher information (3.25) per phase; by default each phase counts only what it
         reveals itself (``restart=False``: the thesis' continuous view, labelled)."""
-        from gearsym.validation.fisher import fim_study
-        from gearsym.validation.sensitivity_run import reference_from_result
+        from gearsym.validation.studies.fisher import fim_study
+        from gearsym.validation.studies.sensitivity_run import reference_from_result
 
         data = reference_from_result(result) if result is not None else None
         return fim_study(self.description, parameters, data=data, **options)
@@ -143,8 +146,8 @@ class Gearbox:
         """The emitted C and CasADi tree (``GeneratedTree``: files by relative path, models).
         With ``out``, also written there through the one output writer (atomic; never over a
         folder gearsym did not write)."""
-        from gearsym.symbolic.generate import generate_tree
-        from gearsym.symbolic.output_dir import OutputDir
+        from gearsym.symbolic.export.generate import generate_tree
+        from gearsym.symbolic.io.output_dir import OutputDir
 
         tree = generate_tree(self.description)
         if out is not None:

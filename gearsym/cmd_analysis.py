@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 from gearsym.commands import add_command, emit_json, load, progress
 from gearsym.interrupts import check
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.output_dir import OutputDir
+from gearsym.symbolic.io.output_dir import OutputDir
 
 if TYPE_CHECKING:
     from gearsym.commands import Subparsers
@@ -46,7 +46,7 @@ def _overrides(d: Any, items: Sequence[str] | None) -> dict[str, float]:
 def _prepare(args: argparse.Namespace, wheel: bool) -> tuple[Any, list[str] | None, dict, Any]:
     """Load the description and check the parameter names before the (slow) simulation."""
     from gearsym.symbolic.sensitivity import select_parameters
-    from gearsym.validation.sensitivity_run import (
+    from gearsym.validation.studies.sensitivity_run import (
         driven_shift_model,
         parameter_values,
         thesis_parameters,
@@ -57,7 +57,7 @@ def _prepare(args: argparse.Namespace, wheel: bool) -> tuple[Any, list[str] | No
     overrides = _overrides(d, args.set)  # before the slow derivation below
     scenario = None
     if args.scenario is not None:
-        from gearsym.validation.scenario import load_scenario
+        from gearsym.validation.sim.scenario import load_scenario
 
         scenario = _measured(args, d, load_scenario(d, args.scenario))
     elif args.measurement is not None:
@@ -73,11 +73,11 @@ def _prepare(args: argparse.Namespace, wheel: bool) -> tuple[Any, list[str] | No
 
 def _measured(args: argparse.Namespace, d: Any, scenario: Any) -> Any:
     """``--measurement FILE``: the scenario with the recording's inputs (its ``[measurement]``
-    map; :func:`gearsym.validation.measurement.with_measured_inputs`); the recorded speeds are
+    map; :func:`gearsym.validation.sim.measurement.with_measured_inputs`); the recorded speeds are
     not used (the Fisher information needs the noise model (3.26), not the data)."""
     if args.measurement is None:
         return scenario
-    from gearsym.validation.measurement import (
+    from gearsym.validation.sim.measurement import (
         RESAMPLE_TEXT,
         input_sources,
         read_measurement,
@@ -99,10 +99,10 @@ def _measured(args: argparse.Namespace, d: Any, scenario: Any) -> Any:
 
 
 def _reference(d: Any, scenario: Any) -> Any:
-    from gearsym.validation.sensitivity_run import reference_data
+    from gearsym.validation.studies.sensitivity_run import reference_data
 
     start = time.perf_counter()
-    progress("simulating the reference shift (gearsym.validation.simulate)")
+    progress("simulating the reference shift (gearsym.validation.sim.simulate)")
     data = reference_data(d, scenario)
     progress(f"reference simulated in {time.perf_counter() - start:.1f} s")
     return data
@@ -115,7 +115,7 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
     """Sensitivities along the reference shift: PNG per parameter (Figs. 3.4–3.8) and a CSV."""
     import numpy as np
 
-    from gearsym.validation.sensitivity_run import (
+    from gearsym.validation.studies.sensitivity_run import (
         phase_of,
         plot_sensitivities,
         run_sensitivities,
@@ -196,7 +196,7 @@ def cmd_fim(args: argparse.Namespace) -> int:
     if not args.open_loop:
         return _hybrid_fim(args)
     from gearsym.symbolic.defaults import ACCELERATION_ERROR
-    from gearsym.validation.fisher import fim_study, format_text, study_json
+    from gearsym.validation.studies.fisher import fim_study, format_text, study_json
 
     for option, given in (
         ("--hybrid", args.hybrid),
@@ -250,12 +250,12 @@ def _sliding(args: argparse.Namespace) -> str:
 
 def _hybrid_fim(args: argparse.Namespace) -> int:
     """``fim`` (default): the FIM on the hybrid shift model's sensitivities
-    (gearsym.validation.hybrid_fisher), per phase with φ at the phase start unknown, or with
+    (gearsym.validation.studies.hybrid_fisher), per phase with φ at the phase start unknown, or with
     ``--known-initial-state`` the thesis' continuous view (3.16). The open-loop study's options
     are refused: they would silently not apply."""
-    from gearsym.validation.hybrid_fisher import format_text, hybrid_fim, to_dict
-    from gearsym.validation.hybrid_simulation import HybridSimulator
-    from gearsym.validation.scenario import load_scenario
+    from gearsym.validation.sim.hybrid_simulation import HybridSimulator
+    from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.studies.hybrid_fisher import format_text, hybrid_fim, to_dict
 
     for option, given in (
         ("--with-wheel-acceleration", args.with_wheel_acceleration),
@@ -324,7 +324,7 @@ def _hybrid_fim(args: argparse.Namespace) -> int:
 
 def write_fim(study: Any, folder: Path) -> list[str]:
     """``fim.json``, ``fim.txt`` and the bar charts (Figs. 3.9–3.14) into ``folder``."""
-    from gearsym.validation.fisher import format_text, plot_scatter, study_json
+    from gearsym.validation.studies.fisher import format_text, plot_scatter, study_json
 
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "fim.json").write_text(json.dumps(study_json(study), indent=2) + "\n")
@@ -343,17 +343,22 @@ def print_fim_summary(
     elimination (3.3), on the hybrid shift model with φ at each phase start unknown (what
     ``gearsym fim`` prints by default; the view is printed with the verdicts).
 
-    ``result`` is a :class:`gearsym.validation.simulate.SimulationResult` of ``scenario``
+    ``result`` is a :class:`gearsym.validation.sim.simulate.SimulationResult` of ``scenario``
     (default: the built-in 2-3); it feeds the open-loop sensitivities written with ``folder``.
     With ``folder``, also write ``fim/fim.json``, ``fim/fim.txt`` (the hybrid study) and what
     ``gearsym sensitivity`` writes (CSV, Figures 3.4–3.8) into ``folder/sensitivity``; with
-    ``background`` (a :class:`gearsym.validation.figures.Background`) the figures are drawn in
-    a child process while the Fisher information is computed (the caller waits for it).
+    ``background`` (a :class:`gearsym.validation.drawing.figures.Background`) the figures are drawn
+    in a child process while the Fisher information is computed (the caller waits for it).
     """
     from gearsym.symbolic.defaults import GAMMA_MAX, SAMPLE_TIME
-    from gearsym.validation.hybrid_fisher import format_text, hybrid_fim, summary_lines, to_dict
-    from gearsym.validation.hybrid_simulation import HybridSimulator
-    from gearsym.validation.sensitivity_run import (
+    from gearsym.validation.sim.hybrid_simulation import HybridSimulator
+    from gearsym.validation.studies.hybrid_fisher import (
+        format_text,
+        hybrid_fim,
+        summary_lines,
+        to_dict,
+    )
+    from gearsym.validation.studies.sensitivity_run import (
         plot_sensitivities,
         reference_data,
         reference_from_result,
@@ -488,7 +493,7 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
     p.add_argument("--out", help="folder for fim.json, fim.txt and bar charts (Figs. 3.9-3.14)")
     p.add_argument(
         "--sample-time",
-        # finer than the simulated record (gearsym.validation.scenario.SAMPLE_TIME) adds nothing
+        # finer than the simulated record (gearsym.validation.sim.scenario.SAMPLE_TIME) adds nothing
         type=number(float, minimum=RECORD_SAMPLE_TIME),
         default=SAMPLE_TIME,
         help="measurement period in s",

@@ -3,11 +3,11 @@
 The pictures a gearbox engineer checks a description with: the stick diagram (thesis
 Fig. 2.1 style), the lever analogy (Benford & Leising, SAE 810102), the speed plan of one gear
 or of every gear, and the drivetrain (Fig. 2.2). Geometry comes from
-:mod:`gearsym.validation.drawing`, pixels from :mod:`gearsym.validation.drawing_render`; both,
-and matplotlib, are imported inside the handler so that ``gearsym --help`` stays light.
+:mod:`gearsym.validation.drawing.geometry`, pixels from :mod:`gearsym.validation.drawing.render`;
+both, and matplotlib, are imported inside the handler so that ``gearsym --help`` stays light.
 
 ``--out FILE`` names one file, ``.svg`` or ``.png`` (the format follows the suffix). It is
-written through :class:`gearsym.symbolic.output_dir.OutputFile`: atomically, parent folders
+written through :class:`gearsym.symbolic.io.output_dir.OutputFile`: atomically, parent folders
 created, and only over a file gearsym wrote (its embedded signature matches its content), so
 re-running the command refreshes the picture but never replaces a user's file or a picture
 edited since. The same input gives the same bytes. ``--json`` prints the geometry and values
@@ -80,7 +80,7 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
 
 def cmd_draw(args: argparse.Namespace) -> int:
     """Check every option, compute the geometry, render, write atomically."""
-    from gearsym.symbolic.output_dir import OutputFile
+    from gearsym.symbolic.io.output_dir import OutputFile
 
     if args.gear is not None and args.what != "speeds":
         raise GearsymError("command line", "--gear", f"only with --what speeds, not {args.what}")
@@ -89,7 +89,7 @@ def cmd_draw(args: argparse.Namespace) -> int:
     # Open the target first: a bad suffix or a foreign file costs no rendering.
     out = OutputFile(args.out, "draw") if args.out is not None else None
     d = load(args.config)
-    from gearsym.validation import drawing
+    from gearsym.validation.drawing import geometry as drawing
 
     plans = None
     if args.what == "speeds":
@@ -107,8 +107,8 @@ def cmd_draw(args: argparse.Namespace) -> int:
     if out is None:
         return 0
     with out:
-        from gearsym.validation import drawing_render as render
-        from gearsym.validation.figures import to_bytes
+        from gearsym.validation.drawing import render
+        from gearsym.validation.drawing.figures import to_bytes
 
         if args.what == "stick":
             fig = render.stick_figure(d, geometry)

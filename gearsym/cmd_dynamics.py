@@ -182,7 +182,7 @@ class ProgressBar:
 
 def simulate_with_progress(d: Any, scenario: Any) -> Any:
     """Simulate a loaded scenario with a progress display on stderr."""
-    from gearsym.validation.simulate import simulate
+    from gearsym.validation.sim.simulate import simulate
 
     bar = ProgressBar("simulate")
     try:
@@ -193,15 +193,15 @@ def simulate_with_progress(d: Any, scenario: Any) -> Any:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Simulate the scenario's shift with the reference model and write the results."""
-    from gearsym.symbolic.output_dir import OutputDir
-    from gearsym.validation.report import format_summary, summary, write_results
-    from gearsym.validation.scenario import load_scenario
+    from gearsym.symbolic.io.output_dir import OutputDir
+    from gearsym.validation.sim.report import format_summary, summary, write_results
+    from gearsym.validation.sim.scenario import load_scenario
 
     d = load(args.config)
     scenario = load_scenario(d, args.scenario)
     measurement = None
     if args.measurement is not None:
-        from gearsym.validation.measurement import read_measurement
+        from gearsym.validation.sim.measurement import read_measurement
 
         if scenario.measurement is None:
             from gearsym.symbolic.errors import GearsymError
@@ -213,7 +213,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     with OutputDir(args.out, "simulate", before_commit=check) as out:
         comparison: dict[str, Any] = {}
         if measurement is not None:
-            from gearsym.validation.measurement import (
+            from gearsym.validation.sim.measurement import (
                 RESAMPLE_TEXT,
                 compare_outputs,
                 input_sources,

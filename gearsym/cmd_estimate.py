@@ -4,7 +4,7 @@ The unknown input observer (4.4): existence per phase, and its estimates of the 
 unknown inputs against the reference simulation; the extended Kalman filter (4.3) on the
 parameter-augmented shift model (4.1): m_veh, μ of the swapping elements and ζ with σ, NEES and
 NIS against the reference. This module parses and prints; the
-work is in :mod:`gearsym.symbolic.estimators` and :mod:`gearsym.validation.estimation`.
+work is in :mod:`gearsym.symbolic.estimators` and :mod:`gearsym.validation.studies.estimation`.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ def _say(message: str) -> None:
 def cmd_estimate(args: argparse.Namespace) -> int:
     """Run the chosen estimator on the scenario's reference shift; print, or write with --out."""
     from gearsym.symbolic.errors import GearsymError
-    from gearsym.validation.scenario import load_scenario
+    from gearsym.validation.sim.scenario import load_scenario
 
     d = load(args.config)
     scenario = load_scenario(d, args.scenario)
@@ -78,13 +78,13 @@ def cmd_estimate(args: argparse.Namespace) -> int:
             raise GearsymError("estimate", "--noise", str(err)) from None
 
     from gearsym.symbolic.estimators import linear_modes
-    from gearsym.validation.estimation import check_unknown
+    from gearsym.validation.studies.estimation import check_unknown
 
     check_unknown(linear_modes(d, scenario.shift.name), unknown)  # before the simulation
 
     def work(folder: Any) -> Any:
         from gearsym.cmd_dynamics import simulate_with_progress
-        from gearsym.validation.estimation import plot_uio, run_uio, write_csv
+        from gearsym.validation.studies.estimation import plot_uio, run_uio, write_csv
 
         result = simulate_with_progress(d, scenario)
         _say("designing and running the UIO of each phase")
@@ -103,7 +103,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
                 plot_uio(run, folder)
         return run
 
-    from gearsym.validation.estimation import format_text
+    from gearsym.validation.studies.estimation import format_text
 
     return _run_and_report(args, work, format_text)
 
@@ -132,8 +132,8 @@ def _cmd_euio(args: argparse.Namespace, d: Any, scenario: Any) -> int:
 
     def work(folder: Any) -> Any:
         from gearsym.cmd_dynamics import simulate_with_progress
-        from gearsym.validation.estimation import plot_euio, write_euio_csv
-        from gearsym.validation.euio_evaluation import euio_filter_run, prepare_euio
+        from gearsym.validation.studies.estimation import plot_euio, write_euio_csv
+        from gearsym.validation.studies.euio_evaluation import euio_filter_run, prepare_euio
 
         result = simulate_with_progress(d, scenario)
         _say("running the extended UIO")
@@ -153,7 +153,7 @@ def _cmd_euio(args: argparse.Namespace, d: Any, scenario: Any) -> int:
                 plot_euio(run, folder / "euio.png")
         return run
 
-    from gearsym.validation.estimation import format_euio_text
+    from gearsym.validation.studies.estimation import format_euio_text
 
     return _run_and_report(args, work, format_euio_text)
 
@@ -166,8 +166,8 @@ def _cmd_euio_monte_carlo(
 
     def work(folder: Any) -> Any:
         from gearsym.cmd_dynamics import ProgressBar, simulate_with_progress
-        from gearsym.validation.estimation import plot_euio, write_euio_csv
-        from gearsym.validation.euio_evaluation import (
+        from gearsym.validation.studies.estimation import plot_euio, write_euio_csv
+        from gearsym.validation.studies.euio_evaluation import (
             plot_euio_efficiency,
             prepare_euio,
             run_euio_monte_carlo,
@@ -197,7 +197,7 @@ def _cmd_euio_monte_carlo(
                 plot_euio_efficiency(mc, folder / "euio_efficiency.png")
         return mc
 
-    from gearsym.validation.euio_evaluation import format_euio_monte_carlo_text
+    from gearsym.validation.studies.euio_evaluation import format_euio_monte_carlo_text
 
     def text(mc: Any) -> str:
         return f"  assumes scenario: {scenario.name} ({args.scenario or 'built-in'})\n" + (
@@ -257,7 +257,7 @@ def _cmd_drive(args: argparse.Namespace, d: Any) -> int:
     from pathlib import Path
 
     from gearsym.symbolic.errors import GearsymError
-    from gearsym.validation.scenario import default_scenario_path, load_scenario
+    from gearsym.validation.sim.scenario import default_scenario_path, load_scenario
 
     for option, given in (
         ("--scenario", args.scenario is not None),
@@ -288,7 +288,7 @@ def _cmd_drive(args: argparse.Namespace, d: Any) -> int:
         )
 
     from gearsym.cmd_dynamics import simulate_with_progress
-    from gearsym.validation.estimation import format_ekf_text, run_ekf_drive
+    from gearsym.validation.studies.estimation import format_ekf_text, run_ekf_drive
 
     results = [simulate_with_progress(d, sc) for sc in scenarios]
     _say("running the EKF through the shifts, m_veh and zeta carried")
@@ -374,7 +374,7 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
 
     def work(folder: Any) -> Any:
         from gearsym.cmd_dynamics import ProgressBar, simulate_with_progress
-        from gearsym.validation.estimation import (
+        from gearsym.validation.studies.estimation import (
             plot_efficiency,
             plot_ekf,
             prepare_ekf,
@@ -425,7 +425,7 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
                 plot_efficiency(mc, folder / "ekf_efficiency.png")
         return mc
 
-    from gearsym.validation.estimation import format_ekf_text, format_monte_carlo_text
+    from gearsym.validation.studies.estimation import format_ekf_text, format_monte_carlo_text
 
     def text(mc: Any) -> str:
         body = format_monte_carlo_text(mc)
@@ -461,7 +461,7 @@ def _cmd_measured(args: argparse.Namespace, d: Any, scenario: Any) -> int:
             scenario.file, "measurement", "missing table [measurement] (the channel map)"
         )
     from gearsym.symbolic.estimators.ekf import augmented_model
-    from gearsym.validation.measurement import read_measurement
+    from gearsym.validation.sim.measurement import read_measurement
 
     cmap = scenario.measurement
     if cmap.sample_time > scenario.t_end / 4:
@@ -492,15 +492,15 @@ def _cmd_measured(args: argparse.Namespace, d: Any, scenario: Any) -> int:
 
     def work(folder: Any) -> Any:
         from gearsym.cmd_dynamics import simulate_with_progress
-        from gearsym.validation.estimation import (
+        from gearsym.validation.sim.measurement import RESAMPLE_TEXT, input_sources
+        from gearsym.validation.sim.measurement import with_measured_inputs as driven
+        from gearsym.validation.studies.estimation import (
             filter_run,
             measured_ekf_dict,
             plot_ekf,
             prepare_ekf,
             write_ekf_csv,
         )
-        from gearsym.validation.measurement import RESAMPLE_TEXT, input_sources
-        from gearsym.validation.measurement import with_measured_inputs as driven
 
         measured_scenario = driven(scenario, measurement)
         result = simulate_with_progress(d, measured_scenario)
@@ -550,7 +550,7 @@ def _cmd_measured(args: argparse.Namespace, d: Any, scenario: Any) -> int:
                 plot_ekf(run, folder / "ekf.png")
         return _Report(data, run)
 
-    from gearsym.validation.estimation import format_measured_ekf_text
+    from gearsym.validation.studies.estimation import format_measured_ekf_text
 
     def text(report: Any) -> str:
         body = format_measured_ekf_text(report.run)
@@ -578,7 +578,7 @@ def _run_and_report(
     if args.out is None:
         run = work(None)
     else:
-        from gearsym.symbolic.output_dir import OutputDir
+        from gearsym.symbolic.io.output_dir import OutputDir
 
         with OutputDir(args.out, "estimate", before_commit=check) as out:
             run = work(out.path)

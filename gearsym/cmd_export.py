@@ -1,22 +1,22 @@
 """``gearsym export-fmu`` and ``gearsym export-a2l``: the emitted code for the tools around it.
 
 ``gearsym export-fmu [CONFIG] --model NAME [--kind me|cs|both] [--fixed-step S] --out FILE.fmu``
-writes an FMI 2.0 source FMU (:mod:`gearsym.symbolic.fmu`), Model Exchange and Co-Simulation in
-one by default (the Co-Simulation part steps the emitted RK4 with the fixed internal step S,
+writes an FMI 2.0 source FMU (:mod:`gearsym.symbolic.export.fmu`), Model Exchange and Co-Simulation
+in one by default (the Co-Simulation part steps the emitted RK4 with the fixed internal step S,
 default 1e-4 s): the model's ``modelDescription.xml``, the emitted C of ``gearsym generate`` and
 an FMI wrapper in ``sources/``, for the importer to compile with its own FMI headers. ``NAME`` is
 a model name of ``gearsym generate`` (``full``, ``shift_2_3``, ``shift_2_3_mu``, ...).
 
 ``gearsym export-a2l [CONFIG] [--model NAME ...] [--precision double|float] --out FILE.a2l``
-writes an ASAP2 file (:mod:`gearsym.symbolic.a2l`) of the emitted parameter structs and the μ map
-(``--model mu_map``), all of them without ``--model``, for INCA, CANape and the like.
+writes an ASAP2 file (:mod:`gearsym.symbolic.export.a2l`) of the emitted parameter structs and the μ
+map (``--model mu_map``), all of them without ``--model``, for INCA, CANape and the like.
 
 ``gearsym export-measurement [CONFIG] --scenario FILE [--noise R] [--seed K] --out FILE.mf4``
 writes a bench recording (MDF4, or CSV for ``.csv``) of the scenario's reference simulation,
 channels as its ``[measurement]`` table maps them, speed noise (3.26) drawn from ``K``
-(:func:`gearsym.validation.measurement.synthetic_recording`): the example for ``--measurement``.
+(:func:`gearsym.validation.sim.measurement.synthetic_recording`): the example for ``--measurement``.
 
-``--out`` goes through :class:`gearsym.symbolic.output_dir.OutputFile`: written atomically,
+``--out`` goes through :class:`gearsym.symbolic.io.output_dir.OutputFile`: written atomically,
 signed (the zip's archive comment; the A2L's closing comment), and only over a file gearsym
 wrote. The same input gives the same bytes. A bad model name or ``--out`` is one line on stderr,
 exit 2, and nothing written.
@@ -146,7 +146,7 @@ def cmd_export_measurement(args: argparse.Namespace) -> int:
     """Simulate the scenario, sample its mapped channels with speed noise, write atomically."""
     from pathlib import Path
 
-    from gearsym.symbolic.output_dir import OutputFile
+    from gearsym.symbolic.io.output_dir import OutputFile
 
     noise = args.noise.split(",")
     try:
@@ -159,7 +159,7 @@ def cmd_export_measurement(args: argparse.Namespace) -> int:
         )
     with OutputFile(args.out, "export-measurement", suffixes=(".mf4", ".csv")) as out:
         d = load(args.config)
-        from gearsym.validation.scenario import load_scenario
+        from gearsym.validation.sim.scenario import load_scenario
 
         scenario = load_scenario(d, args.scenario)
         cmap = scenario.measurement
@@ -184,7 +184,7 @@ def cmd_export_measurement(args: argparse.Namespace) -> int:
                     "writing MDF4 needs asammdf: pip install 'gearsym[mdf]' (or write a .csv)",
                 ) from None
         from gearsym.cmd_dynamics import simulate_with_progress
-        from gearsym.validation.measurement import recording_bytes, synthetic_recording
+        from gearsym.validation.sim.measurement import recording_bytes, synthetic_recording
 
         result = simulate_with_progress(d, scenario)
         t, values = synthetic_recording(result, cmap, relative, args.seed)
@@ -204,14 +204,14 @@ def cmd_export_measurement(args: argparse.Namespace) -> int:
 
 def cmd_export_fmu(args: argparse.Namespace) -> int:
     """Check --out and --model, build the FMU in memory, write it atomically."""
-    from gearsym.symbolic.output_dir import OutputFile
+    from gearsym.symbolic.io.output_dir import OutputFile
 
     # The target first (suffix, a foreign file, the lock): a bad --out costs no derivation.
     # Leaving the block without commit() removes any folder it created: nothing is written.
     with OutputFile(args.out, "export-fmu", suffixes=(".fmu",)) as out:
         d = load(args.config)
-        from gearsym.symbolic.fmu import fmu_archive, fmu_files
-        from gearsym.symbolic.generate import (
+        from gearsym.symbolic.export.fmu import fmu_archive, fmu_files
+        from gearsym.symbolic.export.generate import (
             check_generatable,
             gearbox_model_names,
             gearbox_models,
@@ -241,13 +241,13 @@ def cmd_export_fmu(args: argparse.Namespace) -> int:
 
 def cmd_export_a2l(args: argparse.Namespace) -> int:
     """Check --out and --model, describe the chosen structs and the μ map, write atomically."""
-    from gearsym.symbolic.output_dir import OutputFile
+    from gearsym.symbolic.io.output_dir import OutputFile
 
     # The target first (suffix, a foreign file, the lock): a bad --out costs no derivation.
     with OutputFile(args.out, "export-a2l", suffixes=(".a2l",)) as out:
         d = load(args.config)
-        from gearsym.symbolic.a2l import a2l_text
-        from gearsym.symbolic.generate import (
+        from gearsym.symbolic.export.a2l import a2l_text
+        from gearsym.symbolic.export.generate import (
             check_generatable,
             gearbox_model_names,
             gearbox_models,

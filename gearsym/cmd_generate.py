@@ -1,13 +1,13 @@
 """``gearsym generate [CONFIG] --out DIR [--check]``: emit the C and CasADi code of a gearbox.
 
-Everything is generated in memory first (:func:`gearsym.symbolic.generate.generate_tree`), then
-written through :class:`gearsym.symbolic.output_dir.OutputDir`: into a staging directory next to
-``DIR``, swapped in only when complete, and only over a ``DIR`` that gearsym wrote (see that
+Everything is generated in memory first (:func:`gearsym.symbolic.export.generate.generate_tree`),
+then written through :class:`gearsym.symbolic.io.output_dir.OutputDir`: into a staging directory
+next to ``DIR``, swapped in only when complete, and only over a ``DIR`` that gearsym wrote (see that
 module's rules).
 
 With ``--check`` the new files are compiled and validated
-(:mod:`gearsym.validation.generated_check`) before they replace ``DIR``; if a check fails, ``DIR``
-stays as it was and the exit code is 1. Progress goes to stderr, the summary to stdout.
+(:mod:`gearsym.validation.checks.generated_check`) before they replace ``DIR``; if a check fails,
+``DIR`` stays as it was and the exit code is 1. Progress goes to stderr, the summary to stdout.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from gearsym.commands import add_command, load, progress
 from gearsym.interrupts import check
 from gearsym.symbolic.defaults import DEFAULT_SHIFT
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.output_dir import OutputDir
+from gearsym.symbolic.io.output_dir import OutputDir
 
 if TYPE_CHECKING:
     from gearsym.commands import Subparsers
@@ -91,7 +91,7 @@ def write_files(files: dict[str, str], root: Path) -> None:
 
 def cmd_generate(args: argparse.Namespace) -> int:
     """Generate, optionally check, and move the result into place."""
-    from gearsym.symbolic.generate import (
+    from gearsym.symbolic.export.generate import (
         check_generatable,
         generate_tree,
         hybrid_shift_names,
@@ -118,7 +118,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
         )
         write_files(tree.files, out.path)
         if args.check:
-            from gearsym.validation.generated_check import check_tree
+            from gearsym.validation.checks.generated_check import check_tree
 
             with tempfile.TemporaryDirectory(prefix="gearsym-check-") as build:
                 report = check_tree(

@@ -27,7 +27,7 @@ __all__ = ["cmd_run", "register"]
 def _run_scenario(d: Any, path: str | None) -> tuple[Any, str | None]:
     """The scenario ``gearsym run`` simulates, or ``None`` and why not. A scenario the user
     names must load (its errors are errors); the built-in one is tried on any gearbox."""
-    from gearsym.validation.scenario import load_scenario
+    from gearsym.validation.sim.scenario import load_scenario
 
     if path is not None:
         return load_scenario(d, path), None
@@ -45,12 +45,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     simulate the shift scenario, and its sensitivities and Fisher information; everything the
     description supports, and what was skipped, with the reason."""
     from gearsym.symbolic.dynamics import gearbox_dynamics
-    from gearsym.symbolic.output_dir import OutputDir
+    from gearsym.symbolic.io.output_dir import OutputDir
     from gearsym.symbolic.ratios import ratio_table
 
     d = load(args.config)
     scenario, skipped = _run_scenario(d, args.scenario)
-    from gearsym.validation.figures import Background
+    from gearsym.validation.drawing.figures import Background
 
     with OutputDir(args.out, "run", before_commit=check) as out, Background() as figures:
         print(f"gearsym: {d.title}")
@@ -69,7 +69,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         table = ratio_table(d)  # once: printed and written
         status = print_ratio_table(d, table)
         (out.path / "ratios.json").write_text(json.dumps(ratio_json(table), indent=2) + "\n")
-        from gearsym.validation.drawing_render import write_pictures
+        from gearsym.validation.drawing.render import write_pictures
 
         # stick diagram, lever analogy, speed plans, drivetrain: drawn beside the analyses
         figures.submit("drawings", write_pictures, d, out.path / "drawings")
@@ -81,7 +81,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         if scenario is not None:
             from gearsym.cmd_analysis import print_fim_summary
             from gearsym.cmd_dynamics import simulate_with_progress
-            from gearsym.validation.report import format_summary, plot_shift, write_results
+            from gearsym.validation.sim.report import format_summary, plot_shift, write_results
 
             print()
             result = simulate_with_progress(d, scenario)

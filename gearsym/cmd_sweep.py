@@ -1,5 +1,5 @@
 """``gearsym sweep``: Sobol indices and Monte-Carlo robustness of a shift over parameter ranges,
-evaluated in parallel on Dask (:mod:`gearsym.validation.sweep`)."""
+evaluated in parallel on Dask (:mod:`gearsym.validation.studies.sweep`)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from gearsym.commands import add_command, emit_json, load, progress
 from gearsym.interrupts import check
 from gearsym.options import number
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.output_dir import OutputDir
+from gearsym.symbolic.io.output_dir import OutputDir
 
 if TYPE_CHECKING:
     from gearsym.commands import Subparsers
@@ -21,7 +21,7 @@ def _definition(args: argparse.Namespace, file: str) -> Any:
     (which adds or replaces ranges); ``--samples``/``--seed`` override the file's."""
     from dataclasses import replace
 
-    from gearsym.validation.sweep import (
+    from gearsym.validation.studies.sweep import (
         SweepDefinition,
         check_samples,
         load_definition,
@@ -51,13 +51,13 @@ def _definition(args: argparse.Namespace, file: str) -> Any:
 def cmd_sweep(args: argparse.Namespace) -> int:
     """Sample, evaluate on Dask, write samples (CSV, Parquet), indices and one figure per
     quantity with local sensitivities."""
-    from gearsym.validation.sweep import ShiftEvaluator, check_parameters, connect
+    from gearsym.validation.studies.sweep import ShiftEvaluator, check_parameters, connect
 
     d = load(args.config)
     definition = _definition(args, d.file)
     scenario = None
     if args.scenario is not None:
-        from gearsym.validation.scenario import load_scenario
+        from gearsym.validation.sim.scenario import load_scenario
 
         scenario = load_scenario(d, args.scenario)
     if args.scheduler != "local" and not args.scheduler.startswith(("tcp://", "tls://")):
@@ -107,7 +107,7 @@ def _sweep(
     out: OutputDir,
 ) -> tuple[dict[str, Any], Any, list[str], list[Any]]:
     """The work inside the output folder: local sensitivities, the sweep, files, figures."""
-    from gearsym.validation.sweep import (
+    from gearsym.validation.studies.sweep import (
         LOCAL_QUANTITIES,
         linearised_indices,
         local_sensitivities,

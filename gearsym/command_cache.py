@@ -12,7 +12,7 @@ mpmath. Any change to one of them is a miss; nothing expires otherwise.
 
 Entries live in ``$GEARSYM_CACHE_DIR``, else ``$XDG_CACHE_HOME/gearsym``, else
 ``~/.cache/gearsym``; one folder per key, written by the one output writer
-(:class:`~gearsym.symbolic.output_dir.OutputDir`, with its ``MANIFEST``), read only when its
+(:class:`~gearsym.symbolic.io.output_dir.OutputDir`, with its ``MANIFEST``), read only when its
 ``MANIFEST`` still matches. ``GEARSYM_NO_CACHE=1`` or ``--no-cache`` turns it off. Only
 successful runs are stored (exit 0, and 1 for ``ratios``' "derived ratio differs"); errors
 always come from a fresh run. A cache that cannot be written is skipped without a word: it
@@ -96,7 +96,7 @@ def entry_key(command: str, options: Mapping[str, Any], config: str | None) -> s
 def lookup(root: Path, key: str) -> tuple[str, str, int] | None:
     """The stored (stdout, stderr, exit status) of ``key``, or ``None`` (missing, or not
     intact)."""
-    from gearsym.symbolic.output_dir import foreign_content
+    from gearsym.symbolic.io.output_dir import foreign_content
 
     folder = root / key
     try:
@@ -117,7 +117,7 @@ def store(root: Path, key: str, command: str, stdout: str, stderr: str, status: 
     """Store one entry through the output writer; ``False`` (and nothing written) when it
     cannot be (read-only cache, another process writing it, a foreign folder)."""
     from gearsym.symbolic.errors import GearsymError
-    from gearsym.symbolic.output_dir import OutputDir
+    from gearsym.symbolic.io.output_dir import OutputDir
 
     entry = {
         "format": FORMAT,

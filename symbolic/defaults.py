@@ -26,4 +26,5 @@ GAMMA_MAX = 0.1  # limit of the normalised scatter (3.27), assumed
 SLIDING_MODES = ("detected", "phases")
 SLIDING_PHASES = ("torque phase", "speed phase")
 
-RECORD_SAMPLE_TIME = 5e-4  # s, spacing of the simulated time series (gearsym.validation.simulate)
+#: s, spacing of the simulated time series (gearsym.validation.sim.simulate)
+RECORD_SAMPLE_TIME = 5e-4

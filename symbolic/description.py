@@ -22,8 +22,8 @@ from typing import Any
 
 from gearsym.symbolic import set_kinds
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.input_files import parse_toml, shown, unknown_key_reason
-from gearsym.symbolic.package_data import data_file
+from gearsym.symbolic.io.input_files import parse_toml, shown, unknown_key_reason
+from gearsym.symbolic.io.package_data import data_file
 
 #: Names end up in C identifiers, always behind a prefix (``omega_<shaft>``, ``T_<element>``,
 #: ``shift_<gear>_<gear>``), so they may hold letters, digits and underscores only; a leading

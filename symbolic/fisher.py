@@ -1,8 +1,8 @@
 """Fisher information, Cramér–Rao bounds and parameter elimination: the math (thesis 3.16–3.30).
 
 Pure numerics on arrays, no model knowledge: the output sensitivities ∂y/∂p at the measurement
-times come from :mod:`gearsym.validation.sensitivity_run`; :mod:`gearsym.validation.fisher` runs
-the study along the reference shift.
+times come from :mod:`gearsym.validation.studies.sensitivity_run`;
+:mod:`gearsym.validation.studies.fisher` runs the study along the reference shift.
 
 * noise model (3.26): σ²_ik = r_i² · max(|y_i(t_k)|, y_i^min)², with y_i^min = 1 % of the
   largest measured |y_i| (the floor fraction is a parameter);

@@ -62,8 +62,8 @@ from typing import TYPE_CHECKING, Any, NoReturn
 import numpy as np
 import sympy as sp
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.input_files import parse_toml, read_text
-from gearsym.symbolic.package_data import data_file
+from gearsym.symbolic.io.input_files import parse_toml, read_text
+from gearsym.symbolic.io.package_data import data_file
 from numpy.typing import ArrayLike
 
 if TYPE_CHECKING:

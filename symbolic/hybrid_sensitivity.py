@@ -31,7 +31,7 @@ Unlike :func:`~gearsym.symbolic.sensitivity.sensitivity_equations`, a parameter 
 does not depend on is kept (μ of an element that is locked or open): its ∂f/∂p is zero there,
 but its sensitivity is carried, since it was built up while the element slid.
 
-The grade enters as in :class:`~gearsym.validation.hybrid_simulation.HybridSimulator`: the
+The grade enters as in :class:`~gearsym.validation.sim.hybrid_simulation.HybridSimulator`: the
 parameter ζ plus the input ζ_dev(t) (2.53), so a grade profile moves the guards too.
 """
 

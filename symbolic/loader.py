@@ -18,7 +18,7 @@ from gearsym.symbolic.description import (
     default_config_text,
     parse_description,
 )
-from gearsym.symbolic.input_files import read_text
+from gearsym.symbolic.io.input_files import read_text
 from gearsym.symbolic.ratios import check_gear_table
 
 __all__ = ["load_description"]

@@ -170,7 +170,7 @@ def slip_column(element: str) -> str:
     return f"slip_{element}"
 
 
-# Columns of timeseries.csv that no description name enters (validation/simulate.py).
+# Columns of timeseries.csv that no description name enters (validation/sim/simulate.py).
 TIME = "t"
 ENGINE_TORQUE = "T_engine"
 E_MACHINE_TORQUE = "T_e_machine"
@@ -183,7 +183,7 @@ VEHICLE_SPEED = "v_vehicle"
 #: same quantity, so the same name).
 GRADE = "zeta"
 #: Input of the driven shift model: ζ(t) − ζ0, the recorded grade's deviation from the
-#: parameter ζ0 (validation/sensitivity_run.py), so that ∂/∂ζ is a constant offset.
+#: parameter ζ0 (validation/studies/sensitivity_run.py), so that ∂/∂ζ is a constant offset.
 GRADE_DEVIATION = "zeta_dev"
 ENERGY_TERMS = ("W_in", "W_friction", "W_damper", "W_road")
 

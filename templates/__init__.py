@@ -1,2 +1,2 @@
 """The Jinja2 templates of every emitted file (package data, found by
-gearsym.symbolic.package_data and rendered by gearsym.symbolic.codegen.render)."""
+gearsym.symbolic.io.package_data and rendered by gearsym.symbolic.codegen.render)."""

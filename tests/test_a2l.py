@@ -31,8 +31,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from gearsym.symbolic.generate import MU_BOUNDS, PARAMETER_BOUNDS
-from gearsym.symbolic.output_dir import foreign_file
+from gearsym.symbolic.export.generate import MU_BOUNDS, PARAMETER_BOUNDS
+from gearsym.symbolic.io.output_dir import foreign_file
 
 from gearsym.cli import main
 
@@ -186,7 +186,7 @@ def _scalars(module: Block) -> dict[str, list[Scalar]]:
 
 
 def test_every_emitted_struct_is_described_in_header_order_with_its_units(a2l):
-    from gearsym.symbolic.generate import gearbox_models
+    from gearsym.symbolic.export.generate import gearbox_models
     from gearsym.symbolic.loader import load_description
 
     module = module_of(a2l["double"].read_text())

@@ -1,4 +1,4 @@
-"""Tests of the code-generation core: symbolic/codegen.py, templates/, validation/c_check.py.
+"""Tests of the code-generation core: symbolic/codegen.py, templates/, validation/checks/c_check.py.
 
 Three hand-written models exercise it: a damped pendulum (sin, cos), a LuGre-type friction model
 (Piecewise, sign, Abs, exp, Min/Max, Heaviside, a compound cube) and a 4-state stiff linear
@@ -27,7 +27,7 @@ import scipy.linalg
 import sympy as sp
 from gearsym.symbolic import codegen
 from gearsym.symbolic.model import Model, Variable
-from gearsym.validation import c_check
+from gearsym.validation.checks import c_check
 
 REPO = Path(__file__).resolve().parents[1]
 V = Variable
@@ -430,8 +430,8 @@ def test_sanitizers_and_nan_contract_on_the_test_models(
 ) -> None:
     """The four test models (Piecewise with and without default, shared And/Or conditions, Min,
     Max of three, sign, Heaviside, no inputs) under ASan/UBSan with NaN, ±inf, ±0, ±huge, ±tiny
-    and boundary arguments: see validation/nan_check.py."""
-    from gearsym.validation import nan_check
+    and boundary arguments: see validation/checks/nan_check.py."""
+    from gearsym.validation.checks import nan_check
 
     reason = nan_check.sanitizer_support(build_dir=tmp_path / "probe")
     if reason is not None:

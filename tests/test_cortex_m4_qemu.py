@@ -1,15 +1,15 @@
 """The emitted float EKF, extended UIO and models (2-3 shift, its μ form, full) bare-metal on a
 Cortex-M4F.
 
-QEMU's ``mps2-an386`` board (Cortex-M4F) runs the project's harness (validation/cortex_m4/:
+QEMU's ``mps2-an386`` board (Cortex-M4F) runs the project's harness (validation/checks/cortex_m4/:
 start-up, linker script, semihosting, driver) built with arm-none-eabi-gcc and newlib; the same
 driver built for the host in float prints the same lines. Expected: every printed float equal
-bit for bit (both builds IEEE single with ``-ffp-contract=off``; see gearsym.validation.qemu_m4
-for why equality is a fair expectation). That the runs are not trivially equal is checked
-against physics and an independent integrator: the filter's estimates stay within 4σ of the
-reference simulation's truth, and the RK4 trajectories of the 2-3 and the full model within 1 %
-of the reference simulation's (the hybrid model, integrated by CVODES) states; the float EUIO,
-run on its own state, ends within a tenth of its σ of the library's double filter
+bit for bit (both builds IEEE single with ``-ffp-contract=off``; see
+gearsym.validation.checks.qemu_m4 for why equality is a fair expectation). That the runs are not
+trivially equal is checked against physics and an independent integrator: the filter's estimates
+stay within 4σ of the reference simulation's truth, and the RK4 trajectories of the 2-3 and the full
+model within 1 % of the reference simulation's (the hybrid model, integrated by CVODES) states; the
+float EUIO, run on its own state, ends within a tenth of its σ of the library's double filter
 (:func:`~gearsym.symbolic.estimators.euio.euio_step_full`) and its estimates stay within 4σ of
 the truth. Without the
 tools the tests skip, except under CI, where they fail (.ci/run installs them).
@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from gearsym.symbolic.loader import load_description
-from gearsym.validation import qemu_m4
+from gearsym.validation.checks import qemu_m4
 
 pytestmark = pytest.mark.slow  # QEMU runs on the emulated Cortex-M4F: `make check`
 

@@ -27,9 +27,9 @@ import pytest
 import sympy as sp
 from gearsym.symbolic.drivetrain import full_model, shift_model, shift_spec
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.generate import generate_tree, hybrid_shift_names, selected_shifts
+from gearsym.symbolic.export.generate import generate_tree, hybrid_shift_names, selected_shifts
 from gearsym.symbolic.loader import load_description
-from gearsym.validation import generated_check
+from gearsym.validation.checks import generated_check
 from scipy.integrate import solve_ivp
 
 OVERDRIVE = Path(__file__).parent / "data" / "simpson_overdrive_idle.toml"

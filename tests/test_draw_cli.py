@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.output_dir import OutputFile, sign_file, signed_by_gearsym
+from gearsym.symbolic.io.output_dir import OutputFile, sign_file, signed_by_gearsym
 
 DATA = Path(__file__).parent / "data"
 
@@ -136,7 +136,7 @@ def test_output_file_refuses_a_directory_and_writes_atomically(tmp_path):
 def test_help_does_not_import_matplotlib():
     code = (
         "import sys; from gearsym import cli; cli.build_parser(); "
-        "print('matplotlib' in sys.modules, 'gearsym.validation.drawing' in sys.modules)"
+        "print('matplotlib' in sys.modules, 'gearsym.validation.drawing.geometry' in sys.modules)"
     )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert result.stdout.split() == ["False", "False"], result.stderr

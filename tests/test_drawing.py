@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.drawing import (
+from gearsym.validation.drawing.geometry import (
     drivetrain_diagram,
     lever_diagram,
     set_positions,

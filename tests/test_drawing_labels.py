@@ -238,8 +238,8 @@ def check_picture(svg: bytes, original: bool = True) -> None:
 
 def _pictures(config: Path | None) -> dict[str, Callable[[], object]]:
     from gearsym.symbolic.loader import load_description
-    from gearsym.validation import drawing_render as render_
-    from gearsym.validation.drawing import drivetrain_diagram, speed_plans, stick_diagram
+    from gearsym.validation.drawing import render as render_
+    from gearsym.validation.drawing.geometry import drivetrain_diagram, speed_plans, stick_diagram
 
     d = load_description(config) if config else load_description()
     plans = speed_plans(d)
@@ -255,7 +255,7 @@ def _pictures(config: Path | None) -> dict[str, Callable[[], object]]:
 
 
 def _svg(figure: object) -> bytes:
-    from gearsym.validation.figures import to_bytes
+    from gearsym.validation.drawing.figures import to_bytes
 
     return to_bytes(figure, "svg")
 
@@ -276,7 +276,7 @@ def test_no_label_overlaps_in_any_picture(config):
 def test_the_check_finds_overlapping_and_cut_off_labels():
     """The checker is not vacuous: two labels drawn on top of each other are found, with their
     texts, and so is a label running off the canvas."""
-    from gearsym.validation.figures import subplots
+    from gearsym.validation.drawing.figures import subplots
 
     fig, ax = subplots(1, 1, (3.0, 2.0))
     ax.axis("off")
@@ -294,7 +294,7 @@ def test_the_check_finds_overlapping_and_cut_off_labels():
 
 
 def _svg_of_texts(texts: list[tuple[float, float, str]]) -> bytes:
-    from gearsym.validation.figures import subplots
+    from gearsym.validation.drawing.figures import subplots
 
     fig, ax = subplots(1, 1, (3.0, 2.0))
     ax.axis("off")

@@ -17,9 +17,9 @@ import pytest
 from gearsym.symbolic.codegen import emit_all
 from gearsym.symbolic.drivetrain import shift_spec
 from gearsym.symbolic.estimators.ekf import DiscreteModel, ekf_predict, ekf_update
-from gearsym.symbolic.generate import ekf_model
+from gearsym.symbolic.export.generate import ekf_model
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.c_check import compile_shared, run_with_harness
+from gearsym.validation.checks.c_check import compile_shared, run_with_harness
 
 HARNESS = Path(__file__).parent / "data" / "ekf_spd_harness.c"
 
@@ -48,9 +48,9 @@ def libraries(emitted, tmp_path_factory):
 def _trajectory(d, m):
     """(u_k, y_k, z_k, P_k) before each step of the reference filter on the reference shift."""
     from gearsym.symbolic.estimators.ekf import augmented_model
-    from gearsym.validation.estimation import run_ekf
-    from gearsym.validation.scenario import load_scenario
-    from gearsym.validation.simulate import simulate
+    from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.sim.simulate import simulate
+    from gearsym.validation.studies.estimation import run_ekf
 
     result = simulate(d, load_scenario(d, None))
     aug = augmented_model(d, "2-3")
@@ -161,9 +161,9 @@ def test_emitted_ekf_step_equals_the_reference_filter(emitted, libraries):
 
 
 def _inputs(d, aug, run):
-    from gearsym.validation.estimation import element_modes
-    from gearsym.validation.scenario import load_scenario
-    from gearsym.validation.simulate import simulate
+    from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.sim.simulate import simulate
+    from gearsym.validation.studies.estimation import element_modes
 
     result = simulate(d, load_scenario(d, None))
     modes = element_modes(d, result, run.t)
@@ -193,9 +193,9 @@ def mode_cases(emitted):
     own run of the default shift (seed 2) and on states built around each element's lock-up
     and break-away (slip just either side of zero, every mode of the other element), P with a
     random correlation and the run's σ."""
-    from gearsym.validation.estimation import filter_run, prepare_ekf
-    from gearsym.validation.scenario import load_scenario
-    from gearsym.validation.simulate import simulate
+    from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.sim.simulate import simulate
+    from gearsym.validation.studies.estimation import filter_run, prepare_ekf
 
     d, _ = emitted
     result = simulate(d, load_scenario(d, None))

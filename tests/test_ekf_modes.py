@@ -193,22 +193,22 @@ SEEDS = range(10)
 
 @pytest.fixture(scope="module")
 def result(d):
-    from gearsym.validation.scenario import load_scenario
-    from gearsym.validation.simulate import simulate
+    from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.sim.simulate import simulate
 
     return simulate(d, load_scenario(d, None))
 
 
 @pytest.fixture(scope="module")
 def setup(d, aug, result):
-    from gearsym.validation.estimation import prepare_ekf
+    from gearsym.validation.studies.estimation import prepare_ekf
 
     return prepare_ekf(d, result, sample_time=0.01, aug=aug)
 
 
 @pytest.fixture(scope="module")
 def runs(setup):
-    from gearsym.validation.estimation import filter_run
+    from gearsym.validation.studies.estimation import filter_run
 
     return [filter_run(setup, seed) for seed in SEEDS]
 
@@ -252,7 +252,7 @@ def test_mu_estimate_and_sigma_are_bit_equal_while_the_filter_holds_its_element(
 
 
 def test_reference_modes_remain_available_and_report_their_source(d, result, setup, aug, runs):
-    from gearsym.validation.estimation import filter_run, prepare_ekf
+    from gearsym.validation.studies.estimation import filter_run, prepare_ekf
 
     reference = prepare_ekf(
         d, result, sample_time=0.01, aug=aug, discrete=setup.discrete, modes="reference"

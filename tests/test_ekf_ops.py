@@ -18,7 +18,7 @@ import sympy as sp
 from gearsym.symbolic.codegen import emit_all
 from gearsym.symbolic.codegen.c.ekf_code import output_selection
 from gearsym.symbolic.drivetrain import shift_spec
-from gearsym.symbolic.generate import ekf_model
+from gearsym.symbolic.export.generate import ekf_model
 from gearsym.symbolic.loader import load_description
 
 PREFIX = "gearsym_ekf_2_3_"
@@ -315,7 +315,7 @@ def _compiled_filter(files: dict[str, str], d, shift: str, tmp_path):
     """The emitted filter compiled in double, the library's discrete model of ``shift``, its
     parameter values and them as the emitted parameter struct."""
     from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
-    from gearsym.validation.c_check import compile_shared
+    from gearsym.validation.checks.c_check import compile_shared
 
     lib = ctypes.CDLL(str(compile_shared(files, tmp_path, single=False)))
     discrete = DiscreteModel(augmented_model(d, shift))

@@ -19,9 +19,9 @@ import sympy as sp
 from gearsym.symbolic.drivetrain import quantity
 from gearsym.symbolic.estimators.euio import ROAD_FREE
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.estimation import run_ekf, run_euio
-from gearsym.validation.scenario import default_scenario_path, load_scenario
-from gearsym.validation.simulate import simulate
+from gearsym.validation.sim.scenario import default_scenario_path, load_scenario
+from gearsym.validation.sim.simulate import simulate
+from gearsym.validation.studies.estimation import run_ekf, run_euio
 
 DATA = Path(default_scenario_path()).parent
 

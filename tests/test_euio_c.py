@@ -2,7 +2,7 @@
 
 Expected values: :func:`gearsym.symbolic.estimators.euio.euio_step_full` (CasADi evaluation of
 the SymPy model, dense NumPy linear algebra with ``np.linalg.inv``), step by step along the
-default 2-3 shift as :func:`gearsym.validation.estimation.run_euio` runs it (its held masks:
+default 2-3 shift as :func:`gearsym.validation.studies.estimation.run_euio` runs it (its held masks:
 m_veh in every phase, a μ where its element does not slide or its UIO conditions fail), with
 sensor dropouts (NaN) added. From the library's state before each step: the C double build to
 1e-12 and the float build to 1e-5 in each quantity's own scale (x_i against |x_i| + σ_i, P_ij
@@ -20,9 +20,9 @@ import pytest
 from gearsym.symbolic.codegen import emit_all
 from gearsym.symbolic.drivetrain import shift_spec
 from gearsym.symbolic.estimators.euio import ROAD_FREE, euio_step_full, load_column
-from gearsym.symbolic.generate import euio_model
+from gearsym.symbolic.export.generate import euio_model
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.c_check import compile_shared
+from gearsym.validation.checks.c_check import compile_shared
 
 PREFIX = "gearsym_euio_2_3_"
 H = 0.01
@@ -50,14 +50,14 @@ def libraries(emitted, tmp_path_factory):
 def run(emitted):
     """The library's run (run_euio's loop, dropouts added): per step the inputs of the step."""
     from gearsym.symbolic.drivetrain import quantity
-    from gearsym.validation.estimation import (
+    from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.sim.simulate import simulate
+    from gearsym.validation.studies.estimation import (
         EKF_RELATIVE_NOISE,
         noisy_outputs,
         prepare_ekf,
         run_euio,
     )
-    from gearsym.validation.scenario import load_scenario
-    from gearsym.validation.simulate import simulate
 
     d, m = emitted
     result = simulate(d, load_scenario(d, None))
@@ -231,7 +231,7 @@ def test_casadi_euio_step_equals_the_library(emitted, run, tmp_path):
     """The CasADi module's euio_step (symbolic inverse of S, SX graph) against the library
     (NumPy inverse) along the same run: 1e-12 in the scales above; a dropout gives the
     prediction and a NaN load."""
-    from gearsym.validation.c_binding import load_casadi_module
+    from gearsym.validation.checks.c_binding import load_casadi_module
 
     _, m = emitted
     name = f"gearsym_{m.model.name}_casadi.py"

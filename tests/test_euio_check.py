@@ -1,5 +1,6 @@
 """``gearsym generate --check``'s comparison of the emitted EUIO step with the library
-(validation/euio_check.py): the emitted files pass, and a perturbed constant in them is caught.
+(validation/checks/euio_check.py): the emitted files pass, and a perturbed constant in them is
+caught.
 
 Expected values: the library's :func:`~gearsym.symbolic.estimators.euio.euio_step_full` along
 the default 2-3 shift (the same run as tests/test_euio_c.py). The perturbations are small
@@ -14,10 +15,10 @@ from pathlib import Path
 import pytest
 from gearsym.symbolic.codegen import emit_all
 from gearsym.symbolic.drivetrain import shift_spec
-from gearsym.symbolic.generate import euio_model
+from gearsym.symbolic.export.generate import euio_model
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.euio_check import compare_euio, reference_steps
-from gearsym.validation.generated_check import comparison_ok
+from gearsym.validation.checks.euio_check import compare_euio, reference_steps
+from gearsym.validation.checks.generated_check import comparison_ok
 
 NAME = "euio_2_3"
 
@@ -99,9 +100,9 @@ def test_the_checks_library_run_is_the_evaluations_reference_path():
     it must end where the evaluation's own loop (euio_filter_run, the reference's modes) ends
     on the same seed, so a change to one loop cannot leave the check on another filter."""
     import numpy as np
-    from gearsym.validation.euio_evaluation import euio_filter_run, prepare_euio
-    from gearsym.validation.scenario import load_scenario
-    from gearsym.validation.simulate import simulate
+    from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.sim.simulate import simulate
+    from gearsym.validation.studies.euio_evaluation import euio_filter_run, prepare_euio
 
     d = load_description()
     result = simulate(d, load_scenario(d, None))

@@ -39,8 +39,8 @@ def d():
 
 @pytest.fixture(scope="module")
 def result(d):
-    from gearsym.validation.scenario import load_scenario
-    from gearsym.validation.simulate import simulate
+    from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.sim.simulate import simulate
 
     return simulate(d, load_scenario(d, None))
 
@@ -48,14 +48,14 @@ def result(d):
 @pytest.fixture(scope="module")
 def setup(d, result):
     """The reference's element modes (the truth): the runs are run_euio's."""
-    from gearsym.validation.euio_evaluation import prepare_euio
+    from gearsym.validation.studies.euio_evaluation import prepare_euio
 
     return prepare_euio(d, result, sample_time=0.01, modes="reference")
 
 
 @pytest.fixture(scope="module")
 def mc(setup):
-    from gearsym.validation.euio_evaluation import run_euio_monte_carlo
+    from gearsym.validation.studies.euio_evaluation import run_euio_monte_carlo
 
     calls = []
     out = run_euio_monte_carlo(setup, RUNS, seed=0, progress=lambda f, m: calls.append((f, m)))
@@ -64,8 +64,8 @@ def mc(setup):
 
 
 def test_a_run_is_run_euio_to_the_bit(d, result, setup):
-    from gearsym.validation.estimation import run_euio
-    from gearsym.validation.euio_evaluation import euio_filter_run
+    from gearsym.validation.studies.estimation import run_euio
+    from gearsym.validation.studies.euio_evaluation import euio_filter_run
 
     mine = euio_filter_run(setup, 3).run
     theirs = run_euio(d, result, seed=3)
@@ -104,7 +104,7 @@ def test_mass_is_not_identifiable_in_any_phase_and_its_sigma_does_not_shrink(mc,
     assert np.min(mc.bound.sigma[:, j]) > 0.9 * prior
     # while with the load known they would (the EKF's situation)
     assert np.min(mc.bound.sigma_load_known[:, j]) < 0.5 * prior
-    from gearsym.validation.euio_evaluation import format_euio_monte_carlo_text
+    from gearsym.validation.studies.euio_evaluation import format_euio_monte_carlo_text
 
     lines = format_euio_monte_carlo_text(mc).splitlines()
     flagged = [
@@ -135,7 +135,7 @@ def test_mu_has_no_information_while_its_element_does_not_slide(mc, setup):
 
 @pytest.fixture(scope="module")
 def mc_prior(setup, mc):
-    from gearsym.validation.euio_evaluation import run_euio_monte_carlo
+    from gearsym.validation.studies.euio_evaluation import run_euio_monte_carlo
 
     return run_euio_monte_carlo(setup, RUNS, seed=0, bound=mc.bound, prior_draw=True)
 
@@ -220,7 +220,7 @@ def test_cli_refuses_initial_from_prior_without_runs():
 
 @pytest.fixture(scope="module")
 def setup_filter(d, result):
-    from gearsym.validation.euio_evaluation import prepare_euio
+    from gearsym.validation.studies.euio_evaluation import prepare_euio
 
     out = prepare_euio(d, result, sample_time=0.01)
     assert out.mode_source == "filter"  # the default
@@ -229,7 +229,7 @@ def setup_filter(d, result):
 
 @pytest.fixture(scope="module")
 def mc_filter(setup_filter, mc):
-    from gearsym.validation.euio_evaluation import run_euio_monte_carlo
+    from gearsym.validation.studies.euio_evaluation import run_euio_monte_carlo
 
     return run_euio_monte_carlo(setup_filter, RUNS, seed=0, bound=mc.bound)
 

@@ -1,4 +1,4 @@
-"""The background figure worker of `gearsym run` (validation/figures.py: Background)."""
+"""The background figure worker of `gearsym run` (validation/drawing/figures.py: Background)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import os
 import time
 
 import pytest
-from gearsym.validation.figures import Background
+from gearsym.validation.drawing.figures import Background
 
 
 def _write(path, text):

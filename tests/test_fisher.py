@@ -116,7 +116,7 @@ def test_fim_of_a_linear_in_parameter_ode():
     """ẋ = a, y = x, x(0) = 0: ∂y/∂a = t, so with σ constant F = Σ t_k² / σ² (by hand),
     through the sensitivity equations and their integration."""
     from gearsym.symbolic.sensitivity import sensitivity_equations
-    from gearsym.validation.sensitivity_run import Interpolated, integrate_sensitivities
+    from gearsym.validation.studies.sensitivity_run import Interpolated, integrate_sensitivities
 
     x, a = sp.symbols("x a")
     model = Model(
@@ -147,15 +147,20 @@ def test_fim_of_a_linear_in_parameter_ode():
 @pytest.fixture(scope="module")
 def study():
     from gearsym.symbolic.loader import load_description
-    from gearsym.validation.fisher import fim_study
-    from gearsym.validation.sensitivity_run import reference_data
+    from gearsym.validation.studies.fisher import fim_study
+    from gearsym.validation.studies.sensitivity_run import reference_data
 
     d = load_description()
     return fim_study(d, data=reference_data(d), with_wheel_acceleration=True)
 
 
 def test_study_structure(study):
-    from gearsym.validation.fisher import WHOLE_SHIFT, format_text, study_json, summary_lines
+    from gearsym.validation.studies.fisher import (
+        WHOLE_SHIFT,
+        format_text,
+        study_json,
+        summary_lines,
+    )
 
     names = [w.name for w in study.windows]
     assert names == ["gear 2", "torque phase", "speed phase", "gear 3", WHOLE_SHIFT]
@@ -210,8 +215,8 @@ def _null(result, name):
 @pytest.fixture(scope="module")
 def four_parameters():
     from gearsym.symbolic.loader import load_description
-    from gearsym.validation.fisher import fim_study
-    from gearsym.validation.sensitivity_run import reference_data
+    from gearsym.validation.studies.fisher import fim_study
+    from gearsym.validation.studies.sensitivity_run import reference_data
 
     d = load_description()
     data = reference_data(d)
@@ -242,7 +247,7 @@ def test_a_phase_claims_no_friction_information_where_its_element_carries_none(
 def test_the_carried_over_view_is_labelled_as_such(four_parameters):
     """The thesis' continuous view (sensitivities from t0) remains available, labelled: there
     μ38's torque-phase perturbation is still seen in the speed phase."""
-    from gearsym.validation.fisher import format_text
+    from gearsym.validation.studies.fisher import format_text
 
     carried = four_parameters[False]
     assert "carried over from t0" in format_text(carried)
@@ -255,7 +260,7 @@ def test_gear_3_sees_mu_05_only_while_b05_still_slides():
     has fallen below its threshold, but B05 still slides at capacity for about a millisecond.
     From the first sample at which it sticks on, μ05 has no influence at all (S ≡ 0)."""
     from gearsym.symbolic.loader import load_description
-    from gearsym.validation.sensitivity_run import (
+    from gearsym.validation.studies.sensitivity_run import (
         driven_shift_model,
         reference_data,
         run_sensitivities,

@@ -4,7 +4,7 @@ FMPy (not gearsym) validates each FMU against the FMI schema and its own rules, 
 sources with its CMake project and the FMI headers it ships, adding the project's strict warning
 flags (a warning fails the build), and simulates it. The expected trajectories come from other
 paths: the emitted CasADi module's own integrator and the reference simulation of the 2-3 shift
-(:mod:`gearsym.validation.simulate`), and for the Co-Simulation part the emitted ``rk4_step``
+(:mod:`gearsym.validation.sim.simulate`), and for the Co-Simulation part the emitted ``rk4_step``
 compiled by gearsym's own path and driven from Python; the expected ModelStructure from SymPy's
 ``Matrix.jacobian`` of the model, not from the codegen's forward-mode differentiation.
 """
@@ -24,13 +24,13 @@ import sympy as sp
 from fmpy.build import build_platform_binary
 from fmpy.validation import validate_fmu
 from gearsym.symbolic.codegen import emit_casadi
-from gearsym.symbolic.fmu import fmu_archive, fmu_files
-from gearsym.symbolic.generate import PARAMETER_BOUNDS, gearbox_models
+from gearsym.symbolic.export.fmu import fmu_archive, fmu_files
+from gearsym.symbolic.export.generate import PARAMETER_BOUNDS, gearbox_models
+from gearsym.symbolic.io.output_dir import foreign_file
 from gearsym.symbolic.loader import load_description
-from gearsym.symbolic.output_dir import foreign_file
-from gearsym.validation.c_binding import load_casadi_module
-from gearsym.validation.c_check import STRICT_FLAGS, write_files
-from gearsym.validation.simulate import simulate
+from gearsym.validation.checks.c_binding import load_casadi_module
+from gearsym.validation.checks.c_check import STRICT_FLAGS, write_files
+from gearsym.validation.sim.simulate import simulate
 
 from gearsym.cli import main
 
@@ -369,8 +369,8 @@ def _simulate_cs(unpacked, times, inputs, x0, model, start_values=None):
 def rk4_library(tmp_path_factory, emitted):
     """The emitted C of the 2-3 shift model, compiled by gearsym's own path (not the FMU's)."""
     from gearsym.symbolic.codegen import emit_c
-    from gearsym.validation.c_binding import load_functions
-    from gearsym.validation.c_check import compile_shared
+    from gearsym.validation.checks.c_binding import load_functions
+    from gearsym.validation.checks.c_check import compile_shared
 
     m = emitted["shift_2_3"]
     folder = tmp_path_factory.mktemp("rk4")

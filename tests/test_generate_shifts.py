@@ -25,9 +25,9 @@ from pathlib import Path
 import pytest
 import sympy as sp
 from gearsym.symbolic.drivetrain import element_slip_in_gear, shift_model, shift_spec
-from gearsym.symbolic.generate import gearbox_models, generate_tree, selected_shifts
+from gearsym.symbolic.export.generate import gearbox_models, generate_tree, selected_shifts
 from gearsym.symbolic.loader import load_description
-from gearsym.validation import generated_check
+from gearsym.validation.checks import generated_check
 
 
 @pytest.fixture(scope="module")

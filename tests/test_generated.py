@@ -29,8 +29,7 @@ from unittest import mock
 
 import numpy as np
 import pytest
-from gearsym.symbolic.friction import DEFAULT_MU_MAP, shift_element_num
-from gearsym.symbolic.generate import (
+from gearsym.symbolic.export.generate import (
     C_DIR,
     MANIFEST_MARKER,
     generate_tree,
@@ -38,8 +37,9 @@ from gearsym.symbolic.generate import (
     mu_map_files,
     shift_element_model,
 )
+from gearsym.symbolic.friction import DEFAULT_MU_MAP, shift_element_num
 from gearsym.symbolic.loader import load_description
-from gearsym.validation import c_check, generated_check
+from gearsym.validation.checks import c_check, generated_check
 
 from gearsym import cli
 
@@ -449,7 +449,7 @@ def test_changed_tooth_counts_regenerate_compile_and_validate_in_one_command(
     print(result.stdout)
     assert result.returncode == 0, result.stdout + result.stderr
     assert "FAILED" not in result.stdout
-    # every model and set, the UIO included (against its design, validation/uio_check.py),
+    # every model and set, the UIO included (against its design, validation/checks/uio_check.py),
     # less the μ map
     emitted = len(list(out.glob("c/gearsym_*.h"))) - 1
     assert list(out.glob("c/gearsym_uio_*.h"))  # the UIO is among them
@@ -472,7 +472,7 @@ def test_changed_tooth_counts_regenerate_compile_and_validate_in_one_command(
 
 def test_model_names_are_known_before_any_derivation():
     # export-fmu checks --model against these names, then derives only that model
-    from gearsym.symbolic.generate import gearbox_model_names, gearbox_models
+    from gearsym.symbolic.export.generate import gearbox_model_names, gearbox_models
     from gearsym.symbolic.loader import load_description
 
     d = load_description()

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.scenario import default_scenario_path, load_scenario
-from gearsym.validation.simulate import simulate
+from gearsym.validation.sim.scenario import default_scenario_path, load_scenario
+from gearsym.validation.sim.simulate import simulate
 
 STEP_AT = 0.8  # s, inside the speed phase of the built-in scenario (about 0.78-0.88 s; tested)
 STEP_WIDTH = 5e-4  # s, one sample: the profile is piecewise linear, a step is a steep ramp
@@ -145,7 +145,7 @@ def test_sensitivities_follow_the_recorded_grade(description, step):
     reference as well as the level one (README: drift below 2 % of max |x_i|); with the grade
     dropped (Δζ ≡ 0) it misses the deceleration the step causes. S_ζ, the sensitivity to a
     constant offset of the whole profile, agrees with central differences of that offset."""
-    from gearsym.validation.sensitivity_run import (
+    from gearsym.validation.studies.sensitivity_run import (
         CompiledModel,
         Interpolated,
         driven_shift_model,
@@ -186,7 +186,7 @@ def test_sensitivities_follow_the_recorded_grade(description, step):
         driven.model, ["zeta"], inputs, x0, values, t_eval, relative_step=1e-4
     )
     from gearsym.symbolic.sensitivity import sensitivity_equations
-    from gearsym.validation.sensitivity_run import integrate_sensitivities
+    from gearsym.validation.studies.sensitivity_run import integrate_sensitivities
 
     eqs = sensitivity_equations(driven.model, ["zeta"])
     s_zeta = integrate_sensitivities(eqs, inputs, x0, values, t_eval).S[:, :, 0]  # S(t0) = 0

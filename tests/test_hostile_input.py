@@ -20,10 +20,10 @@ from gearsym.symbolic.description import (
     TEETH_MAX,
     default_config_text,
 )
-from gearsym.symbolic.input_files import MAX_INPUT_BYTES
+from gearsym.symbolic.io.input_files import MAX_INPUT_BYTES
 from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.model import Model, Variable
-from gearsym.validation.scenario import POINTS_MAX, T_END_MAX, default_scenario_path
+from gearsym.validation.sim.scenario import POINTS_MAX, T_END_MAX, default_scenario_path
 
 from gearsym.cli import main
 

@@ -36,7 +36,7 @@ from gearsym.symbolic.hybrid import (
 )
 from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.ratios import gear_ratio
-from gearsym.validation.hybrid_check import (
+from gearsym.validation.checks.hybrid_check import (
     check_modes,
     compile_mode,
     input_columns,
@@ -44,7 +44,7 @@ from gearsym.validation.hybrid_check import (
     recorded_state,
     reference_mode_intervals,
 )
-from gearsym.validation.simulate import simulate
+from gearsym.validation.sim.simulate import simulate
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Fisher information on the hybrid model's sensitivities (validation/hybrid_fisher.py).
+"""Fisher information on the hybrid model's sensitivities (validation/studies/hybrid_fisher.py).
 
 Expected values from physics and independent methods:
 
@@ -24,9 +24,9 @@ import pytest
 from gearsym.symbolic.fisher import analyse, fisher_information, noise_variances
 from gearsym.symbolic.hybrid import LOCK_UP
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.hybrid_fisher import VIEWS, format_text, hybrid_fim
-from gearsym.validation.hybrid_simulation import HybridSimulator
-from gearsym.validation.simulate import Phase, simulate
+from gearsym.validation.sim.hybrid_simulation import HybridSimulator
+from gearsym.validation.sim.simulate import Phase, simulate
+from gearsym.validation.studies.hybrid_fisher import VIEWS, format_text, hybrid_fim
 
 PARAMETERS = ("m_veh", "mu_38", "mu_05", "zeta")
 
@@ -218,7 +218,7 @@ def test_the_open_loop_study_stays_available_and_labelled():
     """``--open-loop`` is the per-phase restarted study on the open-loop shift model, as the
     default was before; every verdict it prints says so, and ``--carry-over`` keeps its
     meaning there (the thesis' view, labelled)."""
-    from gearsym.validation.fisher import SENSITIVITY_VIEW
+    from gearsym.validation.studies.fisher import SENSITIVITY_VIEW
 
     restarted = gearsym("fim", "--open-loop", "--params", "m_veh,mu_38")
     assert restarted.returncode == 0, restarted.stderr

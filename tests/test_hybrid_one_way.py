@@ -6,7 +6,7 @@ F1 locks again, and a coast case in which F1 overruns from the start.
 Expected values come from hand derivations (the box file's header: k_f = 11/5, k_r = 2, gear 1
 ratio i_1 = 26/11, gear 2 i_2 = 16/11; quasi-static torques from the virtual work of the
 external torques), from physics (energy balance, the sign a freewheel can carry) and from the
-reference simulation (validation/simulate.py: an independent model of the same box, every
+reference simulation (validation/sim/simulate.py: an independent model of the same box, every
 element a stiff elasto-plastic spring, F1 a unilateral spring-damper of stiffness σ0 and
 damping σ1, integrated by CVODES).
 """
@@ -28,8 +28,8 @@ from gearsym.symbolic.hybrid import (
     hybrid_shift,
 )
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.hybrid_simulation import HybridSimulator, energy_audit
-from gearsym.validation.scenario import load_scenario
+from gearsym.validation.sim.hybrid_simulation import HybridSimulator, energy_audit
+from gearsym.validation.sim.scenario import load_scenario
 
 from gearsym.cli import main
 
@@ -216,7 +216,7 @@ def _differences(hybrid, reference, window, keys=SPEEDS):
 
 @pytest.fixture(scope="module")
 def reference_upshift(box):
-    from gearsym.validation.simulate import simulate
+    from gearsym.validation.sim.simulate import simulate
 
     return simulate(box, load_scenario(box, UPSHIFT), check_models=False)
 
@@ -274,7 +274,7 @@ def test_differences_are_the_sprag_compliance(box, tmp_path, upshift, reference_
     the hybrid model (rigid constraints, unchanged) is at least twice as close in every speed,
     the twist and the wheel speed. Measured: ω_in 3.2e-3 → 1.0e-3, φ 1.1e-2 → 5.2e-3, ω_C
     5.6e-5 → 1.8e-5."""
-    from gearsym.validation.simulate import simulate
+    from gearsym.validation.sim.simulate import simulate
 
     text = BOX.read_text(encoding="utf-8")
     for old, new in (
@@ -301,7 +301,7 @@ def test_downshift_follows_the_reference(box, downshift):
     starts overrunning, as the hybrid's, so the whole run compares: F1 takes torque within
     1 ms of the hybrid's lock-up (measured 0.05 ms), speeds within 1 % of their peak (0.24 %),
     φ 1 % (0.32 %), ω_C 1e-4 (5.8e-6)."""
-    from gearsym.validation.simulate import simulate
+    from gearsym.validation.sim.simulate import simulate
 
     _, hybrid = downshift
     reference = simulate(
@@ -430,15 +430,15 @@ def test_emitted_hybrid_sensitivities_of_the_freewheel_shift(box, shift, tmp_pat
     """The emitted C of the hybrid sensitivities (``generate --hybrid-shifts 1-2``), compiled
     with the strict flags and driven through the scenario by the emitted functions alone (RK4
     at 0.1 ms, state guards located by Brent's method, the emitted jumps;
-    validation/hybrid_code_check.py) against the hybrid simulator (CasADi AD, DOP853 at 1e-12,
-    μ constant as in the emitted code): the same switches, F1's release or lock-up among them,
-    at the same times within 1e-9 s, and every state and sensitivity within 1e-7 of its
+    validation/checks/hybrid_code_check.py) against the hybrid simulator (CasADi AD, DOP853 at
+    1e-12, μ constant as in the emitted code): the same switches, F1's release or lock-up among
+    them, at the same times within 1e-9 s, and every state and sensitivity within 1e-7 of its
     column's peak (the bound tests/test_hybrid_sensitivity_code.py asserts for the 2-3). The
     header documents the freewheel's switch."""
     from gearsym.symbolic.codegen.hybrid import emit_hybrid_files
-    from gearsym.symbolic.generate import hybrid_sensitivity_sets
-    from gearsym.validation import c_check
-    from gearsym.validation.hybrid_code_check import HybridFunctions, run_emitted
+    from gearsym.symbolic.export.generate import hybrid_sensitivity_sets
+    from gearsym.validation.checks import c_check
+    from gearsym.validation.checks.hybrid_code_check import HybridFunctions, run_emitted
 
     (emitted,) = hybrid_sensitivity_sets(box, hybrid_shifts=shift)
     hs = emitted.sensitivity

@@ -1,7 +1,7 @@
-"""Sensitivities of the hybrid shift model across its switches (validation/hybrid_simulation.py):
-(3.7) inside each mode and the jump conditions of hybrid sensitivity analysis at each event,
-against central finite differences of the same hybrid simulation (an independent method: no
-derivative of any kind, only re-integration with perturbed parameters).
+"""Sensitivities of the hybrid shift model across its switches
+(validation/sim/hybrid_simulation.py): (3.7) inside each mode and the jump conditions of hybrid
+sensitivity analysis at each event, against central finite differences of the same hybrid simulation
+(an independent method: no derivative of any kind, only re-integration with perturbed parameters).
 
 The step: h = 3e-4 · p0 (p0 the nominal value, 0.05 rad for ζ at zero). Central differences
 have a truncation error ~ h² x''' / 6, relative ~1e-7 here; the integration error enters the
@@ -23,8 +23,8 @@ import numpy as np
 import pytest
 from gearsym.symbolic.hybrid import BREAK_AWAY, LOCK_UP
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.hybrid_simulation import HybridSimulator
-from gearsym.validation.scenario import default_scenario_path, load_scenario
+from gearsym.validation.sim.hybrid_simulation import HybridSimulator
+from gearsym.validation.sim.scenario import default_scenario_path, load_scenario
 
 RTOL = 1e-12
 STEP = 3e-4

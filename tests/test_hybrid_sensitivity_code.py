@@ -4,12 +4,12 @@ Independent checks:
 
 * driven through the default 2-3 shift by the emitted functions alone (Runge-Kutta steps of each
   mode's (3.7), guards located by Brent's method, the emitted jump at every switch:
-  :func:`gearsym.validation.hybrid_code_check.run_emitted`), the states and sensitivities equal
-  those of :class:`~gearsym.validation.hybrid_simulation.HybridSimulator`, which differentiates
-  the mode models by CasADi's AD and applies the jump formula numerically (DOP853, tolerances
-  1e-12). The run crosses the break-away of K38, the engagement of B05, the opening of K38 and
-  the lock-up of B05; both runs switch at the same times to 1e-9 s. Tolerance: RK4 at h = 1e-4 s
-  has a global error of order h⁴ times the fourth derivative; measured 5e-11 of each column's
+  :func:`gearsym.validation.checks.hybrid_code_check.run_emitted`), the states and sensitivities
+  equal those of :class:`~gearsym.validation.sim.hybrid_simulation.HybridSimulator`, which
+  differentiates the mode models by CasADi's AD and applies the jump formula numerically (DOP853,
+  tolerances 1e-12). The run crosses the break-away of K38, the engagement of B05, the opening of
+  K38 and the lock-up of B05; both runs switch at the same times to 1e-9 s. Tolerance: RK4 at h =
+  1e-4 s has a global error of order h⁴ times the fourth derivative; measured 5e-11 of each column's
   peak, asserted 1e-7;
 * the comparison is discriminating: with the Euclidean instead of the M-metric projection as
   the map it fails by more than 1 % of a peak;
@@ -29,13 +29,13 @@ import numpy as np
 import pytest
 import sympy as sp
 from gearsym.symbolic.codegen.hybrid import hybrid_table
-from gearsym.symbolic.generate import hybrid_sensitivity_sets
+from gearsym.symbolic.export.generate import hybrid_sensitivity_sets
 from gearsym.symbolic.hybrid import BREAK_AWAY, ENGAGEMENT, LOCK_UP, OPENING
 from gearsym.symbolic.loader import load_description
-from gearsym.validation import c_check
-from gearsym.validation.c_binding import load_casadi_module
-from gearsym.validation.hybrid_code_check import HybridFunctions, run_emitted
-from gearsym.validation.hybrid_simulation import HybridSimulator
+from gearsym.validation.checks import c_check
+from gearsym.validation.checks.c_binding import load_casadi_module
+from gearsym.validation.checks.hybrid_code_check import HybridFunctions, run_emitted
+from gearsym.validation.sim.hybrid_simulation import HybridSimulator
 
 GENERATED = Path(__file__).resolve().parents[1] / "generated"
 NAME = "gearsym_hybrid_2_3_sens"

@@ -1,6 +1,6 @@
 """Hybrid sensitivities against central finite differences of the *reference* simulation.
 
-The reference (validation/simulate.py) is another model: the full gearbox with elasto-plastic
+The reference (validation/sim/simulate.py) is another model: the full gearbox with elasto-plastic
 bristle friction (2.66–2.70), integrated by CVODES, in which a "locked" element still twists its
 bristles by T / σ0. The hybrid shift model (symbolic/hybrid.py) is its rigid limit: a locked
 element is a constraint. So the two sensitivities cannot agree to integration accuracy; they
@@ -26,8 +26,8 @@ import numpy as np
 import pytest
 from gearsym.symbolic.hybrid import BREAK_AWAY, LOCK_UP
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.hybrid_simulation import HybridSimulator
-from gearsym.validation.simulate import simulate
+from gearsym.validation.sim.hybrid_simulation import HybridSimulator
+from gearsym.validation.sim.simulate import simulate
 
 OUTPUTS = ("omega_1", "omega_2", "omega_C")
 PARAMETERS = ("m_veh", "zeta")

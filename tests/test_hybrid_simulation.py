@@ -1,10 +1,10 @@
-"""The hybrid shift model simulated with events (validation/hybrid_simulation.py) against the
+"""The hybrid shift model simulated with events (validation/sim/hybrid_simulation.py) against the
 reference simulation, over the default power-on 2-3 upshift, a coast 2-3 upshift and a power-on
 3-2 downshift of the default gearbox (scenarios in gearsym/data).
 
 Expected values come from the reference simulation (an independent model of the same physics:
 the full gearbox with an elasto-plastic bristle per element, integrated by CVODES), from its own
-mode intervals (read off its record, validation/hybrid_check.py) and from the gear kinematics
+mode intervals (read off its record, validation/checks/hybrid_check.py) and from the gear kinematics
 (power_on_slip_signs). The tolerances are the reference's bristle compliance: with ten times σ0
 the differences shrink (last test), so they are not an error of the hybrid model.
 """
@@ -17,10 +17,10 @@ from gearsym.symbolic.description import default_config_text
 from gearsym.symbolic.drivetrain import power_on_slip_signs, shift_spec
 from gearsym.symbolic.hybrid import BREAK_AWAY, LOCK_UP, LOCKED, SLIDING
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.hybrid_check import reference_mode_intervals
-from gearsym.validation.hybrid_simulation import HybridSimulator
-from gearsym.validation.scenario import default_scenario_path, load_scenario
-from gearsym.validation.simulate import simulate
+from gearsym.validation.checks.hybrid_check import reference_mode_intervals
+from gearsym.validation.sim.hybrid_simulation import HybridSimulator
+from gearsym.validation.sim.scenario import default_scenario_path, load_scenario
+from gearsym.validation.sim.simulate import simulate
 
 DATA = default_scenario_path().parent
 STATES = ("omega_1", "omega_2", "omega_8", "phi", "omega_C")
@@ -171,7 +171,7 @@ def test_energy_audit_closes(description, file):
     """Input work = Δ kinetic + Δ spring + friction + damper + road work (physics): the modes,
     the reactions, the k_sign of the sliding torques and the maps at every switch together
     conserve energy to the quadrature's accuracy; friction only dissipates."""
-    from gearsym.validation.hybrid_simulation import energy_audit
+    from gearsym.validation.sim.hybrid_simulation import energy_audit
 
     scenario = load_scenario(description, None if file is None else DATA / file)
     simulator = HybridSimulator(description, scenario)
@@ -184,7 +184,7 @@ def test_friction_heat_is_the_references(power_on):
     """The clutch heat of the shift, a quantity no state comparison checks directly: within 2 %
     of the reference's (its friction work less what its bristles store; measured 0.5 %:
     2419 J against 2407 J)."""
-    from gearsym.validation.hybrid_simulation import energy_audit
+    from gearsym.validation.sim.hybrid_simulation import energy_audit
 
     hybrid, reference = power_on
     simulator = HybridSimulator(load_description(), hybrid.scenario)
@@ -198,7 +198,7 @@ def test_a_grade_step_changes_what_it_should(description, tmp_path):
     """ζ from 0 to 0.05 rad within 0.1 ms in gear 2 (a scenario [grade] profile, 2.53): the
     wheel acceleration drops by r_dyn m g (sin ζ + f_roll v (cos ζ − 1)) / I_C^eff ((2.49a, c),
     (2.50) by hand, at the state of the step), and the energy audit still closes."""
-    from gearsym.validation.hybrid_simulation import energy_audit
+    from gearsym.validation.sim.hybrid_simulation import energy_audit
 
     text = default_scenario_path().read_text()
     text += '\n[grade]\nunit = "rad"\ntime = [0.0, 0.1, 0.1001]\nvalue = [0.0, 0.0, 0.05]\n'

@@ -155,8 +155,8 @@ def test_uncoupled_idle_shaft_decays_exponentially(
 
 
 def _hold(tmp_path: Path, box: Path, closed: dict[str, float]) -> object:
-    from gearsym.validation.scenario import load_scenario
-    from gearsym.validation.simulate import simulate
+    from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.sim.simulate import simulate
 
     d = load_description(box)
     pressures = "".join(
@@ -246,8 +246,8 @@ def test_reduced_models_with_idle_state_follow_the_reference(tmp_path: Path) -> 
     model, each with the idle od speed as a state, integrated from the reference state inside
     their phase, stay within 1e-3 of it (the simulate command's own model check); the energy
     audit closes."""
-    from gearsym.validation.scenario import load_scenario
-    from gearsym.validation.simulate import simulate
+    from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.sim.simulate import simulate
 
     d = load_description(OVERDRIVE)
     path = tmp_path / "shift.toml"
@@ -262,7 +262,7 @@ def test_reduced_models_with_idle_state_follow_the_reference(tmp_path: Path) -> 
 
 def test_idle_note_passes_the_ecu_source_scan() -> None:
     """The note lands in emitted C headers, whose sources the ECU check scans for the names
-    of dynamic-memory functions (validation/generated_check.py): none may appear in it."""
+    of dynamic-memory functions (validation/checks/generated_check.py): none may appear in it."""
     import re
 
     d = load_description(OVERDRIVE)

@@ -1,5 +1,6 @@
 """The emitted integrator steps and the emitted CasADi integrator against SciPy's Radau
-(validation/integration_check.py), on the committed generated/ code of the built-in gearbox."""
+(validation/checks/integration_check.py), on the committed generated/ code of the built-in
+gearbox."""
 
 from __future__ import annotations
 
@@ -7,7 +8,11 @@ import math
 from pathlib import Path
 
 import pytest
-from gearsym.validation.integration_check import GENERATED, IntegrationReport, integration_check
+from gearsym.validation.checks.integration_check import (
+    GENERATED,
+    IntegrationReport,
+    integration_check,
+)
 
 
 @pytest.fixture(scope="module")

@@ -1,5 +1,5 @@
 """Measured shifts: the [measurement] channel map, MDF4/CSV recordings, their units and the
-analyses run on them (validation/measurement.py, --measurement, export-measurement).
+analyses run on them (validation/sim/measurement.py, --measurement, export-measurement).
 
 Expected values: hand conversions (rpm, bar, % grade), hand-written CSV files, asammdf read
 on its own, the noise model (3.26) as a statistic, and the synthetic EKF run of the same seed
@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from gearsym.symbolic.errors import GearsymError
-from gearsym.validation import measurement as M
+from gearsym.validation.sim import measurement as M
 
 DATA = Path(M.__file__).resolve().parents[1] / "gearsym" / "data"
 if not (DATA / "scenario_2_3_measured.toml").exists():  # installed: gearsym/data in the package
@@ -51,14 +51,14 @@ def box():
 
 @pytest.fixture(scope="module")
 def scenario(box):
-    from gearsym.validation.scenario import load_scenario
+    from gearsym.validation.sim.scenario import load_scenario
 
     return load_scenario(box, SCENARIO)
 
 
 @pytest.fixture(scope="module")
 def reference(box, scenario):
-    from gearsym.validation.simulate import simulate
+    from gearsym.validation.sim.simulate import simulate
 
     return simulate(box, scenario)
 
@@ -299,7 +299,7 @@ def test_ekf_on_the_recording_reproduces_the_synthetic_run_of_the_same_seed(tmp_
 def test_ekf_trajectories_agree_sample_by_sample_for_mdf4_and_csv(
     tmp_path, box, scenario, reference
 ):
-    from gearsym.validation.estimation import filter_run, prepare_ekf, run_ekf
+    from gearsym.validation.studies.estimation import filter_run, prepare_ekf, run_ekf
 
     synthetic = run_ekf(box, reference, 0.01, 0.01, seed=0)
     csv_path = tmp_path / "rec.csv"
@@ -307,7 +307,7 @@ def test_ekf_trajectories_agree_sample_by_sample_for_mdf4_and_csv(
     assert result.returncode == 0, result.stderr
     for path in (EXAMPLE, csv_path):
         m = M.read_measurement(path, scenario.measurement, scenario.t_end)
-        from gearsym.validation.simulate import simulate
+        from gearsym.validation.sim.simulate import simulate
 
         driven = simulate(box, M.with_measured_inputs(scenario, m))
         setup = prepare_ekf(box, driven, 0.01, 0.01, measured={o: m.values[o] for o in m.outputs})

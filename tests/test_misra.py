@@ -1,5 +1,5 @@
 """MISRA C:2012 through cppcheck's add-on: every rule the emitted C breaks is a documented
-deviation (validation/misra.py), and the table of the docs page docs/misra.md lists exactly
+deviation (validation/checks/misra.py), and the table of the docs page docs/misra.md lists exactly
 those rules.
 
 The files checked cover every template path: the full model, a torque-input and a μ-form
@@ -15,7 +15,7 @@ import re
 from pathlib import Path
 
 import pytest
-from gearsym.validation.misra import DEVIATIONS, MisraUnavailable, misra_rules
+from gearsym.validation.checks.misra import DEVIATIONS, MisraUnavailable, misra_rules
 
 ROOT = Path(__file__).resolve().parents[1]
 FILES = [

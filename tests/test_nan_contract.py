@@ -3,8 +3,8 @@
 * Every function of every model in ``generated/`` (and the μ map), built with
   ``-fsanitize=address,undefined -fno-sanitize-recover=all`` in double and single precision,
   called with NaN, ±inf, ±0, ±huge, ±tiny and boundary arguments: no sanitizer report, and the
-  NaN contract of :mod:`gearsym.validation.nan_check` holds (a NaN argument gives NaN in every
-  result that depends on it, or an error code; never a finite result with OK).
+  NaN contract of :mod:`gearsym.validation.checks.nan_check` holds (a NaN argument gives NaN in
+  every result that depends on it, or an error code; never a finite result with OK).
 * The CasADi modules keep the same NaN contract.
 * The check itself fails on code that hides a NaN or writes past a buffer (so a green run
   means something).
@@ -20,10 +20,16 @@ import numpy as np
 import pytest
 import sympy as sp
 from gearsym.symbolic.codegen import emit_c, file_names
-from gearsym.symbolic.generate import C_DIR, PYTHON_DIR, gearbox_models, load_mu_map, sample_ranges
+from gearsym.symbolic.export.generate import (
+    C_DIR,
+    PYTHON_DIR,
+    gearbox_models,
+    load_mu_map,
+    sample_ranges,
+)
 from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.model import Model, Variable
-from gearsym.validation import c_check, generated_check, nan_check
+from gearsym.validation.checks import c_check, generated_check, nan_check
 
 REPO = Path(__file__).resolve().parents[1]
 GENERATED = REPO / "generated"

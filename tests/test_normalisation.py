@@ -13,7 +13,7 @@ import numpy as np
 import sympy as sp
 from gearsym.symbolic.model import Model, Variable
 from gearsym.symbolic.sensitivity import sensitivity_equations
-from gearsym.validation.sensitivity_run import (
+from gearsym.validation.studies.sensitivity_run import (
     Interpolated,
     SensitivityRun,
     integrate_sensitivities,

@@ -145,8 +145,8 @@ def test_parse_from_string_needs_no_file() -> None:
 
 def _hold_gear_1(tmp_path: Path, torque: float) -> tuple[object, object]:
     """Gear 1 (C1 pressed, F1 by itself) held for 0.5 s at a constant input torque."""
-    from gearsym.validation.scenario import load_scenario
-    from gearsym.validation.simulate import simulate
+    from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.sim.simulate import simulate
 
     d = load_description(BOX)
     path = tmp_path / f"hold_{torque:g}.toml"
@@ -215,7 +215,7 @@ def test_one_way_law_is_unilateral_and_passive() -> None:
 
 def test_pressure_on_a_one_way_clutch_is_refused(tmp_path: Path) -> None:
     from gearsym.symbolic.errors import GearsymError
-    from gearsym.validation.scenario import load_scenario
+    from gearsym.validation.sim.scenario import load_scenario
 
     d = load_description(BOX)
     path = tmp_path / "s.toml"

@@ -1,6 +1,6 @@
 """The one output writer (issue 9): nothing a user owns is replaced, nothing is half-written.
 
-Every rule of :mod:`gearsym.symbolic.output_dir` is exercised on the writer directly, and the
+Every rule of :mod:`gearsym.symbolic.io.output_dir` is exercised on the writer directly, and the
 commands that write (simulate, run, sensitivity, fim, generate) are checked to refuse a foreign
 ``--out`` before any work and to leave nothing behind when interrupted.
 """
@@ -20,7 +20,7 @@ from unittest import mock
 
 import pytest
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.output_dir import MANIFEST, OutputDir, foreign_content
+from gearsym.symbolic.io.output_dir import MANIFEST, OutputDir, foreign_content
 
 from gearsym import cli
 
@@ -223,7 +223,7 @@ def test_a_second_writer_on_the_same_target_is_refused(tmp_path: Path) -> None:
 
 _KILLED_WRITER = """
 import os, sys, time
-from gearsym.symbolic.output_dir import OutputDir
+from gearsym.symbolic.io.output_dir import OutputDir
 out = OutputDir(sys.argv[1], "simulate").open()
 (out.path / "half.csv").write_text("1,")
 if sys.argv[2] == "between-renames":
@@ -289,14 +289,14 @@ def test_every_writing_command_refuses_a_foreign_out_before_the_work(
     target = tmp_path / "mine"
     target.mkdir()
     (target / "thesis.tex").write_text("precious")
-    from gearsym.validation import simulate
+    from gearsym.validation.sim import simulate
 
     def no_work(*args: Any, **kwargs: Any) -> Any:
         raise AssertionError("the long work started before --out was checked")
 
     with (
         mock.patch.object(simulate, "simulate", no_work),
-        mock.patch("gearsym.symbolic.generate.generate_tree", no_work),
+        mock.patch("gearsym.symbolic.export.generate.generate_tree", no_work),
     ):
         status = cli.main([a.format(out=target) for a in argv])
     err = capsys.readouterr().err.strip().splitlines()

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import sympy as sp
-from gearsym.validation.posterior_bound import (
+from gearsym.validation.studies.posterior_bound import (
     bound_sigma,
     lambdified,
     output_sensitivities,
@@ -98,7 +98,7 @@ def test_the_scalar_kalman_filter_attains_the_posterior_bound():
 def test_process_noise_bound_of_a_random_walk_follows_the_hand_recursion():
     # x_{k+1} = x_k + w_k (variance q), y_k = x_k + v_k (variance R): P⁻ = P + q,
     # P = P⁻ R / (P⁻ + R), from P0 before the first update
-    from gearsym.validation.posterior_bound import process_noise_bound
+    from gearsym.validation.studies.posterior_bound import process_noise_bound
 
     n, q, R, P0 = 30, 0.3, 0.5, 4.0
     flow, S = np.ones((n, 1, 1)), np.ones((n, 1, 1))
@@ -116,7 +116,7 @@ def test_process_noise_bound_of_a_random_walk_follows_the_hand_recursion():
 
 
 def test_process_noise_bound_without_noise_is_the_constant_parameter_bound():
-    from gearsym.validation.posterior_bound import process_noise_bound
+    from gearsym.validation.studies.posterior_bound import process_noise_bound
 
     f, h = _ramp()
     t = np.arange(25) * 0.02

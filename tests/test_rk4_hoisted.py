@@ -13,10 +13,10 @@ import re
 import numpy as np
 import pytest
 from gearsym.symbolic.codegen import emit_c
-from gearsym.symbolic.generate import gearbox_models
+from gearsym.symbolic.export.generate import gearbox_models
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.c_binding import load_functions
-from gearsym.validation.c_check import compile_shared
+from gearsym.validation.checks.c_binding import load_functions
+from gearsym.validation.checks.c_check import compile_shared
 
 MODELS = ("shift_2_3", "shift_2_3_mu", "full")
 

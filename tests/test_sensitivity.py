@@ -227,7 +227,7 @@ def test_3_15_mu_38():
     The rows are 2·B_K38 with B the K38 column of (5.5) as printed (−2.79, 0.0135). (3.15) is
     printed to one more digit, so it needs B = (−2.7875 … −2.7925, 0.013475 … 0.013525), a
     quarter of (5.5)'s interval; the inertias are fitted to (5.4), (5.5) and (3.15) together
-    (``validation/fit_thesis_inertias.py``), and both rows round to the printed digits.
+    (``validation/studies/fit_thesis_inertias.py``), and both rows round to the printed digits.
     """
     d = load_description()
     jp = equations(d).inhomogeneous_term("mu_38")
@@ -367,7 +367,7 @@ def test_cli_bad_parameter_exits_2(capsys, tmp_path):
 def test_linear_ode_closed_form():
     """ẋ = −a x + b u, u = 1, x(0) = x0: x = x0 e^{−at} + (b/a)(1 − e^{−at}),
     ∂x/∂b = (1 − e^{−at})/a, ∂x/∂a = −t x0 e^{−at} − (b/a²)(1 − e^{−at}) + (b/a) t e^{−at}."""
-    from gearsym.validation.sensitivity_run import Interpolated, integrate_sensitivities
+    from gearsym.validation.studies.sensitivity_run import Interpolated, integrate_sensitivities
 
     x, u, a, b = sp.symbols("x u a b")
     model = Model(
@@ -404,14 +404,14 @@ def test_linear_ode_closed_form():
 
 @pytest.fixture(scope="module")
 def reference():
-    from gearsym.validation.sensitivity_run import reference_data
+    from gearsym.validation.studies.sensitivity_run import reference_data
 
     return reference_data(load_description())
 
 
 @pytest.fixture(scope="module")
 def setup(reference):
-    from gearsym.validation.sensitivity_run import (
+    from gearsym.validation.studies.sensitivity_run import (
         Interpolated,
         driven_shift_model,
         driving_inputs,
@@ -437,7 +437,7 @@ def setup(reference):
 
 
 def test_driven_model_reproduces_the_reference(reference):
-    from gearsym.validation.sensitivity_run import run_sensitivities
+    from gearsym.validation.studies.sensitivity_run import run_sensitivities
 
     run = run_sensitivities(load_description(), data=reference)
     drift = run.drift()
@@ -455,7 +455,7 @@ def test_driven_model_reproduces_the_reference(reference):
 
 def test_finite_differences(reference, setup):
     """Central differences (2 m extra integrations) agree with the integrated (3.7)."""
-    from gearsym.validation.sensitivity_run import (
+    from gearsym.validation.studies.sensitivity_run import (
         finite_difference_sensitivities,
         integrate_sensitivities,
     )
@@ -475,7 +475,10 @@ def test_casadi_forward_mode(reference, setup):
     """CVODES (rtol 1e-12) through CasADi with forward-mode AD, independent of the symbolic
     sensitivity equations, agrees with the integrated (3.7) from t = 0 through gear 2, the
     torque and the speed phase into the first 0.12 s of gear 3."""
-    from gearsym.validation.sensitivity_run import casadi_sensitivities, integrate_sensitivities
+    from gearsym.validation.studies.sensitivity_run import (
+        casadi_sensitivities,
+        integrate_sensitivities,
+    )
 
     driven, eqs, values, u, inputs, x0 = setup
     gear_3 = next(p for p in reference.phases if p.name == "gear 3")

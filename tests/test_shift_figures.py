@@ -1,4 +1,4 @@
-"""The shift figures an engineer judges a shift by (validation/report.py::shift_figures).
+"""The shift figures an engineer judges a shift by (validation/sim/report.py::shift_figures).
 
 Expected values from physics and definitions, not from the plotting code: rpm = rad/s · 60/2π;
 the vehicle acceleration of a rolling wheel a = r_dyn ω̇_C (2.49); the jerk is its time
@@ -13,8 +13,8 @@ import math
 import numpy as np
 import pytest
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.report import shift_figures
-from gearsym.validation.simulate import simulate
+from gearsym.validation.sim.report import shift_figures
+from gearsym.validation.sim.simulate import simulate
 
 
 @pytest.fixture(scope="module")

@@ -19,8 +19,8 @@ import sympy as sp
 from gearsym.symbolic.description import default_config_text
 from gearsym.symbolic.drivetrain import power_on_slip_signs, shift_model, shift_spec
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.scenario import default_scenario_path, load_scenario
-from gearsym.validation.simulate import simulate
+from gearsym.validation.sim.scenario import default_scenario_path, load_scenario
+from gearsym.validation.sim.simulate import simulate
 
 TABLE_2_1 = {"2": 3.243, "3": 2.252}
 SIMPSON = Path(__file__).parent / "data" / "simpson_3speed.toml"
@@ -303,7 +303,7 @@ def test_run_on_another_gearbox_says_what_it_skipped_and_why(tmp_path):
 
 def test_profile_matches_numpy_interp():
     """The scenario's scalar interpolation against np.interp (held constant outside)."""
-    from gearsym.validation.scenario import Profile
+    from gearsym.validation.sim.scenario import Profile
 
     rng = np.random.default_rng(3)
     times = np.cumsum(rng.uniform(0.01, 0.2, 12))

@@ -18,7 +18,7 @@ from gearsym.symbolic.description import parse_description
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.kinematics import gearbox_symbols
 from gearsym.symbolic.ratios import gear_ratio
-from gearsym.validation.drawing import (
+from gearsym.validation.drawing.geometry import (
     lever_diagram,
     set_positions,
     speed_plan,

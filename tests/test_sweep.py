@@ -1,4 +1,4 @@
-"""Sobol sweeps on Dask (validation/sweep.py, `gearsym sweep`).
+"""Sobol sweeps on Dask (validation/studies/sweep.py, `gearsym sweep`).
 
 Expected values: the closed-form Sobol indices of the Ishigami function (Ishigami & Homma 1990;
 Sobol' & Levitan 1999), and for the shift model the local sensitivities of chapter 3 (hybrid
@@ -32,7 +32,7 @@ def client():
 
 def test_ishigami_closed_form_values():
     """The closed forms give the values the literature prints (a = 7, b = 0.1)."""
-    from gearsym.validation.sweep import Ishigami
+    from gearsym.validation.studies.sweep import Ishigami
 
     s1, st = Ishigami().exact()
     assert np.allclose(s1, [0.3139, 0.4424, 0.0], atol=5e-5)
@@ -44,7 +44,7 @@ def test_ishigami_sobol_indices_on_a_local_cluster(client):
     SALib analysis) against the closed form. Tolerance: twice the 95 % bootstrap half-width
     (about 3.9 standard errors, so a correct estimator fails with probability ~1e-4 per index);
     the half-widths themselves must be small, or the check would say nothing."""
-    from gearsym.validation.sweep import Ishigami, SweepDefinition, run_sweep
+    from gearsym.validation.studies.sweep import Ishigami, SweepDefinition, run_sweep
 
     pi = math.pi
     definition = SweepDefinition({f"x{k}": (-pi, pi) for k in (1, 2, 3)}, samples=4096, seed=7)
@@ -71,7 +71,7 @@ def test_ishigami_sobol_indices_on_a_local_cluster(client):
 @pytest.fixture(scope="module")
 def shift():
     from gearsym.symbolic.loader import load_description
-    from gearsym.validation.sweep import ShiftEvaluator
+    from gearsym.validation.studies.sweep import ShiftEvaluator
 
     return ShiftEvaluator(load_description(None))
 
@@ -83,7 +83,7 @@ def test_local_shift_duration_sensitivity_matches_central_differences(shift):
     """∂(shift duration)/∂μ05 of the hybrid sensitivities (the lock-up event's ∂τ/∂p) against
     central differences of two evaluator runs (±1 %); a faster-gripping on-coming clutch ends
     the speed phase sooner, so the sign must be negative."""
-    from gearsym.validation.sweep import local_sensitivities
+    from gearsym.validation.studies.sweep import local_sensitivities
 
     derivative = local_sensitivities(shift, NAMES)["shift_duration"]["mu_05"]
     h = 0.0012
@@ -98,7 +98,7 @@ def test_shift_ranking_by_total_index_agrees_with_local_sensitivities(shift, cli
     linearised indices (∂Q/∂p σ)²/Σ). Over ±10 % the quantities are close to linear in the
     parameters, so the global view must not reorder them; the dominant parameter's share must
     agree with the linearised one within its interval."""
-    from gearsym.validation.sweep import (
+    from gearsym.validation.studies.sweep import (
         SweepDefinition,
         linearised_indices,
         local_sensitivities,
@@ -188,7 +188,7 @@ def test_cli_end_to_end_writes_tables_and_figures(tmp_path, capsys):
 
 def test_definition_file_and_params_merge(tmp_path):
     """A [sweep] table is read as written; --param parses NAME=LO:HI."""
-    from gearsym.validation.sweep import load_definition, parse_range
+    from gearsym.validation.studies.sweep import load_definition, parse_range
 
     path = tmp_path / "s.toml"
     path.write_text(
@@ -213,7 +213,7 @@ class _HalfFails:
 def test_failed_runs_are_counted_and_get_no_indices(client):
     """A quantity with failed runs keeps statistics (with the count) but no indices; the other
     quantity's indices are those of the linear f = x1 + 2 x2 on the unit square: S = (1, 4)/5."""
-    from gearsym.validation.sweep import SweepDefinition, run_sweep
+    from gearsym.validation.studies.sweep import SweepDefinition, run_sweep
 
     definition = SweepDefinition({"x1": (0.0, 1.0), "x2": (0.0, 1.0)}, samples=256, seed=2)
     result = run_sweep(definition, _HalfFails(), batch=256, client=client)

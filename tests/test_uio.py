@@ -162,15 +162,15 @@ def test_the_weighted_decoupling_holds_for_unequal_output_weights(modes):
 
 @pytest.fixture(scope="module")
 def reference():
-    from gearsym.validation.scenario import load_scenario
-    from gearsym.validation.simulate import simulate
+    from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.sim.simulate import simulate
 
     d = load_description()
     return d, simulate(d, load_scenario(d, None))
 
 
 def test_uio_on_the_reference_shift(reference):
-    from gearsym.validation.estimation import run_uio
+    from gearsym.validation.studies.estimation import run_uio
 
     d, result = reference
     coarse = {p.phase: p for p in run_uio(d, result, sample_time=0.01).phases}
@@ -193,7 +193,7 @@ def test_uio_on_the_reference_shift(reference):
 
 
 def test_with_clutch_torques_unknown_only_the_gears_have_an_observer(reference):
-    from gearsym.validation.estimation import run_uio
+    from gearsym.validation.studies.estimation import run_uio
 
     d, result = reference
     run = run_uio(d, result, unknown=["T_K38", "T_B05", "T_res_star"])

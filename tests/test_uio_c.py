@@ -26,8 +26,8 @@ from gearsym.symbolic.loader import load_description
 
 @pytest.fixture(scope="module")
 def emitted(tmp_path_factory):
-    from gearsym.symbolic.generate import uio_files
-    from gearsym.validation.c_check import compile_shared
+    from gearsym.symbolic.export.generate import uio_files
+    from gearsym.validation.checks.c_check import compile_shared
 
     d = load_description()
     files, rows, _ = uio_files(d)
@@ -47,8 +47,8 @@ def emitted(tmp_path_factory):
 def samples():
     """Per phase of the UIO: the measured speeds y and the known inputs u of the reference
     simulation at the sample time, over the phases the mode serves."""
-    from gearsym.validation.scenario import load_scenario
-    from gearsym.validation.simulate import simulate
+    from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.sim.simulate import simulate
 
     d = load_description()
     result = simulate(d, load_scenario(d, None))
@@ -225,8 +225,8 @@ def test_library_unknown_input_against_the_reference_road_load(samples):
     torque and speed phase the clutch torques, known inputs, move within a sample: 100 N m and
     1000 N m RMS, with the first 25 ms of a phase left out (the observer converging from its
     first guess), as `gearsym estimate --filter uio` reports."""
-    from gearsym.validation.scenario import load_scenario
-    from gearsym.validation.simulate import simulate
+    from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.sim.simulate import simulate
 
     d = load_description()
     result = simulate(d, load_scenario(d, None))
@@ -309,12 +309,12 @@ def test_generate_command_refuses_with_exit_code_2(tmp_path):
 
 
 def test_generate_check_compares_the_uio_and_sees_a_changed_number(emitted, tmp_path):
-    """``generate --check``'s comparison (validation/uio_check.py) passes on the emitted
+    """``generate --check``'s comparison (validation/checks/uio_check.py) passes on the emitted
     files and fails when one printed gain of the unknown input moves by 1e-9 relative."""
     import re
 
-    from gearsym.validation.generated_check import comparison_ok
-    from gearsym.validation.uio_check import compare_uio
+    from gearsym.validation.checks.generated_check import comparison_ok
+    from gearsym.validation.checks.uio_check import compare_uio
 
     d, files, _, _, _ = emitted
     designs = shift_uio_designs(d, DEFAULT_SHIFT, (naming.RESISTANCE_INPUT,), SAMPLE_TIME)

@@ -17,7 +17,7 @@ Expected values are derived here, not taken from the code under test:
 from __future__ import annotations
 
 import numpy as np
-from gearsym.validation.posterior_bound import process_noise_bound, unknown_input_bound
+from gearsym.validation.studies.posterior_bound import process_noise_bound, unknown_input_bound
 
 
 def _flows(F: np.ndarray, H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -12,7 +12,7 @@ from functools import lru_cache
 from typing import Any
 
 import jinja2
-from gearsym.symbolic.package_data import template_dir
+from gearsym.symbolic.io.package_data import template_dir
 
 __all__ = ["TEMPLATE_DIR", "render"]
 

@@ -43,7 +43,8 @@ them (:meth:`ModeLogic.inputs`).
 The same logic is emitted as C beside ``ekf_predict``/``ekf_update``
 (``ekf_mode_quantities``: slip, sticking torque and capacity per element from the same
 expressions; ``ekf_mode_update``: this function, the lock-up maps as constants;
-:func:`gearsym.symbolic.generate.ekf_model`), and ``tests/test_ekf_c.py`` holds the two equal.
+:func:`gearsym.symbolic.export.generate.ekf_model`), and ``tests/test_ekf_c.py`` holds the two
+equal.
 """
 
 from __future__ import annotations

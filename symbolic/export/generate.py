@@ -1,0 +1,1016 @@
+"""What ``gearsym generate`` emits for one gearbox, as a pure function: description in, files out.
+
+:func:`generate_tree` returns ``{relative path: text}`` for
+
+* ``c/gearsym_<model>.{h,c}`` and ``python/gearsym_<model>_casadi.py`` for every model of
+  :func:`gearbox_models`: the full model (2.53), every adjacent shift model (2.55–2.58) with the
+  element torques as inputs (``shift_<a>_<b>``) and, when the description has friction data, with
+  the normal forces as inputs and μ as parameters (``shift_<a>_<b>_mu``, 2.69), and the
+  elasto-plastic shift-element friction model (``shift_element``, 2.66–2.70);
+* ``c/gearsym_mu_map.{h,c}`` and ``python/gearsym_mu_map_casadi.py``: the μ(p_N, T_oil, |Δω|)
+  map of the description, trilinear and clamped like :class:`gearsym.symbolic.friction.MuMap`;
+* ``c/main.c``: an example a TCU engineer compiles alone (build line in its header comment);
+* ``README.md`` (what is where, and the build line) and ``MANIFEST`` (SHA-256 of every file;
+  its first line marks a directory that ``gearsym generate`` may replace).
+
+Nothing in the output depends on the time, the machine, absolute paths or ``PYTHONHASHSEED``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import sympy as sp
+from gearsym.symbolic import naming
+from gearsym.symbolic.codegen import (
+    INTEGRATORS,
+    CodegenConfig,
+    EkfLayout,
+    EuioLayout,
+    emit_all,
+    file_names,
+    float_repr,
+    function_names,
+    render,
+)
+from gearsym.symbolic.codegen.hybrid import emit_hybrid_files, hybrid_set_model, hybrid_set_name
+from gearsym.symbolic.codegen.linear import LinearSystem, LinearSystemSet, emit_linear_files
+from gearsym.symbolic.codegen.mu_map import mu_map_files
+from gearsym.symbolic.defaults import DEFAULT_SHIFT
+from gearsym.symbolic.description import GearboxDescription, Quantity
+from gearsym.symbolic.drivetrain import (
+    ShiftSpec,
+    adjacent_shifts,
+    element_short_name,
+    element_slip_in_gear,
+    full_model,
+    shift_model,
+    shift_spec,
+)
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.friction import (
+    T_SS_MIN,
+    MuMap,
+    load_mu_map,
+    mu_map_origin,
+    shift_element_sym,
+)
+from gearsym.symbolic.hybrid import hybrid_shift
+from gearsym.symbolic.hybrid_sensitivity import HybridSensitivity, hybrid_sensitivity
+from gearsym.symbolic.io.output_dir import MANIFEST, manifest_marker, manifest_text
+from gearsym.symbolic.linear_forms import gear_linear_forms, shift_linear_forms
+from gearsym.symbolic.model import Model, Variable
+from gearsym.symbolic.sensitivity import sensitivity_model
+
+__all__ = [
+    "MANIFEST_MARKER",
+    "EmittedLinearSet",
+    "EmittedModel",
+    "GeneratedTree",
+    "gearbox_models",
+    "linear_system_sets",
+    "generate_tree",
+    "load_mu_map",
+    "mu_map_files",
+    "mu_map_origin",
+    "sample_ranges",
+    "selected_shifts",
+    "shift_element_model",
+]
+
+#: First line of ``MANIFEST``; ``gearsym generate`` only replaces directories that carry it.
+MANIFEST_MARKER = manifest_marker("generate")
+
+C_DIR = "c"
+PYTHON_DIR = "python"
+
+#: Plausibility ranges that the emitted ``params_validate`` enforces (ERR_RANGE outside).
+#: Closed intervals; ``None`` means unbounded. Model defaults must lie inside.
+PARAMETER_BOUNDS: dict[str, tuple[float | None, float | None]] = {
+    "m_veh": (100.0, 100000.0),
+    "k_ss": (1.0, 1.0e7),
+    "d_ss": (0.0, 1.0e5),
+    "zeta": (-0.5, 0.5),
+    "I_wheel": (0.01, 1000.0),
+    "rho_air": (0.5, 2.0),
+    "c_W": (0.05, 2.0),
+    "A_front": (0.1, 20.0),
+    "f_roll": (0.0, 0.1),
+    "f_R": (0.0, 0.1),
+    "f_R0": (-0.05, 0.1),  # f_Roll(v) = f_R0 + f_R1 v + f_R2 v^2: a fit may dip below zero
+    "f_R1": (-0.01, 0.01),
+    "f_R2": (-1.0e-3, 1.0e-3),
+    "sigma0": (1.0, 1.0e9),
+    "sigma1": (0.0, 1.0e6),
+    "z_ba_ratio": (0.0, 0.99),
+    "t_ss_min": (1.0e-9, 1.0e3),
+    "n_disc": (1.0, 50.0),
+    "r_m": (0.005, 1.0),
+}
+MU_BOUNDS = (0.0, 1.0)  # every μ_<element> parameter
+
+#: Where the parameter of each bound lives in the description (for the one-line error).
+_PARAMETER_KEYS = {
+    "k_ss": "drivetrain.k_ss",
+    "d_ss": "drivetrain.d_ss",
+    "I_wheel": "drivetrain.I_wheel",
+    "sigma0": "friction.sigma0",
+    "sigma1": "friction.sigma1",
+    "z_ba_ratio": "friction.z_ba_ratio",
+}
+
+#: Sampling ranges of states and inputs for validation, by name prefix (first match wins).
+_RANGES_BY_PREFIX: tuple[tuple[str, tuple[float, float]], ...] = (
+    ("S_", (-10.0, 10.0)),  # sensitivities ∂x/∂p (3.2); compared relatively, any scale
+    ("omega_C", (-150.0, 150.0)),  # wheel speed, rad/s (about ±180 km/h)
+    ("omega_", (-600.0, 600.0)),  # shaft speeds, rad/s
+    ("phi", (-0.05, 0.05)),  # side-shaft twist, rad
+    ("T_", (-800.0, 800.0)),  # torques, N m
+    ("F_N", (0.0, 20000.0)),  # normal forces, N (an open element has 0)
+    ("z", (-0.02, 0.02)),  # bristle deflection of the friction model, rad
+    ("dw", (-50.0, 50.0)),  # slip, rad/s
+    ("mu", (0.08, 0.16)),  # friction coefficient input
+)
+#: Sampling ranges of parameters without a default.
+_PARAMETER_RANGES = {"n_disc": (2.0, 8.0), "r_m": (0.05, 0.12)}
+
+
+@dataclass(frozen=True)
+class EmittedModel:
+    """One emitted model: the model, the ranges its ``params_validate`` enforces, its integrator
+    steps, and what it is."""
+
+    model: Model
+    bounds: dict[str, tuple[float | None, float | None]]
+    role: str  # "full", "shift", "shift_mu", "sensitivity", "ekf", "euio" or "shift_element"
+    summary: str
+    shift: ShiftSpec | None = None
+    integrators: tuple[str, ...] = INTEGRATORS
+    ekf: EkfLayout | None = None
+    euio: EuioLayout | None = None
+
+    @property
+    def config(self) -> CodegenConfig:
+        """The emitters' decisions for this model (bounds, integrator steps, EKF/EUIO rows)."""
+        return CodegenConfig(
+            bounds=self.bounds, integrators=self.integrators, ekf=self.ekf, euio=self.euio
+        )
+
+
+@dataclass(frozen=True)
+class EmittedLinearSet:
+    """One emitted file pair of linear forms (5.1) and the config it was emitted with."""
+
+    set: LinearSystemSet
+    config: CodegenConfig
+
+
+@dataclass(frozen=True)
+class EmittedHybridSet:
+    """The sensitivities of one hybrid shift (3.7 per mode, jumps at switches) as emitted."""
+
+    sensitivity: HybridSensitivity
+    config: CodegenConfig
+
+    @property
+    def name(self) -> str:
+        return hybrid_set_name(self.sensitivity)
+
+
+@dataclass(frozen=True)
+class GeneratedTree:
+    """The output of :func:`generate_tree`: files by relative path, and what produced them."""
+
+    files: dict[str, str]
+    models: tuple[EmittedModel, ...]
+    mu_map: MuMap
+    example_models: tuple[str, ...] = field(default=())
+    linear_sets: tuple[EmittedLinearSet, ...] = field(default=())
+    hybrid_sets: tuple[EmittedHybridSet, ...] = field(default=())
+    #: The UIO designs the ``gearsym_uio_<shift>`` files print (``generate --check`` compares
+    #: them) and their shift (``None``: no UIO emitted).
+    uio_designs: tuple[Any, ...] = field(default=())
+    uio_shift: str | None = None
+
+
+# ---------------------------------------------------------------------------------------------
+# Models
+# ---------------------------------------------------------------------------------------------
+
+
+def _bounds(d: GearboxDescription, model: Model) -> dict[str, tuple[float | None, float | None]]:
+    """Bounds per parameter; a description default outside them is a one-line user error."""
+    bounds = {}
+    for v in model.parameters:
+        if v.name.startswith("mu_"):
+            lo, hi = MU_BOUNDS
+        elif v.name in PARAMETER_BOUNDS:
+            lo, hi = PARAMETER_BOUNDS[v.name]
+        else:
+            continue
+        if v.default is not None and not (
+            (lo is None or v.default >= lo) and (hi is None or v.default <= hi)
+        ):
+            key = _PARAMETER_KEYS.get(v.name, f"vehicle.{v.name}")
+            if v.name.startswith("mu_"):
+                key = "friction.mu_nominal"
+            raise GearsymError(
+                d.file,
+                key,
+                f"value {v.default:g} lies outside the range [{lo:g}, {hi:g}] that the "
+                "generated params_validate accepts",
+            )
+        bounds[v.name] = (lo, hi)
+    return bounds
+
+
+def _has_friction_data(d: GearboxDescription) -> bool:
+    needed = ("sigma0", "sigma1", "z_ba_ratio", "mu_nominal")
+    return all(k in d.friction for k in needed) and all(
+        e.n_disc is not None and e.r_m is not None for e in d.shift_elements
+    )
+
+
+def _quantity_default(q: Quantity) -> tuple[float, str]:
+    return float(q.value), q.source
+
+
+def shift_element_model(d: GearboxDescription) -> Model:
+    """The elasto-plastic friction model of one shift element (2.66)–(2.70) as a :class:`Model`.
+
+    State ``z`` (bristle deflection, rad), inputs ``dw`` (slip ω_a − ω_b), ``F_N`` (normal force),
+    ``mu`` (friction coefficient, e.g. from ``gearsym_mu_map``); output ``T`` (element torque, +T
+    on shaft b, −T on shaft a). Parameters ``sigma0``, ``sigma1``, ``z_ba_ratio`` from the
+    description's ``[friction]``, the regularisation ``t_ss_min``, and the element geometry
+    ``n_disc``, ``r_m`` (no default: set them per element; the README lists them).
+
+    The expressions are those of :func:`gearsym.symbolic.friction.shift_element_sym` (with its
+    regularisations: capacity floored at ``t_ss_min``, passive damping, elastic torque limited
+    to the capacity).
+    """
+    z, dw, f_n, mu = (sp.Symbol(n, real=True) for n in ("z", "dw", "F_N", "mu"))
+    s0, s1, ratio, t_min, n_disc, r_m = (
+        sp.Symbol(n, positive=True)
+        for n in ("sigma0", "sigma1", "z_ba_ratio", "t_ss_min", "n_disc", "r_m")
+    )
+    # The model of symbolic/friction.py itself, so the emitted code follows it.
+    zdot, torque = shift_element_sym(z, dw, f_n, mu, s0, s1, n_disc, r_m, ratio, t_min)
+
+    def friction_value(key: str, fallback: float) -> tuple[float, str]:
+        if key in d.friction:
+            return _quantity_default(d.friction[key])
+        return fallback, "assumed"
+
+    sigma0 = friction_value("sigma0", 2.0e5)
+    sigma1 = friction_value("sigma1", 150.0)
+    z_ba = friction_value("z_ba_ratio", 0.6)
+    elements = ", ".join(
+        f"{e.name} (n_disc {e.n_disc}, r_m {float_repr(e.r_m.value)} m)"
+        for e in d.shift_elements
+        if e.n_disc is not None and e.r_m is not None
+    )
+    return Model(
+        name=naming.SHIFT_ELEMENT_MODEL,
+        states=(Variable("z", z, "rad", "bristle deflection (2.66)"),),
+        inputs=(
+            Variable("dw", dw, "rad/s", "slip omega_a - omega_b"),
+            Variable("F_N", f_n, "N", "normal force on the disc pack, p_N A_piston (2.69)"),
+            Variable("mu", mu, "1", "friction coefficient, e.g. from gearsym_mu_map (2.69)"),
+        ),
+        parameters=(
+            Variable("sigma0", s0, "N*m/rad", "bristle stiffness (2.66)", *sigma0),
+            Variable("sigma1", s1, "N*m*s/rad", "bristle damping (2.67)", *sigma1),
+            Variable("z_ba_ratio", ratio, "1", "break-away deflection z_ba / z_ss (2.66)", *z_ba),
+            Variable(
+                "t_ss_min",
+                t_min,
+                "N*m",
+                "floor of the capacity |T_Cl,SS| (regularises an open element)",
+                T_SS_MIN,
+                "symbolic/friction.py T_SS_MIN",
+            ),
+            Variable("n_disc", n_disc, "1", "friction disc count N_disc of the element (2.69)"),
+            Variable("r_m", r_m, "m", "mean friction radius of the element (2.69)"),
+        ),
+        outputs=(Variable("T", sp.Symbol("T"), "N*m", "element torque T_Cl (2.67)"),),
+        rhs=sp.Matrix([zdot]),
+        output_expressions=sp.Matrix([torque]),
+        metadata={
+            "gearbox": d.name,
+            "equations": "2.66-2.70",
+            "elements": elements or "none with friction data",
+        },
+    )
+
+
+def sensitivity_parameters(d: GearboxDescription, spec: ShiftSpec) -> list[str]:
+    """The thesis' parameter set (3.2) for a shift: m_veh, k_ss, d_ss, μ of the off-going
+    element, ζ."""
+    mu = naming.friction_coefficient(element_short_name(d, spec.off_going))
+    return ["m_veh", "k_ss", "d_ss", mu, "zeta"]
+
+
+#: ``--shifts`` keywords: the adjacent upshifts (default) or every single- and double-swap shift.
+SHIFT_SELECTIONS = ("adjacent", "all")
+
+#: What a double swap gets instead of the models and sets of a single swap, and why (the
+#: generated README lists each double swap with it).
+DOUBLE_SWAP_NOTE = (
+    "torque-input model only (2.55-2.58, the four swapping elements' torques as inputs); no mu "
+    "form, sensitivities, linear forms of hybrid modes or hybrid model: each needs the slip "
+    "direction or lock state of every swapping element, which the gear table fixes for one "
+    "element off and one on but not for two sliding at once"
+)
+
+
+def selected_shifts(
+    d: GearboxDescription, shifts: str = "adjacent", key: str = "--shifts"
+) -> list[ShiftSpec]:
+    """The shifts whose models ``generate`` emits.
+
+    ``"adjacent"``: the upshifts between forward gears adjacent by ratio (the thesis' shifts);
+    ``"all"``: every ordered pair of gears with a drive path that swaps exactly one element
+    (upshifts, downshifts, skip shifts such as 5-3, and reverse engagements where they are
+    single swaps), adjacent upshifts first, then every pair that swaps two elements each way
+    (double swaps such as 1-5: their torque-input model only, :data:`DOUBLE_SWAP_NOTE`);
+    otherwise a comma-separated list such as ``"3-2,5-3,1-5"`` (each a single or double swap,
+    else a one-line error naming it).
+    """
+    adjacent = adjacent_shifts(d)
+    if shifts == "adjacent":
+        return adjacent
+    if shifts == "all":
+        names = [spec.name for spec in adjacent]
+        doubles = []
+        driven = [g.name for g in d.gears if not g.neutral]
+        for a in driven:
+            for b in driven:
+                if a == b or f"{a}-{b}" in names:
+                    continue
+                gear_a, gear_b = d.gear(a), d.gear(b)
+                off = set(gear_a.closed) - set(gear_b.closed)
+                on = set(gear_b.closed) - set(gear_a.closed)
+                if len(off) == 1 and len(on) == 1:
+                    names.append(f"{a}-{b}")
+                elif len(off) == 2 and len(on) == 2:
+                    doubles.append(f"{a}-{b}")
+        return [shift_spec(d, name, max_swaps=2) for name in names + doubles]
+    names = [part.strip() for part in shifts.split(",") if part.strip()]
+    if not names:
+        raise GearsymError(d.file, key, "expected adjacent, all or a list such as 3-2,5-3")
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise GearsymError(d.file, key, f"shift {twice[0]} listed twice")
+    return [shift_spec(d, name, max_swaps=2) for name in names]
+
+
+def check_generatable(d: GearboxDescription) -> None:
+    """Raise the description's errors that ``generate`` would meet (too few forward gears,
+    missing drivetrain or vehicle data) before any work is reported: one line, exit 2."""
+    if not adjacent_shifts(d):
+        raise GearsymError(
+            d.file,
+            "gear",
+            "gearsym generate needs at least two forward gears (positive ratio): it emits the "
+            "models of the shifts between them and an example that drives one",
+        )
+    full_model(d)
+
+
+def gearbox_model_names(d: GearboxDescription, shifts: str = "adjacent") -> list[str]:
+    """The names of :func:`gearbox_models`, in output order, without deriving anything."""
+    return [name for name, _ in _model_plan(d, shifts)]
+
+
+def gearbox_models(
+    d: GearboxDescription,
+    progress: Callable[[str], None] | None = None,
+    only: str | None = None,
+    shifts: str = "adjacent",
+) -> list[EmittedModel]:
+    """Every model ``gearsym generate`` emits for ``d``, in output order (with ``only``: that
+    one model, deriving nothing else; an empty list for an unknown name). ``shifts`` selects
+    the shift models (:func:`selected_shifts`)."""
+    say = progress or (lambda message: None)
+    return [build(say) for name, build in _model_plan(d, shifts) if only is None or name == only]
+
+
+def _model_plan(
+    d: GearboxDescription, shifts_selected: str = "adjacent"
+) -> list[tuple[str, Callable[[Callable[[str], None]], EmittedModel]]]:
+    """(name, builder) of every emitted model: the names come from the naming rules, so a
+    caller can pick one model before any derivation."""
+    from gearsym.symbolic.estimators.ekf import ekf_model_name
+    from gearsym.symbolic.estimators.euio import euio_model_name
+
+    if not adjacent_shifts(d):
+        check_generatable(d)  # the one-line error (missing data fails in full_model below)
+    shifts = selected_shifts(d, shifts_selected)
+    friction = _has_friction_data(d)
+
+    def full(say: Callable[[str], None]) -> EmittedModel:
+        say("deriving the full model (2.53)")
+        m = full_model(d)
+        return EmittedModel(m, _bounds(d, m), "full", "full model (2.53)")
+
+    def torque_shift(spec: ShiftSpec) -> Callable[[Callable[[str], None]], EmittedModel]:
+        def build(say: Callable[[str], None]) -> EmittedModel:
+            say(f"deriving shift model {spec.name} (2.55-2.58)")
+            m = shift_model(d, spec.name)
+            off, on = " and ".join(spec.off_elements), " and ".join(spec.on_elements)
+            what = f"shift {spec.name}: {off} off, {on} on, torque inputs"
+            return EmittedModel(m, _bounds(d, m), "shift", what, spec)
+
+        return build
+
+    def mu_shift(spec: ShiftSpec) -> Callable[[Callable[[str], None]], EmittedModel]:
+        def build(say: Callable[[str], None]) -> EmittedModel:
+            m = shift_model(d, spec.name, friction_inputs=True)
+            what = f"shift {spec.name}: normal-force inputs, mu parameters (2.69)"
+            return EmittedModel(m, _bounds(d, m), "shift_mu", what, spec)
+
+        return build
+
+    def sensitivity(spec: ShiftSpec) -> Callable[[Callable[[str], None]], EmittedModel]:
+        # the sensitivity system [x; S] (3.5)-(3.7) of the mu model for the thesis' parameter
+        # set, with the off-going element's μ (3.14)
+        def build(say: Callable[[str], None]) -> EmittedModel:
+            m = shift_model(d, spec.name, friction_inputs=True)
+            parameters = sensitivity_parameters(d, spec)
+            say(f"deriving the sensitivity system of shift {spec.name} (3.7)")
+            s = sensitivity_model(m, parameters)
+            what = f"shift {spec.name}: sensitivities to {', '.join(parameters)} (3.7)"
+            # RK4 only: (3.7) is not stiff, and an implicit 24 x 24 solve does not belong on
+            # an ECU's stack
+            return EmittedModel(s, _bounds(d, s), "sensitivity", what, spec, integrators=("rk4",))
+
+        return build
+
+    def element(say: Callable[[str], None]) -> EmittedModel:
+        say("building the shift-element friction model (2.66-2.70)")
+        m = shift_element_model(d)
+        return EmittedModel(m, _bounds(d, m), "shift_element", "shift-element friction (2.66-2.70)")
+
+    plan: list[tuple[str, Callable[[Callable[[str], None]], EmittedModel]]] = [
+        (naming.FULL_MODEL, full)
+    ]
+    for spec in shifts:
+        plan.append((naming.shift_model_name(spec.from_gear, spec.to_gear), torque_shift(spec)))
+        if friction and spec.single:  # a double swap: the torque-input model only
+            mu_name = naming.shift_model_name(spec.from_gear, spec.to_gear, True)
+            plan.append((mu_name, mu_shift(spec)))
+            plan.append((naming.sensitivity_model_name(mu_name), sensitivity(spec)))
+    ekf_shift = next((spec for spec in shifts if spec.name == "2-3"), None)
+    if friction and ekf_shift is not None:
+        plan.append((ekf_model_name(ekf_shift.name), lambda say: ekf_model(d, ekf_shift, say)))
+        plan.append((euio_model_name(ekf_shift.name), lambda say: euio_model(d, ekf_shift, say)))
+    if friction:
+        plan.append((naming.SHIFT_ELEMENT_MODEL, element))
+    return plan
+
+
+def ekf_model(
+    d: GearboxDescription, spec: ShiftSpec, say: Callable[[str], None] | None = None
+) -> EmittedModel:
+    """The EKF (4.3) of a shift: its augmented model (4.1) with the predict and update rows;
+    each μ state is frozen while its element's ``slide_<E>`` input is not set."""
+    from gearsym.symbolic.codegen import EkfModeElement
+    from gearsym.symbolic.drivetrain import element_short_name
+    from gearsym.symbolic.estimators.ekf import augmented_model, slide_input, stick_input
+    from gearsym.symbolic.estimators.ekf_modes import LOCK_UP_CONFIDENCE, lock_up_map
+
+    if say is not None:
+        say(f"deriving the augmented model of shift {spec.name} for the EKF (4.1, 4.3)")
+    aug = augmented_model(d, spec.name)
+    states, inputs = aug.state_names, aug.input_names
+    frozen = tuple(
+        (states.index(mu), inputs.index(slide_input(e))) for e, mu in aug.mu_state.items()
+    )
+    n = aug.n_x
+    modes = []
+    for e in aug.elements:
+        A = lock_up_map(d, aug, e)
+        modes.append(
+            EkfModeElement(
+                e,
+                inputs.index(naming.normal_force(element_short_name(d, e))),
+                inputs.index(slide_input(e)),
+                inputs.index(stick_input(e)),
+                aug.slip_sign[e],
+                states.index(aug.mu_state[e]) if e in aug.mu_state else -1,
+                tuple(tuple(A[i, j] for j in range(n)) for i in range(n)),
+            )
+        )
+    quantities = sp.ImmutableMatrix(
+        [q for e in aug.elements for q in (aug.slip[e], aug.sticking_torque[e], aug.capacity[e])]
+    )
+    what = f"shift {spec.name}: EKF of {', '.join(aug.parameters)} (4.1, 4.3)"
+    return EmittedModel(
+        aug.model,
+        _bounds(d, aug.model),
+        "ekf",
+        what,
+        spec,
+        integrators=("rk4",),
+        ekf=EkfLayout(frozen, tuple(modes), quantities, LOCK_UP_CONFIDENCE),
+    )
+
+
+def euio_model(
+    d: GearboxDescription, spec: ShiftSpec, say: Callable[[str], None] | None = None
+) -> EmittedModel:
+    """The extended UIO (4.5) of a shift: the EKF's augmented model (4.1) without ζ and
+    without a road model (ζ, f_roll, c_W are 0: the road load T_res* is the unknown input),
+    with the rows jac_outputs, euio_load_column and euio_step."""
+    from gearsym.symbolic.estimators.euio import euio_filter_model, euio_phase_masks
+
+    if say is not None:
+        say(f"deriving the augmented model of shift {spec.name} for the extended UIO (4.5)")
+    model, frozen, column = euio_filter_model(d, spec.name)
+    what = f"shift {spec.name}: extended UIO of {model.metadata['augmented']} (4.5)"
+    return EmittedModel(
+        model,
+        _bounds(d, model),
+        "euio",
+        what,
+        spec,
+        integrators=("rk4",),
+        euio=EuioLayout(frozen, column, euio_phase_masks(d, spec.name)),
+    )
+
+
+def linear_system_sets(
+    d: GearboxDescription,
+    progress: Callable[[str], None] | None = None,
+    shifts: str = "adjacent",
+) -> list[EmittedLinearSet]:
+    """The linear forms (5.1) ``generate`` emits: ``linear_gears`` (the full model and every
+    gear) and ``linear_<a>_<b>`` (every mode of each emitted shift), as the emitters' sets."""
+    say = progress or (lambda message: None)
+    say("deriving the linear forms (5.1) of the full model and every gear")
+    groups = [gear_linear_forms(d)]
+    for spec in selected_shifts(d, shifts):
+        if not spec.single:  # no hybrid modes for a double swap (DOUBLE_SWAP_NOTE)
+            continue
+        say(f"deriving the linear forms (5.1) of the modes of shift {spec.name}")
+        groups.append(shift_linear_forms(d, spec))
+    sets = []
+    for group in groups:
+        systems = tuple(
+            LinearSystem(
+                named.name,
+                tuple(named.form.states),
+                tuple(named.form.inputs),
+                named.form.A,
+                named.form.B,
+                named.summary,
+                (f"hybrid modes: {', '.join(named.modes)}",) if named.modes else (),
+            )
+            for named in group.forms
+        )
+        metadata = {"gearbox": d.name, "equations": "5.1-5.3", "content": group.summary}
+        one_way = [e for e in d.shift_elements if e.one_way]
+        if one_way:
+            metadata["one_way"] = (
+                f"systems that lock a one-way clutch ({', '.join(e.name for e in one_way)}) "
+                "hold only while it carries reaction torque of its blocking sign; when that "
+                "torque would change sign the caller switches to the system with it released "
+                "(a state-dependent switch, see the gearsym documentation: docs/description.md, "
+                "One-way clutches)"
+            )
+        s = LinearSystemSet(group.name, group.parameters, systems, metadata)
+        # the parameter ranges params_validate enforces are those of the models
+        sets.append(EmittedLinearSet(s, CodegenConfig(bounds=_bounds(d, s.as_model()))))
+    return sets
+
+
+def hybrid_shift_names(d: GearboxDescription, hybrid_shifts: str | None = None) -> list[str]:
+    """The shifts whose hybrid sensitivities ``generate`` emits: ``hybrid_shifts`` as
+    :func:`selected_shifts` reads it, ``"none"``, or by default the thesis' shift
+    (:data:`~gearsym.symbolic.defaults.DEFAULT_SHIFT`) where the gearbox has it as a single
+    swap and friction data (each set is about 110 kB of object code, so not every shift by
+    default). ``all`` and ``adjacent`` leave out double swaps (:data:`DOUBLE_SWAP_NOTE`); a
+    list that names one is the one-line error of a double swap."""
+    if hybrid_shifts == "none":
+        return []
+    if hybrid_shifts is None:
+        if not _has_friction_data(d):  # the hybrid model needs n_disc and r_m (3.14)
+            return []
+        names = {spec.name for spec in selected_shifts(d, "all")}
+        return [DEFAULT_SHIFT] if DEFAULT_SHIFT in names else []
+    specs = selected_shifts(d, hybrid_shifts, "--hybrid-shifts")
+    if hybrid_shifts not in SHIFT_SELECTIONS:
+        for spec in specs:
+            if not spec.single:
+                raise GearsymError(
+                    d.file,
+                    "--hybrid-shifts",
+                    f"shift {spec.name} swaps two elements each way: {DOUBLE_SWAP_NOTE}",
+                )
+    return [spec.name for spec in specs if spec.single]
+
+
+def hybrid_sensitivity_sets(
+    d: GearboxDescription,
+    progress: Callable[[str], None] | None = None,
+    hybrid_shifts: str | None = None,
+) -> list[EmittedHybridSet]:
+    """The hybrid shift models' sensitivities (3.7 per mode, jumps at every switch) that
+    ``generate`` emits (:func:`hybrid_shift_names`)."""
+    say = progress or (lambda message: None)
+    sets = []
+    for name in hybrid_shift_names(d, hybrid_shifts):
+        say(f"deriving the hybrid sensitivities of shift {name} (3.7 and the switch jumps)")
+        hs = hybrid_sensitivity(hybrid_shift(d, name), file=d.file)
+        config = CodegenConfig(bounds=_bounds(d, hybrid_set_model(hs)))
+        sets.append(EmittedHybridSet(hs, config))
+    return sets
+
+
+def sample_ranges(model: Model) -> dict[str, tuple[float, float]]:
+    """Physically meaningful sampling ranges of the states and inputs (and of parameters that
+    have no default) of an emitted model, for :mod:`gearsym.validation.checks.c_check`."""
+    ranges = {}
+    for v in (*model.states, *model.inputs):
+        for prefix, bounds in _RANGES_BY_PREFIX:
+            if v.name.startswith(prefix):
+                ranges[v.name] = bounds
+                break
+    for v in model.parameters:
+        if v.default is None and v.name in _PARAMETER_RANGES:
+            ranges[v.name] = _PARAMETER_RANGES[v.name]
+    return ranges
+
+
+# ---------------------------------------------------------------------------------------------
+# The μ map
+# ---------------------------------------------------------------------------------------------
+
+
+# ---------------------------------------------------------------------------------------------
+# Example and index
+# ---------------------------------------------------------------------------------------------
+
+
+def _example_shift(models: Sequence[EmittedModel]) -> EmittedModel:
+    """The shift model main.c drives: 2-3 (the thesis' example) if there is one, with friction
+    inputs if available."""
+    shifts = [m for m in models if m.role in ("shift", "shift_mu")]
+    if not shifts:
+        raise ValueError("no shift model to show in the example")
+    preferred = (
+        [m for m in shifts if m.shift is not None and m.shift.name == "2-3"]
+        or [m for m in shifts if m.shift is not None and m.shift.single]
+        or shifts
+    )
+    with_mu = [m for m in preferred if m.role == "shift_mu"]
+    return (with_mu or preferred)[0]
+
+
+@dataclass(frozen=True)
+class ExampleInput:
+    name: str  # input variable
+    code: str  # C expression of its value
+    what: str
+
+
+@dataclass(frozen=True)
+class ExampleElement:
+    """The shift element whose friction model main.c runs."""
+
+    name: str
+    n_disc: str
+    r_m: str
+    area: str
+
+
+@dataclass(frozen=True)
+class ExampleView:
+    """What ``c_example_main.c.j2`` prints (and the README's build line)."""
+
+    gearbox: str
+    shift: str
+    from_gear: str
+    to_gear: str
+    ratio_to: str
+    omega_in: str
+    omega_out: str
+    shift_model: str
+    shift_macro: str
+    shift_header: str
+    shift_states: tuple[str, ...]
+    x0: tuple[str, ...]
+    inputs: tuple[ExampleInput, ...]
+    mu_settings: tuple[tuple[str, str], ...]  # (mu parameter, which element)
+    t_oil: str
+    apply_pressure: str
+    slip: str
+    speed: str
+    full_model: str
+    full_macro: str
+    full_header: str
+    element: ExampleElement | None
+    element_header: str | None
+    c_files: tuple[str, ...]
+
+
+def _example_view(d: GearboxDescription, models: Sequence[EmittedModel]) -> ExampleView:
+    from gearsym.symbolic.ratios import gear_ratio
+
+    shift = _example_shift(models)
+    spec = shift.shift
+    assert spec is not None
+    full = next(m for m in models if m.role == "full")
+    element = next((m for m in models if m.role == "shift_element"), None)
+    sm = shift.model
+    ratio = float(gear_ratio(d, d.gear(spec.from_gear)).ratio)
+    ratio_to = float(gear_ratio(d, d.gear(spec.to_gear)).ratio)
+    i_d = float(d.drivetrain["i_D"].value)
+    r_dyn = float(d.vehicle["r_dyn"].value)
+    speed = 15.0  # m/s
+    omega_c = speed / r_dyn
+    omega_out = omega_c * i_d
+    initial = {
+        naming.speed(d.input_shaft): ratio * omega_out,
+        naming.speed(d.output_shaft): omega_out,
+        naming.WHEEL_SPEED: omega_c,
+    }
+    apply_pressure = 5.0e5  # Pa
+    slip = 20.0  # rad/s
+    t_oil = float(d.friction["T_oil"].value) if "T_oil" in d.friction else 80.0
+    inputs = []
+    mu_settings = []
+    for v in sm.inputs:
+        if v.name == naming.INPUT_TORQUE:
+            inputs.append(ExampleInput(v.name, "GEARSYM_LIT(150.0)", "engine torque"))
+    if shift.role == "shift_mu":
+        for elem_name, role in ((spec.off_going, "off-going"), (spec.on_coming, "on-coming")):
+            e = d.element(elem_name)
+            short = element_short_name(d, elem_name)
+            force = naming.normal_force(short)
+            if role == "off-going":
+                inputs.append(ExampleInput(force, "GEARSYM_LIT(0.0)", f"{role} {e.name} released"))
+            else:
+                assert e.a_piston is not None
+                area = f"GEARSYM_LIT({float_repr(e.a_piston.value)})"
+                inputs.append(ExampleInput(force, f"P_APPLY * {area}", f"{role} {e.name}: p_N A"))
+            mu_settings.append((naming.friction_coefficient(short), f"{role} {e.name}"))
+    else:
+        # Sliding torque of each on-coming element with the sign of its slip in the from-gear
+        # (2.70; power_on_slip_signs for a single swap).
+        for name in spec.off_elements:
+            inputs.append(
+                ExampleInput(naming.torque(name), "GEARSYM_LIT(0.0)", "off-going element open")
+            )
+        for name in spec.on_elements:
+            sign = int(sp.sign(element_slip_in_gear(d, spec.from_gear, name)))
+            inputs.append(
+                ExampleInput(
+                    naming.torque(name),
+                    f"GEARSYM_LIT({300.0 * sign})",
+                    "on-coming element sliding",
+                )
+            )
+    element_view = None
+    if element is not None:
+        e = d.element(spec.on_elements[0])
+        element_view = ExampleElement(
+            name=e.name,
+            n_disc=float_repr(float(e.n_disc or 0)),
+            r_m=float_repr(e.r_m.value if e.r_m else 0.0),
+            area=float_repr(e.a_piston.value if e.a_piston else 0.0),
+        )
+    c_files = [file_names(sm)["source"], "gearsym_mu_map.c", file_names(full.model)["source"]]
+    if element is not None:
+        c_files.insert(2, file_names(element.model)["source"])
+    return ExampleView(
+        gearbox=d.name,
+        shift=spec.name,
+        from_gear=spec.from_gear,
+        to_gear=spec.to_gear,
+        ratio_to=float_repr(round(ratio_to, 12)),
+        omega_in=naming.speed(d.input_shaft),
+        omega_out=naming.speed(d.output_shaft),
+        shift_model=sm.name,
+        shift_macro=naming.macro_prefix(sm.name),
+        shift_header=file_names(sm)["header"],
+        shift_states=tuple(v.name for v in sm.states),
+        x0=tuple(float_repr(round(initial.get(v.name, 0.0), 6)) for v in sm.states),
+        inputs=tuple(inputs),
+        mu_settings=tuple(mu_settings),
+        t_oil=float_repr(t_oil),
+        apply_pressure=float_repr(apply_pressure),
+        slip=float_repr(slip),
+        speed=float_repr(speed),
+        full_model=full.model.name,
+        full_macro=naming.macro_prefix(full.model.name),
+        full_header=file_names(full.model)["header"],
+        element=element_view,
+        element_header=file_names(element.model)["header"] if element else None,
+        c_files=tuple(c_files),
+    )
+
+
+@dataclass(frozen=True)
+class ReadmeRow:
+    name: str
+    summary: str
+    sizes: str  # "NX / NU / NP / NY"
+    states: str
+    inputs: str
+    c: str  # the C files
+    python: str  # the CasADi module
+
+
+@dataclass(frozen=True)
+class ReadmeView:
+    gearbox: str
+    title: str
+    models: tuple[ReadmeRow, ...]
+    functions: tuple[str, ...]
+    explicit_only: tuple[str, ...]  # models without the implicit step
+    example: ExampleView
+    mu_map_origin: str  # mu_map_origin() leaves only [A-Za-z0-9._+-] and spaces: Markdown-safe
+    linear_sets: tuple[LinearSetRow, ...]
+    hybrid_sets: tuple[LinearSetRow, ...] = ()
+    uio_rows: tuple[str, ...] = ()  # Markdown table rows of the emitted UIOs
+    double_swaps: tuple[str, ...] = ()  # "`shift_1_5`: K38 and B06 off, K81 and K27 on"
+    double_swap_note: str = DOUBLE_SWAP_NOTE
+
+
+@dataclass(frozen=True)
+class LinearSetRow:
+    name: str
+    summary: str
+    systems: str  # "full (6 x 9), gear_1 (3 x 3), ..."
+    parameters: str
+    c: str
+    python: str
+
+
+def _readme(
+    d: GearboxDescription,
+    models: Sequence[EmittedModel],
+    example: ExampleView,
+    mu_map: MuMap,
+    linear_sets: Sequence[EmittedLinearSet] = (),
+    hybrid_sets: Sequence[EmittedHybridSet] = (),
+    uio_rows: Sequence[str] = (),
+) -> str:
+    rows = []
+    for m in models:
+        names = file_names(m.model)
+        rows.append(
+            ReadmeRow(
+                name=m.model.name,
+                summary=m.summary,
+                sizes=f"{len(m.model.states)} / {len(m.model.inputs)} / "
+                f"{len(m.model.parameters)} / {len(m.model.outputs)}",
+                states=", ".join(v.name for v in m.model.states),
+                inputs=", ".join(v.name for v in m.model.inputs),
+                c=f"{C_DIR}/{names['header']}, {C_DIR}/{names['source']}",
+                python=f"{PYTHON_DIR}/{names['casadi']}",
+            )
+        )
+    view = ReadmeView(
+        gearbox=d.name,
+        title=d.title,
+        models=tuple(rows),
+        functions=tuple(function_names(models[0].config)),
+        explicit_only=tuple(m.model.name for m in models if not m.config.implicit_step),
+        example=example,
+        mu_map_origin=mu_map.origin,
+        linear_sets=tuple(_linear_set_row(emitted.set) for emitted in linear_sets),
+        hybrid_sets=tuple(_hybrid_set_row(emitted) for emitted in hybrid_sets),
+        uio_rows=tuple(uio_rows),
+        double_swaps=tuple(
+            f"`{m.model.name}`: {' and '.join(m.shift.off_elements)} off, "
+            f"{' and '.join(m.shift.on_elements)} on"
+            for m in models
+            if m.role == "shift" and m.shift is not None and not m.shift.single
+        ),
+    )
+    return render("generated_readme.md.j2", view)
+
+
+def _linear_set_row(s: LinearSystemSet) -> LinearSetRow:
+    names = naming.model_file_names(s.name)
+    return LinearSetRow(
+        name=s.name,
+        summary=s.metadata["content"],
+        systems=", ".join(f"`{x.name}` ({len(x.states)} x {len(x.inputs)})" for x in s.systems),
+        parameters=", ".join(v.name for v in s.parameters),
+        c=f"{C_DIR}/{names['header']}, {C_DIR}/{names['source']}",
+        python=f"{PYTHON_DIR}/{names['casadi']}",
+    )
+
+
+def _hybrid_set_row(emitted: EmittedHybridSet) -> LinearSetRow:
+    hs = emitted.sensitivity
+    names = naming.model_file_names(emitted.name)
+    return LinearSetRow(
+        name=emitted.name,
+        summary=f"shift {hs.hybrid.spec.name}: {len(hs.jumps)} switches",
+        systems=f"{len(hs.modes)} (NX_AUG {min(len(m.states) for m in hs.modes)}"
+        f"-{max(len(m.states) for m in hs.modes)})",
+        parameters=", ".join(v.name for v in hs.parameters),
+        c=f"{C_DIR}/{names['header']}, {C_DIR}/{names['source']}",
+        python=f"{PYTHON_DIR}/{names['casadi']}",
+    )
+
+
+def uio_files(
+    d: GearboxDescription,
+    progress: Callable[[str], None] | None = None,
+    shifts: str = "adjacent",
+    unknown: Sequence[str] = (naming.RESISTANCE_INPUT,),
+) -> tuple[dict[str, str], list[str], tuple[Any, ...]]:
+    """The UIO files (thesis 4.4) of the default shift, when it is emitted, their README
+    rows and the designs they print. Only T_res* is unknown by default: with the clutch
+    torques T_K38, T_B05 unknown too the torque and speed phase has an invariant zero at
+    s = 0 and no UIO exists, and
+    :func:`~gearsym.symbolic.estimators.uio.shift_uio_designs` refuses it (naming the phase
+    and the condition)."""
+    from gearsym.symbolic.codegen.uio import emit_uio_files, phase_identifier, uio_set_name
+    from gearsym.symbolic.defaults import DEFAULT_SHIFT, SAMPLE_TIME
+    from gearsym.symbolic.estimators.uio import shift_uio_designs
+
+    if DEFAULT_SHIFT not in {spec.name for spec in selected_shifts(d, shifts)}:
+        return {}, [], ()
+    say = progress or (lambda message: None)
+    say(f"designing the UIO of shift {DEFAULT_SHIFT} ({', '.join(unknown)} unknown)")
+    designs = shift_uio_designs(d, DEFAULT_SHIFT, unknown, SAMPLE_TIME)
+    metadata = {
+        "gearbox": d.name,
+        "equations": "4.4, 5.1-5.3",
+        "unknown inputs": ", ".join(unknown),
+        "sample time": f"{SAMPLE_TIME:g} s",
+    }
+    files = {}
+    for name, text in emit_uio_files(DEFAULT_SHIFT, designs, metadata).items():
+        files[f"{PYTHON_DIR if name.endswith('.py') else C_DIR}/{name}"] = text
+    names = naming.model_file_names(uio_set_name(DEFAULT_SHIFT))
+    rows = [
+        f"| `{uio_set_name(DEFAULT_SHIFT)}` | `{phase_identifier(x.phase)}` ({x.phase}) | "
+        f"{', '.join(x.unknown)} | {len(x.states)} / {len(x.outputs)} / {len(x.known)} | "
+        f"{x.spectral_radius:.3g} | {C_DIR}/{names['header']}, {C_DIR}/{names['source']} | "
+        f"{PYTHON_DIR}/{names['casadi']} |"
+        for x in designs
+    ]
+    return files, rows, tuple(designs)
+
+
+def generate_tree(
+    d: GearboxDescription,
+    progress: Callable[[str], None] | None = None,
+    shifts: str = "adjacent",
+    hybrid_shifts: str | None = None,
+    uio_unknown: Sequence[str] = (naming.RESISTANCE_INPUT,),
+) -> GeneratedTree:
+    """Every file of the output directory for ``d``, by relative path (``/`` separated);
+    ``shifts`` selects the shift models (:func:`selected_shifts`)."""
+    say = progress or (lambda message: None)
+    models = gearbox_models(d, say, shifts=shifts)
+    files: dict[str, str] = {}
+    for m in models:
+        say(f"emitting {m.model.name}")
+        for name, text in emit_all(m.model, m.config).items():
+            folder = PYTHON_DIR if name.endswith(".py") else C_DIR
+            files[f"{folder}/{name}"] = text
+    linear_sets = linear_system_sets(d, say, shifts)
+    for emitted in linear_sets:
+        say(f"emitting {emitted.set.name}")
+        for name, text in emit_linear_files(emitted.set, emitted.config).items():
+            folder = PYTHON_DIR if name.endswith(".py") else C_DIR
+            files[f"{folder}/{name}"] = text
+    hybrid_sets = hybrid_sensitivity_sets(d, say, hybrid_shifts)
+    for emitted_hybrid in hybrid_sets:
+        say(f"emitting {emitted_hybrid.name}")
+        for name, text in emit_hybrid_files(
+            emitted_hybrid.sensitivity, emitted_hybrid.config
+        ).items():
+            folder = PYTHON_DIR if name.endswith(".py") else C_DIR
+            files[f"{folder}/{name}"] = text
+    uio, uio_rows, uio_designs = uio_files(d, say, shifts, uio_unknown)
+    files.update(uio)
+    say("emitting the mu map and the example")
+    mu_map = load_mu_map(d)
+    files.update(mu_map_files(mu_map))
+    example = _example_view(d, models)
+    files[f"{C_DIR}/main.c"] = render("c_example_main.c.j2", example)
+    files["README.md"] = _readme(
+        d, models, example, mu_map, linear_sets, hybrid_sets=hybrid_sets, uio_rows=uio_rows
+    )
+    files[MANIFEST] = manifest_text({k: v.encode("utf-8") for k, v in files.items()}, "generate")
+    return GeneratedTree(
+        files,
+        tuple(models),
+        mu_map,
+        example.c_files,
+        tuple(linear_sets),
+        tuple(hybrid_sets),
+        uio_designs=uio_designs,
+        uio_shift=DEFAULT_SHIFT if uio_designs else None,
+    )

@@ -1,0 +1,810 @@
+"""Simulation of the hybrid shift model (:mod:`gearsym.symbolic.hybrid`) with event detection.
+
+Inside a mode the model is an ODE without stiff friction states (the locked elements are
+constraints, not bristles), integrated by SciPy's ``solve_ivp`` (DOP853, explicit order 8) with
+the mode's continuous guards — break-away and lock-up — as terminal events; SciPy locates each
+event (a bracketing root finder on the dense output), this module only applies it: the guard's
+condition picks the target mode (stick or reverse at a lock-up), the state map
+(:class:`gearsym.symbolic.hybrid.StateMap`) gives the state in the target's coordinates, and the
+integration restarts.
+
+The normal forces F_N = p · a_piston come from the scenario's pressures, piecewise linear and
+never negative: they vanish only at a breakpoint of their profile or over a whole segment. The
+integration restarts at every breakpoint (as the reference does), and there the opening and
+engagement guards (F_N falls to / rises from zero) are evaluated on the next segment, so those
+events are located exactly without a root search.
+
+μ of a sliding element: with ``mu="map"`` (default) the friction coefficient is the μ map at the
+element's pressure, the oil temperature and the current |slip|, scaled by the parameter,
+μ_e,eff = μ_e · map(p_e, T_oil, |Δω_e|) / μ_nominal: at the nominal μ_e it is exactly what the
+reference reads (2.69), and ∂/∂μ_e is a relative change of the whole map, as in
+:mod:`gearsym.validation.studies.sensitivity_run`. ``mu="constant"`` uses the parameter alone. The
+grade enters as ζ + Δζ(t), ζ the parameter and Δζ(t) the scenario's profile minus the description's
+ζ (zero without a profile), like the driven shift model of the sensitivity runs.
+
+A one-way clutch among the swapping elements (:mod:`gearsym.symbolic.hybrid`, module
+docstring) has no pressure, F_N or μ: its slot in u is 0, its guards (release, lock-up) are
+state guards like break-away and lock-up, and its torque signal is the reaction while it is
+locked and 0 while it overruns.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import sympy as sp
+from gearsym.symbolic import naming
+from gearsym.symbolic.description import GearboxDescription
+from gearsym.symbolic.drivetrain import quantity
+from gearsym.symbolic.dynamics import gearbox_dynamics
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.friction import load_mu_map
+from gearsym.symbolic.hybrid import (
+    ENGAGEMENT,
+    LOCKED,
+    OPEN,
+    OPENING,
+    RELEASE,
+    SLIDING,
+    STATE_GUARDS,
+    Guard,
+    HybridShift,
+    Mode,
+    hybrid_shift,
+)
+from gearsym.symbolic.numeric import bilinear, to_casadi
+from gearsym.validation.sim.scenario import SAMPLE_TIME, Scenario, load_scenario
+from gearsym.validation.sim.simulate import EnergyAudit
+from scipy.integrate import solve_ivp
+
+MU_MODES = ("map", "constant")
+
+#: Most switches one simulation follows: a guard that chatters (slip crossing zero back and
+#: forth at the capacity limit) is a modelling problem to report, not to integrate for ever.
+EVENTS_MAX = 200
+
+
+@dataclass(frozen=True)
+class Event:
+    """A switch: guard ``kind`` of ``element`` fired at ``t``, from ``source`` to ``target``."""
+
+    t: float
+    kind: str
+    element: str
+    source: str
+    target: str
+
+
+@dataclass(frozen=True)
+class Piece:
+    """One integration piece in one mode: [t_start, t_end] with SciPy's dense output."""
+
+    mode: str
+    t_start: float
+    t_end: float
+    solution: Any  # scipy OdeSolution, or None for a piece of zero length
+    x_start: np.ndarray
+
+    def state(self, t: np.ndarray) -> np.ndarray:
+        if self.solution is None:
+            return np.repeat(self.x_start[None, :], len(t), axis=0)
+        return np.asarray(self.solution(t)).T
+
+
+@dataclass(frozen=True)
+class HybridResult:
+    """Samples of the hybrid simulation: ``signals`` (every shaft speed ``omega_<s>``, φ, ω_C,
+    the swapping elements' slips ``slip_<e>`` and torques ``T_<e>``), the mode at each sample,
+    the events and the pieces."""
+
+    t: np.ndarray
+    signals: dict[str, np.ndarray]
+    modes: tuple[str, ...]
+    events: tuple[Event, ...]
+    pieces: tuple[Piece, ...]
+    hybrid: HybridShift
+    scenario: Scenario
+    values: dict[str, float]
+    stats: dict[str, float] = field(default_factory=dict)
+    #: ∂(signal)/∂p of the states and shaft speeds, signals × samples × parameters
+    parameters: tuple[str, ...] = ()
+    sensitivities: dict[str, np.ndarray] = field(default_factory=dict)
+    #: ∂τ/∂p of every event (zero for the switches at breakpoints), events × parameters
+    event_time_sensitivities: np.ndarray | None = None
+
+
+class CompiledMode:
+    """A mode's right-hand side, guards, shaft speeds, slips and element torques as CasADi
+    functions of (x, u, p), u = [T_In, F_N per swapping element (0 for a one-way clutch), Δζ],
+    p the hybrid's parameters (μ through the map with ``mu="map"``, module docstring)."""
+
+    def __init__(
+        self,
+        hybrid: HybridShift,
+        mode: Mode,
+        d: GearboxDescription,
+        mu: str,
+        mu_plane: tuple[np.ndarray, np.ndarray, np.ndarray],
+    ) -> None:
+        import casadi as ca
+
+        self.mode = mode
+        model = mode.model
+        self.n = len(model.states)
+        self.x = ca.SX.sym("x", self.n)
+        self.u = ca.SX.sym("u", 1 + len(hybrid.elements) + 1)
+        self.p = ca.SX.sym("p", len(hybrid.parameters))
+        mapping: dict[sp.Symbol, Any] = {s: self.x[i] for i, s in enumerate(model.state_symbols)}
+        mapping[hybrid.inputs[0].symbol] = self.u[0]
+        for k, e in enumerate(hybrid.elements):
+            if e in hybrid.normal_force:
+                mapping[hybrid.normal_force[e]] = self.u[1 + k]
+        names = [v.name for v in hybrid.parameters]
+        for k, v in enumerate(hybrid.parameters):
+            mapping[v.symbol] = self.p[k]
+        mapping[hybrid.parameters[names.index(naming.GRADE)].symbol] = (
+            self.p[names.index(naming.GRADE)] + self.u[-1]
+        )
+        if mu == "map":
+            p_grid, dw_grid, plane = mu_plane
+            mu_nominal = quantity(d, "friction", "mu_nominal").value
+            for k, e in enumerate(hybrid.elements):
+                if e in hybrid.one_way:
+                    continue
+                slip = to_casadi(mode.slip[e], mapping)
+                area = d.element(e).a_piston
+                if area is None:
+                    raise GearsymError(
+                        d.file,
+                        f'shift_element[name="{e}"].a_piston',
+                        "missing (needed for the pressure in the mu map)",
+                    )
+                pressure = self.u[1 + k] / area.value
+                shape = bilinear(pressure, ca.fabs(slip), p_grid, dw_grid, plane) / mu_nominal
+                symbol = hybrid.friction_coefficient[e]
+                mapping[symbol] = self.p[names.index(str(symbol))] * shape
+        self.mapping = mapping
+
+        def function(name: str, exprs: Sequence[sp.Expr]) -> Any:
+            out = ca.vertcat(*[to_casadi(e, mapping) for e in exprs]) if exprs else ca.SX(0, 1)
+            return ca.Function(name, [self.x, self.u, self.p], [out])
+
+        self.rhs_sx = ca.vertcat(*[to_casadi(e, mapping) for e in model.rhs])
+        self.f = ca.Function("f", [self.x, self.u, self.p], [self.rhs_sx])
+        self.continuous = [g for g in hybrid.guards_from(mode.name) if g.kind in STATE_GUARDS]
+        self.guard_sx = [to_casadi(g.expression, mapping) for g in self.continuous]
+        self.guard = [ca.Function("g", [self.x, self.u, self.p], [g]) for g in self.guard_sx]
+        self._augmented: dict[tuple[int, ...], Any] = {}
+        self._gradients: dict[int, Any] = {}
+        self.condition = {
+            id(g): function("c", [g.condition]) for g in self.continuous if g.condition is not None
+        }
+        self.torque_exprs = []
+        for e in hybrid.elements:
+            status, sign = mode.status[e]
+            if status == LOCKED:
+                self.torque_exprs.append(mode.reaction[e])
+            elif status == SLIDING:
+                self.torque_exprs.append(sign * mode.capacity[e])
+            else:
+                self.torque_exprs.append(sp.Integer(0))
+        self.torques = function("torques", self.torque_exprs)
+        self.slips = function("slips", [mode.slip[e] for e in hybrid.elements])
+        # μ as the mode uses it (the map's value scaled by the parameter, or the parameter;
+        # 0 for a one-way clutch)
+        mus = [
+            mapping[hybrid.friction_coefficient[e]] if e in hybrid.friction_coefficient else 0
+            for e in hybrid.elements
+        ]
+        self.mu = ca.Function("mu", [self.x, self.u, self.p], [ca.vertcat(*mus)])
+
+    def rhs(self, x: np.ndarray, u: np.ndarray, p: np.ndarray) -> np.ndarray:
+        return np.asarray(self.f(x, u, p).full(), dtype=float).ravel()
+
+    def augmented(self, indices: tuple[int | None, ...]) -> Any:
+        """(y, u, p) → ẏ of y = [x; S_1; …; S_m] (S_j = ∂x/∂p_j of the parameters at
+        ``indices``): ẋ = f, Ṡ = ∂f/∂x S + ∂f/∂p (3.7), by CasADi's AD of the mode's f. An
+        index None is an initial state taken as a parameter: no ∂f/∂p term."""
+        if indices not in self._augmented:
+            import casadi as ca
+
+            sensitivities = ca.SX.sym("S", self.n, len(indices))
+            f_x = ca.jacobian(self.rhs_sx, self.x)
+            f_p = ca.horzcat(
+                *[
+                    ca.jacobian(self.rhs_sx, self.p[k]) if k is not None else ca.SX(self.n, 1)
+                    for k in indices
+                ]
+            )
+            y = ca.vertcat(self.x, ca.vec(sensitivities))
+            out = ca.vertcat(self.rhs_sx, ca.vec(f_x @ sensitivities + f_p))
+            self._augmented[indices] = ca.Function("augmented", [y, self.u, self.p], [out])
+        return self._augmented[indices]
+
+    def guard_gradient(self, k: int) -> Any:
+        """(x, u, p) → (∂g/∂x, ∂g/∂u, ∂g/∂p) of the k-th continuous guard."""
+        if k not in self._gradients:
+            import casadi as ca
+
+            g = self.guard_sx[k]
+            self._gradients[k] = ca.Function(
+                "dg",
+                [self.x, self.u, self.p],
+                [ca.jacobian(g, self.x), ca.jacobian(g, self.u), ca.jacobian(g, self.p)],
+            )
+        return self._gradients[k]
+
+    def value(self, function: Any, x: np.ndarray, u: np.ndarray, p: np.ndarray) -> np.ndarray:
+        return np.asarray(function(x, u, p).full(), dtype=float).ravel()
+
+    def many(self, function: Any, x: np.ndarray, u: np.ndarray, p: np.ndarray) -> np.ndarray:
+        out = function.map(len(x))(x.T, u.T, p)
+        return np.asarray(out.full(), dtype=float).T
+
+
+class HybridSimulator:
+    """Compiled modes, the scenario's inputs and the switching logic of one hybrid shift."""
+
+    def __init__(
+        self,
+        d: GearboxDescription,
+        scenario: Scenario | None = None,
+        hybrid: HybridShift | None = None,
+        mu: str = "map",
+    ) -> None:
+        if mu not in MU_MODES:
+            raise ValueError(f"mu must be one of {MU_MODES}, got {mu!r}")
+        self.d = d
+        self.scenario = scenario if scenario is not None else load_scenario(d)
+        self.hybrid = hybrid if hybrid is not None else hybrid_shift(d, self.scenario.shift.name)
+        mu_map = load_mu_map(d)
+        p_grid, _, dw_grid = mu_map.grid
+        t_oil = quantity(d, "friction", "T_oil").value
+        plane = mu_map(p_grid[:, None], t_oil, dw_grid[None, :])
+        self.modes = {
+            name: CompiledMode(self.hybrid, mode, d, mu, (p_grid, dw_grid, plane))
+            for name, mode in self.hybrid.modes.items()
+        }
+        self.area = {}
+        for e in self.hybrid.friction_elements:
+            area = d.element(e).a_piston
+            if area is None:
+                raise GearsymError(
+                    d.file, f'shift_element[name="{e}"].a_piston', "missing (F_N = p a_piston)"
+                )
+            self.area[e] = area.value
+        self.parameter_names = [v.name for v in self.hybrid.parameters]
+        zeta = next(v for v in self.hybrid.parameters if v.name == naming.GRADE)
+        self.zeta0 = float(zeta.default or 0.0)
+        self._speeds: dict[str, Any] = {}
+
+    # ------------------------------------------------------------------ inputs and parameters
+
+    def values(self, overrides: Mapping[str, float] | None = None) -> dict[str, float]:
+        """Every parameter's value: its default, or the override."""
+        values = {v.name: float(v.default) for v in self.hybrid.parameters if v.default is not None}
+        for name, value in (overrides or {}).items():
+            if name not in values:
+                raise GearsymError(self.d.file, "set", f"unknown parameter {name!r}")
+            values[name] = float(value)
+        return values
+
+    def parameter_vector(self, values: Mapping[str, float]) -> np.ndarray:
+        return np.array([values[n] for n in self.parameter_names], dtype=float)
+
+    def normal_forces(self, t: float) -> np.ndarray:
+        """F_N = p a_piston of each swapping element (0 for a one-way clutch)."""
+        return np.array(
+            [
+                self.scenario.pressure[e](t) * self.area[e] if e in self.area else 0.0
+                for e in self.hybrid.elements
+            ]
+        )
+
+    def inputs(self, t: float) -> np.ndarray:
+        """u(t) = [T_In, F_N of each swapping element (0 for a one-way clutch), Δζ]."""
+        grade = self.scenario.grade
+        deviation = 0.0 if grade is None else grade(t) - self.zeta0
+        return np.array([self.scenario.input_torque(t), *self.normal_forces(t), deviation])
+
+    # ------------------------------------------------------------------ initial state
+
+    def initial_state(self, p: np.ndarray) -> np.ndarray:
+        """The from-gear at the scenario's vehicle speed, accelerating as one rigid gear: the
+        side-shaft twist φ solves d(φ̇)/dt = 0 (2.44), the condition the reference's
+        quasi-static start imposes too (affine in φ: two evaluations solve it)."""
+        mode = self.modes[self.hybrid.from_mode]
+        names = [v.name for v in mode.mode.model.states]
+        r_dyn = quantity(self.d, "vehicle", "r_dyn").value
+        i_d = quantity(self.d, "drivetrain", "i_D").value
+        omega_c = self.scenario.vehicle_speed / r_dyn
+        x = np.zeros(mode.n)
+        x[names.index(naming.WHEEL_SPEED)] = omega_c
+        (out,) = [
+            k
+            for k, v in enumerate(mode.mode.model.states)
+            if v.name.startswith("omega_") and v.name != naming.WHEEL_SPEED
+        ]
+        x[out] = i_d * omega_c  # φ̇ = ω_out / i_D − ω_C = 0
+        u = self.inputs(0.0)
+        phi = names.index(naming.TWIST)
+
+        def twist_acceleration(value: float) -> float:
+            y = x.copy()
+            y[phi] = value
+            xdot = mode.rhs(y, u, p)
+            return xdot[out] / i_d - xdot[names.index(naming.WHEEL_SPEED)]
+
+        a0, a1 = twist_acceleration(0.0), twist_acceleration(1e-2)
+        x[phi] = -a0 * 1e-2 / (a1 - a0)
+        return x
+
+    def initial_sensitivity(self, p: np.ndarray, parameters: Sequence[str]) -> np.ndarray:
+        """S(0) = ∂x(0)/∂p of :meth:`initial_state`: the speeds are given by the vehicle speed
+        (S = 0), the twist solves c(φ, p) = d(φ̇)/dt = 0, so ∂φ/∂p = −(∂c/∂p)/(∂c/∂φ) (as
+        :func:`gearsym.symbolic.sensitivity.stationary_initial_sensitivity` does for the
+        shift model)."""
+        import casadi as ca
+
+        mode = self.modes[self.hybrid.from_mode]
+        names = [v.name for v in mode.mode.model.states]
+        i_d = quantity(self.d, "drivetrain", "i_D").value
+        out = next(
+            k
+            for k, name in enumerate(names)
+            if name.startswith("omega_") and name != naming.WHEEL_SPEED
+        )
+        condition = mode.rhs_sx[out] / i_d - mode.rhs_sx[names.index(naming.WHEEL_SPEED)]
+        phi = names.index(naming.TWIST)
+        gradient = ca.Function(
+            "dc",
+            [mode.x, mode.u, mode.p],
+            [ca.jacobian(condition, mode.x[phi]), ca.jacobian(condition, mode.p)],
+        )
+        c_phi, c_p = (
+            np.asarray(v.full(), dtype=float)
+            for v in gradient(self.initial_state(p), self.inputs(0.0), p)
+        )
+        columns = [self.parameter_names.index(n) for n in parameters]
+        result = np.zeros((mode.n, len(columns)))
+        result[phi] = -c_p[0, columns] / c_phi[0, 0]
+        return result
+
+    # ------------------------------------------------------------------ switching
+
+    def switch(
+        self, guard: Guard, t: float, x: np.ndarray, p: np.ndarray
+    ) -> tuple[str, np.ndarray]:
+        """Target mode and state map (x⁺ = A x⁻) after ``guard`` fired at (t, x)."""
+        target = guard.target
+        if guard.condition is not None:
+            compiled = self.modes[guard.source]
+            value = compiled.value(compiled.condition[id(guard)], x, self.inputs(t), p)[0]
+            if value < 0:
+                assert guard.otherwise is not None
+                target = guard.otherwise
+        return target, np.array(self.hybrid.maps[(guard.source, target)].matrix, dtype=float)
+
+    def normal_force_switches(
+        self, mode: str, t: float, t_next: float, x: np.ndarray, p: np.ndarray
+    ) -> list[tuple[Guard, str, np.ndarray]]:
+        """Opening and engagement at a breakpoint t: the element's F_N on the next segment (its
+        midpoint) is zero for an element that is not open, or positive for an open one.
+        Returns (guard, target, map matrix) in order."""
+        switches = []
+        middle = (t + t_next) / 2
+        forces = self.normal_forces(middle)
+        for k, e in enumerate(self.hybrid.elements):
+            if e in self.hybrid.one_way:  # not pressed: its guards depend on the state
+                continue
+            status = self.hybrid.modes[mode].status[e][0]
+            pressed = forces[k] > 0
+            kind = ENGAGEMENT if status == OPEN and pressed else None
+            if status != OPEN and not pressed:
+                kind = OPENING
+            if kind is None:
+                continue
+            (guard,) = [
+                g for g in self.hybrid.guards_from(mode) if g.element == e and g.kind == kind
+            ]
+            target = guard.target
+            if kind == ENGAGEMENT:
+                slip = self.modes[mode].value(self.modes[mode].slips, x, self.inputs(t), p)[k]
+                target = guard.target if slip >= 0 else str(guard.otherwise)
+            matrix = np.array(self.hybrid.maps[(mode, target)].matrix, dtype=float)
+            x = matrix @ x
+            switches.append((guard, target, matrix))
+            mode = target
+        return switches
+
+    def pending_releases(
+        self, mode: str, t: float, x: np.ndarray, p: np.ndarray
+    ) -> list[tuple[Guard, str, np.ndarray]]:
+        """One-way clutches that are locked in ``mode`` but would carry torque of the sign they
+        cannot carry at (t, x): their release is due now, not at a later zero crossing (the
+        start of a coast shift in a gear that locks a freewheel, or a switch after which the
+        reaction has the wrong sign). Returns (guard, target, map matrix) in order; empty
+        without one-way clutches."""
+        switches = []
+        done: set[str] = set()
+        while True:
+            compiled = self.modes[mode]
+            due = [
+                (k, g)
+                for k, g in enumerate(compiled.continuous)
+                if g.kind == RELEASE
+                and g.element not in done
+                and compiled.value(compiled.guard[k], x, self.inputs(t), p)[0] < 0
+            ]
+            if not due:
+                return switches
+            guard = due[0][1]
+            matrix = np.array(self.hybrid.maps[(mode, guard.target)].matrix, dtype=float)
+            x = matrix @ x
+            switches.append((guard, guard.target, matrix))
+            done.add(guard.element)
+            mode = guard.target
+
+    def input_slope(self, ta: float, tb: float) -> np.ndarray:
+        """du/dt inside the segment [ta, tb], where every profile is linear."""
+        return (self.inputs(tb) - self.inputs(ta)) / (tb - ta)
+
+    # ------------------------------------------------------------------ integration
+
+    def run(
+        self,
+        overrides: Mapping[str, float] | None = None,
+        rtol: float = 1e-10,
+        atol: float = 1e-10,
+        sample_time: float = SAMPLE_TIME,
+        x0: np.ndarray | None = None,
+        parameters: Sequence[str] = (),
+        t_start: float = 0.0,
+        mode: str | None = None,
+        s0: np.ndarray | None = None,
+        state_columns: Sequence[str] = (),
+        t_eval: np.ndarray | None = None,
+    ) -> HybridResult:
+        """Integrate through the scenario from the quasi-static from-gear (or ``x0`` in the
+        from-gear's coordinates); see the module docstring.
+
+        With ``parameters`` the sensitivities S = ∂x/∂p ride along: (3.7) inside each mode, and
+        at each switch the jump of hybrid sensitivity analysis (Hiskens & Pai 2000; Galán,
+        Feehery & Barton 1999),
+
+            S⁺ = A S⁻ + (A f⁻ − f⁺) ∂τ/∂p,   ∂τ/∂p = −(∂g/∂x S⁻ + ∂g/∂p) / (∂g/∂x f⁻ + ∂g/∂u u̇),
+
+        A the (constant, linear) state map, f∓ the source and target right-hand sides at the
+        event, g the guard; ∂g/∂u u̇ is there because the guards depend on time through T_In and
+        F_N. Switches at breakpoints happen at fixed times (∂τ/∂p = 0): S⁺ = A S⁻. S(t0) is
+        ``s0`` (states × parameters; default 0: the initial state known and independent of p,
+        (3.7) from t = 0 as the thesis does).
+
+        A restart inside the shift: ``t_start``, ``mode`` and ``x0`` in that mode's
+        coordinates. ``state_columns`` names states of that mode whose initial values are
+        further parameters (columns ∂x/∂x_s(t0), starting as unit vectors, without ∂f/∂p): the
+        nuisance parameters of the Fisher information. ``t_eval``: the sample times (default:
+        every ``sample_time`` and the breakpoints).
+        """
+        values = self.values(overrides)
+        p = self.parameter_vector(values)
+        unknown = [name for name in parameters if name not in self.parameter_names]
+        if unknown:
+            raise GearsymError(self.d.file, "params", f"unknown parameters {unknown}")
+        scenario = self.scenario
+        mode = self.hybrid.from_mode if mode is None else mode
+        x = self.initial_state(p) if x0 is None else np.asarray(x0, dtype=float)
+        names = [v.name for v in self.hybrid.modes[mode].model.states]
+        indices: tuple[int | None, ...] = tuple(
+            self.parameter_names.index(name) for name in parameters
+        ) + (None,) * len(state_columns)
+        m = len(indices)
+        sens = np.zeros((len(x), m))
+        if s0 is not None:
+            sens[:, : len(parameters)] = s0
+        for k, name in enumerate(state_columns):
+            sens[names.index(name), len(parameters) + k] = 1.0
+        breakpoints = [t_start] + [b for b in scenario.breakpoints() if b > t_start]
+        events: list[Event] = []
+        tau_p: list[np.ndarray] = []
+        pieces: list[Piece] = []
+        nfev = 0
+        for ta, tb in zip(breakpoints[:-1], breakpoints[1:], strict=True):
+            switches = self.normal_force_switches(mode, ta, tb, x, p)
+            for guard, target, matrix in switches:
+                events.append(Event(ta, guard.kind, guard.element, mode, target))
+                tau_p.append(np.zeros(m))
+                mode, x, sens = target, matrix @ x, matrix @ sens
+            if ta == t_start or switches:
+                # a one-way clutch whose reaction has the wrong sign already releases now
+                for guard, target, matrix in self.pending_releases(mode, ta, x, p):
+                    events.append(Event(ta, guard.kind, guard.element, mode, target))
+                    tau_p.append(np.zeros(m))
+                    mode, x, sens = target, matrix @ x, matrix @ sens
+            t = ta
+            while t < tb:
+                compiled = self.modes[mode]
+                n = compiled.n
+                fun = self._right_hand_side(compiled, indices, p)
+                functions = []
+                for guard, g in zip(compiled.continuous, compiled.guard, strict=True):
+
+                    def event(
+                        time: float, y: np.ndarray, c: CompiledMode = compiled, g: Any = g
+                    ) -> float:
+                        return float(c.value(g, y[: c.n], self.inputs(time), p)[0])
+
+                    event.terminal = True  # type: ignore[attr-defined]
+                    event.direction = guard.direction  # type: ignore[attr-defined]
+                    functions.append(event)
+                # S rides in the same error control as x (its columns in units of x per unit p)
+                y0 = np.concatenate([x, sens.T.ravel()])
+                sol = solve_ivp(
+                    fun,
+                    (t, tb),
+                    y0,
+                    method="DOP853",
+                    rtol=rtol,
+                    atol=atol,
+                    events=functions or None,
+                    dense_output=True,
+                )
+                if sol.status == -1:
+                    raise GearsymError(
+                        scenario.file,
+                        "scenario",
+                        f"hybrid integration failed at t = {sol.t[-1]:.6g} s in {mode}: "
+                        f"{sol.message}",
+                    )
+                nfev += sol.nfev
+                pieces.append(Piece(mode, t, float(sol.t[-1]), sol.sol, y0.copy()))
+                t = float(sol.t[-1])
+                if sol.status != 1:
+                    x, sens = sol.y[:n, -1], sol.y[n:, -1].reshape(m, n).T
+                    break
+                k = next(k for k, times in enumerate(sol.t_events) if len(times))
+                y_event = sol.y_events[k][0]
+                x, sens = y_event[:n], y_event[n:].reshape(m, n).T
+                guard = compiled.continuous[k]
+                target, matrix = self.switch(guard, t, x, p)
+                x_plus = matrix @ x
+                dtau = np.zeros(m)
+                if m:
+                    u = self.inputs(t)
+                    f_minus = compiled.rhs(x, u, p)
+                    f_plus = self.modes[target].rhs(x_plus, u, p)
+                    g_x, g_u, g_p = (
+                        np.asarray(v.full(), dtype=float)
+                        for v in compiled.guard_gradient(k)(x, u, p)
+                    )
+                    rate = float((g_x @ f_minus + g_u @ self.input_slope(ta, tb))[0])
+                    g_theta = np.array([g_p[0, i] if i is not None else 0.0 for i in indices])[
+                        None, :
+                    ]
+                    dtau = -(g_x @ sens + g_theta).ravel() / rate
+                    sens = matrix @ sens + np.outer(matrix @ f_minus - f_plus, dtau)
+                x = x_plus
+                events.append(Event(t, guard.kind, guard.element, mode, target))
+                tau_p.append(dtau)
+                mode = target
+                for guard, target, matrix in self.pending_releases(mode, t, x, p):
+                    events.append(Event(t, guard.kind, guard.element, mode, target))
+                    tau_p.append(np.zeros(m))
+                    mode, x, sens = target, matrix @ x, matrix @ sens
+                if len(events) > EVENTS_MAX:
+                    raise GearsymError(
+                        scenario.file,
+                        "scenario",
+                        f"more than {EVENTS_MAX} mode switches by t = {t:.6g} s (chattering "
+                        f"{guard.kind} of {guard.element})",
+                    )
+        if t_eval is None:
+            grid = np.unique(
+                np.concatenate([np.arange(0.0, scenario.t_end, sample_time), breakpoints])
+            )
+            grid = grid[grid >= t_start]
+        else:
+            grid = np.asarray(t_eval, dtype=float)
+        signals, modes, sensitivities = self._sample(pieces, grid, p, m)
+        return HybridResult(
+            t=grid,
+            signals=signals,
+            modes=modes,
+            events=tuple(events),
+            pieces=tuple(pieces),
+            hybrid=self.hybrid,
+            scenario=scenario,
+            values=values,
+            stats={"nfev": float(nfev), "events": float(len(events))},
+            parameters=(*parameters, *(f"{name}(t0)" for name in state_columns)),
+            sensitivities=sensitivities,
+            event_time_sensitivities=np.array(tau_p).reshape(len(events), m),
+        )
+
+    def _right_hand_side(
+        self, compiled: CompiledMode, indices: tuple[int, ...], p: np.ndarray
+    ) -> Any:
+        """(t, y) → ẏ for solve_ivp: the mode's f, or the augmented [f; ∂f/∂x S + ∂f/∂p]."""
+        if not indices:
+            return lambda time, y: compiled.rhs(y, self.inputs(time), p)
+        augmented = compiled.augmented(indices)
+        return lambda time, y: np.asarray(
+            augmented(y, self.inputs(time), p).full(), dtype=float
+        ).ravel()
+
+    def shaft_speeds(self, mode: str) -> Any:
+        """CasADi function x → every shaft's speed in ``mode`` (ẏ = P z, then s(y), 2.29)."""
+        if mode not in self._speeds:
+            import casadi as ca
+
+            compiled = self.modes[mode]
+            m = self.hybrid.modes[mode]
+            dyn = gearbox_dynamics(self.d)
+            index = {b: i for i, b in enumerate(self.d.body_names)}
+            z = sp.Matrix(m.model.state_symbols[: len(m.keep)])
+            y_dot = m.projection * z
+            exprs = [(dyn.kinematics.transform[index[s.name], :] * y_dot)[0] for s in self.d.shafts]
+            out = ca.vertcat(*[to_casadi(e, compiled.mapping) for e in exprs])
+            self._speeds[mode] = ca.Function("speeds", [compiled.x], [out])
+        return self._speeds[mode]
+
+    def _sample(
+        self, pieces: Sequence[Piece], grid: np.ndarray, p: np.ndarray, m: int = 0
+    ) -> tuple[dict[str, np.ndarray], tuple[str, ...], dict[str, np.ndarray]]:
+        """Every signal (and its sensitivities, samples × parameters) at the grid; a sample at a
+        switch takes the later piece."""
+        shafts = [s.name for s in self.d.shafts]
+        keys = [naming.speed(s) for s in shafts] + [naming.TWIST, naming.WHEEL_SPEED]
+        signals = {k: np.zeros(len(grid)) for k in keys}
+        sensitivities = {k: np.zeros((len(grid), m)) for k in keys} if m else {}
+        for e in self.hybrid.elements:
+            keys = [naming.slip_column(e), naming.torque(e)]
+            if e in self.hybrid.normal_force:
+                keys += [str(self.hybrid.normal_force[e]), str(self.hybrid.friction_coefficient[e])]
+            for key in keys:
+                signals[key] = np.zeros(len(grid))
+        modes = [""] * len(grid)
+        owner = np.full(len(grid), -1)
+        for k, piece in enumerate(pieces):
+            owner[(grid >= piece.t_start) & (grid <= piece.t_end)] = k
+        for k, piece in enumerate(pieces):
+            index = np.flatnonzero(owner == k)
+            if index.size == 0:
+                continue
+            compiled = self.modes[piece.mode]
+            n = compiled.n
+            y = piece.state(grid[index])
+            x = y[:, :n]
+            u = np.array([self.inputs(float(t)) for t in grid[index]])
+            speeds_of = self.shaft_speeds(piece.mode).map(len(x))
+            speeds = np.asarray(speeds_of(x.T).full()).T
+            names = [v.name for v in compiled.mode.model.states]
+            for j, s in enumerate(shafts):
+                signals[naming.speed(s)][index] = speeds[:, j]
+            signals[naming.TWIST][index] = x[:, names.index(naming.TWIST)]
+            signals[naming.WHEEL_SPEED][index] = x[:, names.index(naming.WHEEL_SPEED)]
+            for col in range(m):
+                # the shaft speeds are linear in x (ẏ = P z): their sensitivities are the same
+                # map applied to S
+                s_col = y[:, n + col * n : n + (col + 1) * n]
+                d_speeds = np.asarray(speeds_of(s_col.T).full()).T
+                for j, s in enumerate(shafts):
+                    sensitivities[naming.speed(s)][index, col] = d_speeds[:, j]
+                for key in (naming.TWIST, naming.WHEEL_SPEED):
+                    sensitivities[key][index, col] = s_col[:, names.index(key)]
+            slips = compiled.many(compiled.slips, x, u, p)
+            torques = compiled.many(compiled.torques, x, u, p)
+            mu = compiled.many(compiled.mu, x, u, p)
+            for j, e in enumerate(self.hybrid.elements):
+                signals[naming.slip_column(e)][index] = slips[:, j]
+                signals[naming.torque(e)][index] = torques[:, j]
+                if e not in self.hybrid.normal_force:
+                    continue
+                signals[str(self.hybrid.normal_force[e])][index] = u[:, 1 + j]
+                signals[str(self.hybrid.friction_coefficient[e])][index] = mu[:, j]
+            for i in index:
+                modes[i] = piece.mode
+        w_in = signals[naming.speed(self.d.input_shaft)]
+        w_out = signals[naming.speed(self.d.output_shaft)]
+        signals[naming.RATIO] = w_in / np.where(w_out != 0, w_out, np.nan)
+        return signals, tuple(modes), sensitivities
+
+
+def simulate_hybrid(
+    d: GearboxDescription,
+    scenario: Scenario | None = None,
+    overrides: Mapping[str, float] | None = None,
+    mu: str = "map",
+    rtol: float = 1e-10,
+    atol: float = 1e-10,
+) -> HybridResult:
+    """Integrate the hybrid shift model through the scenario (default: the built-in 2-3)."""
+    return HybridSimulator(d, scenario, mu=mu).run(overrides, rtol=rtol, atol=atol)
+
+
+def energy_audit(
+    simulator: HybridSimulator, result: HybridResult, interval: float = 1e-3
+) -> EnergyAudit:
+    """W_in = ΔE_kin + ΔE_spring + W_friction + W_damper + W_road over the hybrid run (the
+    reference's audit without bristles): E_kin = ½ zᵀ Pᵀ M P z + ½ I_C^eff ω_C² (2.34, 2.46),
+    E_spring = k_ss φ² (two side shafts, 2.47), the powers T_In ω_in, Σ T_e Δω_e (sliding
+    elements; a locked one has Δω = 0, an open one T = 0), 2 d_ss φ̇², T_res ω_C (2.48). The
+    works are integrated over each piece's dense output by 5-point Gauss–Legendre on
+    sub-intervals of at most ``interval``. The maps at lock-up and break-away conserve E_kin
+    (zero slip); a residual would show an inconsistent reaction, sign or map."""
+    import casadi as ca
+    from gearsym.symbolic.drivetrain import drivetrain_parts
+    from gearsym.symbolic.hybrid import drivetrain_mass
+
+    d = simulator.d
+    p = simulator.parameter_vector(result.values)
+    mass = np.array(drivetrain_mass(d, gearbox_dynamics(d)), dtype=float)
+    parts = drivetrain_parts(d)
+    names = simulator.parameter_names
+    k_ss = p[names.index("k_ss")]
+    d_ss = p[names.index("d_ss")]
+    functions = {}
+    for name, compiled in simulator.modes.items():
+        mode = simulator.hybrid.modes[name]
+        mapping = compiled.mapping
+        n_gear = len(mode.keep)
+        projection = np.array(mode.projection, dtype=float)
+        reduced = projection.T @ mass @ projection
+        z = compiled.x[:n_gear]
+        states = [v.name for v in mode.model.states]
+        phi = compiled.x[states.index(naming.TWIST)]
+        omega_c = compiled.x[states.index(naming.WHEEL_SPEED)]
+        wheel = to_casadi(parts.wheel_inertia, mapping)
+        kinetic = 0.5 * ca.dot(z, ca.mtimes(ca.DM(reduced), z)) + 0.5 * wheel * omega_c**2
+        speeds = simulator.shaft_speeds(name)(compiled.x)
+        omega_in = speeds[[s.name for s in d.shafts].index(d.input_shaft)]
+        friction = ca.dot(
+            ca.vertcat(*[to_casadi(t, mapping) for t in compiled.torque_exprs]),
+            ca.vertcat(*[to_casadi(mode.slip[e], mapping) for e in simulator.hybrid.elements]),
+        )
+        phi_dot = compiled.rhs_sx[states.index(naming.TWIST)]
+        powers = ca.vertcat(
+            compiled.u[0] * omega_in,
+            friction,
+            2 * d_ss * phi_dot**2,
+            to_casadi(parts.road_torque, mapping) * omega_c,
+        )
+        energies = ca.vertcat(kinetic, k_ss * phi**2)
+        functions[name] = (
+            ca.Function("powers", [compiled.x, compiled.u, compiled.p], [powers]),
+            ca.Function("energies", [compiled.x, compiled.p], [energies]),
+        )
+    nodes, weights = np.polynomial.legendre.leggauss(5)
+    works = np.zeros(4)
+    for piece in result.pieces:
+        if piece.t_end <= piece.t_start:
+            continue
+        n = simulator.modes[piece.mode].n
+        count = max(1, int(np.ceil((piece.t_end - piece.t_start) / interval)))
+        edges = np.linspace(piece.t_start, piece.t_end, count + 1)
+        half = np.diff(edges) / 2
+        times = ((edges[:-1] + edges[1:]) / 2)[:, None] + half[:, None] * nodes[None, :]
+        times = times.ravel()
+        x = piece.state(times)[:, :n]
+        u = np.array([simulator.inputs(float(t)) for t in times])
+        power_of = functions[piece.mode][0].map(len(times))
+        values = np.asarray(power_of(x.T, u.T, p).full()).T
+        w = (half[:, None] * weights[None, :]).ravel()
+        works += w @ values
+    first, last = result.pieces[0], result.pieces[-1]
+    n0, n1 = simulator.modes[first.mode].n, simulator.modes[last.mode].n
+    e0 = np.asarray(functions[first.mode][1](first.x_start[:n0], p).full()).ravel()
+    end = last.state(np.array([last.t_end]))[0, :n1]
+    e1 = np.asarray(functions[last.mode][1](end, p).full()).ravel()
+    return EnergyAudit(
+        input_work=float(works[0]),
+        kinetic_change=float(e1[0] - e0[0]),
+        spring_change=float(e1[1] - e0[1]),
+        bristle_change=0.0,
+        friction_dissipation=float(works[1]),
+        damper_dissipation=float(works[2]),
+        road_work=float(works[3]),
+    )
