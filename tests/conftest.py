@@ -19,7 +19,7 @@ os.environ.pop("GEARSYM_CACHE_DIR", None)
 def generated_tree() -> Any:
     """The built-in gearbox's generated tree, derived once per test run (per xdist worker):
     every test that needs the default tree in memory shares it instead of deriving its own."""
-    from gearsym.symbolic.generate import generate_tree
+    from gearsym.symbolic.export.generate import generate_tree
     from gearsym.symbolic.loader import load_description
 
     return generate_tree(load_description(None))
