@@ -15,6 +15,7 @@ import io
 import os
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 from typing import NoReturn
 
 from gearsym import (
@@ -85,12 +86,28 @@ def _cached_run(args: argparse.Namespace) -> int | None:
         return None
     hit = command_cache.lookup(root, key)
     if hit is None:
+        from gearsym.symbolic.io.input_files import recorded_reads
+
         out, err = io.StringIO(), io.StringIO()
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        with (
+            recorded_reads() as reads,
+            contextlib.redirect_stdout(out),
+            contextlib.redirect_stderr(err),
+        ):
             status = int(args.func(args))
         hit = (out.getvalue(), err.getvalue(), status)
         if status in (0, 1):
-            command_cache.store(root, key, args.command, *hit)
+            # Stored under the bytes the run read, not those read for the lookup: a file saved
+            # during the run must not pair its old key with its new output.
+            if args.config is not None:
+                read = reads.pop(str(Path(args.config).resolve()), None)
+                key = (
+                    None
+                    if read is None
+                    else command_cache.entry_key(args.command, options, args.config, digest=read)
+                )
+            if key is not None:
+                command_cache.store(root, key, args.command, *hit, reads=reads)
     stdout, stderr, status = hit
     sys.stdout.write(stdout)
     sys.stderr.write(stderr)

@@ -8,7 +8,11 @@ importing SymPy.
 The key is the SHA-256 of: the command and its parsed options, the description's path as given
 and its bytes (the built-in one when none is given), the bytes of every source file of the
 installed ``gearsym`` packages (``gearsym/``, ``symbolic/``) and the versions of SymPy and
-mpmath. Any change to one of them is a miss; nothing expires otherwise.
+mpmath. Any change to one of them is a miss; nothing expires otherwise. An output is stored under
+the key of the description bytes the run itself read (recorded by
+:func:`~gearsym.symbolic.io.input_files.recorded_reads`), not of those read for the lookup, so a
+file saved during the run cannot pair its old key with its new output; any other file the run
+read is listed in the entry with its digest and checked again at every hit.
 
 Entries live in ``$GEARSYM_CACHE_DIR``, else ``$XDG_CACHE_HOME/gearsym``, else
 ``~/.cache/gearsym``; one folder per key, written by the one output writer
@@ -30,10 +34,17 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-__all__ = ["cache_root", "code_fingerprint", "entry_key", "lookup", "store"]
+__all__ = [
+    "cache_root",
+    "code_fingerprint",
+    "description_digest",
+    "entry_key",
+    "lookup",
+    "store",
+]
 
 #: Bump when the entry format changes.
-FORMAT = 1
+FORMAT = 2  # 2: the entry lists the other files the run read
 _ENTRY = "output.json"
 _SOURCE_SUFFIXES = (".py", ".toml", ".j2")
 
@@ -71,9 +82,9 @@ def code_fingerprint() -> str:
     return digest.hexdigest()
 
 
-def entry_key(command: str, options: Mapping[str, Any], config: str | None) -> str | None:
-    """The key of one call, or ``None`` when the description cannot be read (the fresh run
-    then reports why, with the project's usual one-line error)."""
+def description_digest(config: str | None) -> str | None:
+    """SHA-256 (hex) of the description's bytes now (the built-in one for ``None``), or
+    ``None`` when it cannot be read (the fresh run then reports why)."""
     try:
         if config is None:
             from gearsym.symbolic.description import default_config_path
@@ -86,11 +97,34 @@ def entry_key(command: str, options: Mapping[str, Any], config: str | None) -> s
             text = path.read_bytes()
     except (OSError, ImportError):
         return None
-    digest = hashlib.sha256()
-    digest.update(code_fingerprint().encode())
-    digest.update(json.dumps([command, dict(options), config], sort_keys=True).encode())
-    digest.update(hashlib.sha256(text).digest())
-    return f"{command}-{digest.hexdigest()[:40]}"
+    return hashlib.sha256(text).hexdigest()
+
+
+def entry_key(
+    command: str, options: Mapping[str, Any], config: str | None, digest: str | None = None
+) -> str | None:
+    """The key of one call, or ``None`` when the description cannot be read. ``digest`` is the
+    SHA-256 of the description bytes the output was computed from (default: its bytes now)."""
+    if digest is None:
+        digest = description_digest(config)
+        if digest is None:
+            return None
+    key = hashlib.sha256()
+    key.update(code_fingerprint().encode())
+    key.update(json.dumps([command, dict(options), config], sort_keys=True).encode())
+    key.update(bytes.fromhex(digest))
+    return f"{command}-{key.hexdigest()[:40]}"
+
+
+def _unchanged(reads: Mapping[str, str]) -> bool:
+    """Every other file the stored run read still holds the bytes it read then."""
+    for path, digest in reads.items():
+        try:
+            if hashlib.sha256(Path(path).read_bytes()).hexdigest() != digest:
+                return False
+        except OSError:
+            return False
+    return True
 
 
 def lookup(root: Path, key: str) -> tuple[str, str, int] | None:
@@ -110,12 +144,28 @@ def lookup(root: Path, key: str) -> tuple[str, str, int] | None:
     stdout, stderr, status = data.get("stdout"), data.get("stderr"), data.get("status")
     if not (isinstance(stdout, str) and isinstance(stderr, str) and isinstance(status, int)):
         return None
+    reads = data.get("reads")
+    if not isinstance(reads, dict) or not all(
+        isinstance(k, str) and isinstance(v, str) for k, v in reads.items()
+    ):
+        return None
+    if not _unchanged(reads):
+        return None  # a file it read besides the description changed since
     return stdout, stderr, status
 
 
-def store(root: Path, key: str, command: str, stdout: str, stderr: str, status: int) -> bool:
+def store(
+    root: Path,
+    key: str,
+    command: str,
+    stdout: str,
+    stderr: str,
+    status: int,
+    reads: Mapping[str, str] | None = None,
+) -> bool:
     """Store one entry through the output writer; ``False`` (and nothing written) when it
-    cannot be (read-only cache, another process writing it, a foreign folder)."""
+    cannot be (read-only cache, another process writing it, a foreign folder). ``reads``: the
+    other files the run read (path -> SHA-256), checked again at every hit."""
     from gearsym.symbolic.errors import GearsymError
     from gearsym.symbolic.io.output_dir import OutputDir
 
@@ -125,6 +175,7 @@ def store(root: Path, key: str, command: str, stdout: str, stderr: str, status: 
         "status": status,
         "stdout": stdout,
         "stderr": stderr,
+        "reads": dict(sorted((reads or {}).items())),
     }
     try:
         with OutputDir(root / key, command, shown=str(root / key)) as out:

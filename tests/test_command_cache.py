@@ -166,3 +166,58 @@ def test_cache_root_follows_the_environment(tmp_path):
     assert cache_root({"GEARSYM_CACHE_DIR": str(tmp_path)}) == tmp_path
     assert cache_root({"XDG_CACHE_HOME": str(tmp_path)}) == tmp_path / "gearsym"
     assert entry_key("ratios", {}, str(tmp_path / "absent.toml")) is None
+
+
+SAVE_DURING_RUN = """
+import sys
+from pathlib import Path
+
+import gearsym.symbolic.loader as loader
+from gearsym import cli
+
+box, saved = Path(sys.argv[1]), sys.argv[2]
+real = loader.read_text
+
+
+def save_then_read(path, shown=None):
+    box.write_text(saved)  # the user saves the file while gearsym runs
+    return real(path, shown)
+
+
+loader.read_text = save_then_read
+sys.exit(cli.main(["ratios", str(box)]))
+"""
+
+
+def test_a_file_saved_during_the_run_is_remembered_under_the_bytes_the_run_read(tmp_path):
+    """The lookup reads the file before the run, the run reads it again: a save in between
+    must not pair the old bytes' key with the new bytes' output (a wrong gear table would
+    then replay "All ratios match", exit 0)."""
+    cache, box = tmp_path / "cache", tmp_path / "box.toml"
+    right = default_config_text()
+    wrong = right.replace("ratio = 3.243", "ratio = 3.300", 1)
+    box.write_text(wrong)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("GEARSYM_")}
+    env["GEARSYM_CACHE_DIR"] = str(cache)
+    during = subprocess.run(
+        [sys.executable, "-c", SAVE_DURING_RUN, str(box), right],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=env,
+    )
+    assert during.returncode == 0, during.stderr  # the run read the saved (right) table
+    box.write_text(wrong)
+    fresh = gearsym(None, "ratios", str(box))
+    assert fresh.returncode == 1 and "1 gear(s) differ" in fresh.stdout
+    cached = gearsym(cache, "ratios", str(box))
+    assert (cached.stdout, cached.stderr, cached.returncode) == (
+        fresh.stdout,
+        fresh.stderr,
+        fresh.returncode,
+    )
+    box.write_text(right)  # the entry the interrupted run stored serves the bytes it read
+    assert len(entries(cache)) == 2
+    replay = gearsym(cache, "ratios", str(box))
+    assert replay.returncode == 0 and replay.stdout == during.stdout
+    assert len(entries(cache)) == 2

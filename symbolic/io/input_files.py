@@ -8,23 +8,49 @@ deeper than its recursion allows) are reported with their place, never as a trac
 
 from __future__ import annotations
 
+import contextlib
 import difflib
+import hashlib
 import os
 import re
 import reprlib
 import stat
 import tomllib
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextvars import ContextVar
 from pathlib import Path
 from typing import Any
 
 from gearsym.symbolic.errors import GearsymError
 
-__all__ = ["MAX_INPUT_BYTES", "parse_toml", "read_text", "shown", "unknown_key_reason"]
+__all__ = [
+    "MAX_INPUT_BYTES",
+    "parse_toml",
+    "read_text",
+    "recorded_reads",
+    "shown",
+    "unknown_key_reason",
+]
 
 #: Largest input file read. The built-in description is about 12 kB; a megabyte leaves room
 #: for any real gearbox or scenario and bounds the memory and parse time of a wrong file.
 MAX_INPUT_BYTES = 1 << 20
+
+#: While :func:`recorded_reads` is active: resolved path -> SHA-256 of the bytes read.
+_READS: ContextVar[dict[str, str] | None] = ContextVar("gearsym_reads", default=None)
+
+
+@contextlib.contextmanager
+def recorded_reads() -> Iterator[dict[str, str]]:
+    """Record every file :func:`read_text` reads inside the block: resolved path -> SHA-256 of
+    the very bytes the caller received (the output cache keys a result by what it was computed
+    from, not by what the file holds before or after)."""
+    reads: dict[str, str] = {}
+    token = _READS.set(reads)
+    try:
+        yield reads
+    finally:
+        _READS.reset(token)
 
 
 def read_text(path: str | Path, shown: str | None = None) -> str:
@@ -65,6 +91,9 @@ def read_text(path: str | Path, shown: str | None = None) -> str:
         raise GearsymError(
             shown, "", f"larger than {MAX_INPUT_BYTES} bytes (1 MiB), the limit for input files"
         )
+    reads = _READS.get()
+    if reads is not None:
+        reads[str(Path(path).resolve())] = hashlib.sha256(data).hexdigest()
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as err:
