@@ -216,11 +216,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             from gearsym.validation.sim.measurement import (
                 RESAMPLE_TEXT,
                 compare_outputs,
-                input_sources,
                 plot_comparison,
-                with_measured_inputs,
                 write_comparison_csv,
             )
+            from gearsym.validation.sim.scenario import input_sources, with_measured_inputs
 
             result = simulate_with_progress(d, with_measured_inputs(scenario, measurement))
             comparison = {

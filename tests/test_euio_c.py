@@ -49,11 +49,11 @@ def libraries(emitted, tmp_path_factory):
 @pytest.fixture(scope="module")
 def run(emitted):
     """The library's run (run_euio's loop, dropouts added): per step the inputs of the step."""
+    from gearsym.symbolic.defaults import EKF_RELATIVE_NOISE
     from gearsym.symbolic.drivetrain import quantity
     from gearsym.validation.sim.scenario import load_scenario
     from gearsym.validation.sim.simulate import simulate
     from gearsym.validation.studies.estimation import (
-        EKF_RELATIVE_NOISE,
         noisy_outputs,
         prepare_ekf,
         run_euio,

@@ -40,8 +40,7 @@ from gearsym.symbolic.codegen import float_repr, render
 from gearsym.symbolic.codegen.printing import comment_text
 from gearsym.symbolic.export.generate import MU_BOUNDS, EmittedModel
 from gearsym.symbolic.friction import MuMap
-
-from gearsym import __version__
+from gearsym.symbolic.version import __version__
 
 __all__ = [
     "BYTE_ORDERS",

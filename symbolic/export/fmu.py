@@ -47,8 +47,7 @@ from gearsym.symbolic.codegen import (
 )
 from gearsym.symbolic.export.generate import EmittedModel, sample_ranges
 from gearsym.symbolic.model import Variable
-
-from gearsym import __version__
+from gearsym.symbolic.version import __version__
 
 __all__ = [
     "DEFAULT_FIXED_STEP",
