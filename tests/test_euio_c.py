@@ -18,10 +18,10 @@ import ctypes
 import numpy as np
 import pytest
 from gearsym.symbolic.codegen import emit_all
-from gearsym.symbolic.drivetrain import shift_spec
 from gearsym.symbolic.estimators.euio import ROAD_FREE, euio_step_full, load_column
 from gearsym.symbolic.export.generate import euio_model
 from gearsym.symbolic.loader import load_description
+from gearsym.symbolic.shifts import shift_spec
 from gearsym.validation.checks.c_check import compile_shared
 
 PREFIX = "gearsym_euio_2_3_"

@@ -41,13 +41,11 @@ from gearsym.symbolic.codegen.mu_map import mu_map_files
 from gearsym.symbolic.defaults import DEFAULT_SHIFT
 from gearsym.symbolic.description import GearboxDescription, Quantity
 from gearsym.symbolic.drivetrain import (
-    ShiftSpec,
     adjacent_shifts,
     element_short_name,
     element_slip_in_gear,
     full_model,
     shift_model,
-    shift_spec,
 )
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.friction import (
@@ -63,6 +61,7 @@ from gearsym.symbolic.io.output_dir import MANIFEST, manifest_marker, manifest_t
 from gearsym.symbolic.linear_forms import gear_linear_forms, shift_linear_forms
 from gearsym.symbolic.model import Model, Variable
 from gearsym.symbolic.sensitivity import sensitivity_model
+from gearsym.symbolic.shifts import ShiftSpec, shift_spec
 
 __all__ = [
     "MANIFEST_MARKER",

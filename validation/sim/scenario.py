@@ -47,9 +47,9 @@ from typing import Any
 import numpy as np
 from gearsym.symbolic.defaults import RECORD_SAMPLE_TIME as SAMPLE_TIME
 from gearsym.symbolic.description import GearboxDescription
-from gearsym.symbolic.drivetrain import ShiftSpec, shift_spec
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.io.input_files import parse_toml, read_text, shown, unknown_key_reason
+from gearsym.symbolic.shifts import ShiftSpec, shift_spec
 from gearsym.validation.sim.measurement import ChannelMap, Measurement, parse_channel_map
 
 DEFAULT_SCENARIO = "scenario_2_3.toml"
