@@ -37,13 +37,13 @@ from typing import Any
 import numpy as np
 from gearsym.symbolic.codegen import file_names
 from gearsym.symbolic.description import GearboxDescription
-from gearsym.symbolic.export.generate import (
+from gearsym.symbolic.export.generate import sample_ranges
+from gearsym.symbolic.export.tree import (
     C_DIR,
     PYTHON_DIR,
     EmittedHybridSet,
     EmittedLinearSet,
     EmittedModel,
-    sample_ranges,
 )
 from gearsym.symbolic.friction import MuMap
 from gearsym.validation.checks import c_check

@@ -35,7 +35,8 @@ from gearsym.symbolic.estimators import (
     linear_modes,
     uio_existence,
 )
-from gearsym.validation.sim.simulate import Phase, SimulationResult
+from gearsym.validation.sim.phases import Phase
+from gearsym.validation.sim.simulate import SimulationResult
 
 __all__ = [
     "BOUND_ASSUMPTION",

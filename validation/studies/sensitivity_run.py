@@ -62,7 +62,7 @@ from gearsym.symbolic.sensitivity import (
     stationary_initial_sensitivity,
 )
 from gearsym.symbolic.shifts import ShiftSpec, shift_spec
-from gearsym.validation.sim.simulate import Phase
+from gearsym.validation.sim.phases import Phase
 
 #: Reference scale of parameters whose nominal value is zero, for the normalisation (3.3) and
 #: the normalised scatter (3.27): the road grade ζ is 0 on a level road, so a 5 % grade
