@@ -32,6 +32,7 @@ from gearsym.symbolic.dynamics import GearboxDynamics, gearbox_dynamics
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.kinematics import exact
 from gearsym.symbolic.model import Model, Variable
+from gearsym.symbolic.ratios import gear_motion, gear_ratio, idle_shafts
 from gearsym.symbolic.shifts import ShiftSpec, shift_spec
 
 
@@ -43,8 +44,6 @@ def shift_keep(d: GearboxDescription, spec: ShiftSpec) -> tuple[str, ...] | None
     coordinates, in order, each taken while it adds a motion the others do not fix (2.55)."""
     if spec.single:
         return None
-    from gearsym.symbolic.ratios import idle_shafts
-
     shafts = (d.input_shaft, d.output_shaft, *idle_shafts(d), *d.coordinates)
     return _extend_keep(d, gearbox_dynamics(d), spec.locked, (), shafts)
 
@@ -56,8 +55,6 @@ def element_short_name(d: GearboxDescription, element: str) -> str:
 
 def element_slip_in_gear(d: GearboxDescription, gear: str, element: str) -> sp.Expr:
     """Slip Δω = ω_a − ω_b of an element in a gear, per unit output speed (exact)."""
-    from gearsym.symbolic.ratios import gear_motion
-
     motion = gear_motion(d, d.gear(gear))
     speeds = dict(zip(d.shaft_names, motion, strict=True))
     motion_out = speeds[d.output_shaft]
@@ -77,8 +74,6 @@ def power_on_slip_signs(d: GearboxDescription, spec: ShiftSpec) -> dict[str, int
     element, in an upshift, slips the other way than the to-gear would make it (the input
     flares slightly during the torque phase, 3.1); in a downshift, the way the to-gear does.
     """
-    from gearsym.symbolic.ratios import gear_ratio
-
     on = sp.sign(element_slip_in_gear(d, spec.from_gear, spec.on_coming))
     off_to = sp.sign(element_slip_in_gear(d, spec.to_gear, spec.off_going))
     upshift = (
@@ -91,8 +86,6 @@ def adjacent_shifts(d: GearboxDescription) -> list[ShiftSpec]:
     """Shifts between forward gears adjacent by ratio (largest ratio first); a double swap
     among them (the overdrive engagement 3-4 of tests/data/simpson_overdrive_idle.toml) has
     ``single`` False."""
-    from gearsym.symbolic.ratios import gear_ratio
-
     forward = []
     for g in d.gears:
         if g.neutral:
@@ -128,8 +121,6 @@ def idle_note(d: GearboxDescription) -> str:
     """The dynamics assumption for idle shafts, as text for model metadata (and so the emitted
     C headers: no word the ECU source check reads as dynamic memory); "" when no gear leaves a
     shaft idle."""
-    from gearsym.symbolic.ratios import idle_shafts
-
     idle = idle_shafts(d)
     if not idle:
         return ""
@@ -243,8 +234,6 @@ def keep_with_idle(
     order) while the locked elements and the kept speeds leave motions undetermined: a gear
     that leaves idle shafts free keeps their speeds as further states. Unchanged for a
     gearbox without idle shafts."""
-    from gearsym.symbolic.ratios import idle_shafts
-
     idle = [s for s in idle_shafts(d) if s not in keep]
     if not idle or len(locked) + len(keep) >= len(d.coordinates):
         return keep
@@ -402,8 +391,6 @@ def _derive_parts(
         generalized += dyn.input_matrix[:, column[naming.torque(e)]] * torque[e]
     # Idle shafts: viscous drag −d ω to the housing on each (README "Idle shafts"); its
     # generalized force J_Rᵀ (−d ω) (2.35) and its power d Σ ω².
-    from gearsym.symbolic.ratios import idle_shafts
-
     drag_power = sp.Integer(0)
     idle = idle_shafts(d)
     if idle:
