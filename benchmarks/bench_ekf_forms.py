@@ -32,9 +32,9 @@ PREFIX = "gearsym_ekf_2_3_"
 
 def _files(form: str) -> dict[str, str]:
     from gearsym.symbolic.codegen import emit_all
-    from gearsym.symbolic.drivetrain import shift_spec
     from gearsym.symbolic.export.generate import ekf_model
     from gearsym.symbolic.loader import load_description
+    from gearsym.symbolic.shifts import shift_spec
 
     d = load_description()
     m = ekf_model(d, shift_spec(d, "2-3"))

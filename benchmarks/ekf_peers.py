@@ -487,9 +487,9 @@ def build_driver(seq: Sequence, build: Path, flags: tuple[str, ...] = ("-O2",)) 
     import importlib.util
 
     from gearsym.symbolic.codegen import emit_all
-    from gearsym.symbolic.drivetrain import shift_spec
     from gearsym.symbolic.export.generate import ekf_model
     from gearsym.symbolic.loader import load_description
+    from gearsym.symbolic.shifts import shift_spec
 
     d = load_description(None)
     m = ekf_model(d, shift_spec(d, SHIFT))

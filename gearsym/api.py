@@ -105,7 +105,7 @@ class Gearbox:
         if scenario is None or isinstance(scenario, str | Path):
             scenario = self.scenario(scenario)
         if measurement is not None:
-            from gearsym.validation.sim.measurement import with_measured_inputs
+            from gearsym.validation.sim.scenario import with_measured_inputs
 
             if isinstance(measurement, str | Path):
                 measurement = self.measurement(measurement, scenario)

@@ -73,16 +73,12 @@ def _prepare(args: argparse.Namespace, wheel: bool) -> tuple[Any, list[str] | No
 
 def _measured(args: argparse.Namespace, d: Any, scenario: Any) -> Any:
     """``--measurement FILE``: the scenario with the recording's inputs (its ``[measurement]``
-    map; :func:`gearsym.validation.sim.measurement.with_measured_inputs`); the recorded speeds are
+    map; :func:`gearsym.validation.sim.scenario.with_measured_inputs`); the recorded speeds are
     not used (the Fisher information needs the noise model (3.26), not the data)."""
     if args.measurement is None:
         return scenario
-    from gearsym.validation.sim.measurement import (
-        RESAMPLE_TEXT,
-        input_sources,
-        read_measurement,
-        with_measured_inputs,
-    )
+    from gearsym.validation.sim.measurement import RESAMPLE_TEXT, read_measurement
+    from gearsym.validation.sim.scenario import input_sources, with_measured_inputs
 
     if scenario.measurement is None:
         raise GearsymError(

@@ -40,14 +40,12 @@ def model_dict(
     linear form A_ex, B_ex (5.1)–(5.5) at the defaults, with the inputs of (5.3) the mode has
     (full model, a shift, a gear with all its elements locked, or a mode of the hybrid shift:
     ``mode`` with ``shift``)."""
-    from gearsym.symbolic.drivetrain import (
-        drivetrain_model,
+    from gearsym.symbolic.drivetrain import drivetrain_model, full_model, shift_model
+    from gearsym.symbolic.linear_forms import (
         full_linear_form,
-        full_model,
         gear_linear_form,
         mode_linear_form,
         shift_linear_form,
-        shift_model,
     )
 
     if mode is not None:
@@ -216,11 +214,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             from gearsym.validation.sim.measurement import (
                 RESAMPLE_TEXT,
                 compare_outputs,
-                input_sources,
                 plot_comparison,
-                with_measured_inputs,
                 write_comparison_csv,
             )
+            from gearsym.validation.sim.scenario import input_sources, with_measured_inputs
 
             result = simulate_with_progress(d, with_measured_inputs(scenario, measurement))
             comparison = {

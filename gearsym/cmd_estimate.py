@@ -492,8 +492,9 @@ def _cmd_measured(args: argparse.Namespace, d: Any, scenario: Any) -> int:
 
     def work(folder: Any) -> Any:
         from gearsym.cmd_dynamics import simulate_with_progress
-        from gearsym.validation.sim.measurement import RESAMPLE_TEXT, input_sources
-        from gearsym.validation.sim.measurement import with_measured_inputs as driven
+        from gearsym.validation.sim.measurement import RESAMPLE_TEXT
+        from gearsym.validation.sim.scenario import input_sources
+        from gearsym.validation.sim.scenario import with_measured_inputs as driven
         from gearsym.validation.studies.estimation import (
             filter_run,
             measured_ekf_dict,

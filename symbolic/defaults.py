@@ -21,6 +21,13 @@ ACCELERATION_ERROR = 0.10  # relative error of ω̇_C (3.32), "deutlich höher",
 FLOOR_FRACTION = 0.01  # y_min = 1 % of the largest measured value (3.26)
 GAMMA_MAX = 0.1  # limit of the normalised scatter (3.27), assumed
 
+#: Default relative speed-sensor error r_i (3.26) of the EKF's measurements (assumed, as in the
+#: Fisher study: 1 % on every output), and the floor fraction y_min = 1 % of the largest value
+#: (:mod:`gearsym.validation.studies.estimation`; the synthetic recording of
+#: :mod:`gearsym.validation.sim.measurement` draws the same noise).
+EKF_RELATIVE_NOISE = 0.01
+EKF_FLOOR_FRACTION = 0.01
+
 #: How μ acts on a swapping element's torque in the sensitivity runs: "detected" from the
 #: record (|T| at the friction capacity) or the thesis' "phases" (torque and speed phase).
 SLIDING_MODES = ("detected", "phases")

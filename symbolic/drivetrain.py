@@ -32,112 +32,8 @@ from gearsym.symbolic.dynamics import GearboxDynamics, gearbox_dynamics
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.kinematics import exact
 from gearsym.symbolic.model import Model, Variable
-from gearsym.symbolic.sympy_utils import smart_jacobian
-
-#: Vehicle and drivetrain values that are parameters of every drivetrain model (symbols with
-#: defaults). Geometry (teeth, inertias, i_D, r_dyn) is hardware and enters as exact numbers.
-PARAMETER_KEYS = ("m_veh", "k_ss", "d_ss", "zeta", "I_wheel", "rho_air", "c_W", "A_front")
-#: The parameters of each rolling-resistance form (2.49a): the thesis' printed form, the
-#: textbook form, and a speed-dependent coefficient f_Roll(v) = f_R0 + f_R1 v + f_R2 v² that
-#: contains both (f_R1 = f_roll, or f_R0 = f_R, the rest zero).
-ROLLING_KEYS = {"thesis": ("f_roll",), "textbook": ("f_R",), "polynomial": ("f_R0", "f_R1", "f_R2")}
-
-DESCRIPTIONS = {
-    "m_veh": "vehicle mass",
-    "k_ss": "side-shaft torsional stiffness, per shaft (2.47)",
-    "d_ss": "side-shaft torsional damping, per shaft (2.47)",
-    "zeta": "road grade angle (2.49)",
-    "I_wheel": "wheel-side inertia: wheels, side shafts, half the differential (2.46)",
-    "rho_air": "air density (2.49b)",
-    "c_W": "drag coefficient (2.49b)",
-    "A_front": "frontal area (2.49b)",
-    "f_roll": "rolling-resistance factor of the thesis' form F_r = v f_roll cos(zeta) m g (2.49a)",
-    "f_R": "rolling-resistance coefficient, F_r = f_R cos(zeta) m g",
-    "f_R0": "rolling resistance f_Roll(v) = f_R0 + f_R1 v + f_R2 v^2, constant part (2.49a)",
-    "f_R1": "rolling resistance f_Roll(v), coefficient of v (2.49a)",
-    "f_R2": "rolling resistance f_Roll(v), coefficient of v^2 (2.49a)",
-}
-
-#: Parameters that may be zero or negative (real symbols, not positive ones).
-SIGNED_PARAMETERS = ("zeta", "f_R0", "f_R1", "f_R2")
-
-
-@dataclass(frozen=True)
-class ShiftSpec:
-    """A shift: the common elements stay locked, the others swap (3.1).
-
-    A single swap has one off-going and one on-coming element (``off_going``, ``on_coming``).
-    A double swap (from :func:`shift_spec` with ``max_swaps=2`` only) has two of each in
-    ``off_elements``, ``on_elements``; its ``off_going`` and ``on_coming`` are ``""``, and
-    every analysis that needs a single swap takes its spec from :func:`shift_spec` with the
-    default ``max_swaps=1``, which refuses a double swap with a one-line error.
-    """
-
-    name: str
-    from_gear: str
-    to_gear: str
-    locked: tuple[str, ...]
-    off_going: str
-    on_coming: str
-    #: Every off-going / on-coming element, in the gear table's order (one each for a single
-    #: swap: filled from ``off_going`` / ``on_coming`` when not given).
-    off_elements: tuple[str, ...] = ()
-    on_elements: tuple[str, ...] = ()
-
-    def __post_init__(self) -> None:
-        if not self.off_elements and self.off_going:
-            object.__setattr__(self, "off_elements", (self.off_going,))
-        if not self.on_elements and self.on_coming:
-            object.__setattr__(self, "on_elements", (self.on_coming,))
-
-    @property
-    def single(self) -> bool:
-        """True for a single swap (one element off, one on)."""
-        return len(self.off_elements) == 1 and len(self.on_elements) == 1
-
-    @property
-    def swapping(self) -> tuple[str, ...]:
-        """The elements that act as input torques in the shift model: off-going, then
-        on-coming."""
-        return (*self.off_elements, *self.on_elements)
-
-
-def shift_spec(d: GearboxDescription, name: str, max_swaps: int = 1) -> ShiftSpec:
-    """Parse ``"2-3"`` into the elements that stay locked, go off and come on.
-
-    ``max_swaps`` is the most off-going (and on-coming) elements accepted: 1 (every analysis
-    of a single-swap shift) or 2 (the torque-input shift model of a double swap,
-    :func:`shift_model`)."""
-    parts = name.split("-")
-    if len(parts) != 2:
-        raise GearsymError(d.file, "shift", f"expected FROM-TO (e.g. 2-3), got {name!r}")
-    gears = {g.name: g for g in d.gears}
-    for part in parts:
-        if part not in gears:
-            raise GearsymError(d.file, "shift", f"unknown gear {part!r} in shift {name!r}")
-    g_from, g_to = gears[parts[0]], gears[parts[1]]
-    if g_from.neutral or g_to.neutral:
-        raise GearsymError(d.file, "shift", f"shift {name!r} involves a neutral gear")
-    common = tuple(e for e in g_from.closed if e in g_to.closed)
-    off = [e for e in g_from.closed if e not in g_to.closed]
-    on = [e for e in g_to.closed if e not in g_from.closed]
-    if len(off) == len(on) == 2 and max_swaps >= 2:
-        return ShiftSpec(name, g_from.name, g_to.name, common, "", "", tuple(off), tuple(on))
-    if len(off) != 1 or len(on) != 1:
-        double = len(off) == len(on) == 2
-        raise GearsymError(
-            d.file,
-            "shift",
-            f"gears {g_from.name!r} and {g_to.name!r} differ by {len(off)} off-going and "
-            f"{len(on)} on-coming elements; a shift model needs exactly one of each"
-            + (
-                " (a double swap has the torque-input model only, no mu form, hybrid modes "
-                "or sensitivities: gearsym model --shift, gearsym generate --shifts)"
-                if double
-                else ""
-            ),
-        )
-    return ShiftSpec(name, g_from.name, g_to.name, common, off[0], on[0])
+from gearsym.symbolic.ratios import gear_motion, gear_ratio, idle_shafts
+from gearsym.symbolic.shifts import ShiftSpec, shift_spec
 
 
 def shift_keep(d: GearboxDescription, spec: ShiftSpec) -> tuple[str, ...] | None:
@@ -148,8 +44,6 @@ def shift_keep(d: GearboxDescription, spec: ShiftSpec) -> tuple[str, ...] | None
     coordinates, in order, each taken while it adds a motion the others do not fix (2.55)."""
     if spec.single:
         return None
-    from gearsym.symbolic.ratios import idle_shafts
-
     shafts = (d.input_shaft, d.output_shaft, *idle_shafts(d), *d.coordinates)
     return _extend_keep(d, gearbox_dynamics(d), spec.locked, (), shafts)
 
@@ -161,8 +55,6 @@ def element_short_name(d: GearboxDescription, element: str) -> str:
 
 def element_slip_in_gear(d: GearboxDescription, gear: str, element: str) -> sp.Expr:
     """Slip Δω = ω_a − ω_b of an element in a gear, per unit output speed (exact)."""
-    from gearsym.symbolic.ratios import gear_motion
-
     motion = gear_motion(d, d.gear(gear))
     speeds = dict(zip(d.shaft_names, motion, strict=True))
     motion_out = speeds[d.output_shaft]
@@ -182,8 +74,6 @@ def power_on_slip_signs(d: GearboxDescription, spec: ShiftSpec) -> dict[str, int
     element, in an upshift, slips the other way than the to-gear would make it (the input
     flares slightly during the torque phase, 3.1); in a downshift, the way the to-gear does.
     """
-    from gearsym.symbolic.ratios import gear_ratio
-
     on = sp.sign(element_slip_in_gear(d, spec.from_gear, spec.on_coming))
     off_to = sp.sign(element_slip_in_gear(d, spec.to_gear, spec.off_going))
     upshift = (
@@ -196,8 +86,6 @@ def adjacent_shifts(d: GearboxDescription) -> list[ShiftSpec]:
     """Shifts between forward gears adjacent by ratio (largest ratio first); a double swap
     among them (the overdrive engagement 3-4 of tests/data/simpson_overdrive_idle.toml) has
     ``single`` False."""
-    from gearsym.symbolic.ratios import gear_ratio
-
     forward = []
     for g in d.gears:
         if g.neutral:
@@ -233,8 +121,6 @@ def idle_note(d: GearboxDescription) -> str:
     """The dynamics assumption for idle shafts, as text for model metadata (and so the emitted
     C headers: no word the ECU source check reads as dynamic memory); "" when no gear leaves a
     shaft idle."""
-    from gearsym.symbolic.ratios import idle_shafts
-
     idle = idle_shafts(d)
     if not idle:
         return ""
@@ -277,21 +163,22 @@ def friction_symbols(
 def drivetrain_parameters(d: GearboxDescription) -> tuple[Variable, ...]:
     """The model parameters with defaults, units and sources from the description."""
     section = {
-        k: "drivetrain" if k in ("k_ss", "d_ss", "I_wheel") else "vehicle" for k in PARAMETER_KEYS
+        k: "drivetrain" if k in ("k_ss", "d_ss", "I_wheel") else "vehicle"
+        for k in naming.PARAMETER_KEYS
     }
-    rolling = ROLLING_KEYS[d.rolling_resistance]
-    keys = list(PARAMETER_KEYS) + list(rolling)
+    rolling = naming.ROLLING_KEYS[d.rolling_resistance]
+    keys = list(naming.PARAMETER_KEYS) + list(rolling)
     section |= {key: "vehicle" for key in rolling}
     result = []
     for key in keys:
         q = quantity(d, section[key], key)
-        positive = key not in SIGNED_PARAMETERS
+        positive = key not in naming.SIGNED_PARAMETERS
         result.append(
             Variable(
                 name=key,
                 symbol=sp.Symbol(key, positive=positive) if positive else sp.Symbol(key, real=True),
                 unit=q.unit,
-                description=DESCRIPTIONS[key],
+                description=naming.DESCRIPTIONS[key],
                 default=q.value,
                 source=q.source,
             )
@@ -347,8 +234,6 @@ def keep_with_idle(
     order) while the locked elements and the kept speeds leave motions undetermined: a gear
     that leaves idle shafts free keeps their speeds as further states. Unchanged for a
     gearbox without idle shafts."""
-    from gearsym.symbolic.ratios import idle_shafts
-
     idle = [s for s in idle_shafts(d) if s not in keep]
     if not idle or len(locked) + len(keep) >= len(d.coordinates):
         return keep
@@ -506,8 +391,6 @@ def _derive_parts(
         generalized += dyn.input_matrix[:, column[naming.torque(e)]] * torque[e]
     # Idle shafts: viscous drag −d ω to the housing on each (README "Idle shafts"); its
     # generalized force J_Rᵀ (−d ω) (2.35) and its power d Σ ω².
-    from gearsym.symbolic.ratios import idle_shafts
-
     drag_power = sp.Integer(0)
     idle = idle_shafts(d)
     if idle:
@@ -692,133 +575,3 @@ def shift_model(
         with_wheel_acceleration=with_wheel_acceleration,
         slip_signs=power_on_slip_signs(d, spec) if friction_inputs else None,
     )
-
-
-def linear_shift_form(
-    d: GearboxDescription, shift: str
-) -> tuple[sp.Matrix, sp.Matrix, list[str], list[str]]:
-    """A_ex, B_ex of the linear form (5.1)–(5.3) of a shift model in the column order of the
-    printed (5.4), (5.5): inputs [T_In, T_off, T_on, T_res*, ζ], the off-going element first.
-
-    A view of :func:`shift_linear_form` (one derivation: T_res* (5.2), sin ζ ≈ ζ as (5.5)
-    prints it), whose B keeps the order of (5.3) instead. Returns (A, B, state names, input
-    names).
-    """
-    spec = shift_spec(d, shift)
-    form = shift_linear_form(d, shift)
-    inputs = [
-        naming.INPUT_TORQUE,
-        naming.torque(spec.off_going),
-        naming.torque(spec.on_coming),
-        naming.RESISTANCE_INPUT,
-        form.inputs[-1],  # ζ, the grade
-    ]
-    columns = [form.inputs.index(name) for name in inputs]
-    return form.A, form.B.extract(list(range(form.B.rows)), columns), form.states, inputs
-
-
-@dataclass(frozen=True)
-class LinearForm:
-    """ẋ = A x + B u (5.1) of one mode, with the mode's inputs in the order of (5.3)."""
-
-    mode: str
-    A: sp.Matrix
-    B: sp.Matrix
-    states: list[str]
-    inputs: list[str]
-    parameters: tuple[Variable, ...]
-
-    def at_defaults(self) -> tuple[list[list[float]], list[list[float]]]:
-        """A and B as nested lists of floats at the parameters' defaults."""
-        values = {v.symbol: v.default for v in self.parameters if v.default is not None}
-        a, b = self.A.xreplace(values), self.B.xreplace(values)
-        return (
-            [[float(a[i, j]) for j in range(a.cols)] for i in range(a.rows)],
-            [[float(b[i, j]) for j in range(b.cols)] for i in range(b.rows)],
-        )
-
-
-def linear_form(
-    d: GearboxDescription,
-    mode: str,
-    locked: tuple[str, ...],
-    torque_elements: tuple[str, ...],
-    keep: tuple[str, ...] | None,
-) -> LinearForm:
-    """(5.1)–(5.3) of a mode: rolling and aerodynamic resistance become the input T_res* (5.2),
-    the grade term r_dyn m g sin ζ is linearised at ζ = 0 as (5.5) prints it. Everything else is
-    linear already (the gearbox (2.39), the twist (2.44) and the side-shaft law (2.47)).
-
-    Inputs in the order of (5.3), u = [T_In, T_res*, T_<element>…, ζ], where each element that
-    acts as a torque in this mode keeps its place in the description (the thesis' order K81,
-    K38, B08, B05, B06, K27): the full model has all of them (nine inputs for the built-in
-    gearbox), a shift model the off-going and on-coming element, a gear none (its elements are
-    locked constraints, the others open, 2.54).
-    """
-    parts = drivetrain_parts(d, locked=locked, torque_elements=torque_elements, keep=keep)
-    p = {v.name: v.symbol for v in parts.parameters}
-    t_res_star = sp.Symbol(naming.RESISTANCE_INPUT)
-    wheel = (
-        2 * parts.side_shaft_torque - t_res_star - parts.grade_lever * p["m_veh"] * p["zeta"]
-    ) / parts.wheel_inertia  # (5.2), sin ζ ≈ ζ
-    rhs = sp.Matrix([*parts.gearbox_rhs, parts.phi_dot, wheel])
-    x = [*parts.speeds, sp.Symbol(naming.TWIST), sp.Symbol(naming.WHEEL_SPEED)]
-    order = [e.name for e in d.shift_elements if e.name in parts.torque_elements]
-    u = [parts.torque_symbols[naming.INPUT], t_res_star]
-    u += [parts.torque_symbols[e] for e in order] + [p["zeta"]]
-    return LinearForm(
-        mode=mode,
-        A=smart_jacobian(rhs, x, by_rules=True),
-        B=smart_jacobian(rhs, u, by_rules=True),
-        states=[str(s) for s in x],
-        inputs=[str(s) for s in u],
-        parameters=parts.parameters,
-    )
-
-
-def full_linear_form(d: GearboxDescription) -> LinearForm:
-    """A_ex, B_ex (5.1) of the full model (2.53): nothing locked, every element an input,
-    the nine inputs of (5.3) for the built-in gearbox."""
-    elements = tuple(e.name for e in d.shift_elements)
-    return linear_form(d, naming.FULL_MODEL, (), elements, None)
-
-
-def gear_linear_form(d: GearboxDescription, gear: str) -> LinearForm:
-    """(5.1) of a gear: all its elements locked (one gearbox speed left, that of the output
-    shaft), the others open; inputs [T_In, T_res*, ζ]."""
-    gears = {g.name: g for g in d.gears}
-    if gear not in gears:
-        raise GearsymError(d.file, "gear", f"unknown gear {gear!r} (known: {', '.join(gears)})")
-    g = gears[gear]
-    if g.neutral:
-        raise GearsymError(d.file, "gear", f"gear {gear!r} is a neutral: it has no drive path")
-    return linear_form(d, f"gear_{gear}", tuple(g.closed), (), (d.output_shaft,))
-
-
-def shift_linear_form(d: GearboxDescription, shift: str) -> LinearForm:
-    """(5.1) of a shift model (2.55–2.58): the shared elements locked; inputs [T_In, T_res*,
-    the swapping elements' torques (two, or four for a double swap) in description order, ζ]
-    (:func:`linear_shift_form` gives B in the column order of the printed (5.5))."""
-    spec = shift_spec(d, shift, max_swaps=2)
-    name = naming.shift_model_name(spec.from_gear, spec.to_gear)
-    return linear_form(d, name, spec.locked, spec.swapping, shift_keep(d, spec))
-
-
-def mode_linear_form(d: GearboxDescription, shift: str, mode: str) -> LinearForm:
-    """(5.1) of one mode of the hybrid ``shift`` (:func:`gearsym.symbolic.hybrid.hybrid_shift`):
-    the shared and the mode's locked swapping elements are constraints, a sliding element's
-    torque is an input of (5.3) (its place in the description order), an open one is absent
-    (2.54); the mode's own state coordinates (``Mode.keep``)."""
-    from gearsym.symbolic.hybrid import LOCKED, SLIDING, hybrid_shift
-
-    hybrid = hybrid_shift(d, shift)
-    if mode not in hybrid.modes:
-        raise GearsymError(
-            d.file,
-            "mode",
-            f"unknown mode {mode!r} of the {shift} shift (known: {', '.join(hybrid.modes)})",
-        )
-    m = hybrid.modes[mode]
-    locked = (*hybrid.spec.locked, *(e for e in hybrid.elements if m.status[e][0] == LOCKED))
-    sliding = tuple(e for e in hybrid.elements if m.status[e][0] == SLIDING)
-    return linear_form(d, mode, locked, sliding, m.keep)

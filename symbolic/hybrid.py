@@ -76,20 +76,19 @@ import sympy as sp
 from gearsym.symbolic import naming
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import (
-    ShiftSpec,
     drivetrain_model,
     drivetrain_parameters,
     drivetrain_parts,
     friction_symbols,
     locked_projection,
     quantity,
-    shift_spec,
     slip_rows,
 )
 from gearsym.symbolic.dynamics import GearboxDynamics, gearbox_dynamics
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.kinematics import exact
 from gearsym.symbolic.model import Model, Variable
+from gearsym.symbolic.shifts import ShiftSpec, shift_spec
 
 LOCKED = "locked"
 SLIDING = "sliding"
@@ -332,7 +331,7 @@ def hybrid_shift(d: GearboxDescription, shift: str) -> HybridShift:
     """Derive the hybrid model of a single-swap shift (module docstring): every mode's model
     (2.55)–(2.58) with (3.14), the guards (break-away, lock-up, opening, engagement) and the
     state maps. Nothing here is specific to a gearbox: the shift's elements come from the
-    gear table (:func:`gearsym.symbolic.drivetrain.shift_spec`)."""
+    gear table (:func:`gearsym.symbolic.shifts.shift_spec`)."""
     spec = shift_spec(d, shift)
     dyn = gearbox_dynamics(d)
     elements = (spec.off_going, spec.on_coming)

@@ -85,7 +85,7 @@ def gearbox_symbols(
         )
         j = ps.name
         if ps.given_k is not None:
-            # No teeth: the one shaft relation with |i0| (set_kinds.relations), and the
+            # No teeth: the one shaft relation with |i0| (set_relations.relations), and the
             # planets only through their inertia reflected to the members.
             ratio = sp.Rational(abs(ps.given_k.numerator), ps.given_k.denominator)
             teeth[j] = {"k": quantity(naming.stationary_ratio(j), ratio, symbolic_teeth)}

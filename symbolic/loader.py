@@ -1,11 +1,12 @@
 """The one loader of a gearbox description: read, parse, check the structure, check the gear table.
 
-:mod:`gearsym.symbolic.description` parses and checks the file as data;
-:mod:`gearsym.symbolic.ratios` derives what the gears do with it. A description is usable only
-when both agree (every gear leaves the one degree of freedom it claims, Table 2.1), so the
-composition lives here, above both, and the CLI, the notebook API and the validation all load
-through :func:`load_description`. Keeping it out of ``description.py`` keeps the data layer
-free of any import of the derivation (no ``description`` ↔ ``ratios`` circle).
+:mod:`gearsym.symbolic.description_parser` parses and checks the file as data
+(:mod:`gearsym.symbolic.description`); :mod:`gearsym.symbolic.ratios` derives what the gears do
+with it. A description is usable only when both agree (every gear leaves the one degree of
+freedom it claims, Table 2.1), so the composition lives here, above both, and the CLI, the
+notebook API and the validation all load through :func:`load_description`. Keeping it out of
+the parser keeps the data layer free of any import of the derivation (no ``description`` ↔
+``ratios`` circle).
 """
 
 from __future__ import annotations
@@ -16,8 +17,8 @@ from gearsym.symbolic.description import (
     DEFAULT_CONFIG_NAME,
     GearboxDescription,
     default_config_text,
-    parse_description,
 )
+from gearsym.symbolic.description_parser import parse_description
 from gearsym.symbolic.io.input_files import read_text
 from gearsym.symbolic.ratios import check_gear_table
 
@@ -29,7 +30,7 @@ def load_description(
 ) -> GearboxDescription:
     """Load a description file, or the built-in default when ``path`` is None.
 
-    Checks the structure (:func:`~gearsym.symbolic.description.parse_description`) and that
+    Checks the structure (:func:`~gearsym.symbolic.description_parser.parse_description`) and that
     every gear leaves the degrees of freedom it claims
     (:func:`~gearsym.symbolic.ratios.check_gear_table`, Table 2.1). Bad input raises
     :class:`~gearsym.symbolic.errors.GearsymError` (file, key, reason).

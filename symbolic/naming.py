@@ -16,13 +16,11 @@ import keyword
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
+from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.set_kinds import file_key
-
-if TYPE_CHECKING:
-    from gearsym.symbolic.description import GearboxDescription
+from gearsym.symbolic.shifts import shift_spec
 
 # ---------------------------------------------------------------------------------------------
 # Symbols of the gearbox (2.26-2.39) and the drivetrain (2.42-2.58)
@@ -188,6 +186,37 @@ GRADE_DEVIATION = "zeta_dev"
 ENERGY_TERMS = ("W_in", "W_friction", "W_damper", "W_road")
 
 # ---------------------------------------------------------------------------------------------
+# Parameters of the elastic drivetrain and the vehicle (2.42-2.53), by description key
+# ---------------------------------------------------------------------------------------------
+
+#: Vehicle and drivetrain values that are parameters of every drivetrain model (symbols with
+#: defaults). Geometry (teeth, inertias, i_D, r_dyn) is hardware and enters as exact numbers.
+PARAMETER_KEYS = ("m_veh", "k_ss", "d_ss", "zeta", "I_wheel", "rho_air", "c_W", "A_front")
+#: The parameters of each rolling-resistance form (2.49a): the thesis' printed form, the
+#: textbook form, and a speed-dependent coefficient f_Roll(v) = f_R0 + f_R1 v + f_R2 v² that
+#: contains both (f_R1 = f_roll, or f_R0 = f_R, the rest zero).
+ROLLING_KEYS = {"thesis": ("f_roll",), "textbook": ("f_R",), "polynomial": ("f_R0", "f_R1", "f_R2")}
+
+DESCRIPTIONS = {
+    "m_veh": "vehicle mass",
+    "k_ss": "side-shaft torsional stiffness, per shaft (2.47)",
+    "d_ss": "side-shaft torsional damping, per shaft (2.47)",
+    "zeta": "road grade angle (2.49)",
+    "I_wheel": "wheel-side inertia: wheels, side shafts, half the differential (2.46)",
+    "rho_air": "air density (2.49b)",
+    "c_W": "drag coefficient (2.49b)",
+    "A_front": "frontal area (2.49b)",
+    "f_roll": "rolling-resistance factor of the thesis' form F_r = v f_roll cos(zeta) m g (2.49a)",
+    "f_R": "rolling-resistance coefficient, F_r = f_R cos(zeta) m g",
+    "f_R0": "rolling resistance f_Roll(v) = f_R0 + f_R1 v + f_R2 v^2, constant part (2.49a)",
+    "f_R1": "rolling resistance f_Roll(v), coefficient of v (2.49a)",
+    "f_R2": "rolling resistance f_Roll(v), coefficient of v^2 (2.49a)",
+}
+
+#: Parameters that may be zero or negative (real symbols, not positive ones).
+SIGNED_PARAMETERS = ("zeta", "f_R0", "f_R1", "f_R2")
+
+# ---------------------------------------------------------------------------------------------
 # Models and what is emitted for them
 # ---------------------------------------------------------------------------------------------
 
@@ -334,8 +363,6 @@ def check_names(d: GearboxDescription) -> None:
     (no function or macro suffix of one model starts like another's), so the model names
     stand for them.
     """
-    from gearsym.symbolic.drivetrain import DESCRIPTIONS, ROLLING_KEYS, shift_spec
-
     f = d.file
     names = _Space(
         f,

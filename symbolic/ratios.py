@@ -20,7 +20,8 @@ import sympy as sp
 from gearsym.symbolic import naming
 from gearsym.symbolic.description import Gear, GearboxDescription
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.set_kinds import HOUSING, Relation, relations
+from gearsym.symbolic.set_kinds import HOUSING
+from gearsym.symbolic.set_relations import Relation, relations
 from gearsym.symbolic.sympy_utils import exact_nullspace
 
 
@@ -32,7 +33,7 @@ def _symbol_name(relation: Relation, planetary_set: str) -> str:
 
 def stationary_ratio_symbols(d: GearboxDescription) -> dict[str, sp.Symbol]:
     """k of every sun–ring pair as positive symbols: k_<set>, and k2_<set> for the second
-    pair of a Ravigneaux set (keyed by :attr:`~gearsym.symbolic.set_kinds.Relation.key`)."""
+    pair of a Ravigneaux set (keyed by :attr:`~gearsym.symbolic.set_relations.Relation.key`)."""
     return {
         rel.key: sp.Symbol(_symbol_name(rel, ps.name), positive=True)
         for ps in d.planetary_sets

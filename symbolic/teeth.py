@@ -7,7 +7,7 @@ k2 = z_ring_short / z_sun of a Ravigneaux set with two rings
 
 1. lists, per set, every buildable realisation in the given ranges, grouped by the exact
    tuple of its stationary ratios. Buildable is what the description checks
-   (:func:`gearsym.symbolic.description.parse_description`, README "Planetary set kinds"),
+   (:func:`gearsym.symbolic.description_parser.parse_description`, README "Planetary set kinds"),
    with exact coaxiality (no profile shift):
 
    - simple: z_ring = z_sun + 2 z_planet, (z_sun + z_ring) divisible by the planet count,
@@ -51,7 +51,7 @@ from gearsym.symbolic.ratios import (
     stationary_ratio_symbols,
     stationary_ratios,
 )
-from gearsym.symbolic.set_kinds import relations
+from gearsym.symbolic.set_relations import relations
 
 #: Kinds the search knows how to build, with the tooth keys (file names) after
 #: (z_sun, z_planet, z_ring, planet_count) in a realisation tuple.
@@ -137,7 +137,7 @@ def buildable_realisations(
     kind: str, ranges: ToothRanges, planet_counts: tuple[int, ...]
 ) -> dict[tuple[Fraction, ...], list[Realisation]]:
     """Every buildable realisation of a set of ``kind`` in range, grouped by the tuple of its
-    stationary ratios (in the order of :func:`gearsym.symbolic.set_kinds.relations`); one
+    stationary ratios (in the order of :func:`gearsym.symbolic.set_relations.relations`); one
     pinion choice (the smallest) per set of sun/ring teeth."""
     planets = np.arange(ranges.planet[0], ranges.planet[1] + 1)
     suns = np.arange(ranges.sun[0], ranges.sun[1] + 1)

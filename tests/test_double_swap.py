@@ -25,10 +25,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sympy as sp
-from gearsym.symbolic.drivetrain import full_model, shift_model, shift_spec
+from gearsym.symbolic.drivetrain import full_model, shift_model
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.export.generate import generate_tree, hybrid_shift_names, selected_shifts
 from gearsym.symbolic.loader import load_description
+from gearsym.symbolic.shifts import shift_spec
 from gearsym.validation.checks import generated_check
 from scipy.integrate import solve_ivp
 

@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from gearsym.symbolic.codegen import emit_all
-from gearsym.symbolic.drivetrain import shift_spec
 from gearsym.symbolic.estimators.ekf import DiscreteModel, ekf_predict, ekf_update
 from gearsym.symbolic.export.generate import ekf_model
 from gearsym.symbolic.loader import load_description
+from gearsym.symbolic.shifts import shift_spec
 from gearsym.validation.checks.c_check import compile_shared, run_with_harness
 
 HARNESS = Path(__file__).parent / "data" / "ekf_spd_harness.c"

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from gearsym.symbolic.drivetrain import locked_projection, shift_spec
+from gearsym.symbolic.drivetrain import locked_projection
 from gearsym.symbolic.dynamics import gearbox_dynamics
 from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
 from gearsym.symbolic.estimators.ekf_modes import (
@@ -31,6 +31,7 @@ from gearsym.symbolic.estimators.ekf_modes import (
 )
 from gearsym.symbolic.hybrid import BREAK_AWAY, ENGAGEMENT, LOCK_UP, OPENING, drivetrain_mass
 from gearsym.symbolic.loader import load_description
+from gearsym.symbolic.shifts import shift_spec
 
 #: gear ratios of Table 2.1 of the built-in gearbox (gear 2 with K38 locked, gear 3 with B05)
 RATIO = {"K38": 3.243, "B05": 2.252}

@@ -17,9 +17,9 @@ import pytest
 import sympy as sp
 from gearsym.symbolic.codegen import emit_all
 from gearsym.symbolic.codegen.c.ekf_code import output_selection
-from gearsym.symbolic.drivetrain import shift_spec
 from gearsym.symbolic.export.generate import ekf_model
 from gearsym.symbolic.loader import load_description
+from gearsym.symbolic.shifts import shift_spec
 
 PREFIX = "gearsym_ekf_2_3_"
 

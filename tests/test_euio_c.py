@@ -18,10 +18,10 @@ import ctypes
 import numpy as np
 import pytest
 from gearsym.symbolic.codegen import emit_all
-from gearsym.symbolic.drivetrain import shift_spec
 from gearsym.symbolic.estimators.euio import ROAD_FREE, euio_step_full, load_column
 from gearsym.symbolic.export.generate import euio_model
 from gearsym.symbolic.loader import load_description
+from gearsym.symbolic.shifts import shift_spec
 from gearsym.validation.checks.c_check import compile_shared
 
 PREFIX = "gearsym_euio_2_3_"
@@ -49,11 +49,11 @@ def libraries(emitted, tmp_path_factory):
 @pytest.fixture(scope="module")
 def run(emitted):
     """The library's run (run_euio's loop, dropouts added): per step the inputs of the step."""
+    from gearsym.symbolic.defaults import EKF_RELATIVE_NOISE
     from gearsym.symbolic.drivetrain import quantity
     from gearsym.validation.sim.scenario import load_scenario
     from gearsym.validation.sim.simulate import simulate
     from gearsym.validation.studies.estimation import (
-        EKF_RELATIVE_NOISE,
         noisy_outputs,
         prepare_ekf,
         run_euio,

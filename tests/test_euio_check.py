@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 from gearsym.symbolic.codegen import emit_all
-from gearsym.symbolic.drivetrain import shift_spec
 from gearsym.symbolic.export.generate import euio_model
 from gearsym.symbolic.loader import load_description
+from gearsym.symbolic.shifts import shift_spec
 from gearsym.validation.checks.euio_check import compare_euio, reference_steps
 from gearsym.validation.checks.generated_check import comparison_ok
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sympy as sp
-from gearsym.symbolic.description import parse_description
+from gearsym.symbolic.description_parser import parse_description
 from gearsym.symbolic.drivetrain import full_model
 from gearsym.symbolic.dynamics import gearbox_dynamics
 from gearsym.symbolic.loader import load_description

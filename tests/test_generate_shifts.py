@@ -24,9 +24,10 @@ from pathlib import Path
 
 import pytest
 import sympy as sp
-from gearsym.symbolic.drivetrain import element_slip_in_gear, shift_model, shift_spec
+from gearsym.symbolic.drivetrain import element_slip_in_gear, shift_model
 from gearsym.symbolic.export.generate import gearbox_models, generate_tree, selected_shifts
 from gearsym.symbolic.loader import load_description
+from gearsym.symbolic.shifts import shift_spec
 from gearsym.validation.checks import generated_check
 
 

@@ -30,13 +30,13 @@ from unittest import mock
 import numpy as np
 import pytest
 from gearsym.symbolic.export.generate import (
-    C_DIR,
     MANIFEST_MARKER,
     generate_tree,
     load_mu_map,
     mu_map_files,
     shift_element_model,
 )
+from gearsym.symbolic.export.tree import C_DIR
 from gearsym.symbolic.friction import DEFAULT_MU_MAP, shift_element_num
 from gearsym.symbolic.loader import load_description
 from gearsym.validation.checks import c_check, generated_check

@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 import sympy as sp
 from gearsym.symbolic.description import default_config_text
-from gearsym.symbolic.drivetrain import element_slip_in_gear, power_on_slip_signs, shift_spec
+from gearsym.symbolic.drivetrain import element_slip_in_gear, power_on_slip_signs
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.hybrid import (
     BREAK_AWAY,
@@ -36,6 +36,7 @@ from gearsym.symbolic.hybrid import (
 )
 from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.ratios import gear_ratio
+from gearsym.symbolic.shifts import shift_spec
 from gearsym.validation.checks.hybrid_check import (
     check_modes,
     compile_mode,

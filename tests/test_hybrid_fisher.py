@@ -25,7 +25,8 @@ from gearsym.symbolic.fisher import analyse, fisher_information, noise_variances
 from gearsym.symbolic.hybrid import LOCK_UP
 from gearsym.symbolic.loader import load_description
 from gearsym.validation.sim.hybrid_simulation import HybridSimulator
-from gearsym.validation.sim.simulate import Phase, simulate
+from gearsym.validation.sim.phases import Phase
+from gearsym.validation.sim.simulate import simulate
 from gearsym.validation.studies.hybrid_fisher import VIEWS, format_text, hybrid_fim
 
 PARAMETERS = ("m_veh", "mu_38", "mu_05", "zeta")

@@ -14,9 +14,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from gearsym.symbolic.description import default_config_text
-from gearsym.symbolic.drivetrain import power_on_slip_signs, shift_spec
+from gearsym.symbolic.drivetrain import power_on_slip_signs
 from gearsym.symbolic.hybrid import BREAK_AWAY, LOCK_UP, LOCKED, SLIDING
 from gearsym.symbolic.loader import load_description
+from gearsym.symbolic.shifts import shift_spec
 from gearsym.validation.checks.hybrid_check import reference_mode_intervals
 from gearsym.validation.sim.hybrid_simulation import HybridSimulator
 from gearsym.validation.sim.scenario import default_scenario_path, load_scenario

@@ -16,15 +16,10 @@ import sys
 import numpy as np
 import pytest
 import sympy as sp
-from gearsym.symbolic.drivetrain import (
-    adjacent_shifts,
-    drivetrain_model,
-    full_linear_form,
-    gear_linear_form,
-    shift_linear_form,
-    shift_spec,
-)
+from gearsym.symbolic.drivetrain import adjacent_shifts, drivetrain_model
+from gearsym.symbolic.linear_forms import full_linear_form, gear_linear_form, shift_linear_form
 from gearsym.symbolic.loader import load_description
+from gearsym.symbolic.shifts import shift_spec
 
 
 @pytest.fixture(scope="module")
@@ -105,7 +100,7 @@ def test_every_gear_form_is_locked_and_matches_the_jacobians(d):
 
 
 def test_2_3_shift_form_is_the_5_4_5_5_form_with_columns_in_5_3_order(d):
-    from gearsym.symbolic.drivetrain import linear_shift_form
+    from gearsym.symbolic.linear_forms import linear_shift_form
 
     a_old, b_old, x, u = linear_shift_form(d, "2-3")
     form = shift_linear_form(d, "2-3")
@@ -153,8 +148,8 @@ def test_every_mode_of_the_hybrid_2_3_has_its_linear_form(d):
     finite-difference Jacobians of the nonlinear model with the same constraint set. The slip
     sign only picks the sign of T (2.70), and T is the input here, so the two sign variants of a
     mode have the same form."""
-    from gearsym.symbolic.drivetrain import mode_linear_form
     from gearsym.symbolic.hybrid import hybrid_shift
+    from gearsym.symbolic.linear_forms import mode_linear_form
 
     hybrid = hybrid_shift(d, "2-3")
     spec = hybrid.spec

@@ -19,11 +19,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from gearsym.symbolic.drivetrain import mode_linear_form, shift_spec
 from gearsym.symbolic.export.generate import linear_system_sets
 from gearsym.symbolic.hybrid import hybrid_shift
-from gearsym.symbolic.linear_forms import gear_linear_forms, shift_linear_forms
+from gearsym.symbolic.linear_forms import gear_linear_forms, mode_linear_form, shift_linear_forms
 from gearsym.symbolic.loader import load_description
+from gearsym.symbolic.shifts import shift_spec
 from gearsym.validation.checks import c_check
 from gearsym.validation.checks.linear_check import LinearFunctions, compare_linear_sets
 

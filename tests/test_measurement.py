@@ -307,9 +307,10 @@ def test_ekf_trajectories_agree_sample_by_sample_for_mdf4_and_csv(
     assert result.returncode == 0, result.stderr
     for path in (EXAMPLE, csv_path):
         m = M.read_measurement(path, scenario.measurement, scenario.t_end)
+        from gearsym.validation.sim.scenario import with_measured_inputs
         from gearsym.validation.sim.simulate import simulate
 
-        driven = simulate(box, M.with_measured_inputs(scenario, m))
+        driven = simulate(box, with_measured_inputs(scenario, m))
         setup = prepare_ekf(box, driven, 0.01, 0.01, measured={o: m.values[o] for o in m.outputs})
         run = filter_run(setup)
         gap = np.abs(run.estimates - synthetic.estimates) / synthetic.sigmas

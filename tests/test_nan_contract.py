@@ -20,13 +20,8 @@ import numpy as np
 import pytest
 import sympy as sp
 from gearsym.symbolic.codegen import emit_c, file_names
-from gearsym.symbolic.export.generate import (
-    C_DIR,
-    PYTHON_DIR,
-    gearbox_models,
-    load_mu_map,
-    sample_ranges,
-)
+from gearsym.symbolic.export.generate import gearbox_models, load_mu_map, sample_ranges
+from gearsym.symbolic.export.tree import C_DIR, PYTHON_DIR
 from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.model import Model, Variable
 from gearsym.validation.checks import c_check, generated_check, nan_check

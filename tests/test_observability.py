@@ -1042,7 +1042,8 @@ def test_real_2_3_search_confirms_the_hand_derived_drops(shift23_result):
 
 
 def _linear_form_defaults(d, **overrides):
-    from gearsym.symbolic.drivetrain import drivetrain_parameters, linear_shift_form
+    from gearsym.symbolic.drivetrain import drivetrain_parameters
+    from gearsym.symbolic.linear_forms import linear_shift_form
 
     a, b, xs, us = linear_shift_form(d, "2-3")
     values = {v.symbol: sp.Rational(repr(v.default)) for v in drivetrain_parameters(d)}

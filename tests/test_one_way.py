@@ -11,7 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from gearsym.symbolic.description import parse_description
+from gearsym.symbolic.description_parser import parse_description
 from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.ratios import gear_ratio
 

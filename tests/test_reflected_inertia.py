@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from gearsym.symbolic.description import parse_description
+from gearsym.symbolic.description_parser import parse_description
 from gearsym.symbolic.dynamics import gearbox_dynamics
 from gearsym.symbolic.errors import GearsymError
 

@@ -21,7 +21,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import sympy as sp
-from gearsym.symbolic.description import default_config_text, parse_description
+from gearsym.symbolic.description import default_config_text
+from gearsym.symbolic.description_parser import parse_description
 from gearsym.symbolic.drivetrain import shift_model
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.loader import load_description

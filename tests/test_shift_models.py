@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import pytest
 import sympy as sp
-from gearsym.symbolic.drivetrain import adjacent_shifts, linear_shift_form, shift_model, shift_spec
+from gearsym.symbolic.drivetrain import adjacent_shifts, shift_model
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.linear_forms import linear_shift_form
 from gearsym.symbolic.loader import load_description
+from gearsym.symbolic.shifts import shift_spec
 
 d_ss, k_ss, m_veh = sp.symbols("d_ss k_ss m_veh", positive=True)
 

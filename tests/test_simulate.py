@@ -17,8 +17,9 @@ import numpy as np
 import pytest
 import sympy as sp
 from gearsym.symbolic.description import default_config_text
-from gearsym.symbolic.drivetrain import power_on_slip_signs, shift_model, shift_spec
+from gearsym.symbolic.drivetrain import power_on_slip_signs, shift_model
 from gearsym.symbolic.loader import load_description
+from gearsym.symbolic.shifts import shift_spec
 from gearsym.validation.sim.scenario import default_scenario_path, load_scenario
 from gearsym.validation.sim.simulate import simulate
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 import sympy as sp
-from gearsym.symbolic.description import parse_description
+from gearsym.symbolic.description_parser import parse_description
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.kinematics import gearbox_symbols
 from gearsym.symbolic.ratios import gear_ratio

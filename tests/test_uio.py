@@ -13,10 +13,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import sympy as sp
-from gearsym.symbolic.drivetrain import LinearForm
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.estimators import design_uio, linear_modes, uio_existence
 from gearsym.symbolic.estimators.uio import LinearMode
+from gearsym.symbolic.linear_forms import LinearForm
 from gearsym.symbolic.loader import load_description
 from scipy.signal import cont2discrete
 

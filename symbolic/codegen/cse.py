@@ -5,15 +5,12 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import sympy as sp
 from gearsym.symbolic.codegen.config import CodegenConfig
 from gearsym.symbolic.codegen.expressions import is_inline_power
 from sympy.logic.boolalg import Boolean
-
-if TYPE_CHECKING:
-    from gearsym.symbolic.codegen.table import FunctionSpec
 
 __all__ = [
     "CseForm",
@@ -25,6 +22,15 @@ __all__ = [
     "is_condition",
     "share_products",
 ]
+
+
+class FunctionExpressions(Protocol):
+    """What a CSE pass reads of an emitted function: its output matrices, in order (a row of
+    the function table, :class:`gearsym.symbolic.codegen.table.FunctionSpec`, which is built
+    on the Jacobians and so on this module)."""
+
+    @property
+    def expressions(self) -> tuple[sp.ImmutableMatrix, ...]: ...
 
 
 @lru_cache(maxsize=256)
@@ -324,7 +330,7 @@ def boolean_definitions(form: CseForm) -> dict[sp.Symbol, sp.Basic]:
     return {s: e for s, e in form.temporaries if is_condition(e)}
 
 
-def cse_function(spec: FunctionSpec, config: CodegenConfig | None = None) -> CseForm:
+def cse_function(spec: FunctionExpressions, config: CodegenConfig | None = None) -> CseForm:
     """One CSE pass over all outputs of ``spec``, with deterministic temporaries ``t0, t1, ...``.
 
     After :func:`sympy.cse`, bases of small integer powers that are not plain symbols are hoisted

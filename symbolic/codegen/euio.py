@@ -1,5 +1,6 @@
-"""The emitted extended UIO (thesis 4.5): what ``euio_step`` of ``templates/c_euio.c.j2`` needs
-from the function table, and its stated operation count.
+"""The emitted extended UIO (thesis 4.5): the view of the CasADi ``euio_step`` and the
+operation count of the C one (whose view, with the printed prediction, is
+:func:`gearsym.symbolic.codegen.c.emitter.euio_step_extra`).
 
 The rows themselves (``jac_outputs``, ``euio_load_column``, ``euio_step``) are in
 :mod:`gearsym.symbolic.codegen.table`; the filter they implement operation by operation is
@@ -8,14 +9,12 @@ The rows themselves (``jac_outputs``, ``euio_load_column``, ``euio_step``) are i
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 from gearsym.symbolic.codegen.ops import OpCount
 from gearsym.symbolic.codegen.table import FunctionTable
 
-__all__ = ["CasadiEuioView", "casadi_euio_view", "euio_own_ops", "euio_step_extra"]
+__all__ = ["CasadiEuioView", "casadi_euio_view", "euio_own_ops"]
 
 
 @dataclass(frozen=True)
@@ -46,61 +45,3 @@ def euio_own_ops(nx: int, ny: int) -> OpCount:
     add = (3 * n * n + 3 * n) + (m * n * n + m * m * n)
     add += 2 * m**3 + 2 * n * m * m + 2 * n * m + 2 * n * n * m + 2 * n**3 + n * n
     return OpCount(mul=mul, add=add, div=m + 1)
-
-
-def euio_step_extra(
-    table: FunctionTable, counts: Mapping[str, OpCount]
-) -> tuple[dict[str, Any], str, set[str], set[str]]:
-    """(the view fields of ``euio_step``, its operation text for the doc comment, the math
-    macros and helpers its printed prediction uses)."""
-    layout = table.config.euio
-    assert layout is not None
-    nx, ny = len(table.states), len(table.model.outputs)
-    names = [v.name for v in table.model.states]
-    frozen = ", ".join(
-        f"{names[i]} while |{table.model.inputs[j].name}| <= 0.5" for i, j in layout.frozen
-    )
-    from gearsym.symbolic.codegen.c.emitter import predict_body
-
-    jac_ops = counts.get("jac_x_sparse", counts.get("jac_x"))
-    assert jac_ops is not None
-    code, fused, macros, helpers = predict_body(table, inputs="u_prev")
-    predict = fused.once_ops + fused.stage_ops.scaled(4) + code.ops
-    own = euio_own_ops(nx, ny)
-    total = (
-        predict
-        + jac_ops
-        + counts["outputs"]
-        + counts["jac_outputs"]
-        + counts["euio_load_column"]
-        + own
-    )
-    phases = "; ".join(
-        f"{phase}: {', '.join(names[i] for i in held) or 'none'}"
-        for phase, held, _ in layout.held_phases
-    )
-    reasons = list(
-        dict.fromkeys(
-            r for _, _, why in layout.held_phases for r in why.replace("μ", "mu").split("; ") if r
-        )
-    )
-    # series, rate, E, E_d; J, dstage, FP; C, CP, K/L; S, S^-1; 7 of size NY; the prediction's
-    stack = 5 * nx + 3 * nx * nx + 3 * nx * ny + 2 * ny * ny + 7 * ny + code.stack
-    text = (
-        f"Held by the element modes: {frozen or 'none'}. "
-        + (
-            f"Pass held[] per phase as the library's existence result (4.4, "
-            f"euio_phase_masks) says: {phases}; because {'; '.join(reasons)}. "
-            if phases
-            else ""
-        )
-        + f"Operations (about): {total.format()} (the prediction as ekf_predict: "
-        f"{predict.format()}; jac_x + outputs + jac_outputs + the load column + "
-        f"{own.format()}); stack: {stack} reals."
-    )
-    extra = {
-        "frozen": layout.frozen,
-        "declarations": code.declarations,
-        "statements": code.statements,
-    }
-    return extra, text, macros, helpers

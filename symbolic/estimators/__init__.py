@@ -1,7 +1,7 @@
 """Estimators of thesis chapter 4 (EKF 4.3, UIO 4.4, extended UIO 4.5): existence, design.
 
 Each estimator consumes the model IR (:class:`~gearsym.symbolic.model.Model`) or a mode's linear
-form (:class:`~gearsym.symbolic.drivetrain.LinearForm`, 5.1); nothing here is specific to one
+form (:class:`~gearsym.symbolic.linear_forms.LinearForm`, 5.1); nothing here is specific to one
 gearbox.
 """
 

@@ -43,10 +43,10 @@ from gearsym.symbolic.drivetrain import (
     element_short_name,
     power_on_slip_signs,
     shift_model,
-    shift_spec,
 )
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.model import Model, Variable
+from gearsym.symbolic.shifts import shift_spec
 from gearsym.symbolic.sympy_utils import smart_jacobian
 
 if TYPE_CHECKING:  # NumPy and CasADi load with the numeric classes only

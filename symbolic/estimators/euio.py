@@ -157,7 +157,7 @@ def euio_phase_masks(d: Any, shift: str = "2-3") -> tuple[tuple[str, tuple[int, 
     those of :func:`euio_filter_model`'s model."""
     import numpy as np
     from gearsym.symbolic import naming
-    from gearsym.symbolic.drivetrain import element_short_name, shift_spec
+    from gearsym.symbolic.drivetrain import element_short_name
     from gearsym.symbolic.estimators.ekf import (
         DiscreteModel,
         augmented_model,
@@ -165,6 +165,7 @@ def euio_phase_masks(d: Any, shift: str = "2-3") -> tuple[tuple[str, tuple[int, 
         slide_input,
         stick_input,
     )
+    from gearsym.symbolic.shifts import shift_spec
 
     spec = shift_spec(d, shift)
     parameters = [name for name in default_parameters(d, shift) if name != naming.GRADE]

@@ -48,15 +48,10 @@ from typing import TYPE_CHECKING, Any
 
 import sympy as sp
 from gearsym.symbolic.description import GearboxDescription
-from gearsym.symbolic.drivetrain import (
-    LinearForm,
-    drivetrain_model,
-    gear_linear_form,
-    shift_linear_form,
-    shift_model,
-    shift_spec,
-)
+from gearsym.symbolic.drivetrain import drivetrain_model, shift_model
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.linear_forms import LinearForm, gear_linear_form, shift_linear_form
+from gearsym.symbolic.shifts import shift_spec
 
 if TYPE_CHECKING:
     import numpy as np

@@ -38,10 +38,10 @@ from decimal import Decimal
 import numpy as np
 from gearsym.symbolic.codegen import float_repr, render
 from gearsym.symbolic.codegen.printing import comment_text
-from gearsym.symbolic.export.generate import MU_BOUNDS, EmittedModel
+from gearsym.symbolic.export.generate import MU_BOUNDS
+from gearsym.symbolic.export.tree import EmittedModel
 from gearsym.symbolic.friction import MuMap
-
-from gearsym import __version__
+from gearsym.symbolic.version import __version__
 
 __all__ = [
     "BYTE_ORDERS",

@@ -45,10 +45,10 @@ from gearsym.symbolic.codegen import (
     jacobian_blocks,
     render,
 )
-from gearsym.symbolic.export.generate import EmittedModel, sample_ranges
+from gearsym.symbolic.export.generate import sample_ranges
+from gearsym.symbolic.export.tree import EmittedModel
 from gearsym.symbolic.model import Variable
-
-from gearsym import __version__
+from gearsym.symbolic.version import __version__
 
 __all__ = [
     "DEFAULT_FIXED_STEP",

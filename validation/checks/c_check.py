@@ -56,6 +56,13 @@ STRICT_FLAGS: tuple[str, ...] = (
 )
 FLOOR = {"double": 1e-3, "single": 1e-2}
 TOLERANCE = {"double": 1e-12, "single": 1e-5}
+#: The conditioned single-precision metric (``conditioned_error`` of
+#: :mod:`gearsym.validation.checks.generated_check` for the models, and of
+#: :mod:`gearsym.validation.checks.hybrid_code_check` for the hybrid sets): float ulps by which
+#: every input is perturbed, and how many times the resulting spread of the exact function the
+#: float build may deviate.
+PERTURBATION_ULPS = 1.0
+CONDITIONED_FACTOR = 10.0
 EXPR_FUNCTIONS = ("rhs", "outputs", "jac_x", "jac_u", "jac_p")
 STATE_RANGE = (-2.0, 2.0)  # default sampling range of states and inputs
 

@@ -37,13 +37,13 @@ from typing import Any
 import numpy as np
 from gearsym.symbolic.codegen import file_names
 from gearsym.symbolic.description import GearboxDescription
-from gearsym.symbolic.export.generate import (
+from gearsym.symbolic.export.generate import sample_ranges
+from gearsym.symbolic.export.tree import (
     C_DIR,
     PYTHON_DIR,
     EmittedHybridSet,
     EmittedLinearSet,
     EmittedModel,
-    sample_ranges,
 )
 from gearsym.symbolic.friction import MuMap
 from gearsym.validation.checks import c_check
@@ -134,8 +134,6 @@ def compare_models(
     return reports
 
 
-#: Float ulps by which :func:`conditioned_error` perturbs every input, and how many times the
-#: resulting spread of the exact function the float build may deviate.
 #: Targets of the hybrid sets' jump functions: the event-time term is a quotient of long sums,
 #: −(g_x S + g_p)/(g_x f⁻ + g_u u̇), times the difference A f⁻ − f⁺ of two right-hand sides. At
 #: random points (grazing crossings redrawn) C double and CasADi agree with each other but
@@ -143,8 +141,6 @@ def compare_models(
 #: too), and float by up to 2.5e-4, beyond what one ulp of input rounding explains (measured on
 #: the built-in 2-3; README, "The hybrid sensitivities as code").
 HYBRID_JUMP = {"double": 1e-10, "single": 1e-3}
-PERTURBATION_ULPS = 1.0
-CONDITIONED_FACTOR = 10.0
 
 
 def conditioned_error(
@@ -162,8 +158,9 @@ def conditioned_error(
     ends of the α ramp of the friction model, where |z| ≈ z_ba or z_ss), no float evaluation can
     meet 1e-5: rounding any intermediate moves the result by κ ε. This metric measures that spread
     ``s`` directly: the largest change of the exact (double) reference when every input moves by
-    :data:`PERTURBATION_ULPS` float ulps, over ``n_perturbations`` random perturbations, and
-    returns ``max |c - r| / max(d, K s / 1e-5)`` with ``K`` = :data:`CONDITIONED_FACTOR`, i.e. the
+    :data:`~gearsym.validation.checks.c_check.PERTURBATION_ULPS` float ulps, over
+    ``n_perturbations`` random perturbations, and returns ``max |c - r| / max(d, K s / 1e-5)``
+    with ``K`` = :data:`~gearsym.validation.checks.c_check.CONDITIONED_FACTOR`, i.e. the
     build passes (≤ 1e-5) where it is within the plain target or within K times the error that
     one ulp of input rounding causes in exact arithmetic.
     """
@@ -175,7 +172,7 @@ def conditioned_error(
     reference = c_check.evaluate_reference(m.model, points)[jacobian]
     rng = np.random.default_rng(seed + 1)
     spread = np.zeros_like(reference)
-    eps = PERTURBATION_ULPS * float(np.finfo(np.float32).eps)
+    eps = c_check.PERTURBATION_ULPS * float(np.finfo(np.float32).eps)
     for _ in range(n_perturbations):
         moved = points * (1.0 + eps * rng.uniform(-1.0, 1.0, points.shape))
         perturbed = c_check.evaluate_reference(m.model, moved)[jacobian]
@@ -189,7 +186,7 @@ def conditioned_error(
     magnitude = np.abs(reference)
     scale = np.where(np.isfinite(magnitude), magnitude, 0.0).max(axis=0)
     denominator = np.maximum(magnitude, np.maximum(floor * scale, np.finfo(np.float64).tiny))
-    denominator = np.maximum(denominator, CONDITIONED_FACTOR * spread / tolerance)
+    denominator = np.maximum(denominator, c_check.CONDITIONED_FACTOR * spread / tolerance)
     with np.errstate(invalid="ignore"):
         err = np.abs(computed - reference) / denominator
     both_nan = np.isnan(computed) & np.isnan(reference)

@@ -23,6 +23,9 @@ import numpy as np
 from gearsym.symbolic.codegen.hybrid import hybrid_table
 from gearsym.symbolic.hybrid import ENGAGEMENT, OPEN, OPENING, STATE_GUARDS
 from gearsym.symbolic.hybrid_sensitivity import HybridSensitivity
+from gearsym.symbolic.naming import model_file_names
+from gearsym.validation.checks import c_check
+from gearsym.validation.checks.c_binding import load_casadi_module
 from scipy.optimize import brentq
 
 __all__ = ["EmittedRun", "HybridFunctions", "run_emitted"]
@@ -308,7 +311,6 @@ def _well_conditioned(
 
 def c_check_range() -> tuple[float, float]:
     """The sampling range of states and inputs of the model checks."""
-    from gearsym.validation.checks import c_check
 
     return c_check.STATE_RANGE
 
@@ -325,9 +327,6 @@ def compare_hybrid_sets(
     :data:`~gearsym.validation.checks.c_check.STATE_RANGE`, parameters as
     :func:`~gearsym.validation.checks.c_check.sample_points` draws them), with the metric and floors
     of the model checks."""
-    from gearsym.symbolic.naming import model_file_names
-    from gearsym.validation.checks import c_check
-    from gearsym.validation.checks.c_binding import load_casadi_module
 
     reports = []
     for k, (hs, config) in enumerate(sets):
@@ -424,12 +423,10 @@ def _conditioned_error(
     the spread of the (double) function when every input moves by one float ulp sets the
     denominator's lower bound, times its factor (e.g. the difference A f⁻ − f⁺ of a jump
     cancels where the two fields nearly agree)."""
-    from gearsym.validation.checks import c_check
-    from gearsym.validation.checks.generated_check import CONDITIONED_FACTOR, PERTURBATION_ULPS
 
     tolerance = c_check.TOLERANCE["single"]
     floor = c_check.FLOOR["single"]
-    eps = PERTURBATION_ULPS * float(np.finfo(np.float32).eps)
+    eps = c_check.PERTURBATION_ULPS * float(np.finfo(np.float32).eps)
     spread = np.zeros_like(reference)
     for _ in range(n_perturbations):
         moved = {a: v * (1.0 + eps * rng.uniform(-1.0, 1.0, v.shape)) for a, v in given.items()}
@@ -438,5 +435,5 @@ def _conditioned_error(
     magnitude = np.abs(reference)
     scale = magnitude.max(axis=0)
     denominator = np.maximum(magnitude, np.maximum(floor * scale, np.finfo(np.float64).tiny))
-    denominator = np.maximum(denominator, CONDITIONED_FACTOR * spread / tolerance)
+    denominator = np.maximum(denominator, c_check.CONDITIONED_FACTOR * spread / tolerance)
     return float((np.abs(computed - reference) / denominator).max(initial=0.0))

@@ -33,7 +33,8 @@ from typing import Any
 import sympy as sp
 from gearsym.symbolic.description import GearboxDescription, PlanetarySet
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.set_kinds import HOUSING, relations
+from gearsym.symbolic.set_kinds import HOUSING
+from gearsym.symbolic.set_relations import relations
 
 __all__ = [
     "DRAW_KINDS",

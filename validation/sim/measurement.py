@@ -34,18 +34,17 @@ import csv
 import io
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from gearsym.symbolic.defaults import RECORD_SAMPLE_TIME
+from gearsym.symbolic.defaults import EKF_FLOOR_FRACTION, RECORD_SAMPLE_TIME
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.io.input_files import shown, unknown_key_reason
 
 if TYPE_CHECKING:
     from gearsym.symbolic.description import GearboxDescription
-    from gearsym.validation.sim.scenario import Scenario
 
 __all__ = [
     "UNITS",
@@ -57,7 +56,6 @@ __all__ = [
     "read_measurement",
     "recording_bytes",
     "to_si",
-    "with_measured_inputs",
 ]
 
 #: Most samples of the analysis grid: each is a breakpoint of the recorded inputs where the
@@ -485,38 +483,6 @@ def _read_csv(
     return {c.signal: (t, columns[c.name]) for c in channel_map.channels}
 
 
-def with_measured_inputs(scenario: Scenario, measurement: Measurement) -> Scenario:
-    """``scenario`` with every input the recording carries replaced by its resampled trace
-    (linear between grid samples): T_In as the engine torque (e-machine 0), the pressures,
-    ζ; inputs the recording lacks keep the scenario's profiles."""
-    from gearsym.validation.sim.scenario import Profile
-
-    t = measurement.t
-    values = measurement.values
-    changes: dict[str, Any] = {}
-    if "T_In" in values:
-        changes["engine"] = Profile(t, values["T_In"])
-        changes["e_machine"] = Profile(np.array([0.0]), np.array([0.0]))
-    pressure = dict(scenario.pressure)
-    for name in list(pressure):
-        if f"p_{name}" in values:
-            pressure[name] = Profile(t, values[f"p_{name}"])
-    changes["pressure"] = pressure
-    if "zeta" in values:
-        changes["grade"] = Profile(t, values["zeta"])
-    return replace(scenario, **changes)
-
-
-def input_sources(scenario: Scenario, measurement: Measurement) -> dict[str, str]:
-    """Per input of the simulation, where it comes from: the recording or the scenario."""
-    names = ["T_In", *(f"p_{e}" for e in scenario.pressure), "zeta"]
-    return {
-        n: "recording" if n in measurement.values else "scenario"
-        for n in names
-        if n != "zeta" or scenario.grade is not None or n in measurement.values
-    }
-
-
 def recording_bytes(
     channel_map: ChannelMap,
     t: np.ndarray,
@@ -584,7 +550,6 @@ def synthetic_recording(
     (:func:`gearsym.validation.studies.estimation.noisy_outputs`) when the map lists the filter's
     outputs in the filter's order: the same seed, the same noise. Returns the grid (scenario time)
     and the SI values per signal."""
-    from gearsym.validation.studies.estimation import EKF_FLOOR_FRACTION
 
     t_end = float(result.scenario.t_end)
     grid = analysis_grid(t_end, channel_map.sample_time)

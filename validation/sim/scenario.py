@@ -39,17 +39,18 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from gearsym.symbolic.defaults import RECORD_SAMPLE_TIME as SAMPLE_TIME
 from gearsym.symbolic.description import GearboxDescription
-from gearsym.symbolic.drivetrain import ShiftSpec, shift_spec
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.io.input_files import parse_toml, read_text, shown, unknown_key_reason
 from gearsym.symbolic.io.package_data import data_file
-from gearsym.validation.sim.measurement import ChannelMap, parse_channel_map
+from gearsym.symbolic.shifts import ShiftSpec, shift_spec
+from gearsym.validation.sim.measurement import ChannelMap, Measurement, parse_channel_map
 
 DEFAULT_SCENARIO = "scenario_2_3.toml"
 
@@ -278,3 +279,33 @@ def _increasing(fail: Callable[[str, str], GearsymError], key: str, times: np.nd
             f"times must increase strictly (entry {bad + 1}: {times[bad + 1]:g} after "
             f"{times[bad]:g})",
         )
+
+
+def with_measured_inputs(scenario: Scenario, measurement: Measurement) -> Scenario:
+    """``scenario`` with every input the recording carries replaced by its resampled trace
+    (linear between grid samples): T_In as the engine torque (e-machine 0), the pressures,
+    ζ; inputs the recording lacks keep the scenario's profiles."""
+    t = measurement.t
+    values = measurement.values
+    changes: dict[str, Any] = {}
+    if "T_In" in values:
+        changes["engine"] = Profile(t, values["T_In"])
+        changes["e_machine"] = Profile(np.array([0.0]), np.array([0.0]))
+    pressure = dict(scenario.pressure)
+    for name in list(pressure):
+        if f"p_{name}" in values:
+            pressure[name] = Profile(t, values[f"p_{name}"])
+    changes["pressure"] = pressure
+    if "zeta" in values:
+        changes["grade"] = Profile(t, values["zeta"])
+    return replace(scenario, **changes)
+
+
+def input_sources(scenario: Scenario, measurement: Measurement) -> dict[str, str]:
+    """Per input of the simulation, where it comes from: the recording or the scenario."""
+    names = ["T_In", *(f"p_{e}" for e in scenario.pressure), "zeta"]
+    return {
+        n: "recording" if n in measurement.values else "scenario"
+        for n in names
+        if n != "zeta" or scenario.grade is not None or n in measurement.values
+    }

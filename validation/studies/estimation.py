@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 from gearsym.symbolic import naming
+from gearsym.symbolic.defaults import EKF_FLOOR_FRACTION, EKF_RELATIVE_NOISE
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import element_short_name, quantity
 from gearsym.symbolic.errors import GearsymError
@@ -34,7 +35,8 @@ from gearsym.symbolic.estimators import (
     linear_modes,
     uio_existence,
 )
-from gearsym.validation.sim.simulate import Phase, SimulationResult
+from gearsym.validation.sim.phases import Phase
+from gearsym.validation.sim.simulate import SimulationResult
 
 __all__ = [
     "BOUND_ASSUMPTION",
@@ -409,11 +411,6 @@ def check_unknown(modes: Sequence[LinearMode], unknown: Sequence[str]) -> None:
 # ---------------------------------------------------------------------------------------------
 # EKF (4.3)
 # ---------------------------------------------------------------------------------------------
-
-#: Default relative speed-sensor error r_i (3.26) of the EKF's measurements (assumed, as in the
-#: Fisher study: 1 % on every output), and the floor fraction y_min = 1 % of the largest value.
-EKF_RELATIVE_NOISE = 0.01
-EKF_FLOOR_FRACTION = 0.01
 
 #: Default initial estimate of the augmented parameters, relative to the description's value
 #: (m_veh: 30 % light, the issue's wrong-mass case) or absolute (μ: the description's nominal

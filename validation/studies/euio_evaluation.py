@@ -41,12 +41,12 @@ from typing import Any
 
 import numpy as np
 from gearsym.symbolic import naming
+from gearsym.symbolic.defaults import EKF_RELATIVE_NOISE
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
 from gearsym.symbolic.errors import GearsymError
 from gearsym.validation.sim.simulate import SimulationResult
 from gearsym.validation.studies.estimation import (
-    EKF_RELATIVE_NOISE,
     NOT_IDENTIFIABLE,
     EkfSetup,
     EuioRun,

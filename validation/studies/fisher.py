@@ -44,7 +44,7 @@ from gearsym.symbolic.fisher import (
     noise_variances,
     submatrix,
 )
-from gearsym.validation.sim.simulate import Phase
+from gearsym.validation.sim.phases import Phase
 from gearsym.validation.studies.sensitivity_run import (
     Progress,
     ReferenceData,

@@ -23,10 +23,11 @@ from __future__ import annotations
 
 import numpy as np
 import sympy as sp
-from gearsym.symbolic.drivetrain import locked_projection, shift_spec
+from gearsym.symbolic.drivetrain import locked_projection
 from gearsym.symbolic.dynamics import GearboxDynamics, gearbox_dynamics
 from gearsym.symbolic.kinematics import exact
 from gearsym.symbolic.loader import load_description
+from gearsym.symbolic.shifts import shift_spec
 from scipy.optimize import linprog
 
 #: Printed rows 1–2 of (5.4) (coefficients of d_ss ω2, k_ss φ, d_ss ω_C) and (5.5)

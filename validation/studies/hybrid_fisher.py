@@ -48,8 +48,8 @@ from gearsym.symbolic.fisher import (
     noise_variances,
 )
 from gearsym.validation.sim.hybrid_simulation import HybridResult, HybridSimulator
+from gearsym.validation.sim.phases import Phase, detect_phases
 from gearsym.validation.sim.scenario import Scenario
-from gearsym.validation.sim.simulate import Phase, detect_phases
 from gearsym.validation.studies.sensitivity_run import nominal_scales
 
 VIEWS = {
@@ -141,7 +141,7 @@ def hybrid_fim(
     simulator: HybridSimulator | None = None,
 ) -> HybridFimStudy:
     """The per-window FIM of the hybrid model (module docstring). ``windows`` default to the
-    phases :func:`gearsym.validation.sim.simulate.detect_phases` finds in the hybrid model's own
+    phases :func:`gearsym.validation.sim.phases.detect_phases` finds in the hybrid model's own
     record (from-gear, torque phase, speed phase, to-gear)."""
     if view not in VIEWS:
         raise GearsymError(d.file, "view", f"expected one of {tuple(VIEWS)}, got {view!r}")

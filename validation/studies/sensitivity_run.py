@@ -52,13 +52,7 @@ import sympy as sp
 from gearsym.symbolic import naming
 from gearsym.symbolic.defaults import SLIDING_MODES, SLIDING_PHASES
 from gearsym.symbolic.description import GearboxDescription
-from gearsym.symbolic.drivetrain import (
-    ShiftSpec,
-    element_short_name,
-    power_on_slip_signs,
-    shift_model,
-    shift_spec,
-)
+from gearsym.symbolic.drivetrain import element_short_name, power_on_slip_signs, shift_model
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.model import Model, Variable
 from gearsym.symbolic.numeric import casadi_function, to_casadi
@@ -67,7 +61,8 @@ from gearsym.symbolic.sensitivity import (
     sensitivity_equations,
     stationary_initial_sensitivity,
 )
-from gearsym.validation.sim.simulate import Phase
+from gearsym.symbolic.shifts import ShiftSpec, shift_spec
+from gearsym.validation.sim.phases import Phase
 
 #: Reference scale of parameters whose nominal value is zero, for the normalisation (3.3) and
 #: the normalised scatter (3.27): the road grade ζ is 0 on a level road, so a 5 % grade

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import sympy as sp
 from gearsym.symbolic.codegen.c.ekf_code import (
@@ -21,6 +22,7 @@ from gearsym.symbolic.codegen.cse import (
     hoist,
     is_condition,
 )
+from gearsym.symbolic.codegen.euio import euio_own_ops
 from gearsym.symbolic.codegen.jacobian import SparsityPattern
 from gearsym.symbolic.codegen.ops import (
     OpCount,
@@ -305,6 +307,63 @@ def predict_body(
     return code, fused, macros, helpers
 
 
+def euio_step_extra(
+    table: FunctionTable, counts: Mapping[str, OpCount]
+) -> tuple[dict[str, Any], str, set[str], set[str]]:
+    """What ``euio_step`` of ``templates/c_euio.c.j2`` needs from the function table: (the view
+    fields, its operation text for the doc comment, the math macros and helpers its printed
+    prediction uses)."""
+    layout = table.config.euio
+    assert layout is not None
+    nx, ny = len(table.states), len(table.model.outputs)
+    names = [v.name for v in table.model.states]
+    frozen = ", ".join(
+        f"{names[i]} while |{table.model.inputs[j].name}| <= 0.5" for i, j in layout.frozen
+    )
+    jac_ops = counts.get("jac_x_sparse", counts.get("jac_x"))
+    assert jac_ops is not None
+    code, fused, macros, helpers = predict_body(table, inputs="u_prev")
+    predict = fused.once_ops + fused.stage_ops.scaled(4) + code.ops
+    own = euio_own_ops(nx, ny)
+    total = (
+        predict
+        + jac_ops
+        + counts["outputs"]
+        + counts["jac_outputs"]
+        + counts["euio_load_column"]
+        + own
+    )
+    phases = "; ".join(
+        f"{phase}: {', '.join(names[i] for i in held) or 'none'}"
+        for phase, held, _ in layout.held_phases
+    )
+    reasons = list(
+        dict.fromkeys(
+            r for _, _, why in layout.held_phases for r in why.replace("μ", "mu").split("; ") if r
+        )
+    )
+    # series, rate, E, E_d; J, dstage, FP; C, CP, K/L; S, S^-1; 7 of size NY; the prediction's
+    stack = 5 * nx + 3 * nx * nx + 3 * nx * ny + 2 * ny * ny + 7 * ny + code.stack
+    text = (
+        f"Held by the element modes: {frozen or 'none'}. "
+        + (
+            f"Pass held[] per phase as the library's existence result (4.4, "
+            f"euio_phase_masks) says: {phases}; because {'; '.join(reasons)}. "
+            if phases
+            else ""
+        )
+        + f"Operations (about): {total.format()} (the prediction as ekf_predict: "
+        f"{predict.format()}; jac_x + outputs + jac_outputs + the load column + "
+        f"{own.format()}); stack: {stack} reals."
+    )
+    extra = {
+        "frozen": layout.frozen,
+        "declarations": code.declarations,
+        "statements": code.statements,
+    }
+    return extra, text, macros, helpers
+
+
 def _function_views(
     table: FunctionTable, forms: Mapping[str, CseForm]
 ) -> tuple[list[CFunctionView], set[str], set[str]]:
@@ -464,8 +523,6 @@ def _function_views(
                 f"{nx * nx + 2 * nx + 6 * len(layout.modes) + len(table.inputs)} reals."
             )
         elif spec.kind == "euio_step":
-            from gearsym.symbolic.codegen.euio import euio_step_extra
-
             euio_extra, op_text, macros, helpers = euio_step_extra(table, counts)
             extra.update(euio_extra)
             used_macros |= macros
