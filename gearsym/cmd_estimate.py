@@ -280,15 +280,21 @@ def _cmd_drive(args: argparse.Namespace, d: Any) -> int:
                 "estimate", "--drive", "give 'upshifts' or at least two scenario files"
             )
     scenarios = [load_scenario(d, f) for f in files]
+    from gearsym.cmd_dynamics import simulate_with_progress
+    from gearsym.validation.studies.estimation import (
+        DRIVE_CARRIED,
+        format_ekf_text,
+        run_ekf_drive,
+    )
+
     initial = _initial_values(args.initial)
-    wrong = [name for name in initial if name not in ("m_veh", "zeta")]
+    wrong = [name for name in initial if name not in DRIVE_CARRIED]
     if wrong:
         raise GearsymError(
-            "estimate", "--initial", f"with --drive only m_veh and zeta, got {', '.join(wrong)}"
+            "estimate",
+            "--initial",
+            f"with --drive only {' and '.join(DRIVE_CARRIED)}, got {', '.join(wrong)}",
         )
-
-    from gearsym.cmd_dynamics import simulate_with_progress
-    from gearsym.validation.studies.estimation import format_ekf_text, run_ekf_drive
 
     results = [simulate_with_progress(d, sc) for sc in scenarios]
     _say("running the EKF through the shifts, m_veh and zeta carried")

@@ -22,6 +22,7 @@ from pathlib import Path
 from gearsym.symbolic import set_kinds
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.io.package_data import data_file
+from gearsym.symbolic.parameters import RECORDS, section_units
 
 #: Names end up in C identifiers, always behind a prefix (``omega_<shaft>``, ``T_<element>``,
 #: ``shift_<gear>_<gear>``), so they may hold letters, digits and underscores only; a leading
@@ -58,44 +59,13 @@ EXPECTED_UNITS: dict[str, str] = {
 }
 
 #: Sections of named quantities for the elastic drivetrain (2.42–2.53), the vehicle and road
-#: loads (2.48–2.49) and the shift-element friction (2.59–2.70): key -> required unit.
-SECTION_UNITS: dict[str, dict[str, str]] = {
-    "drivetrain": {
-        "i_D": "1",
-        "k_ss": "N*m/rad",
-        "d_ss": "N*m*s/rad",
-        "J_cs": "kg*m^2",
-        "J_D": "kg*m^2",
-        "I_wheel": "kg*m^2",
-        # viscous drag of each idle shaft to the housing (README "Idle shafts"), optional
-        "idle_drag": "N*m*s/rad",
-    },
-    "vehicle": {
-        "m_veh": "kg",
-        "r_dyn": "m",
-        "g": "m/s^2",
-        "rho_air": "kg/m^3",
-        "c_W": "1",
-        "A_front": "m^2",
-        "f_roll": "s/m",
-        "f_R": "1",
-        "f_R0": "1",
-        "f_R1": "s/m",
-        "f_R2": "s^2/m^2",
-        "zeta": "rad",
-    },
-    "friction": {
-        "sigma0": "N*m/rad",
-        "sigma1": "N*m*s/rad",
-        "z_ba_ratio": "1",
-        "T_oil": "degC",
-        "mu_nominal": "1",
-    },
-}
+#: loads (2.48–2.49) and the shift-element friction (2.59–2.70): key -> required unit (the
+#: records of :mod:`gearsym.symbolic.parameters`).
+SECTION_UNITS: dict[str, dict[str, str]] = section_units()
 
 #: Quantities that may be zero or negative (everything else must be positive).
 #: The polynomial's coefficients may be zero (a term left out) or of either sign (a fit).
-SIGNED_QUANTITIES = {"zeta", "T_oil", "z_ba_ratio", "f_R0", "f_R1", "f_R2"}
+SIGNED_QUANTITIES = {r.key for r in RECORDS if r.signed and r.section != "element"}
 
 ROLLING_RESISTANCE_FORMS = ("thesis", "textbook", "polynomial")
 

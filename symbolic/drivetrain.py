@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from itertools import pairwise
 
 import sympy as sp
-from gearsym.symbolic import naming
+from gearsym.symbolic import naming, parameters
 from gearsym.symbolic.description import GearboxDescription, Quantity
 from gearsym.symbolic.dynamics import GearboxDynamics, gearbox_dynamics
 from gearsym.symbolic.errors import GearsymError
@@ -162,16 +162,11 @@ def friction_symbols(
 
 def drivetrain_parameters(d: GearboxDescription) -> tuple[Variable, ...]:
     """The model parameters with defaults, units and sources from the description."""
-    section = {
-        k: "drivetrain" if k in ("k_ss", "d_ss", "I_wheel") else "vehicle"
-        for k in naming.PARAMETER_KEYS
-    }
     rolling = naming.ROLLING_KEYS[d.rolling_resistance]
     keys = list(naming.PARAMETER_KEYS) + list(rolling)
-    section |= {key: "vehicle" for key in rolling}
     result = []
     for key in keys:
-        q = quantity(d, section[key], key)
+        q = quantity(d, parameters.record(key).section, key)
         positive = key not in naming.SIGNED_PARAMETERS
         result.append(
             Variable(

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.parameters import record
 from gearsym.symbolic.set_kinds import file_key
 from gearsym.symbolic.shifts import shift_spec
 
@@ -197,24 +198,15 @@ PARAMETER_KEYS = ("m_veh", "k_ss", "d_ss", "zeta", "I_wheel", "rho_air", "c_W", 
 #: contains both (f_R1 = f_roll, or f_R0 = f_R, the rest zero).
 ROLLING_KEYS = {"thesis": ("f_roll",), "textbook": ("f_R",), "polynomial": ("f_R0", "f_R1", "f_R2")}
 
+#: One line per drivetrain parameter, shown with the models' parameters (the records of
+#: :mod:`gearsym.symbolic.parameters`).
 DESCRIPTIONS = {
-    "m_veh": "vehicle mass",
-    "k_ss": "side-shaft torsional stiffness, per shaft (2.47)",
-    "d_ss": "side-shaft torsional damping, per shaft (2.47)",
-    "zeta": "road grade angle (2.49)",
-    "I_wheel": "wheel-side inertia: wheels, side shafts, half the differential (2.46)",
-    "rho_air": "air density (2.49b)",
-    "c_W": "drag coefficient (2.49b)",
-    "A_front": "frontal area (2.49b)",
-    "f_roll": "rolling-resistance factor of the thesis' form F_r = v f_roll cos(zeta) m g (2.49a)",
-    "f_R": "rolling-resistance coefficient, F_r = f_R cos(zeta) m g",
-    "f_R0": "rolling resistance f_Roll(v) = f_R0 + f_R1 v + f_R2 v^2, constant part (2.49a)",
-    "f_R1": "rolling resistance f_Roll(v), coefficient of v (2.49a)",
-    "f_R2": "rolling resistance f_Roll(v), coefficient of v^2 (2.49a)",
+    key: record(key).description
+    for key in (*PARAMETER_KEYS, *dict.fromkeys(k for ks in ROLLING_KEYS.values() for k in ks))
 }
 
 #: Parameters that may be zero or negative (real symbols, not positive ones).
-SIGNED_PARAMETERS = ("zeta", "f_R0", "f_R1", "f_R2")
+SIGNED_PARAMETERS = tuple(key for key in DESCRIPTIONS if record(key).signed)
 
 # ---------------------------------------------------------------------------------------------
 # Models and what is emitted for them

@@ -46,6 +46,7 @@ from gearsym.symbolic.drivetrain import (
 )
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.model import Model, Variable
+from gearsym.symbolic.parameters import RECORDS
 from gearsym.symbolic.shifts import shift_spec
 from gearsym.symbolic.sympy_utils import smart_jacobian
 
@@ -67,12 +68,9 @@ __all__ = [
 SAMPLE_TIMES: tuple[float, ...] = (0.001, 0.005, 0.01)
 
 #: Random-walk intensities q_p (unit²/s) of the augmented parameters (assumed; the thesis
-#: states the random walk (4.1) but no numbers). m_veh: constant within a drive, 1 kg/√s lets
-#: the filter follow a load change over minutes, not within a shift; μ: the wet-clutch μ moves
-#: with slip and temperature by about 0.02 within a 0.1 s speed phase (the reference's μ map),
-#: so σ grows by 0.02 in 0.1 s: q = 0.02²/0.1; ζ: a grade changes over tens of metres,
-#: 0.005 rad/√s.
-RANDOM_WALK: dict[str, float] = {"m_veh": 1.0, "mu": 4.0e-3, "zeta": 2.5e-5}
+#: states the random walk (4.1) but no numbers): the records' defaults
+#: (:mod:`gearsym.symbolic.parameters`, where each value's reason is stated).
+RANDOM_WALK: dict[str, float] = {r.key: r.random_walk for r in RECORDS if r.random_walk is not None}
 
 #: Model-error intensities q_x (unit²/s) of the states: the filter's rigid model misses the
 #: bristle compliance of the elements (2.66) and the ZOH of inputs that ramp. Tuned on the

@@ -63,6 +63,7 @@ from gearsym.symbolic.hybrid_sensitivity import hybrid_sensitivity
 from gearsym.symbolic.io.output_dir import MANIFEST, manifest_marker, manifest_text
 from gearsym.symbolic.linear_forms import gear_linear_forms, shift_linear_forms
 from gearsym.symbolic.model import Model, Variable
+from gearsym.symbolic.parameters import RECORDS, record
 from gearsym.symbolic.sensitivity import sensitivity_model
 from gearsym.symbolic.shifts import ShiftSpec, shift_spec
 
@@ -83,30 +84,13 @@ __all__ = [
 MANIFEST_MARKER = manifest_marker("generate")
 
 
-#: Plausibility ranges that the emitted ``params_validate`` enforces (ERR_RANGE outside).
-#: Closed intervals; ``None`` means unbounded. Model defaults must lie inside.
+#: Plausibility ranges that the emitted ``params_validate`` enforces (ERR_RANGE outside):
+#: the records' ranges (:mod:`gearsym.symbolic.parameters`). Closed intervals; ``None`` means
+#: unbounded. Model defaults must lie inside.
 PARAMETER_BOUNDS: dict[str, tuple[float | None, float | None]] = {
-    "m_veh": (100.0, 100000.0),
-    "k_ss": (1.0, 1.0e7),
-    "d_ss": (0.0, 1.0e5),
-    "zeta": (-0.5, 0.5),
-    "I_wheel": (0.01, 1000.0),
-    "rho_air": (0.5, 2.0),
-    "c_W": (0.05, 2.0),
-    "A_front": (0.1, 20.0),
-    "f_roll": (0.0, 0.1),
-    "f_R": (0.0, 0.1),
-    "f_R0": (-0.05, 0.1),  # f_Roll(v) = f_R0 + f_R1 v + f_R2 v^2: a fit may dip below zero
-    "f_R1": (-0.01, 0.01),
-    "f_R2": (-1.0e-3, 1.0e-3),
-    "sigma0": (1.0, 1.0e9),
-    "sigma1": (0.0, 1.0e6),
-    "z_ba_ratio": (0.0, 0.99),
-    "t_ss_min": (1.0e-9, 1.0e3),
-    "n_disc": (1.0, 50.0),
-    "r_m": (0.005, 1.0),
+    r.key: r.bounds for r in RECORDS if r.bounds is not None and r.section != "mu"
 }
-MU_BOUNDS = (0.0, 1.0)  # every μ_<element> parameter
+MU_BOUNDS = record("mu").bounds  # every μ_<element> parameter
 
 #: Where the parameter of each bound lives in the description (for the one-line error).
 _PARAMETER_KEYS = {
@@ -131,7 +115,7 @@ _RANGES_BY_PREFIX: tuple[tuple[str, tuple[float, float]], ...] = (
     ("mu", (0.08, 0.16)),  # friction coefficient input
 )
 #: Sampling ranges of parameters without a default.
-_PARAMETER_RANGES = {"n_disc": (2.0, 8.0), "r_m": (0.05, 0.12)}
+_PARAMETER_RANGES = {r.key: r.sample_range for r in RECORDS if r.sample_range is not None}
 
 
 # ---------------------------------------------------------------------------------------------

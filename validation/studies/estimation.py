@@ -35,6 +35,7 @@ from gearsym.symbolic.estimators import (
     linear_modes,
     uio_existence,
 )
+from gearsym.symbolic.parameters import RECORDS, axis_label, symbol
 from gearsym.validation.sim.phases import Phase
 from gearsym.validation.sim.simulate import SimulationResult
 
@@ -414,9 +415,14 @@ def check_unknown(modes: Sequence[LinearMode], unknown: Sequence[str]) -> None:
 
 #: Default initial estimate of the augmented parameters, relative to the description's value
 #: (m_veh: 30 % light, the issue's wrong-mass case) or absolute (μ: the description's nominal
-#: μ; ζ: a level road), and the prior standard deviations (stated, not the truth).
+#: μ; ζ: a level road), and the prior standard deviations (stated, not the truth): the
+#: parameters' from their records (:mod:`gearsym.symbolic.parameters`; m_veh's relative to its
+#: value), the unmeasured state φ's here.
 EKF_INITIAL_MASS_FACTOR = 0.7
-EKF_PRIOR_SIGMA = {"m_veh": 0.3, "mu": 0.03, "zeta": 0.05, "phi": 0.05}  # m_veh: × nominal
+EKF_PRIOR_SIGMA = {
+    **{r.key: r.prior_sigma for r in RECORDS if r.prior_sigma is not None},
+    "phi": 0.05,
+}
 
 
 def element_modes(
@@ -1144,9 +1150,6 @@ def write_ekf_csv(run: EkfRun, path: Path) -> Path:
     return path
 
 
-_LABELS = {"m_veh": "m_veh / kg", "mu_38": "μ₃₈", "mu_05": "μ₀₅", "zeta": "ζ / rad"}
-
-
 def shade_phases(axes: Sequence[Any], phases: Sequence[Phase]) -> None:
     """Shade each phase on every axis and name it above the first; short phases sit side by
     side, so their names alternate between two heights and never overlap."""
@@ -1191,7 +1194,7 @@ def plot_ekf(run: EkfRun, path: Path) -> Path:
         centre = float(np.median(finite)) if finite.size else float(np.median(est))
         spread = max(float(np.max(np.abs(est - centre))) * 1.3, 1e-3)
         ax.set_ylim(centre - spread, centre + spread)
-        ax.set_ylabel(_LABELS.get(name, name))
+        ax.set_ylabel(axis_label(name))
         ax.legend(fontsize=6, loc="upper right")
     ax = axes[-1]
     lo = chi2.ppf(0.025, run.nees_dof)
@@ -1783,7 +1786,7 @@ def plot_efficiency(mc: EkfMonteCarlo, path: Path) -> Path:
                 if j == 0:
                     ax.bar(x, 0, width * 0.9, color=f"C{i}", label=phase)
     ax.axhline(1.0, color="k", lw=0.8, ls="--", label="the bound (efficiency 1)")
-    ax.set_xticks(range(len(names)), [_LABELS.get(n, n).split(" /")[0] for n in names])
+    ax.set_xticks(range(len(names)), [symbol(n) for n in names])
     ax.set_xlim(-0.5, len(names) - 0.5)
     ax.set_ylabel("RMSE / posterior Cramér–Rao bound")
     ax.legend(fontsize=6, loc="upper left", ncol=3)
@@ -2108,7 +2111,7 @@ def plot_euio(run: EuioRun, path: Path) -> Path:
         held = np.where(run.held[:, j], est, np.nan)
         ax.plot(run.t, held, color="C1", lw=2.5, alpha=0.6, label="held (no UIO for it)")
         ax.plot(run.t, truth, color="k", lw=1.2, label="reference (where defined)")
-        ax.set_ylabel(_LABELS.get(name, name))
+        ax.set_ylabel(axis_label(name))
         ax.legend(fontsize=6, loc="upper right")
     ax = axes[-1]
     ax.plot(run.t, run.load, color="C0", lw=0.6, label="d̂ = T_res* (per sample)")

@@ -45,6 +45,7 @@ from gearsym.symbolic.defaults import EKF_RELATIVE_NOISE
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.parameters import symbol
 from gearsym.validation.sim.simulate import SimulationResult
 from gearsym.validation.studies.estimation import (
     NOT_IDENTIFIABLE,
@@ -769,7 +770,7 @@ def plot_euio_efficiency(mc: EuioMonteCarlo, path: Path) -> Path:
                 if j == 0:
                     ax.bar(x, 0, width * 0.9, color=f"C{i}", label=phase)
     ax.axhline(1.0, color="k", lw=0.8, ls="--", label="the bound (efficiency 1)")
-    ax.set_xticks(range(len(names)), names)
+    ax.set_xticks(range(len(names)), [symbol(n) for n in names])
     ax.set_xlim(-0.5, len(names) - 0.5)
     ax.set_ylabel("RMSE / matched bound")
     ax.legend(fontsize=6, loc="upper left", ncol=3)

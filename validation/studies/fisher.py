@@ -44,6 +44,7 @@ from gearsym.symbolic.fisher import (
     noise_variances,
     submatrix,
 )
+from gearsym.symbolic.parameters import symbol
 from gearsym.validation.sim.phases import Phase
 from gearsym.validation.studies.sensitivity_run import (
     Progress,
@@ -382,7 +383,7 @@ def plot_scatter(study: FimStudy, out_dir: Path) -> list[Path]:
                         )
             ax.axhline(study.settings["gamma_max"], color="k", ls="--", lw=0.8, label="γ_max")
             ax.set_yscale("log")
-            ax.set_xticks(positions, analysis.names)
+            ax.set_xticks(positions, [symbol(n) for n in analysis.names])
             ax.set_ylabel("normalised scatter γ (3.27)")
             kind = "simultaneous" if len(analysis.names) > 1 else "single"
             ax.set_title(

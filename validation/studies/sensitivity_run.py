@@ -56,6 +56,7 @@ from gearsym.symbolic.drivetrain import element_short_name, power_on_slip_signs,
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.model import Model, Variable
 from gearsym.symbolic.numeric import casadi_function, to_casadi
+from gearsym.symbolic.parameters import symbol, zero_scale
 from gearsym.symbolic.sensitivity import (
     SensitivityEquations,
     sensitivity_equations,
@@ -63,12 +64,6 @@ from gearsym.symbolic.sensitivity import (
 )
 from gearsym.symbolic.shifts import ShiftSpec, shift_spec
 from gearsym.validation.sim.phases import Phase
-
-#: Reference scale of parameters whose nominal value is zero, for the normalisation (3.3) and
-#: the normalised scatter (3.27): the road grade ζ is 0 on a level road, so a 5 % grade
-#: (0.05 rad, assumed) stands in for p_j0.
-ZERO_NOMINAL_SCALES: dict[str, float] = {"zeta": 0.05}
-
 
 #: The phases in which the thesis takes both swapping elements as sliding (3.1).
 
@@ -303,11 +298,11 @@ def parameter_values(
 
 
 def nominal_scales(names: Sequence[str], values: Mapping[str, float]) -> np.ndarray:
-    """p_j0 of (3.3), (3.27); a parameter at zero uses :data:`ZERO_NOMINAL_SCALES`."""
+    """p_j0 of (3.3), (3.27); a parameter at zero uses its record's scale (:func:`zero_scale`)."""
     scales = []
     for name in names:
         value = abs(values[name])
-        scales.append(value if value > 0 else ZERO_NOMINAL_SCALES.get(name, 1.0))
+        scales.append(value if value > 0 else zero_scale(name))
     return np.array(scales)
 
 
@@ -762,14 +757,6 @@ STATE_LABELS = {
     "phi": "φ",
     "omega_C": "ω_C",
 }
-PARAMETER_LABELS = {
-    "m_veh": "m_veh",
-    "k_ss": "k_ss",
-    "d_ss": "d_ss",
-    "mu_38": "μ₃₈",
-    "mu_05": "μ₀₅",
-    "zeta": "ζ",
-}
 
 
 def plot_sensitivities(run: SensitivityRun, out_dir: Path) -> list[Path]:
@@ -809,7 +796,7 @@ def plot_sensitivities(run: SensitivityRun, out_dir: Path) -> list[Path]:
                 )
         fig.suptitle(
             f"Normalised sensitivities of the states and their derivatives with respect to "
-            f"{PARAMETER_LABELS.get(p, p)} (p0 = {run.scales[j]:g})",
+            f"{symbol(p)} (p0 = {run.scales[j]:g})",
             fontsize=10,
         )
         paths.append(save(fig, out_dir / f"sensitivity_{p}.png", dpi=120))

@@ -48,6 +48,7 @@ from typing import Any
 
 import numpy as np
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.parameters import symbol, zero_scale
 
 #: The quantities of interest of one shift run, with units.
 QUANTITIES: dict[str, str] = {
@@ -494,7 +495,6 @@ def plot_indices(
     indices (:func:`linearised_indices`); right, the normalised local sensitivities (3.3)
     ∂Q/∂p · p0/Q0 of chapter 3 (p0 = |nominal| or the ζ scale 0.05)."""
     from gearsym.validation.drawing.figures import save, subplots
-    from gearsym.validation.studies.sensitivity_run import ZERO_NOMINAL_SCALES
 
     names = list(result.definition.ranges)
     si = result.indices[quantity]
@@ -514,16 +514,16 @@ def plot_indices(
     if local:
         lin = linearised_indices(local, result.definition.ranges)
         ax.bar(x + width, [lin[n] for n in names], width, label="local, linearised")
-    ax.set_xticks(x, names)
+    ax.set_xticks(x, [symbol(n) for n in names])
     ax.set_ylabel("share of variance")
     ax.set_title(f"Sobol indices of {quantity} (95 % CI)")
     ax.legend()
     if local and nominal is not None:
         q0 = float(np.median(result.values[quantity]))
-        scale = [abs(nominal[n]) or ZERO_NOMINAL_SCALES.get(n, 1.0) for n in names]
+        scale = [abs(nominal[n]) or zero_scale(n) for n in names]
         sn = [local[n] * s / q0 for n, s in zip(names, scale, strict=True)]
         axes[0, 1].bar(x, sn, 0.5, color="C2")
-        axes[0, 1].set_xticks(x, names)
+        axes[0, 1].set_xticks(x, [symbol(n) for n in names])
         axes[0, 1].set_ylabel("∂Q/∂p · p0/Q0")
         axes[0, 1].set_title("normalised local sensitivity (3.3), nominal point")
     fig.suptitle(
