@@ -9,6 +9,7 @@
 >>> study = box.fim(result=result)            # Fisher information per phase (3.25)
 >>> box.observability("2-3").result.rank      # (4.12): rank 8, proved by a witness minor
 8
+>>> box.estimate("ekf").data["nees_mean"]     # the EKF (4.3) on the 2-3 shift  # doctest: +SKIP
 >>> tree = box.generate()                     # emitted C and CasADi, in memory
 >>> box.generate("out/code")                  # written through the one output writer
 
@@ -141,6 +142,64 @@ class Gearbox:
         from gearsym.symbolic.observability import analyze_shift
 
         return analyze_shift(self.description, shift, **options)
+
+    def estimate(
+        self,
+        filter: str = "ekf",
+        scenario: Any = None,
+        *,
+        out: str | Path | None = None,
+        **options: Any,
+    ) -> Any:
+        """Run an estimator of thesis chapter 4 (``"uio"``, ``"ekf"``, ``"euio"``) on the
+        reference shift of ``scenario`` (a path, a loaded scenario, or None: the built-in
+        2-3) and return its report (``.data`` as ``gearsym estimate --json``, ``.text``,
+        ``.result``). ``options``: the calibration's (``sample_time``, ``relative_noise``,
+        ``parameters``, ``initial``, ``modes``) and the evaluation's (``runs``, ``seed``,
+        ``initial_from_prior``, ``dropout``, ``dropout_outputs``, ``unknown``) fields of
+        :class:`~gearsym.validation.studies.estimate_workflow.Calibration` and
+        :class:`~gearsym.validation.studies.estimate_workflow.EstimateRequest`. With
+        ``out``, the CSV, JSON and plots are written there through the one output writer."""
+        from dataclasses import fields
+
+        from gearsym.symbolic.errors import GearsymError
+        from gearsym.symbolic.io.output_dir import OutputDir
+        from gearsym.validation.studies.estimate_workflow import (
+            Calibration,
+            EstimateRequest,
+            Truth,
+            estimate,
+        )
+
+        source = "built-in" if scenario is None else str(getattr(scenario, "file", scenario))
+        if scenario is None or isinstance(scenario, str | Path):
+            scenario = self.scenario(scenario)
+        known_cal = {f.name for f in fields(Calibration)} - {"description"}
+        known_req = {f.name for f in fields(EstimateRequest)} - {
+            "filter",
+            "calibration",
+            "truths",
+        }
+        unknown = sorted(set(options) - known_cal - known_req)
+        if unknown:
+            raise GearsymError("estimate", unknown[0], "is not an option of the estimate")
+        tuples = ("relative_noise", "parameters", "dropout_outputs", "unknown")
+        options = {k: tuple(v) if k in tuples and v is not None else v for k, v in options.items()}
+        calibration = Calibration(
+            self.description, **{k: v for k, v in options.items() if k in known_cal}
+        )
+        request = EstimateRequest(
+            filter=filter,
+            calibration=calibration,
+            truths=(Truth(scenario, source),),
+            **{k: v for k, v in options.items() if k in known_req},
+        )
+        if out is None:
+            return estimate(request)
+        with OutputDir(out, "estimate") as staged:
+            report = estimate(request, staged.path)
+            staged.commit()
+        return report
 
     def generate(self, out: str | Path | None = None) -> Any:
         """The emitted C and CasADi tree (``GeneratedTree``: files by relative path, models).

@@ -3,8 +3,10 @@
 The unknown input observer (4.4): existence per phase, and its estimates of the states and the
 unknown inputs against the reference simulation; the extended Kalman filter (4.3) on the
 parameter-augmented shift model (4.1): m_veh, μ of the swapping elements and ζ with σ, NEES and
-NIS against the reference. This module parses and prints; the
-work is in :mod:`gearsym.symbolic.estimators` and :mod:`gearsym.validation.studies.estimation`.
+NIS against the reference. This module parses the options into an
+:class:`~gearsym.validation.studies.estimate_workflow.EstimateRequest` (what the filter knows
+apart from the world it is judged in) and prints the report; the workflow is
+:func:`gearsym.validation.studies.estimate_workflow.estimate`.
 """
 
 from __future__ import annotations
@@ -18,198 +20,122 @@ from typing import TYPE_CHECKING, Any
 from gearsym.commands import add_command, load
 from gearsym.interrupts import check
 from gearsym.options import number
+from gearsym.symbolic.errors import GearsymError
 
 if TYPE_CHECKING:
     from gearsym.commands import Subparsers
 
 __all__ = ["cmd_estimate", "register"]
 
-FILTERS = ("uio", "ekf", "euio")
+FILTERS = ("uio", "ekf", "euio")  # the workflow's (checked there too)
 
 
-def _say(message: str) -> None:
-    check()
-    print(f"  … {message}", file=sys.stderr, flush=True)
+class _Reporter:
+    """The workflow's steps and progress on stderr (interruptible)."""
+
+    def say(self, message: str) -> None:
+        check()
+        print(f"  … {message}", file=sys.stderr, flush=True)
+
+    def bar(self, label: str) -> tuple[Callable[[float, str], None], Callable[[], None]]:
+        from gearsym.cmd_dynamics import ProgressBar
+
+        bar = ProgressBar(label)
+        return bar, bar.done
 
 
 def cmd_estimate(args: argparse.Namespace) -> int:
-    """Run the chosen estimator on the scenario's reference shift; print, or write with --out."""
-    from gearsym.symbolic.errors import GearsymError
+    """Parse the options into a request, run it (:func:`estimate`), print or write."""
     from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.studies.estimate_workflow import (
+        Calibration,
+        EstimateRequest,
+        Truth,
+        drive_truths,
+        estimate,
+        measured_truth,
+    )
 
     d = load(args.config)
+    calibration = Calibration(
+        description=d,
+        sample_time=args.sample_time,
+        relative_noise=_noise(args),
+        parameters=_names(args.params),
+        initial=_initial_values(args.initial),
+        modes=args.modes,
+    )
     scenario = load_scenario(d, args.scenario)
+    source = args.scenario or "built-in"
     if args.measurement is not None:
-        return _cmd_measured(args, d, scenario)
-    if args.sample_time is None:
-        args.sample_time = 0.01
-    if args.sample_time > scenario.t_end / 4:  # before the simulation: it records [0, t_end]
-        raise GearsymError(
-            "estimate",
-            "--sample-time",
-            f"must be in (0, {scenario.t_end / 4:g}] s, got {args.sample_time!r}",
+        if args.filter != "ekf":  # before the file is read
+            raise GearsymError("estimate", "--measurement", "runs the EKF: add --filter ekf")
+        truths: tuple[Truth, ...] = (
+            measured_truth(calibration, scenario, args.measurement, source),
         )
-    if args.modes is not None and args.filter not in ("ekf", "euio"):
-        raise GearsymError("estimate", "--modes", "is for --filter ekf or euio only")
-    if args.modes is None:
-        args.modes = "filter"
-    if args.drive is not None:
-        if args.filter != "ekf":
-            raise GearsymError("estimate", "--drive", "is for --filter ekf only")
-        return _cmd_drive(args, d)
-    if args.filter == "ekf":
-        return _cmd_ekf(args, d, scenario)
-    if args.filter == "euio":
-        return _cmd_euio(args, d, scenario)
-    if args.runs != 1:
-        raise GearsymError(
-            "estimate", "--runs", "Monte-Carlo runs are for --filter ekf or euio only"
-        )
-    if args.initial_from_prior:
-        raise GearsymError("estimate", "--initial-from-prior", "is for --filter ekf or euio only")
-    unknown = [u.strip() for u in args.unknown.split(",") if u.strip()]
-    if not unknown:
-        raise GearsymError("estimate", "--unknown", "name at least one unknown input")
-    noise = None
-    if args.noise is not None:
-        try:
-            noise = [number(float, minimum=0)(v) for v in args.noise.split(",")]
-        except argparse.ArgumentTypeError as err:
-            raise GearsymError("estimate", "--noise", str(err)) from None
+    elif args.drive is not None:
+        if args.scenario is not None:
+            raise GearsymError("estimate", "--scenario", "is not available with --drive")
+        if args.out is not None:
+            raise GearsymError("estimate", "--out", "is not available with --drive")
+        truths = drive_truths(d, args.drive)
+    else:
+        truths = (Truth(scenario, source),)
+    request = EstimateRequest(
+        filter=args.filter,
+        calibration=calibration,
+        truths=truths,
+        runs=args.runs,
+        seed=args.seed,
+        initial_from_prior=args.initial_from_prior,
+        dropout=_dropout_window(args.dropout, truths[0].scenario.shift.name),
+        dropout_outputs=_names(args.dropout_outputs),
+        unknown=_names(args.unknown) or (),
+        drive=args.drive is not None,
+        plots=not args.no_plots,
+    )
+    paths: list[Any] = []
+    if args.out is None:
+        report = estimate(request, reporter=_Reporter())
+    else:
+        from gearsym.symbolic.io.output_dir import OutputDir
 
-    from gearsym.symbolic.estimators import linear_modes
-    from gearsym.validation.studies.estimation import check_unknown
-
-    check_unknown(linear_modes(d, scenario.shift.name), unknown)  # before the simulation
-
-    def work(folder: Any) -> Any:
-        from gearsym.cmd_dynamics import simulate_with_progress
-        from gearsym.validation.studies.estimation import plot_uio, run_uio, write_csv
-
-        result = simulate_with_progress(d, scenario)
-        _say("designing and running the UIO of each phase")
-        run = run_uio(
-            d,
-            result,
-            unknown=unknown,
-            sample_time=args.sample_time,
-            relative_noise=noise,
-            seed=args.seed,
-        )
-        if folder is not None:
-            write_csv(run, folder / "uio.csv")
-            (folder / "uio.json").write_text(json.dumps(run.to_dict(), indent=2) + "\n")
-            if not args.no_plots:
-                plot_uio(run, folder)
-        return run
-
-    from gearsym.validation.studies.estimation import format_text
-
-    return _run_and_report(args, work, format_text)
+        with OutputDir(args.out, "estimate", before_commit=check) as out:
+            report = estimate(request, out.path, _Reporter())
+            paths = out.commit()
+    if args.json:
+        data = report.to_dict()
+        if not request.drive:
+            data = {**data, "files": [str(p) for p in paths]}
+        json.dump(data, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return 0
+    print(report.text)
+    if paths:
+        print(f"  wrote {len(paths)} files to {args.out}: {', '.join(p.name for p in paths)}")
+    return 0
 
 
-def _cmd_euio(args: argparse.Namespace, d: Any, scenario: Any) -> int:
-    """``--filter euio``: the extended UIO (4.5) on the reference shift."""
-    from gearsym.symbolic.errors import GearsymError
-
-    if args.initial_from_prior and args.runs == 1:
-        raise GearsymError(
-            "estimate", "--initial-from-prior", "with --filter euio needs --runs N (N > 1)"
-        )
-    initial = _initial_values(args.initial)
-    if args.initial_from_prior and initial:
-        raise GearsymError(
-            "estimate", "--initial-from-prior", "draws the initial estimate: drop --initial"
-        )
-    noise = 0.01
-    if args.noise is not None:
-        try:
-            noise = number(float, above=0)(args.noise)
-        except argparse.ArgumentTypeError as err:
-            raise GearsymError("estimate", "--noise", str(err)) from None
-    if args.runs > 1:
-        return _cmd_euio_monte_carlo(args, d, scenario, initial, noise)
-
-    def work(folder: Any) -> Any:
-        from gearsym.cmd_dynamics import simulate_with_progress
-        from gearsym.validation.studies.estimation import plot_euio, write_euio_csv
-        from gearsym.validation.studies.euio_evaluation import euio_filter_run, prepare_euio
-
-        result = simulate_with_progress(d, scenario)
-        _say("running the extended UIO")
-        setup = prepare_euio(
-            d,
-            result,
-            sample_time=args.sample_time,
-            relative_noise=noise,
-            initial=initial,
-            modes=args.modes,
-        )
-        run = euio_filter_run(setup, args.seed).run  # run_euio's loop (tested to the bit)
-        if folder is not None:
-            write_euio_csv(run, folder / "euio.csv")
-            (folder / "euio.json").write_text(json.dumps(run.to_dict(), indent=2) + "\n")
-            if not args.no_plots:
-                plot_euio(run, folder / "euio.png")
-        return run
-
-    from gearsym.validation.studies.estimation import format_euio_text
-
-    return _run_and_report(args, work, format_euio_text)
+def _names(text: str | None) -> tuple[str, ...] | None:
+    """A comma-separated list of names (``None`` when the option is absent)."""
+    if text is None:
+        return None
+    return tuple(name.strip() for name in text.split(",") if name.strip())
 
 
-def _cmd_euio_monte_carlo(
-    args: argparse.Namespace, d: Any, scenario: Any, initial: dict[str, float], noise: float
-) -> int:
-    """``--filter euio --runs N``: the extended UIO over N noise seeds with its matched bound
-    (the road load unknown in every sample interval)."""
-
-    def work(folder: Any) -> Any:
-        from gearsym.cmd_dynamics import ProgressBar, simulate_with_progress
-        from gearsym.validation.studies.estimation import plot_euio, write_euio_csv
-        from gearsym.validation.studies.euio_evaluation import (
-            plot_euio_efficiency,
-            prepare_euio,
-            run_euio_monte_carlo,
-        )
-
-        result = simulate_with_progress(d, scenario)
-        setup = prepare_euio(
-            d,
-            result,
-            sample_time=args.sample_time,
-            relative_noise=noise,
-            initial=initial,
-            modes=args.modes,
-        )
-        bar = ProgressBar(f"EUIO, {args.runs} runs")
-        try:
-            mc = run_euio_monte_carlo(
-                setup, args.runs, seed=args.seed, progress=bar, prior_draw=args.initial_from_prior
-            )
-        finally:
-            bar.done()
-        if folder is not None:
-            write_euio_csv(mc.first, folder / "euio.csv")
-            (folder / "euio.json").write_text(json.dumps(mc.to_dict(), indent=2) + "\n")
-            if not args.no_plots:
-                plot_euio(mc.first, folder / "euio.png")
-                plot_euio_efficiency(mc, folder / "euio_efficiency.png")
-        return mc
-
-    from gearsym.validation.studies.euio_evaluation import format_euio_monte_carlo_text
-
-    def text(mc: Any) -> str:
-        return f"  assumes scenario: {scenario.name} ({args.scenario or 'built-in'})\n" + (
-            format_euio_monte_carlo_text(mc)
-        )
-
-    return _run_and_report(args, work, text)
+def _noise(args: argparse.Namespace) -> tuple[float, ...] | None:
+    """``--noise``: one relative error r (3.26) or one per output; the UIO may run
+    noise-free (0), the filters need r > 0."""
+    if args.noise is None:
+        return None
+    parse = number(float, minimum=0) if args.filter == "uio" else number(float, above=0)
+    try:
+        return tuple(float(parse(v)) for v in args.noise.split(","))
+    except argparse.ArgumentTypeError as err:
+        raise GearsymError("estimate", "--noise", str(err)) from None
 
 
 def _initial_values(items: list[str] | None) -> dict[str, float]:
-    from gearsym.symbolic.errors import GearsymError
-
     values = {}
     for item in items or []:
         name, sep, text = item.partition("=")
@@ -226,8 +152,6 @@ def _initial_values(items: list[str] | None) -> dict[str, float]:
 def _dropout_window(text: str | None, shift: str) -> tuple[float, float] | str | None:
     """``--dropout``: (T0, T1) in s, or the name of a phase of the shift (``speed_phase``),
     checked before the simulation; a phase is resolved to its detected window afterwards."""
-    from gearsym.symbolic.errors import GearsymError
-
     if text is None:
         return None
     source, target = shift.split("-")
@@ -246,358 +170,6 @@ def _dropout_window(text: str | None, shift: str) -> tuple[float, float] | str |
             f"expected T0,T1 with T0 < T1 or a phase ({', '.join(phases)}), got {text!r}",
         )
     return (t0, t1)
-
-
-#: ``--drive upshifts``: the shipped scenarios of the drive 1->2->3->4.
-DRIVE_UPSHIFTS = ("scenario_1_2.toml", "scenario_2_3.toml", "scenario_3_4.toml")
-
-
-def _cmd_drive(args: argparse.Namespace, d: Any) -> int:
-    """``--drive``: the EKF through consecutive shifts, m_veh and ζ carried across them."""
-    from pathlib import Path
-
-    from gearsym.symbolic.errors import GearsymError
-    from gearsym.validation.sim.scenario import default_scenario_path, load_scenario
-
-    for option, given in (
-        ("--scenario", args.scenario is not None),
-        ("--runs", args.runs != 1),
-        ("--dropout", args.dropout is not None),
-        ("--params", args.params is not None),
-        ("--noise", args.noise is not None),
-        ("--initial-from-prior", args.initial_from_prior),
-        ("--out", args.out is not None),
-    ):
-        if given:
-            raise GearsymError("estimate", option, "is not available with --drive")
-    if args.drive.strip() == "upshifts":
-        folder = Path(default_scenario_path()).parent
-        files: list[Any] = [folder / name for name in DRIVE_UPSHIFTS]
-    else:
-        files = [f.strip() for f in args.drive.split(",") if f.strip()]
-        if len(files) < 2:
-            raise GearsymError(
-                "estimate", "--drive", "give 'upshifts' or at least two scenario files"
-            )
-    scenarios = [load_scenario(d, f) for f in files]
-    from gearsym.cmd_dynamics import simulate_with_progress
-    from gearsym.validation.studies.estimation import (
-        DRIVE_CARRIED,
-        format_ekf_text,
-        run_ekf_drive,
-    )
-
-    initial = _initial_values(args.initial)
-    wrong = [name for name in initial if name not in DRIVE_CARRIED]
-    if wrong:
-        raise GearsymError(
-            "estimate",
-            "--initial",
-            f"with --drive only {' and '.join(DRIVE_CARRIED)}, got {', '.join(wrong)}",
-        )
-
-    results = [simulate_with_progress(d, sc) for sc in scenarios]
-    _say("running the EKF through the shifts, m_veh and zeta carried")
-    runs = run_ekf_drive(
-        d,
-        results,
-        seed=args.seed,
-        sample_time=args.sample_time,
-        initial=initial,
-        modes=args.modes,
-    )
-    if args.json:
-        data = {"filter": "ekf", "drive": [r.to_dict() for r in runs]}
-        json.dump(data, sys.stdout, indent=2)
-        sys.stdout.write("\n")
-        return 0
-    print(
-        "  assumes a drive of consecutive shifts "
-        + " -> ".join(sc.name for sc in scenarios)
-        + ": each shift simulated on its own (the reference does not chain shifts); the "
-        "filter carries m_veh and zeta, estimate and covariance, from one shift's end to "
-        "the next one's start; every other state starts as in a single shift"
-    )
-    for sc, run in zip(scenarios, runs, strict=True):
-        print(f"  shift {sc.shift.name} ({sc.name}):")
-        print(format_ekf_text(run))
-    return 0
-
-
-def _ekf_noise_and_parameters(args: argparse.Namespace) -> tuple[Any, list[str] | None]:
-    """``--noise`` (one relative error or one per output, default 0.01) and ``--params``."""
-    from gearsym.symbolic.errors import GearsymError
-
-    noise: Any = 0.01
-    if args.noise is not None:
-        try:
-            noise = [number(float, above=0)(v) for v in args.noise.split(",")]
-        except argparse.ArgumentTypeError as err:
-            raise GearsymError("estimate", "--noise", str(err)) from None
-        if len(noise) not in (1, 3):
-            raise GearsymError("estimate", "--noise", "give one value or one per output (3)")
-    parameters = None
-    if args.params is not None:
-        parameters = [p.strip() for p in args.params.split(",") if p.strip()]
-    return noise, parameters
-
-
-def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
-    """``--filter ekf``: the EKF on the scenario's reference shift."""
-    from gearsym.symbolic.errors import GearsymError
-    from gearsym.symbolic.estimators.ekf import augmented_model
-
-    noise, parameters = _ekf_noise_and_parameters(args)
-    initial = _initial_values(args.initial)
-    if args.initial_from_prior and initial:
-        raise GearsymError(
-            "estimate", "--initial-from-prior", "draws the initial estimate: drop --initial"
-        )
-    dropout_outputs = None
-    if args.dropout_outputs is not None:
-        if args.dropout is None:
-            raise GearsymError("estimate", "--dropout-outputs", "needs --dropout")
-        dropout_outputs = [o.strip() for o in args.dropout_outputs.split(",") if o.strip()]
-    dropout = _dropout_window(args.dropout, scenario.shift.name)
-    aug = augmented_model(d, scenario.shift.name, parameters)  # bad names fail before the run
-    outputs = [name.removeprefix("y_") for name in aug.output_names]
-    wrong = [o for o in dropout_outputs or [] if o not in outputs]
-    if wrong or dropout_outputs == []:
-        raise GearsymError(
-            "estimate",
-            "--dropout-outputs",
-            f"expected outputs of the filter ({', '.join(outputs)}), got {args.dropout_outputs!r}",
-        )
-    wrong = [name for name in initial if name not in aug.state_names]
-    if wrong:
-        raise GearsymError(
-            "estimate",
-            "--initial",
-            f"{', '.join(wrong)} is not a state of the filter ({', '.join(aug.state_names)})",
-        )
-
-    assumes: list[str] = []
-
-    def work(folder: Any) -> Any:
-        from gearsym.cmd_dynamics import ProgressBar, simulate_with_progress
-        from gearsym.validation.studies.estimation import (
-            plot_efficiency,
-            plot_ekf,
-            prepare_ekf,
-            run_ekf_monte_carlo,
-            write_ekf_csv,
-        )
-
-        result = simulate_with_progress(d, scenario)
-        window: tuple[float, float] | None
-        if isinstance(dropout, str):  # a phase: its window as the simulation detected it
-            (phase,) = [p for p in result.phases if p.name == dropout]
-            window = (float(phase.t_start), float(phase.t_end))
-        else:
-            window = dropout
-        setup = prepare_ekf(
-            d,
-            result,
-            sample_time=args.sample_time,
-            relative_noise=noise,
-            initial=initial,
-            aug=aug,
-            modes=args.modes,
-        )
-        bar = ProgressBar(f"EKF, {args.runs} run{'s' if args.runs > 1 else ''}")
-        try:
-            mc = run_ekf_monte_carlo(
-                setup,
-                args.runs,
-                seed=args.seed,
-                progress=bar,
-                prior_draw=args.initial_from_prior,
-                dropout=window,
-                dropout_outputs=dropout_outputs,
-            )
-        finally:
-            bar.done()
-        assumes.append(f"scenario: {scenario.name} ({args.scenario or 'built-in'})")
-        if window is not None:
-            assumes.append(
-                f"sensor dropout: {', '.join(dropout_outputs or outputs)} missing (NaN) in "
-                f"[{window[0]:.4g}, {window[1]:.4g}) s: those updates are skipped"
-            )
-        if folder is not None:
-            write_ekf_csv(mc.first, folder / "ekf.csv")
-            (folder / "ekf.json").write_text(json.dumps(mc.to_dict(), indent=2) + "\n")
-            if not args.no_plots:
-                plot_ekf(mc.first, folder / "ekf.png")
-                plot_efficiency(mc, folder / "ekf_efficiency.png")
-        return mc
-
-    from gearsym.validation.studies.estimation import format_ekf_text, format_monte_carlo_text
-
-    def text(mc: Any) -> str:
-        body = format_monte_carlo_text(mc)
-        body = body if len(mc.runs) > 1 else format_ekf_text(mc.first) + "\n" + body
-        return "\n".join(f"  assumes {line}" for line in assumes) + "\n" + body
-
-    return _run_and_report(args, work, text)
-
-
-def _cmd_measured(args: argparse.Namespace, d: Any, scenario: Any) -> int:
-    """``--measurement FILE``: the EKF on a bench recording mapped by the scenario's
-    ``[measurement]`` table; the inputs of the simulation that gives the element modes and
-    the phases are the recorded ones."""
-    from gearsym.symbolic.errors import GearsymError
-
-    if args.filter != "ekf":
-        raise GearsymError("estimate", "--measurement", "runs the EKF: add --filter ekf")
-    for option, given in (
-        ("--drive", args.drive is not None),
-        ("--runs", args.runs != 1),
-        ("--initial-from-prior", args.initial_from_prior),
-        ("--sample-time", args.sample_time is not None),
-        ("--seed", args.seed != 0),
-    ):
-        if given:
-            reason = {
-                "--sample-time": "the recording's grid is the channel map's sample_time",
-                "--seed": "a recording carries its own noise, none is drawn",
-            }.get(option, "needs a truth and noise seeds; a recording has neither")
-            raise GearsymError("estimate", option, f"is not available with --measurement: {reason}")
-    if scenario.measurement is None:
-        raise GearsymError(
-            scenario.file, "measurement", "missing table [measurement] (the channel map)"
-        )
-    from gearsym.symbolic.estimators.ekf import augmented_model
-    from gearsym.validation.sim.measurement import read_measurement
-
-    cmap = scenario.measurement
-    if cmap.sample_time > scenario.t_end / 4:
-        raise GearsymError(
-            scenario.file,
-            "measurement.sample_time",
-            f"must be at most t_end / 4 = {scenario.t_end / 4:g} s, got {cmap.sample_time:g}",
-        )
-    noise, parameters = _ekf_noise_and_parameters(args)
-    initial = _initial_values(args.initial)
-    aug = augmented_model(d, scenario.shift.name, parameters)
-    outputs = [name.removeprefix("y_") for name in aug.output_names]
-    missing = [o for o in outputs if cmap.channel(o) is None]
-    if missing:
-        raise GearsymError(
-            scenario.file,
-            f"measurement.channel.{missing[0]}",
-            f"missing: the filter measures {', '.join(outputs)}",
-        )
-    measurement = read_measurement(args.measurement, cmap, scenario.t_end)
-    dropout = _dropout_window(args.dropout, scenario.shift.name)
-    dropout_outputs = None
-    if args.dropout_outputs is not None:
-        if args.dropout is None:
-            raise GearsymError("estimate", "--dropout-outputs", "needs --dropout")
-        dropout_outputs = [o.strip() for o in args.dropout_outputs.split(",") if o.strip()]
-    assumes: list[str] = []
-
-    def work(folder: Any) -> Any:
-        from gearsym.cmd_dynamics import simulate_with_progress
-        from gearsym.validation.sim.measurement import RESAMPLE_TEXT
-        from gearsym.validation.sim.scenario import input_sources
-        from gearsym.validation.sim.scenario import with_measured_inputs as driven
-        from gearsym.validation.studies.estimation import (
-            filter_run,
-            measured_ekf_dict,
-            plot_ekf,
-            prepare_ekf,
-            write_ekf_csv,
-        )
-
-        measured_scenario = driven(scenario, measurement)
-        result = simulate_with_progress(d, measured_scenario)
-        window: tuple[float, float] | None
-        if isinstance(dropout, str):
-            (phase,) = [p for p in result.phases if p.name == dropout]
-            window = (float(phase.t_start), float(phase.t_end))
-        else:
-            window = dropout
-        setup = prepare_ekf(
-            d,
-            result,
-            sample_time=cmap.sample_time,
-            relative_noise=noise,
-            initial=initial,
-            aug=aug,
-            measured={o: measurement.values[o] for o in outputs},
-            modes=args.modes or "filter",
-        )
-        _say("running the EKF on the recording")
-        run = filter_run(setup, dropout=window, dropout_outputs=dropout_outputs)
-        sources = input_sources(scenario, measurement)
-        assumes.extend(
-            [
-                f"recording: {measurement.file} ({measurement.format}, {len(measurement.t)} "
-                f"samples every {cmap.sample_time * 1e3:g} ms; {RESAMPLE_TEXT})",
-                "inputs: "
-                + ", ".join(f"{name} from the {where}" for name, where in sources.items()),
-                (
-                    "element modes: decided by the filter from its estimate and F_N"
-                    if (args.modes or "filter") == "filter"
-                    else "element modes: from the reference simulation driven by those inputs"
-                )
-                + "; phases: from the reference simulation driven by those inputs (scenario "
-                f"{scenario.name}, {args.scenario or 'built-in'})",
-            ]
-        )
-        data = {
-            **measured_ekf_dict(run),
-            "measurement": measurement.to_dict(),
-            "input_sources": sources,
-        }
-        if folder is not None:
-            write_ekf_csv(run, folder / "ekf.csv")
-            (folder / "ekf.json").write_text(json.dumps(data, indent=2) + "\n")
-            if not args.no_plots:
-                plot_ekf(run, folder / "ekf.png")
-        return _Report(data, run)
-
-    from gearsym.validation.studies.estimation import format_measured_ekf_text
-
-    def text(report: Any) -> str:
-        body = format_measured_ekf_text(report.run)
-        return "\n".join(f"  assumes {line}" for line in assumes) + "\n" + body
-
-    return _run_and_report(args, work, text)
-
-
-class _Report:
-    """A run with its JSON (``to_dict``), as :func:`_run_and_report` expects."""
-
-    def __init__(self, data: dict[str, Any], run: Any) -> None:
-        self.data, self.run = data, run
-
-    def to_dict(self) -> dict[str, Any]:
-        return self.data
-
-
-def _run_and_report(
-    args: argparse.Namespace, work: Callable[[Any], Any], text: Callable[[Any], str]
-) -> int:
-    """Run ``work`` (given the staging folder with ``--out``, else ``None``), write through
-    the one output writer, print the run as JSON or as ``text`` with the files written."""
-    paths: list[Any] = []
-    if args.out is None:
-        run = work(None)
-    else:
-        from gearsym.symbolic.io.output_dir import OutputDir
-
-        with OutputDir(args.out, "estimate", before_commit=check) as out:
-            run = work(out.path)
-            paths = out.commit()
-    if args.json:
-        json.dump({**run.to_dict(), "files": [str(p) for p in paths]}, sys.stdout, indent=2)
-        sys.stdout.write("\n")
-        return 0
-    print(text(run))
-    if paths:
-        print(f"  wrote {len(paths)} files to {args.out}: {', '.join(p.name for p in paths)}")
-    return 0
 
 
 def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:

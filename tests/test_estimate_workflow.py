@@ -1,0 +1,96 @@
+"""``estimate(request) -> report`` (validation/studies/estimate_workflow.py): one workflow for
+the command line and the notebook; every option the chosen filter would not use is refused in
+one line before any simulation; what the filter knows (the calibration) and the world it is
+judged in (the truth) enter separately."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import pytest
+from gearsym.symbolic.errors import GearsymError
+from gearsym.validation.studies.estimate_workflow import (
+    Calibration,
+    EstimateRequest,
+    Truth,
+    check_request,
+)
+
+import gearsym
+from gearsym import cli
+
+
+@pytest.mark.parametrize(
+    ("args", "option"),
+    [
+        (("--filter", "euio", "--dropout", "0.2,0.4"), "--dropout"),
+        (("--filter", "euio", "--dropout-outputs", "omega_1"), "--dropout-outputs"),
+        (("--filter", "euio", "--params", "m_veh"), "--params"),
+        (("--filter", "euio", "--unknown", "T_K38"), "--unknown"),
+        (("--filter", "uio", "--params", "m_veh"), "--params"),
+        (("--filter", "uio", "--initial", "m_veh=1500"), "--initial"),
+        (("--filter", "uio", "--dropout", "0.2,0.4"), "--dropout"),
+        (("--filter", "uio", "--modes", "filter"), "--modes"),
+        (("--filter", "ekf", "--unknown", "T_K38"), "--unknown"),
+        (("--filter", "ekf", "--sample-time", "1e-9"), "--sample-time"),
+        (("--filter", "uio", "--sample-time", "0.0001"), "--sample-time"),
+        (("--filter", "ekf", "--drive", "upshifts", "--runs", "2"), "--runs"),
+    ],
+)
+def test_an_option_the_filter_would_not_use_is_refused_before_any_work(
+    args: tuple[str, ...], option: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    start = time.perf_counter()
+    assert cli.main(["estimate", *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"gearsym: estimate: {option}: "), err
+    assert time.perf_counter() - start < 5  # refused before the reference simulation
+
+
+def test_a_drive_whose_shifts_do_not_chain_is_refused(
+    tmp_path_factory: pytest.TempPathFactory, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from gearsym.validation.sim.scenario import default_scenario_path
+
+    folder = default_scenario_path().parent
+    drive = f"{folder / 'scenario_3_4.toml'},{folder / 'scenario_1_2.toml'}"
+    assert cli.main(["estimate", "--filter", "ekf", "--drive", drive]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert "--drive: the shifts do not chain: 3-4 ends in gear 4" in err
+    assert "starts in gear 1" in err
+
+
+def test_the_request_keeps_the_calibration_apart_from_the_truth() -> None:
+    """Two requests that differ only in their truth give the filter the same calibration
+    object; the check reads the truth only for its time span."""
+    from gearsym.validation.sim.scenario import default_scenario_path
+
+    box = gearsym.load()
+    calibration = Calibration(box.description, sample_time=0.01)
+    coast = default_scenario_path().parent / "scenario_2_3_coast.toml"
+    a = EstimateRequest("ekf", calibration, (Truth(box.scenario(None)),))
+    b = EstimateRequest("ekf", calibration, (Truth(box.scenario(coast)),))
+    check_request(a)
+    check_request(b)
+    assert a.calibration is b.calibration
+    assert a.truth.scenario.name != b.truth.scenario.name
+    with pytest.raises(GearsymError, match="--filter"):
+        check_request(EstimateRequest("kalman", calibration, a.truths))
+
+
+def test_the_notebook_and_the_command_line_give_the_same_report(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """``gearsym.load().estimate(...)`` is the command's workflow: the same JSON, seed for
+    seed (the UIO: quick and deterministic)."""
+    report = gearsym.load().estimate("uio", seed=3, relative_noise=(0.01,))
+    assert (
+        cli.main(["estimate", "--filter", "uio", "--seed", "3", "--noise", "0.01", "--json"]) == 0
+    )
+    printed = json.loads(capsys.readouterr().out)
+    assert printed.pop("files") == []
+    assert printed == json.loads(json.dumps(report.to_dict()))
+    with pytest.raises(GearsymError, match="noise"):
+        gearsym.load().estimate("uio", noise=0.01)  # a misspelt option is refused
