@@ -78,13 +78,15 @@ def cmd_estimate(args: argparse.Namespace) -> int:
             raise GearsymError("estimate", "--noise", str(err)) from None
 
     from gearsym.symbolic.estimators import linear_modes
-    from gearsym.validation.studies.estimation import check_unknown
+    from gearsym.validation.studies.estimation.uio import check_unknown
 
     check_unknown(linear_modes(d, scenario.shift.name), unknown)  # before the simulation
 
     def work(folder: Any) -> Any:
         from gearsym.cmd_dynamics import simulate_with_progress
-        from gearsym.validation.studies.estimation import plot_uio, run_uio, write_csv
+        from gearsym.validation.studies.estimation.plots import plot_uio
+        from gearsym.validation.studies.estimation.report import write_csv
+        from gearsym.validation.studies.estimation.uio import run_uio
 
         result = simulate_with_progress(d, scenario)
         _say("designing and running the UIO of each phase")
@@ -103,7 +105,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
                 plot_uio(run, folder)
         return run
 
-    from gearsym.validation.studies.estimation import format_text
+    from gearsym.validation.studies.estimation.report import format_text
 
     return _run_and_report(args, work, format_text)
 
@@ -132,7 +134,8 @@ def _cmd_euio(args: argparse.Namespace, d: Any, scenario: Any) -> int:
 
     def work(folder: Any) -> Any:
         from gearsym.cmd_dynamics import simulate_with_progress
-        from gearsym.validation.studies.estimation import plot_euio, write_euio_csv
+        from gearsym.validation.studies.estimation.plots import plot_euio
+        from gearsym.validation.studies.estimation.report import write_euio_csv
         from gearsym.validation.studies.euio_evaluation import euio_filter_run, prepare_euio
 
         result = simulate_with_progress(d, scenario)
@@ -153,7 +156,7 @@ def _cmd_euio(args: argparse.Namespace, d: Any, scenario: Any) -> int:
                 plot_euio(run, folder / "euio.png")
         return run
 
-    from gearsym.validation.studies.estimation import format_euio_text
+    from gearsym.validation.studies.estimation.report import format_euio_text
 
     return _run_and_report(args, work, format_euio_text)
 
@@ -166,7 +169,8 @@ def _cmd_euio_monte_carlo(
 
     def work(folder: Any) -> Any:
         from gearsym.cmd_dynamics import ProgressBar, simulate_with_progress
-        from gearsym.validation.studies.estimation import plot_euio, write_euio_csv
+        from gearsym.validation.studies.estimation.plots import plot_euio
+        from gearsym.validation.studies.estimation.report import write_euio_csv
         from gearsym.validation.studies.euio_evaluation import (
             plot_euio_efficiency,
             prepare_euio,
@@ -288,7 +292,8 @@ def _cmd_drive(args: argparse.Namespace, d: Any) -> int:
         )
 
     from gearsym.cmd_dynamics import simulate_with_progress
-    from gearsym.validation.studies.estimation import format_ekf_text, run_ekf_drive
+    from gearsym.validation.studies.estimation.loop import run_ekf_drive
+    from gearsym.validation.studies.estimation.report import format_ekf_text
 
     results = [simulate_with_progress(d, sc) for sc in scenarios]
     _say("running the EKF through the shifts, m_veh and zeta carried")
@@ -374,13 +379,10 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
 
     def work(folder: Any) -> Any:
         from gearsym.cmd_dynamics import ProgressBar, simulate_with_progress
-        from gearsym.validation.studies.estimation import (
-            plot_efficiency,
-            plot_ekf,
-            prepare_ekf,
-            run_ekf_monte_carlo,
-            write_ekf_csv,
-        )
+        from gearsym.validation.studies.estimation.montecarlo import run_ekf_monte_carlo
+        from gearsym.validation.studies.estimation.plots import plot_efficiency, plot_ekf
+        from gearsym.validation.studies.estimation.report import write_ekf_csv
+        from gearsym.validation.studies.estimation.setup import prepare_ekf
 
         result = simulate_with_progress(d, scenario)
         window: tuple[float, float] | None
@@ -425,7 +427,10 @@ def _cmd_ekf(args: argparse.Namespace, d: Any, scenario: Any) -> int:
                 plot_efficiency(mc, folder / "ekf_efficiency.png")
         return mc
 
-    from gearsym.validation.studies.estimation import format_ekf_text, format_monte_carlo_text
+    from gearsym.validation.studies.estimation.report import (
+        format_ekf_text,
+        format_monte_carlo_text,
+    )
 
     def text(mc: Any) -> str:
         body = format_monte_carlo_text(mc)
@@ -495,13 +500,10 @@ def _cmd_measured(args: argparse.Namespace, d: Any, scenario: Any) -> int:
         from gearsym.validation.sim.measurement import RESAMPLE_TEXT
         from gearsym.validation.sim.scenario import input_sources
         from gearsym.validation.sim.scenario import with_measured_inputs as driven
-        from gearsym.validation.studies.estimation import (
-            filter_run,
-            measured_ekf_dict,
-            plot_ekf,
-            prepare_ekf,
-            write_ekf_csv,
-        )
+        from gearsym.validation.studies.estimation.loop import filter_run
+        from gearsym.validation.studies.estimation.plots import plot_ekf
+        from gearsym.validation.studies.estimation.report import measured_ekf_dict, write_ekf_csv
+        from gearsym.validation.studies.estimation.setup import prepare_ekf
 
         measured_scenario = driven(scenario, measurement)
         result = simulate_with_progress(d, measured_scenario)
@@ -551,7 +553,7 @@ def _cmd_measured(args: argparse.Namespace, d: Any, scenario: Any) -> int:
                 plot_ekf(run, folder / "ekf.png")
         return _Report(data, run)
 
-    from gearsym.validation.studies.estimation import format_measured_ekf_text
+    from gearsym.validation.studies.estimation.report import format_measured_ekf_text
 
     def text(report: Any) -> str:
         body = format_measured_ekf_text(report.run)
