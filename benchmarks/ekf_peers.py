@@ -67,17 +67,14 @@ class Sequence:
 
 def sequence(seed: int = SEED, sample_time: float = SAMPLE_TIME) -> Sequence:
     """The default 2-3 shift, speeds with 1 % noise drawn from ``seed`` as
-    :func:`gearsym.validation.studies.estimation.filter_run` draws them, and that run's
+    :func:`gearsym.validation.studies.estimation.loop.filter_run` draws them, and that run's
     estimates."""
     from gearsym.symbolic.estimators.ekf import ekf_update
     from gearsym.symbolic.loader import load_description
     from gearsym.validation.sim.scenario import load_scenario
     from gearsym.validation.sim.simulate import simulate
-    from gearsym.validation.studies.estimation import (
-        filter_run,
-        prepare_ekf,
-        start_from_first_measurement,
-    )
+    from gearsym.validation.studies.estimation.loop import filter_run, start_from_first_measurement
+    from gearsym.validation.studies.estimation.setup import prepare_ekf
 
     d = load_description(None)
     result = simulate(d, load_scenario(d, None))

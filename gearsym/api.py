@@ -157,14 +157,14 @@ class Gearbox:
         ``.result``). ``options``: the calibration's (``sample_time``, ``relative_noise``,
         ``parameters``, ``initial``, ``modes``) and the evaluation's (``runs``, ``seed``,
         ``initial_from_prior``, ``dropout``, ``dropout_outputs``, ``unknown``) fields of
-        :class:`~gearsym.validation.studies.estimate_workflow.Calibration` and
-        :class:`~gearsym.validation.studies.estimate_workflow.EstimateRequest`. With
+        :class:`~gearsym.validation.studies.estimation.workflow.Calibration` and
+        :class:`~gearsym.validation.studies.estimation.workflow.EstimateRequest`. With
         ``out``, the CSV, JSON and plots are written there through the one output writer."""
         from dataclasses import fields
 
         from gearsym.symbolic.errors import GearsymError
         from gearsym.symbolic.io.output_dir import OutputDir
-        from gearsym.validation.studies.estimate_workflow import (
+        from gearsym.validation.studies.estimation.workflow import (
             Calibration,
             EstimateRequest,
             Truth,

@@ -4,9 +4,9 @@ The unknown input observer (4.4): existence per phase, and its estimates of the 
 unknown inputs against the reference simulation; the extended Kalman filter (4.3) on the
 parameter-augmented shift model (4.1): m_veh, μ of the swapping elements and ζ with σ, NEES and
 NIS against the reference. This module parses the options into an
-:class:`~gearsym.validation.studies.estimate_workflow.EstimateRequest` (what the filter knows
+:class:`~gearsym.validation.studies.estimation.workflow.EstimateRequest` (what the filter knows
 apart from the world it is judged in) and prints the report; the workflow is
-:func:`gearsym.validation.studies.estimate_workflow.estimate`.
+:func:`gearsym.validation.studies.estimation.workflow.estimate`.
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ class _Reporter:
 def cmd_estimate(args: argparse.Namespace) -> int:
     """Parse the options into a request, run it (:func:`estimate`), print or write."""
     from gearsym.validation.sim.scenario import load_scenario
-    from gearsym.validation.studies.estimate_workflow import (
+    from gearsym.validation.studies.estimation.workflow import (
         Calibration,
         EstimateRequest,
         Truth,

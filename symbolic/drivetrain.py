@@ -1,4 +1,5 @@
-"""Stage 3b: the elastic drivetrain and the shift models (thesis 2.42–2.58, 5.1–5.5).
+"""Stage 3b: the elastic drivetrain and the shift models (thesis 2.42–2.58); their linear
+forms (5.1)–(5.5) are :mod:`gearsym.symbolic.linear_forms`.
 
 The rigid gearbox M ÿ = B̃ u (2.39) is closed at its output by an elastic side-shaft pair
 (spring k_ss, damper d_ss, 2.47), the differential ratio i_D and an equivalent wheel that carries

@@ -157,7 +157,7 @@ def reference():
 
 @pytest.fixture(scope="module")
 def ekf_run(reference, aug, discrete):
-    from gearsym.validation.studies.estimation import run_ekf
+    from gearsym.validation.studies.estimation.loop import run_ekf
 
     d, result = reference
     return run_ekf(d, result, sample_time=0.01, seed=0, aug=aug, discrete=discrete)
@@ -184,7 +184,7 @@ def test_nees_over_ten_seeds_is_consistent_with_its_chi2_distribution(reference,
     samples inside (the filter's model-error intensities are tuned to the average, not to every
     sample: the fraction is 0.78 over these seeds with the 0.27 s gear 2 of the former
     scenario and 0.76 with the 0.57 s one)."""
-    from gearsym.validation.studies.estimation import run_ekf
+    from gearsym.validation.studies.estimation.loop import run_ekf
 
     d, result = reference
     runs = [
@@ -230,7 +230,7 @@ def _sliding_windows(result) -> dict[str, tuple[float, float]]:
 def reference_modes_run(reference, aug, discrete):
     """The run with the reference's element modes (``modes="reference"``): their sliding
     windows are the scenario's; the filter's own modes are tested in tests/test_ekf_modes.py."""
-    from gearsym.validation.studies.estimation import run_ekf
+    from gearsym.validation.studies.estimation.loop import run_ekf
 
     d, result = reference
     return run_ekf(
@@ -263,7 +263,7 @@ def test_mu_is_frozen_while_its_element_does_not_slide(reference_modes_run, refe
 
 
 def test_dropout_skips_updates_and_no_nan_enters_the_state(reference, aug, discrete, ekf_run):
-    from gearsym.validation.studies.estimation import run_ekf
+    from gearsym.validation.studies.estimation.loop import run_ekf
 
     d, result = reference
     # 0.2 s without measurements early in gear 3, then 0.1 s to recover

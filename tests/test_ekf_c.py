@@ -50,7 +50,7 @@ def _trajectory(d, m):
     from gearsym.symbolic.estimators.ekf import augmented_model
     from gearsym.validation.sim.scenario import load_scenario
     from gearsym.validation.sim.simulate import simulate
-    from gearsym.validation.studies.estimation import run_ekf
+    from gearsym.validation.studies.estimation.loop import run_ekf
 
     result = simulate(d, load_scenario(d, None))
     aug = augmented_model(d, "2-3")
@@ -163,7 +163,7 @@ def test_emitted_ekf_step_equals_the_reference_filter(emitted, libraries):
 def _inputs(d, aug, run):
     from gearsym.validation.sim.scenario import load_scenario
     from gearsym.validation.sim.simulate import simulate
-    from gearsym.validation.studies.estimation import element_modes
+    from gearsym.validation.studies.estimation.modes import element_modes
 
     result = simulate(d, load_scenario(d, None))
     modes = element_modes(d, result, run.t)
@@ -195,7 +195,8 @@ def mode_cases(emitted):
     random correlation and the run's σ."""
     from gearsym.validation.sim.scenario import load_scenario
     from gearsym.validation.sim.simulate import simulate
-    from gearsym.validation.studies.estimation import filter_run, prepare_ekf
+    from gearsym.validation.studies.estimation.loop import filter_run
+    from gearsym.validation.studies.estimation.setup import prepare_ekf
 
     d, _ = emitted
     result = simulate(d, load_scenario(d, None))

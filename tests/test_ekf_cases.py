@@ -18,7 +18,8 @@ from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
 from gearsym.symbolic.loader import load_description
 from gearsym.validation.sim.scenario import default_scenario_path, load_scenario
 from gearsym.validation.sim.simulate import simulate
-from gearsym.validation.studies.estimation import filter_run, prepare_ekf, run_ekf
+from gearsym.validation.studies.estimation.loop import filter_run, run_ekf
+from gearsym.validation.studies.estimation.setup import prepare_ekf
 
 DATA = Path(default_scenario_path()).parent
 GRADE = math.atan(0.04)  # a 4 % grade: tan ζ = 0.04
@@ -176,7 +177,7 @@ def test_estimate_command_runs_the_cases_and_states_what_it_assumes():
 
 
 def test_drive_of_upshifts_1_2_3_4_carries_mass_and_grade(d, level):
-    from gearsym.validation.studies.estimation import run_ekf_drive
+    from gearsym.validation.studies.estimation.loop import run_ekf_drive
 
     results = [
         simulate(d, load_scenario(d, DATA / "scenario_1_2.toml")),

@@ -202,14 +202,14 @@ def result(d):
 
 @pytest.fixture(scope="module")
 def setup(d, aug, result):
-    from gearsym.validation.studies.estimation import prepare_ekf
+    from gearsym.validation.studies.estimation.setup import prepare_ekf
 
     return prepare_ekf(d, result, sample_time=0.01, aug=aug)
 
 
 @pytest.fixture(scope="module")
 def runs(setup):
-    from gearsym.validation.studies.estimation import filter_run
+    from gearsym.validation.studies.estimation.loop import filter_run
 
     return [filter_run(setup, seed) for seed in SEEDS]
 
@@ -253,7 +253,8 @@ def test_mu_estimate_and_sigma_are_bit_equal_while_the_filter_holds_its_element(
 
 
 def test_reference_modes_remain_available_and_report_their_source(d, result, setup, aug, runs):
-    from gearsym.validation.studies.estimation import filter_run, prepare_ekf
+    from gearsym.validation.studies.estimation.loop import filter_run
+    from gearsym.validation.studies.estimation.setup import prepare_ekf
 
     reference = prepare_ekf(
         d, result, sample_time=0.01, aug=aug, discrete=setup.discrete, modes="reference"

@@ -28,7 +28,7 @@ RUNS = 50
 def setup():
     from gearsym.validation.sim.scenario import load_scenario
     from gearsym.validation.sim.simulate import simulate
-    from gearsym.validation.studies.estimation import prepare_ekf
+    from gearsym.validation.studies.estimation.setup import prepare_ekf
 
     d = load_description()
     return prepare_ekf(d, simulate(d, load_scenario(d, None)), sample_time=0.01)
@@ -36,7 +36,7 @@ def setup():
 
 @pytest.fixture(scope="module")
 def mc(setup):
-    from gearsym.validation.studies.estimation import run_ekf_monte_carlo
+    from gearsym.validation.studies.estimation.montecarlo import run_ekf_monte_carlo
 
     calls = []
     result = run_ekf_monte_carlo(setup, RUNS, seed=0, progress=lambda f, m: calls.append((f, m)))
@@ -45,7 +45,7 @@ def mc(setup):
 
 
 def test_runs_differ_only_by_the_noise(mc, setup):
-    from gearsym.validation.studies.estimation import filter_run
+    from gearsym.validation.studies.estimation.loop import filter_run
 
     first, second = mc.runs[0], mc.runs[1]
     assert [r.seed for r in mc.runs] == list(range(RUNS))
@@ -63,7 +63,7 @@ def test_nees_mean_over_50_runs_is_inside_its_chi2_band(mc):
     hi = chi2.ppf(0.975, RUNS * dof) / RUNS
     assert mc.nees_band() == pytest.approx((lo, hi))
     assert lo <= mc.nees_mean <= hi, (mc.nees_mean, lo, hi)
-    from gearsym.validation.studies.estimation import format_monte_carlo_text
+    from gearsym.validation.studies.estimation.report import format_monte_carlo_text
 
     text = format_monte_carlo_text(mc)
     assert f"NEES mean {mc.nees_mean:.2f} over {RUNS} runs" in text and "NIS mean" in text
@@ -102,7 +102,8 @@ def _mode_phases(setup, element_index):
 def test_mu_not_identifiable_where_its_element_does_not_slide_and_its_sigma_stays(
     mc, setup, element_index
 ):
-    from gearsym.validation.studies.estimation import NOT_IDENTIFIABLE, format_monte_carlo_text
+    from gearsym.validation.studies.estimation.bounds import NOT_IDENTIFIABLE
+    from gearsym.validation.studies.estimation.report import format_monte_carlo_text
 
     text = format_monte_carlo_text(mc).splitlines()
     element, idle = _mode_phases(setup, element_index)
@@ -191,7 +192,7 @@ def test_bound_equals_the_information_filter_along_the_truth(mc, setup):
 
 @pytest.fixture(scope="module")
 def mc_prior(setup, mc):
-    from gearsym.validation.studies.estimation import run_ekf_monte_carlo
+    from gearsym.validation.studies.estimation.montecarlo import run_ekf_monte_carlo
 
     return run_ekf_monte_carlo(setup, RUNS, seed=0, bound=mc.bound, prior_draw=True)
 

@@ -1,4 +1,4 @@
-"""``estimate(request) -> report`` (validation/studies/estimate_workflow.py): one workflow for
+"""``estimate(request) -> report`` (validation/studies/estimation/workflow.py): one workflow for
 the command line and the notebook; every option the chosen filter would not use is refused in
 one line before any simulation; what the filter knows (the calibration) and the world it is
 judged in (the truth) enter separately."""
@@ -10,7 +10,7 @@ import time
 
 import pytest
 from gearsym.symbolic.errors import GearsymError
-from gearsym.validation.studies.estimate_workflow import (
+from gearsym.validation.studies.estimation.workflow import (
     Calibration,
     EstimateRequest,
     Truth,

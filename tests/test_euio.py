@@ -21,7 +21,8 @@ from gearsym.symbolic.estimators.euio import ROAD_FREE
 from gearsym.symbolic.loader import load_description
 from gearsym.validation.sim.scenario import default_scenario_path, load_scenario
 from gearsym.validation.sim.simulate import simulate
-from gearsym.validation.studies.estimation import run_ekf, run_euio
+from gearsym.validation.studies.estimation.euio import run_euio
+from gearsym.validation.studies.estimation.loop import run_ekf
 
 DATA = Path(default_scenario_path()).parent
 

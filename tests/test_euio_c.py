@@ -2,8 +2,8 @@
 
 Expected values: :func:`gearsym.symbolic.estimators.euio.euio_step_full` (CasADi evaluation of
 the SymPy model, dense NumPy linear algebra with ``np.linalg.inv``), step by step along the
-default 2-3 shift as :func:`gearsym.validation.studies.estimation.run_euio` runs it (its held masks:
-m_veh in every phase, a μ where its element does not slide or its UIO conditions fail), with
+default 2-3 shift as :func:`gearsym.validation.studies.estimation.euio.run_euio` runs it (its held
+masks: m_veh in every phase, a μ where its element does not slide or its UIO conditions fail), with
 sensor dropouts (NaN) added. From the library's state before each step: the C double build to
 1e-12 and the float build to 1e-5 in each quantity's own scale (x_i against |x_i| + σ_i, P_ij
 against σ_i σ_j, d̂ against |d̂| + σ_d, σ_d² relative, the NIS νᵀS⁻¹ν − d̂²/σ_d² against its
@@ -53,11 +53,9 @@ def run(emitted):
     from gearsym.symbolic.drivetrain import quantity
     from gearsym.validation.sim.scenario import load_scenario
     from gearsym.validation.sim.simulate import simulate
-    from gearsym.validation.studies.estimation import (
-        noisy_outputs,
-        prepare_ekf,
-        run_euio,
-    )
+    from gearsym.validation.studies.estimation.euio import run_euio
+    from gearsym.validation.studies.estimation.loop import noisy_outputs
+    from gearsym.validation.studies.estimation.setup import prepare_ekf
 
     d, m = emitted
     result = simulate(d, load_scenario(d, None))

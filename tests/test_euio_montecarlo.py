@@ -64,7 +64,7 @@ def mc(setup):
 
 
 def test_a_run_is_run_euio_to_the_bit(d, result, setup):
-    from gearsym.validation.studies.estimation import run_euio
+    from gearsym.validation.studies.estimation.euio import run_euio
     from gearsym.validation.studies.euio_evaluation import euio_filter_run
 
     mine = euio_filter_run(setup, 3).run

@@ -299,7 +299,8 @@ def test_ekf_on_the_recording_reproduces_the_synthetic_run_of_the_same_seed(tmp_
 def test_ekf_trajectories_agree_sample_by_sample_for_mdf4_and_csv(
     tmp_path, box, scenario, reference
 ):
-    from gearsym.validation.studies.estimation import filter_run, prepare_ekf, run_ekf
+    from gearsym.validation.studies.estimation.loop import filter_run, run_ekf
+    from gearsym.validation.studies.estimation.setup import prepare_ekf
 
     synthetic = run_ekf(box, reference, 0.01, 0.01, seed=0)
     csv_path = tmp_path / "rec.csv"

@@ -13,7 +13,7 @@ from gearsym.symbolic.drivetrain import full_model
 from gearsym.symbolic.estimators.ekf import RANDOM_WALK
 from gearsym.symbolic.export.generate import MU_BOUNDS, PARAMETER_BOUNDS
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.studies.estimation import EKF_PRIOR_SIGMA
+from gearsym.validation.studies.estimation.setup import EKF_PRIOR_SIGMA
 
 ROOT = Path(__file__).resolve().parents[1]
 

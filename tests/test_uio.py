@@ -170,7 +170,7 @@ def reference():
 
 
 def test_uio_on_the_reference_shift(reference):
-    from gearsym.validation.studies.estimation import run_uio
+    from gearsym.validation.studies.estimation.uio import run_uio
 
     d, result = reference
     coarse = {p.phase: p for p in run_uio(d, result, sample_time=0.01).phases}
@@ -193,7 +193,7 @@ def test_uio_on_the_reference_shift(reference):
 
 
 def test_with_clutch_torques_unknown_only_the_gears_have_an_observer(reference):
-    from gearsym.validation.studies.estimation import run_uio
+    from gearsym.validation.studies.estimation.uio import run_uio
 
     d, result = reference
     run = run_uio(d, result, unknown=["T_K38", "T_B05", "T_res_star"])

@@ -78,7 +78,7 @@ def reference_steps(
     from gearsym.symbolic.estimators.euio import euio_step_full, load_column
     from gearsym.validation.sim.scenario import load_scenario
     from gearsym.validation.sim.simulate import simulate
-    from gearsym.validation.studies.estimation import noisy_outputs
+    from gearsym.validation.studies.estimation.loop import noisy_outputs
     from gearsym.validation.studies.euio_evaluation import prepare_euio
 
     if result is None:

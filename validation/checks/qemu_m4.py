@@ -130,7 +130,8 @@ def reference_case(description: Any, seed: int = 11, noise: float = 0.01) -> Cas
     from gearsym.validation.checks.euio_check import reference_steps
     from gearsym.validation.sim.scenario import load_scenario
     from gearsym.validation.sim.simulate import simulate
-    from gearsym.validation.studies.estimation import element_modes, run_ekf
+    from gearsym.validation.studies.estimation.loop import run_ekf
+    from gearsym.validation.studies.estimation.modes import element_modes
 
     result = simulate(description, load_scenario(description, None))
     aug = augmented_model(description, "2-3")

@@ -547,9 +547,9 @@ def synthetic_recording(
     ``seed`` as one (samples × speeds) array in the map's order; the inputs exact.
 
     The draw is the EKF's synthetic one
-    (:func:`gearsym.validation.studies.estimation.noisy_outputs`) when the map lists the filter's
-    outputs in the filter's order: the same seed, the same noise. Returns the grid (scenario time)
-    and the SI values per signal."""
+    (:func:`gearsym.validation.studies.estimation.loop.noisy_outputs`) when the map lists the
+    filter's outputs in the filter's order: the same seed, the same noise. Returns the grid
+    (scenario time) and the SI values per signal."""
 
     t_end = float(result.scenario.t_end)
     grid = analysis_grid(t_end, channel_map.sample_time)

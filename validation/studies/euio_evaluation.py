@@ -2,8 +2,8 @@
 
 The EUIO (:mod:`gearsym.symbolic.estimators.euio`) estimates m_veh, μ_off, μ_on as random
 walks (4.1) with the road load T_res* (absorbing ζ, (5.5)) as an unknown input about which it
-assumes nothing. Its runs here are :func:`~gearsym.validation.studies.estimation.run_euio`'s (the
-same loop, checked equal to the bit by the tests), split like the EKF's Monte-Carlo study: the
+assumes nothing. Its runs here are :func:`~gearsym.validation.studies.estimation.euio.run_euio`'s
+(the same loop, checked equal to the bit by the tests), split like the EKF's Monte-Carlo study: the
 reference simulated once (:func:`prepare_euio`), the speed noise (3.26) drawn anew per run
 (:func:`euio_filter_run`).
 
@@ -47,16 +47,14 @@ from gearsym.symbolic.drivetrain import quantity
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.parameters import symbol
 from gearsym.validation.sim.simulate import SimulationResult
-from gearsym.validation.studies.estimation import (
-    NOT_IDENTIFIABLE,
-    EkfSetup,
-    EuioRun,
+from gearsym.validation.studies.estimation.bounds import NOT_IDENTIFIABLE, _phase_samples
+from gearsym.validation.studies.estimation.euio import EuioRun
+from gearsym.validation.studies.estimation.loop import (
     ParameterEstimate,
     _chi2_mean_band,
-    _phase_samples,
     noisy_outputs,
-    prepare_ekf,
 )
+from gearsym.validation.studies.estimation.setup import EkfSetup, prepare_ekf
 
 __all__ = [
     "EUIO_BOUND_ASSUMPTION",
@@ -146,9 +144,9 @@ def prepare_euio(
     initial: Mapping[str, float] | None = None,
     modes: str = "filter",
 ) -> EuioSetup:
-    """As :func:`~gearsym.validation.studies.estimation.run_euio` before its loop: the EKF's setup
-    for m_veh and the μ of the swapping elements, existence per phase on the linearisation at the
-    phase's midpoint (truth states, the truth's parameters). ``modes``: "filter" (default),
+    """As :func:`~gearsym.validation.studies.estimation.euio.run_euio` before its loop: the EKF's
+    setup for m_veh and the μ of the swapping elements, existence per phase on the linearisation at
+    the phase's midpoint (truth states, the truth's parameters). ``modes``: "filter" (default),
     the EKF's mode logic (:func:`~gearsym.symbolic.estimators.ekf_modes.ekf_mode_update`)
     decides the element modes in each run, or "reference", the reference's (the truth)."""
     from gearsym.symbolic.estimators.ekf import default_parameters
@@ -223,8 +221,9 @@ def euio_filter_run(
     (:func:`~gearsym.symbolic.estimators.ekf_modes.ekf_mode_update`, from the posterior and
     F_N; a lock-up maps z and P through the hybrid model's state map) decide after each
     sample the modes held over the next interval, with the held mask of that mode combination
-    (:meth:`EuioSetup.held_for_modes`), as :func:`~gearsym.validation.studies.estimation.filter_run`
-    does for the EKF. The estimate and NEES recorded at a sample are the update's."""
+    (:meth:`EuioSetup.held_for_modes`), as
+    :func:`~gearsym.validation.studies.estimation.loop.filter_run` does for the EKF. The estimate
+    and NEES recorded at a sample are the update's."""
     from gearsym.symbolic.estimators.ekf_modes import ekf_mode_update
     from gearsym.symbolic.estimators.euio import euio_step_full, load_column
 

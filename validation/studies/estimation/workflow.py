@@ -397,13 +397,9 @@ def _assumes(lines: Sequence[str]) -> str:
 
 def _uio(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> EstimateReport:
     from gearsym.symbolic.estimators import linear_modes
-    from gearsym.validation.studies.estimation import (
-        check_unknown,
-        format_text,
-        plot_uio,
-        run_uio,
-        write_csv,
-    )
+    from gearsym.validation.studies.estimation.plots import plot_uio
+    from gearsym.validation.studies.estimation.report import format_text, write_csv
+    from gearsym.validation.studies.estimation.uio import check_unknown, run_uio
 
     cal, truth = request.calibration, request.truth
     d = cal.description
@@ -450,15 +446,14 @@ def _check_ekf_names(request: EstimateRequest, aug: Any) -> list[str]:
 
 def _ekf(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> EstimateReport:
     from gearsym.symbolic.estimators.ekf import augmented_model
-    from gearsym.validation.studies.estimation import (
+    from gearsym.validation.studies.estimation.montecarlo import run_ekf_monte_carlo
+    from gearsym.validation.studies.estimation.plots import plot_efficiency, plot_ekf
+    from gearsym.validation.studies.estimation.report import (
         format_ekf_text,
         format_monte_carlo_text,
-        plot_efficiency,
-        plot_ekf,
-        prepare_ekf,
-        run_ekf_monte_carlo,
         write_ekf_csv,
     )
+    from gearsym.validation.studies.estimation.setup import prepare_ekf
 
     cal, truth = request.calibration, request.truth
     d = cal.description
@@ -510,11 +505,8 @@ def _ekf(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> E
 
 
 def _euio(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> EstimateReport:
-    from gearsym.validation.studies.estimation import (
-        format_euio_text,
-        plot_euio,
-        write_euio_csv,
-    )
+    from gearsym.validation.studies.estimation.plots import plot_euio
+    from gearsym.validation.studies.estimation.report import format_euio_text, write_euio_csv
     from gearsym.validation.studies.euio_evaluation import (
         euio_filter_run,
         format_euio_monte_carlo_text,
@@ -567,11 +559,8 @@ def _euio(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> 
 
 
 def _drive(request: EstimateRequest, reporter: Reporter) -> EstimateReport:
-    from gearsym.validation.studies.estimation import (
-        DRIVE_CARRIED,
-        format_ekf_text,
-        run_ekf_drive,
-    )
+    from gearsym.validation.studies.estimation.loop import DRIVE_CARRIED, run_ekf_drive
+    from gearsym.validation.studies.estimation.report import format_ekf_text
 
     cal = request.calibration
     d = cal.description
@@ -615,14 +604,14 @@ def _measured(request: EstimateRequest, folder: Path | None, reporter: Reporter)
     from gearsym.validation.sim.measurement import RESAMPLE_TEXT
     from gearsym.validation.sim.scenario import input_sources
     from gearsym.validation.sim.scenario import with_measured_inputs as driven
-    from gearsym.validation.studies.estimation import (
-        filter_run,
+    from gearsym.validation.studies.estimation.loop import filter_run
+    from gearsym.validation.studies.estimation.plots import plot_ekf
+    from gearsym.validation.studies.estimation.report import (
         format_measured_ekf_text,
         measured_ekf_dict,
-        plot_ekf,
-        prepare_ekf,
         write_ekf_csv,
     )
+    from gearsym.validation.studies.estimation.setup import prepare_ekf
 
     cal, truth = request.calibration, request.truth
     d, scenario, measurement = cal.description, truth.scenario, truth.measurement

@@ -1,0 +1,311 @@
+"""Monte-Carlo evaluation of the EKF against its matched posterior Cramér–Rao bound: many noise
+draws of one set-up, the statistics per phase and parameter.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from gearsym.symbolic.errors import GearsymError
+from gearsym.validation.studies.estimation.bounds import (
+    BOUND_ASSUMPTION,
+    NOT_IDENTIFIABLE,
+    EkfBound,
+    _phase_samples,
+    ekf_bound,
+)
+from gearsym.validation.studies.estimation.loop import EkfRun, _chi2_mean_band, filter_run
+from gearsym.validation.studies.estimation.setup import EkfSetup
+
+__all__ = [
+    "EkfMonteCarlo",
+    "run_ekf_monte_carlo",
+]
+
+
+@dataclass(frozen=True)
+class PhaseParameterStats:
+    """One parameter in one phase over the Monte-Carlo runs."""
+
+    samples: int  # scored samples per run
+    mean_error: float | None
+    rmse: float | None
+    sigma: float | None  # reported σ, RMS over the scored samples and runs
+    crb_sigma: float | None  # the posterior bound, RMS over the same samples
+    efficiency: float | None  # rmse / crb_sigma
+    #: the bound with the filter's process noise (random walks, model error), and rmse over it
+    crb_sigma_process: float | None
+    efficiency_process: float | None
+    identifiable: bool
+    gamma: float | None  # (3.27) on the phase's own FIM
+    #: filter σ and bound at the phase's last sample over those before it (1: no information)
+    sigma_ratio: float
+    crb_ratio: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "samples": self.samples,
+            "mean_error": self.mean_error,
+            "rmse": self.rmse,
+            "sigma": self.sigma,
+            "crb_sigma": self.crb_sigma,
+            "efficiency": self.efficiency,
+            "crb_sigma_process_noise": self.crb_sigma_process,
+            "efficiency_process_noise": self.efficiency_process,
+            "identifiable": self.identifiable,
+            "verdict": None if self.identifiable else NOT_IDENTIFIABLE,
+            "gamma": self.gamma if self.gamma is None or np.isfinite(self.gamma) else "inf",
+            "sigma_ratio": self.sigma_ratio,
+            "crb_ratio": self.crb_ratio,
+        }
+
+
+@dataclass(frozen=True)
+class EkfMonteCarlo:
+    """The EKF over ``len(runs)`` noise seeds of one reference shift, with the matched bound."""
+
+    runs: tuple[EkfRun, ...]
+    bound: EkfBound
+    seconds_per_run: float
+    #: per phase name, per parameter
+    phase_stats: dict[str, dict[str, PhaseParameterStats]]
+    #: initial estimates drawn from the prior around the truth (else the fixed default)
+    prior_draw: bool = False
+
+    @property
+    def first(self) -> EkfRun:
+        return self.runs[0]
+
+    def _stack(self, attribute: str) -> np.ndarray:
+        return np.array([getattr(r, attribute) for r in self.runs])
+
+    def nees_run_mean(self) -> np.ndarray:
+        """ε̄_k: NEES at each sample averaged over the runs."""
+        return np.mean(self._stack("nees"), axis=0)
+
+    @property
+    def nees_mean(self) -> float:
+        return float(np.mean(self.nees_run_mean()))
+
+    def nees_band(self, probability: float = 0.95) -> tuple[float, float]:
+        """Band of the NEES mean of a consistent filter: one sample's mean over the R runs is
+        χ²(R n)/R (n its dof, the runs independent); the time average of such means, which are
+        correlated in time, scatters no more than one of them. n: the mean dof."""
+        from scipy.stats import chi2
+
+        runs, dof = len(self.runs), float(np.mean(self.first.nees_dof))
+        return (
+            float(chi2.ppf((1 - probability) / 2, runs * dof) / runs),
+            float(chi2.ppf((1 + probability) / 2, runs * dof) / runs),
+        )
+
+    def nees_inside(self, probability: float = 0.95) -> float:
+        """Fraction of samples whose run-averaged NEES lies inside its χ²(R n_k)/R band."""
+        from scipy.stats import chi2
+
+        runs, dof = len(self.runs), self.first.nees_dof
+        lo = chi2.ppf((1 - probability) / 2, runs * dof) / runs
+        hi = chi2.ppf((1 + probability) / 2, runs * dof) / runs
+        mean = self.nees_run_mean()
+        return float(np.mean((mean >= lo) & (mean <= hi)))
+
+    def parameter_summary(self, name: str) -> dict[str, Any]:
+        """Over every scored sample of every run: the JSON entry of one parameter."""
+        first = self.first
+        j = first.state_names.index(name)
+        scored = first.scored[:, j]
+        errors = self._stack("estimates")[:, scored, j] - first.truth[None, scored, j]
+        sigmas = self._stack("sigmas")[:, scored, j]
+        crb = self.bound.sigma[scored, j]
+        crb_process = self.bound.sigma_process[scored, j]
+        process_rms = float(np.sqrt(np.mean(crb_process**2))) if crb_process.size else None
+        final = [next(p for p in r.parameters if p.name == name) for r in self.runs]
+        rmse = float(np.sqrt(np.mean(errors**2))) if errors.size else None
+        crb_rms = float(np.sqrt(np.mean(crb**2))) if crb.size else None
+        return {
+            "truth": final[0].truth,
+            "initial": float(np.mean([p.initial for p in final])),
+            "estimate": float(np.mean([p.estimate for p in final])),
+            "sigma": float(np.mean([p.sigma for p in final])),
+            "rmse": rmse,
+            "mean_error": float(np.mean(errors)) if errors.size else None,
+            "sigma_rms": float(np.sqrt(np.mean(sigmas**2))) if sigmas.size else None,
+            "crb_sigma": crb_rms,
+            "efficiency": None if rmse is None or not crb_rms else rmse / crb_rms,
+            "crb_sigma_process_noise": process_rms,
+            "efficiency_process_noise": None
+            if rmse is None or not process_rms
+            else rmse / process_rms,
+            "identifiable": [
+                phase for phase, stats in self.phase_stats.items() if stats[name].identifiable
+            ],
+            "samples": int(np.count_nonzero(scored)),
+        }
+
+    def to_dict(self) -> dict[str, Any]:
+        first = self.first
+        band = self.nees_band()
+        nis = self._stack("nis")
+        nis_dof = first.nis_dof
+        used = nis_dof > 0
+        return {
+            "filter": "ekf",
+            "shift": first.shift,
+            "runs": len(self.runs),
+            "seed": first.seed,
+            "seeds": [r.seed for r in self.runs],
+            "sample_time": first.sample_time,
+            "relative_noise": list(first.relative_noise),
+            "seconds_per_run": self.seconds_per_run,
+            "initial_estimate": "drawn from the prior around the truth"
+            if self.prior_draw
+            else "fixed",
+            "parameters": {name: self.parameter_summary(name) for name in self.parameter_names},
+            "bound": BOUND_ASSUMPTION,
+            "nees_mean": self.nees_mean,
+            "nees_band": list(band),
+            "nees_dof_mean": float(np.mean(first.nees_dof)),
+            "nees_inside_95": self.nees_inside(),
+            "nis_mean": float(np.mean(nis[:, used])) if used.any() else None,
+            "nis_band": list(_chi2_mean_band(np.tile(nis_dof[used], len(self.runs))))
+            if used.any()
+            else None,
+            "min_covariance_eigenvalue": min(r.min_eigenvalue for r in self.runs),
+            "modes": first.mode_source,
+            "events": self.event_summary(),
+            "phases": [
+                {
+                    **phase.to_dict(),
+                    "parameters": {
+                        name: stats.to_dict()
+                        for name, stats in self.phase_stats[phase.name].items()
+                    },
+                }
+                for phase in first.phases
+            ],
+        }
+
+    @property
+    def parameter_names(self) -> list[str]:
+        return [p.name for p in self.first.parameters]
+
+    def event_summary(self) -> list[dict[str, Any]]:
+        """Per truth switch: in how many runs the filter detected it and the error
+        t_detected − t_truth over those runs (mean, largest magnitude, ms); then the mean
+        number per run of detected switches the truth does not have."""
+        per_run = [r.events() for r in self.runs]
+        out: list[dict[str, Any]] = []
+        for i, ev in enumerate(e for e in per_run[0] if e["t_reference"] is not None):
+            errors = [
+                events[i]["error_ms"] for events in per_run if events[i]["error_ms"] is not None
+            ]
+            out.append(
+                {
+                    "element": ev["element"],
+                    "kind": ev["kind"],
+                    "t_reference": ev["t_reference"],
+                    "runs": len(self.runs),
+                    "detected_runs": len(errors),
+                    "error_ms_mean": float(np.mean(errors)) if errors else None,
+                    "error_ms_max_abs": float(np.max(np.abs(errors))) if errors else None,
+                }
+            )
+        extra = [sum(e["t_reference"] is None for e in events) for events in per_run]
+        if any(extra):
+            out.append(
+                {
+                    "element": "any",
+                    "kind": "switches without a reference counterpart (mean per run)",
+                    "t_reference": None,
+                    "t_detected": None,
+                    "count_mean": float(np.mean(extra)),
+                }
+            )
+        return out
+
+
+def run_ekf_monte_carlo(
+    setup: EkfSetup,
+    runs: int,
+    seed: int = 0,
+    progress: Any = None,
+    bound: EkfBound | None = None,
+    prior_draw: bool = False,
+    dropout: tuple[float, float] | None = None,
+    dropout_outputs: Sequence[str] | None = None,
+) -> EkfMonteCarlo:
+    """The EKF (4.3) over ``runs`` seeds ``seed``, ``seed`` + 1, …: the reference and
+    everything of ``setup`` fixed, only the speed noise (3.26) drawn anew. ``progress(fraction,
+    message)`` is called after each run. Per parameter and phase: mean error, RMSE and RMS
+    reported σ over the scored samples of every run, the posterior bound (:func:`ekf_bound`)
+    over the same samples and the efficiency RMSE / bound; the phase's own identifiability.
+    ``prior_draw``: each run's initial estimate drawn from the prior around the truth
+    (:func:`filter_run`), the bound's premise. ``dropout``/``dropout_outputs``: a sensor
+    dropout in every run (:func:`filter_run`); the bound keeps every sample."""
+    import time
+
+    if runs < 1:
+        raise GearsymError("estimate", "--runs", f"must be at least 1, got {runs}")
+    done = []
+    start = time.perf_counter()
+    for i in range(runs):
+        done.append(
+            filter_run(
+                setup,
+                seed + i,
+                dropout=dropout,
+                prior_draw=prior_draw,
+                dropout_outputs=dropout_outputs,
+            )
+        )
+        if progress is not None:
+            progress((i + 1) / runs, f"run {i + 1} of {runs}")
+    seconds = (time.perf_counter() - start) / runs
+    if bound is None:
+        if progress is not None:
+            progress(1.0, "posterior Cramér–Rao bound")
+        bound = ekf_bound(setup)
+    estimates = np.array([r.estimates for r in done])
+    sigmas = np.array([r.sigmas for r in done])
+    first = done[0]
+    stats: dict[str, dict[str, PhaseParameterStats]] = {}
+    for k, phase in enumerate(first.phases):
+        inside = _phase_samples(first.t, phase, last=k == len(first.phases) - 1)
+        stats[phase.name] = {}
+        for p in first.parameters:
+            j = first.state_names.index(p.name)
+            idx = inside[first.scored[inside, j]]
+            err = estimates[:, idx, j] - first.truth[None, idx, j]
+            sig = sigmas[:, idx, j]
+            crb = bound.sigma[idx, j]
+            crb_process = bound.sigma_process[idx, j]
+            before = max(int(inside[0]) - 1, 0) if inside.size else 0
+            end = int(inside[-1]) if inside.size else 0
+            rmse = float(np.sqrt(np.mean(err**2))) if idx.size else None
+            crb_rms = float(np.sqrt(np.mean(crb**2))) if idx.size else None
+            process_rms = float(np.sqrt(np.mean(crb_process**2))) if idx.size else None
+            g = bound.gamma.get(phase.name, {}).get(p.name)
+            stats[phase.name][p.name] = PhaseParameterStats(
+                samples=int(idx.size),
+                mean_error=float(np.mean(err)) if idx.size else None,
+                rmse=rmse,
+                sigma=float(np.sqrt(np.mean(sig**2))) if idx.size else None,
+                crb_sigma=crb_rms,
+                efficiency=None if rmse is None or not crb_rms else rmse / crb_rms,
+                crb_sigma_process=process_rms,
+                efficiency_process=None if rmse is None or not process_rms else rmse / process_rms,
+                identifiable=p.name in bound.identifiable.get(phase.name, ()),
+                gamma=g,
+                sigma_ratio=float(np.mean(sigmas[:, end, j]) / np.mean(sigmas[:, before, j])),
+                crb_ratio=float(bound.sigma[end, j] / bound.sigma[before, j]),
+            )
+    return EkfMonteCarlo(
+        runs=tuple(done),
+        bound=bound,
+        seconds_per_run=seconds,
+        phase_stats=stats,
+        prior_draw=prior_draw,
+    )

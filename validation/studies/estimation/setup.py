@@ -1,0 +1,251 @@
+"""The EKF's (4.3) set-up on a simulated shift: the augmented model, its prior, the noise
+(3.26), the measurements and inputs on the TCU's sample grid (:class:`EkfSetup`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from gearsym.symbolic import naming
+from gearsym.symbolic.defaults import EKF_FLOOR_FRACTION, EKF_RELATIVE_NOISE
+from gearsym.symbolic.description import GearboxDescription
+from gearsym.symbolic.drivetrain import quantity
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.parameters import RECORDS
+from gearsym.validation.sim.phases import Phase
+from gearsym.validation.sim.simulate import SimulationResult
+from gearsym.validation.studies.estimation.modes import (
+    MODE_SOURCES,
+    ModeSwitch,
+    element_modes,
+    reference_switches,
+)
+
+__all__ = [
+    "EkfSetup",
+    "prepare_ekf",
+]
+
+
+#: Default initial estimate of the augmented parameters, relative to the description's value
+#: (m_veh: 30 % light, the issue's wrong-mass case) or absolute (μ: the description's nominal
+#: μ; ζ: a level road), and the prior standard deviations (stated, not the truth): the
+#: parameters' from their records (:mod:`gearsym.symbolic.parameters`; m_veh's relative to its
+#: value), the unmeasured state φ's here.
+EKF_INITIAL_MASS_FACTOR = 0.7
+EKF_PRIOR_SIGMA = {
+    **{r.key: r.prior_sigma for r in RECORDS if r.prior_sigma is not None},
+    "phi": 0.05,
+}
+
+
+@dataclass
+class EkfSetup:
+    """Everything about an EKF run that does not depend on the noise seed: the sample grid,
+    the true outputs and their noise σ (3.26), the known inputs and element modes, the truth
+    per augmented state, the initial estimate and the prior σ (P0 = diag(σ0²)). Built once for
+    a Monte-Carlo study; only the noise draws change per run."""
+
+    aug: Any
+    discrete: Any
+    shift: str
+    t: np.ndarray
+    y_true: np.ndarray  # (N, m)
+    sigma_y: np.ndarray  # (N, m): r_i max(|y_i|, y_i^min) (3.26)
+    relative: np.ndarray  # (m,)
+    floor: np.ndarray  # (m,)
+    u: np.ndarray  # (N, n_u), held over each sample interval
+    p: list[float]
+    q: list[float]
+    truth: np.ndarray  # (N, n), NaN where none
+    scored: np.ndarray  # (N, n) bool
+    initial: np.ndarray  # (n,) initial estimate (speeds: filled in from the first measurement)
+    prior_sigma: np.ndarray  # (n,)
+    outputs: list[str]
+    phases: tuple[Phase, ...]
+    #: The outputs are a recording's (``y_true`` holds them, noise included): no noise is
+    #: drawn and there is no truth.
+    measured: bool = False
+    #: :data:`MODE_SOURCES`: "filter" (its own mode logic, ``logic``) or "reference" (the
+    #: reference's modes in ``u``); the truth's switches on the reference's own grid
+    mode_source: str = "filter"
+    logic: Any = None
+    reference_switches: tuple[ModeSwitch, ...] = ()
+
+    @property
+    def names(self) -> list[str]:
+        return self.aug.state_names
+
+    @property
+    def truth0(self) -> np.ndarray:
+        """The true z0 = [x0; p] as the filter's model sees it: the reference's initial states,
+        m_veh and ζ; a μ at its mean while its element slides (the model's μ is constant),
+        the initial estimate where an element never slides."""
+        n, n_x = len(self.names), self.aug.n_x
+        z0 = np.array(
+            [
+                np.mean(self.truth[self.scored[:, j], j])
+                if self.scored[:, j].any()
+                else self.initial[j]
+                for j in range(n)
+            ]
+        )
+        z0[:n_x] = self.truth[0, :n_x]
+        return z0
+
+
+def prepare_ekf(
+    d: GearboxDescription,
+    result: SimulationResult,
+    sample_time: float = 0.01,
+    relative_noise: Sequence[float] | float = EKF_RELATIVE_NOISE,
+    initial: Mapping[str, float] | None = None,
+    parameters: Sequence[str] | None = None,
+    aug: Any = None,
+    discrete: Any = None,
+    measured: Mapping[str, np.ndarray] | None = None,
+    modes: str = "filter",
+    logic: Any = None,
+) -> EkfSetup:
+    """The seed-independent part of :func:`run_ekf` (its arguments of the same name).
+
+    ``modes``: "filter" (default), the filter decides the element modes itself
+    (:func:`~gearsym.symbolic.estimators.ekf_modes.ekf_mode_update`; ``logic`` reuses a built
+    :class:`~gearsym.symbolic.estimators.ekf_modes.ModeLogic`), or "reference", the
+    reference's modes (:func:`element_modes`: the truth, which a TCU does not have).
+
+    ``measured``: per output of the filter its recorded values on the sample grid (a bench
+    recording, :mod:`gearsym.validation.sim.measurement`); they replace the reference's outputs,
+    no noise is drawn on them, and no state has a truth. ``result`` is then the simulation
+    driven by the recorded inputs: it gives the inputs, the element modes and the phases."""
+    from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
+
+    shift = result.scenario.shift.name
+    if modes not in MODE_SOURCES:
+        raise GearsymError(
+            "estimate", "--modes", f"expected one of {', '.join(MODE_SOURCES)}, got {modes!r}"
+        )
+    if aug is None:
+        aug = augmented_model(d, shift, parameters)
+    if discrete is None:
+        discrete = DiscreteModel(aug)
+    span = result.t[-1] - result.t[0]
+    if not (0 < sample_time <= span / 4):
+        raise GearsymError(
+            "estimate", "--sample-time", f"must be in (0, {span / 4:g}] s, got {sample_time!r}"
+        )
+    if modes == "filter" and logic is None:
+        from gearsym.symbolic.estimators.ekf_modes import ModeLogic
+
+        logic = ModeLogic(d, aug)
+    t = np.arange(result.t[0], result.t[-1] + 1e-12, sample_time)
+    names = aug.state_names
+    n = len(names)
+    outputs = [name.removeprefix("y_") for name in aug.output_names]
+
+    def sampled(name: str) -> np.ndarray:
+        return np.interp(t, result.t, result.signals[name])
+
+    if measured is None:
+        y_true = np.column_stack([sampled(name) for name in outputs])
+    else:
+        missing = [name for name in outputs if name not in measured]
+        if missing:
+            raise GearsymError(
+                "estimate",
+                "--measurement",
+                f"the recording has no channel for the filter's output {missing[0]} (map it in "
+                "[measurement.channel])",
+            )
+        y_true = np.column_stack([np.asarray(measured[name], dtype=float) for name in outputs])
+        if y_true.shape[0] != len(t):
+            raise GearsymError(
+                "estimate",
+                "--measurement",
+                f"{y_true.shape[0]} recorded samples for {len(t)} sample times",
+            )
+    r = np.broadcast_to(np.asarray(relative_noise, dtype=float), (len(outputs),)).copy()
+    if np.any(~np.isfinite(r)) or np.any(r <= 0):
+        raise GearsymError("estimate", "--noise", "relative errors must be finite and > 0")
+    floor = EKF_FLOOR_FRACTION * np.nanmax(np.abs(y_true), axis=0)
+    sigma_y = r[None, :] * np.maximum(np.abs(y_true), floor[None, :])
+
+    reference_modes = element_modes(d, result, t)
+    columns = []
+    for name in aug.input_names:
+        element = name.split("_", 1)[1] if name.startswith(("slide_", "stick_")) else None
+        if element is not None:
+            columns.append(reference_modes[element][0 if name.startswith("slide_") else 1])
+        else:
+            columns.append(sampled(name))
+    u = np.column_stack(columns)
+    p = aug.parameter_values()
+    q = [aug.intensities[name] for name in names]
+
+    # truth per augmented state (NaN where the reference has none)
+    truth = np.full((len(t), n), np.nan)
+    scored = np.zeros((len(t), n), dtype=bool)
+    nominal = {v.name: v.default for v in aug.model.states if v.default is not None}
+    for j, name in enumerate(names):
+        if name in result.signals:
+            truth[:, j] = sampled(name)
+            scored[:, j] = True
+        elif name == "m_veh":
+            truth[:, j] = quantity(d, "vehicle", "m_veh").value
+            scored[:, j] = True
+    for e, mu in aug.mu_state.items():
+        j = names.index(mu)
+        scored[:, j] = reference_modes[e][0] > 0.5  # μ is defined while the truth slides
+    if measured is not None:  # a recording: no state has a truth
+        truth[:] = np.nan
+        scored[:] = False
+
+    # initial estimate and prior (the speeds' are set from the first measurement per run)
+    z = np.zeros(n)
+    sig0 = np.zeros(n)
+    for j, name in enumerate(names):
+        if name in outputs:
+            sig0[j] = sigma_y[0, outputs.index(name)]
+        elif name == naming.TWIST:
+            z[j], sig0[j] = 0.0, EKF_PRIOR_SIGMA["phi"]
+        elif name == "m_veh":
+            z[j] = EKF_INITIAL_MASS_FACTOR * float(nominal["m_veh"])
+            sig0[j] = EKF_PRIOR_SIGMA["m_veh"] * float(nominal["m_veh"])
+        elif name.startswith("mu_"):
+            z[j], sig0[j] = float(nominal[name]), EKF_PRIOR_SIGMA["mu"]
+        elif name == naming.GRADE:
+            z[j], sig0[j] = 0.0, EKF_PRIOR_SIGMA["zeta"]
+        else:  # pragma: no cover - every state of the augmented model is covered above
+            raise AssertionError(name)
+    for name, value in (initial or {}).items():
+        if name not in names:
+            raise GearsymError(
+                "estimate", "--initial", f"{name!r} is not a state ({', '.join(names)})"
+            )
+        z[names.index(name)] = float(value)
+    return EkfSetup(
+        aug=aug,
+        discrete=discrete,
+        shift=shift,
+        t=t,
+        y_true=y_true,
+        sigma_y=sigma_y,
+        relative=r,
+        floor=floor,
+        u=u,
+        p=p,
+        q=q,
+        truth=truth,
+        scored=scored,
+        initial=z,
+        prior_sigma=sig0,
+        outputs=outputs,
+        phases=tuple(result.phases),
+        measured=measured is not None,
+        mode_source=modes,
+        logic=logic,
+        reference_switches=tuple(reference_switches(d, result)),
+    )
