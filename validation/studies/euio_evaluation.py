@@ -33,7 +33,6 @@ a mass error is a road load); its bound shows it: it barely shrinks below the pr
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,8 +43,6 @@ from gearsym.symbolic import naming
 from gearsym.symbolic.defaults import EKF_RELATIVE_NOISE
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
-from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.parameters import symbol
 from gearsym.validation.sim.simulate import SimulationResult
 from gearsym.validation.studies.estimation.bounds import NOT_IDENTIFIABLE, _phase_samples
 from gearsym.validation.studies.estimation.euio import EuioRun
@@ -54,6 +51,7 @@ from gearsym.validation.studies.estimation.loop import (
     _chi2_mean_band,
     noisy_outputs,
 )
+from gearsym.validation.studies.estimation.montecarlo import rms, run_seeds, score
 from gearsym.validation.studies.estimation.setup import EkfSetup, prepare_ekf
 
 __all__ = [
@@ -448,10 +446,6 @@ class EuioPhaseStats:
         }
 
 
-def _rms(values: np.ndarray) -> float | None:
-    return float(np.sqrt(np.mean(values**2))) if values.size else None
-
-
 @dataclass(frozen=True)
 class EuioMonteCarlo:
     """The EUIO over ``len(trials)`` noise seeds of one reference shift, with its bound."""
@@ -521,10 +515,10 @@ class EuioMonteCarlo:
         for k, phase in enumerate(self.first.phases):
             inside = _phase_samples(self.first.t, phase, last=k == len(self.first.phases) - 1)
             idx = inside[ok[inside]]
-            per_phase[phase.name] = _rms(load[:, idx] - truth[None, idx])
+            per_phase[phase.name] = rms(load[:, idx] - truth[None, idx])
         return {
-            "rmse": _rms(load[:, ok] - truth[None, ok]),
-            "sigma_rms": _rms(sig[:, ok]),
+            "rmse": rms(load[:, ok] - truth[None, ok]),
+            "sigma_rms": rms(sig[:, ok]),
             "rmse_per_phase": per_phase,
             "absorbs": "zeta, rolling and aero resistance (2.48)",
         }
@@ -536,9 +530,9 @@ class EuioMonteCarlo:
         errors = self._run_stack("estimates")[:, scored, j] - first.truth[None, scored, j]
         sigmas = self._run_stack("sigmas")[:, scored, j]
         crb = self.bound.sigma[scored, j]
-        crb_process = _rms(self.bound.sigma_process[scored, j])
+        crb_process = rms(self.bound.sigma_process[scored, j])
         final = [next(p for p in tr.run.parameters if p.name == name) for tr in self.trials]
-        rmse, crb_rms = _rms(errors), _rms(crb)
+        rmse, crb_rms = rms(errors), rms(crb)
         identifiable = [ph for ph, st in self.phase_stats.items() if st[name].identifiable]
         return {
             "truth": final[0].truth,
@@ -547,14 +541,14 @@ class EuioMonteCarlo:
             "sigma": float(np.mean([p.sigma for p in final])),
             "rmse": rmse,
             "mean_error": float(np.mean(errors)) if errors.size else None,
-            "sigma_rms": _rms(sigmas),
+            "sigma_rms": rms(sigmas),
             "crb_sigma": crb_rms if identifiable else None,
             "efficiency": rmse / crb_rms if identifiable and rmse and crb_rms else None,
             "crb_sigma_process_noise": crb_process if identifiable else None,
             "efficiency_process_noise": rmse / crb_process
             if identifiable and rmse and crb_process
             else None,
-            "crb_sigma_load_known": _rms(self.bound.sigma_load_known[scored, j]),
+            "crb_sigma_load_known": rms(self.bound.sigma_load_known[scored, j]),
             "identifiable": identifiable,
             "samples": int(np.count_nonzero(scored)),
         }
@@ -615,15 +609,12 @@ def run_euio_monte_carlo(
     phase: mean error, RMSE and RMS σ over the scored samples of every run, the matched bound
     (:func:`euio_bound`) over the same samples and the efficiency RMSE / bound where the
     phase's existence test passes; elsewhere "not identifiable in this phase"."""
-    if runs < 1:
-        raise GearsymError("estimate", "--runs", f"must be at least 1, got {runs}")
-    trials = []
-    start = time.perf_counter()
-    for i in range(runs):
-        trials.append(euio_filter_run(setup, seed + i, prior_draw=prior_draw))
-        if progress is not None:
-            progress((i + 1) / runs, f"run {i + 1} of {runs}")
-    seconds = (time.perf_counter() - start) / runs
+    trials, seconds = run_seeds(
+        lambda run_seed: euio_filter_run(setup, run_seed, prior_draw=prior_draw),
+        runs,
+        seed,
+        progress,
+    )
     if bound is None:
         if progress is not None:
             progress(1.0, "matched bound (road load unknown)")
@@ -639,25 +630,11 @@ def run_euio_monte_carlo(
             j = first.state_names.index(p.name)
             (ex,) = [x for x in setup.existence[phase.name] if x.parameter == p.name]
             idx = inside[first.scored[inside, j]]
-            err = estimates[:, idx, j] - first.truth[None, idx, j]
-            rmse, crb_rms = _rms(err), _rms(bound.sigma[idx, j])
-            crb_process = _rms(bound.sigma_process[idx, j])
-            before = max(int(inside[0]) - 1, 0) if inside.size else 0
-            end = int(inside[-1]) if inside.size else 0
             stats[phase.name][p.name] = EuioPhaseStats(
-                samples=int(idx.size),
-                mean_error=float(np.mean(err)) if idx.size else None,
-                rmse=rmse,
-                sigma=_rms(sigmas[:, idx, j]),
-                crb_sigma=crb_rms,
-                efficiency=rmse / crb_rms if rmse is not None and crb_rms else None,
-                crb_sigma_process=crb_process,
-                efficiency_process=rmse / crb_process if rmse is not None and crb_process else None,
-                crb_sigma_load_known=_rms(bound.sigma_load_known[idx, j]),
+                **score(estimates, sigmas, first, inside, j, bound.sigma, bound.sigma_process),
+                crb_sigma_load_known=rms(bound.sigma_load_known[idx, j]),
                 identifiable=ex.exists,
                 reason=ex.reason(),
-                sigma_ratio=float(np.mean(sigmas[:, end, j]) / np.mean(sigmas[:, before, j])),
-                crb_ratio=float(bound.sigma[end, j] / bound.sigma[before, j]),
             )
     return EuioMonteCarlo(
         trials=tuple(trials),
@@ -737,48 +714,25 @@ def format_euio_monte_carlo_text(mc: EuioMonteCarlo) -> str:
 
 
 def plot_euio_efficiency(mc: EuioMonteCarlo, path: Path) -> Path:
-    """RMSE / matched bound per parameter and phase (n.i.: not identifiable in this phase)."""
-    from gearsym.validation.drawing.figures import save, subplots
+    """RMSE / matched bound per parameter and phase (n.i.: not identifiable in this phase), in
+    the EKF's figure (:func:`~gearsym.validation.studies.estimation.plots.plot_efficiency_bars`)."""
+    from gearsym.validation.studies.estimation.plots import plot_efficiency_bars
 
-    names = mc.parameter_names
-    phases = [p.name for p in mc.first.phases]
-    fig, ax = subplots(1, 1, (8, 4.2), {"top": 0.84, "bottom": 0.1, "left": 0.08, "right": 0.98})
-    width = 0.8 / len(phases)
-    marked = False
-    for i, phase in enumerate(phases):
-        for j, name in enumerate(names):
-            s = mc.phase_stats[phase][name]
-            x = j + (i - (len(phases) - 1) / 2) * width
-            if s.identifiable and s.efficiency is not None:
-                ax.bar(x, s.efficiency, width * 0.9, color=f"C{i}", label=phase if j == 0 else None)
-                ax.plot(
-                    x,
-                    s.efficiency_process,
-                    "kD",
-                    ms=4,
-                    label="against the bound with the filter's process noise"
-                    if not marked
-                    else None,
-                )
-                marked = True
-                ax.annotate(
-                    f"{s.efficiency:.2f}", (x, s.efficiency), ha="center", va="bottom", fontsize=6
-                )
-            else:
-                ax.annotate("n.i.", (x, 0.05), ha="center", va="bottom", fontsize=6, rotation=90)
-                if j == 0:
-                    ax.bar(x, 0, width * 0.9, color=f"C{i}", label=phase)
-    ax.axhline(1.0, color="k", lw=0.8, ls="--", label="the bound (efficiency 1)")
-    ax.set_xticks(range(len(names)), [symbol(n) for n in names])
-    ax.set_xlim(-0.5, len(names) - 0.5)
-    ax.set_ylabel("RMSE / matched bound")
-    ax.legend(fontsize=6, loc="upper left", ncol=3)
     first = mc.first
-    fig.suptitle(
+    title = (
         f"Extended UIO efficiency, {first.shift} shift, {len(mc.trials)} runs, samples every "
         f"{first.sample_time * 1e3:g} ms (n.i.: not identifiable in this phase)\nbars: RMSE / "
         "bound with the road load unknown in every interval, constant parameters; initial "
-        f"estimates {'drawn from the prior' if mc.prior_draw else 'fixed'}",
-        fontsize=9,
+        f"estimates {'drawn from the prior' if mc.prior_draw else 'fixed'}"
     )
-    return save(fig, path)
+    phases = [p.name for p in first.phases]
+    return plot_efficiency_bars(
+        mc.parameter_names,
+        phases,
+        mc.phase_stats,
+        "RMSE / matched bound",
+        title,
+        path,
+        height=4.2,
+        top=0.84,
+    )

@@ -4,9 +4,9 @@ draws of one set-up, the statistics per phase and parameter.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from gearsym.symbolic.errors import GearsymError
@@ -20,10 +20,73 @@ from gearsym.validation.studies.estimation.bounds import (
 from gearsym.validation.studies.estimation.loop import EkfRun, _chi2_mean_band, filter_run
 from gearsym.validation.studies.estimation.setup import EkfSetup
 
+T = TypeVar("T")
+
 __all__ = [
     "EkfMonteCarlo",
+    "rms",
     "run_ekf_monte_carlo",
+    "run_seeds",
+    "score",
 ]
+
+
+def run_seeds(
+    run_one: Callable[[int], T], runs: int, seed: int, progress: Any = None
+) -> tuple[list[T], float]:
+    """Every filter's Monte-Carlo loop: ``run_one(seed + i)`` for i < ``runs`` (only the noise
+    drawn anew), ``progress(fraction, message)`` after each; the runs and seconds per run."""
+    import time
+
+    if runs < 1:
+        raise GearsymError("estimate", "--runs", f"must be at least 1, got {runs}")
+    done = []
+    start = time.perf_counter()
+    for i in range(runs):
+        done.append(run_one(seed + i))
+        if progress is not None:
+            progress((i + 1) / runs, f"run {i + 1} of {runs}")
+    return done, (time.perf_counter() - start) / runs
+
+
+def rms(values: np.ndarray) -> float | None:
+    """Root mean square of ``values``, ``None`` for none."""
+    return float(np.sqrt(np.mean(values**2))) if values.size else None
+
+
+def score(
+    estimates: np.ndarray,
+    sigmas: np.ndarray,
+    first: Any,
+    inside: np.ndarray,
+    j: int,
+    bound_sigma: np.ndarray,
+    bound_sigma_process: np.ndarray,
+) -> dict[str, Any]:
+    """Every filter's scoring of one parameter (state index ``j``) in one phase (its samples
+    ``inside``) over the runs (``estimates``, ``sigmas``: runs × samples × states): the
+    samples the first run scores, mean error and RMSE against the truth, RMS reported σ, the
+    bound and the bound with the filter's process noise over the same samples, the
+    efficiencies RMSE / bound, and σ and bound at the phase's last sample over those before it
+    (1: no information). The truth is used for scoring only."""
+    idx = inside[first.scored[inside, j]]
+    err = estimates[:, idx, j] - first.truth[None, idx, j]
+    rmse, crb_rms = rms(err), rms(bound_sigma[idx, j])
+    process_rms = rms(bound_sigma_process[idx, j])
+    before = max(int(inside[0]) - 1, 0) if inside.size else 0
+    end = int(inside[-1]) if inside.size else 0
+    return {
+        "samples": int(idx.size),
+        "mean_error": float(np.mean(err)) if idx.size else None,
+        "rmse": rmse,
+        "sigma": rms(sigmas[:, idx, j]),
+        "crb_sigma": crb_rms,
+        "efficiency": rmse / crb_rms if rmse is not None and crb_rms else None,
+        "crb_sigma_process": process_rms,
+        "efficiency_process": rmse / process_rms if rmse is not None and process_rms else None,
+        "sigma_ratio": float(np.mean(sigmas[:, end, j]) / np.mean(sigmas[:, before, j])),
+        "crb_ratio": float(bound_sigma[end, j] / bound_sigma[before, j]),
+    }
 
 
 @dataclass(frozen=True)
@@ -245,25 +308,18 @@ def run_ekf_monte_carlo(
     ``prior_draw``: each run's initial estimate drawn from the prior around the truth
     (:func:`filter_run`), the bound's premise. ``dropout``/``dropout_outputs``: a sensor
     dropout in every run (:func:`filter_run`); the bound keeps every sample."""
-    import time
-
-    if runs < 1:
-        raise GearsymError("estimate", "--runs", f"must be at least 1, got {runs}")
-    done = []
-    start = time.perf_counter()
-    for i in range(runs):
-        done.append(
-            filter_run(
-                setup,
-                seed + i,
-                dropout=dropout,
-                prior_draw=prior_draw,
-                dropout_outputs=dropout_outputs,
-            )
-        )
-        if progress is not None:
-            progress((i + 1) / runs, f"run {i + 1} of {runs}")
-    seconds = (time.perf_counter() - start) / runs
+    done, seconds = run_seeds(
+        lambda run_seed: filter_run(
+            setup,
+            run_seed,
+            dropout=dropout,
+            prior_draw=prior_draw,
+            dropout_outputs=dropout_outputs,
+        ),
+        runs,
+        seed,
+        progress,
+    )
     if bound is None:
         if progress is not None:
             progress(1.0, "posterior Cramér–Rao bound")
@@ -277,30 +333,10 @@ def run_ekf_monte_carlo(
         stats[phase.name] = {}
         for p in first.parameters:
             j = first.state_names.index(p.name)
-            idx = inside[first.scored[inside, j]]
-            err = estimates[:, idx, j] - first.truth[None, idx, j]
-            sig = sigmas[:, idx, j]
-            crb = bound.sigma[idx, j]
-            crb_process = bound.sigma_process[idx, j]
-            before = max(int(inside[0]) - 1, 0) if inside.size else 0
-            end = int(inside[-1]) if inside.size else 0
-            rmse = float(np.sqrt(np.mean(err**2))) if idx.size else None
-            crb_rms = float(np.sqrt(np.mean(crb**2))) if idx.size else None
-            process_rms = float(np.sqrt(np.mean(crb_process**2))) if idx.size else None
-            g = bound.gamma.get(phase.name, {}).get(p.name)
             stats[phase.name][p.name] = PhaseParameterStats(
-                samples=int(idx.size),
-                mean_error=float(np.mean(err)) if idx.size else None,
-                rmse=rmse,
-                sigma=float(np.sqrt(np.mean(sig**2))) if idx.size else None,
-                crb_sigma=crb_rms,
-                efficiency=None if rmse is None or not crb_rms else rmse / crb_rms,
-                crb_sigma_process=process_rms,
-                efficiency_process=None if rmse is None or not process_rms else rmse / process_rms,
+                **score(estimates, sigmas, first, inside, j, bound.sigma, bound.sigma_process),
                 identifiable=p.name in bound.identifiable.get(phase.name, ()),
-                gamma=g,
-                sigma_ratio=float(np.mean(sigmas[:, end, j]) / np.mean(sigmas[:, before, j])),
-                crb_ratio=float(bound.sigma[end, j] / bound.sigma[before, j]),
+                gamma=bound.gamma.get(phase.name, {}).get(p.name),
             )
     return EkfMonteCarlo(
         runs=tuple(done),

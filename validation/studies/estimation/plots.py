@@ -4,7 +4,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -126,19 +126,29 @@ def plot_ekf(run: EkfRun, path: Path) -> Path:
     return save(fig, path)
 
 
-def plot_efficiency(mc: EkfMonteCarlo, path: Path) -> Path:
-    """Efficiency RMSE / posterior bound per parameter and phase (bars; a phase in which the
-    parameter is not identifiable is left empty and labelled), the line at 1 the bound."""
+def plot_efficiency_bars(
+    names: Sequence[str],
+    phases: Sequence[str],
+    phase_stats: Mapping[str, Mapping[str, Any]],
+    ylabel: str,
+    title: str,
+    path: Path,
+    height: float = 4.4,
+    top: float = 0.82,
+) -> Path:
+    """Every filter's efficiency figure: RMSE / bound per parameter and phase as bars (a
+    phase in which the parameter is not identifiable is left empty and labelled "n.i."), ◆
+    the efficiency against the bound with the filter's process noise, the line at 1 the
+    bound. ``phase_stats[phase][name]`` has ``identifiable``, ``efficiency`` and
+    ``efficiency_process``."""
     from gearsym.validation.drawing.figures import save, subplots
 
-    names = mc.parameter_names
-    phases = [p.name for p in mc.first.phases]
-    fig, ax = subplots(1, 1, (8, 4.4), {"top": 0.82, "bottom": 0.1, "left": 0.08, "right": 0.98})
+    fig, ax = subplots(1, 1, (8, height), {"top": top, "bottom": 0.1, "left": 0.08, "right": 0.98})
     width = 0.8 / len(phases)
     marked = False
     for i, phase in enumerate(phases):
         for j, name in enumerate(names):
-            s = mc.phase_stats[phase][name]
+            s = phase_stats[phase][name]
             x = j + (i - (len(phases) - 1) / 2) * width
             if s.identifiable and s.efficiency is not None:
                 ax.bar(x, s.efficiency, width * 0.9, color=f"C{i}", label=phase if j == 0 else None)
@@ -162,10 +172,16 @@ def plot_efficiency(mc: EkfMonteCarlo, path: Path) -> Path:
     ax.axhline(1.0, color="k", lw=0.8, ls="--", label="the bound (efficiency 1)")
     ax.set_xticks(range(len(names)), [symbol(n) for n in names])
     ax.set_xlim(-0.5, len(names) - 0.5)
-    ax.set_ylabel("RMSE / posterior Cramér–Rao bound")
+    ax.set_ylabel(ylabel)
     ax.legend(fontsize=6, loc="upper left", ncol=3)
+    fig.suptitle(title, fontsize=9)
+    return save(fig, path)
+
+
+def plot_efficiency(mc: EkfMonteCarlo, path: Path) -> Path:
+    """Efficiency RMSE / posterior bound per parameter and phase (:func:`plot_efficiency_bars`)."""
     first = mc.first
-    fig.suptitle(
+    title = (
         f"EKF efficiency, {first.shift} shift, {len(mc.runs)} runs, samples every "
         f"{first.sample_time * 1e3:g} ms (n.i.: not identifiable in this phase)\n"
         "bars: RMSE / bound for constant parameters (the filter's random walks make > 1 "
@@ -174,10 +190,17 @@ def plot_efficiency(mc: EkfMonteCarlo, path: Path) -> Path:
             "drawn from the prior"
             if mc.prior_draw
             else "fixed (< 1 possible while the prior rules)"
-        ),
-        fontsize=9,
+        )
     )
-    return save(fig, path)
+    phases = [p.name for p in first.phases]
+    return plot_efficiency_bars(
+        mc.parameter_names,
+        phases,
+        mc.phase_stats,
+        "RMSE / posterior Cramér–Rao bound",
+        title,
+        path,
+    )
 
 
 def plot_euio(run: EuioRun, path: Path) -> Path:
