@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 from gearsym.commands import add_command, emit_json, load, progress
 from gearsym.interrupts import check
 from gearsym.options import number
+from gearsym.symbolic.defaults import SWEEP_MAX_SAMPLES
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.io.output_dir import OutputDir
 
@@ -51,7 +52,12 @@ def _definition(args: argparse.Namespace, file: str) -> Any:
 def cmd_sweep(args: argparse.Namespace) -> int:
     """Sample, evaluate on Dask, write samples (CSV, Parquet), indices and one figure per
     quantity with local sensitivities."""
-    from gearsym.validation.studies.sweep import ShiftEvaluator, check_parameters, connect
+    from gearsym.validation.studies.sweep import (
+        ShiftEvaluator,
+        check_parameters,
+        check_ranges,
+        connect,
+    )
 
     d = load(args.config)
     definition = _definition(args, d.file)
@@ -64,6 +70,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         raise GearsymError(
             "sweep", "scheduler", f"expected local or tcp://HOST:PORT, got {args.scheduler!r}"
         )
+    check_ranges(definition, d.file)  # every sample passes the description's checks
     with OutputDir(args.out, "sweep", before_commit=check) as out:
         progress("building the hybrid shift model")
         evaluator = ShiftEvaluator(d, scenario, rtol=args.rtol)
@@ -95,6 +102,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             )
     for q, why in result.skipped.items():
         print(f"  {q}: no indices ({why})")
+    for line in summary["implausible_indices"]:
+        print(f"  ! {line}")
     print(f"  written: {args.out} (samples.csv, samples.parquet, indices.csv, sweep.json, PNGs)")
     return 0
 
@@ -109,6 +118,7 @@ def _sweep(
     """The work inside the output folder: local sensitivities, the sweep, files, figures."""
     from gearsym.validation.studies.sweep import (
         LOCAL_QUANTITIES,
+        implausible_indices,
         linearised_indices,
         local_sensitivities,
         plot_indices,
@@ -156,6 +166,7 @@ def _sweep(
         "skipped": result.skipped,
         "statistics": result.statistics,
         "local_derivatives": local,
+        "implausible_indices": implausible_indices(result.indices, names),
         "local_linearised_indices": {
             q: linearised_indices(local[q], definition.ranges)
             for q in LOCAL_QUANTITIES
@@ -189,7 +200,7 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--samples",
-        type=number(int, minimum=2, maximum=100000),
+        type=number(int, minimum=2, maximum=SWEEP_MAX_SAMPLES),
         help="base sample count N, a power of two (runs: N (d + 2)); default 64 or the file's",
     )
     p.add_argument("--seed", type=number(int, minimum=0), help="sampling seed (default 1)")

@@ -35,3 +35,7 @@ SLIDING_PHASES = ("torque phase", "speed phase")
 
 #: s, spacing of the simulated time series (gearsym.validation.sim.simulate)
 RECORD_SAMPLE_TIME = 5e-4
+
+#: Largest base sample count N of a sweep, in a definition file as on the command line
+#: (N (d + 2) shift runs: 100 000 with five parameters is 700 000 runs).
+SWEEP_MAX_SAMPLES = 100_000

@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 import pytest
+from gearsym.symbolic.errors import GearsymError
 
 from gearsym.cli import main
 
@@ -128,6 +129,20 @@ def test_shift_ranking_by_total_index_agrees_with_local_sensitivities(shift, cli
         (["--param", "m_vehx=1:2", "--param", "k_ss=1:2"], "unknown parameter 'm_vehx'"),
         (["--param", "m_veh=1:2", "--scheduler", "udp://x"], "expected local or tcp://"),
         (["--param", "m_veh=1:2", "--samples", "10"], "samples: must be a power of two"),
+        # a sample must pass the description's checks (the parameter records): negative mass
+        # and friction ran and printed S1 = 2.09
+        (
+            ["--param", "m_veh=-2000:-1000", "--param", "mu_05=-0.2:-0.1"],
+            "m_veh=-2000:-1000: m_veh must be positive, got LO -2000",
+        ),
+        (
+            ["--param", "m_veh=1600:2000", "--param", "mu_05=0.1:1.5"],
+            "mu_05=0.1:1.5: above the plausible range of μ (at most 1)",
+        ),
+        (
+            ["--param", "m_veh=50:2000", "--param", "mu_05=0.1:0.2"],
+            "m_veh=50:2000: below the plausible range of m_veh (at least 100 kg)",
+        ),
         (
             [
                 "--param",
@@ -222,3 +237,31 @@ def test_failed_runs_are_counted_and_get_no_indices(client):
     si = result.indices["ok"]
     for k, exact in enumerate((0.2, 0.8)):
         assert abs(si["ST"][k] - exact) <= 2 * si["ST_conf"][k] + 1e-9
+
+
+def test_a_definition_files_samples_are_bounded_as_the_options(tmp_path, capsys):
+    """``[sweep] samples`` had no upper bound (the option has one)."""
+    from gearsym.validation.studies.sweep import load_definition
+
+    path = tmp_path / "sweep.toml"
+    path.write_text("[sweep]\nsamples = 1048576\n[sweep.parameters]\nm_veh = [1600, 2000]\n")
+    with pytest.raises(GearsymError, match="sweep.samples: must be at most 100000, got 1048576"):
+        load_definition(path)
+
+
+def test_indices_outside_zero_one_beyond_their_interval_are_flagged():
+    """S1 = 2.09 ± 0.3 (the negative-mass sweep's) is no index; -0.05 ± 0.1 is noise."""
+    from gearsym.validation.studies.sweep import implausible_indices
+
+    indices = {
+        "shift_duration": {
+            "S1": [2.09, 0.5, -0.05],
+            "S1_conf": [0.3, 0.1, 0.1],
+            "ST": [0.4, 1.05, -0.3],
+            "ST_conf": [0.1, 0.1, 0.2],
+        }
+    }
+    flagged = implausible_indices(indices, ["m_veh", "mu_05", "zeta"])
+    assert len(flagged) == 2
+    assert flagged[0].startswith("shift_duration: S1 of m_veh = 2.090 ± 0.300 lies outside")
+    assert flagged[1].startswith("shift_duration: ST of zeta = -0.300 ± 0.200 lies outside")

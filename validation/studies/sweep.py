@@ -47,6 +47,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from gearsym.symbolic.defaults import SWEEP_MAX_SAMPLES
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.parameters import symbol, zero_scale
 
@@ -144,9 +145,14 @@ def load_definition(path: str | Path) -> SweepDefinition:
     return SweepDefinition(ranges, samples, seed, file)
 
 
+MAX_SAMPLES = SWEEP_MAX_SAMPLES
+
+
 def check_samples(samples: int, file: str, key: str) -> None:
     """N must be a power of two: the balance properties of the Sobol' points (and SALib's
-    estimators) need it."""
+    estimators) need it; at most :data:`MAX_SAMPLES`."""
+    if samples > MAX_SAMPLES:
+        raise GearsymError(file, key, f"must be at most {MAX_SAMPLES}, got {samples}")
     if samples < 2 or samples & (samples - 1):
         raise GearsymError(file, key, f"must be a power of two (Sobol' points), got {samples}")
 
@@ -160,6 +166,57 @@ def check_parameters(definition: SweepDefinition, known: Sequence[str], file: st
             )
     if len(definition.ranges) < 2:
         raise GearsymError(file, "param", "a sweep needs at least two parameters")
+
+
+def check_ranges(definition: SweepDefinition, file: str) -> None:
+    """:func:`check_range` for every swept parameter (before any model is built)."""
+    for name, (lo, hi) in definition.ranges.items():
+        check_range(name, lo, hi, file)
+
+
+def check_range(name: str, lo: float, hi: float, file: str) -> None:
+    """Every sample of a swept parameter passes the checks its value in a description passes
+    (:mod:`gearsym.symbolic.parameters`: positive unless signed, inside the plausibility
+    range the emitted ``params_validate`` enforces); a one-line error names the bound."""
+    from gearsym.symbolic.parameters import is_mu, record
+
+    try:
+        r = record(name)
+    except KeyError:
+        return  # a parameter gearsym states nothing about: the model's own checks apply
+    shown = f"{name}={lo:g}:{hi:g}"
+    if not r.signed and lo <= 0:
+        raise GearsymError(file, "param", f"{shown}: {name} must be positive, got LO {lo:g}")
+    low, high = r.bounds or (None, None)
+    what = "μ" if is_mu(name) else name
+    unit = "" if r.unit == "1" else f" {r.unit}"
+    if low is not None and lo < low:
+        raise GearsymError(
+            file, "param", f"{shown}: below the plausible range of {what} (at least {low:g}{unit})"
+        )
+    if high is not None and hi > high:
+        raise GearsymError(
+            file, "param", f"{shown}: above the plausible range of {what} (at most {high:g}{unit})"
+        )
+
+
+def implausible_indices(
+    indices: Mapping[str, Mapping[str, Sequence[float]]], names: Sequence[str]
+) -> list[str]:
+    """Sobol indices outside [0, 1] beyond their confidence interval: a sample too small for
+    the quantity, or a quantity that jumps; said where the indices are printed."""
+    found = []
+    for quantity, si in indices.items():
+        for kind in ("S1", "ST"):
+            for j, name in enumerate(names):
+                value, conf = float(si[kind][j]), float(si[f"{kind}_conf"][j])
+                if value - conf > 1.0 or value + conf < 0.0:
+                    found.append(
+                        f"{quantity}: {kind} of {name} = {value:.3f} ± {conf:.3f} lies outside "
+                        "[0, 1] beyond its confidence interval (too few samples, or a quantity "
+                        "that jumps): not a valid index"
+                    )
+    return found
 
 
 # ----------------------------------------------------------------------------- evaluators
