@@ -132,6 +132,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # `gearsym ... | head`: the reader left; say nothing more
         sys.stdout = open(os.devnull, "w")  # noqa: SIM115 (interpreter shutdown flushes it)
         return 0
+    except OSError as err:
+        from gearsym.symbolic.io.output_dir import STORAGE_ERRORS
+
+        if err.errno not in STORAGE_ERRORS:
+            raise
+        # the one output writer discarded its staging folder: nothing half-written remains
+        where = err.filename or "output"
+        print(
+            f"gearsym: {where}: cannot write: {err.strerror}; nothing was written", file=sys.stderr
+        )
+        return 2
     except KeyboardInterrupt:
         print("gearsym: interrupted; nothing was written", file=sys.stderr)
         return 130

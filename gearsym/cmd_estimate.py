@@ -155,9 +155,16 @@ def _dropout_window(text: str | None, shift: str) -> tuple[float, float] | str |
     if text is None:
         return None
     source, target = shift.split("-")
-    phases = [f"gear_{source}", "torque_phase", "speed_phase", f"gear_{target}"]
-    if text.strip() in phases:
-        return text.strip().replace("_", " ")
+    # option spelling -> the detected phase's name (a gear's own name may hold underscores)
+    names = {
+        f"gear_{source}": f"gear {source}",
+        "torque_phase": "torque phase",
+        "speed_phase": "speed phase",
+        f"gear_{target}": f"gear {target}",
+    }
+    phases = list(names)
+    if text.strip() in names:
+        return names[text.strip()]
     parts = text.split(",")
     try:
         t0, t1 = (float(v) for v in parts)

@@ -94,3 +94,45 @@ def test_the_notebook_and_the_command_line_give_the_same_report(
     assert printed == json.loads(json.dumps(report.to_dict()))
     with pytest.raises(GearsymError, match="noise"):
         gearsym.load().estimate("uio", noise=0.01)  # a misspelt option is refused
+
+
+def test_a_dropout_phase_of_a_gear_named_with_underscores_is_the_detected_phase() -> None:
+    """``--dropout gear_2_a`` names the phase "gear 2_a" (every underscore used to become a
+    space, and the phase was not found: a traceback)."""
+    from gearsym.cmd_estimate import _dropout_window
+
+    assert _dropout_window("gear_2_a", "2_a-3") == "gear 2_a"
+    assert _dropout_window("speed_phase", "2_a-3") == "speed phase"
+    assert _dropout_window("0.1,0.2", "2_a-3") == (0.1, 0.2)
+    with pytest.raises(GearsymError, match="gear_2_a, torque_phase, speed_phase, gear_3"):
+        _dropout_window("gear_2", "2_a-3")
+
+
+@pytest.mark.parametrize("noise", ["1e300", "1.5", "0.01,0.01,2"])
+def test_an_absurd_relative_noise_is_refused(
+    noise: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert cli.main(["estimate", "--filter", "ekf", "--noise", noise]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--noise: a relative speed error must be in [0, 1]" in err
+
+
+def test_a_full_disk_under_out_is_one_line_and_leaves_nothing(
+    tmp_path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import errno
+
+    from gearsym.validation.studies.estimation import workflow
+
+    def full(path, data):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    monkeypatch.setattr(workflow, "_write_json", full)
+    out = tmp_path / "out"
+    assert cli.main(["estimate", "--filter", "uio", "--out", str(out), "--no-plots"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    assert err.splitlines()[-1] == (
+        f"gearsym: {out}: cannot write: No space left on device; nothing was written"
+    )
+    assert not out.exists() and list(tmp_path.iterdir()) == []

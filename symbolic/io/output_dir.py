@@ -162,6 +162,15 @@ def _umask() -> int:
     return mask
 
 
+#: A full disk, an exceeded quota, a file too large, a read-only file system or an I/O error
+#: while writing: the machine's condition, reported in one line like bad input.
+STORAGE_ERRORS = frozenset(
+    getattr(errno, name)
+    for name in ("ENOSPC", "EDQUOT", "EFBIG", "EROFS", "EIO")
+    if hasattr(errno, name)
+)
+
+
 class OutputDir:
     """Stage the files of one command and swap them into ``target`` when complete.
 
@@ -429,6 +438,12 @@ class OutputDir:
     ) -> None:
         if not self.committed:
             self.discard()
+        if isinstance(value, OSError) and value.errno in STORAGE_ERRORS:
+            # a full disk (or quota, read-only file system) while staging: one line naming the
+            # user's folder, not the staging path, and the staging folder is gone
+            raise GearsymError(
+                self.shown, "", f"cannot write: {value.strerror}; nothing was written"
+            ) from None
 
 
 # ----------------------------------------------------------------------------- single files

@@ -49,6 +49,10 @@ DRIVE_UPSHIFTS = ("scenario_1_2.toml", "scenario_2_3.toml", "scenario_3_4.toml")
 #: r (3.26) of the EKF and the EUIO; the UIO is run noise-free.
 DEFAULT_RELATIVE_NOISE = 0.01
 
+#: Largest relative speed-sensor error r (3.26) a request may state: σ equal to the speed
+#: itself; beyond it the filter's covariances overflow (r = 1e300 ended in a LinAlgError).
+MAX_RELATIVE_NOISE = 1.0
+
 #: Default TCU sample time (s), the thesis'.
 DEFAULT_SAMPLE_TIME = 0.01
 #: The smallest sample time: the simulated record's spacing (0.5 ms); a smaller one would
@@ -173,6 +177,14 @@ def check_request(request: EstimateRequest) -> None:
     if request.filter not in FILTERS:
         raise GearsymError(
             "estimate", "--filter", f"expected one of {', '.join(FILTERS)}, got {request.filter!r}"
+        )
+    noise = cal.relative_noise or ()
+    if any(not 0 <= r <= MAX_RELATIVE_NOISE for r in noise):
+        raise GearsymError(
+            "estimate",
+            "--noise",
+            f"a relative speed error must be in [0, {MAX_RELATIVE_NOISE:g}], got "
+            f"{', '.join(f'{r:g}' for r in noise)}",
         )
     if request.truth.measurement is not None:
         _check_measured(request)
