@@ -56,6 +56,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         ShiftEvaluator,
         check_parameters,
         check_ranges,
+        check_scheduler,
         connect,
     )
 
@@ -66,10 +67,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         from gearsym.validation.sim.scenario import load_scenario
 
         scenario = load_scenario(d, args.scenario)
-    if args.scheduler != "local" and not args.scheduler.startswith(("tcp://", "tls://")):
-        raise GearsymError(
-            "sweep", "scheduler", f"expected local or tcp://HOST:PORT, got {args.scheduler!r}"
-        )
+    check_scheduler(args.scheduler)
     check_ranges(definition, d.file)  # every sample passes the description's checks
     with OutputDir(args.out, "sweep", before_commit=check) as out:
         progress("building the hybrid shift model")

@@ -129,6 +129,10 @@ def test_shift_ranking_by_total_index_agrees_with_local_sensitivities(shift, cli
         (["--param", "m_vehx=1:2", "--param", "k_ss=1:2"], "unknown parameter 'm_vehx'"),
         (["--param", "m_veh=1:2", "--scheduler", "udp://x"], "expected local or tcp://"),
         (["--param", "m_veh=1:2", "--samples", "10"], "samples: must be a power of two"),
+        (
+            ["--param", "m_veh=1000:2000", "--param", "k_ss=1:2", "--scheduler", "tls://h:1"],
+            "TLS needs certificates gearsym does not configure",
+        ),
         # a sample must pass the description's checks (the parameter records): negative mass
         # and friction ran and printed S1 = 2.09
         (
@@ -265,3 +269,16 @@ def test_indices_outside_zero_one_beyond_their_interval_are_flagged():
     assert len(flagged) == 2
     assert flagged[0].startswith("shift_duration: S1 of m_veh = 2.090 ± 0.300 lies outside")
     assert flagged[1].startswith("shift_duration: ST of zeta = -0.300 ± 0.200 lies outside")
+
+
+def test_a_scheduler_without_workers_is_one_line(monkeypatch):
+    """A reachable scheduler that has no worker would wait for ever: refused after a wait."""
+    from dask.distributed import LocalCluster
+    from gearsym.validation.studies import sweep
+
+    monkeypatch.setattr(sweep, "WORKER_WAIT", 1.0)
+    with LocalCluster(
+        n_workers=0, processes=False, protocol="tcp://", dashboard_address=":0"
+    ) as cluster:
+        with pytest.raises(GearsymError, match="has no workers"):
+            sweep.connect(cluster.scheduler_address, workers=1)

@@ -375,6 +375,27 @@ def _evaluate_batch(evaluator: Evaluator, points: np.ndarray, names: list[str]) 
     return evaluator(points, names)
 
 
+def check_scheduler(scheduler: str) -> None:
+    """``local`` or ``tcp://HOST:PORT``, refused in one line before any work otherwise."""
+    if scheduler == "local":
+        return
+    if scheduler.startswith("tls://"):
+        raise GearsymError(
+            "sweep",
+            "scheduler",
+            f"{scheduler}: TLS needs certificates gearsym does not configure; reach the "
+            "scheduler by tcp://HOST:PORT (through an SSH tunnel across networks)",
+        )
+    if not scheduler.startswith("tcp://"):
+        raise GearsymError(
+            "sweep", "scheduler", f"expected local or tcp://HOST:PORT, got {scheduler!r}"
+        )
+
+
+#: How long a remote scheduler may take to show one worker (s).
+WORKER_WAIT = 10.0
+
+
 def connect(scheduler: str, workers: int, processes: bool = True) -> tuple[Any, Any]:
     """(client, cluster or None): a new LocalCluster for ``"local"``, else the scheduler at
     ``scheduler`` (``tcp://HOST:PORT``); an unreachable one is a one-line error."""
@@ -388,15 +409,23 @@ def connect(scheduler: str, workers: int, processes: bool = True) -> tuple[Any, 
             dashboard_address=":0",
         )
         return Client(cluster), cluster
-    if not scheduler.startswith(("tcp://", "tls://", "inproc://", "ucx://")):
-        raise GearsymError(
-            "sweep", "scheduler", f"expected local or tcp://HOST:PORT, got {scheduler!r}"
-        )
+    check_scheduler(scheduler)
     try:
-        return Client(scheduler, timeout="5s"), None
-    except (OSError, TimeoutError, ValueError) as err:
+        client = Client(scheduler, timeout="5s")
+    except (OSError, TimeoutError, ValueError, TypeError, RuntimeError) as err:
         reason = str(err).splitlines()[0] if str(err) else type(err).__name__
         raise GearsymError("sweep", "scheduler", f"cannot reach {scheduler}: {reason}") from None
+    try:
+        client.wait_for_workers(1, timeout=WORKER_WAIT)
+    except (TimeoutError, OSError) as err:
+        client.close()
+        raise GearsymError(
+            "sweep",
+            "scheduler",
+            f"{scheduler} has no workers (none joined within {WORKER_WAIT:g} s): start "
+            "`dask worker` processes against it",
+        ) from err
+    return client, None
 
 
 def text_progress(done: int, total: int) -> None:
