@@ -32,6 +32,7 @@ from gearsym import (
 )
 from gearsym.commands import common_arguments
 from gearsym.interrupts import Terminated, sigterm_raises
+from gearsym.interrupts import requested as terminate_requested
 from gearsym.symbolic.errors import GearsymError
 
 #: The command modules in the order ``gearsym --help`` lists their commands.
@@ -147,6 +148,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("gearsym: interrupted; nothing was written", file=sys.stderr)
         return 130
     except Terminated:
+        print("gearsym: terminated; nothing was written", file=sys.stderr)
+        return 143
+    except Exception:
+        if not terminate_requested():
+            raise
+        # CasADi turns the Terminated its signal check raised into its own RuntimeError
         print("gearsym: terminated; nothing was written", file=sys.stderr)
         return 143
 

@@ -14,7 +14,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
-__all__ = ["Terminated", "check", "sigterm_raises"]
+__all__ = ["Terminated", "check", "requested", "sigterm_raises"]
 
 _requested = threading.Event()
 
@@ -33,6 +33,12 @@ def check() -> None:
     """Raise :class:`Terminated` if SIGTERM arrived (and was swallowed on its way)."""
     if _requested.is_set():
         raise Terminated
+
+
+def requested() -> bool:
+    """SIGTERM arrived within :func:`sigterm_raises` (native code may have turned the
+    :class:`Terminated` it raised into its own error on the way out)."""
+    return _requested.is_set()
 
 
 @contextmanager

@@ -136,3 +136,33 @@ def test_a_full_disk_under_out_is_one_line_and_leaves_nothing(
         f"gearsym: {out}: cannot write: No space left on device; nothing was written"
     )
     assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_sigterm_turned_into_a_native_error_still_ends_in_one_line(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """CasADi's signal check raises the handler's Terminated inside its call and may hand it
+    back as its own RuntimeError (seen under ``--filter euio --runs 50``): still exit 143 and
+    one line, not a traceback."""
+    import os
+    import signal
+
+    from gearsym.validation.studies.estimation import workflow
+
+    def native(*args: object, **kwargs: object) -> None:
+        try:
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(5)  # the handler raises Terminated here
+        except BaseException as err:  # what native code does with it
+            raise RuntimeError("Error in Function::call for 'F' [IdasInterface]") from err
+        raise AssertionError("SIGTERM was not delivered")
+
+    def failing(*args: object, **kwargs: object) -> None:
+        raise RuntimeError("a real error")
+
+    monkeypatch.setattr(workflow, "_uio", native)
+    assert cli.main(["estimate", "--filter", "uio"]) == 143
+    assert capsys.readouterr().err == "gearsym: terminated; nothing was written\n"
+    monkeypatch.setattr(workflow, "_uio", failing)
+    with pytest.raises(RuntimeError, match="a real error"):  # without SIGTERM: an error
+        cli.main(["estimate", "--filter", "uio"])
