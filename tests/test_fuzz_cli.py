@@ -58,6 +58,8 @@ FUZZ = settings(
     suppress_health_check=list(HealthCheck),
 )
 SLOW = settings(FUZZ, max_examples=SLOW_EXAMPLES)
+#: estimate's valid option sets simulate and filter (seconds each), its refusals are instant
+FUZZ_OPTIONS = settings(FUZZ, max_examples=max(4, EXAMPLES // 4))
 
 # ----------------------------------------------------------------------------- mutations
 
@@ -446,3 +448,116 @@ def test_changed_descriptions_generate_compilable_code_or_one_line(data: st.Data
             build = root / "build"
             build.mkdir()
             _strict_compile(out / "c", build)
+
+
+# ----------------------------------------------------------------------------- options
+
+#: Hostile and plain values per option of the newer commands: NaN, infinities, signs, sizes,
+#: wrong types, names that do not exist, underscores, empty lists.
+ESTIMATE_OPTIONS: dict[str, list[str]] = {
+    "--sample-time": ["nan", "inf", "-1", "0", "1e-9", "1e9", "0.01", "abc", "0.0005"],
+    "--noise": ["nan", "-0.1", "0", "1e300", "0.01", "0.01,0.02", "a,b", "0.01,0.01,0.01"],
+    "--runs": ["0", "-1", "1", "2", "1e9", "x"],
+    "--seed": ["-1", "1.5", "0", "7"],
+    "--initial": ["m_veh=nan", "x=1", "m_veh=1500", "=", "m_veh", "zeta=1e308"],
+    "--dropout": ["0.5,0.1", "nan,1", "speed_phase", "gear_9", "0.2,0.4", "gear_2_a", ""],
+    "--dropout-outputs": ["omega_1", "x", ",", "omega_1,omega_2"],
+    "--params": ["m_veh", "x", ",", "m_veh,zeta"],
+    "--modes": ["filter", "reference", "truth"],
+    "--unknown": ["T_res_star", "x", ","],
+}
+
+
+@FUZZ_OPTIONS
+@given(
+    flt=st.sampled_from(["uio", "ekf", "euio", "kalman"]),
+    chosen=st.dictionaries(
+        st.sampled_from(sorted(ESTIMATE_OPTIONS)),
+        st.integers(min_value=0, max_value=8),
+        max_size=3,
+    ),
+)
+def test_mutated_estimate_options_keep_the_error_contract(flt: str, chosen: dict[str, int]) -> None:
+    """Every combination of hostile options: a run (exit 0) or one line (exit 2), never a
+    traceback, and nothing written outside ``--out``."""
+    argv = ["estimate", "--filter", flt, "--no-plots"]
+    for option, k in sorted(chosen.items()):
+        values = ESTIMATE_OPTIONS[option]
+        argv += [option, values[k % len(values)]]
+    with workdir() as folder:
+        status, stdout, stderr = run_cli([*argv, "--out", "out"])
+        assert_contract(status, stdout, stderr)
+        written = {p.name for p in folder.iterdir()}
+        assert written <= {"out"} and (status == 0) == ("out" in written), (argv, written)
+
+
+SWEEP_RANGES = ["1600:2000", "-2000:-1000", "0:1", "nan:1", "2:1", "1e308:1e309", "0.1:0.12"]
+
+
+@FUZZ
+@given(
+    mass=st.sampled_from(SWEEP_RANGES),
+    mu=st.sampled_from(SWEEP_RANGES),
+    samples=st.sampled_from(["3", "0", "1048576", "x", "-4", "4"]),
+    scheduler=st.sampled_from(["tls://h:1", "udp://h", "tcp://", "local"]),
+)
+def test_mutated_sweeps_are_refused_in_one_line_before_any_work(
+    mass: str, mu: str, samples: str, scheduler: str
+) -> None:
+    """Ranges outside a parameter's plausible values, bad sample counts and schedulers are
+    refused in one line before a model is built; nothing is written. A valid sweep is not run
+    here (it takes minutes): only its refusals are the property."""
+    valid = mass == "1600:2000" and mu == "0.1:0.12" and samples == "4" and scheduler == "local"
+    if valid:
+        return
+    argv = ["sweep", "--param", f"m_veh={mass}", "--param", f"mu_05={mu}"]
+    argv += ["--samples", samples, "--scheduler", scheduler, "--out", "out"]
+    with workdir() as folder:
+        status, stdout, stderr = run_cli(argv)
+        if status == 0:
+            pytest.fail(f"a sweep with a bad value ran: {argv}")
+        assert_contract(status, stdout, stderr, allow=(2,))
+        assert list(folder.iterdir()) == []
+
+
+@FUZZ_OPTIONS
+@given(
+    what=st.sampled_from(["stick", "lever", "speeds", "drivetrain", "x"]),
+    gear=st.sampled_from([None, "2", "9", "x", "_", ""]),
+    suffix=st.sampled_from([".svg", ".png", ".pdf", ""]),
+)
+def test_mutated_draw_options_keep_the_error_contract(
+    what: str, gear: str | None, suffix: str
+) -> None:
+    argv = ["draw", "--what", what, "--out", f"picture{suffix}"]
+    if gear is not None:
+        argv += ["--gear", gear]
+    with workdir() as folder:
+        status, stdout, stderr = run_cli(argv)
+        assert_contract(status, stdout, stderr)
+        written = sorted(p.name for p in folder.iterdir())
+        assert written == ([f"picture{suffix}"] if status == 0 else []), (argv, written)
+
+
+@FUZZ_OPTIONS
+@given(
+    noise=st.sampled_from([None, "nan", "-1", "0", "1e300", "0.01", "x"]),
+    seed=st.sampled_from([None, "-1", "3", "1.5"]),
+    suffix=st.sampled_from([".mf4", ".csv", ".txt", ""]),
+    scenario=st.sampled_from([None, "scenario_2_3_measured.toml", "missing.toml"]),
+)
+def test_mutated_export_measurement_options_keep_the_error_contract(
+    noise: str | None, seed: str | None, suffix: str, scenario: str | None
+) -> None:
+    argv = ["export-measurement", "--out", f"rec{suffix}"]
+    if scenario is not None:
+        path = ROOT / "gearsym" / "data" / scenario
+        argv += ["--scenario", str(path) if path.exists() else scenario]
+    for option, value in (("--noise", noise), ("--seed", seed)):
+        if value is not None:
+            argv += [option, value]
+    with workdir() as folder:
+        status, stdout, stderr = run_cli(argv)
+        assert_contract(status, stdout, stderr)
+        written = sorted(p.name for p in folder.iterdir())
+        assert written == ([f"rec{suffix}"] if status == 0 else []), (argv, written)
