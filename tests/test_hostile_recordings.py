@@ -147,6 +147,27 @@ def test_a_damaged_mdf4_is_one_line_and_writes_nothing(tmp_path, recording, dama
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.parametrize(
+    "command",
+    [
+        ("estimate", "--filter", "ekf", "--no-plots"),
+        ("sensitivity", "--no-plots"),
+        ("fim", "--json"),
+    ],
+)
+def test_every_command_reading_recordings_survives_the_crash_case(tmp_path, recording, command):
+    """estimate, sensitivity and fim read recordings through the same reader: the SIGSEGV
+    case is one line, exit 2, nothing written for them too."""
+    path = tmp_path / "bad.mf4"
+    path.write_bytes(CRASHES["channel byte offset +4096 (SIGSEGV)"](recording))
+    out = () if command[0] == "fim" else ("--out", str(tmp_path / "o"))
+    line = one_line_error(
+        gearsym_cli(*command, "--scenario", str(SCENARIO), "--measurement", str(path), *out)
+    )
+    assert line.startswith(f"gearsym: {path}: ") and "outside its record" in line, line
+    assert not (tmp_path / "o").exists()
+
+
 def test_asammdf_alone_dies_on_the_regression_case(tmp_path, recording):
     """Why the reader runs in a child: asammdf, in-process, is killed by a signal on the
     +4096 byte offset (the regression case above), or loops without end (it reads freed
