@@ -25,7 +25,11 @@ between grid samples, as the scenario's own profiles. A NaN in a speed channel m
 samples next to it NaN: the filter skips those updates (a sensor dropout); an input must not be
 NaN. Refused, one line naming the file, the key and the reason: a missing channel, an unknown
 unit or one that contradicts the recording's, a time base that does not cover the scenario's
-window, time that does not increase strictly, NaN in an input.
+window, time that does not increase strictly, NaN in an input, a sample beyond its quantity's
+plausible bound (:data:`PLAUSIBLE_MAX`), a file beyond the limits on bytes, samples and
+channels (:data:`RECORDING_BYTES_MAX`, :data:`RECORDING_SAMPLES_MAX`,
+:data:`RECORDING_CHANNELS_MAX`; docs/limits.md), a damaged MDF4 file (read in a child process,
+:mod:`.mdf_read`: a crash of asammdf is one line, not the end of gearsym).
 """
 
 from __future__ import annotations
@@ -33,7 +37,7 @@ from __future__ import annotations
 import csv
 import io
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -47,6 +51,10 @@ if TYPE_CHECKING:
     from gearsym.symbolic.description import GearboxDescription
 
 __all__ = [
+    "PLAUSIBLE_MAX",
+    "RECORDING_BYTES_MAX",
+    "RECORDING_CHANNELS_MAX",
+    "RECORDING_SAMPLES_MAX",
     "UNITS",
     "Channel",
     "ChannelMap",
@@ -64,6 +72,24 @@ GRID_SAMPLES_MAX = 5000
 
 #: Largest recording read (bytes): a one-shift bench file at 1 kHz with 50 channels is ~10 MB.
 RECORDING_BYTES_MAX = 256 << 20
+
+#: Most samples of one recorded channel (MDF4: the cycle count of its channel group, checked in
+#: the header before any data are read; CSV: data rows): 1000 s at 1 kHz. A channel read is
+#: 8 bytes a sample for its time and 8 for its values (16 MB at the limit).
+RECORDING_SAMPLES_MAX = 1_000_000
+
+#: Most channels in an MDF4 file (all channel groups) or columns in a CSV header.
+RECORDING_CHANNELS_MAX = 10_000
+
+#: Longest CSV line (characters): a header of 10 000 channel names fits.
+CSV_LINE_CHARS_MAX = 1 << 20
+
+#: Largest plausible |value| per quantity (SI, after gain, offset and unit) of a recorded
+#: sample the analysis uses: 5000 rad/s is 47 700 rpm (e-machines turn up to ~20 000 rpm),
+#: 100 bar (clutch pressures stay below ~30 bar), 10 000 N*m (a truck engine gives ~3500 N*m);
+#: 0.5 rad of grade, the scenarios' GRADE_MAX (a test holds them equal). A sample of 1e300 is
+#: a broken sensor or file.
+PLAUSIBLE_MAX = {"speed": 5000.0, "pressure": 1e7, "torque": 1e4, "grade": 0.5}
 
 #: The start time written into a synthetic MDF4 (the same input gives the same bytes).
 RECORDING_START_TEXT = "2018-01-01T00:00:00+00:00"
@@ -317,131 +343,131 @@ def analysis_grid(t_end: float, sample_time: float) -> np.ndarray:
     return np.arange(0.0, t_end + 1e-12, sample_time)
 
 
-def read_measurement(path: str | Path, channel_map: ChannelMap, t_end: float) -> Measurement:
-    """Read the recording ``path`` (``.mf4``/``.mdf`` through asammdf, else CSV with a header
-    row), take every mapped channel, convert it to SI and resample it onto the grid of
-    ``channel_map.sample_time`` over [0, ``t_end``] (module docstring)."""
+def read_measurement(
+    path: str | Path, channel_map: ChannelMap, t_end: float, require: Sequence[str] = ()
+) -> Measurement:
+    """Read the recording ``path`` (``.mf4``/``.mdf`` through asammdf in a child process,
+    :mod:`.mdf_read`; else CSV with a header row, streamed), take every mapped channel, convert
+    it to SI and resample it onto the grid of ``channel_map.sample_time`` over [0, ``t_end``]
+    (module docstring). Every signal in ``require`` (the outputs a filter needs) must have a
+    finite sample on the grid: a filter that receives no measurement estimates nothing."""
     file = str(path)
     source = Path(path)
     try:
         if not source.is_file():
             raise GearsymError(file, "", "no such file" if not source.exists() else "not a file")
         if source.stat().st_size > RECORDING_BYTES_MAX:
-            raise GearsymError(file, "", f"larger than {RECORDING_BYTES_MAX >> 20} MiB")
+            raise GearsymError(
+                file, "", f"larger than RECORDING_BYTES_MAX = {RECORDING_BYTES_MAX >> 20} MiB"
+            )
     except OSError as err:
         raise GearsymError(file, "", f"cannot be read ({err.strerror})") from None
+    grid = analysis_grid(t_end, channel_map.sample_time)
     if source.suffix.lower() in (".mf4", ".mdf"):
-        raw = _read_mdf(source, file, channel_map)
+        from gearsym.validation.sim.mdf_read import read_mdf_on_grid
+
+        values = read_mdf_on_grid(source, file, channel_map, t_end)
         kind = "mdf4"
     else:
         raw = _read_csv(source, file, channel_map)
+        values = {
+            c.signal: on_grid(file, channel_map, c, *raw.pop(c.signal), grid, t_end)
+            for c in channel_map.channels
+        }
         kind = "csv"
-    grid = analysis_grid(t_end, channel_map.sample_time)
-    values = {}
-    for channel in channel_map.channels:
-        key = f"measurement.channel.{channel.signal}"
-        t, v = raw[channel.signal]
-        if channel_map.time_unit == "ms":
-            t = t / 1e3
-        t = t - channel_map.time_offset
-        if not np.all(np.isfinite(t)):
-            raise GearsymError(file, key, f"time of channel {channel.name!r} is not finite")
-        if len(t) < 2 or np.any(np.diff(t) <= 0):
-            bad = int(np.argmax(np.diff(t) <= 0)) + 1 if len(t) >= 2 else 0
+    for signal in require:
+        channel = channel_map.channel(signal)
+        if channel is not None and not np.any(np.isfinite(values[signal])):
             raise GearsymError(
                 file,
-                key,
-                f"time of channel {channel.name!r} must increase strictly (sample {bad})",
+                f"measurement.channel.{signal}",
+                f"channel {channel.name!r} has no finite sample in the analysis window "
+                f"0..{t_end:g} s: the filter would receive no measurement of {signal}",
             )
-        slack = 1e-9 * max(1.0, t_end)
-        if t[0] > slack or t[-1] < t_end - slack:
-            raise GearsymError(
-                file,
-                key,
-                f"channel {channel.name!r} covers {t[0]:g}..{t[-1]:g} s of scenario time, not "
-                f"the scenario's window 0..{t_end:g} s (time_offset "
-                f"{channel_map.time_offset:g} s)",
-            )
-        si = channel.to_si(v)
-        if np.any(np.isinf(si)):
-            first = int(np.argmax(np.isinf(si)))
-            raise GearsymError(
-                file,
-                key,
-                f"channel {channel.name!r} is infinite at t = {t[first]:g} s (after its gain, "
-                "offset and unit)",
-            )
-        if channel.is_input and not np.all(np.isfinite(si)):
-            first = int(np.argmax(~np.isfinite(si)))
-            raise GearsymError(
-                file,
-                key,
-                f"input channel {channel.name!r} is NaN or infinite at t = {t[first]:g} s "
-                "(an input must be known at every sample)",
-            )
-        on_grid = np.interp(grid, t, si)
-        if channel.quantity == "pressure" and np.any(on_grid < 0):
-            raise GearsymError(
-                file,
-                key,
-                f"pressure {channel.name!r} is negative ({on_grid.min():g} Pa); set its "
-                "offset to the sensor's zero",
-            )
-        values[channel.signal] = on_grid
     return Measurement(file=file, format=kind, channel_map=channel_map, t=grid, values=values)
 
 
-def _read_mdf(
-    source: Path, file: str, channel_map: ChannelMap
-) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    try:
-        from asammdf import MDF
-    except ImportError:
+def on_grid(
+    file: str,
+    channel_map: ChannelMap,
+    channel: Channel,
+    t: np.ndarray,
+    v: np.ndarray,
+    grid: np.ndarray,
+    t_end: float,
+) -> np.ndarray:
+    """One recorded channel (recording time ``t``, raw values ``v``) checked, in SI units and
+    resampled onto ``grid`` (module docstring)."""
+    key = f"measurement.channel.{channel.signal}"
+    if channel_map.time_unit == "ms":
+        t = t / 1e3
+    t = t - channel_map.time_offset
+    if not np.all(np.isfinite(t)):
+        raise GearsymError(file, key, f"time of channel {channel.name!r} is not finite")
+    if len(t) < 2 or np.any(np.diff(t) <= 0):
+        bad = int(np.argmax(np.diff(t) <= 0)) + 1 if len(t) >= 2 else 0
         raise GearsymError(
-            file, "", "reading MDF4 needs asammdf: pip install 'gearsym[mdf]' (or use a CSV)"
-        ) from None
-    import logging
+            file,
+            key,
+            f"time of channel {channel.name!r} must increase strictly (sample {bad})",
+        )
+    slack = 1e-9 * max(1.0, t_end)
+    if t[0] > slack or t[-1] < t_end - slack:
+        raise GearsymError(
+            file,
+            key,
+            f"channel {channel.name!r} covers {t[0]:g}..{t[-1]:g} s of scenario time, not "
+            f"the scenario's window 0..{t_end:g} s (time_offset "
+            f"{channel_map.time_offset:g} s)",
+        )
+    with np.errstate(over="ignore", invalid="ignore"):
+        si = channel.to_si(v)
+    if np.any(np.isinf(si)):
+        first = int(np.argmax(np.isinf(si)))
+        raise GearsymError(
+            file,
+            key,
+            f"channel {channel.name!r} is infinite at t = {t[first]:g} s (after its gain, "
+            "offset and unit)",
+        )
+    if channel.is_input and not np.all(np.isfinite(si)):
+        first = int(np.argmax(~np.isfinite(si)))
+        raise GearsymError(
+            file,
+            key,
+            f"input channel {channel.name!r} is NaN or infinite at t = {t[first]:g} s "
+            "(an input must be known at every sample)",
+        )
+    bound = plausible_max(channel.quantity)
+    # the samples the grid uses: those in the window and one on either side
+    lo = max(int(np.searchsorted(t, 0.0, side="right")) - 1, 0)
+    hi = int(np.searchsorted(t, t_end, side="left")) + 1
+    used = si[lo:hi]
+    with np.errstate(invalid="ignore"):
+        beyond = np.abs(used) > bound
+    if np.any(beyond):
+        first = int(np.argmax(beyond))
+        raise GearsymError(
+            file,
+            key,
+            f"channel {channel.name!r} is {used[first]:g} {SI_UNIT[channel.quantity]} at t = "
+            f"{t[lo + first]:g} s, beyond the plausible |{channel.quantity}| <= {bound:g} "
+            f"{SI_UNIT[channel.quantity]} (PLAUSIBLE_MAX; after its gain, offset and unit)",
+        )
+    resampled = np.interp(grid, t, si)
+    if channel.quantity == "pressure" and np.any(resampled < 0):
+        raise GearsymError(
+            file,
+            key,
+            f"pressure {channel.name!r} is negative ({resampled.min():g} Pa); set its "
+            "offset to the sensor's zero",
+        )
+    return resampled
 
-    logging.getLogger("asammdf").setLevel(logging.ERROR)
-    try:
-        mdf = MDF(str(source))
-    except Exception as err:  # asammdf raises many kinds on a damaged file
-        raise GearsymError(file, "", f"not a readable MDF file ({err})") from None
-    try:
-        known = sorted(mdf.channels_db)
-        out = {}
-        for channel in channel_map.channels:
-            key = f"measurement.channel.{channel.signal}.name"
-            if channel.name not in mdf.channels_db:
-                raise GearsymError(
-                    file, key, f"no channel {channel.name!r} in the recording ({_few(known)})"
-                )
-            try:
-                signal = mdf.get(channel.name, raw=False)
-            except Exception as err:  # e.g. the name in several channel groups
-                raise GearsymError(
-                    file, key, f"cannot read channel {channel.name!r}: {err}"
-                ) from None
-            unit = (signal.unit or "").strip()
-            if unit and unit != channel.unit:
-                raise GearsymError(
-                    file,
-                    f"measurement.channel.{channel.signal}.unit",
-                    f"the recording gives {channel.name!r} in {unit!r}, the channel map says "
-                    f"{channel.unit!r}",
-                )
-            samples = np.asarray(signal.samples)
-            if samples.dtype.kind not in "fiu":
-                raise GearsymError(
-                    file, key, f"channel {channel.name!r} is not numeric ({samples.dtype})"
-                )
-            out[channel.signal] = (
-                np.asarray(signal.timestamps, dtype=float),
-                samples.astype(float),
-            )
-        return out
-    finally:
-        mdf.close()
+
+def plausible_max(quantity: str) -> float:
+    """The largest plausible |value| of ``quantity`` in SI units (:data:`PLAUSIBLE_MAX`)."""
+    return PLAUSIBLE_MAX[quantity]
 
 
 def _few(names: Sequence[str]) -> str:
@@ -449,38 +475,84 @@ def _few(names: Sequence[str]) -> str:
     return f"channels: {shown_names}{', ...' if len(names) > 12 else ''}"
 
 
+def _bounded_lines(handle: io.TextIOBase, file: str) -> Iterator[str]:
+    """The lines of ``handle``, each read with a length limit: a file without line breaks is
+    refused at :data:`CSV_LINE_CHARS_MAX` characters instead of being read whole."""
+    while True:
+        line = handle.readline(CSV_LINE_CHARS_MAX + 1)
+        if not line:
+            return
+        if len(line) > CSV_LINE_CHARS_MAX:
+            raise GearsymError(
+                file, "", f"a line longer than CSV_LINE_CHARS_MAX = {CSV_LINE_CHARS_MAX} characters"
+            )
+        yield line
+
+
 def _read_csv(
     source: Path, file: str, channel_map: ChannelMap
 ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    try:
-        text = source.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        raise GearsymError(file, "", f"cannot be read as UTF-8 text ({err})") from None
-    rows = [r for r in csv.reader(io.StringIO(text)) if r and not r[0].lstrip().startswith("#")]
-    if not rows:
-        raise GearsymError(file, "", "empty: expected a header row and samples")
-    header = [h.strip() for h in rows[0]]
+    """The mapped columns, streamed row by row into float arrays (8 bytes a value): at most
+    :data:`RECORDING_SAMPLES_MAX` data rows and :data:`RECORDING_CHANNELS_MAX` columns."""
+    from array import array
+
     wanted = [("measurement.time_channel", channel_map.time_channel)] + [
         (f"measurement.channel.{c.signal}.name", c.name) for c in channel_map.channels
     ]
-    for key, name in wanted:
-        if name not in header:
-            raise GearsymError(file, key, f"no column {name!r} in the header ({_few(header)})")
-    columns: dict[str, np.ndarray] = {}
-    for key, name in wanted:
-        j = header.index(name)
-        values = []
-        for line, row in enumerate(rows[1:], start=2):
-            cell = row[j].strip() if j < len(row) else ""
-            try:
-                values.append(float(cell) if cell else math.nan)
-            except ValueError:
+    names = list(dict.fromkeys(name for _, name in wanted))
+    columns = {name: array("d") for name in names}
+    try:
+        with source.open(encoding="utf-8", newline="") as handle:
+            rows = (
+                r
+                for r in csv.reader(_bounded_lines(handle, file))
+                if r and not r[0].lstrip().startswith("#")
+            )
+            header_row = next(rows, None)
+            if header_row is None:
+                raise GearsymError(file, "", "empty: expected a header row and samples")
+            header = [h.strip() for h in header_row]
+            if len(header) > RECORDING_CHANNELS_MAX:
                 raise GearsymError(
-                    file, key, f"column {name!r}, data row {line - 1}: not a number: {cell!r}"
-                ) from None
-        columns[name] = np.array(values)
-    t = columns[channel_map.time_channel]
-    return {c.signal: (t, columns[c.name]) for c in channel_map.channels}
+                    file,
+                    "",
+                    f"{len(header)} columns, more than RECORDING_CHANNELS_MAX = "
+                    f"{RECORDING_CHANNELS_MAX}",
+                )
+            for key, name in wanted:
+                if name not in header:
+                    raise GearsymError(
+                        file, key, f"no column {name!r} in the header ({_few(header)})"
+                    )
+            place = [(name, header.index(name)) for name in names]
+            keys = {name: key for key, name in reversed(wanted)}
+            for line, row in enumerate(rows, start=1):
+                if line > RECORDING_SAMPLES_MAX:
+                    raise GearsymError(
+                        file,
+                        "",
+                        f"more than RECORDING_SAMPLES_MAX = {RECORDING_SAMPLES_MAX} data rows",
+                    )
+                for name, j in place:
+                    cell = row[j].strip() if j < len(row) else ""
+                    try:
+                        columns[name].append(float(cell) if cell else math.nan)
+                    except ValueError:
+                        raise GearsymError(
+                            file,
+                            keys[name],
+                            f"column {name!r}, data row {line}: not a number: {_clip(cell)!r}",
+                        ) from None
+    except (OSError, UnicodeDecodeError, csv.Error) as err:
+        raise GearsymError(file, "", f"cannot be read as UTF-8 CSV text ({err})") from None
+    t = np.frombuffer(columns[channel_map.time_channel], dtype=float)
+    return {
+        c.signal: (t, np.frombuffer(columns[c.name], dtype=float)) for c in channel_map.channels
+    }
+
+
+def _clip(text: str, n: int = 40) -> str:
+    return text if len(text) <= n else text[: n - 3] + "..."
 
 
 def recording_bytes(

@@ -327,7 +327,7 @@ def measured_truth(
             f"measurement.channel.{missing[0]}",
             f"missing: the filter measures {', '.join(outputs)}",
         )
-    measurement = read_measurement(recording, cmap, scenario.t_end)
+    measurement = read_measurement(recording, cmap, scenario.t_end, require=outputs)
     return Truth(scenario, source, measurement)
 
 
