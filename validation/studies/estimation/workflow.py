@@ -304,12 +304,21 @@ def _check_measured(request: EstimateRequest) -> None:
 # ---------------------------------------------------------------------------------------------
 
 
+def filter_model(calibration: Calibration, shift: str) -> tuple[Any, list[str]]:
+    """The EKF's augmented model (4.1) of ``shift`` with the calibration's parameters (a bad
+    name is a one-line error before any run) and the outputs it measures."""
+    from gearsym.symbolic.estimators.ekf import augmented_model
+
+    parameters = None if calibration.parameters is None else list(calibration.parameters)
+    aug = augmented_model(calibration.description, shift, parameters)
+    return aug, [name.removeprefix("y_") for name in aug.output_names]
+
+
 def measured_truth(
     calibration: Calibration, scenario: Scenario, recording: str | Path, source: str
 ) -> Truth:
     """A bench recording as the truth: the scenario's ``[measurement]`` table must map every
     output the filter measures (checked before the file is read), then the file is read."""
-    from gearsym.symbolic.estimators.ekf import augmented_model
     from gearsym.validation.sim.measurement import read_measurement
 
     cmap = scenario.measurement
@@ -317,9 +326,7 @@ def measured_truth(
         raise GearsymError(
             scenario.file, "measurement", "missing table [measurement] (the channel map)"
         )
-    parameters = None if calibration.parameters is None else list(calibration.parameters)
-    aug = augmented_model(calibration.description, scenario.shift.name, parameters)
-    outputs = [name.removeprefix("y_") for name in aug.output_names]
+    _, outputs = filter_model(calibration, scenario.shift.name)
     missing = [o for o in outputs if cmap.channel(o) is None]
     if missing:
         raise GearsymError(
@@ -457,7 +464,6 @@ def _check_ekf_names(request: EstimateRequest, aug: Any) -> list[str]:
 
 
 def _ekf(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> EstimateReport:
-    from gearsym.symbolic.estimators.ekf import augmented_model
     from gearsym.validation.studies.estimation.montecarlo import run_ekf_monte_carlo
     from gearsym.validation.studies.estimation.plots import plot_efficiency, plot_ekf
     from gearsym.validation.studies.estimation.report import (
@@ -469,8 +475,7 @@ def _ekf(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> E
 
     cal, truth = request.calibration, request.truth
     d = cal.description
-    parameters = None if cal.parameters is None else list(cal.parameters)
-    aug = augmented_model(d, truth.scenario.shift.name, parameters)  # bad names: before the run
+    aug, _ = filter_model(cal, truth.scenario.shift.name)  # bad names: before the run
     outputs = _check_ekf_names(request, aug)
     result = _simulate(d, truth.scenario, reporter)
     window = _window(request.dropout, result)
@@ -612,7 +617,6 @@ def _measured(request: EstimateRequest, folder: Path | None, reporter: Reporter)
     """The EKF on a bench recording mapped by the scenario's ``[measurement]`` table; the
     inputs of the simulation that gives the element modes and the phases are the recorded
     ones."""
-    from gearsym.symbolic.estimators.ekf import augmented_model
     from gearsym.validation.sim.measurement import RESAMPLE_TEXT
     from gearsym.validation.sim.scenario import input_sources
     from gearsym.validation.sim.scenario import with_measured_inputs as driven
@@ -628,9 +632,7 @@ def _measured(request: EstimateRequest, folder: Path | None, reporter: Reporter)
     cal, truth = request.calibration, request.truth
     d, scenario, measurement = cal.description, truth.scenario, truth.measurement
     cmap = scenario.measurement
-    parameters = None if cal.parameters is None else list(cal.parameters)
-    aug = augmented_model(d, scenario.shift.name, parameters)
-    outputs = [name.removeprefix("y_") for name in aug.output_names]
+    aug, outputs = filter_model(cal, scenario.shift.name)
     result = _simulate(d, driven(scenario, measurement), reporter)
     window = _window(request.dropout, result)
     setup = prepare_ekf(
