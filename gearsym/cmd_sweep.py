@@ -68,6 +68,12 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
         scenario = load_scenario(d, args.scenario)
     check_scheduler(args.scheduler)
+    if args.workers is not None and args.scheduler != "local":
+        raise GearsymError(
+            "sweep", "workers", "is for --scheduler local; a remote scheduler brings its workers"
+        )
+    if args.workers is None:
+        args.workers = 2
     check_ranges(definition, d.file)  # every sample passes the description's checks
     with OutputDir(args.out, "sweep", before_commit=check) as out:
         progress("building the hybrid shift model")
@@ -211,8 +217,9 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--workers",
         type=number(int, minimum=1, maximum=256),
-        default=2,
-        help="LocalCluster worker processes (default 2)",
+        default=None,
+        help="LocalCluster worker processes (default 2; with a remote scheduler its workers "
+        "are used, and this option is refused)",
     )
     p.add_argument(
         "--batch",

@@ -1,12 +1,13 @@
-"""Property-based hostile-input suite (issue 9): mutate valid gearbox descriptions and scenarios
-and hold every command to the error contract.
+"""Property-based hostile-input suite (issues 9, 26): mutate valid gearbox descriptions,
+scenarios and the options of the newer commands (estimate, sweep, draw, export-measurement) and
+hold every command to the error contract.
 
-For every mutated input and every command: exit 0 with a correct result, or exit 2 with one
-line on stderr and no traceback (``ratios`` may also exit 1, after saying which gears differ
-from the expected table); no file outside the chosen ``--out`` changes; code that ``generate``
-emits compiles under the strict flags. A result is "correct" when an independent computation
-agrees: the gear ratios are re-derived here with NumPy from the mutated TOML (Willis equations
-by hand), not with gearsym's SymPy code.
+For every mutated input and every command: exit 0 with a correct result, or exit 2 with one line
+on stderr and no traceback (``ratios`` may also exit 1, after saying which gears differ from the
+expected table), the process's peak memory under :data:`MEMORY_MAX_BYTES`; no file outside the
+chosen ``--out`` changes; code that ``generate`` emits compiles under the strict flags. A result
+is "correct" when an independent computation agrees: the gear ratios are re-derived here with
+NumPy from the mutated TOML (Willis equations by hand), not with gearsym's SymPy code.
 
 The budget is fixed and the seed too (``derandomize``), so ``make test`` is reproducible. The
 nightly run raises the budget: ``GEARSYM_FUZZ_EXAMPLES=2000 make fuzz`` (see the Makefile).
@@ -273,10 +274,27 @@ def workdir() -> Iterator[Path]:
             os.chdir(previous)
 
 
+#: Peak resident memory the suite's process (and any child, e.g. the MDF reader) may reach
+#: over every mutated input: the whole test process, so it bounds each command too.
+MEMORY_MAX_BYTES = 3 << 30
+
+
+def peak_memory() -> int:
+    """Largest resident set of this process or of any child it waited for, in bytes."""
+    import resource
+
+    kib = max(
+        resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
+        resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss,
+    )
+    return kib * 1024  # Linux reports KiB
+
+
 def assert_contract(status: int, stdout: str, stderr: str, allow: tuple[int, ...] = (0, 2)) -> None:
     event(f"exit {status}")  # --hypothesis-show-statistics shows how often each outcome ran
     assert status in allow, (status, stdout[-2000:], stderr[-2000:])
     assert "Traceback" not in stderr
+    assert peak_memory() < MEMORY_MAX_BYTES, f"peak memory {peak_memory() >> 20} MiB"
     if status == 2:
         lines = stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("gearsym: "), stderr[-2000:]

@@ -133,6 +133,11 @@ def test_shift_ranking_by_total_index_agrees_with_local_sensitivities(shift, cli
             ["--param", "m_veh=1000:2000", "--param", "k_ss=1:2", "--scheduler", "tls://h:1"],
             "TLS needs certificates gearsym does not configure",
         ),
+        (
+            ["--param", "m_veh=1000:2000", "--param", "k_ss=1:2", "--scheduler", "tcp://h:1"]
+            + ["--workers", "4"],
+            "workers: is for --scheduler local",
+        ),
         # a sample must pass the description's checks (the parameter records): negative mass
         # and friction ran and printed S1 = 2.09
         (
@@ -250,6 +255,24 @@ def test_a_definition_files_samples_are_bounded_as_the_options(tmp_path, capsys)
     path = tmp_path / "sweep.toml"
     path.write_text("[sweep]\nsamples = 1048576\n[sweep.parameters]\nm_veh = [1600, 2000]\n")
     with pytest.raises(GearsymError, match="sweep.samples: must be at most 100000, got 1048576"):
+        load_definition(path)
+
+
+@pytest.mark.parametrize(
+    ("body", "key"),
+    [
+        ("[sweep]\nparameters = 5\n", "sweep.parameters"),
+        ("[sweep]\nparameters = [1, 2]\n", "sweep.parameters"),
+        ("sweep = 3\n", "sweep"),
+        ('[sweep]\nsamples = "many"\n', "sweep.samples"),
+    ],
+)
+def test_a_definition_of_the_wrong_type_is_one_line(tmp_path, body, key):
+    from gearsym.validation.studies.sweep import load_definition
+
+    path = tmp_path / "sweep.toml"
+    path.write_text(body)
+    with pytest.raises(GearsymError, match=f"^{path}: {key}: "):
         load_definition(path)
 
 

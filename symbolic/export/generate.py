@@ -63,7 +63,7 @@ from gearsym.symbolic.hybrid_sensitivity import hybrid_sensitivity
 from gearsym.symbolic.io.output_dir import MANIFEST, manifest_marker, manifest_text
 from gearsym.symbolic.linear_forms import gear_linear_forms, shift_linear_forms
 from gearsym.symbolic.model import Model, Variable
-from gearsym.symbolic.parameters import RECORDS, record
+from gearsym.symbolic.parameters import RECORDS, is_mu, record
 from gearsym.symbolic.sensitivity import sensitivity_model
 from gearsym.symbolic.shifts import ShiftSpec, shift_spec
 
@@ -91,16 +91,6 @@ PARAMETER_BOUNDS: dict[str, tuple[float | None, float | None]] = {
     r.key: r.bounds for r in RECORDS if r.bounds is not None and r.section != "mu"
 }
 MU_BOUNDS = record("mu").bounds  # every μ_<element> parameter
-
-#: Where the parameter of each bound lives in the description (for the one-line error).
-_PARAMETER_KEYS = {
-    "k_ss": "drivetrain.k_ss",
-    "d_ss": "drivetrain.d_ss",
-    "I_wheel": "drivetrain.I_wheel",
-    "sigma0": "friction.sigma0",
-    "sigma1": "friction.sigma1",
-    "z_ba_ratio": "friction.z_ba_ratio",
-}
 
 #: Sampling ranges of states and inputs for validation, by name prefix (first match wins).
 _RANGES_BY_PREFIX: tuple[tuple[str, tuple[float, float]], ...] = (
@@ -133,18 +123,9 @@ def _bounds(d: GearboxDescription, model: Model) -> dict[str, tuple[float | None
             lo, hi = PARAMETER_BOUNDS[v.name]
         else:
             continue
-        if v.default is not None and not (
-            (lo is None or v.default >= lo) and (hi is None or v.default <= hi)
-        ):
-            key = _PARAMETER_KEYS.get(v.name, f"vehicle.{v.name}")
-            if v.name.startswith("mu_"):
-                key = "friction.mu_nominal"
-            raise GearsymError(
-                d.file,
-                key,
-                f"value {v.default:g} lies outside the range [{lo:g}, {hi:g}] that the "
-                "generated params_validate accepts",
-            )
+        if v.default is not None:
+            key = "friction.mu_nominal" if is_mu(v.name) else f"{record(v.name).section}.{v.name}"
+            _check_bound(d, key, v.default, (lo, hi))
         bounds[v.name] = (lo, hi)
     return bounds
 
@@ -291,6 +272,27 @@ def check_generatable(d: GearboxDescription) -> None:
             "models of the shifts between them and an example that drives one",
         )
     full_model(d)
+    for section in ("drivetrain", "vehicle", "friction"):
+        for key, q in getattr(d, section).items():
+            bounds = MU_BOUNDS if key == "mu_nominal" else PARAMETER_BOUNDS.get(key)
+            if bounds is not None:
+                _check_bound(d, f"{section}.{key}", float(q.value), bounds)
+
+
+def _check_bound(
+    d: GearboxDescription, key: str, value: float, bounds: tuple[float | None, float | None]
+) -> None:
+    """A description value outside the range the emitted ``params_validate`` accepts is a
+    one-line user error."""
+    lo, hi = bounds
+    if (lo is None or value >= lo) and (hi is None or value <= hi):
+        return
+    raise GearsymError(
+        d.file,
+        key,
+        f"value {value:g} lies outside the range [{lo:g}, {hi:g}] that the generated "
+        "params_validate accepts",
+    )
 
 
 def gearbox_model_names(d: GearboxDescription, shifts: str = "adjacent") -> list[str]:

@@ -119,11 +119,16 @@ def load_definition(path: str | Path) -> SweepDefinition:
     if unknown or "sweep" not in data:
         raise GearsymError(file, unknown[0] if unknown else "sweep", "expected one [sweep] table")
     table = data["sweep"]
+    if not isinstance(table, dict):
+        raise GearsymError(file, "sweep", "expected a table [sweep]")
     extra = sorted(set(table) - {"samples", "seed", "parameters"})
     if extra:
         raise GearsymError(file, f"sweep.{extra[0]}", "unknown key (samples, seed, parameters)")
     ranges = {}
-    for name, pair in table.get("parameters", {}).items():
+    parameters = table.get("parameters", {})
+    if not isinstance(parameters, dict):
+        raise GearsymError(file, "sweep.parameters", "expected a table of NAME = [LO, HI]")
+    for name, pair in parameters.items():
         key = f"sweep.parameters.{name}"
         if (
             not isinstance(pair, list)
