@@ -8,11 +8,9 @@ import math
 from pathlib import Path
 
 import pytest
-from gearsym.validation.checks.integration_check import (
-    GENERATED,
-    IntegrationReport,
-    integration_check,
-)
+from gearsym.validation.checks.integration_check import IntegrationReport, integration_check
+
+GENERATED = Path(__file__).resolve().parents[1] / "generated"
 
 
 @pytest.fixture(scope="module")

@@ -48,8 +48,9 @@ from gearsym.symbolic.model import Model
 from gearsym.validation.checks import c_check
 from scipy.integrate import solve_ivp
 
-REPO = Path(__file__).resolve().parents[2]
-GENERATED = REPO / "generated"
+#: The emitted tree checked by default: ``generated/`` of the folder it is run from (the
+#: repository's, run from a checkout; an installed gearsym has none of its own).
+GENERATED = Path("generated")
 
 T_END = 0.256  # s; a multiple of every step size below
 RK4_STEPS = (0.016, 0.008, 0.004, 0.002, 0.001)
