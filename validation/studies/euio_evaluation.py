@@ -51,7 +51,7 @@ from gearsym.validation.studies.estimation.loop import (
     _chi2_mean_band,
     noisy_outputs,
 )
-from gearsym.validation.studies.estimation.montecarlo import rms, run_seeds, score
+from gearsym.validation.studies.estimation.montecarlo import ScoredStats, rms, run_seeds, score
 from gearsym.validation.studies.estimation.setup import EkfSetup, prepare_ekf
 
 __all__ = [
@@ -410,39 +410,20 @@ def euio_bound(setup: EuioSetup, relative_step: float = 1e-5) -> EuioBound:
 
 
 @dataclass(frozen=True)
-class EuioPhaseStats:
+class EuioPhaseStats(ScoredStats):
     """One parameter in one phase over the runs (keys as the EKF's)."""
 
-    samples: int
-    mean_error: float | None
-    rmse: float | None
-    sigma: float | None
-    crb_sigma: float | None
-    efficiency: float | None
-    crb_sigma_process: float | None
-    efficiency_process: float | None
-    crb_sigma_load_known: float | None
-    identifiable: bool
-    reason: str | None
-    sigma_ratio: float
-    crb_ratio: float
+    crb_sigma_load_known: float | None = None
+    reason: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "samples": self.samples,
-            "mean_error": self.mean_error,
-            "rmse": self.rmse,
-            "sigma": self.sigma,
-            "crb_sigma": self.crb_sigma,
-            "efficiency": self.efficiency,
-            "crb_sigma_process_noise": self.crb_sigma_process,
-            "efficiency_process_noise": self.efficiency_process,
+            **self.scored_dict(),
             "crb_sigma_load_known": self.crb_sigma_load_known,
             "identifiable": self.identifiable,
             "verdict": None if self.identifiable else NOT_IDENTIFIABLE,
             "reason": self.reason,
-            "sigma_ratio": self.sigma_ratio,
-            "crb_ratio": self.crb_ratio,
+            **self.ratios_dict(),
         }
 
 

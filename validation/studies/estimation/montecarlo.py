@@ -24,6 +24,8 @@ T = TypeVar("T")
 
 __all__ = [
     "EkfMonteCarlo",
+    "PhaseParameterStats",
+    "ScoredStats",
     "rms",
     "run_ekf_monte_carlo",
     "run_seeds",
@@ -90,25 +92,26 @@ def score(
 
 
 @dataclass(frozen=True)
-class PhaseParameterStats:
-    """One parameter in one phase over the Monte-Carlo runs."""
+class ScoredStats:
+    """What :func:`score` measures of one parameter in one phase over the runs, for every
+    filter; each filter's stats add what only it knows."""
 
     samples: int  # scored samples per run
     mean_error: float | None
     rmse: float | None
     sigma: float | None  # reported σ, RMS over the scored samples and runs
-    crb_sigma: float | None  # the posterior bound, RMS over the same samples
+    crb_sigma: float | None  # the bound, RMS over the same samples
     efficiency: float | None  # rmse / crb_sigma
     #: the bound with the filter's process noise (random walks, model error), and rmse over it
     crb_sigma_process: float | None
     efficiency_process: float | None
-    identifiable: bool
-    gamma: float | None  # (3.27) on the phase's own FIM
     #: filter σ and bound at the phase's last sample over those before it (1: no information)
     sigma_ratio: float
     crb_ratio: float
+    identifiable: bool
 
-    def to_dict(self) -> dict[str, Any]:
+    def scored_dict(self) -> dict[str, Any]:
+        """The JSON keys every filter's stats share, in their printed order."""
         return {
             "samples": self.samples,
             "mean_error": self.mean_error,
@@ -118,11 +121,25 @@ class PhaseParameterStats:
             "efficiency": self.efficiency,
             "crb_sigma_process_noise": self.crb_sigma_process,
             "efficiency_process_noise": self.efficiency_process,
+        }
+
+    def ratios_dict(self) -> dict[str, Any]:
+        return {"sigma_ratio": self.sigma_ratio, "crb_ratio": self.crb_ratio}
+
+
+@dataclass(frozen=True)
+class PhaseParameterStats(ScoredStats):
+    """One parameter in one phase over the EKF's Monte-Carlo runs."""
+
+    gamma: float | None = None  # (3.27) on the phase's own FIM
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            **self.scored_dict(),
             "identifiable": self.identifiable,
             "verdict": None if self.identifiable else NOT_IDENTIFIABLE,
             "gamma": self.gamma if self.gamma is None or np.isfinite(self.gamma) else "inf",
-            "sigma_ratio": self.sigma_ratio,
-            "crb_ratio": self.crb_ratio,
+            **self.ratios_dict(),
         }
 
 
