@@ -29,6 +29,9 @@ __all__ = ["cmd_estimate", "register"]
 
 FILTERS = ("uio", "ekf", "euio")  # the workflow's (checked there too)
 
+#: ``--fleet`` without a file: the shipped default fleet.
+DEFAULT_FLEET_ARGUMENT = "default"
+
 
 class _Reporter:
     """The workflow's steps and progress on stderr (interruptible)."""
@@ -81,6 +84,11 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         truths = drive_truths(d, args.drive)
     else:
         truths = (Truth(scenario, source),)
+    fleet = None
+    if args.fleet is not None:
+        from gearsym.validation.sim.fleet import load_fleet
+
+        fleet = load_fleet(d, None if args.fleet == DEFAULT_FLEET_ARGUMENT else args.fleet)
     request = EstimateRequest(
         filter=args.filter,
         calibration=calibration,
@@ -93,6 +101,8 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         unknown=_names(args.unknown) or (),
         drive=args.drive is not None,
         plots=not args.no_plots,
+        fleet=fleet,
+        command=" ".join(["gearsym", *sys.argv[1:]]) if sys.argv[1:] else "",
     )
     paths: list[Any] = []
     if args.out is None:
@@ -207,8 +217,8 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "--initial",
         nargs="+",
         metavar="NAME=VALUE",
-        help="ekf, euio: initial estimate of a filter state (default: m_veh 30 %% below the "
-        "description's value, mu nominal, zeta 0, phi 0, speeds from the first measurement)",
+        help="ekf, euio: initial estimate of a filter state (default: the description's "
+        "[estimator] prior, else its own values; speeds from the first measurement)",
     )
     p.add_argument(
         "--initial-from-prior",
@@ -285,6 +295,18 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "break-away when it exceeds it, open while F_N = 0); 'reference' takes the reference "
         "simulation's (the truth), for comparison; the output reports the detected switch "
         "times against the reference's",
+    )
+    p.add_argument(
+        "--fleet",
+        nargs="?",
+        const=DEFAULT_FLEET_ARGUMENT,
+        metavar="FLEET.toml",
+        help="ekf: judge the filter over a fleet of vehicles: each of --runs N runs draws its "
+        "own vehicle (mass, grade, mu map, torque and pressure errors, tolerances) from the "
+        "fleet file (default: the shipped gearsym/data/fleet_default.toml), the reference "
+        "simulates it, the filter knows only the calibration (the description's [estimator] "
+        "prior) and is told the commanded inputs; per parameter bias, RMSE, mean sigma, "
+        "coverage of the 95 %% interval, the bound and NEES/NIS against their bands",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG")
     p.add_argument("--json", action="store_true", help="machine-readable output")

@@ -21,6 +21,7 @@ from pathlib import Path
 
 from gearsym.symbolic import set_kinds
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.estimator_calibration import EstimatorCalibration
 from gearsym.symbolic.io.package_data import data_file
 from gearsym.symbolic.parameters import RECORDS, section_units
 
@@ -282,6 +283,8 @@ class GearboxDescription:
     friction: dict[str, Quantity] = field(default_factory=dict)
     rolling_resistance: str = "thesis"
     mu_map: str = "built-in"
+    #: What the TCU's estimators assume (``[estimator]``: prior and tuning), not the truth.
+    estimator: EstimatorCalibration = field(default_factory=EstimatorCalibration)
 
     @property
     def shaft_names(self) -> tuple[str, ...]:

@@ -105,6 +105,37 @@ BAD_CASES = [
         "gearbox.output_shft",
         "unknown key",
     ),
+    # the [estimator] table: what the TCU's filter assumes
+    (
+        "m_veh = { mean = 1950.0, sd = 300.0",
+        "m_veh = { mean = 1950.0, sd = -300.0",
+        "estimator.prior.m_veh.sd",
+        "must be positive",
+    ),
+    (
+        'zeta = { mean = 0.0, sd = 0.035, unit = "rad"',
+        'zeta = { mean = 0.0, sd = 0.035, unit = "deg"',
+        "estimator.prior.zeta.unit",
+        "expected 'rad'",
+    ),
+    (
+        "[estimator.prior]\nm_veh",
+        "[estimator.prior]\nr_dyn = { sd = 0.01, unit = 'm', source = 'x' }\nm_veh",
+        "estimator.prior.r_dyn",
+        "unknown prior",
+    ),
+    (
+        "[estimator.model_error]\nomega_1",
+        "[estimator.model_error]\nomega_9 = { value = 1.0, unit = '1', source = 'x' }\nomega_1",
+        "estimator.model_error.omega_9",
+        "not a state of a filter's model",
+    ),
+    (
+        "[estimator.random_walk]\nm_veh = { value = 1.0",
+        "[estimator.random_walk]\nm_veh = { value = -1.0",
+        "estimator.random_walk.m_veh.value",
+        "must be finite and >= 0",
+    ),
 ]
 
 

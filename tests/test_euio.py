@@ -43,8 +43,8 @@ def mass(d):
 
 
 @pytest.fixture(scope="module")
-def wrong_mass_run(d, level):
-    return run_euio(d, level, noise=False)  # default initial m_veh: 30 % light
+def wrong_mass_run(d, level, mass):
+    return run_euio(d, level, noise=False, initial={"m_veh": 0.7 * mass})  # 30 % light
 
 
 def test_existence_per_phase_matches_rank_tests_by_hand(d, level, wrong_mass_run):

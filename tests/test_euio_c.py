@@ -5,7 +5,9 @@ the SymPy model, dense NumPy linear algebra with ``np.linalg.inv``), step by ste
 default 2-3 shift as :func:`gearsym.validation.studies.estimation.euio.run_euio` runs it (its held
 masks: m_veh in every phase, a μ where its element does not slide or its UIO conditions fail), with
 sensor dropouts (NaN) added. From the library's state before each step: the C double build to
-1e-12 and the float build to 1e-5 in each quantity's own scale (x_i against |x_i| + σ_i, P_ij
+1e-12 and the float build to 2e-5 (about 170 float epsilons; measured 1.02e-5 with the
+description's [estimator] prior, whose μ σ is half the former default) in each quantity's own
+scale (x_i against |x_i| + σ_i, P_ij
 against σ_i σ_j, d̂ against |d̂| + σ_d, σ_d² relative, the NIS νᵀS⁻¹ν − d̂²/σ_d² against its
 first term νᵀS⁻¹ν + 1, from which float cancels the second). And the float filter on its own along
 the whole run: P exactly symmetric and positive definite after every step.
@@ -168,7 +170,7 @@ def test_emitted_euio_step_equals_the_library(libraries, run):
     assert held_seen[5] and free_seen[5] and held_seen[6] and free_seen[6]
     assert dropouts >= 5
     assert worst[False] < 1e-12, worst
-    assert worst[True] < 1e-5, worst
+    assert worst[True] < 2e-5, worst
 
 
 def test_float_euio_keeps_its_covariance_symmetric_positive_definite(libraries, run):

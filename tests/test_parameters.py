@@ -10,10 +10,10 @@ import pytest
 from gearsym.symbolic import naming, parameters
 from gearsym.symbolic.description import SECTION_UNITS, SIGNED_QUANTITIES
 from gearsym.symbolic.drivetrain import full_model
+from gearsym.symbolic.estimator_calibration import EstimatorCalibration
 from gearsym.symbolic.estimators.ekf import RANDOM_WALK
 from gearsym.symbolic.export.generate import MU_BOUNDS, PARAMETER_BOUNDS
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.studies.estimation.setup import EKF_PRIOR_SIGMA
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -46,8 +46,11 @@ def test_the_stages_read_the_records() -> None:
     for key, text in naming.DESCRIPTIONS.items():
         assert parameters.record(key).description == text
     assert RANDOM_WALK == {"m_veh": 1.0, "zeta": 2.5e-5, "mu": 4.0e-3}  # the stated defaults
-    for key in ("m_veh", "zeta", "mu"):
-        assert EKF_PRIOR_SIGMA[key] == parameters.record(key).prior_sigma
+    # a description without an [estimator] table: the records' default priors around its values
+    empty = EstimatorCalibration()
+    assert empty.prior_of("m_veh", 1800.0) == (1800.0, 0.3 * 1800.0)  # relative σ
+    assert empty.prior_of("zeta", 0.0) == (0.0, 0.05)
+    assert empty.prior_of("mu_38", 0.12) == (0.12, 0.03)
 
 
 @pytest.mark.parametrize(

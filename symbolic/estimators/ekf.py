@@ -292,12 +292,19 @@ def augmented_model(
             "modes": "slide_<E>/stick_<E> inputs: sliding friction, constraint torque or open",
         },
     )
+    # the description's [estimator] tuning where the state exists, a caller's over it
+    stated = {
+        name: value
+        for name, value in d.estimator.intensities().items()
+        if name == "mu" or name in {v.name for v in states}
+    }
+    stated.update(intensities or {})
     rates: dict[str, float] = {}
     for v in states:
-        if v.name in (intensities or {}):
-            rates[v.name] = float((intensities or {})[v.name])
+        if v.name in stated:
+            rates[v.name] = float(stated[v.name])
         elif v.name.startswith("mu_"):
-            rates[v.name] = float((intensities or {}).get("mu", RANDOM_WALK["mu"]))
+            rates[v.name] = float(stated.get("mu", RANDOM_WALK["mu"]))
         elif v.name in RANDOM_WALK:
             rates[v.name] = RANDOM_WALK[v.name]
         elif v.name in MODEL_ERROR:

@@ -261,10 +261,13 @@ class _Inputs:
         mu_map: MuMap,
         t_oil: float,
         compiled: _Compiled,
+        mu_scale: Mapping[str, float] | None = None,
     ) -> None:
         self.scenario = scenario
         self.elements = elements
         self.compiled = compiled
+        # a fleet's truth: each element's μ map scaled (oil temperature, wear); 1 by default
+        self.mu_scale = np.array([float((mu_scale or {}).get(e, 1.0)) for e in elements])
         # The oil temperature is constant in a scenario: slice the map once and interpolate
         # bilinearly in (p_N, |Δω|) with a spline of degree 1 (the map's own trilinear
         # interpolation restricted to that plane), clamped to the grid like MuMap.
@@ -285,7 +288,8 @@ class _Inputs:
         return self.compiled.zeta_default if profile is None else profile(t)
 
     def mu(self, p: np.ndarray, slips: np.ndarray) -> np.ndarray:
-        return self._mu.ev(np.clip(p, *self._p_range), np.clip(np.abs(slips), *self._dw_range))
+        mu = self._mu.ev(np.clip(p, *self._p_range), np.clip(np.abs(slips), *self._dw_range))
+        return mu * self.mu_scale if np.any(self.mu_scale != 1.0) else mu
 
     def __call__(self, t: float, x: np.ndarray) -> list[float]:
         p = self.pressures(t)
@@ -413,8 +417,12 @@ def simulate(
     method: str = "cvodes",
     analytic_jacobian: bool = True,
     phases: bool = True,
+    mu_scale: Mapping[str, float] | None = None,
 ) -> SimulationResult:
     """Integrate the reference model through the scenario (thesis 3.1).
+
+    ``mu_scale``: a factor on the μ map per element name (a fleet's truth: oil temperature,
+    wear); elements not named keep the map.
 
     ``method``: "cvodes" (default; SUNDIALS CVODES through CasADi, BDF with CasADi's exact
     Jacobian, in C) or a stiff SciPy integrator, "Radau" or "BDF" (the cross-checks; the tests
@@ -451,7 +459,10 @@ def simulate(
     ref = reference_model(d, elements + one_way)
     compiled = _Compiled(ref, d, elements, one_way)
     t_oil = quantity(d, "friction", "T_oil").value
-    inputs = _Inputs(scenario, elements, load_mu_map(d), t_oil, compiled)
+    unknown = sorted(set(mu_scale or {}) - {e.name for e in d.shift_elements})
+    if unknown:
+        raise GearsymError(d.file, "mu_scale", f"{unknown[0]!r} is not a shift element")
+    inputs = _Inputs(scenario, elements, load_mu_map(d), t_oil, compiled, mu_scale)
     x0 = quasi_static_state(d, ref, inputs, compiled)
     n = compiled.n
     names = tuple(v.name for v in ref.model.states)
@@ -583,6 +594,7 @@ def _integrate_cvodes(
     p_grid, dw_grid = inputs.map_grid
     mu = [
         bilinear(driven[1 + k], ca.fabs(slip[k]), p_grid, dw_grid, inputs.map_plane)
+        * float(inputs.mu_scale[k])
         for k in range(ne)
     ]
     u = ca.vertcat(driven[: 1 + ne], *mu, driven[1 + ne])

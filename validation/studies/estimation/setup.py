@@ -9,12 +9,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from gearsym.symbolic import naming
 from gearsym.symbolic.defaults import EKF_FLOOR_FRACTION, EKF_RELATIVE_NOISE
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.parameters import RECORDS
 from gearsym.validation.sim.phases import Phase
 from gearsym.validation.sim.simulate import SimulationResult
 from gearsym.validation.studies.estimation.modes import (
@@ -28,18 +26,6 @@ __all__ = [
     "EkfSetup",
     "prepare_ekf",
 ]
-
-
-#: Default initial estimate of the augmented parameters, relative to the description's value
-#: (m_veh: 30 % light, the issue's wrong-mass case) or absolute (μ: the description's nominal
-#: μ; ζ: a level road), and the prior standard deviations (stated, not the truth): the
-#: parameters' from their records (:mod:`gearsym.symbolic.parameters`; m_veh's relative to its
-#: value), the unmeasured state φ's here.
-EKF_INITIAL_MASS_FACTOR = 0.7
-EKF_PRIOR_SIGMA = {
-    **{r.key: r.prior_sigma for r in RECORDS if r.prior_sigma is not None},
-    "phi": 0.05,
-}
 
 
 @dataclass
@@ -109,6 +95,9 @@ def prepare_ekf(
     measured: Mapping[str, np.ndarray] | None = None,
     modes: str = "filter",
     logic: Any = None,
+    told: Mapping[str, np.ndarray] | None = None,
+    truth_description: GearboxDescription | None = None,
+    floor: np.ndarray | None = None,
 ) -> EkfSetup:
     """The seed-independent part of :func:`run_ekf` (its arguments of the same name).
 
@@ -120,7 +109,14 @@ def prepare_ekf(
     ``measured``: per output of the filter its recorded values on the sample grid (a bench
     recording, :mod:`gearsym.validation.sim.measurement`); they replace the reference's outputs,
     no noise is drawn on them, and no state has a truth. ``result`` is then the simulation
-    driven by the recorded inputs: it gives the inputs, the element modes and the phases."""
+    driven by the recorded inputs: it gives the inputs, the element modes and the phases.
+
+    ``d`` is the calibration (the filter's model, prior and tuning). ``told``: per known input
+    of the filter its values on the sample grid as the TCU is told them
+    (:func:`gearsym.validation.sim.fleet.told_inputs`); without it the inputs are read from
+    ``result``, which is right only when the truth is the calibration. ``truth_description``:
+    the description the reference simulated (a fleet's vehicle), for scoring only (default
+    ``d``)."""
     from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
 
     shift = result.scenario.shift.name
@@ -170,7 +166,8 @@ def prepare_ekf(
     r = np.broadcast_to(np.asarray(relative_noise, dtype=float), (len(outputs),)).copy()
     if np.any(~np.isfinite(r)) or np.any(r <= 0):
         raise GearsymError("estimate", "--noise", "relative errors must be finite and > 0")
-    floor = EKF_FLOOR_FRACTION * np.nanmax(np.abs(y_true), axis=0)
+    if floor is None:
+        floor = EKF_FLOOR_FRACTION * np.nanmax(np.abs(y_true), axis=0)
     sigma_y = r[None, :] * np.maximum(np.abs(y_true), floor[None, :])
 
     reference_modes = element_modes(d, result, t)
@@ -179,13 +176,16 @@ def prepare_ekf(
         element = name.split("_", 1)[1] if name.startswith(("slide_", "stick_")) else None
         if element is not None:
             columns.append(reference_modes[element][0 if name.startswith("slide_") else 1])
+        elif told is not None and name in told:
+            columns.append(np.asarray(told[name], dtype=float))
         else:
             columns.append(sampled(name))
     u = np.column_stack(columns)
     p = aug.parameter_values()
     q = [aug.intensities[name] for name in names]
 
-    # truth per augmented state (NaN where the reference has none)
+    # truth per augmented state (NaN where the reference has none): for scoring only
+    truth_description = truth_description or d
     truth = np.full((len(t), n), np.nan)
     scored = np.zeros((len(t), n), dtype=bool)
     nominal = {v.name: v.default for v in aug.model.states if v.default is not None}
@@ -194,7 +194,7 @@ def prepare_ekf(
             truth[:, j] = sampled(name)
             scored[:, j] = True
         elif name == "m_veh":
-            truth[:, j] = quantity(d, "vehicle", "m_veh").value
+            truth[:, j] = quantity(truth_description, "vehicle", "m_veh").value
             scored[:, j] = True
     for e, mu in aug.mu_state.items():
         j = names.index(mu)
@@ -209,17 +209,8 @@ def prepare_ekf(
     for j, name in enumerate(names):
         if name in outputs:
             sig0[j] = sigma_y[0, outputs.index(name)]
-        elif name == naming.TWIST:
-            z[j], sig0[j] = 0.0, EKF_PRIOR_SIGMA["phi"]
-        elif name == "m_veh":
-            z[j] = EKF_INITIAL_MASS_FACTOR * float(nominal["m_veh"])
-            sig0[j] = EKF_PRIOR_SIGMA["m_veh"] * float(nominal["m_veh"])
-        elif name.startswith("mu_"):
-            z[j], sig0[j] = float(nominal[name]), EKF_PRIOR_SIGMA["mu"]
-        elif name == naming.GRADE:
-            z[j], sig0[j] = 0.0, EKF_PRIOR_SIGMA["zeta"]
-        else:  # pragma: no cover - every state of the augmented model is covered above
-            raise AssertionError(name)
+        else:  # the calibration's prior (the description's [estimator] table), not the truth
+            z[j], sig0[j] = d.estimator.prior_of(name, nominal.get(name))
     for name, value in (initial or {}).items():
         if name not in names:
             raise GearsymError(

@@ -121,6 +121,11 @@ class EstimateRequest:
     unknown: tuple[str, ...] = ("T_res_star",)
     drive: bool = False
     plots: bool = True
+    #: a :class:`~gearsym.validation.sim.fleet.Fleet`: each run draws its own vehicle (the
+    #: truth) and the reference simulates it; ``None``: one truth equal to the calibration
+    fleet: Any = None
+    #: the command that made the request, for the Markdown table a fleet evaluation writes
+    command: str = ""
 
     @property
     def truth(self) -> Truth:
@@ -187,8 +192,11 @@ def check_request(request: EstimateRequest) -> None:
             f"{', '.join(f'{r:g}' for r in noise)}",
         )
     if request.truth.measurement is not None:
+        _refuse("--fleet", request.fleet is not None, "needs a simulated truth, not a recording")
         _check_measured(request)
         return
+    if request.fleet is not None:
+        _check_fleet(request)
     t_end = request.truth.scenario.t_end
     sample_time = cal.filter_sample_time
     if not MIN_SAMPLE_TIME <= sample_time <= t_end / 4:  # the simulation records [0, t_end]
@@ -264,6 +272,30 @@ def check_request(request: EstimateRequest) -> None:
         raise GearsymError("estimate", "--noise", "give one value or one per output (3)")
     if request.dropout_outputs is not None and request.dropout is None:
         raise GearsymError("estimate", "--dropout-outputs", "needs --dropout")
+
+
+def _check_fleet(request: EstimateRequest) -> None:
+    """What a fleet evaluation does not take: the filter's start is the calibration's prior
+    (no --initial, --initial-from-prior), its parameters the thesis' (4.1)."""
+    cal = request.calibration
+    _refuse(
+        "--fleet",
+        request.filter != "ekf",
+        "is for --filter ekf (the UIO and the extended UIO over a fleet are not built yet)",
+    )
+    for option, given, reason in (
+        ("--drive", request.drive, "a drive over a fleet is not built yet"),
+        ("--initial", bool(cal.initial), "the filter starts from the calibration's prior"),
+        (
+            "--initial-from-prior",
+            request.initial_from_prior,
+            "each vehicle is drawn from the fleet; the filter starts from the calibration's prior",
+        ),
+        ("--params", cal.parameters is not None, "the fleet evaluation runs the thesis' (4.1)"),
+        ("--dropout", request.dropout is not None, "not available over a fleet yet"),
+        ("--dropout-outputs", request.dropout_outputs is not None, "needs --dropout"),
+    ):
+        _refuse(option, given, f"is not available with --fleet: {reason}")
 
 
 def _check_measured(request: EstimateRequest) -> None:
@@ -370,6 +402,8 @@ def estimate(
     reporter = reporter or _Silent()
     if request.truth.measurement is not None:
         return _measured(request, folder, reporter)
+    if request.fleet is not None:
+        return _fleet(request, folder, reporter)
     if request.drive:
         return _drive(request, reporter)
     if request.filter == "uio":
@@ -675,3 +709,43 @@ def _measured(request: EstimateRequest, folder: Path | None, reporter: Reporter)
         if request.plots:
             plot_ekf(run, folder / "ekf.png")
     return EstimateReport(data, _assumes(assumes) + "\n" + format_measured_ekf_text(run), run)
+
+
+def _fleet(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> EstimateReport:
+    """The EKF over a fleet (:func:`~gearsym.validation.studies.estimation.fleet_eval.
+    run_fleet`): each run its own vehicle, simulated, the filter told the commands."""
+    from gearsym.validation.studies.estimation.fleet_eval import run_fleet
+    from gearsym.validation.studies.estimation.fleet_report import (
+        fleet_markdown,
+        format_fleet_text,
+        plot_fleet,
+        write_fleet_csv,
+    )
+
+    cal, truth = request.calibration, request.truth
+    update, done = reporter.bar(f"EKF over the fleet, {request.runs} vehicles")
+    try:
+        evaluation = run_fleet(
+            cal.description,
+            truth.scenario,
+            request.fleet,
+            request.runs,
+            seed=request.seed,
+            sample_time=cal.filter_sample_time,
+            relative_noise=_noise(cal),
+            modes=cal.mode_source,
+            progress=update,
+        )
+    finally:
+        done()
+    data = evaluation.to_dict()
+    if folder is not None:
+        write_fleet_csv(evaluation, folder / "fleet.csv")
+        _write_json(folder / "fleet.json", data)
+        (folder / "fleet.md").write_text(
+            fleet_markdown(data, request.command or "gearsym estimate --fleet"),
+            encoding="utf-8",
+        )
+        if request.plots:
+            plot_fleet(evaluation, folder / "fleet.png")
+    return EstimateReport(data, format_fleet_text(data), evaluation)

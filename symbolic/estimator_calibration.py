@@ -1,0 +1,204 @@
+"""What the TCU's estimators assume (thesis chapter 4), read from a description's optional
+``[estimator]`` table: the filter's prior (the start z0 and P0 of (4.3)) and its tuning (the
+random-walk intensities of (4.1) and the model-error intensities of the states).
+
+This is calibration, never the truth: a TCU is flashed with one prior for a whole fleet of
+vehicles, so the prior's mean is a stated number (for the mass, a mean between the empty
+and the loaded vehicle), not the value of the vehicle the filter will meet. Where the table is
+silent the defaults of :mod:`gearsym.symbolic.parameters` apply: the prior's mean is the
+description's own value of the parameter and its σ the record's stated default.
+
+The table::
+
+    [estimator]
+    tuned_on = "what the tuning below was chosen on (fleet, scenario, seeds)"
+    [estimator.prior]      # mean optional (default: the description's value), sd required
+    m_veh = { mean = 1950.0, sd = 300.0, unit = "kg", source = "..." }
+    mu    = { sd = 0.015, unit = "1", source = "..." }    # every mu_<element>
+    [estimator.random_walk]    # q_p of (4.1), unit^2/s
+    mu = { value = 4.0e-3, unit = "1/s", source = "..." }
+    [estimator.model_error]    # q_x of a state of the filter's model, unit^2/s
+    omega_1 = { value = 6.0, unit = "rad^2/s^3", source = "..." }
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.parameters import RECORDS, is_mu, record
+
+__all__ = [
+    "PRIOR_NAMES",
+    "EstimatorCalibration",
+    "Prior",
+    "Tuning",
+    "parse_estimator_table",
+]
+
+#: The names ``[estimator.prior]`` may give: the unmeasured state φ (side-shaft twist) and
+#: every quantity whose record states a prior (``mu`` stands for every ``mu_<element>``).
+PRIOR_NAMES: tuple[str, ...] = ("phi", *(r.key for r in RECORDS if r.prior_sigma is not None))
+
+#: The names ``[estimator.random_walk]`` may give (``mu``: every ``mu_<element>``).
+RANDOM_WALK_NAMES: tuple[str, ...] = tuple(r.key for r in RECORDS if r.random_walk is not None)
+
+#: The states beside the shaft speeds ``omega_<shaft>`` that ``[estimator.model_error]`` may
+#: name: the side-shaft twist and the wheel speed (2.43, 2.44).
+MODEL_ERROR_NAMES: tuple[str, ...] = ("phi", "omega_C")
+
+#: Units of the prior entries that have no record (φ).
+_PRIOR_UNITS = {"phi": "rad"}
+
+#: φ's default prior: untwisted, σ 0.05 rad (assumed).
+_DEFAULT_PRIORS = {"phi": (0.0, 0.05)}
+
+
+@dataclass(frozen=True)
+class Prior:
+    """One entry of the filter's prior: ``mean`` (``None``: the description's value of the
+    parameter) and standard deviation ``sd``, both in the quantity's unit."""
+
+    sd: float
+    mean: float | None = None
+    source: str = ""
+
+
+@dataclass(frozen=True)
+class Tuning:
+    """One stated intensity (unit²/s) with where it comes from."""
+
+    value: float
+    unit: str
+    source: str
+
+
+@dataclass(frozen=True)
+class EstimatorCalibration:
+    """The ``[estimator]`` table: priors by name, random-walk and model-error intensities, and
+    what the tuning was chosen on. Empty (every default) when the description has no table."""
+
+    prior: tuple[tuple[str, Prior], ...] = ()
+    random_walk: tuple[tuple[str, Tuning], ...] = ()
+    model_error: tuple[tuple[str, Tuning], ...] = ()
+    tuned_on: str = ""
+    #: the description file, for errors raised when a name meets a model
+    file: str = field(default="", compare=False)
+
+    def prior_of(self, name: str, nominal: float | None) -> tuple[float, float]:
+        """(mean, σ) of the state ``name``'s prior: the table's entry (``mu`` for any
+        ``mu_<element>``), else the record's default σ (relative to ``nominal`` where the record
+        says so) around ``nominal``. A one-line error when neither gives a σ or a mean."""
+        key = "mu" if is_mu(name) else name
+        given = dict(self.prior).get(key)
+        if given is None and key in _DEFAULT_PRIORS:
+            return _DEFAULT_PRIORS[key]
+        mean = given.mean if given is not None and given.mean is not None else nominal
+        if mean is None:
+            raise GearsymError(
+                self.file or "estimator",
+                f"estimator.prior.{key}",
+                f"no mean for {name}: state one (the description has no value for it)",
+            )
+        if given is not None:
+            return float(mean), given.sd
+        try:
+            r = record(name)
+        except KeyError:
+            r = None
+        if r is None or r.prior_sigma is None:
+            raise GearsymError(
+                self.file or "estimator",
+                f"estimator.prior.{key}",
+                f"no prior for {name}: state {{ mean = ..., sd = ... }}",
+            )
+        sd = r.prior_sigma * abs(float(mean)) if r.prior_relative else r.prior_sigma
+        return float(mean), float(sd)
+
+    def intensities(self) -> dict[str, float]:
+        """Every stated intensity by state name (``mu``: every μ state), the overrides
+        :func:`gearsym.symbolic.estimators.ekf.augmented_model` takes."""
+        return {name: t.value for name, t in (*self.random_walk, *self.model_error)}
+
+    def to_dict(self) -> dict[str, Any]:
+        """For a report: what the filter was told, with the sources."""
+        return {
+            "prior": {
+                name: {"mean": p.mean, "sd": p.sd, "source": p.source} for name, p in self.prior
+            },
+            "random_walk": {n: t.value for n, t in self.random_walk},
+            "model_error": {n: t.value for n, t in self.model_error},
+            "tuned_on": self.tuned_on,
+        }
+
+
+def _unit_of(name: str) -> str:
+    return _PRIOR_UNITS.get(name) or record(name).unit
+
+
+def parse_estimator_table(table: Any, shafts: Sequence[str] = ()) -> EstimatorCalibration:
+    """The ``[estimator]`` table read through a
+    :class:`~gearsym.symbolic.io.table_reader.TableReader` (an absent table: every default).
+    One-line errors name the file and the key; ``shafts``: the description's shafts, whose
+    speeds ``omega_<shaft>`` may carry a model-error intensity."""
+    shaft_states = {f"omega_{name}" for name in shafts}
+    tuned_on = table.string("tuned_on", required=False, default="")
+    priors: list[tuple[str, Prior]] = []
+    prior_table = table.table("prior", required=False)
+    for name in list(prior_table.data):
+        if name not in PRIOR_NAMES:
+            raise prior_table.fail(name, f"unknown prior (known: {', '.join(sorted(PRIOR_NAMES))})")
+        entry = prior_table.table(name)
+        mean = entry.number("mean", required=False)
+        sd = entry.number("sd")
+        assert sd is not None
+        unit = entry.string("unit")
+        source = entry.string("source")
+        entry.reject_unknown()
+        if unit != _unit_of(name):
+            raise entry.fail("unit", f"expected {_unit_of(name)!r}, got {unit!r}")
+        if not sd > 0:
+            raise entry.fail("sd", f"must be positive, got {sd:g}")
+        if not source.strip():
+            raise entry.fail("source", "must say where the value comes from (or 'assumed')")
+        if mean is not None and name == "m_veh" and mean <= 0:
+            raise entry.fail("mean", f"must be positive, got {mean:g}")
+        priors.append((name, Prior(sd=sd, mean=mean, source=source)))
+    prior_table.reject_unknown()
+    tables = {}
+    for kind in ("random_walk", "model_error"):
+        sub = table.table(kind, required=False)
+        values: list[tuple[str, Tuning]] = []
+        for name in list(sub.data):
+            if kind == "random_walk" and name not in RANDOM_WALK_NAMES:
+                raise sub.fail(
+                    name,
+                    f"not a random-walk parameter (known: {', '.join(RANDOM_WALK_NAMES)})",
+                )
+            if kind == "model_error" and not (name in MODEL_ERROR_NAMES or name in shaft_states):
+                known = ", ".join((*MODEL_ERROR_NAMES, *sorted(shaft_states)))
+                raise sub.fail(name, f"not a state of a filter's model (known: {known})")
+            entry = sub.table(name)
+            value = entry.number("value")
+            assert value is not None
+            unit = entry.string("unit")
+            source = entry.string("source")
+            entry.reject_unknown()
+            if not (math.isfinite(value) and value >= 0):
+                raise entry.fail("value", f"must be finite and >= 0, got {value:g}")
+            if not source.strip():
+                raise entry.fail("source", "must say where the value comes from (or 'assumed')")
+            values.append((name, Tuning(value, unit, source)))
+        sub.reject_unknown()
+        tables[kind] = tuple(values)
+    table.reject_unknown()
+    return EstimatorCalibration(
+        prior=tuple(priors),
+        random_walk=tables["random_walk"],
+        model_error=tables["model_error"],
+        tuned_on=tuned_on,
+        file=table.file,
+    )

@@ -1,0 +1,355 @@
+"""A fleet of vehicles as the truth (``validation/sim/fleet.py``): the file's contract, the
+draws, what a draw does to the reference, and what the filter is handed (the same whatever the
+truth: ``validation/studies/estimation/fleet_eval.py``)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from gearsym.symbolic.drivetrain import quantity
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.friction import load_mu_map
+from gearsym.symbolic.loader import load_description
+from gearsym.validation.sim.fleet import (
+    FLEET_QUANTITIES,
+    Fleet,
+    FleetDraw,
+    load_fleet,
+    parse_fleet,
+    told_inputs,
+    truth_world,
+)
+from gearsym.validation.sim.scenario import load_scenario
+
+
+@pytest.fixture(scope="module")
+def d():
+    return load_description(None)
+
+
+@pytest.fixture(scope="module")
+def scenario(d):
+    return load_scenario(d, None)
+
+
+def _fleet(d, body: str) -> Fleet:
+    return parse_fleet(f'[fleet]\nname = "t"\n{body}\n', "fleet.toml", d)
+
+
+def test_the_default_fleet_states_a_source_for_every_range(d):
+    fleet = load_fleet(d)
+    names = dict(fleet.entries)
+    # the estimation issue's stated fleet
+    assert names["m_veh"].kind == "uniform" and (names["m_veh"].a, names["m_veh"].b) == (
+        1500.0,
+        2400.0,
+    )
+    assert (names["mu_scale"].a, names["mu_scale"].b) == (0.8, 1.2)
+    assert names["zeta"].b == pytest.approx(np.arctan(0.06), rel=1e-4)  # 6 % grade
+    for name, dist in fleet.entries:
+        assert dist.source.strip(), name
+
+
+def test_draws_follow_their_distributions(d):
+    """Uniform m_veh on [1500, 2400]: over 4000 draws the mean within 4 standard errors of 1950
+    and every draw inside; normal: mean and sd within their sampling error."""
+    fleet = _fleet(
+        d,
+        'm_veh = { dist = "uniform", low = 1500.0, high = 2400.0, unit = "kg", source = "x" }\n'
+        'engine_torque_offset = { dist = "normal", mean = 2.0, sd = 3.0, unit = "N*m", '
+        'source = "x" }',
+    )
+    draws = [dict(fleet.draw(seed).values) for seed in range(4000)]
+    m = np.array([v["m_veh"] for v in draws])
+    off = np.array([v["engine_torque_offset"] for v in draws])
+    assert m.min() >= 1500.0 and m.max() <= 2400.0
+    assert abs(m.mean() - 1950.0) < 4 * (900.0 / np.sqrt(12.0)) / np.sqrt(4000)
+    assert abs(off.mean() - 2.0) < 4 * 3.0 / np.sqrt(4000)
+    assert abs(off.std() - 3.0) < 0.15
+
+
+def test_each_entry_has_its_own_stream(d):
+    """Adding an entry leaves the other entries' draws as they were."""
+    one = _fleet(
+        d, 'm_veh = { dist = "uniform", low = 1500.0, high = 2400.0, unit = "kg", source = "x" }'
+    )
+    two = _fleet(
+        d,
+        'm_veh = { dist = "uniform", low = 1500.0, high = 2400.0, unit = "kg", source = "x" }\n'
+        'mu_scale = { dist = "uniform", low = 0.8, high = 1.2, unit = "1", source = "x" }',
+    )
+    for seed in (0, 7, 123):
+        assert dict(one.draw(seed).values)["m_veh"] == dict(two.draw(seed).values)["m_veh"]
+    assert dict(one.draw(0).values)["m_veh"] != dict(one.draw(1).values)["m_veh"]
+
+
+@pytest.mark.parametrize(
+    ("body", "key", "reason"),
+    [
+        (
+            'm_vehicle = { value = 1.0, unit = "kg", source = "x" }',
+            "fleet.m_vehicle",
+            "unknown fleet quantity",
+        ),
+        (
+            'm_veh = { value = 1800.0, unit = "t", source = "x" }',
+            "fleet.m_veh.unit",
+            "expected 'kg'",
+        ),
+        ('m_veh = { value = 1800.0, unit = "kg", source = " " }', "fleet.m_veh.source", "must say"),
+        (
+            'm_veh = { dist = "uniform", low = 2400.0, high = 1500.0, unit = "kg", source = "x" }',
+            "fleet.m_veh.high",
+            "must be above low",
+        ),
+        (
+            'zeta = { dist = "normal", mean = 0.0, sd = 0.2, unit = "rad", source = "x" }',
+            "fleet.zeta.dist",
+            "outside the plausible",
+        ),
+        (
+            'mu_scale = { dist = "gamma", low = 0.8, high = 1.2, unit = "1", source = "x" }',
+            "fleet.mu_scale.dist",
+            "expected one of uniform, normal",
+        ),
+        (
+            'mu_scale_K99 = { value = 1.0, unit = "1", source = "x" }',
+            "fleet.mu_scale_K99",
+            "unknown",
+        ),
+        (
+            '[fleet.factor.vehicle]\nr_wheel = { value = 1.0, unit = "1", source = "x" }',
+            "fleet.factor.vehicle.r_wheel",
+            "the description has no [vehicle] r_wheel",
+        ),
+        ("", "fleet.fleet", "draws nothing"),
+    ],
+)
+def test_a_bad_fleet_is_refused_in_one_line(d, body, key, reason):
+    with pytest.raises(GearsymError) as err:
+        _fleet(d, body)
+    text = str(err.value)
+    assert "\n" not in text and text.startswith("fleet.toml: ")
+    assert key in text and reason in text, text
+
+
+def test_every_documented_quantity_is_accepted(d):
+    from gearsym.validation.sim.fleet import _unit_and_range
+
+    for name in FLEET_QUANTITIES:
+        unit, (low, high) = _unit_and_range(name)
+        value = min(max(1.0, low), high) if name != "m_veh" else 1800.0
+        fleet = _fleet(d, f'{name} = {{ value = {value!r}, unit = "{unit}", source = "x" }}')
+        assert dict(fleet.entries)[name].a == value
+
+
+def test_a_draw_changes_the_truth_not_the_calibration(d, scenario):
+    draw = FleetDraw(
+        0,
+        (
+            ("m_veh", 2100.0),
+            ("zeta", 0.03),
+            ("input_torque_gain", 1.05),
+            ("pressure_gain", 0.9),
+            ("pressure_offset", 1.0e4),
+            ("factor.vehicle.r_dyn", 1.02),
+            ("factor.inertia", 1.03),
+            ("mu_scale", 1.1),
+            ("mu_scale_B05", 0.9),
+        ),
+    )
+    world = truth_world(d, scenario, draw)
+    truth = world.description
+    assert quantity(truth, "vehicle", "m_veh").value == 2100.0
+    assert quantity(truth, "vehicle", "zeta").value == 0.03
+    assert quantity(truth, "vehicle", "r_dyn").value == pytest.approx(
+        1.02 * quantity(d, "vehicle", "r_dyn").value, rel=1e-15
+    )
+    assert truth.shafts[0].inertia.value == pytest.approx(1.03 * d.shafts[0].inertia.value)
+    assert quantity(d, "vehicle", "m_veh").value == 1800.0  # the calibration is untouched
+    for t in (0.0, 0.6, 0.9, 1.2):
+        assert world.scenario.input_torque(t) == pytest.approx(1.05 * scenario.input_torque(t))
+    # the true pressure at each knot of the command: gain and offset while applied, 0 released
+    # (linear between the knots, so the offset fades along a ramp to or from zero)
+    for e, commanded in scenario.pressure.items():
+        for t, p in zip(commanded.time, commanded.value, strict=True):
+            expected = max(0.9 * p + 1.0e4, 0.0) if p > 0 else 0.0
+            assert world.scenario.pressure[e](float(t)) == pytest.approx(expected, abs=1e-9)
+    assert world.mu_scale["B05"] == pytest.approx(1.1 * 0.9) and world.mu_scale["K38"] == 1.1
+
+
+def test_the_reference_uses_the_scaled_mu_map(d, scenario):
+    """μ of a sliding element in the reference with its map scaled by 1.15 equals 1.15 times
+    the description's map at that run's own pressure, oil temperature and slip (the map read by
+    :class:`~gearsym.symbolic.friction.MuMap`, trilinear)."""
+    from gearsym.validation.sim.simulate import simulate
+
+    result = simulate(d, scenario, mu_scale={"B05": 1.15}, check_models=False)
+    mu_map = load_mu_map(d)
+    t_oil = quantity(d, "friction", "T_oil").value
+    s = result.signals
+    on = (s["p_B05"] > 1e4) & (np.abs(s["slip_B05"]) > 1.0)
+    assert on.sum() > 20
+    expected = 1.15 * mu_map(s["p_B05"][on], t_oil, np.abs(s["slip_B05"][on]))
+    np.testing.assert_allclose(s["mu_05"][on], expected, rtol=1e-9)
+
+
+def test_the_tcu_is_told_the_commanded_inputs(d, scenario):
+    """T_In as commanded and F_N = commanded pressure × the calibration's piston area, whatever
+    the truth does with them."""
+    t = np.arange(0.0, 1.5, 0.01)
+    told = told_inputs(d, scenario, t, ["T_In", "F_N38", "F_N05", "slide_K38"])
+    assert set(told) == {"T_In", "F_N38", "F_N05"}
+    np.testing.assert_array_equal(told["T_In"], [scenario.input_torque(v) for v in t])
+    area = d.element("B05").a_piston.value
+    np.testing.assert_allclose(told["F_N05"], [scenario.pressure["B05"](v) * area for v in t])
+
+
+def test_two_fleets_hand_the_filter_the_same_start_and_inputs(d, scenario):
+    """Nothing the filter uses is read from the truth: a light fleet on a downhill road with
+    weak clutches and a heavy one uphill with strong clutches and a strong engine give the
+    filter the same initial state, covariance, tuning, parameters, noise floor and told
+    inputs, to the bit; only the scores differ."""
+    from gearsym.validation.studies.estimation.fleet_eval import run_fleet
+
+    light = _fleet(
+        d,
+        'm_veh = { value = 1500.0, unit = "kg", source = "x" }\n'
+        'zeta = { value = -0.04, unit = "rad", source = "x" }\n'
+        'mu_scale = { value = 0.85, unit = "1", source = "x" }',
+    )
+    heavy = _fleet(
+        d,
+        'm_veh = { value = 2400.0, unit = "kg", source = "x" }\n'
+        'zeta = { value = 0.04, unit = "rad", source = "x" }\n'
+        'mu_scale = { value = 1.15, unit = "1", source = "x" }\n'
+        'input_torque_gain = { value = 1.04, unit = "1", source = "x" }',
+    )
+    a = run_fleet(d, scenario, light, runs=1, seed=5, bound=False)
+    b = run_fleet(d, scenario, heavy, runs=1, seed=5, bound=False)
+    handed_a, handed_b = a.runs[0].handed, b.runs[0].handed
+    assert set(handed_a) == {"initial", "prior_sigma", "q", "p", "floor", "told_inputs"}
+    for key in handed_a:
+        np.testing.assert_array_equal(handed_a[key], handed_b[key], err_msg=key)
+    j = list(a.runs[0].run.state_names).index("m_veh")
+    assert a.runs[0].run.truth[0, j] == 1500.0 and b.runs[0].run.truth[0, j] == 2400.0
+    assert a.initial["m_veh"] == (1950.0, 300.0)  # the description's [estimator] prior
+
+
+def test_a_fleet_evaluation_scores_every_parameter(d, scenario):
+    """Three vehicles of the default fleet: the JSON carries the fleet, the tuning, the
+    filter's start and per parameter the final and per-phase scores; coverage is a fraction."""
+    from gearsym.validation.studies.estimation.fleet_eval import run_fleet
+
+    evaluation = run_fleet(d, scenario, load_fleet(d), runs=3, seed=4242, bound=False)
+    data = evaluation.to_dict()
+    assert data["runs"] == 3 and data["seeds"] == [4242, 4243, 4244]
+    assert data["fleet"]["name"] == "default" and data["tuning"]["tuned_on"]
+    assert data["initial"]["m_veh"] == {"value": 1950.0, "sigma": 300.0}
+    masses = [draw["m_veh"] for draw in data["draws"]]
+    assert len(set(masses)) == 3 and all(1500.0 <= m <= 2400.0 for m in masses)
+    for name in ("m_veh", "mu_38", "mu_05", "zeta"):
+        final = data["parameters"][name]["final"]
+        assert final["runs"] == 3
+        assert 0.0 <= final["coverage_95"] <= 1.0
+    assert data["parameters"]["m_veh"]["phases"]["gear 2"]["samples"] > 100
+    lo, hi = data["nees_band"]
+    assert lo < hi and data["nees_mean"] > 0
+
+
+def test_the_final_mass_error_is_the_filters_end_value_minus_the_draw(d, scenario):
+    """Scored by hand from one run: the reported final error is the filter's estimate at the
+    last sample minus the vehicle's drawn mass."""
+    from gearsym.validation.studies.estimation.fleet_eval import run_fleet
+
+    evaluation = run_fleet(d, scenario, load_fleet(d), runs=1, seed=90001, bound=False)
+    (fr,) = evaluation.runs
+    j = list(fr.run.state_names).index("m_veh")
+    stats = evaluation.final_stats("m_veh")
+    assert stats.bias == pytest.approx(fr.run.estimates[-1, j] - dict(fr.draw.values)["m_veh"])
+    assert stats.mean_sigma == pytest.approx(fr.run.sigmas[-1, j])
+
+
+def test_simulate_refuses_a_scale_for_an_unknown_element(d, scenario):
+    from gearsym.validation.sim.simulate import simulate
+
+    with pytest.raises(GearsymError, match="'K99' is not a shift element"):
+        simulate(d, scenario, mu_scale={"K99": 1.0})
+
+
+def test_dataclass_replace_keeps_the_calibration_table(d):
+    assert dataclasses.replace(d, name="x").estimator == d.estimator
+
+
+# ------------------------------------------------------------------------------ the command
+
+
+def _gearsym(*args: str):
+    import subprocess
+    import sys
+
+    return subprocess.run(
+        [sys.executable, "-m", "gearsym", *args], capture_output=True, text=True, check=False
+    )
+
+
+def test_estimate_over_the_default_fleet_reports_what_the_issue_asks(tmp_path):
+    """`gearsym estimate --filter ekf --fleet --runs 2 --json --out DIR`: the JSON names the
+    fleet, the tuning, the filter's start and per parameter the scores; the folder holds the
+    CSV (one row per vehicle), the Markdown table headed by the command, and the picture."""
+    import json
+
+    out = tmp_path / "fleet"
+    result = _gearsym(
+        "estimate",
+        "--filter",
+        "ekf",
+        "--fleet",
+        "--runs",
+        "2",
+        "--seed",
+        "77",
+        "--json",
+        "--out",
+        str(out),
+    )
+    assert result.returncode == 0, result.stderr
+    data = json.loads(result.stdout)
+    assert data["fleet"]["name"] == "default" and data["seeds"] == [77, 78]
+    assert set(data["initial"]) >= {"m_veh", "mu_38", "mu_05", "zeta"}
+    assert data["tuning"]["evaluated_on"].endswith("seeds 77-78")
+    final = data["parameters"]["m_veh"]["final"]
+    assert set(final) >= {"bias", "rmse", "mean_sigma", "coverage_95", "bound", "efficiency"}
+    assert {"nees_mean", "nees_band", "nis_mean", "nis_band"} <= set(data)
+    rows = (out / "fleet.csv").read_text().splitlines()
+    assert len(rows) == 3 and rows[0].startswith("seed,")
+    markdown = (out / "fleet.md").read_text()
+    assert markdown.startswith("<!-- written by `gearsym estimate --filter ekf --fleet")
+    assert (out / "fleet.png").stat().st_size > 1000
+
+
+@pytest.mark.parametrize(
+    ("extra", "key", "reason"),
+    [
+        (["--filter", "euio"], "--fleet", "is for --filter ekf"),
+        (["--filter", "ekf", "--initial", "m_veh=1500"], "--initial", "calibration's prior"),
+        (["--filter", "ekf", "--initial-from-prior"], "--initial-from-prior", "--fleet"),
+        (["--filter", "ekf", "--params", "m_veh"], "--params", "--fleet"),
+    ],
+)
+def test_estimate_refuses_what_a_fleet_does_not_take(extra, key, reason):
+    result = _gearsym("estimate", "--fleet", *extra)
+    assert result.returncode == 2 and result.stdout == ""
+    (line,) = result.stderr.strip().splitlines()
+    assert key in line and reason in line, line
+
+
+def test_a_bad_fleet_file_exits_2_in_one_line(tmp_path):
+    path = tmp_path / "fleet.toml"
+    path.write_text('[fleet]\nm_veh = { dist = "uniform", low = 1500.0, high = 2400.0 }\n')
+    result = _gearsym("estimate", "--filter", "ekf", "--fleet", str(path))
+    assert result.returncode == 2 and result.stdout == ""
+    (line,) = result.stderr.strip().splitlines()
+    assert str(path) in line and "fleet.m_veh" in line and "Traceback" not in line, line

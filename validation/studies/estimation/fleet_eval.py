@@ -1,0 +1,375 @@
+"""The EKF judged over a fleet of vehicles as a TCU meets them (the estimation issue's world).
+
+Each run draws one vehicle from the fleet (:mod:`gearsym.validation.sim.fleet`), simulates it
+with the reference (its own truth trajectory), and runs the filter of the calibration on its
+noisy speeds with the inputs the TCU is told. The filter's model, prior, tuning, noise floor
+and mode logic come from the calibration alone and are the same in every run; the draw is
+used to simulate and to score, never handed to the filter.
+
+Per parameter, over every run: the filter's own value at the end of the shift (its decision
+time: what an adaptation would read) against that run's truth (bias, RMSE, mean σ, coverage of
+the 95 % interval), and per detected phase the same over the samples where the parameter has
+a truth, with the posterior bound of each run's truth under the filter's own assumptions
+(:func:`~gearsym.validation.studies.estimation.bounds.ekf_bound`) and the efficiency RMSE /
+bound. NEES and NIS against their χ² bands over the runs.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from gearsym.symbolic.description import GearboxDescription
+from gearsym.symbolic.errors import GearsymError
+from gearsym.validation.sim.fleet import Fleet, FleetDraw, told_inputs, truth_world
+from gearsym.validation.sim.scenario import Scenario
+
+__all__ = [
+    "COVERAGE_Z",
+    "FleetEvaluation",
+    "FleetRun",
+    "FleetStats",
+    "run_fleet",
+]
+
+#: The 95 % interval of a Gaussian estimate: ±1.96 σ.
+COVERAGE_Z = 1.959963984540054
+
+Progress = Callable[[float, str], None]
+
+
+@dataclass(frozen=True)
+class FleetRun:
+    """One vehicle: its draw, the filter's run on it, and the bound along its truth."""
+
+    draw: FleetDraw
+    run: Any  # EkfRun
+    bound: Any = None  # EkfBound or None
+    seconds: float = 0.0
+    #: what the filter was handed: initial estimate, prior σ, intensities q, parameters p,
+    #: noise floor, and the known inputs (told T_In, F_N) per sample; the same in every run of
+    #: a calibration, whatever the truth (tests compare them across fleets)
+    handed: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+
+
+@dataclass(frozen=True)
+class FleetStats:
+    """One parameter (in one phase, or at the end of the shift) over the fleet's runs."""
+
+    runs: int  # runs that score it here
+    samples: int  # scored samples over those runs
+    bias: float | None
+    rmse: float | None
+    mean_sigma: float | None  # RMS of the reported σ over the same samples
+    coverage_95: float | None  # fraction with |error| <= 1.96 σ
+    bound: float | None = None  # RMS of the posterior bound over the same samples
+    efficiency: float | None = None  # rmse / bound
+    identifiable: float | None = None  # fraction of runs whose phase identifies it
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "runs": self.runs,
+            "samples": self.samples,
+            "bias": self.bias,
+            "rmse": self.rmse,
+            "mean_sigma": self.mean_sigma,
+            "coverage_95": self.coverage_95,
+            "bound": self.bound,
+            "efficiency": self.efficiency,
+            "identifiable": self.identifiable,
+        }
+
+
+def _stats(
+    errors: Sequence[np.ndarray],
+    sigmas: Sequence[np.ndarray],
+    bounds: Sequence[np.ndarray] | None = None,
+    identifiable: Sequence[bool] | None = None,
+) -> FleetStats:
+    kept = [k for k, e in enumerate(errors) if e.size]
+    if not kept:
+        return FleetStats(0, 0, None, None, None, None)
+    err = np.concatenate([errors[k] for k in kept])
+    sig = np.concatenate([sigmas[k] for k in kept])
+    rmse = float(np.sqrt(np.mean(err**2)))
+    bound = None
+    if bounds is not None and all(bounds[k] is not None for k in kept):
+        b = np.concatenate([bounds[k] for k in kept])
+        bound = float(np.sqrt(np.mean(b**2)))
+    return FleetStats(
+        runs=len(kept),
+        samples=int(err.size),
+        bias=float(np.mean(err)),
+        rmse=rmse,
+        mean_sigma=float(np.sqrt(np.mean(sig**2))),
+        coverage_95=float(np.mean(np.abs(err) <= COVERAGE_Z * sig)),
+        bound=bound,
+        efficiency=rmse / bound if bound else None,
+        identifiable=None
+        if identifiable is None
+        else float(np.mean([identifiable[k] for k in kept])),
+    )
+
+
+@dataclass
+class FleetEvaluation:
+    """The EKF over a fleet: the runs, the runs that could not be simulated, and the scores."""
+
+    fleet: Fleet
+    calibration: GearboxDescription
+    scenario: Scenario
+    seeds: tuple[int, ...]
+    runs: list[FleetRun]
+    failed: list[tuple[int, str]] = field(default_factory=list)
+    seconds_per_run: float = 0.0
+    initial: dict[str, tuple[float, float]] = field(default_factory=dict)
+    #: the filter's μ states by element (the augmented model's)
+    mu_elements: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def parameter_names(self) -> list[str]:
+        return [p.name for p in self.runs[0].run.parameters] if self.runs else []
+
+    def final_rows(self, fr: FleetRun) -> dict[str, tuple[float, float, float | None]]:
+        """Per parameter of one run: the filter's last estimate, its σ, and the truth it is
+        scored against (``None``: none; module text)."""
+        run = fr.run
+        out = {}
+        for name in self.parameter_names:
+            j = list(run.state_names).index(name)
+            truth = _final_truth(run, j, self.mu_elements.get(name))
+            out[name] = (float(run.estimates[-1, j]), float(run.sigmas[-1, j]), truth)
+        return out
+
+    def final_stats(self, name: str) -> FleetStats:
+        """The filter's own value at the end of each run (what an adaptation reads) against
+        that run's truth at the end; μ against the mean true μ over the samples the filter
+        itself judged its element sliding (its own decision, not the truth's)."""
+        errors, sigmas = [], []
+        for fr in self.runs:
+            estimate, sigma, truth = self.final_rows(fr)[name]
+            known = truth is not None
+            errors.append(np.array([estimate - truth]) if known else np.zeros(0))
+            sigmas.append(np.array([sigma]) if known else np.zeros(0))
+        return _stats(errors, sigmas)
+
+    def phase_names(self) -> list[str]:
+        names: list[str] = []
+        for fr in self.runs:
+            for p in fr.run.phases:
+                if p.name not in names:
+                    names.append(p.name)
+        return names
+
+    def phase_stats(self, phase: str, name: str) -> FleetStats:
+        """Over the samples of ``phase`` (as each run's reference detected it) where ``name``
+        has a truth."""
+        from gearsym.validation.studies.estimation.bounds import _phase_samples
+
+        errors, sigmas, bounds, ident = [], [], [], []
+        for fr in self.runs:
+            run = fr.run
+            found = [k for k, p in enumerate(run.phases) if p.name == phase]
+            j = list(run.state_names).index(name)
+            if not found:
+                errors.append(np.zeros(0))
+                sigmas.append(np.zeros(0))
+                bounds.append(None)
+                ident.append(False)
+                continue
+            k = found[0]
+            inside = _phase_samples(run.t, run.phases[k], last=k == len(run.phases) - 1)
+            idx = inside[run.scored[inside, j]]
+            errors.append(run.estimates[idx, j] - run.truth[idx, j])
+            sigmas.append(run.sigmas[idx, j])
+            bounds.append(None if fr.bound is None else fr.bound.sigma[idx, j])
+            ident.append(fr.bound is not None and name in fr.bound.identifiable.get(phase, ()))
+        with_bound = all(fr.bound is not None for fr in self.runs)
+        return _stats(errors, sigmas, bounds if with_bound else None, ident if with_bound else None)
+
+    def nees(self) -> tuple[float, tuple[float, float]]:
+        """Mean NEES over samples of the run-averaged NEES, and its 95 % band: one sample's
+        sum over the runs is χ² with the summed dof; the time average of such correlated
+        means scatters no more than one of them (the mean dof taken)."""
+        from scipy.stats import chi2
+
+        runs = len(self.runs)
+        nees = np.array([fr.run.nees for fr in self.runs])
+        dof = np.array([fr.run.nees_dof for fr in self.runs])
+        total = float(np.mean(np.sum(dof, axis=0)))
+        return float(np.mean(np.mean(nees, axis=0))), (
+            float(chi2.ppf(0.025, total) / runs),
+            float(chi2.ppf(0.975, total) / runs),
+        )
+
+    def nis(self) -> tuple[float | None, tuple[float, float] | None]:
+        """Mean NIS over every used update of every run and its band (innovations are white:
+        the summed NIS is χ² with the summed dof)."""
+        from scipy.stats import chi2
+
+        nis = np.concatenate([fr.run.nis[fr.run.nis_dof > 0] for fr in self.runs])
+        dof = np.concatenate([fr.run.nis_dof[fr.run.nis_dof > 0] for fr in self.runs])
+        if not dof.size:
+            return None, None
+        total = float(np.sum(dof))
+        return float(np.mean(nis)), (
+            float(chi2.ppf(0.025, total) / dof.size),
+            float(chi2.ppf(0.975, total) / dof.size),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        nees, nees_band = self.nees()
+        nis, nis_band = self.nis()
+        cal = self.calibration.estimator
+        return {
+            "filter": "ekf",
+            "shift": self.scenario.shift.name,
+            "scenario": self.scenario.name,
+            "runs": len(self.runs),
+            "seeds": list(self.seeds),
+            "failed": [{"seed": s, "reason": r} for s, r in self.failed],
+            "seconds_per_run": self.seconds_per_run,
+            "fleet": self.fleet.to_dict(),
+            "tuning": {
+                "tuned_on": cal.tuned_on or "the code's defaults (no [estimator] table)",
+                "evaluated_on": f"fleet {self.fleet.name} ({self.fleet.file}), seeds "
+                f"{self.seeds[0]}-{self.seeds[-1]}"
+                if self.seeds
+                else "",
+                "calibration": cal.to_dict(),
+            },
+            "initial": {name: {"value": v, "sigma": s} for name, (v, s) in self.initial.items()},
+            "parameters": {
+                name: {
+                    "final": self.final_stats(name).to_dict(),
+                    "phases": {
+                        phase: self.phase_stats(phase, name).to_dict()
+                        for phase in self.phase_names()
+                    },
+                }
+                for name in self.parameter_names
+            },
+            "nees_mean": nees,
+            "nees_band": list(nees_band),
+            "nis_mean": nis,
+            "nis_band": None if nis_band is None else list(nis_band),
+            "draws": [fr.draw.to_dict() for fr in self.runs],
+        }
+
+
+def _final_truth(run: Any, j: int, element: str | None) -> float | None:
+    if element is not None:  # a μ: over the samples the filter judged its element sliding
+        sliding = np.abs(run.modes[element]) == 1
+        use = sliding & run.scored[:, j]
+        return float(np.mean(run.truth[use, j])) if use.any() else None
+    column = run.truth[:, j]
+    return float(column[-1]) if np.isfinite(column[-1]) else None
+
+
+def run_fleet(
+    d: GearboxDescription,
+    scenario: Scenario,
+    fleet: Fleet,
+    runs: int,
+    seed: int = 0,
+    sample_time: float = 0.01,
+    relative_noise: Any = 0.01,
+    modes: str = "filter",
+    bound: bool = True,
+    progress: Progress | None = None,
+) -> FleetEvaluation:
+    """The EKF of the calibration ``d`` over ``runs`` vehicles of ``fleet`` (run i: seed
+    ``seed`` + i draws the vehicle and, in its own stream, the speed noise) on ``scenario``
+    (the commanded inputs). ``bound``: the posterior bound of each run's truth (about 1.5 s a
+    run). A vehicle whose simulation fails is reported in ``failed`` with the reason."""
+    from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
+    from gearsym.symbolic.estimators.ekf_modes import ModeLogic
+    from gearsym.validation.sim.simulate import simulate
+    from gearsym.validation.studies.estimation.bounds import ekf_bound
+    from gearsym.validation.studies.estimation.loop import filter_run
+    from gearsym.validation.studies.estimation.setup import prepare_ekf
+
+    if runs < 1:
+        raise GearsymError("estimate", "--runs", f"must be at least 1, got {runs}")
+    report = progress or (lambda fraction, message: None)
+    aug = augmented_model(d, scenario.shift.name)
+    discrete = DiscreteModel(aug)
+    logic = ModeLogic(d, aug) if modes == "filter" else None
+    # The noise floor of (3.26) is calibration: from the TCU engineer's own simulation of the
+    # calibration's vehicle on the same commanded shift, never from a run's truth.
+    report(0.0, "simulating the calibration's own vehicle (the noise floor)")
+    nominal = prepare_ekf(
+        d,
+        simulate(d, scenario),
+        sample_time,
+        relative_noise,
+        aug=aug,
+        discrete=discrete,
+        modes=modes,
+        logic=logic,
+    )
+    floor = nominal.floor
+    initial = {
+        name: (float(nominal.initial[j]), float(nominal.prior_sigma[j]))
+        for j, name in enumerate(nominal.names)
+        if name not in nominal.outputs
+    }
+    seeds = tuple(range(seed, seed + runs))
+    done: list[FleetRun] = []
+    failed: list[tuple[int, str]] = []
+    start = time.perf_counter()
+    for i, run_seed in enumerate(seeds):
+        t0 = time.perf_counter()
+        draw = fleet.draw(run_seed)
+        world = truth_world(d, scenario, draw)
+        try:
+            result = simulate(world.description, world.scenario, mu_scale=world.mu_scale)
+        except GearsymError as err:
+            failed.append((run_seed, str(err)))
+            report((i + 1) / runs, f"run {i + 1} of {runs}: simulation failed")
+            continue
+        told = told_inputs(d, scenario, nominal.t, aug.input_names)
+        setup = prepare_ekf(
+            d,
+            result,
+            sample_time,
+            relative_noise,
+            aug=aug,
+            discrete=discrete,
+            modes=modes,
+            logic=logic,
+            told=told,
+            truth_description=world.description,
+            floor=floor,
+        )
+        run = filter_run(setup, run_seed)
+        run_bound = ekf_bound(setup) if bound else None
+        known = [k for k, name in enumerate(aug.input_names) if name in told]
+        handed = {
+            "initial": setup.initial.copy(),
+            "prior_sigma": setup.prior_sigma.copy(),
+            "q": np.asarray(setup.q, dtype=float),
+            "p": np.asarray(setup.p, dtype=float),
+            "floor": np.asarray(setup.floor, dtype=float),
+            "told_inputs": np.asarray(setup.u, dtype=float)[:, known],
+        }
+        done.append(FleetRun(draw, run, run_bound, time.perf_counter() - t0, handed))
+        report((i + 1) / runs, f"run {i + 1} of {runs}")
+    if not done:
+        raise GearsymError(
+            "estimate", "--fleet", f"every run's simulation failed (first: {failed[0][1]})"
+        )
+    return FleetEvaluation(
+        fleet=fleet,
+        calibration=d,
+        scenario=scenario,
+        seeds=seeds,
+        runs=done,
+        failed=failed,
+        seconds_per_run=(time.perf_counter() - start) / runs,
+        initial=initial,
+        mu_elements={mu: e for e, mu in aug.mu_state.items()},
+    )

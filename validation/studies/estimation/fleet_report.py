@@ -1,0 +1,248 @@
+"""What a fleet evaluation (:mod:`.fleet_eval`) prints and writes: the text of ``gearsym
+estimate --fleet``, its CSV (one row per vehicle), its Markdown table (the documentation's
+result tables are these files, written by the command, never typed) and its picture."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from gearsym.symbolic.parameters import axis_label, record, symbol
+from gearsym.validation.studies.estimation.fleet_eval import FleetEvaluation
+
+__all__ = [
+    "COVERAGE_RANGE",
+    "fleet_markdown",
+    "format_fleet_text",
+    "plot_fleet",
+    "write_fleet_csv",
+]
+
+#: The coverage of a 95 % interval a consistent filter shows over a fleet (the estimation
+#: issue's acceptance range: 200 runs put the sampling error of 95 % at about 1.5 %).
+COVERAGE_RANGE = (0.90, 0.98)
+
+
+def _unit(name: str) -> str:
+    try:
+        unit = record(name).unit
+    except KeyError:
+        return ""
+    return "" if unit == "1" else f" {unit}"
+
+
+def _g(value: float | None, digits: int = 3) -> str:
+    return "—" if value is None else f"{value:.{digits}g}"
+
+
+def _coverage(stats: dict[str, Any]) -> str:
+    value = stats.get("coverage_95")
+    if value is None:
+        return "—"
+    lo, hi = COVERAGE_RANGE
+    flag = "" if lo <= value <= hi else (" LOW" if value < lo else " HIGH")
+    return f"{100 * value:.0f} %{flag} of {stats['samples']}"
+
+
+def _band(value: float | None, band: Sequence[float] | None) -> str:
+    if value is None or band is None:
+        return "—"
+    inside = band[0] <= value <= band[1]
+    return f"{value:.3g} in [{band[0]:.3g}, {band[1]:.3g}]: {'inside' if inside else 'OUTSIDE'}"
+
+
+def _has_bound(data: dict[str, Any]) -> bool:
+    return any(
+        stats.get("bound") is not None
+        for entry in data["parameters"].values()
+        for stats in entry["phases"].values()
+    )
+
+
+def _assumptions(data: dict[str, Any]) -> list[str]:
+    seeds = data["seeds"]
+    prior = ", ".join(
+        f"{symbol(n)} {_g(v['value'], 4)} ± {_g(v['sigma'], 3)}{_unit(n)}"
+        for n, v in data["initial"].items()
+    )
+    fleet = data["fleet"]
+    lines = [
+        f"the fleet {fleet['name']} ({fleet['file']}): {data['runs']} vehicles drawn with seeds "
+        f"{seeds[0]}-{seeds[-1]}, each simulated by the reference on the scenario "
+        f"{data['scenario']}; the filter knows the calibration only and is told the commanded "
+        "inputs (T_In as commanded, F_N = commanded pressure x piston area)",
+        "the filter's start (the description's [estimator] prior, the same for every vehicle): "
+        f"{prior}",
+        f"tuned on: {data['tuning']['tuned_on']}",
+        "scores: at the end of the shift the filter's own last estimate against the vehicle's "
+        "truth (mu: against the mean true mu over the samples the filter judged its element "
+        "sliding); per phase over the samples with a truth (mu: while the truth slides); "
+        "coverage: the share of scored samples whose error lies within 1.96 sigma, judged "
+        f"against {100 * COVERAGE_RANGE[0]:.0f}-{100 * COVERAGE_RANGE[1]:.0f} %",
+    ]
+    if _has_bound(data):
+        lines.append(
+            "bound: the posterior Cramer-Rao bound along each vehicle's truth under the "
+            "filter's own model and prior (constant parameters, exact model); efficiency = "
+            "RMSE / bound, > 1 expected with random walks and the elastic truth"
+        )
+    return lines
+
+
+def _phase_rows(data: dict[str, Any]) -> list[tuple[str, str, dict[str, Any]]]:
+    names = list(data["parameters"])
+    phases: list[str] = []
+    for name in names:
+        for phase in data["parameters"][name]["phases"]:
+            if phase not in phases:
+                phases.append(phase)
+    return [
+        (phase, name, data["parameters"][name]["phases"][phase])
+        for phase in phases
+        for name in names
+        if data["parameters"][name]["phases"].get(phase, {}).get("samples")
+    ]
+
+
+def _identifiable(stats: dict[str, Any]) -> str:
+    value = stats.get("identifiable")
+    return "—" if value is None else f"{100 * value:.0f} % of runs"
+
+
+def format_fleet_text(data: dict[str, Any]) -> str:
+    """The printed report of a fleet evaluation, from its JSON."""
+    lines = [f"  assumes {line}" for line in _assumptions(data)]
+    lines.append("")
+    lines.append("  at the end of the shift (the value an adaptation reads):")
+    lines.append(f"    {'parameter':<10} {'bias':>10} {'RMSE':>10} {'mean σ':>10}  coverage 95 %")
+    for name, entry in data["parameters"].items():
+        s = entry["final"]
+        lines.append(
+            f"    {symbol(name):<10} {_g(s['bias']):>10} {_g(s['rmse']):>10} "
+            f"{_g(s['mean_sigma']):>10}  {_coverage(s)}"
+        )
+    lines.append("")
+    lines.append("  per phase (samples with a truth):")
+    lines.append(
+        f"    {'phase':<13} {'parameter':<9} {'bias':>9} {'RMSE':>9} {'mean σ':>9} "
+        f"{'bound':>9} {'eff.':>6}  coverage 95 %; identifiable in"
+    )
+    for phase, name, s in _phase_rows(data):
+        lines.append(
+            f"    {phase:<13} {symbol(name):<9} {_g(s['bias']):>9} {_g(s['rmse']):>9} "
+            f"{_g(s['mean_sigma']):>9} {_g(s['bound']):>9} {_g(s['efficiency']):>6}  "
+            f"{_coverage(s)}; {_identifiable(s)}"
+        )
+    lines.append("")
+    lines.append(f"  NEES mean {_band(data['nees_mean'], data['nees_band'])}")
+    lines.append(f"  NIS mean {_band(data['nis_mean'], data['nis_band'])}")
+    if data["failed"]:
+        lines.append(
+            f"  {len(data['failed'])} vehicle(s) could not be simulated and are not scored: "
+            + "; ".join(f"seed {f['seed']}: {f['reason']}" for f in data["failed"][:3])
+        )
+    lines.append(f"  {data['seconds_per_run']:.2f} s per vehicle (simulation, filter, bound)")
+    return "\n".join(lines)
+
+
+def write_fleet_csv(ev: FleetEvaluation, path: Path) -> None:
+    """One row per vehicle: its seed, its draw, and per parameter the filter's final
+    estimate, σ and the truth it is scored against."""
+    import csv
+
+    draw_names = sorted({name for fr in ev.runs for name, _ in fr.draw.values})
+    names = ev.parameter_names
+    header = ["seed", *draw_names]
+    for name in names:
+        header += [f"{name}_estimate", f"{name}_sigma", f"{name}_truth"]
+    with path.open("w", newline="", encoding="utf-8") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(header)
+        for fr in ev.runs:
+            values = dict(fr.draw.values)
+            row: list[Any] = [fr.draw.seed, *(repr(values.get(n, "")) for n in draw_names)]
+            finals = ev.final_rows(fr)
+            for name in names:
+                estimate, sigma, truth = finals[name]
+                row += [repr(estimate), repr(sigma), "" if truth is None else repr(truth)]
+            writer.writerow(row)
+
+
+def fleet_markdown(data: dict[str, Any], command: str) -> str:
+    """The evaluation's JSON as Markdown tables for the documentation, headed by the command
+    that wrote it (the docs include this file; nobody types its numbers)."""
+    out = [
+        f"<!-- written by `{command}`; do not edit by hand: run the command again -->",
+        "",
+        f"*Written by `{command}`.*",
+        "",
+    ]
+    out += [f"- {line}" for line in _assumptions(data)]
+    out += [
+        f"- NEES mean {_band(data['nees_mean'], data['nees_band'])}; "
+        f"NIS mean {_band(data['nis_mean'], data['nis_band'])}",
+        f"- {len(data['failed'])} vehicle(s) not simulated"
+        if data["failed"]
+        else "- every vehicle simulated",
+        "",
+        "At the end of the shift (the value an adaptation reads):",
+        "",
+        "| parameter | bias | RMSE | mean σ | coverage of the 95 % interval |",
+        "|---|---|---|---|---|",
+    ]
+    for name, entry in data["parameters"].items():
+        s = entry["final"]
+        out.append(
+            f"| {axis_label(name)} | {_g(s['bias'])} | {_g(s['rmse'])} | "
+            f"{_g(s['mean_sigma'])} | {_coverage(s)} |"
+        )
+    out += [
+        "",
+        "Per phase (samples with a truth):",
+        "",
+        "| phase | parameter | bias | RMSE | mean σ | coverage 95 % | bound | efficiency | "
+        "identifiable in |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for phase, name, s in _phase_rows(data):
+        out.append(
+            f"| {phase} | {axis_label(name)} | {_g(s['bias'])} | {_g(s['rmse'])} | "
+            f"{_g(s['mean_sigma'])} | {_coverage(s)} | {_g(s['bound'])} | "
+            f"{_g(s['efficiency'])} | {_identifiable(s)} |"
+        )
+    return "\n".join(out) + "\n"
+
+
+def plot_fleet(ev: FleetEvaluation, path: Path) -> None:
+    """Per parameter, the filter's final estimate against each vehicle's truth with its
+    ±1.96 σ interval: points on the diagonal are right, bars that miss it are overconfident."""
+    from gearsym.validation.drawing.figures import save, subplots
+
+    names = [n for n in ev.parameter_names if ev.final_stats(n).runs]
+    fig, axes = subplots(1, len(names), (3.2 * len(names), 3.2))
+    axes = np.atleast_1d(axes)
+    for ax, name in zip(axes, names, strict=True):
+        rows = [ev.final_rows(fr)[name] for fr in ev.runs]
+        rows = [r for r in rows if r[2] is not None]
+        est = np.array([r[0] for r in rows])
+        sig = np.array([r[1] for r in rows])
+        truth = np.array([r[2] for r in rows])
+        covered = np.abs(est - truth) <= 1.959963984540054 * sig
+        for mask, colour in ((covered, "tab:blue"), (~covered, "tab:red")):
+            ax.errorbar(
+                truth[mask],
+                est[mask],
+                yerr=1.96 * sig[mask],
+                fmt="o",
+                ms=3,
+                lw=0.8,
+                color=colour,
+            )
+        lo, hi = float(min(truth.min(), est.min())), float(max(truth.max(), est.max()))
+        ax.plot([lo, hi], [lo, hi], color="0.4", lw=0.8)
+        ax.set_xlabel(f"truth {axis_label(name)}")
+        ax.set_ylabel("estimate at the end")
+        ax.set_title(f"{symbol(name)}: {100 * np.mean(covered):.0f} % covered", fontsize=9)
+    save(fig, path)
