@@ -196,6 +196,7 @@ def main() -> int:
             peer=f"the same command at e19b1f9, a constant measured once (beside {BEFORE_NEW_S} s "
             "for this code then)",
             peer_value=BEFORE_S,
+            peer_runs=RUNS,  # BEFORE_S is the median of as many runs
             target=Target(f"≤ {GENERATE_RATIO:g}×", "ratio", "<=", GENERATE_RATIO),
         ),
         row(

@@ -106,6 +106,7 @@ def row(
     peer: str | None = None,
     peer_value: float | None = None,
     peer_samples: Sequence[float] | None = None,
+    peer_runs: int | None = None,
     pair_ratios: Sequence[float] | None = None,
     target: Target | None = None,
 ) -> dict[str, Any]:
@@ -113,10 +114,11 @@ def row(
 
     Give either ``value`` (one number: a single run, a count, a size) or ``samples`` (the timed
     runs: the value is their median, with the min-max spread); likewise ``peer_value`` or
-    ``peer_samples``. ``runs`` states how many runs a ``value`` derived from several stands on
-    (default 1). The ratio is gearsym / peer: the ratio of the two values, or, when the
-    runs were taken in alternating pairs, the median of ``pair_ratios`` (with their spread).
-    The verdict is computed from the numbers and the target (:func:`verdict`)."""
+    ``peer_samples``. ``runs`` (``peer_runs``) states how many runs a ``value``
+    (``peer_value``) derived from several stands on (default 1). The ratio is gearsym / peer:
+    the ratio of the two values, or, when the runs were taken in alternating pairs, the median
+    of ``pair_ratios`` (with their spread). The verdict is computed from the numbers and the
+    target (:func:`verdict`)."""
     if value is not None and samples is not None:
         raise ValueError("give value or samples, not both")
     if peer_value is not None and peer_samples is not None:
@@ -140,7 +142,7 @@ def row(
         out["peer"] = {
             "name": peer,
             "value": peer_value,
-            "runs": len(peer_samples) if peer_samples is not None else 1,
+            "runs": len(peer_samples) if peer_samples is not None else peer_runs or 1,
             "spread": peer_spread,
             "samples": None if peer_samples is None else [_round(v) for v in peer_samples],
         }
