@@ -167,3 +167,12 @@ def test_the_record_is_replaced_whole(tmp_path):
     record.write_atomic(target, "new\n")
     assert target.read_text(encoding="utf-8") == "new\n"
     assert [p.name for p in tmp_path.iterdir()] == ["bench_x.json"]  # no temporary file left
+
+
+def test_the_benchmarks_page_includes_the_table_and_types_none():
+    page = (ROOT / "docs" / "benchmarks.md").read_text(encoding="utf-8")
+    assert '--8<-- "results/benchmarks.md"' in page
+    typed = [line for line in page.splitlines() if line.lstrip().startswith("|")]
+    assert not typed, f"docs/benchmarks.md types a table: {typed[:2]}"
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert not [line for line in readme.splitlines() if line.lstrip().startswith("|")]
