@@ -50,6 +50,7 @@ from gearsym.symbolic.codegen import build_function_table
 from gearsym.symbolic.export.generate import sample_ranges, sensitivity_parameters
 from gearsym.symbolic.loader import load_description
 from gearsym.validation.checks.c_check import sample_points
+from record import Target, begin, record, row
 
 #: ``-ffp-contract``: g++ (the SymForce peer) contracts a*b + c into FMA instructions by
 #: default, gcc in ISO C mode (gearsym's and CasADi's -std=c99) does not; with -march=native
@@ -64,6 +65,17 @@ POINTS = 256  # a power of two: the loop picks point i & (POINTS - 1)
 SECONDS_PER_TIMING = 0.004
 EIGEN = "/usr/include/eigen3"
 IMPLEMENTATIONS = ("gearsym", "CasADi", "SymForce")
+#: The table's words for each emitted model, and how each peer counts its operations.
+MODEL_WORDS = {
+    "full": "full model",
+    "shift_2_3_mu": "2-3 shift",
+    "shift_2_3_mu_sens": "2-3 sensitivity system (24 states)",
+}
+FUNCTION_WORDS = {"rhs": "`rhs`", "jac_x": "`jac_x` (its structural nonzeros)"}
+PEER_WORDS = {
+    "CasADi": "CasADi `CodeGenerator` C ({ops} arithmetic instructions)",
+    "SymForce": "SymForce C++ ({ops} ops, its count)",
+}
 
 
 @dataclass
@@ -375,6 +387,8 @@ def build_and_run(
 
 
 def main() -> int:
+    started = begin()
+    rows = []
     reason = symforce_available()
     symforce = reason is None
     if not symforce:
@@ -413,12 +427,25 @@ def main() -> int:
                     median, lo, hi = stats[impl]
                     ratio = ours / median
                     met &= ratio <= 1.0
+                    rows.append(
+                        row(
+                            f"{FUNCTION_WORDS[p.function]} of the {MODEL_WORDS[p.emitted]}, gcc "
+                            f"`{' '.join(flags)}` ({case.ours_ops} operations stated)",
+                            unit="ns",
+                            samples=times[k][0],
+                            peer=PEER_WORDS[impl].format(ops=ops),
+                            peer_samples=times[k][IMPLEMENTATIONS.index(impl)],
+                            target=Target("≤ 1.0× each peer", "ratio", "<=", 1.0),
+                        )
+                    )
                     text += (
                         f" | {impl} {median:7.1f} ns [{lo:.1f}-{hi:.1f}], {ops} ops: "
                         f"ours/{impl} {ratio:4.2f}"
                     )
                 ok &= met
                 print(text + f" | target <= 1.0: {'met' if met else 'MISSED'}")
+    title = "Emitted C against CasADi" + (" and SymForce" if symforce else "")
+    record(__file__, rows, started=started, title=f"{title}: time per call")
     return 0 if ok else 1
 
 

@@ -26,6 +26,7 @@ import tempfile
 from pathlib import Path
 
 from codegen_peers import EXPR_FUNCTIONS, casadi_c, casadi_module, run, write_tree
+from record import Target, begin, record, row
 
 FLAGS = (
     "-mcpu=cortex-m4",
@@ -69,6 +70,8 @@ def main() -> int:
     if shutil.which("arm-none-eabi-gcc") is None:
         print("arm-none-eabi-gcc is not installed (apt-get install gcc-arm-none-eabi)")
         return 1
+    started = begin()
+    rows = []
     ok = True
     print(f"Cortex-M4F object code, bytes of .text (arm-none-eabi-gcc {' '.join(FLAGS[:6])})")
     with tempfile.TemporaryDirectory(prefix="gearsym-bench-") as tmp:
@@ -84,6 +87,7 @@ def main() -> int:
             if source.stem == "gearsym_mu_map":
                 rodata = sum(v for k, v in secs.items() if k.startswith(".rodata"))
                 print(f"  {'mu_map':<14} all {code(secs):6d} (+ {rodata} bytes of tables)")
+                rows.append(row(f"μ map: all its code (+ {rodata} B of tables)", code(secs), "B"))
                 continue
             name = source.stem.removeprefix("gearsym_")
             prefix = f".text.gearsym_{name}_"
@@ -94,6 +98,11 @@ def main() -> int:
                 and k[len(prefix) :] in (*EXPR_FUNCTIONS, *SPARSE, "sign", "heaviside")
             )
             module = casadi_module(out, name)
+            if not set(EXPR_FUNCTIONS) <= set(module.functions()):
+                # hybrid sensitivities, linear forms, the UIO: no rhs/outputs/Jacobians of its own
+                print(f"  {name:<17} all {code(secs):6d} | no {', '.join(EXPR_FUNCTIONS)}: no peer")
+                rows.append(row(f"`{name}`: all its code (no peer)", code(secs), "B"))
+                continue
             peer_source = casadi_c(module, EXPR_FUNCTIONS, out / "peer", f"cas_{name}", "float")
             peer = compile_m4(peer_source, peer_source.parent)
             theirs = sum(
@@ -113,7 +122,20 @@ def main() -> int:
                     else f"target no larger: {verdict}"
                 )
             )
+            rows.append(
+                row(
+                    f"`{name}`: rhs, outputs and the three Jacobians (sparse and dense), "
+                    f".text (the whole object: {code(secs)} B)",
+                    ours,
+                    "B",
+                    peer=f"CasADi `CodeGenerator` C, float ({code(peer)} B with its API)",
+                    peer_value=theirs,
+                    target=None if sensitivity else Target("no larger", "ratio", "<=", 1.0),
+                )
+            )
         print(f"  all {len(models)} models and the mu map: {total} bytes of code")
+        rows.append(row(f"all {len(models)} models and the μ map: all code", total, "B"))
+    record(__file__, rows, started=started, title="Cortex-M4F object code against CasADi")
     return 0 if ok else 1
 
 

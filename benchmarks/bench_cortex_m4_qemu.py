@@ -33,6 +33,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 from codegen_peers import REPO, Problem, casadi_peer, run
+from record import Target, begin, record, row
 
 PEER_DRIVER = r"""
 #include <stdint.h>
@@ -142,6 +143,7 @@ def main() -> int:
     if missing:
         print(f"not installed: {', '.join(missing)} (apt-get install qemu-system-arm ...)")
         return 1
+    started = begin()
     d = load_description(None)
     c_dir = REPO / "generated" / "c"
     with tempfile.TemporaryDirectory(prefix="gearsym-bench-m4-") as tmp:
@@ -237,6 +239,7 @@ def main() -> int:
         ours_x = qemu_m4.floats("rk4 0 " + check.split(" ", 1)[1])
         scale = np.abs(case.shift_truth).max(axis=0)
         agree = bool(np.all(np.abs(peer_x - ours_x) <= 1e-4 * scale))
+        worst = float(np.max(np.abs(peer_x - ours_x) / scale))
         peer_sizes = qemu_m4.function_sizes(peer_elf, ("cas_rk4", "casadi_"))
         peer_size = sum(v for k, v in peer_sizes.items() if k != "cas_rk4_work")
         met = t.rk4 <= peer
@@ -251,6 +254,58 @@ def main() -> int:
             f"{'yes' if agree else 'NO'} | target no more instructions: "
             f"{'met' if met else 'MISSED'}"
         )
+    peer_words = "CasADi SX RK4 step, `CodeGenerator` C (float), same flags and board"
+    rows = [
+        row(
+            f"EKF 2-3 step (predict + update, 8 states, 3 speeds), float, {t.ekf_steps} steps: "
+            f"instructions per step (predict {t.ekf_predict:.0f}, update {t.ekf_update:.0f})",
+            t.ekf_step,
+            "instructions",
+        ),
+        row("EKF object `gearsym_ekf_2_3.o`, .text", ekf_text, "B"),
+        row(
+            f"linked EKF functions (ekf_predict {predict} B, ekf_update {update} B; newlib "
+            f"sinf/cosf {sum(math.values())} B more)",
+            linked_ekf,
+            "B",
+        ),
+        row(
+            f"extended UIO 2-3 step (`euio_step`; 7 states, 3 speeds), float, {t.euio_steps} "
+            "steps: instructions per step",
+            t.euio,
+            "instructions",
+        ),
+        row("EUIO object `gearsym_euio_2_3.o`, .text", euio_text, "B"),
+        row(f"linked EUIO functions (euio_step {euio_step} B)", linked_euio, "B"),
+        row("RK4 step of the 2-3 μ form: instructions per step", t.rk4mu, "instructions"),
+        row(
+            "RK4 step of the full model (6 states): instructions per step",
+            t.rk4full,
+            "instructions",
+        ),
+        row(
+            f"2-3 RK4 step (4 states), float, {t.rk4_steps} steps: instructions per step",
+            t.rk4,
+            "instructions",
+            peer=peer_words,
+            peer_value=peer,
+            target=Target("no more instructions", "ratio", "<=", 1.0),
+        ),
+        row(
+            "2-3 RK4 step: code (rk4_step and rhs)",
+            rk4_size,
+            "B",
+            peer=peer_words,
+            peer_value=peer_size,
+        ),
+        row(
+            "2-3 RK4 end states, gearsym against the CasADi peer: largest difference over "
+            "each state's scale",
+            worst,
+            target=Target("≤ 1e-4", "value", "<=", 1e-4),
+        ),
+    ]
+    record(__file__, rows, started=started, title="Emulated Cortex-M4F: instructions per step")
     return 0 if met and agree else 1
 
 

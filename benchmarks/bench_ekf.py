@@ -51,6 +51,7 @@ from ekf_peers import (
     symbol_sizes,
     text_size,
 )
+from record import Target, begin, record, row
 
 FLAG_SETS = (("-O2",), ("-O3", "-march=native"))
 ROUNDS = 11
@@ -62,6 +63,15 @@ AGREE_FLOAT = 5e-4  # 150 steps of float rounding (measured about 5e-5)
 #: The functions one emitted step runs (ekf_predict, with f and jac_x inlined, ekf_update and
 #: the outputs it calls).
 STEP_FUNCTIONS = ("ekf_predict", "ekf_update", "outputs")
+#: The table's words for each comparison of :func:`check_agreement`.
+AGREEMENT_WORDS = {
+    "gearsym double vs NumPy reference": "the emitted C in double against the NumPy reference",
+    "gearsym_float": "the emitted C in float against it in double",
+    "casadi_c_double": "CasADi's C in double against the emitted C in double",
+    "casadi_c_float": "CasADi's C in float against the emitted C in double",
+    "casadi_python": "CasADi called from Python against the emitted C in double",
+    "filterpy": "FilterPy against the emitted C in double",
+}
 
 
 def check_agreement(
@@ -126,15 +136,26 @@ def time_python(
     return times
 
 
-def code_sizes(build: Build) -> str:
-    """``size`` .text of each object; for gearsym also the functions a step runs."""
-    parts = []
+def code_size_numbers(build: Build) -> dict[str, tuple[int, int | None]]:
+    """``size`` .text of each object and, for gearsym's, the bytes of the functions a step
+    runs (``None`` for the peers)."""
+    numbers = {}
     for name, obj in build.objects.items():
-        text = f"{name} .text {text_size(obj)} B"
+        step = None
         if name.startswith("gearsym"):
             sizes = symbol_sizes(obj)
             prefix = "f32_" if name.endswith("float") else ""
             step = sum(sizes[f"{prefix}gearsym_ekf_2_3_{fn}"] for fn in STEP_FUNCTIONS)
+        numbers[name] = (text_size(obj), step)
+    return numbers
+
+
+def code_sizes(numbers: dict[str, tuple[int, int | None]]) -> str:
+    """The printed line of :func:`code_size_numbers`."""
+    parts = []
+    for name, (text_bytes, step) in numbers.items():
+        text = f"{name} .text {text_bytes} B"
+        if step is not None:
             text += f" (the step's functions {step} B)"
         parts.append(text)
     return "; ".join(parts)
@@ -153,6 +174,7 @@ def main() -> int:
     import filterpy
     from codegen_peers import casadi_operations
 
+    started = begin()
     seq = sequence()
     with tempfile.TemporaryDirectory(prefix="gearsym-bench-ekf-") as tmp:
         out = Path(tmp)
@@ -184,7 +206,8 @@ def main() -> int:
         )
         python_times = time_python(seq, cas_step, peer, ROUNDS)
         c_times = {flags: time_c(build, ROUNDS) for flags, build in builds.items()}
-        sizes = {flags: code_sizes(build) for flags, build in builds.items()}
+        size_numbers = {flags: code_size_numbers(build) for flags, build in builds.items()}
+        sizes = {flags: code_sizes(numbers) for flags, numbers in size_numbers.items()}
 
     print(f"ns per step (predict + update), median of {ROUNDS} rotated rounds [min-max]:")
     for flags, times in c_times.items():
@@ -208,18 +231,106 @@ def main() -> int:
     update = stated_operations(header, "ekf_update")
     total = {k: predict[k] + update[k] for k in predict}
     ops = sum(total.values())
+    cas_ops = casadi_operations(cas_step)
     met = ops <= OPS_GOAL
     print(
         f"operations per step (stated in the emitted header, all 3 speeds used): predict "
         f"{sum(predict.values())} + update {sum(update.values())} = {ops} ({total['add']} add, "
         f"{total['mul']} mul, {total['div']} div, {total['calls']} calls, {total['cmp']} cmp); "
         f"CasADi's step "
-        f"function: {casadi_operations(cas_step)} arithmetic instructions"
+        f"function: {cas_ops} arithmetic instructions"
     )
     print(f"  goal <= {OPS_GOAL}: {'met' if met else 'MISSED'}")
     for flags, text in sizes.items():
         print(f"host code size, x86-64 gcc {' '.join(flags)}: {text}")
+    rows = agreement_rows(diffs)
+    rows += timing_rows(c_times, python_times)
+    rows.append(
+        row(
+            f"operations per EKF step as the emitted header states them (predict "
+            f"{sum(predict.values())} + update {sum(update.values())}: {total['add']} add, "
+            f"{total['mul']} mul, {total['div']} div, {total['calls']} calls, {total['cmp']} "
+            "cmp; all 3 speeds used)",
+            ops,
+            "operations",
+            peer="CasADi's step function, arithmetic instructions (counted differently)",
+            peer_value=cas_ops,
+            target=Target(f"≤ {OPS_GOAL}", "value", "<=", OPS_GOAL),
+        )
+    )
+    rows += size_rows(size_numbers)
+    record(__file__, rows, started=started, title="EKF step against CasADi and FilterPy")
     return 0 if met else 1
+
+
+def agreement_rows(diffs: dict[str, float]) -> list[dict[str, Any]]:
+    """The recorded agreement of each implementation (the benchmark stops before timing if
+    one is over its limit)."""
+    rows = []
+    for impl, diff in diffs.items():
+        limit = AGREE_FLOAT if impl.endswith("float") else AGREE_DOUBLE
+        rows.append(
+            row(
+                f"agreement over every step (estimates against |x| + σ, σ against σ), largest "
+                f"scaled difference: {AGREEMENT_WORDS[impl]}",
+                diff,
+                target=Target(f"< {limit:g}", "value", "<", limit),
+            )
+        )
+    return rows
+
+
+def timing_rows(
+    c_times: dict[tuple[str, ...], dict[str, list[float]]],
+    python_times: dict[str, list[float]],
+) -> list[dict[str, Any]]:
+    """ns per step of the emitted C against CasADi's C (same loop, same flags), and of the
+    emitted C at -O2 against the peers called from Python; reported, no target."""
+    rows = []
+    for flags, times in c_times.items():
+        for precision in ("double", "float"):
+            rows.append(
+                row(
+                    f"EKF step (predict + update), emitted C in {precision} called in a C "
+                    f"loop, gcc `{' '.join(flags)}`",
+                    unit="ns",
+                    samples=times[f"gearsym {precision}"],
+                    peer=f"CasADi `CodeGenerator` C of the same step, {precision}",
+                    peer_samples=times[f"CasADi C {precision}"],
+                )
+            )
+    ours = c_times[FLAG_SETS[0]]["gearsym double"]
+    for name, values in python_times.items():
+        rows.append(
+            row(
+                f"EKF step, emitted C in double at `{' '.join(FLAG_SETS[0])}` against a peer "
+                "called from Python",
+                unit="ns",
+                samples=ours,
+                peer=name,
+                peer_samples=values,
+            )
+        )
+    return rows
+
+
+def size_rows(numbers: dict[tuple[str, ...], dict[str, tuple[int, int | None]]]) -> list:
+    """x86-64 .text of the emitted EKF against CasADi's C of the step; reported, no target."""
+    rows = []
+    for flags, sizes in numbers.items():
+        for precision in ("double", "float"):
+            text_bytes, step = sizes[f"gearsym {precision}"]
+            rows.append(
+                row(
+                    f"host code of the EKF, x86-64 gcc `{' '.join(flags)}`, {precision}: "
+                    f".text of the object (the step's functions {step} B)",
+                    text_bytes,
+                    "B",
+                    peer=f"CasADi C of the step, {precision}",
+                    peer_value=sizes[f"CasADi C {precision}"][0],
+                )
+            )
+    return rows
 
 
 if __name__ == "__main__":

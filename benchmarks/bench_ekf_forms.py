@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 from ekf_peers import Sequence, scaled_difference, sequence
+from record import Target, begin, record, row
 
 HARNESS = Path(__file__).resolve().parents[1] / "tests" / "data" / "ekf_spd_harness.c"
 PREFIX = "gearsym_ekf_2_3_"
@@ -84,6 +85,8 @@ def free_run(lib: ctypes.CDLL, single: bool, seq: Sequence) -> tuple[np.ndarray,
 def main() -> int:
     from gearsym.validation.checks.c_check import compile_shared
 
+    started = begin()
+    rows = []
     seq = sequence()
     failed = False
     with tempfile.TemporaryDirectory() as tmp:
@@ -107,6 +110,22 @@ def main() -> int:
                 f" (smallest scaled Cholesky pivot {pivot}); float vs double along the default "
                 f"shift: {diff:.2g} (limit 1e-3) -> {'pass' if ok else 'FAIL'}"
             )
+            rows += [
+                row(
+                    f'`update_form="{form}"`: 10⁶ float steps of the harness, smallest '
+                    "σ-scaled Cholesky pivot (it stops at the first P not exactly symmetric or "
+                    "not positive definite: then not measured)",
+                    float(pivot) if line.startswith("ok") else None,
+                    target=Target("> 0: symmetric positive definite throughout", "value", ">", 0.0),
+                ),
+                row(
+                    f'`update_form="{form}"`: float against double along the default shift '
+                    "(150 steps), largest scaled difference",
+                    float(diff),
+                    target=Target("< 1e-3", "value", "<", 1e-3),
+                ),
+            ]
+    record(__file__, rows, started=started, title="The EKF update's covariance form")
     return 1 if failed else 0
 
 

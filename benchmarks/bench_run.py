@@ -18,6 +18,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from record import Target, begin, record, row
+
 ROOT = Path(__file__).resolve().parents[1]
 BASELINE = "243e332"
 ROUNDS = 3
@@ -32,6 +34,7 @@ def wall(argv: list[str], cwd: Path, out: Path) -> float:
 
 
 def main() -> int:
+    started = begin()
     with tempfile.TemporaryDirectory(prefix="gearsym-bench-run-") as tmp:
         base = Path(tmp) / "baseline"
         base.mkdir()
@@ -67,6 +70,18 @@ def main() -> int:
         f"  ratio {ratio:4.2f}x [{min(ratios):.2f}–{max(ratios):.2f}]   target ≤ {TARGET}x: "
         f"{'met' if met else 'MISSED'}"
     )
+    rows = [
+        row(
+            "`gearsym run` on the built-in gearbox, whole process",
+            unit="s",
+            samples=ours,
+            peer=f"the same command at {BASELINE} (before the renovation), alternating",
+            peer_samples=theirs,
+            pair_ratios=ratios,
+            target=Target(f"≤ {TARGET}×", "ratio", "<=", TARGET),
+        )
+    ]
+    record(__file__, rows, started=started, title="`gearsym run` against its baseline")
     return 0 if met else 1
 
 

@@ -28,19 +28,22 @@ from gearsym.validation.studies.sensitivity_run import (
     reference_data,
     sliding_masks,
 )
+from record import Target, begin, record, row
 
 
-def timed(fn, repeat: int = 3) -> tuple[float, object]:
+def timed(fn, repeat: int = 3) -> tuple[list[float], object]:
+    """Seconds of ``repeat`` runs (SymPy's cache cleared before each) and the last result."""
     times, result = [], None
     for _ in range(repeat):
         sp.core.cache.clear_cache()  # SymPy memoises; a warm cache would flatter repeat runs
         start = time.perf_counter()
         result = fn()
         times.append(time.perf_counter() - start)
-    return statistics.median(times), result
+    return times, result
 
 
 def main() -> int:
+    started = begin()
     d = load_description()
     print("sensitivities of the default 2-3 shift, 5 parameters (median of 3 runs)")
     start = time.perf_counter()
@@ -52,22 +55,25 @@ def main() -> int:
         eqs = sensitivity_equations(driven.model)
         return eqs, CompiledModel(eqs.augmented)
 
-    t_derive, (eqs, compiled) = timed(derive)
+    runs_derive, (eqs, compiled) = timed(derive)
+    t_derive = statistics.median(runs_derive)
     values = parameter_values(driven.model)
     masks = sliding_masks(d, driven, data)
     inputs = Interpolated(data.t, driving_inputs(driven, data, masks, values))
     x0 = initial_state(driven.model, data)
 
-    t_integrate, _ = timed(
+    runs_integrate, _ = timed(
         lambda: integrate_sensitivities(eqs, inputs, x0, values, data.t, compiled=compiled)
     )
+    t_integrate = statistics.median(runs_integrate)
 
     def peer():
         return finite_difference_sensitivities(
             driven.model, eqs.parameter_names, inputs, x0, values, data.t
         )
 
-    t_peer, _ = timed(peer, repeat=1)
+    runs_peer, _ = timed(peer, repeat=1)
+    t_peer = statistics.median(runs_peer)
     ours = t_derive + t_integrate
     met = ours <= t_peer
     print(f"  {'derive ∂f/∂x, ∂f/∂p, [x; S] model, CasADi functions':<48}{t_derive:7.2f} s")
@@ -78,6 +84,25 @@ def main() -> int:
         f"{t_peer:6.2f} s   ratio {t_peer / ours:5.1f}x   target ≤ peer: "
         f"{'met' if met else 'MISSED'}"
     )
+    what = "sensitivities of the default 2-3 shift (5 parameters, 24 states)"
+    rows = [
+        row(
+            f"{what}: derive + integrate (the sum of the two medians below)",
+            ours,
+            "s",
+            runs=len(runs_derive),
+            peer="central finite differences, 10 integrations",
+            peer_samples=runs_peer,
+            target=Target("≤ peer", "ratio", "<=", 1.0),
+        ),
+        row(
+            f"{what}: derive ∂f/∂x, ∂f/∂p, the [x; S] model, CasADi functions",
+            unit="s",
+            samples=runs_derive,
+        ),
+        row(f"{what}: integrate [x; S], {len(data.t)} samples", unit="s", samples=runs_integrate),
+    ]
+    record(__file__, rows, started=started, title="Sensitivities of the default 2-3 shift")
     return 0 if met else 1
 
 

@@ -19,6 +19,7 @@ import sympy as sp
 from gearsym.symbolic.drivetrain import adjacent_shifts, full_model, shift_model
 from gearsym.symbolic.loader import load_description
 from gearsym.validation.sim.simulate import simulate
+from record import Target, begin, record, row
 
 
 def rotated(runs: dict, rounds: int = 3) -> dict[str, list[float]]:
@@ -39,6 +40,7 @@ def spread(values: list[float]) -> str:
 
 
 def main() -> int:
+    started = begin()
     d = load_description()
     runs = {
         "CVODES (default)": lambda: simulate(d, check_models=False),
@@ -62,6 +64,32 @@ def main() -> int:
         f"  deriving all {len(shifts)} adjacent shift models {t_shifts[0]:6.2f} s; the full "
         f"model {t_full[0]:6.2f} s"
     )
+    what = "reference simulation of the default 2→3 shift (derive, translate, integrate, sample)"
+    rows = [
+        row(
+            f"{what}, CVODES (the default)",
+            unit="s",
+            samples=times["CVODES (default)"],
+            peer="SciPy Radau with the same exact Jacobian",
+            peer_samples=times["Radau, exact Jacobian"],
+            target=Target("< 5 s", "value", "<", 5.0),
+        ),
+        row(
+            "the same, against Radau with finite differences",
+            unit="s",
+            samples=times["CVODES (default)"],
+            peer="SciPy Radau, finite-difference Jacobian",
+            peer_samples=times["Radau, finite differences"],
+        ),
+        row(
+            f"derive all {len(shifts)} adjacent shift models",
+            unit="s",
+            samples=t_shifts,
+            peer="the full model once",
+            peer_samples=t_full,
+        ),
+    ]
+    record(__file__, rows, started=started, title="Reference simulation and shift models")
     return 0 if met else 1
 
 

@@ -3,6 +3,10 @@
 A benchmark whose tools are missing (a compiler, the Arm toolchain, QEMU) is skipped with the
 reason; one that fails for another reason is reported in one line, its full output kept in a
 log file whose path is printed, never a traceback on the terminal.
+
+Each benchmark writes its measured rows to ``benchmarks/results/<bench>.json`` (``record.py``);
+at the end ``render_results.py`` renders every record into ``docs/results/benchmarks.md``. A
+skipped or failed benchmark keeps its last record, whose date the table shows.
 """
 
 from __future__ import annotations
@@ -12,6 +16,8 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+
+import render_results
 
 #: The programs each benchmark runs, beyond Python (and the Debian package that brings them).
 NEEDS: dict[str, tuple[tuple[str, str], ...]] = {
@@ -64,6 +70,12 @@ def main() -> int:
         else:
             sys.stderr.write(proc.stderr)
             failed.append(script.name)
+    print("== render_results.py", flush=True)
+    try:
+        render_results.main([])
+    except (ValueError, KeyError, OSError) as err:
+        print(f"error: the records could not be rendered: {err}")
+        crashed.append("render_results.py")
     if skipped:
         print(f"skipped (tools missing): {', '.join(skipped)}")
     if crashed:
