@@ -102,6 +102,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         drive=args.drive is not None,
         plots=not args.no_plots,
         fleet=fleet,
+        tune=args.tune,
         command=" ".join(["gearsym", *sys.argv[1:]]) if sys.argv[1:] else "",
     )
     paths: list[Any] = []
@@ -307,6 +308,14 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "simulates it, the filter knows only the calibration (the description's [estimator] "
         "prior) and is told the commanded inputs; per parameter bias, RMSE, mean sigma, "
         "coverage of the 95 %% interval, the bound and NEES/NIS against their bands",
+    )
+    p.add_argument(
+        "--tune",
+        action="store_true",
+        help="ekf, with --fleet: choose the model-error intensities on the --runs vehicles "
+        "(seeds --seed ...): one factor on the calibration's values, NEES/dof and NIS/dof "
+        "nearest 1; prints the values for the description's [estimator.model_error] table "
+        "(tune and evaluate on different seeds)",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG")
     p.add_argument("--json", action="store_true", help="machine-readable output")

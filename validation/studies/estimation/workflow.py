@@ -126,6 +126,9 @@ class EstimateRequest:
     fleet: Any = None
     #: the command that made the request, for the Markdown table a fleet evaluation writes
     command: str = ""
+    #: with ``fleet``: tune the model-error intensities on these runs' vehicles instead of
+    #: evaluating (:func:`~gearsym.validation.studies.estimation.tuning.tune_model_error`)
+    tune: bool = False
 
     @property
     def truth(self) -> Truth:
@@ -195,6 +198,7 @@ def check_request(request: EstimateRequest) -> None:
         _refuse("--fleet", request.fleet is not None, "needs a simulated truth, not a recording")
         _check_measured(request)
         return
+    _refuse("--tune", request.tune and request.fleet is None, "needs --fleet (it tunes on one)")
     if request.fleet is not None:
         _check_fleet(request)
     t_end = request.truth.scenario.t_end
@@ -723,6 +727,8 @@ def _fleet(request: EstimateRequest, folder: Path | None, reporter: Reporter) ->
     )
 
     cal, truth = request.calibration, request.truth
+    if request.tune:
+        return _tune(request, folder, reporter)
     update, done = reporter.bar(f"EKF over the fleet, {request.runs} vehicles")
     try:
         evaluation = run_fleet(
@@ -749,3 +755,29 @@ def _fleet(request: EstimateRequest, folder: Path | None, reporter: Reporter) ->
         if request.plots:
             plot_fleet(evaluation, folder / "fleet.png")
     return EstimateReport(data, format_fleet_text(data), evaluation)
+
+
+def _tune(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> EstimateReport:
+    """``--fleet --tune``: the model-error intensities chosen on the runs' vehicles (tuning
+    seeds, which an evaluation must not reuse)."""
+    from gearsym.validation.studies.estimation.tuning import tune_model_error
+
+    cal, truth = request.calibration, request.truth
+    seeds = list(range(request.seed, request.seed + request.runs))
+    update, done = reporter.bar(f"tuning over the fleet, {request.runs} vehicles")
+    try:
+        result = tune_model_error(
+            cal.description,
+            truth.scenario,
+            request.fleet,
+            seeds,
+            sample_time=cal.filter_sample_time,
+            relative_noise=_noise(cal),
+            progress=update,
+        )
+    finally:
+        done()
+    data = {"filter": "ekf", "tuning": result.to_dict()}
+    if folder is not None:
+        _write_json(folder / "tuning.json", data)
+    return EstimateReport(data, result.text(), result)

@@ -1,0 +1,44 @@
+"""The documentation's result tables are written by commands, not typed: each Markdown file
+under ``docs/results`` that a command wrote is rendered again from the JSON the same command
+wrote beside it, byte for byte, and its first line names the command."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+from gearsym.validation.studies.estimation.fleet_report import fleet_markdown
+
+RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
+HEADER = re.compile(r"^<!-- written by `(?P<command>[^`]+)`; do not edit by hand")
+
+FLEET_TABLES = sorted(RESULTS.glob("fleet_*.md"))
+
+
+@pytest.mark.parametrize("table", FLEET_TABLES, ids=lambda p: p.name)
+def test_a_fleet_table_is_its_json_rendered(table):
+    first = table.read_text(encoding="utf-8").splitlines()[0]
+    match = HEADER.match(first)
+    assert match, f"{table.name}: no 'written by' header: {first!r}"
+    command = match["command"]
+    assert command.startswith("gearsym estimate ") and "--fleet" in command
+    data = json.loads(table.with_suffix(".json").read_text(encoding="utf-8"))
+    assert fleet_markdown(data, command) == table.read_text(encoding="utf-8")
+    # the command that wrote it is the one make results runs
+    makefile = (RESULTS.parents[1] / "Makefile").read_text(encoding="utf-8")
+    assert command.removeprefix("gearsym ") in makefile
+
+
+def test_the_docs_have_fleet_results():
+    assert FLEET_TABLES, "make results writes docs/results/fleet_ekf_2_3.md"
+
+
+def test_a_hand_edit_is_caught(tmp_path):
+    """The check has teeth: one changed digit in a rendered table no longer matches."""
+    (table,) = [t for t in FLEET_TABLES if t.name == "fleet_ekf_2_3.md"]
+    data = json.loads(table.with_suffix(".json").read_text(encoding="utf-8"))
+    command = HEADER.match(table.read_text(encoding="utf-8").splitlines()[0])["command"]
+    data["parameters"]["m_veh"]["final"]["rmse"] *= 1.5
+    assert fleet_markdown(data, command) != table.read_text(encoding="utf-8")

@@ -1,0 +1,170 @@
+"""Tuning the EKF's model-error intensities on a fleet, apart from any evaluation.
+
+The filter's model is rigid and holds its inputs over a sample; the truth is elastic, its μ
+follows a slip-dependent map and its inputs ramp. The model-error intensities q_x of the states
+(4.1) stand for that mismatch and must be chosen on data, so they are chosen on **tuning
+seeds** of a fleet (each seed its own vehicle and noise) that no evaluation uses: one common
+factor c on the calibration's current q_x, the grid :data:`FACTORS`, the criterion NEES/dof and
+NIS/dof (each summed over runs and samples, divided by its summed dof) both near 1: the
+smallest (ln NEES/dof)² + (ln NIS/dof)². The calibration engineer copies the chosen values into
+the description's ``[estimator.model_error]`` table and names the fleet and seeds in
+``tuned_on``; an evaluation then runs on other seeds (``make results``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from gearsym.symbolic.description import GearboxDescription
+from gearsym.symbolic.errors import GearsymError
+from gearsym.validation.sim.fleet import Fleet, told_inputs, truth_world
+from gearsym.validation.sim.scenario import Scenario
+
+__all__ = ["FACTORS", "TWIST_FACTORS", "TuningResult", "tune_model_error"]
+
+#: The factors on the speeds' model-error intensities tried.
+FACTORS: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0, 4.0)
+#: The factors on the twist φ's model-error intensity tried.
+TWIST_FACTORS: tuple[float, ...] = (1.0, 10.0, 100.0, 1000.0, 10000.0)
+
+
+@dataclass(frozen=True)
+class TuningResult:
+    """Per factor: NEES/dof and NIS/dof over the tuning runs; the chosen factor and the
+    intensities it gives, by state name."""
+
+    fleet: str
+    seeds: tuple[int, ...]
+    factors: tuple[tuple[float, float], ...]  # (c, c_φ)
+    nees_per_dof: tuple[float, ...]
+    nis_per_dof: tuple[float, ...]
+    chosen: tuple[float, float]
+    intensities: dict[str, float]
+    base: dict[str, float]
+
+    def criterion(self, k: int) -> float:
+        return math.log(self.nees_per_dof[k]) ** 2 + math.log(self.nis_per_dof[k]) ** 2
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "fleet": self.fleet,
+            "seeds": [self.seeds[0], self.seeds[-1]],
+            "factors": [list(f) for f in self.factors],
+            "nees_per_dof": list(self.nees_per_dof),
+            "nis_per_dof": list(self.nis_per_dof),
+            "chosen_factors": list(self.chosen),
+            "model_error": self.intensities,
+            "from": self.base,
+        }
+
+    def text(self) -> str:
+        lines = [
+            f"  tuned on the fleet {self.fleet}, seeds {self.seeds[0]}-{self.seeds[-1]} "
+            f"({len(self.seeds)} vehicles): factors c on the speeds' and c_phi on the twist's "
+            "model-error intensities",
+            f"    {'c':>6} {'c_phi':>7} {'NEES/dof':>9} {'NIS/dof':>9} {'criterion':>10}",
+        ]
+        for k, (c, c_phi) in enumerate(self.factors):
+            mark = "  <- chosen" if (c, c_phi) == self.chosen else ""
+            lines.append(
+                f"    {c:>6g} {c_phi:>7g} {self.nees_per_dof[k]:>9.3f} "
+                f"{self.nis_per_dof[k]:>9.3f} {self.criterion(k):>10.4f}{mark}"
+            )
+        lines.append("  for the description's [estimator.model_error] table:")
+        for name, value in self.intensities.items():
+            lines.append(f"    {name} = {value:.3g}")
+        return "\n".join(lines)
+
+
+def tune_model_error(
+    d: GearboxDescription,
+    scenario: Scenario,
+    fleet: Fleet,
+    seeds: Sequence[int],
+    sample_time: float = 0.01,
+    relative_noise: Any = 0.01,
+    factors: Sequence[float] = FACTORS,
+    twist_factors: Sequence[float] = TWIST_FACTORS,
+    progress: Callable[[float, str], None] | None = None,
+) -> TuningResult:
+    """Choose the factors on the calibration's model-error intensities (module text): every
+    tuning vehicle simulated once, the filter run once per pair of factors on the same
+    noise."""
+    from gearsym.symbolic import naming
+    from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
+    from gearsym.symbolic.estimators.ekf_modes import ModeLogic
+    from gearsym.validation.sim.simulate import simulate
+    from gearsym.validation.studies.estimation.loop import filter_run
+    from gearsym.validation.studies.estimation.setup import prepare_ekf
+
+    if not seeds:
+        raise GearsymError("estimate", "--runs", "tuning needs at least one seed")
+    report = progress or (lambda fraction, message: None)
+    aug = augmented_model(d, scenario.shift.name)
+    discrete = DiscreteModel(aug)
+    logic = ModeLogic(d, aug)
+    nominal = prepare_ekf(
+        d,
+        simulate(d, scenario),
+        sample_time,
+        relative_noise,
+        aug=aug,
+        discrete=discrete,
+        logic=logic,
+    )
+    n_x = aug.n_x
+    base = {name: float(q) for name, q in zip(aug.state_names[:n_x], nominal.q, strict=False)}
+    grid = [(float(c), float(c_phi)) for c in factors for c_phi in twist_factors]
+    twist = aug.state_names.index(naming.TWIST)
+    sums = np.zeros((len(grid), 4))  # NEES, its dof, NIS, its dof
+    for i, seed in enumerate(seeds):
+        world = truth_world(d, scenario, fleet.draw(seed))
+        try:
+            result = simulate(world.description, world.scenario, mu_scale=world.mu_scale)
+        except GearsymError:
+            continue  # a vehicle the reference cannot simulate does not tune
+        setup = prepare_ekf(
+            d,
+            result,
+            sample_time,
+            relative_noise,
+            aug=aug,
+            discrete=discrete,
+            logic=logic,
+            told=told_inputs(d, scenario, nominal.t, aug.input_names),
+            truth_description=world.description,
+            floor=nominal.floor,
+        )
+        q0 = list(setup.q)
+        for k, (c, c_phi) in enumerate(grid):
+            setup.q = [(c_phi if j == twist else c) * q if j < n_x else q for j, q in enumerate(q0)]
+            run = filter_run(setup, seed)
+            used = run.nis_dof > 0
+            sums[k] += (
+                float(np.sum(run.nees)),
+                float(np.sum(run.nees_dof)),
+                float(np.sum(run.nis[used])),
+                float(np.sum(run.nis_dof[used])),
+            )
+        report((i + 1) / len(seeds), f"vehicle {i + 1} of {len(seeds)}")
+    nees = tuple(float(v) for v in sums[:, 0] / sums[:, 1])
+    nis = tuple(float(v) for v in sums[:, 2] / sums[:, 3])
+    scores = [math.log(a) ** 2 + math.log(b) ** 2 for a, b in zip(nees, nis, strict=True)]
+    best = int(np.argmin(scores))
+    chosen = grid[best]
+    return TuningResult(
+        fleet=f"{fleet.name} ({fleet.file})",
+        seeds=tuple(seeds),
+        factors=tuple(grid),
+        nees_per_dof=nees,
+        nis_per_dof=nis,
+        chosen=chosen,
+        intensities={
+            name: (chosen[1] if name == naming.TWIST else chosen[0]) * q for name, q in base.items()
+        },
+        base=base,
+    )
