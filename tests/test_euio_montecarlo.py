@@ -87,9 +87,9 @@ def test_nees_mean_over_50_runs_is_not_above_its_chi2_band(mc):
     χ² band. Every run here meets one truth from one fixed start (μ 0.12 against a truth near
     0.11), so the runs share their initial error and the NEES is no χ² sample over the prior;
     and the filter is tuned for the fleet's input errors, which this vehicle does not have, so
-    it is conservative here (below the band). Two-sided consistency is judged where its premise
-    holds, over the fleet (tests/test_fleet.py, the EKF; the extended UIO over a fleet is not
-    built yet)."""
+    it is conservative here (below the band). Consistency is judged where its premise holds,
+    over the fleet (tests/test_fleet.py, the EKF; the extended UIO over a fleet is not built
+    yet)."""
     from scipy.stats import chi2
 
     dof = float(np.mean(mc.trials[0].nees_dof))

@@ -280,11 +280,15 @@ def run_fleet(
     modes: str = "filter",
     bound: bool = True,
     progress: Progress | None = None,
+    filter_noise: Any = None,
 ) -> FleetEvaluation:
     """The EKF of the calibration ``d`` over ``runs`` vehicles of ``fleet`` (run i: seed
     ``seed`` + i draws the vehicle and, in its own stream, the speed noise) on ``scenario``
     (the commanded inputs). ``bound``: the posterior bound of each run's truth (about 1.5 s a
-    run). A vehicle whose simulation fails is reported in ``failed`` with the reason."""
+    run). A vehicle whose simulation fails is reported in ``failed`` with the reason.
+    ``filter_noise``: the filter's own sensor-noise model r (3.26) when it differs from the
+    sensors' ``relative_noise`` (a mistuned filter, to show that the consistency checks see
+    it); ``None``: the same."""
     from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
     from gearsym.symbolic.estimators.ekf_modes import ModeLogic
     from gearsym.validation.sim.simulate import simulate
@@ -345,6 +349,10 @@ def run_fleet(
             truth_description=world.description,
             floor=floor,
         )
+        if filter_noise is not None:  # the filter told another noise than the sensors have
+            setup.relative = np.broadcast_to(
+                np.asarray(filter_noise, dtype=float), setup.relative.shape
+            ).copy()
         run = filter_run(setup, run_seed)
         run_bound = ekf_bound(setup) if bound else None
         known = [k for k, name in enumerate(aug.input_names) if name in told]
