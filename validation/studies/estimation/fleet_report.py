@@ -221,7 +221,12 @@ def plot_fleet(ev: FleetEvaluation, path: Path) -> None:
     from gearsym.validation.drawing.figures import save, subplots
 
     names = [n for n in ev.parameter_names if ev.final_stats(n).runs]
-    fig, axes = subplots(1, len(names), (3.2 * len(names), 3.2))
+    fig, axes = subplots(
+        1,
+        len(names),
+        (3.4 * len(names), 3.4),
+        {"left": 0.07, "right": 0.99, "bottom": 0.16, "top": 0.9, "wspace": 0.42},
+    )
     axes = np.atleast_1d(axes)
     for ax, name in zip(axes, names, strict=True):
         rows = [ev.final_rows(fr)[name] for fr in ev.runs]
