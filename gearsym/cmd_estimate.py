@@ -67,6 +67,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         parameters=_names(args.params),
         initial=_initial_values(args.initial),
         modes=args.modes,
+        mu_model=args.mu_model,
     )
     scenario = load_scenario(d, args.scenario)
     source = args.scenario or "built-in"
@@ -316,6 +317,15 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "(seeds --seed ...): one factor on the calibration's values, NEES/dof and NIS/dof "
         "nearest 1; prints the values for the description's [estimator.model_error] table "
         "(tune and evaluate on different seeds)",
+    )
+    p.add_argument(
+        "--mu-model",
+        choices=("random_walk", "map_scale"),
+        default=None,
+        help="ekf: the filter's mu (default: the description's [estimator] mu_model, else "
+        "random_walk): 'random_walk', mu itself a random-walk state (thesis 4.1); 'map_scale', "
+        "mu = s mu_map(p, T_oil, |slip|) with the calibration's map read at the commanded "
+        "pressure and the filter's own slip estimate, the scale s per element the state",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG")
     p.add_argument("--json", action="store_true", help="machine-readable output")

@@ -32,6 +32,8 @@ from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.parameters import RECORDS, is_mu, record
 
 __all__ = [
+    "MU_MODELS",
+    "MU_SCALE",
     "PRIOR_NAMES",
     "EstimatorCalibration",
     "Prior",
@@ -39,22 +41,44 @@ __all__ = [
     "parse_estimator_table",
 ]
 
+#: How the filter models an element's μ (``[estimator] mu_model``): "random_walk", the
+#: thesis' (4.1): μ itself a random-walk state; "map_scale": μ = s · μ_map(p, T_oil, |Δω|), the
+#: calibration's μ map at the commanded pressure and the filter's own slip estimate, times a
+#: scale s per element that is the random-walk state (oil temperature, wear).
+MU_MODELS: tuple[str, ...] = ("random_walk", "map_scale")
+
+#: The scale state's name in the tables (the state keeps the element's ``mu_<E>`` name).
+MU_SCALE = "mu_scale"
+
 #: The names ``[estimator.prior]`` may give: the unmeasured state φ (side-shaft twist) and
 #: every quantity whose record states a prior (``mu`` stands for every ``mu_<element>``).
-PRIOR_NAMES: tuple[str, ...] = ("phi", *(r.key for r in RECORDS if r.prior_sigma is not None))
+PRIOR_NAMES: tuple[str, ...] = (
+    "phi",
+    *(r.key for r in RECORDS if r.prior_sigma is not None),
+    MU_SCALE,
+)
 
-#: The names ``[estimator.random_walk]`` may give (``mu``: every ``mu_<element>``).
-RANDOM_WALK_NAMES: tuple[str, ...] = tuple(r.key for r in RECORDS if r.random_walk is not None)
+#: The names ``[estimator.random_walk]`` may give (``mu``: every ``mu_<element>``; ``mu_scale``:
+#: every element's map scale under ``mu_model = "map_scale"``).
+RANDOM_WALK_NAMES: tuple[str, ...] = (
+    *(r.key for r in RECORDS if r.random_walk is not None),
+    MU_SCALE,
+)
 
 #: The states beside the shaft speeds ``omega_<shaft>`` that ``[estimator.model_error]`` may
 #: name: the side-shaft twist and the wheel speed (2.43, 2.44).
 MODEL_ERROR_NAMES: tuple[str, ...] = ("phi", "omega_C")
 
-#: Units of the prior entries that have no record (φ).
-_PRIOR_UNITS = {"phi": "rad"}
+#: Units of the prior entries that have no record (φ, the μ-map scale).
+_PRIOR_UNITS = {"phi": "rad", MU_SCALE: "1"}
 
-#: φ's default prior: untwisted, σ 0.05 rad (assumed).
-_DEFAULT_PRIORS = {"phi": (0.0, 0.05)}
+#: Default priors of the entries without a record: φ untwisted, σ 0.05 rad; the μ-map scale
+#: 1 (the calibration's map), σ 0.2 (assumed).
+_DEFAULT_PRIORS = {"phi": (0.0, 0.05), MU_SCALE: (1.0, 0.2)}
+
+#: Default random walk of the μ-map scale (1/s): it moves with oil temperature and wear over
+#: minutes, not within a shift (assumed).
+MU_SCALE_RANDOM_WALK = 1.0e-3
 
 
 @dataclass(frozen=True)
@@ -85,6 +109,8 @@ class EstimatorCalibration:
     random_walk: tuple[tuple[str, Tuning], ...] = ()
     model_error: tuple[tuple[str, Tuning], ...] = ()
     tuned_on: str = ""
+    #: :data:`MU_MODELS`
+    mu_model: str = "random_walk"
     #: the description file, for errors raised when a name meets a model
     file: str = field(default="", compare=False)
 
@@ -118,10 +144,24 @@ class EstimatorCalibration:
         sd = r.prior_sigma * abs(float(mean)) if r.prior_relative else r.prior_sigma
         return float(mean), float(sd)
 
+    def scale_prior(self) -> tuple[float, float]:
+        """(mean, σ) of every element's μ-map scale (``mu_model = "map_scale"``)."""
+        given = dict(self.prior).get(MU_SCALE)
+        if given is None:
+            return _DEFAULT_PRIORS[MU_SCALE]
+        return (1.0 if given.mean is None else float(given.mean)), given.sd
+
+    def scale_random_walk(self) -> float:
+        """q of every element's μ-map scale (1/s)."""
+        given = dict(self.random_walk).get(MU_SCALE)
+        return MU_SCALE_RANDOM_WALK if given is None else given.value
+
     def intensities(self) -> dict[str, float]:
         """Every stated intensity by state name (``mu``: every μ state), the overrides
         :func:`gearsym.symbolic.estimators.ekf.augmented_model` takes."""
-        return {name: t.value for name, t in (*self.random_walk, *self.model_error)}
+        return {
+            name: t.value for name, t in (*self.random_walk, *self.model_error) if name != MU_SCALE
+        }
 
     def to_dict(self) -> dict[str, Any]:
         """For a report: what the filter was told, with the sources."""
@@ -132,6 +172,7 @@ class EstimatorCalibration:
             "random_walk": {n: t.value for n, t in self.random_walk},
             "model_error": {n: t.value for n, t in self.model_error},
             "tuned_on": self.tuned_on,
+            "mu_model": self.mu_model,
         }
 
 
@@ -146,6 +187,9 @@ def parse_estimator_table(table: Any, shafts: Sequence[str] = ()) -> EstimatorCa
     speeds ``omega_<shaft>`` may carry a model-error intensity."""
     shaft_states = {f"omega_{name}" for name in shafts}
     tuned_on = table.string("tuned_on", required=False, default="")
+    mu_model = table.string("mu_model", required=False, default="random_walk")
+    if mu_model not in MU_MODELS:
+        raise table.fail("mu_model", f"expected one of {', '.join(MU_MODELS)}, got {mu_model!r}")
     priors: list[tuple[str, Prior]] = []
     prior_table = table.table("prior", required=False)
     for name in list(prior_table.data):
@@ -200,5 +244,6 @@ def parse_estimator_table(table: Any, shafts: Sequence[str] = ()) -> EstimatorCa
         random_walk=tables["random_walk"],
         model_error=tables["model_error"],
         tuned_on=tuned_on,
+        mu_model=mu_model,
         file=table.file,
     )

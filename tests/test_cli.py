@@ -131,6 +131,12 @@ BAD_CASES = [
         "not a state of a filter's model",
     ),
     (
+        "[estimator]\ntuned_on",
+        "[estimator]\nmu_model = 'banana'\ntuned_on",
+        "estimator.mu_model",
+        "expected one of random_walk, map_scale",
+    ),
+    (
         "[estimator.random_walk]\nm_veh = { value = 1.0",
         "[estimator.random_walk]\nm_veh = { value = -1.0",
         "estimator.random_walk.m_veh.value",

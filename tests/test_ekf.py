@@ -175,16 +175,17 @@ def test_nees_of_one_run_is_consistent_with_its_chi2_distribution(ekf_run):
     assert ekf_run.min_eigenvalue > 0
 
 
-def test_nees_over_ten_seeds_is_consistent_with_its_chi2_distribution(reference, aug, discrete):
-    """A consistent filter has NEES_k ~ χ²(dof_k): a seed- and time-averaged NEES/dof near 1
-    (the README's 10-seed figure) and most samples inside their per-sample 95 % interval. One
-    run's errors are correlated in time (the filter's memory is ~0.1 s, ten samples) and across
-    its parameters' estimates, so a factor 2 either side of 1 is what "reasonable" means here,
-    for the NEES as for the NIS (three speeds per sample); and at least 70 % of the pooled
-    samples inside (the filter's model-error intensities are tuned to the average, not to every
-    sample: the fraction is 0.78 over these seeds with the 0.27 s gear 2 of the former
-    scenario and 0.76 with the 0.57 s one)."""
+def test_nees_over_ten_seeds_is_not_overconfident(reference, aug, discrete):
+    """A consistent filter has NEES_k ~ χ²(dof_k). On the calibration's own vehicle, from the
+    fixed start, the filter tuned for the fleet (its twist's model error covers the fleet's
+    stiffness and torque errors, which this vehicle does not have) is conservative, so only
+    the upper side binds here: the seed- and time-averaged NEES/dof below 2 (one run's errors
+    are correlated in time, the filter's memory is ~0.1 s, so a factor 2 is what "reasonable"
+    means) and at least 95 % of the pooled samples below their per-sample 97.5 % quantile;
+    the NIS (three speeds per sample, white innovations) within a factor 2 either side of 1.
+    Consistency over the fleet: tests/test_fleet.py."""
     from gearsym.validation.studies.estimation.loop import run_ekf
+    from scipy.stats import chi2
 
     d, result = reference
     runs = [
@@ -196,10 +197,10 @@ def test_nees_over_ten_seeds_is_consistent_with_its_chi2_distribution(reference,
     nis = sum(float(np.sum(r.nis[u])) for r, u in zip(runs, used, strict=True)) / sum(
         float(np.sum(r.nis_dof[u])) for r, u in zip(runs, used, strict=True)
     )
-    assert 0.5 < nees < 2.0, nees
+    assert nees < 2.0, nees
     assert 0.5 < nis < 2.0, nis
-    inside = np.mean([r.nees_inside() for r in runs])
-    assert inside > 0.7, inside
+    below = np.mean([np.mean(r.nees <= chi2.ppf(0.975, r.nees_dof)) for r in runs])
+    assert below > 0.95, below
     assert all(r.min_eigenvalue > 0 for r in runs)
 
 

@@ -448,3 +448,103 @@ def test_tune_needs_a_fleet():
     assert result.returncode == 2
     (line,) = result.stderr.strip().splitlines()
     assert "--tune" in line and "needs --fleet" in line, line
+
+
+# ------------------------------------------------------------- the μ map's scale as the state
+
+
+def test_the_map_scale_form_reads_the_calibrations_map_at_the_filters_slip(d, scenario):
+    """F_N × μ_map(F_N / A, T_oil, |Δω̂|): the slip from the filter's speed states against the
+    reference's own slip at the same instant in the torque phase, where both elements slide
+    (the model's kinematics against the reference's body speeds, within 0.1 %: the
+    reference's bristles add their deflection rates), the map value against MuMap read
+    directly."""
+    from gearsym.symbolic.estimators.ekf import augmented_model
+    from gearsym.validation.sim.simulate import simulate
+    from gearsym.validation.studies.estimation.mu_map_form import map_scale_form
+
+    aug = augmented_model(d, "2-3")
+    form = map_scale_form(d, aug)
+    result = simulate(d, scenario, check_models=False)
+    k = int(np.searchsorted(result.t, 0.7))  # torque phase: both elements slide
+    z = np.array(
+        [result.signals[name][k] if name in result.signals else 0.0 for name in aug.state_names]
+    )
+    for row, e in zip(form.slip_rows, form.elements, strict=True):
+        true_slip = result.signals[f"slip_{e}"][k]
+        assert abs(true_slip) > 1.0
+        assert row @ z == pytest.approx(true_slip, rel=1e-3)
+    u = np.zeros(len(aug.input_names))
+    columns = dict(zip(form.elements, form.columns, strict=True))
+    u[columns["K38"]] = 2.0e5 * d.element("K38").a_piston.value
+    u[columns["B05"]] = 6.0e5 * d.element("B05").a_piston.value
+    mapped = form(z, u)
+    mu_map = load_mu_map(d)
+    t_oil = quantity(d, "friction", "T_oil").value
+    for e, p in (("K38", 2.0e5), ("B05", 6.0e5)):
+        slip = abs(form.slip_rows[form.elements.index(e)] @ z)
+        expected = u[columns[e]] * float(mu_map(np.array([p]), t_oil, np.array([slip]))[0])
+        assert mapped[columns[e]] == pytest.approx(expected, rel=1e-12)
+
+
+def test_the_map_scale_follows_a_scaled_clutch(d, scenario):
+    """One vehicle whose on-coming clutch B05 has its map scaled by 1.15, nothing else drawn:
+    the filter (map_scale, told the commanded inputs) ends with a scale whose 3σ interval
+    holds 1.15 in at least 4 of 5 noise seeds, while the random-walk μ's end value is scored
+    against a slip-dependent truth (the reason for the form)."""
+    from gearsym.validation.studies.estimation.fleet_eval import run_fleet
+
+    scaled = dataclasses.replace(
+        d, estimator=dataclasses.replace(d.estimator, mu_model="map_scale")
+    )
+    fleet = _fleet(d, 'mu_scale_B05 = { value = 1.15, unit = "1", source = "x" }')
+    evaluation = run_fleet(scaled, scenario, fleet, runs=5, seed=600000, bound=False)
+    assert evaluation.to_dict()["mu_model"] == "map_scale"
+    inside = 0
+    for fr in evaluation.runs:
+        estimate, sigma, truth = evaluation.final_rows(fr)["mu_05"]
+        assert truth == pytest.approx(1.15)
+        inside += abs(estimate - truth) <= 3 * sigma
+    assert inside >= 4
+
+
+def test_map_scale_is_refused_for_the_extended_uio():
+    result = _gearsym("estimate", "--filter", "euio", "--mu-model", "map_scale")
+    assert result.returncode == 2
+    (line,) = result.stderr.strip().splitlines()
+    assert "--mu-model" in line and "is for --filter ekf" in line, line
+
+
+# ------------------------------------------------------- what one shift cannot separate
+
+
+@pytest.fixture(scope="module")
+def separability(d, scenario):
+    from gearsym.validation.sim.simulate import simulate
+    from gearsym.validation.studies.estimation.separability import torque_gain_separability
+    from gearsym.validation.studies.estimation.setup import prepare_ekf
+
+    return torque_gain_separability(prepare_ekf(d, simulate(d, scenario), 0.01)).phases
+
+
+def test_an_unknown_torque_gain_only_takes_information(separability):
+    """A parameter's γ (3.27) with the gain unknown is never below its γ with the gain known
+    (a Schur complement only removes information); the correlation is a correlation."""
+    for phase, study in separability.items():
+        for name, known in study["gamma_gain_known"].items():
+            unknown = study["gamma_gain_unknown"][name]
+            if known is not None and unknown is not None:
+                assert unknown >= known * (1 - 1e-9), (phase, name, known, unknown)
+        c = study["correlation_m_veh_gain"]
+        assert c is None or -1.0 <= c <= 1.0
+
+
+def test_in_the_steady_gear_the_gain_is_not_separable(separability):
+    """Gear 2 at a steady operating point: the speeds see one wheel-torque balance, k_T T_In i
+    against the road load of m_veh and ζ, so the gain, the mass and the grade are tied (no
+    finite γ with the gain unknown); over the whole shift the torque and speed phases add
+    what separates them."""
+    gear2 = separability["gear 2"]["gamma_gain_unknown"]
+    assert gear2["input_torque_gain"] is None and gear2["m_veh"] is None
+    whole = separability["shift"]["gamma_gain_unknown"]
+    assert whole["input_torque_gain"] is not None and whole["m_veh"] is not None

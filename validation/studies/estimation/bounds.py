@@ -81,7 +81,8 @@ def ekf_bound(setup: EkfSetup, relative_step: float = 1e-5) -> EkfBound:
     z0 = setup.truth0
     steps = relative_step * np.maximum(np.abs(z0), setup.prior_sigma)
     variances = setup.sigma_y**2
-    _, S, z, flow = output_sensitivities(f, h, z0, setup.t, setup.u, steps, return_flow=True)
+    u = setup.u if setup.bound_u is None else setup.bound_u  # the inputs along the truth
+    _, S, z, flow = output_sensitivities(f, h, z0, setup.t, u, steps, return_flow=True)
     # the speeds' prior (σ of their first measurement) *is* that measurement (filter_run
     # initialises them from it and skips it in the first update): counted once, as the prior
     used_once = variances.copy()
@@ -93,7 +94,7 @@ def ekf_bound(setup: EkfSetup, relative_step: float = 1e-5) -> EkfBound:
     process = np.zeros((len(setup.t), n, n))
     for k in range(len(setup.t)):
         rates = np.array(setup.q, dtype=float)
-        rates[setup.aug.frozen_states(setup.u[k])] = 0.0
+        rates[setup.aug.frozen_states(u[k])] = 0.0
         process[k] = np.diag(h_step * rates)
     sigma_process = process_noise_bound(flow, S, used_once, np.diag(setup.prior_sigma**2), process)
     parameters = list(setup.aug.parameters)
@@ -112,7 +113,7 @@ def ekf_bound(setup: EkfSetup, relative_step: float = 1e-5) -> EkfBound:
             h,
             z[a],
             setup.t[inside],
-            setup.u[inside],
+            u[inside],
             relative_step * np.maximum(np.abs(z[a]), setup.prior_sigma),
         )
         fim = schur_complement(

@@ -128,6 +128,10 @@ class FleetEvaluation:
     initial: dict[str, tuple[float, float]] = field(default_factory=dict)
     #: the filter's μ states by element (the augmented model's)
     mu_elements: dict[str, str] = field(default_factory=dict)
+    #: the calibration's ``[estimator] mu_model``: "map_scale" makes the μ states map scales
+    mu_model: str = "random_walk"
+    #: what one shift cannot separate (:mod:`.separability`), on the calibration's vehicle
+    separability: dict[str, Any] = field(default_factory=dict)
 
     @property
     def parameter_names(self) -> list[str]:
@@ -140,7 +144,9 @@ class FleetEvaluation:
         out = {}
         for name in self.parameter_names:
             j = list(run.state_names).index(name)
-            truth = _final_truth(run, j, self.mu_elements.get(name))
+            # a map scale has one truth (the draw's factor); a random-walk μ follows the slip
+            element = None if self.mu_model == "map_scale" else self.mu_elements.get(name)
+            truth = _final_truth(run, j, element)
             out[name] = (float(run.estimates[-1, j]), float(run.sigmas[-1, j]), truth)
         return out
 
@@ -226,6 +232,7 @@ class FleetEvaluation:
         cal = self.calibration.estimator
         return {
             "filter": "ekf",
+            "mu_model": self.mu_model,
             "shift": self.scenario.shift.name,
             "scenario": self.scenario.name,
             "runs": len(self.runs),
@@ -256,6 +263,7 @@ class FleetEvaluation:
             "nees_band": list(nees_band),
             "nis_mean": nis,
             "nis_band": None if nis_band is None else list(nis_band),
+            "separability": self.separability,
             "draws": [fr.draw.to_dict() for fr in self.runs],
         }
 
@@ -294,6 +302,7 @@ def run_fleet(
     from gearsym.validation.sim.simulate import simulate
     from gearsym.validation.studies.estimation.bounds import ekf_bound
     from gearsym.validation.studies.estimation.loop import filter_run
+    from gearsym.validation.studies.estimation.separability import torque_gain_separability
     from gearsym.validation.studies.estimation.setup import prepare_ekf
 
     if runs < 1:
@@ -316,6 +325,8 @@ def run_fleet(
         logic=logic,
     )
     floor = nominal.floor
+    report(0.0, "what one shift cannot separate (Fisher information with a torque gain)")
+    separability = {"input_torque_gain": torque_gain_separability(nominal).to_dict()}
     initial = {
         name: (float(nominal.initial[j]), float(nominal.prior_sigma[j]))
         for j, name in enumerate(nominal.names)
@@ -348,6 +359,7 @@ def run_fleet(
             told=told,
             truth_description=world.description,
             floor=floor,
+            truth_mu_scale=world.mu_scale,
         )
         if filter_noise is not None:  # the filter told another noise than the sensors have
             setup.relative = np.broadcast_to(
@@ -380,4 +392,6 @@ def run_fleet(
         seconds_per_run=(time.perf_counter() - start) / runs,
         initial=initial,
         mu_elements={mu: e for e, mu in aug.mu_state.items()},
+        mu_model=d.estimator.mu_model,
+        separability=separability,
     )

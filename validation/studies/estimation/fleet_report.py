@@ -33,6 +33,13 @@ def _unit(name: str) -> str:
     return "" if unit == "1" else f" {unit}"
 
 
+def _name(name: str, data: dict[str, Any], label: Any = symbol) -> str:
+    """A parameter's label; under ``mu_model = "map_scale"`` a μ state is its map's scale."""
+    if data.get("mu_model") == "map_scale" and name.startswith("mu_"):
+        return f"{symbol(name)} map scale"
+    return str(label(name))
+
+
 def _g(value: float | None, digits: int = 3) -> str:
     return "—" if value is None else f"{value:.{digits}g}"
 
@@ -64,8 +71,14 @@ def _has_bound(data: dict[str, Any]) -> bool:
 def _assumptions(data: dict[str, Any]) -> list[str]:
     seeds = data["seeds"]
     prior = ", ".join(
-        f"{symbol(n)} {_g(v['value'], 4)} ± {_g(v['sigma'], 3)}{_unit(n)}"
+        f"{_name(n, data)} {_g(v['value'], 4)} ± {_g(v['sigma'], 3)}{_unit(n)}"
         for n, v in data["initial"].items()
+    )
+    mu_model = (
+        "a scale s per element on the calibration's mu map read at the commanded pressure and "
+        "the filter's own slip estimate (mu = s mu_map; scored against the draw's factor)"
+        if data.get("mu_model") == "map_scale"
+        else "mu itself a random walk (thesis 4.1)"
     )
     fleet = data["fleet"]
     lines = [
@@ -76,6 +89,7 @@ def _assumptions(data: dict[str, Any]) -> list[str]:
         "the filter's start (the description's [estimator] prior, the same for every vehicle): "
         f"{prior}",
         f"tuned on: {data['tuning']['tuned_on']}",
+        f"the filter's mu: {mu_model}",
         "scores: at the end of the shift the filter's own last estimate against the vehicle's "
         "truth (mu: against the mean true mu over the samples the filter judged its element "
         "sliding); per phase over the samples with a truth (mu: while the truth slides); "
@@ -111,16 +125,44 @@ def _identifiable(stats: dict[str, Any]) -> str:
     return "—" if value is None else f"{100 * value:.0f} % of runs"
 
 
+def _separability(data: dict[str, Any]) -> list[str]:
+    """What one shift cannot separate, from the JSON's ``separability``: the γ (3.27) of each
+    parameter over the whole shift with the input-torque gain known and unknown."""
+    study = data.get("separability", {}).get("input_torque_gain")
+    if not study or "shift" not in study:
+        return []
+    whole = study["shift"]
+    known, unknown = whole["gamma_gain_known"], whole["gamma_gain_unknown"]
+    pairs = ", ".join(
+        f"{_name(n, data)} {_g(known[n], 2)} -> {_g(unknown.get(n), 2)}" for n in known
+    )
+    phases = ", ".join(
+        f"{phase} {_g(v['gamma_gain_unknown'].get('input_torque_gain'), 2)}"
+        for phase, v in study.items()
+        if phase != "shift"
+    )
+    correlation = whole.get("correlation_m_veh_gain")
+    return [
+        "what one shift cannot separate (Fisher information (3.25) of the filter's problem on "
+        "the calibration's own vehicle, states at the start unknown, gamma (3.27), > 0.1 not "
+        f"identifiable): with an input-torque gain unknown beside the parameters, gamma over "
+        f"the whole shift {pairs}; the gain's own {_g(unknown.get('input_torque_gain'), 2)}"
+        + (f", its correlation with m_veh {correlation:.2f}" if correlation is not None else "")
+        + f"; the gain within a single phase: {phases}",
+    ]
+
+
 def format_fleet_text(data: dict[str, Any]) -> str:
     """The printed report of a fleet evaluation, from its JSON."""
     lines = [f"  assumes {line}" for line in _assumptions(data)]
+    lines += [f"  {line}" for line in _separability(data)]
     lines.append("")
     lines.append("  at the end of the shift (the value an adaptation reads):")
     lines.append(f"    {'parameter':<10} {'bias':>10} {'RMSE':>10} {'mean σ':>10}  coverage 95 %")
     for name, entry in data["parameters"].items():
         s = entry["final"]
         lines.append(
-            f"    {symbol(name):<10} {_g(s['bias']):>10} {_g(s['rmse']):>10} "
+            f"    {_name(name, data):<10} {_g(s['bias']):>10} {_g(s['rmse']):>10} "
             f"{_g(s['mean_sigma']):>10}  {_coverage(s)}"
         )
     lines.append("")
@@ -131,7 +173,7 @@ def format_fleet_text(data: dict[str, Any]) -> str:
     )
     for phase, name, s in _phase_rows(data):
         lines.append(
-            f"    {phase:<13} {symbol(name):<9} {_g(s['bias']):>9} {_g(s['rmse']):>9} "
+            f"    {phase:<13} {_name(name, data):<9} {_g(s['bias']):>9} {_g(s['rmse']):>9} "
             f"{_g(s['mean_sigma']):>9} {_g(s['bound']):>9} {_g(s['efficiency']):>6}  "
             f"{_coverage(s)}; {_identifiable(s)}"
         )
@@ -186,6 +228,7 @@ def fleet_markdown(data: dict[str, Any], command: str) -> str:
         f"- {len(data['failed'])} vehicle(s) not simulated"
         if data["failed"]
         else "- every vehicle simulated",
+        *(f"- {line}" for line in _separability(data)),
         "",
         "At the end of the shift (the value an adaptation reads):",
         "",
@@ -195,7 +238,7 @@ def fleet_markdown(data: dict[str, Any], command: str) -> str:
     for name, entry in data["parameters"].items():
         s = entry["final"]
         out.append(
-            f"| {axis_label(name)} | {_g(s['bias'])} | {_g(s['rmse'])} | "
+            f"| {_name(name, data, axis_label)} | {_g(s['bias'])} | {_g(s['rmse'])} | "
             f"{_g(s['mean_sigma'])} | {_coverage(s)} |"
         )
     out += [
@@ -208,7 +251,7 @@ def fleet_markdown(data: dict[str, Any], command: str) -> str:
     ]
     for phase, name, s in _phase_rows(data):
         out.append(
-            f"| {phase} | {axis_label(name)} | {_g(s['bias'])} | {_g(s['rmse'])} | "
+            f"| {phase} | {_name(name, data, axis_label)} | {_g(s['bias'])} | {_g(s['rmse'])} | "
             f"{_g(s['mean_sigma'])} | {_coverage(s)} | {_g(s['bound'])} | "
             f"{_g(s['efficiency'])} | {_identifiable(s)} |"
         )

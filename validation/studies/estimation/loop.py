@@ -272,6 +272,7 @@ def filter_run(
     min_eig = np.inf
     scale = np.maximum(sig0, 1e-12)
     logic = s.logic if s.mode_source == "filter" else None
+    form = s.input_form
     if logic is not None:
         modes = logic.initial_modes()
         codes = {e: np.zeros(len(t), dtype=int) for e in logic.elements}
@@ -282,8 +283,12 @@ def filter_run(
             u_before, u_now = s.u[k - 1], s.u[k]
         else:  # the modes held since the previous sample, the known inputs of this one
             u_before, u_now = held, logic.inputs(s.u[k], modes)
+        if form is not None:  # the μ map read at the filter's own estimate (mu_map_form)
+            u_before = form(z, u_before)
         if k > 0:
             z, P = ekf_predict(s.discrete, z, P, u_before, sample_time, s.p, s.q)
+        if form is not None:
+            u_now = form(z, u_now)
         z, P, nis[k], nis_dof[k] = ekf_update(
             s.discrete, z, P, u_now, first if k == 0 else y[k], s.p, s.relative, s.floor
         )
@@ -294,7 +299,8 @@ def filter_run(
         error = z[idx] - truth[k, idx]
         nees[k] = float(error @ np.linalg.solve(P[np.ix_(idx, idx)], error))
         if logic is not None:
-            z, P, modes, decided = ekf_mode_update(logic, z, P, s.u[k], s.p, modes)
+            known = s.u[k] if form is None else form(z, s.u[k])
+            z, P, modes, decided = ekf_mode_update(logic, z, P, known, s.p, modes)
             switches += [
                 ModeSwitch(ev.element, ev.kind, float(t[k]), ev.before, ev.after) for ev in decided
             ]

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from gearsym.symbolic import naming
 from gearsym.symbolic.defaults import EKF_FLOOR_FRACTION, EKF_RELATIVE_NOISE
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
@@ -60,6 +61,13 @@ class EkfSetup:
     mode_source: str = "filter"
     logic: Any = None
     reference_switches: tuple[ModeSwitch, ...] = ()
+    #: ``mu_model = "map_scale"``: the :class:`~gearsym.validation.studies.estimation.
+    #: mu_map_form.MapScaleForm` that maps the F_N inputs at the filter's own estimate each
+    #: step (its μ states hold the map scales); ``None``: the thesis' random-walk μ
+    input_form: Any = None
+    #: the inputs along the truth for the posterior bound (the F_N inputs mapped at the true
+    #: slip under ``input_form``); ``None``: ``u``
+    bound_u: np.ndarray | None = None
 
     @property
     def names(self) -> list[str]:
@@ -98,6 +106,7 @@ def prepare_ekf(
     told: Mapping[str, np.ndarray] | None = None,
     truth_description: GearboxDescription | None = None,
     floor: np.ndarray | None = None,
+    truth_mu_scale: Mapping[str, float] | None = None,
 ) -> EkfSetup:
     """The seed-independent part of :func:`run_ekf` (its arguments of the same name).
 
@@ -116,7 +125,10 @@ def prepare_ekf(
     (:func:`gearsym.validation.sim.fleet.told_inputs`); without it the inputs are read from
     ``result``, which is right only when the truth is the calibration. ``truth_description``:
     the description the reference simulated (a fleet's vehicle), for scoring only (default
-    ``d``)."""
+    ``d``). ``floor``: the noise floor y_min of (3.26) per output (default: a fraction of the
+    largest |y| of ``result``, right only when the truth is the calibration).
+    ``truth_mu_scale``: the truth's factor on the μ map per element (a fleet's draw), the truth
+    of the map-scale states (``[estimator] mu_model = "map_scale"``), for scoring only."""
     from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
 
     shift = result.scenario.shift.name
@@ -196,9 +208,12 @@ def prepare_ekf(
         elif name == "m_veh":
             truth[:, j] = quantity(truth_description, "vehicle", "m_veh").value
             scored[:, j] = True
+    scale_form = d.estimator.mu_model == "map_scale"
     for e, mu in aug.mu_state.items():
         j = names.index(mu)
         scored[:, j] = reference_modes[e][0] > 0.5  # μ is defined while the truth slides
+        if scale_form:  # the state is the map's scale: the truth's factor on the same map
+            truth[:, j] = float((truth_mu_scale or {}).get(e, 1.0))
     if measured is not None:  # a recording: no state has a truth
         truth[:] = np.nan
         scored[:] = False
@@ -209,8 +224,18 @@ def prepare_ekf(
     for j, name in enumerate(names):
         if name in outputs:
             sig0[j] = sigma_y[0, outputs.index(name)]
+        elif scale_form and name in aug.mu_state.values():
+            z[j], sig0[j] = d.estimator.scale_prior()
+            q[j] = d.estimator.scale_random_walk()
         else:  # the calibration's prior (the description's [estimator] table), not the truth
             z[j], sig0[j] = d.estimator.prior_of(name, nominal.get(name))
+    input_form, bound_u = None, None
+    if scale_form:
+        from gearsym.validation.studies.estimation.mu_map_form import map_scale_form
+
+        input_form = map_scale_form(d, aug)
+        slips = np.column_stack([sampled(naming.slip_column(e)) for e in aug.elements])
+        bound_u = input_form.along(u, slips)
     for name, value in (initial or {}).items():
         if name not in names:
             raise GearsymError(
@@ -239,4 +264,6 @@ def prepare_ekf(
         mode_source=modes,
         logic=logic,
         reference_switches=tuple(reference_switches(d, result)),
+        input_form=input_form,
+        bound_u=bound_u,
     )

@@ -138,6 +138,7 @@ def tune_model_error(
             told=told_inputs(d, scenario, nominal.t, aug.input_names),
             truth_description=world.description,
             floor=nominal.floor,
+            truth_mu_scale=world.mu_scale,
         )
         q0 = list(setup.q)
         for k, (c, c_phi) in enumerate(grid):

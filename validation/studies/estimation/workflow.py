@@ -18,12 +18,13 @@ the chosen filter would not use, and assembles the report.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol
 
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.estimator_calibration import MU_MODELS
 from gearsym.validation.sim.scenario import Scenario
 
 __all__ = [
@@ -78,6 +79,8 @@ class Calibration:
     parameters: tuple[str, ...] | None = None
     initial: Mapping[str, float] = field(default_factory=dict)
     modes: str | None = None
+    #: overrides the description's ``[estimator] mu_model`` (``None``: the description's)
+    mu_model: str | None = None
 
     @property
     def mode_source(self) -> str:
@@ -186,6 +189,18 @@ def check_request(request: EstimateRequest) -> None:
         raise GearsymError(
             "estimate", "--filter", f"expected one of {', '.join(FILTERS)}, got {request.filter!r}"
         )
+    if cal.mu_model is not None and cal.mu_model not in MU_MODELS:
+        raise GearsymError(
+            "estimate",
+            "--mu-model",
+            f"expected one of {', '.join(MU_MODELS)}, got {cal.mu_model!r}",
+        )
+    mu_model = cal.mu_model or cal.description.estimator.mu_model
+    _refuse(
+        "--mu-model" if cal.mu_model else "estimator.mu_model",
+        mu_model == "map_scale" and request.filter != "ekf",
+        "map_scale is for --filter ekf (the extended UIO keeps the thesis' random-walk mu)",
+    )
     noise = cal.relative_noise or ()
     if any(not 0 <= r <= MAX_RELATIVE_NOISE for r in noise):
         raise GearsymError(
@@ -404,6 +419,11 @@ def estimate(
     (a staging folder of the one output writer), also write the CSV, JSON and plots there."""
     check_request(request)
     reporter = reporter or _Silent()
+    cal = request.calibration
+    if cal.mu_model is not None:  # the filter's μ form, over the description's table
+        d = cal.description
+        d = replace(d, estimator=replace(d.estimator, mu_model=cal.mu_model))
+        request = replace(request, calibration=replace(cal, description=d))
     if request.truth.measurement is not None:
         return _measured(request, folder, reporter)
     if request.fleet is not None:
