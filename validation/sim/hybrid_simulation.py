@@ -57,7 +57,7 @@ from gearsym.symbolic.hybrid import (
 )
 from gearsym.symbolic.numeric import bilinear, to_casadi
 from gearsym.validation.sim.scenario import SAMPLE_TIME, Scenario, load_scenario
-from gearsym.validation.sim.simulate import EnergyAudit
+from gearsym.validation.sim.simulation_result import EnergyAudit
 from scipy.integrate import solve_ivp
 
 MU_MODES = ("map", "constant")
