@@ -18,7 +18,7 @@ events are located exactly without a root search.
 element's pressure, the oil temperature and the current |slip|, scaled by the parameter,
 μ_e,eff = μ_e · map(p_e, T_oil, |Δω_e|) / μ_nominal: at the nominal μ_e it is exactly what the
 reference reads (2.69), and ∂/∂μ_e is a relative change of the whole map, as in
-:mod:`gearsym.validation.studies.sensitivity_run`. ``mu="constant"`` uses the parameter alone. The
+:mod:`gearsym.validation.studies.driven_shift`. ``mu="constant"`` uses the parameter alone. The
 grade enters as ζ + Δζ(t), ζ the parameter and Δζ(t) the scenario's profile minus the description's
 ζ (zero without a profile), like the driven shift model of the sensitivity runs.
 
