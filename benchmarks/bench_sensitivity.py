@@ -16,18 +16,20 @@ import time
 import sympy as sp
 from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.sensitivity import sensitivity_equations
-from gearsym.validation.studies.sensitivity_run import (
-    CompiledModel,
-    Interpolated,
+from gearsym.validation.studies.driven_shift import (
     driven_shift_model,
     driving_inputs,
-    finite_difference_sensitivities,
     initial_state,
-    integrate_sensitivities,
-    parameter_values,
     reference_data,
     sliding_masks,
 )
+from gearsym.validation.studies.sensitivity_integration import (
+    CompiledModel,
+    Interpolated,
+    integrate_sensitivities,
+    parameter_values,
+)
+from gearsym.validation.studies.sensitivity_peers import finite_difference_sensitivities
 from record import Target, begin, record, row
 
 

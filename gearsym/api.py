@@ -118,10 +118,8 @@ class Gearbox:
     ) -> Any:
         """Sensitivities (3.5)-(3.7) along the reference shift (``result`` reuses a
         simulation; default parameters: the thesis' set (3.2) for the shift)."""
-        from gearsym.validation.studies.sensitivity_run import (
-            reference_from_result,
-            run_sensitivities,
-        )
+        from gearsym.validation.studies.driven_shift import reference_from_result
+        from gearsym.validation.studies.sensitivity_run import run_sensitivities
 
         data = reference_from_result(result) if result is not None else None
         return run_sensitivities(self.description, parameters, data=data, **options)
@@ -129,8 +127,8 @@ class Gearbox:
     def fim(self, parameters: list[str] | None = None, result: Any = None, **options: Any) -> Any:
         """Fisher information (3.25) per phase; by default each phase counts only what it
         reveals itself (``restart=False``: the thesis' continuous view, labelled)."""
+        from gearsym.validation.studies.driven_shift import reference_from_result
         from gearsym.validation.studies.fisher import fim_study
-        from gearsym.validation.studies.sensitivity_run import reference_from_result
 
         data = reference_from_result(result) if result is not None else None
         return fim_study(self.description, parameters, data=data, **options)

@@ -46,11 +46,8 @@ def _overrides(d: Any, items: Sequence[str] | None) -> dict[str, float]:
 def _prepare(args: argparse.Namespace, wheel: bool) -> tuple[Any, list[str] | None, dict, Any]:
     """Load the description and check the parameter names before the (slow) simulation."""
     from gearsym.symbolic.sensitivity import select_parameters
-    from gearsym.validation.studies.sensitivity_run import (
-        driven_shift_model,
-        parameter_values,
-        thesis_parameters,
-    )
+    from gearsym.validation.studies.driven_shift import driven_shift_model, thesis_parameters
+    from gearsym.validation.studies.sensitivity_integration import parameter_values
 
     d = load(args.config)
     names = _parameter_list(args.params)
@@ -95,7 +92,7 @@ def _measured(args: argparse.Namespace, d: Any, scenario: Any) -> Any:
 
 
 def _reference(d: Any, scenario: Any) -> Any:
-    from gearsym.validation.studies.sensitivity_run import reference_data
+    from gearsym.validation.studies.driven_shift import reference_data
 
     start = time.perf_counter()
     progress("simulating the reference shift (gearsym.validation.sim.simulate)")
@@ -111,12 +108,9 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
     """Sensitivities along the reference shift: PNG per parameter (Figs. 3.4–3.8) and a CSV."""
     import numpy as np
 
-    from gearsym.validation.studies.sensitivity_run import (
-        phase_of,
-        plot_sensitivities,
-        run_sensitivities,
-        write_csv,
-    )
+    from gearsym.validation.sim.phases import phase_of
+    from gearsym.validation.studies.sensitivity_output import plot_sensitivities, write_csv
+    from gearsym.validation.studies.sensitivity_run import run_sensitivities
 
     d, names, overrides, scenario = _prepare(args, False)
     with OutputDir(args.out, "sensitivity", before_commit=check) as out:
@@ -348,19 +342,15 @@ def print_fim_summary(
     """
     from gearsym.symbolic.defaults import GAMMA_MAX, SAMPLE_TIME
     from gearsym.validation.sim.hybrid_simulation import HybridSimulator
+    from gearsym.validation.studies.driven_shift import reference_data, reference_from_result
     from gearsym.validation.studies.hybrid_fisher import (
         format_text,
         hybrid_fim,
         summary_lines,
         to_dict,
     )
-    from gearsym.validation.studies.sensitivity_run import (
-        plot_sensitivities,
-        reference_data,
-        reference_from_result,
-        run_sensitivities,
-        write_csv,
-    )
+    from gearsym.validation.studies.sensitivity_output import plot_sensitivities, write_csv
+    from gearsym.validation.studies.sensitivity_run import run_sensitivities
 
     figures = 0
     if folder is not None:  # first, so that its figures draw while the FIM is computed

@@ -182,7 +182,7 @@ VEHICLE_SPEED = "v_vehicle"
 #: same quantity, so the same name).
 GRADE = "zeta"
 #: Input of the driven shift model: ζ(t) − ζ0, the recorded grade's deviation from the
-#: parameter ζ0 (validation/studies/sensitivity_run.py), so that ∂/∂ζ is a constant offset.
+#: parameter ζ0 (validation/studies/driven_shift.py), so that ∂/∂ζ is a constant offset.
 GRADE_DEVIATION = "zeta_dev"
 ENERGY_TERMS = ("W_in", "W_friction", "W_damper", "W_road")
 

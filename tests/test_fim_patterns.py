@@ -32,8 +32,8 @@ import pytest
 @pytest.fixture(scope="module")
 def studies():
     from gearsym.symbolic.loader import load_description
+    from gearsym.validation.studies.driven_shift import reference_data
     from gearsym.validation.studies.fisher import fim_study
-    from gearsym.validation.studies.sensitivity_run import reference_data
 
     d = load_description()
     data = reference_data(d)

@@ -116,7 +116,10 @@ def test_fim_of_a_linear_in_parameter_ode():
     """ẋ = a, y = x, x(0) = 0: ∂y/∂a = t, so with σ constant F = Σ t_k² / σ² (by hand),
     through the sensitivity equations and their integration."""
     from gearsym.symbolic.sensitivity import sensitivity_equations
-    from gearsym.validation.studies.sensitivity_run import Interpolated, integrate_sensitivities
+    from gearsym.validation.studies.sensitivity_integration import (
+        Interpolated,
+        integrate_sensitivities,
+    )
 
     x, a = sp.symbols("x a")
     model = Model(
@@ -147,8 +150,8 @@ def test_fim_of_a_linear_in_parameter_ode():
 @pytest.fixture(scope="module")
 def study():
     from gearsym.symbolic.loader import load_description
+    from gearsym.validation.studies.driven_shift import reference_data
     from gearsym.validation.studies.fisher import fim_study
-    from gearsym.validation.studies.sensitivity_run import reference_data
 
     d = load_description()
     return fim_study(d, data=reference_data(d), with_wheel_acceleration=True)
@@ -215,8 +218,8 @@ def _null(result, name):
 @pytest.fixture(scope="module")
 def four_parameters():
     from gearsym.symbolic.loader import load_description
+    from gearsym.validation.studies.driven_shift import reference_data
     from gearsym.validation.studies.fisher import fim_study
-    from gearsym.validation.studies.sensitivity_run import reference_data
 
     d = load_description()
     data = reference_data(d)
@@ -260,12 +263,12 @@ def test_gear_3_sees_mu_05_only_while_b05_still_slides():
     has fallen below its threshold, but B05 still slides at capacity for about a millisecond.
     From the first sample at which it sticks on, μ05 has no influence at all (S ≡ 0)."""
     from gearsym.symbolic.loader import load_description
-    from gearsym.validation.studies.sensitivity_run import (
+    from gearsym.validation.studies.driven_shift import (
         driven_shift_model,
         reference_data,
-        run_sensitivities,
         sliding_masks,
     )
+    from gearsym.validation.studies.sensitivity_run import run_sensitivities
 
     d = load_description()
     data = reference_data(d)

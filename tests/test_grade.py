@@ -145,18 +145,20 @@ def test_sensitivities_follow_the_recorded_grade(description, step):
     reference as well as the level one (README: drift below 2 % of max |x_i|); with the grade
     dropped (Δζ ≡ 0) it misses the deceleration the step causes. S_ζ, the sensitivity to a
     constant offset of the whole profile, agrees with central differences of that offset."""
-    from gearsym.validation.studies.sensitivity_run import (
-        CompiledModel,
-        Interpolated,
+    from gearsym.validation.studies.driven_shift import (
         driven_shift_model,
         driving_inputs,
-        finite_difference_sensitivities,
         initial_state,
-        integrate,
         reference_from_result,
-        run_sensitivities,
         sliding_masks,
     )
+    from gearsym.validation.studies.sensitivity_integration import (
+        CompiledModel,
+        Interpolated,
+        integrate,
+    )
+    from gearsym.validation.studies.sensitivity_peers import finite_difference_sensitivities
+    from gearsym.validation.studies.sensitivity_run import run_sensitivities
 
     data = reference_from_result(step)
     run = run_sensitivities(description, data=data)
@@ -186,7 +188,7 @@ def test_sensitivities_follow_the_recorded_grade(description, step):
         driven.model, ["zeta"], inputs, x0, values, t_eval, relative_step=1e-4
     )
     from gearsym.symbolic.sensitivity import sensitivity_equations
-    from gearsym.validation.studies.sensitivity_run import integrate_sensitivities
+    from gearsym.validation.studies.sensitivity_integration import integrate_sensitivities
 
     eqs = sensitivity_equations(driven.model, ["zeta"])
     s_zeta = integrate_sensitivities(eqs, inputs, x0, values, t_eval).S[:, :, 0]  # S(t0) = 0

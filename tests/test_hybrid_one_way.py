@@ -28,7 +28,8 @@ from gearsym.symbolic.hybrid import (
     hybrid_shift,
 )
 from gearsym.symbolic.loader import load_description
-from gearsym.validation.sim.hybrid_simulation import HybridSimulator, energy_audit
+from gearsym.validation.sim.hybrid_energy import energy_audit
+from gearsym.validation.sim.hybrid_simulation import HybridSimulator
 from gearsym.validation.sim.scenario import load_scenario
 
 from gearsym.cli import main

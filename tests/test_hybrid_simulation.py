@@ -172,7 +172,7 @@ def test_energy_audit_closes(description, file):
     """Input work = Δ kinetic + Δ spring + friction + damper + road work (physics): the modes,
     the reactions, the k_sign of the sliding torques and the maps at every switch together
     conserve energy to the quadrature's accuracy; friction only dissipates."""
-    from gearsym.validation.sim.hybrid_simulation import energy_audit
+    from gearsym.validation.sim.hybrid_energy import energy_audit
 
     scenario = load_scenario(description, None if file is None else DATA / file)
     simulator = HybridSimulator(description, scenario)
@@ -185,7 +185,7 @@ def test_friction_heat_is_the_references(power_on):
     """The clutch heat of the shift, a quantity no state comparison checks directly: within 2 %
     of the reference's (its friction work less what its bristles store; measured 0.5 %:
     2419 J against 2407 J)."""
-    from gearsym.validation.sim.hybrid_simulation import energy_audit
+    from gearsym.validation.sim.hybrid_energy import energy_audit
 
     hybrid, reference = power_on
     simulator = HybridSimulator(load_description(), hybrid.scenario)
@@ -199,7 +199,7 @@ def test_a_grade_step_changes_what_it_should(description, tmp_path):
     """ζ from 0 to 0.05 rad within 0.1 ms in gear 2 (a scenario [grade] profile, 2.53): the
     wheel acceleration drops by r_dyn m g (sin ζ + f_roll v (cos ζ − 1)) / I_C^eff ((2.49a, c),
     (2.50) by hand, at the state of the step), and the energy audit still closes."""
-    from gearsym.validation.sim.hybrid_simulation import energy_audit
+    from gearsym.validation.sim.hybrid_energy import energy_audit
 
     text = default_scenario_path().read_text()
     text += '\n[grade]\nunit = "rad"\ntime = [0.0, 0.1, 0.1001]\nvalue = [0.0, 0.0, 0.05]\n'

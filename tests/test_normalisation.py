@@ -13,11 +13,8 @@ import numpy as np
 import sympy as sp
 from gearsym.symbolic.model import Model, Variable
 from gearsym.symbolic.sensitivity import sensitivity_equations
-from gearsym.validation.studies.sensitivity_run import (
-    Interpolated,
-    SensitivityRun,
-    integrate_sensitivities,
-)
+from gearsym.validation.studies.sensitivity_integration import Interpolated, integrate_sensitivities
+from gearsym.validation.studies.sensitivity_run import SensitivityRun
 
 
 def test_normalised_sensitivity_of_a_first_order_lag():

@@ -368,7 +368,10 @@ def test_cli_bad_parameter_exits_2(capsys, tmp_path):
 def test_linear_ode_closed_form():
     """ẋ = −a x + b u, u = 1, x(0) = x0: x = x0 e^{−at} + (b/a)(1 − e^{−at}),
     ∂x/∂b = (1 − e^{−at})/a, ∂x/∂a = −t x0 e^{−at} − (b/a²)(1 − e^{−at}) + (b/a) t e^{−at}."""
-    from gearsym.validation.studies.sensitivity_run import Interpolated, integrate_sensitivities
+    from gearsym.validation.studies.sensitivity_integration import (
+        Interpolated,
+        integrate_sensitivities,
+    )
 
     x, u, a, b = sp.symbols("x u a b")
     model = Model(
@@ -405,21 +408,20 @@ def test_linear_ode_closed_form():
 
 @pytest.fixture(scope="module")
 def reference():
-    from gearsym.validation.studies.sensitivity_run import reference_data
+    from gearsym.validation.studies.driven_shift import reference_data
 
     return reference_data(load_description())
 
 
 @pytest.fixture(scope="module")
 def setup(reference):
-    from gearsym.validation.studies.sensitivity_run import (
-        Interpolated,
+    from gearsym.validation.studies.driven_shift import (
         driven_shift_model,
         driving_inputs,
         initial_state,
-        parameter_values,
         sliding_masks,
     )
+    from gearsym.validation.studies.sensitivity_integration import Interpolated, parameter_values
 
     d = load_description()
     driven = driven_shift_model(d)
@@ -456,10 +458,8 @@ def test_driven_model_reproduces_the_reference(reference):
 
 def test_finite_differences(reference, setup):
     """Central differences (2 m extra integrations) agree with the integrated (3.7)."""
-    from gearsym.validation.studies.sensitivity_run import (
-        finite_difference_sensitivities,
-        integrate_sensitivities,
-    )
+    from gearsym.validation.studies.sensitivity_integration import integrate_sensitivities
+    from gearsym.validation.studies.sensitivity_peers import finite_difference_sensitivities
 
     driven, eqs, values, _, inputs, x0 = setup
     t_eval = reference.t[::20]
@@ -476,10 +476,8 @@ def test_casadi_forward_mode(reference, setup):
     """CVODES (rtol 1e-12) through CasADi with forward-mode AD, independent of the symbolic
     sensitivity equations, agrees with the integrated (3.7) from t = 0 through gear 2, the
     torque and the speed phase into the first 0.12 s of gear 3."""
-    from gearsym.validation.studies.sensitivity_run import (
-        casadi_sensitivities,
-        integrate_sensitivities,
-    )
+    from gearsym.validation.studies.sensitivity_integration import integrate_sensitivities
+    from gearsym.validation.studies.sensitivity_peers import casadi_sensitivities
 
     driven, eqs, values, u, inputs, x0 = setup
     gear_3 = next(p for p in reference.phases if p.name == "gear 3")

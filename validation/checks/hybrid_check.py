@@ -9,7 +9,7 @@ its capacity 2 N_disc r_m μ F_N (the sliding condition of the elasto-plastic mo
 reached z_ss), **locked** otherwise. Each mode model is then integrated from the recorded state
 at the start of its interval with the recorded inputs (T_In, the normal forces, μ from the map
 as the reference read it, ζ) and compared with the record — the hybrid model's version of
-``check_reduced_models`` in :mod:`gearsym.validation.sim.simulate`.
+``check_reduced_models`` in :mod:`gearsym.validation.sim.model_checks`.
 """
 
 from __future__ import annotations

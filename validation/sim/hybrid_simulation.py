@@ -18,7 +18,7 @@ events are located exactly without a root search.
 element's pressure, the oil temperature and the current |slip|, scaled by the parameter,
 μ_e,eff = μ_e · map(p_e, T_oil, |Δω_e|) / μ_nominal: at the nominal μ_e it is exactly what the
 reference reads (2.69), and ∂/∂μ_e is a relative change of the whole map, as in
-:mod:`gearsym.validation.studies.sensitivity_run`. ``mu="constant"`` uses the parameter alone. The
+:mod:`gearsym.validation.studies.driven_shift`. ``mu="constant"`` uses the parameter alone. The
 grade enters as ζ + Δζ(t), ζ the parameter and Δζ(t) the scenario's profile minus the description's
 ζ (zero without a profile), like the driven shift model of the sensitivity runs.
 
@@ -26,12 +26,15 @@ A one-way clutch among the swapping elements (:mod:`gearsym.symbolic.hybrid`, mo
 docstring) has no pressure, F_N or μ: its slot in u is 0, its guards (release, lock-up) are
 state guards like break-away and lock-up, and its torque signal is the reaction while it is
 locked and 0 while it overruns.
+
+Beside this module: each mode compiled to CasADi (:mod:`~gearsym.validation.sim.hybrid_modes`),
+the records a run returns (:mod:`~gearsym.validation.sim.hybrid_result`) and the energy audit
+of a run (:mod:`~gearsym.validation.sim.hybrid_energy`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -44,20 +47,17 @@ from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.friction import load_mu_map
 from gearsym.symbolic.hybrid import (
     ENGAGEMENT,
-    LOCKED,
     OPEN,
     OPENING,
     RELEASE,
-    SLIDING,
-    STATE_GUARDS,
     Guard,
     HybridShift,
-    Mode,
     hybrid_shift,
 )
-from gearsym.symbolic.numeric import bilinear, to_casadi
+from gearsym.symbolic.numeric import to_casadi
+from gearsym.validation.sim.hybrid_modes import CompiledMode
+from gearsym.validation.sim.hybrid_result import Event, HybridResult, Piece
 from gearsym.validation.sim.scenario import SAMPLE_TIME, Scenario, load_scenario
-from gearsym.validation.sim.simulate import EnergyAudit
 from scipy.integrate import solve_ivp
 
 MU_MODES = ("map", "constant")
@@ -65,184 +65,6 @@ MU_MODES = ("map", "constant")
 #: Most switches one simulation follows: a guard that chatters (slip crossing zero back and
 #: forth at the capacity limit) is a modelling problem to report, not to integrate for ever.
 EVENTS_MAX = 200
-
-
-@dataclass(frozen=True)
-class Event:
-    """A switch: guard ``kind`` of ``element`` fired at ``t``, from ``source`` to ``target``."""
-
-    t: float
-    kind: str
-    element: str
-    source: str
-    target: str
-
-
-@dataclass(frozen=True)
-class Piece:
-    """One integration piece in one mode: [t_start, t_end] with SciPy's dense output."""
-
-    mode: str
-    t_start: float
-    t_end: float
-    solution: Any  # scipy OdeSolution, or None for a piece of zero length
-    x_start: np.ndarray
-
-    def state(self, t: np.ndarray) -> np.ndarray:
-        if self.solution is None:
-            return np.repeat(self.x_start[None, :], len(t), axis=0)
-        return np.asarray(self.solution(t)).T
-
-
-@dataclass(frozen=True)
-class HybridResult:
-    """Samples of the hybrid simulation: ``signals`` (every shaft speed ``omega_<s>``, φ, ω_C,
-    the swapping elements' slips ``slip_<e>`` and torques ``T_<e>``), the mode at each sample,
-    the events and the pieces."""
-
-    t: np.ndarray
-    signals: dict[str, np.ndarray]
-    modes: tuple[str, ...]
-    events: tuple[Event, ...]
-    pieces: tuple[Piece, ...]
-    hybrid: HybridShift
-    scenario: Scenario
-    values: dict[str, float]
-    stats: dict[str, float] = field(default_factory=dict)
-    #: ∂(signal)/∂p of the states and shaft speeds, signals × samples × parameters
-    parameters: tuple[str, ...] = ()
-    sensitivities: dict[str, np.ndarray] = field(default_factory=dict)
-    #: ∂τ/∂p of every event (zero for the switches at breakpoints), events × parameters
-    event_time_sensitivities: np.ndarray | None = None
-
-
-class CompiledMode:
-    """A mode's right-hand side, guards, shaft speeds, slips and element torques as CasADi
-    functions of (x, u, p), u = [T_In, F_N per swapping element (0 for a one-way clutch), Δζ],
-    p the hybrid's parameters (μ through the map with ``mu="map"``, module docstring)."""
-
-    def __init__(
-        self,
-        hybrid: HybridShift,
-        mode: Mode,
-        d: GearboxDescription,
-        mu: str,
-        mu_plane: tuple[np.ndarray, np.ndarray, np.ndarray],
-    ) -> None:
-        import casadi as ca
-
-        self.mode = mode
-        model = mode.model
-        self.n = len(model.states)
-        self.x = ca.SX.sym("x", self.n)
-        self.u = ca.SX.sym("u", 1 + len(hybrid.elements) + 1)
-        self.p = ca.SX.sym("p", len(hybrid.parameters))
-        mapping: dict[sp.Symbol, Any] = {s: self.x[i] for i, s in enumerate(model.state_symbols)}
-        mapping[hybrid.inputs[0].symbol] = self.u[0]
-        for k, e in enumerate(hybrid.elements):
-            if e in hybrid.normal_force:
-                mapping[hybrid.normal_force[e]] = self.u[1 + k]
-        names = [v.name for v in hybrid.parameters]
-        for k, v in enumerate(hybrid.parameters):
-            mapping[v.symbol] = self.p[k]
-        mapping[hybrid.parameters[names.index(naming.GRADE)].symbol] = (
-            self.p[names.index(naming.GRADE)] + self.u[-1]
-        )
-        if mu == "map":
-            p_grid, dw_grid, plane = mu_plane
-            mu_nominal = quantity(d, "friction", "mu_nominal").value
-            for k, e in enumerate(hybrid.elements):
-                if e in hybrid.one_way:
-                    continue
-                slip = to_casadi(mode.slip[e], mapping)
-                area = d.element(e).a_piston
-                if area is None:
-                    raise GearsymError(
-                        d.file,
-                        f'shift_element[name="{e}"].a_piston',
-                        "missing (needed for the pressure in the mu map)",
-                    )
-                pressure = self.u[1 + k] / area.value
-                shape = bilinear(pressure, ca.fabs(slip), p_grid, dw_grid, plane) / mu_nominal
-                symbol = hybrid.friction_coefficient[e]
-                mapping[symbol] = self.p[names.index(str(symbol))] * shape
-        self.mapping = mapping
-
-        def function(name: str, exprs: Sequence[sp.Expr]) -> Any:
-            out = ca.vertcat(*[to_casadi(e, mapping) for e in exprs]) if exprs else ca.SX(0, 1)
-            return ca.Function(name, [self.x, self.u, self.p], [out])
-
-        self.rhs_sx = ca.vertcat(*[to_casadi(e, mapping) for e in model.rhs])
-        self.f = ca.Function("f", [self.x, self.u, self.p], [self.rhs_sx])
-        self.continuous = [g for g in hybrid.guards_from(mode.name) if g.kind in STATE_GUARDS]
-        self.guard_sx = [to_casadi(g.expression, mapping) for g in self.continuous]
-        self.guard = [ca.Function("g", [self.x, self.u, self.p], [g]) for g in self.guard_sx]
-        self._augmented: dict[tuple[int, ...], Any] = {}
-        self._gradients: dict[int, Any] = {}
-        self.condition = {
-            id(g): function("c", [g.condition]) for g in self.continuous if g.condition is not None
-        }
-        self.torque_exprs = []
-        for e in hybrid.elements:
-            status, sign = mode.status[e]
-            if status == LOCKED:
-                self.torque_exprs.append(mode.reaction[e])
-            elif status == SLIDING:
-                self.torque_exprs.append(sign * mode.capacity[e])
-            else:
-                self.torque_exprs.append(sp.Integer(0))
-        self.torques = function("torques", self.torque_exprs)
-        self.slips = function("slips", [mode.slip[e] for e in hybrid.elements])
-        # μ as the mode uses it (the map's value scaled by the parameter, or the parameter;
-        # 0 for a one-way clutch)
-        mus = [
-            mapping[hybrid.friction_coefficient[e]] if e in hybrid.friction_coefficient else 0
-            for e in hybrid.elements
-        ]
-        self.mu = ca.Function("mu", [self.x, self.u, self.p], [ca.vertcat(*mus)])
-
-    def rhs(self, x: np.ndarray, u: np.ndarray, p: np.ndarray) -> np.ndarray:
-        return np.asarray(self.f(x, u, p).full(), dtype=float).ravel()
-
-    def augmented(self, indices: tuple[int | None, ...]) -> Any:
-        """(y, u, p) → ẏ of y = [x; S_1; …; S_m] (S_j = ∂x/∂p_j of the parameters at
-        ``indices``): ẋ = f, Ṡ = ∂f/∂x S + ∂f/∂p (3.7), by CasADi's AD of the mode's f. An
-        index None is an initial state taken as a parameter: no ∂f/∂p term."""
-        if indices not in self._augmented:
-            import casadi as ca
-
-            sensitivities = ca.SX.sym("S", self.n, len(indices))
-            f_x = ca.jacobian(self.rhs_sx, self.x)
-            f_p = ca.horzcat(
-                *[
-                    ca.jacobian(self.rhs_sx, self.p[k]) if k is not None else ca.SX(self.n, 1)
-                    for k in indices
-                ]
-            )
-            y = ca.vertcat(self.x, ca.vec(sensitivities))
-            out = ca.vertcat(self.rhs_sx, ca.vec(f_x @ sensitivities + f_p))
-            self._augmented[indices] = ca.Function("augmented", [y, self.u, self.p], [out])
-        return self._augmented[indices]
-
-    def guard_gradient(self, k: int) -> Any:
-        """(x, u, p) → (∂g/∂x, ∂g/∂u, ∂g/∂p) of the k-th continuous guard."""
-        if k not in self._gradients:
-            import casadi as ca
-
-            g = self.guard_sx[k]
-            self._gradients[k] = ca.Function(
-                "dg",
-                [self.x, self.u, self.p],
-                [ca.jacobian(g, self.x), ca.jacobian(g, self.u), ca.jacobian(g, self.p)],
-            )
-        return self._gradients[k]
-
-    def value(self, function: Any, x: np.ndarray, u: np.ndarray, p: np.ndarray) -> np.ndarray:
-        return np.asarray(function(x, u, p).full(), dtype=float).ravel()
-
-    def many(self, function: Any, x: np.ndarray, u: np.ndarray, p: np.ndarray) -> np.ndarray:
-        out = function.map(len(x))(x.T, u.T, p)
-        return np.asarray(out.full(), dtype=float).T
 
 
 class HybridSimulator:
@@ -723,88 +545,3 @@ def simulate_hybrid(
 ) -> HybridResult:
     """Integrate the hybrid shift model through the scenario (default: the built-in 2-3)."""
     return HybridSimulator(d, scenario, mu=mu).run(overrides, rtol=rtol, atol=atol)
-
-
-def energy_audit(
-    simulator: HybridSimulator, result: HybridResult, interval: float = 1e-3
-) -> EnergyAudit:
-    """W_in = ΔE_kin + ΔE_spring + W_friction + W_damper + W_road over the hybrid run (the
-    reference's audit without bristles): E_kin = ½ zᵀ Pᵀ M P z + ½ I_C^eff ω_C² (2.34, 2.46),
-    E_spring = k_ss φ² (two side shafts, 2.47), the powers T_In ω_in, Σ T_e Δω_e (sliding
-    elements; a locked one has Δω = 0, an open one T = 0), 2 d_ss φ̇², T_res ω_C (2.48). The
-    works are integrated over each piece's dense output by 5-point Gauss–Legendre on
-    sub-intervals of at most ``interval``. The maps at lock-up and break-away conserve E_kin
-    (zero slip); a residual would show an inconsistent reaction, sign or map."""
-    import casadi as ca
-    from gearsym.symbolic.drivetrain import drivetrain_parts
-    from gearsym.symbolic.hybrid import drivetrain_mass
-
-    d = simulator.d
-    p = simulator.parameter_vector(result.values)
-    mass = np.array(drivetrain_mass(d, gearbox_dynamics(d)), dtype=float)
-    parts = drivetrain_parts(d)
-    names = simulator.parameter_names
-    k_ss = p[names.index("k_ss")]
-    d_ss = p[names.index("d_ss")]
-    functions = {}
-    for name, compiled in simulator.modes.items():
-        mode = simulator.hybrid.modes[name]
-        mapping = compiled.mapping
-        n_gear = len(mode.keep)
-        projection = np.array(mode.projection, dtype=float)
-        reduced = projection.T @ mass @ projection
-        z = compiled.x[:n_gear]
-        states = [v.name for v in mode.model.states]
-        phi = compiled.x[states.index(naming.TWIST)]
-        omega_c = compiled.x[states.index(naming.WHEEL_SPEED)]
-        wheel = to_casadi(parts.wheel_inertia, mapping)
-        kinetic = 0.5 * ca.dot(z, ca.mtimes(ca.DM(reduced), z)) + 0.5 * wheel * omega_c**2
-        speeds = simulator.shaft_speeds(name)(compiled.x)
-        omega_in = speeds[[s.name for s in d.shafts].index(d.input_shaft)]
-        friction = ca.dot(
-            ca.vertcat(*[to_casadi(t, mapping) for t in compiled.torque_exprs]),
-            ca.vertcat(*[to_casadi(mode.slip[e], mapping) for e in simulator.hybrid.elements]),
-        )
-        phi_dot = compiled.rhs_sx[states.index(naming.TWIST)]
-        powers = ca.vertcat(
-            compiled.u[0] * omega_in,
-            friction,
-            2 * d_ss * phi_dot**2,
-            to_casadi(parts.road_torque, mapping) * omega_c,
-        )
-        energies = ca.vertcat(kinetic, k_ss * phi**2)
-        functions[name] = (
-            ca.Function("powers", [compiled.x, compiled.u, compiled.p], [powers]),
-            ca.Function("energies", [compiled.x, compiled.p], [energies]),
-        )
-    nodes, weights = np.polynomial.legendre.leggauss(5)
-    works = np.zeros(4)
-    for piece in result.pieces:
-        if piece.t_end <= piece.t_start:
-            continue
-        n = simulator.modes[piece.mode].n
-        count = max(1, int(np.ceil((piece.t_end - piece.t_start) / interval)))
-        edges = np.linspace(piece.t_start, piece.t_end, count + 1)
-        half = np.diff(edges) / 2
-        times = ((edges[:-1] + edges[1:]) / 2)[:, None] + half[:, None] * nodes[None, :]
-        times = times.ravel()
-        x = piece.state(times)[:, :n]
-        u = np.array([simulator.inputs(float(t)) for t in times])
-        power_of = functions[piece.mode][0].map(len(times))
-        values = np.asarray(power_of(x.T, u.T, p).full()).T
-        w = (half[:, None] * weights[None, :]).ravel()
-        works += w @ values
-    first, last = result.pieces[0], result.pieces[-1]
-    n0, n1 = simulator.modes[first.mode].n, simulator.modes[last.mode].n
-    e0 = np.asarray(functions[first.mode][1](first.x_start[:n0], p).full()).ravel()
-    end = last.state(np.array([last.t_end]))[0, :n1]
-    e1 = np.asarray(functions[last.mode][1](end, p).full()).ravel()
-    return EnergyAudit(
-        input_work=float(works[0]),
-        kinetic_change=float(e1[0] - e0[0]),
-        spring_change=float(e1[1] - e0[1]),
-        bristle_change=0.0,
-        friction_dissipation=float(works[1]),
-        damper_dissipation=float(works[2]),
-        road_work=float(works[3]),
-    )

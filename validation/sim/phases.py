@@ -8,6 +8,7 @@ result carries them, and by the hybrid simulation and the studies that work phas
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -19,7 +20,7 @@ from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.ratios import gear_ratio
 from gearsym.validation.sim.scenario import Scenario
 
-__all__ = ["Phase", "detect_phases"]
+__all__ = ["Phase", "detect_phases", "phase_of"]
 
 
 @dataclass(frozen=True)
@@ -134,3 +135,11 @@ def detect_phases(
 def _first(mask: np.ndarray, start: int = 0) -> int | None:
     hits = np.flatnonzero(mask[start:])
     return None if hits.size == 0 else int(start + hits[0])
+
+
+def phase_of(phases: Sequence[Phase], t: float) -> str:
+    """Name of the phase containing t (the last phase includes its end)."""
+    for k, p in enumerate(phases):
+        if p.t_start <= t < p.t_end or (k == len(phases) - 1 and t <= p.t_end):
+            return p.name
+    return ""

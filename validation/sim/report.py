@@ -14,7 +14,7 @@ from typing import Any
 
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.io.output_dir import OutputDir
-from gearsym.validation.sim.simulate import SimulationResult
+from gearsym.validation.sim.simulation_result import SimulationResult
 
 
 def summary(result: SimulationResult) -> dict[str, Any]:

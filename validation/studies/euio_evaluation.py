@@ -43,7 +43,7 @@ from gearsym.symbolic import naming
 from gearsym.symbolic.defaults import EKF_RELATIVE_NOISE
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
-from gearsym.validation.sim.simulate import SimulationResult
+from gearsym.validation.sim.simulation_result import SimulationResult
 from gearsym.validation.studies.estimation.bounds import NOT_IDENTIFIABLE, _phase_samples
 from gearsym.validation.studies.estimation.euio import EuioRun
 from gearsym.validation.studies.estimation.loop import (

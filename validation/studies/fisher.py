@@ -46,13 +46,8 @@ from gearsym.symbolic.fisher import (
 )
 from gearsym.symbolic.parameters import symbol
 from gearsym.validation.sim.phases import Phase
-from gearsym.validation.studies.sensitivity_run import (
-    Progress,
-    ReferenceData,
-    SensitivityRun,
-    reference_data,
-    run_sensitivities,
-)
+from gearsym.validation.studies.driven_shift import Progress, ReferenceData, reference_data
+from gearsym.validation.studies.sensitivity_run import SensitivityRun, run_sensitivities
 
 WHEEL_ACCELERATION = "y_domega_C"
 

@@ -47,10 +47,11 @@ from gearsym.symbolic.fisher import (
     fisher_information,
     noise_variances,
 )
-from gearsym.validation.sim.hybrid_simulation import HybridResult, HybridSimulator
+from gearsym.validation.sim.hybrid_result import HybridResult
+from gearsym.validation.sim.hybrid_simulation import HybridSimulator
 from gearsym.validation.sim.phases import Phase, detect_phases
 from gearsym.validation.sim.scenario import Scenario
-from gearsym.validation.studies.sensitivity_run import nominal_scales
+from gearsym.validation.studies.sensitivity_integration import nominal_scales
 
 VIEWS = {
     "nuisance": "per phase, unmeasured initial states (φ) unknown: Schur complement",

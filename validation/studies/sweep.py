@@ -8,7 +8,7 @@ HybridSimulator`: the modes' right-hand sides and guards compiled to CasADi func
 by SciPy's DOP853 with the guards as events). That evaluator is chosen because it is the only
 fast one in which the shift *ends by itself*: the on-coming element locks up when its slip
 reaches zero, so the shift duration and the slip energy are outcomes, not inputs (the driven
-open-loop model of :mod:`gearsym.validation.studies.sensitivity_run` is driven with recorded element
+open-loop model of :mod:`gearsym.validation.studies.driven_shift` is driven with recorded element
 torques, and the emitted C shift models take the element torques or μ F_N as inputs: neither
 has lock-up logic). One run takes about 0.3 s at
 rtol = 10⁻⁶ on the development machine.

@@ -1,0 +1,62 @@
+"""What a hybrid simulation returns
+(:class:`~gearsym.validation.sim.hybrid_simulation.HybridSimulator`): the switches, the
+integration pieces in each mode, and the samples with their sensitivities."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from gearsym.symbolic.hybrid import HybridShift
+from gearsym.validation.sim.scenario import Scenario
+
+
+@dataclass(frozen=True)
+class Event:
+    """A switch: guard ``kind`` of ``element`` fired at ``t``, from ``source`` to ``target``."""
+
+    t: float
+    kind: str
+    element: str
+    source: str
+    target: str
+
+
+@dataclass(frozen=True)
+class Piece:
+    """One integration piece in one mode: [t_start, t_end] with SciPy's dense output."""
+
+    mode: str
+    t_start: float
+    t_end: float
+    solution: Any  # scipy OdeSolution, or None for a piece of zero length
+    x_start: np.ndarray
+
+    def state(self, t: np.ndarray) -> np.ndarray:
+        """The state (and the sensitivities riding along) at the times ``t``: len(t) × size."""
+        if self.solution is None:
+            return np.repeat(self.x_start[None, :], len(t), axis=0)
+        return np.asarray(self.solution(t)).T
+
+
+@dataclass(frozen=True)
+class HybridResult:
+    """Samples of the hybrid simulation: ``signals`` (every shaft speed ``omega_<s>``, φ, ω_C,
+    the swapping elements' slips ``slip_<e>`` and torques ``T_<e>``), the mode at each sample,
+    the events and the pieces."""
+
+    t: np.ndarray
+    signals: dict[str, np.ndarray]
+    modes: tuple[str, ...]
+    events: tuple[Event, ...]
+    pieces: tuple[Piece, ...]
+    hybrid: HybridShift
+    scenario: Scenario
+    values: dict[str, float]
+    stats: dict[str, float] = field(default_factory=dict)
+    #: ∂(signal)/∂p of the states and shaft speeds, signals × samples × parameters
+    parameters: tuple[str, ...] = ()
+    sensitivities: dict[str, np.ndarray] = field(default_factory=dict)
+    #: ∂τ/∂p of every event (zero for the switches at breakpoints), events × parameters
+    event_time_sensitivities: np.ndarray | None = None
