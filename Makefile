@@ -54,6 +54,21 @@ results: $(STAMP)
 	cp build/results/fleet_ekf_2_3_map_scale/fleet.json $(RESULTS)/fleet_ekf_2_3_map_scale.json
 	cp build/results/fleet_ekf_2_3_map_scale/fleet.md $(RESULTS)/fleet_ekf_2_3_map_scale.md
 	cp build/results/fleet_ekf_2_3_map_scale/fleet.png $(RESULTS)/fleet_ekf_2_3_map_scale.png
+	rm -rf build/results/ekf_2_3 build/results/euio_2_3
+	$(BIN)/gearsym estimate --filter ekf --runs 50 --seed 0 --out build/results/ekf_2_3
+	cp build/results/ekf_2_3/ekf.json $(RESULTS)/montecarlo_ekf_2_3.json
+	cp build/results/ekf_2_3/monte_carlo.md $(RESULTS)/montecarlo_ekf_2_3.md
+	$(BIN)/gearsym estimate --filter euio --runs 50 --seed 0 --out build/results/euio_2_3
+	cp build/results/euio_2_3/euio.json $(RESULTS)/montecarlo_euio_2_3.json
+	cp build/results/euio_2_3/monte_carlo.md $(RESULTS)/montecarlo_euio_2_3.md
+	rm -rf build/results/uio_2_3_10ms build/results/uio_2_3_1ms build/results/uio_2_3_noise
+	$(BIN)/gearsym estimate --filter uio --out build/results/uio_2_3_10ms
+	$(BIN)/gearsym estimate --filter uio --sample-time 0.001 --out build/results/uio_2_3_1ms
+	$(BIN)/gearsym estimate --filter uio --noise 0.001 --out build/results/uio_2_3_noise
+	for run in 10ms 1ms noise; do \
+	  cp build/results/uio_2_3_$$run/uio.json $(RESULTS)/uio_2_3_$$run.json; \
+	  cp build/results/uio_2_3_$$run/uio.md $(RESULTS)/uio_2_3_$$run.md; \
+	done
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.sensitivity import sensitivity_equations
-from gearsym.validation.sim.phases import Phase, phase_of
+from gearsym.validation.sim.phases import Phase
 from gearsym.validation.studies.driven_shift import (
     Progress,
     ReferenceData,
@@ -28,7 +28,6 @@ from gearsym.validation.studies.driven_shift import (
     driving_inputs,
     initial_state,
     reference_data,
-    reference_from_result,
     sliding_masks,
     thesis_parameters,
 )
@@ -45,12 +44,6 @@ from gearsym.validation.studies.sensitivity_integration import (
 __all__ = [
     "SensitivityRun",
     "run_sensitivities",
-    # imported from here by validation/studies/estimation/ (modes.py, bounds.py, report.py)
-    "driven_shift_model",
-    "nominal_scales",
-    "phase_of",
-    "reference_from_result",
-    "sliding_masks",
 ]
 
 

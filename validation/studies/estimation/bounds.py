@@ -70,7 +70,7 @@ def ekf_bound(setup: EkfSetup, relative_step: float = 1e-5) -> EkfBound:
         posterior_information,
         process_noise_bound,
     )
-    from gearsym.validation.studies.sensitivity_run import nominal_scales
+    from gearsym.validation.studies.sensitivity_integration import nominal_scales
 
     model = setup.aug.model
     args = (model.state_symbols, model.input_symbols, model.parameter_symbols, setup.p)

@@ -34,7 +34,7 @@ def element_modes(
     otherwise. These are the *truth's* modes (``--modes reference``); by default the filter
     decides its modes itself (:func:`~gearsym.symbolic.estimators.ekf_modes.ekf_mode_update`).
     """
-    from gearsym.validation.studies.sensitivity_run import (
+    from gearsym.validation.studies.driven_shift import (
         driven_shift_model,
         reference_from_result,
         sliding_masks,

@@ -82,7 +82,7 @@ def write_ekf_csv(run: EkfRun, path: Path) -> Path:
     """Every sample: t, phase, per augmented state its estimate, σ and truth (empty where none),
     NEES with its dof, NIS with its dof, and per element the mode held from the sample on
     (0 open, ±1 slide, 2 stick)."""
-    from gearsym.validation.studies.sensitivity_run import phase_of
+    from gearsym.validation.sim.phases import phase_of
 
     header = ["t", "phase"]
     for name in run.state_names:
@@ -288,7 +288,7 @@ def format_measured_ekf_text(run: EkfRun) -> str:
 def write_euio_csv(run: EuioRun, path: Path) -> Path:
     """Every sample: t, phase, per state its estimate, σ, truth (empty where none) and whether
     it is held, then d̂ = T_res*, its σ and the reference T_res."""
-    from gearsym.validation.studies.sensitivity_run import phase_of
+    from gearsym.validation.sim.phases import phase_of
 
     header = ["t", "phase"]
     for name in run.state_names:

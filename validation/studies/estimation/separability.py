@@ -57,7 +57,7 @@ def torque_gain_separability(
     from gearsym.validation.studies.estimation.bounds import _phase_samples
     from gearsym.validation.studies.hybrid_fisher import schur_complement
     from gearsym.validation.studies.posterior_bound import lambdified, output_sensitivities
-    from gearsym.validation.studies.sensitivity_run import nominal_scales
+    from gearsym.validation.studies.sensitivity_integration import nominal_scales
 
     model = setup.aug.model
     args = (model.state_symbols, model.input_symbols, model.parameter_symbols, setup.p)

@@ -468,6 +468,17 @@ def _write_json(path: Path, data: Mapping[str, Any]) -> None:
     path.write_text(json.dumps(data, indent=2) + "\n")
 
 
+def _write_markdown(
+    path: Path, data: Mapping[str, Any], request: EstimateRequest, kind: str = "monte_carlo"
+) -> None:
+    """A result table for the documentation (written by the command, never typed)."""
+    from gearsym.validation.studies.estimation.markdown import monte_carlo_markdown, uio_markdown
+
+    command = request.command or f"gearsym estimate --filter {request.filter}"
+    render = uio_markdown if kind == "uio" else monte_carlo_markdown
+    path.write_text(render(dict(data), command), encoding="utf-8")
+
+
 def _assumes(lines: Sequence[str]) -> str:
     return "\n".join(f"  assumes {line}" for line in lines)
 
@@ -494,6 +505,7 @@ def _uio(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> E
     if folder is not None:
         write_csv(run, folder / "uio.csv")
         _write_json(folder / "uio.json", run.to_dict())
+        _write_markdown(folder / "uio.md", run.to_dict(), request, "uio")
         if request.plots:
             plot_uio(run, folder)
     return EstimateReport(run.to_dict(), format_text(run), run)
@@ -571,6 +583,8 @@ def _ekf(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> E
     if folder is not None:
         write_ekf_csv(mc.first, folder / "ekf.csv")
         _write_json(folder / "ekf.json", mc.to_dict())
+        if len(mc.runs) > 1:
+            _write_markdown(folder / "monte_carlo.md", mc.to_dict(), request)
         if request.plots:
             plot_ekf(mc.first, folder / "ekf.png")
             plot_efficiency(mc, folder / "ekf_efficiency.png")
@@ -626,6 +640,7 @@ def _euio(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> 
     if folder is not None:
         write_euio_csv(mc.first, folder / "euio.csv")
         _write_json(folder / "euio.json", mc.to_dict())
+        _write_markdown(folder / "monte_carlo.md", mc.to_dict(), request)
         if request.plots:
             plot_euio(mc.first, folder / "euio.png")
             plot_euio_efficiency(mc, folder / "euio_efficiency.png")
