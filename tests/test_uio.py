@@ -228,7 +228,13 @@ def test_estimate_command(tmp_path):
     data = json.loads(run.stdout)
     assert data["filter"] == "uio" and data["unknown"] == ["T_res_star"]
     assert [p["existence"]["exists"] for p in data["phases"]] == [True] * 4
-    assert sorted(p.name for p in out.iterdir()) == ["MANIFEST", "uio.csv", "uio.json", "uio.png"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "MANIFEST",
+        "uio.csv",
+        "uio.json",
+        "uio.md",
+        "uio.png",
+    ]
     header = (out / "uio.csv").read_text().splitlines()[0].split(",")
     assert header[:3] == ["t", "omega_2_hat", "omega_2"] and "T_res_star_hat" in header
     for bad, key in (
