@@ -289,9 +289,11 @@ def test_ekf_on_the_recording_reproduces_the_synthetic_run_of_the_same_seed(tmp_
         for x, y in zip(ra, rb, strict=True):
             sigma = float(y[f"{name}_sigma"])
             error = abs(float(x[f"{name}_hat"]) - float(y[f"{name}_hat"]))
-            # 3 % of σ: measured 2.1 % (μ38 at 0.69 s) since μ's prior σ is the calibration
-            # table's 0.015, half the former default the 2 % limit was set with
-            assert error < 0.03 * sigma, (name, x["t"], error / sigma)
+            # 5 % of σ: measured 2.1 % (μ38 at 0.69 s) once μ's prior σ became the calibration
+            # table's 0.015 (half the default the former 2 % limit was set with), 3.1 % (μ05 at
+            # 0.67 s) once the fleet tuning raised the twist's intensity (the updates weigh
+            # each sample more, so the σ floor taken from noisy speeds moves them more)
+            assert error < 0.05 * sigma, (name, x["t"], error / sigma)
     lo, hi = a["nis_band"]
     assert lo <= a["nis_mean"] <= hi  # the filter is consistent with the recording
     assert (tmp_path / "ekf" / "ekf.json").exists()
