@@ -36,9 +36,11 @@ from gearsym.symbolic.export.generate import (
     mu_map_files,
     shift_element_model,
 )
+from gearsym.symbolic.export.index import example_view
 from gearsym.symbolic.export.tree import C_DIR
 from gearsym.symbolic.friction import DEFAULT_MU_MAP, shift_element_num
 from gearsym.symbolic.loader import load_description
+from gearsym.symbolic.shifts import shift_spec
 from gearsym.validation.checks import c_check, generated_check
 
 from gearsym import cli
@@ -282,12 +284,35 @@ def test_shift_element_model_equals_the_friction_module() -> None:
     np.testing.assert_allclose(torque, want_torque, rtol=1e-12, atol=1e-9)
 
 
-def test_example_main_compiles_alone_and_runs(tmp_path: Path) -> None:
+def test_example_main_compiles_alone_and_runs(tree: Any, tmp_path: Path) -> None:
+    """``main.c`` compiles alone, runs, and prints the friction torque of the on-coming element
+    of its shift by value: after 10 ms of constant slip the elasto-plastic bristle (2.66)–(2.68)
+    is at its steady deflection, so the torque is the sliding torque 2 N_disc r_m μ F_N with
+    F_N = p_N A_piston (2.69). N_disc, r_m and A_piston are the description's, of the element
+    the shift brings on (B05 of 2-3); p_N, T_oil and the slip are the template's inputs (the
+    example's view), and μ is the description's μ map there (:class:`MuMap`, which the emitted
+    map matches in ``test_mu_map_matches_the_reference``), never a number read from the
+    program's output.
+
+    Teeth: a planted bug that hands the example another element's friction radius (K38's
+    0.08 m instead of B05's 0.09 m, in the template or its view, then regenerated) makes the
+    program print 320.46 N·m where 2 N_disc r_m μ F_N of B05 is 360.5 N·m, 11 % off and far
+    outside the 1e-3 here; the former pattern ``torque 3\\d\\d\\.\\d+`` took both."""
+    d = load_description()
+    view = example_view(d, tree.models)
+    element = d.element(shift_spec(d, view.shift).on_coming)
+    assert element.n_disc and element.r_m and element.a_piston
+    pressure = float(view.apply_pressure)
+    mu = float(load_mu_map(d)(pressure, float(view.t_oil), float(view.slip)))
+    expected = 2 * element.n_disc * element.r_m.value * mu * pressure * element.a_piston.value
     outputs = generated_check.run_example(GENERATED, tmp_path)
     for precision, text in outputs.items():
         print(precision, text)
         assert "synchronised with gear 3" in text
-        assert re.search(r"shift_element B05: mu 0\.11\d+, torque 3\d\d\.\d+ N\*m", text)
+        printed = re.search(r"shift_element (\w+): mu (\S+), torque (\S+) N\*m", text)
+        assert printed is not None and printed[1] == element.name
+        assert float(printed[2]) == pytest.approx(mu, abs=1e-4)  # printed to 4 decimals
+        assert float(printed[3]) == pytest.approx(expected, rel=1e-3), (precision, expected)
     line = re.search(r"omega_1 +(\S+)", outputs["double"]).group(1)
     assert float(line) == pytest.approx(
         float(re.search(r"omega_1 +(\S+)", outputs["single"])[1]), rel=1e-4
