@@ -305,3 +305,26 @@ def test_a_scheduler_without_workers_is_one_line(monkeypatch):
     ) as cluster:
         with pytest.raises(GearsymError, match="has no workers"):
             sweep.connect(cluster.scheduler_address, workers=1)
+
+
+def test_a_worker_that_dies_is_one_line(capsys):
+    """A task that kills its worker process (as a crash in native code or the kernel's OOM
+    killer would): the scheduler gives up on it and the sweep says so in one line, not with
+    Dask's traceback."""
+    import dask
+    from gearsym.validation.studies.sweep import Evaluator, SweepDefinition, run_sweep
+
+    class Dies(Evaluator):  # defined here: it travels to the worker process by value
+        quantities = ("f",)
+
+        def __call__(self, points, names):
+            import os
+
+            os._exit(3)
+
+    definition = SweepDefinition({"x1": (0.0, 1.0), "x2": (0.0, 1.0)}, samples=2, seed=1)
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+        with pytest.raises(GearsymError) as err:
+            run_sweep(definition, Dies(), workers=1, batch=64)
+    text = str(err.value)
+    assert text.startswith("sweep: scheduler: a Dask worker died") and "\n" not in text, text

@@ -36,9 +36,7 @@ T_oil is not offered (a μ_e range covers a relative change of the friction leve
 
 from __future__ import annotations
 
-import hashlib
 import math
-import pickle
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -50,6 +48,7 @@ import numpy as np
 from gearsym.symbolic.defaults import SWEEP_MAX_SAMPLES
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.parameters import symbol, zero_scale
+from gearsym.validation.studies import dask_runner
 
 #: The quantities of interest of one shift run, with units.
 QUANTITIES: dict[str, str] = {
@@ -259,9 +258,6 @@ class Ishigami(Evaluator):
         return np.array([v1, v2, 0.0]) / v, np.array([v1 + v13, v2, v13]) / v
 
 
-_WORKER_CACHE: dict[str, Any] = {}
-
-
 class ShiftEvaluator(Evaluator):
     """One hybrid shift run per point (see the module docstring); picklable: the description
     and scenario travel, the simulator is built once per worker process and cached."""
@@ -270,16 +266,15 @@ class ShiftEvaluator(Evaluator):
 
     def __init__(self, d: Any, scenario: Any = None, rtol: float = 1e-6) -> None:
         self.d, self.scenario, self.rtol = d, scenario, rtol
-        self.key = hashlib.sha256(pickle.dumps((d, scenario, rtol))).hexdigest()
+        self.key = dask_runner.content_key(d, scenario, rtol)
 
     def simulator(self) -> Any:
-        sim = _WORKER_CACHE.get(self.key)
-        if sim is None:
-            from gearsym.validation.sim.hybrid_simulation import HybridSimulator
+        return dask_runner.worker_cached(self.key, self._build)
 
-            sim = HybridSimulator(self.d, self.scenario)
-            _WORKER_CACHE[self.key] = sim
-        return sim
+    def _build(self) -> Any:
+        from gearsym.validation.sim.hybrid_simulation import HybridSimulator
+
+        return HybridSimulator(self.d, self.scenario)
 
     def parameter_names(self) -> list[str]:
         return list(self.simulator().parameter_names)
@@ -380,57 +375,25 @@ def _evaluate_batch(evaluator: Evaluator, points: np.ndarray, names: list[str]) 
     return evaluator(points, names)
 
 
+#: The command and option a scheduler error names.
+WHERE = ("sweep", "scheduler")
+
+
 def check_scheduler(scheduler: str) -> None:
-    """``local`` or ``tcp://HOST:PORT``, refused in one line before any work otherwise."""
-    if scheduler == "local":
-        return
-    if scheduler.startswith("tls://"):
-        raise GearsymError(
-            "sweep",
-            "scheduler",
-            f"{scheduler}: TLS needs certificates gearsym does not configure; reach the "
-            "scheduler by tcp://HOST:PORT (through an SSH tunnel across networks)",
-        )
-    if not scheduler.startswith("tcp://"):
-        raise GearsymError(
-            "sweep", "scheduler", f"expected local or tcp://HOST:PORT, got {scheduler!r}"
-        )
+    """``local`` or ``tcp://HOST:PORT``, refused in one line before any work otherwise
+    (:func:`~gearsym.validation.studies.dask_runner.check_scheduler`)."""
+    dask_runner.check_scheduler(scheduler, WHERE)
 
 
 #: How long a remote scheduler may take to show one worker (s).
-WORKER_WAIT = 10.0
+WORKER_WAIT = dask_runner.WORKER_WAIT
 
 
 def connect(scheduler: str, workers: int, processes: bool = True) -> tuple[Any, Any]:
     """(client, cluster or None): a new LocalCluster for ``"local"``, else the scheduler at
-    ``scheduler`` (``tcp://HOST:PORT``); an unreachable one is a one-line error."""
-    from dask.distributed import Client, LocalCluster
-
-    if scheduler == "local":
-        cluster = LocalCluster(
-            n_workers=workers,
-            threads_per_worker=1,
-            processes=processes,
-            dashboard_address=":0",
-        )
-        return Client(cluster), cluster
-    check_scheduler(scheduler)
-    try:
-        client = Client(scheduler, timeout="5s")
-    except (OSError, TimeoutError, ValueError, TypeError, RuntimeError) as err:
-        reason = str(err).splitlines()[0] if str(err) else type(err).__name__
-        raise GearsymError("sweep", "scheduler", f"cannot reach {scheduler}: {reason}") from None
-    try:
-        client.wait_for_workers(1, timeout=WORKER_WAIT)
-    except (TimeoutError, OSError) as err:
-        client.close()
-        raise GearsymError(
-            "sweep",
-            "scheduler",
-            f"{scheduler} has no workers (none joined within {WORKER_WAIT:g} s): start "
-            "`dask worker` processes against it",
-        ) from err
-    return client, None
+    ``scheduler`` (``tcp://HOST:PORT``); an unreachable one is a one-line error
+    (:func:`~gearsym.validation.studies.dask_runner.connect`)."""
+    return dask_runner.connect(scheduler, workers, processes, WHERE, wait=WORKER_WAIT)
 
 
 def text_progress(done: int, total: int) -> None:
@@ -461,7 +424,6 @@ def run_sweep(
     """Sample (Saltelli/Sobol'), evaluate in batches on Dask, analyse (Sobol S1, ST with 95 %
     bootstrap confidence intervals) and summarise (mean, std, 5/50/95 % quantiles, min, max
     over every evaluated point: the Monte-Carlo robustness view)."""
-    from dask.distributed import as_completed
     from SALib.analyze import sobol as analyze
     from SALib.sample import sobol as sample
 
@@ -476,15 +438,11 @@ def run_sweep(
     if own:
         client, cluster = connect(scheduler, workers, processes)
     try:
-        scattered = client.scatter(evaluator, broadcast=True)
         chunks = [points[k : k + batch] for k in range(0, len(points), batch)]
-        futures = {
-            client.submit(_evaluate_batch, scattered, c, names, pure=False): i
-            for i, c in enumerate(chunks)
-        }
+        futures = dask_runner.submit_each(client, _evaluate_batch, evaluator, chunks, names)
         results: dict[int, dict] = {}
-        for done, future in enumerate(as_completed(futures), 1):
-            results[futures[future]] = future.result()
+        for done, (i, values) in enumerate(dask_runner.completed(futures, WHERE), 1):
+            results[i] = values
             if progress is not None:
                 progress(done, len(chunks))
         n_workers = len(client.scheduler_info().get("workers", {}))
