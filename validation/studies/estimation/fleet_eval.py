@@ -29,10 +29,16 @@ from gearsym.validation.sim.scenario import Scenario
 
 __all__ = [
     "COVERAGE_Z",
+    "FilterModel",
+    "FleetContext",
     "FleetEvaluation",
     "FleetRun",
     "FleetStats",
+    "each_vehicle",
+    "filter_model",
+    "fleet_vehicle",
     "run_fleet",
+    "vehicle_setup",
 ]
 
 #: The 95 % interval of a Gaussian estimate: ±1.96 σ.
@@ -277,6 +283,167 @@ def _final_truth(run: Any, j: int, element: str | None) -> float | None:
     return float(column[-1]) if np.isfinite(column[-1]) else None
 
 
+#: The command and option a Dask error of a fleet study names.
+WHERE = ("estimate", "--scheduler")
+
+
+@dataclass(frozen=True)
+class FilterModel:
+    """The filter's model of a calibration: the augmented model (4.1), its discretisation and
+    the mode logic (``None`` with the reference's modes). The expensive part of a fleet study
+    and the same for every vehicle: built once per process."""
+
+    aug: Any
+    discrete: Any
+    logic: Any = None
+
+
+def filter_model(d: GearboxDescription, shift: str, modes: str = "filter") -> FilterModel:
+    """Build the EKF's model of the calibration ``d`` for ``shift`` (the thesis' (4.1))."""
+    from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
+    from gearsym.symbolic.estimators.ekf_modes import ModeLogic
+
+    aug = augmented_model(d, shift)
+    return FilterModel(aug, DiscreteModel(aug), ModeLogic(d, aug) if modes == "filter" else None)
+
+
+@dataclass(frozen=True, eq=False)
+class FleetContext:
+    """What every vehicle of one fleet study shares: small and picklable, it travels with
+    each Dask task; the filter's model does not (:meth:`model` builds it once per worker
+    process). ``floor``: the noise floor (3.26) of the calibration's own vehicle; ``grid``:
+    its sample times, on which the TCU is told the commanded inputs; ``filter_noise``: the
+    filter's own sensor-noise model when it differs from the sensors' (:func:`run_fleet`)."""
+
+    d: GearboxDescription
+    scenario: Scenario
+    fleet: Fleet
+    sample_time: float
+    relative_noise: Any
+    modes: str
+    floor: np.ndarray = field(repr=False)
+    grid: np.ndarray = field(repr=False)
+    bound: bool = True
+    filter_noise: Any = None
+
+    @property
+    def key(self) -> str:
+        """What the filter's model is built from, as a key of the workers' cache."""
+        from gearsym.validation.studies.dask_runner import content_key
+
+        return content_key("fleet filter model", self.d, self.scenario.shift.name, self.modes)
+
+    def model(self) -> FilterModel:
+        """The filter's model, built once per process and calibration."""
+        from gearsym.validation.studies.dask_runner import worker_cached
+
+        return worker_cached(
+            self.key, lambda: filter_model(self.d, self.scenario.shift.name, self.modes)
+        )
+
+
+def vehicle_setup(
+    context: FleetContext, model: FilterModel, seed: int
+) -> tuple[FleetDraw, Any, tuple[str, ...]] | str:
+    """Vehicle ``seed`` of the fleet simulated by the reference and the filter's set-up on
+    it: (draw, :class:`~gearsym.validation.studies.estimation.setup.EkfSetup`, the inputs the
+    TCU is told), or why its simulation failed."""
+    from gearsym.validation.sim.simulate import simulate
+    from gearsym.validation.studies.estimation.setup import prepare_ekf
+
+    d, scenario = context.d, context.scenario
+    draw = context.fleet.draw(seed)
+    world = truth_world(d, scenario, draw)
+    try:
+        result = simulate(world.description, world.scenario, mu_scale=world.mu_scale)
+    except GearsymError as err:
+        return str(err)
+    told = told_inputs(d, scenario, context.grid, model.aug.input_names)
+    setup = prepare_ekf(
+        d,
+        result,
+        context.sample_time,
+        context.relative_noise,
+        aug=model.aug,
+        discrete=model.discrete,
+        modes=context.modes,
+        logic=model.logic,
+        told=told,
+        truth_description=world.description,
+        floor=context.floor,
+        truth_mu_scale=world.mu_scale,
+    )
+    return draw, setup, tuple(told)
+
+
+def fleet_vehicle(
+    context: FleetContext, model: FilterModel, seed: int
+) -> FleetRun | tuple[int, str]:
+    """One run of the fleet evaluation: vehicle ``seed`` simulated, the filter run on it
+    (noise from ``seed``) and, with ``context.bound``, the posterior bound along its truth;
+    (seed, reason) when its simulation failed."""
+    from gearsym.validation.studies.estimation.bounds import ekf_bound
+    from gearsym.validation.studies.estimation.loop import filter_run
+
+    t0 = time.perf_counter()
+    found = vehicle_setup(context, model, seed)
+    if isinstance(found, str):
+        return (seed, found)
+    draw, setup, told = found
+    if context.filter_noise is not None:  # the filter told another noise than the sensors have
+        setup.relative = np.broadcast_to(
+            np.asarray(context.filter_noise, dtype=float), setup.relative.shape
+        ).copy()
+    run = filter_run(setup, seed)
+    run_bound = ekf_bound(setup) if context.bound else None
+    known = [k for k, name in enumerate(model.aug.input_names) if name in told]
+    handed = {
+        "initial": setup.initial.copy(),
+        "prior_sigma": setup.prior_sigma.copy(),
+        "q": np.asarray(setup.q, dtype=float),
+        "p": np.asarray(setup.p, dtype=float),
+        "floor": np.asarray(setup.floor, dtype=float),
+        "told_inputs": np.asarray(setup.u, dtype=float)[:, known],
+    }
+    return FleetRun(draw, run, run_bound, time.perf_counter() - t0, handed)
+
+
+def _fleet_task(context: FleetContext, seed: int) -> FleetRun | tuple[int, str]:
+    """:func:`fleet_vehicle` on a Dask worker, with the worker's own filter model."""
+    return fleet_vehicle(context, context.model(), seed)
+
+
+def each_vehicle(
+    seeds: Sequence[int],
+    here: Callable[[int], Any],
+    task: Callable[..., Any],
+    context: FleetContext,
+    client: Any = None,
+    progress: Callable[[int, int, Any], None] | None = None,
+    args: Sequence[Any] = (),
+) -> list[Any]:
+    """The outcome of every seed, in the seeds' order: ``here(seed)`` one after the other
+    without ``client``, else ``task(context, seed, *args)`` on its Dask workers (a worker that
+    died or a scheduler lost is a one-line error). ``progress(done, total, outcome)`` after
+    each (on Dask: as they complete)."""
+    from gearsym.validation.studies.dask_runner import completed, submit_each
+
+    total = len(seeds)
+    outcomes: list[Any] = [None] * total
+    if client is None:
+        for i, seed in enumerate(seeds):
+            outcomes[i] = here(seed)
+            if progress is not None:
+                progress(i + 1, total, outcomes[i])
+        return outcomes
+    futures = submit_each(client, task, context, list(seeds), *args)
+    for done, (i, outcome) in enumerate(completed(futures, WHERE), 1):
+        outcomes[i] = outcome
+        if progress is not None:
+            progress(done, total, outcome)
+    return outcomes
+
+
 def run_fleet(
     d: GearboxDescription,
     scenario: Scenario,
@@ -289,6 +456,7 @@ def run_fleet(
     bound: bool = True,
     progress: Progress | None = None,
     filter_noise: Any = None,
+    client: Any = None,
 ) -> FleetEvaluation:
     """The EKF of the calibration ``d`` over ``runs`` vehicles of ``fleet`` (run i: seed
     ``seed`` + i draws the vehicle and, in its own stream, the speed noise) on ``scenario``
@@ -296,21 +464,19 @@ def run_fleet(
     run). A vehicle whose simulation fails is reported in ``failed`` with the reason.
     ``filter_noise``: the filter's own sensor-noise model r (3.26) when it differs from the
     sensors' ``relative_noise`` (a mistuned filter, to show that the consistency checks see
-    it); ``None``: the same."""
-    from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
-    from gearsym.symbolic.estimators.ekf_modes import ModeLogic
+    it); ``None``: the same.
+
+    ``client``: a ``dask.distributed`` client (:func:`~gearsym.validation.studies.
+    dask_runner.connect`); the vehicles then run on its workers, one task each, every worker
+    building the filter's model once; the same seeds, draws and numbers as without."""
     from gearsym.validation.sim.simulate import simulate
-    from gearsym.validation.studies.estimation.bounds import ekf_bound
-    from gearsym.validation.studies.estimation.loop import filter_run
     from gearsym.validation.studies.estimation.separability import torque_gain_separability
     from gearsym.validation.studies.estimation.setup import prepare_ekf
 
     if runs < 1:
         raise GearsymError("estimate", "--runs", f"must be at least 1, got {runs}")
     report = progress or (lambda fraction, message: None)
-    aug = augmented_model(d, scenario.shift.name)
-    discrete = DiscreteModel(aug)
-    logic = ModeLogic(d, aug) if modes == "filter" else None
+    model = filter_model(d, scenario.shift.name, modes)
     # The noise floor of (3.26) is calibration: from the TCU engineer's own simulation of the
     # calibration's vehicle on the same commanded shift, never from a run's truth.
     report(0.0, "simulating the calibration's own vehicle (the noise floor)")
@@ -319,12 +485,11 @@ def run_fleet(
         simulate(d, scenario),
         sample_time,
         relative_noise,
-        aug=aug,
-        discrete=discrete,
+        aug=model.aug,
+        discrete=model.discrete,
         modes=modes,
-        logic=logic,
+        logic=model.logic,
     )
-    floor = nominal.floor
     report(0.0, "what one shift cannot separate (Fisher information with a torque gain)")
     separability = {"input_torque_gain": torque_gain_separability(nominal).to_dict()}
     initial = {
@@ -332,52 +497,30 @@ def run_fleet(
         for j, name in enumerate(nominal.names)
         if name not in nominal.outputs
     }
+    context = FleetContext(
+        d,
+        scenario,
+        fleet,
+        sample_time,
+        relative_noise,
+        modes,
+        nominal.floor,
+        nominal.t,
+        bound,
+        filter_noise,
+    )
     seeds = tuple(range(seed, seed + runs))
-    done: list[FleetRun] = []
-    failed: list[tuple[int, str]] = []
+
+    def told(done: int, total: int, outcome: Any) -> None:
+        failed = "" if isinstance(outcome, FleetRun) else ": simulation failed"
+        report(done / total, f"run {done} of {total}{failed}")
+
     start = time.perf_counter()
-    for i, run_seed in enumerate(seeds):
-        t0 = time.perf_counter()
-        draw = fleet.draw(run_seed)
-        world = truth_world(d, scenario, draw)
-        try:
-            result = simulate(world.description, world.scenario, mu_scale=world.mu_scale)
-        except GearsymError as err:
-            failed.append((run_seed, str(err)))
-            report((i + 1) / runs, f"run {i + 1} of {runs}: simulation failed")
-            continue
-        told = told_inputs(d, scenario, nominal.t, aug.input_names)
-        setup = prepare_ekf(
-            d,
-            result,
-            sample_time,
-            relative_noise,
-            aug=aug,
-            discrete=discrete,
-            modes=modes,
-            logic=logic,
-            told=told,
-            truth_description=world.description,
-            floor=floor,
-            truth_mu_scale=world.mu_scale,
-        )
-        if filter_noise is not None:  # the filter told another noise than the sensors have
-            setup.relative = np.broadcast_to(
-                np.asarray(filter_noise, dtype=float), setup.relative.shape
-            ).copy()
-        run = filter_run(setup, run_seed)
-        run_bound = ekf_bound(setup) if bound else None
-        known = [k for k, name in enumerate(aug.input_names) if name in told]
-        handed = {
-            "initial": setup.initial.copy(),
-            "prior_sigma": setup.prior_sigma.copy(),
-            "q": np.asarray(setup.q, dtype=float),
-            "p": np.asarray(setup.p, dtype=float),
-            "floor": np.asarray(setup.floor, dtype=float),
-            "told_inputs": np.asarray(setup.u, dtype=float)[:, known],
-        }
-        done.append(FleetRun(draw, run, run_bound, time.perf_counter() - t0, handed))
-        report((i + 1) / runs, f"run {i + 1} of {runs}")
+    outcomes = each_vehicle(
+        seeds, lambda s: fleet_vehicle(context, model, s), _fleet_task, context, client, told
+    )
+    done = [o for o in outcomes if isinstance(o, FleetRun)]
+    failed = [o for o in outcomes if not isinstance(o, FleetRun)]
     if not done:
         raise GearsymError(
             "estimate", "--fleet", f"every run's simulation failed (first: {failed[0][1]})"
@@ -391,7 +534,7 @@ def run_fleet(
         failed=failed,
         seconds_per_run=(time.perf_counter() - start) / runs,
         initial=initial,
-        mu_elements={mu: e for e, mu in aug.mu_state.items()},
+        mu_elements={mu: e for e, mu in model.aug.mu_state.items()},
         mu_model=d.estimator.mu_model,
         separability=separability,
     )

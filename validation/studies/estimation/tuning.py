@@ -21,10 +21,10 @@ from typing import Any
 import numpy as np
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.errors import GearsymError
-from gearsym.validation.sim.fleet import Fleet, told_inputs, truth_world
+from gearsym.validation.sim.fleet import Fleet
 from gearsym.validation.sim.scenario import Scenario
 
-__all__ = ["FACTORS", "TWIST_FACTORS", "TuningResult", "tune_model_error"]
+__all__ = ["FACTORS", "TWIST_FACTORS", "TuningResult", "tune_model_error", "tuning_sums"]
 
 #: The factors on the speeds' model-error intensities tried.
 FACTORS: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0, 4.0)
@@ -90,68 +90,59 @@ def tune_model_error(
     factors: Sequence[float] = FACTORS,
     twist_factors: Sequence[float] = TWIST_FACTORS,
     progress: Callable[[float, str], None] | None = None,
+    client: Any = None,
 ) -> TuningResult:
     """Choose the factors on the calibration's model-error intensities (module text): every
     tuning vehicle simulated once, the filter run once per pair of factors on the same
-    noise."""
+    noise. ``client``: a ``dask.distributed`` client; the vehicles then run on its workers
+    (:func:`~gearsym.validation.studies.estimation.fleet_eval.each_vehicle`), the same
+    numbers as without."""
     from gearsym.symbolic import naming
-    from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
-    from gearsym.symbolic.estimators.ekf_modes import ModeLogic
     from gearsym.validation.sim.simulate import simulate
-    from gearsym.validation.studies.estimation.loop import filter_run
+    from gearsym.validation.studies.estimation.fleet_eval import (
+        FleetContext,
+        each_vehicle,
+        filter_model,
+    )
     from gearsym.validation.studies.estimation.setup import prepare_ekf
 
     if not seeds:
         raise GearsymError("estimate", "--runs", "tuning needs at least one seed")
     report = progress or (lambda fraction, message: None)
-    aug = augmented_model(d, scenario.shift.name)
-    discrete = DiscreteModel(aug)
-    logic = ModeLogic(d, aug)
+    model = filter_model(d, scenario.shift.name)
+    aug = model.aug
     nominal = prepare_ekf(
         d,
         simulate(d, scenario),
         sample_time,
         relative_noise,
         aug=aug,
-        discrete=discrete,
-        logic=logic,
+        discrete=model.discrete,
+        logic=model.logic,
     )
     n_x = aug.n_x
     base = {name: float(q) for name, q in zip(aug.state_names[:n_x], nominal.q, strict=False)}
     grid = [(float(c), float(c_phi)) for c in factors for c_phi in twist_factors]
-    twist = aug.state_names.index(naming.TWIST)
+    context = FleetContext(
+        d, scenario, fleet, sample_time, relative_noise, "filter", nominal.floor, nominal.t
+    )
+
+    def told(done: int, total: int, outcome: Any) -> None:
+        report(done / total, f"vehicle {done} of {total}")
+
+    outcomes = each_vehicle(
+        list(seeds),
+        lambda seed: tuning_sums(context, model, seed, grid),
+        _tuning_task,
+        context,
+        client,
+        told,
+        args=(grid,),
+    )
     sums = np.zeros((len(grid), 4))  # NEES, its dof, NIS, its dof
-    for i, seed in enumerate(seeds):
-        world = truth_world(d, scenario, fleet.draw(seed))
-        try:
-            result = simulate(world.description, world.scenario, mu_scale=world.mu_scale)
-        except GearsymError:
-            continue  # a vehicle the reference cannot simulate does not tune
-        setup = prepare_ekf(
-            d,
-            result,
-            sample_time,
-            relative_noise,
-            aug=aug,
-            discrete=discrete,
-            logic=logic,
-            told=told_inputs(d, scenario, nominal.t, aug.input_names),
-            truth_description=world.description,
-            floor=nominal.floor,
-            truth_mu_scale=world.mu_scale,
-        )
-        q0 = list(setup.q)
-        for k, (c, c_phi) in enumerate(grid):
-            setup.q = [(c_phi if j == twist else c) * q if j < n_x else q for j, q in enumerate(q0)]
-            run = filter_run(setup, seed)
-            used = run.nis_dof > 0
-            sums[k] += (
-                float(np.sum(run.nees)),
-                float(np.sum(run.nees_dof)),
-                float(np.sum(run.nis[used])),
-                float(np.sum(run.nis_dof[used])),
-            )
-        report((i + 1) / len(seeds), f"vehicle {i + 1} of {len(seeds)}")
+    for vehicle in outcomes:
+        if vehicle is not None:  # a vehicle the reference cannot simulate does not tune
+            sums += vehicle
     nees = tuple(float(v) for v in sums[:, 0] / sums[:, 1])
     nis = tuple(float(v) for v in sums[:, 2] / sums[:, 3])
     scores = [math.log(a) ** 2 + math.log(b) ** 2 for a, b in zip(nees, nis, strict=True)]
@@ -169,3 +160,41 @@ def tune_model_error(
         },
         base=base,
     )
+
+
+def tuning_sums(
+    context: Any, model: Any, seed: int, grid: Sequence[tuple[float, float]]
+) -> np.ndarray | None:
+    """One tuning vehicle: per pair of factors (c, c_φ) of ``grid`` the filter's summed NEES,
+    its dof, summed NIS and its dof over the run (one row each); ``None`` when the reference
+    cannot simulate the vehicle. ``context``, ``model``: a
+    :class:`~gearsym.validation.studies.estimation.fleet_eval.FleetContext` and its
+    :class:`~gearsym.validation.studies.estimation.fleet_eval.FilterModel`."""
+    from gearsym.symbolic import naming
+    from gearsym.validation.studies.estimation.fleet_eval import vehicle_setup
+    from gearsym.validation.studies.estimation.loop import filter_run
+
+    found = vehicle_setup(context, model, seed)
+    if isinstance(found, str):
+        return None
+    _, setup, _ = found
+    n_x = model.aug.n_x
+    twist = model.aug.state_names.index(naming.TWIST)
+    sums = np.zeros((len(grid), 4))
+    q0 = list(setup.q)
+    for k, (c, c_phi) in enumerate(grid):
+        setup.q = [(c_phi if j == twist else c) * q if j < n_x else q for j, q in enumerate(q0)]
+        run = filter_run(setup, seed)
+        used = run.nis_dof > 0
+        sums[k] = (
+            float(np.sum(run.nees)),
+            float(np.sum(run.nees_dof)),
+            float(np.sum(run.nis[used])),
+            float(np.sum(run.nis_dof[used])),
+        )
+    return sums
+
+
+def _tuning_task(context: Any, seed: int, grid: Sequence[tuple[float, float]]) -> np.ndarray | None:
+    """:func:`tuning_sums` on a Dask worker, with the worker's own filter model."""
+    return tuning_sums(context, context.model(), seed, grid)
