@@ -104,6 +104,8 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         plots=not args.no_plots,
         fleet=fleet,
         tune=args.tune,
+        scheduler=args.scheduler,
+        workers=args.workers,
         command=" ".join(["gearsym", *sys.argv[1:]]) if sys.argv[1:] else "",
     )
     paths: list[Any] = []
@@ -326,6 +328,20 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "random_walk): 'random_walk', mu itself a random-walk state (thesis 4.1); 'map_scale', "
         "mu = s mu_map(p, T_oil, |slip|) with the calibration's map read at the commanded "
         "pressure and the filter's own slip estimate, the scale s per element the state",
+    )
+    p.add_argument(
+        "--scheduler",
+        metavar="local|tcp://HOST:PORT",
+        help="ekf, with --fleet (also --tune): run the vehicles on Dask, one task each, instead "
+        "of one after the other: 'local' starts a LocalCluster on this machine (--workers "
+        "processes), tcp://HOST:PORT uses a running dask scheduler and its workers; each "
+        "worker builds the filter's model once; the same seeds, draws and numbers as without",
+    )
+    p.add_argument(
+        "--workers",
+        type=number(int, minimum=1, maximum=256),
+        default=None,
+        help="with --scheduler local: the LocalCluster's worker processes (default 2)",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG")
     p.add_argument("--json", action="store_true", help="machine-readable output")

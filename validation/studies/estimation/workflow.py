@@ -17,7 +17,8 @@ the chosen filter would not use, and assembles the report.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol
@@ -53,6 +54,9 @@ DEFAULT_RELATIVE_NOISE = 0.01
 #: Largest relative speed-sensor error r (3.26) a request may state: σ equal to the speed
 #: itself; beyond it the filter's covariances overflow (r = 1e300 ended in a LinAlgError).
 MAX_RELATIVE_NOISE = 1.0
+
+#: LocalCluster worker processes of ``--scheduler local`` when ``--workers`` is not given.
+DEFAULT_WORKERS = 2
 
 #: Default TCU sample time (s), the thesis'.
 DEFAULT_SAMPLE_TIME = 0.01
@@ -132,6 +136,11 @@ class EstimateRequest:
     #: with ``fleet``: tune the model-error intensities on these runs' vehicles instead of
     #: evaluating (:func:`~gearsym.validation.studies.estimation.tuning.tune_model_error`)
     tune: bool = False
+    #: with ``fleet``: run the vehicles on Dask, ``"local"`` (a LocalCluster of ``workers``
+    #: processes, default :data:`DEFAULT_WORKERS`) or ``"tcp://HOST:PORT"`` (a running
+    #: scheduler and its workers); ``None``: one after the other in this process
+    scheduler: str | None = None
+    workers: int | None = None
 
     @property
     def truth(self) -> Truth:
@@ -209,6 +218,7 @@ def check_request(request: EstimateRequest) -> None:
             f"a relative speed error must be in [0, {MAX_RELATIVE_NOISE:g}], got "
             f"{', '.join(f'{r:g}' for r in noise)}",
         )
+    _check_scheduler(request)
     if request.truth.measurement is not None:
         _refuse("--fleet", request.fleet is not None, "needs a simulated truth, not a recording")
         _check_measured(request)
@@ -291,6 +301,30 @@ def check_request(request: EstimateRequest) -> None:
         raise GearsymError("estimate", "--noise", "give one value or one per output (3)")
     if request.dropout_outputs is not None and request.dropout is None:
         raise GearsymError("estimate", "--dropout-outputs", "needs --dropout")
+
+
+def _check_scheduler(request: EstimateRequest) -> None:
+    """``--scheduler`` spreads the runs over a fleet on Dask, nothing else; ``--workers`` is
+    the size of a LocalCluster (a remote scheduler brings its own workers)."""
+    from gearsym.validation.studies.dask_runner import check_scheduler
+    from gearsym.validation.studies.estimation.fleet_eval import WHERE
+
+    if request.scheduler is not None:
+        _refuse(
+            "--scheduler",
+            request.fleet is None,
+            "needs --fleet (only the runs over a fleet go to Dask)",
+        )
+        check_scheduler(request.scheduler, WHERE)
+    if request.workers is not None:
+        _refuse(
+            "--workers",
+            request.scheduler != "local",
+            "is for --scheduler local; a remote scheduler brings its workers"
+            if request.scheduler is not None
+            else "is for --scheduler local (the LocalCluster's worker processes)",
+        )
+        _refuse("--workers", request.workers < 1, f"must be at least 1, got {request.workers}")
 
 
 def _check_fleet(request: EstimateRequest) -> None:
@@ -764,21 +798,23 @@ def _fleet(request: EstimateRequest, folder: Path | None, reporter: Reporter) ->
     cal, truth = request.calibration, request.truth
     if request.tune:
         return _tune(request, folder, reporter)
-    update, done = reporter.bar(f"EKF over the fleet, {request.runs} vehicles")
-    try:
-        evaluation = run_fleet(
-            cal.description,
-            truth.scenario,
-            request.fleet,
-            request.runs,
-            seed=request.seed,
-            sample_time=cal.filter_sample_time,
-            relative_noise=_noise(cal),
-            modes=cal.mode_source,
-            progress=update,
-        )
-    finally:
-        done()
+    with _dask(request, reporter) as client:
+        update, done = reporter.bar(f"EKF over the fleet, {request.runs} vehicles")
+        try:
+            evaluation = run_fleet(
+                cal.description,
+                truth.scenario,
+                request.fleet,
+                request.runs,
+                seed=request.seed,
+                sample_time=cal.filter_sample_time,
+                relative_noise=_noise(cal),
+                modes=cal.mode_source,
+                progress=update,
+                client=client,
+            )
+        finally:
+            done()
     data = evaluation.to_dict()
     if folder is not None:
         write_fleet_csv(evaluation, folder / "fleet.csv")
@@ -792,6 +828,35 @@ def _fleet(request: EstimateRequest, folder: Path | None, reporter: Reporter) ->
     return EstimateReport(data, format_fleet_text(data), evaluation)
 
 
+@contextmanager
+def _dask(request: EstimateRequest, reporter: Reporter) -> Iterator[Any]:
+    """The Dask client of ``request.scheduler`` for the block (``None`` without one), closed
+    after it with the LocalCluster it started; reached before any simulation, so an
+    unreachable scheduler is a one-line error at once."""
+    from gearsym.validation.studies.dask_runner import connect
+    from gearsym.validation.studies.estimation.fleet_eval import WHERE
+
+    if request.scheduler is None:
+        yield None
+        return
+    workers = DEFAULT_WORKERS if request.workers is None else request.workers
+    if request.scheduler == "local":
+        reporter.say(f"starting a local Dask cluster of {workers} worker processes")
+    else:
+        reporter.say(f"connecting to the Dask scheduler {request.scheduler}")
+    client, cluster = connect(request.scheduler, workers, where=WHERE)
+    try:
+        reporter.say(
+            f"{len(client.scheduler_info().get('workers', {}))} Dask workers; each builds the "
+            "filter's model once"
+        )
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
 def _tune(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> EstimateReport:
     """``--fleet --tune``: the model-error intensities chosen on the runs' vehicles (tuning
     seeds, which an evaluation must not reuse)."""
@@ -799,19 +864,21 @@ def _tune(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> 
 
     cal, truth = request.calibration, request.truth
     seeds = list(range(request.seed, request.seed + request.runs))
-    update, done = reporter.bar(f"tuning over the fleet, {request.runs} vehicles")
-    try:
-        result = tune_model_error(
-            cal.description,
-            truth.scenario,
-            request.fleet,
-            seeds,
-            sample_time=cal.filter_sample_time,
-            relative_noise=_noise(cal),
-            progress=update,
-        )
-    finally:
-        done()
+    with _dask(request, reporter) as client:
+        update, done = reporter.bar(f"tuning over the fleet, {request.runs} vehicles")
+        try:
+            result = tune_model_error(
+                cal.description,
+                truth.scenario,
+                request.fleet,
+                seeds,
+                sample_time=cal.filter_sample_time,
+                relative_noise=_noise(cal),
+                progress=update,
+                client=client,
+            )
+        finally:
+            done()
     data = {"filter": "ekf", "tuning": result.to_dict()}
     if folder is not None:
         _write_json(folder / "tuning.json", data)
