@@ -16,13 +16,16 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.errors import GearsymError
 from gearsym.validation.sim.fleet import Fleet
 from gearsym.validation.sim.scenario import Scenario
+
+if TYPE_CHECKING:
+    from gearsym.validation.studies.estimation.fleet_eval import FilterModel, FleetContext
 
 __all__ = ["FACTORS", "TWIST_FACTORS", "TuningResult", "tune_model_error", "tuning_sums"]
 
@@ -163,13 +166,11 @@ def tune_model_error(
 
 
 def tuning_sums(
-    context: Any, model: Any, seed: int, grid: Sequence[tuple[float, float]]
+    context: FleetContext, model: FilterModel, seed: int, grid: Sequence[tuple[float, float]]
 ) -> np.ndarray | None:
     """One tuning vehicle: per pair of factors (c, c_φ) of ``grid`` the filter's summed NEES,
     its dof, summed NIS and its dof over the run (one row each); ``None`` when the reference
-    cannot simulate the vehicle. ``context``, ``model``: a
-    :class:`~gearsym.validation.studies.estimation.fleet_eval.FleetContext` and its
-    :class:`~gearsym.validation.studies.estimation.fleet_eval.FilterModel`."""
+    cannot simulate the vehicle."""
     from gearsym.symbolic import naming
     from gearsym.validation.studies.estimation.fleet_eval import vehicle_setup
     from gearsym.validation.studies.estimation.loop import filter_run
