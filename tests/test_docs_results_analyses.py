@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from gearsym.validation.studies.fisher import fim_markdown
 from gearsym.validation.studies.hybrid_fisher import hybrid_fim_markdown
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -24,6 +25,7 @@ Renderer = Callable[[dict[str, Any], str], str]
 #: file name pattern → (the renderer, how its command starts)
 KINDS: dict[str, tuple[Renderer, str]] = {
     "fim_hybrid_*.md": (hybrid_fim_markdown, "gearsym fim "),
+    "fim_open_loop_*.md": (fim_markdown, "gearsym fim --open-loop "),
 }
 TABLES = sorted((t, *kind) for pattern, kind in KINDS.items() for t in RESULTS.glob(pattern))
 
@@ -31,6 +33,8 @@ TABLES = sorted((t, *kind) for pattern, kind in KINDS.items() for t in RESULTS.g
 EXPECTED = {
     "fim_hybrid_2_3.md": "hybrid.md",
     "fim_hybrid_2_3_known_initial_state.md": "hybrid.md",
+    "fim_open_loop_2_3.md": "sensitivities.md",
+    "fim_open_loop_2_3_carry_over.md": "sensitivities.md",
 }
 
 
