@@ -7,6 +7,7 @@ import argparse
 import contextlib
 import json
 import math
+import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -89,6 +90,12 @@ def _measured(args: argparse.Namespace, d: Any, scenario: Any) -> Any:
         f"({RESAMPLE_TEXT}); the others from the scenario"
     )
     return with_measured_inputs(scenario, measurement)
+
+
+def _command_line() -> str:
+    """The command as typed, for the header of the Markdown table ``--out`` writes (the
+    documentation's result tables name the command that wrote them)."""
+    return " ".join(["gearsym", *sys.argv[1:]]) if sys.argv[1:] else "gearsym fim"
 
 
 def _reference(d: Any, scenario: Any) -> Any:
@@ -220,7 +227,7 @@ def cmd_fim(args: argparse.Namespace) -> int:
         )
         paths: list[Path] = []
         if out is not None:
-            write_fim(study, out.path)
+            write_fim(study, out.path, _command_line())
             paths = out.commit()
     if args.json:
         data_out = study_json(study)
@@ -245,7 +252,12 @@ def _hybrid_fim(args: argparse.Namespace) -> int:
     are refused: they would silently not apply."""
     from gearsym.validation.sim.hybrid_simulation import HybridSimulator
     from gearsym.validation.sim.scenario import load_scenario
-    from gearsym.validation.studies.hybrid_fisher import format_text, hybrid_fim, to_dict
+    from gearsym.validation.studies.hybrid_fisher import (
+        format_text,
+        hybrid_fim,
+        hybrid_fim_markdown,
+        to_dict,
+    )
 
     for option, given in (
         ("--with-wheel-acceleration", args.with_wheel_acceleration),
@@ -298,8 +310,12 @@ def _hybrid_fim(args: argparse.Namespace) -> int:
         )
         paths: list[Path] = []
         if out is not None:
-            (out.path / "fim.json").write_text(json.dumps(to_dict(study), indent=2) + "\n")
+            data = to_dict(study)
+            (out.path / "fim.json").write_text(json.dumps(data, indent=2) + "\n")
             (out.path / "fim.txt").write_text(format_text(study) + "\n", encoding="utf-8")
+            (out.path / "fim.md").write_text(
+                hybrid_fim_markdown(data, _command_line()), encoding="utf-8"
+            )
             paths = out.commit()
     if args.json:
         data_out = to_dict(study)
@@ -312,14 +328,22 @@ def _hybrid_fim(args: argparse.Namespace) -> int:
     return 0
 
 
-def write_fim(study: Any, folder: Path) -> list[str]:
-    """``fim.json``, ``fim.txt`` and the bar charts (Figs. 3.9–3.14) into ``folder``."""
-    from gearsym.validation.studies.fisher import format_text, plot_scatter, study_json
+def write_fim(study: Any, folder: Path, command: str = "gearsym fim --open-loop") -> list[str]:
+    """``fim.json``, ``fim.txt``, ``fim.md`` (the table for the documentation, headed by
+    ``command``) and the bar charts (Figs. 3.9–3.14) into ``folder``."""
+    from gearsym.validation.studies.fisher import (
+        fim_markdown,
+        format_text,
+        plot_scatter,
+        study_json,
+    )
 
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / "fim.json").write_text(json.dumps(study_json(study), indent=2) + "\n")
+    data = study_json(study)
+    (folder / "fim.json").write_text(json.dumps(data, indent=2) + "\n")
     (folder / "fim.txt").write_text(format_text(study) + "\n", encoding="utf-8")
-    return ["fim.json", "fim.txt", *(p.name for p in plot_scatter(study, folder))]
+    (folder / "fim.md").write_text(fim_markdown(data, command), encoding="utf-8")
+    return ["fim.json", "fim.txt", "fim.md", *(p.name for p in plot_scatter(study, folder))]
 
 
 def print_fim_summary(
@@ -476,7 +500,11 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "--acceleration-error",
     )
     p.add_argument("--json", action="store_true", help="machine-readable output")
-    p.add_argument("--out", help="folder for fim.json, fim.txt and bar charts (Figs. 3.9-3.14)")
+    p.add_argument(
+        "--out",
+        help="folder for fim.json, fim.txt, fim.md (the table, Markdown) and, with "
+        "--open-loop, bar charts (Figs. 3.9-3.14)",
+    )
     p.add_argument(
         "--sample-time",
         # finer than the simulated record (gearsym.validation.sim.scenario.SAMPLE_TIME) adds nothing

@@ -158,8 +158,10 @@ def study():
 
 
 def test_study_structure(study):
+    from gearsym.symbolic.parameters import symbol
     from gearsym.validation.studies.fisher import (
         WHOLE_SHIFT,
+        fim_markdown,
         format_text,
         study_json,
         summary_lines,
@@ -174,6 +176,14 @@ def test_study_structure(study):
     assert data["windows"][0]["output_sets"][1]["outputs"][-1] == "y_domega_C"
     assert "gear 2" in format_text(study)
     assert len(summary_lines(study)) == 5
+    # the documentation's table: headed by the command, one row per window in each table,
+    # what the elimination keeps per output set
+    table = fim_markdown(json.loads(json.dumps(data)), "gearsym fim --open-loop --out x")
+    assert table.startswith("<!-- written by `gearsym fim --open-loop --out x`; do not edit")
+    for w in study.windows:
+        finals = [", ".join(symbol(n) for n in r.elimination.final) for r in w.results]
+        assert f"| {' | '.join(finals)} |" in table, w.name
+        assert table.count(f"| {w.name} |") >= 2
 
 
 def test_whole_shift_is_the_sum_of_the_phases(study):

@@ -27,7 +27,12 @@ from gearsym.symbolic.loader import load_description
 from gearsym.validation.sim.hybrid_simulation import HybridSimulator
 from gearsym.validation.sim.phases import Phase
 from gearsym.validation.sim.simulate import simulate
-from gearsym.validation.studies.hybrid_fisher import VIEWS, format_text, hybrid_fim
+from gearsym.validation.studies.hybrid_fisher import (
+    VIEWS,
+    format_text,
+    hybrid_fim,
+    hybrid_fim_markdown,
+)
 
 PARAMETERS = ("m_veh", "mu_38", "mu_05", "zeta")
 
@@ -198,8 +203,13 @@ def test_fim_defaults_to_the_hybrid_model(tmp_path):
     for phase in ("speed phase", "gear 3"):
         assert "mu_38" not in windows[phase]["elimination"]["final"], phase
     assert "mu_05" not in windows["gear 3"]["elimination"]["final"]
-    assert sorted(p.name for p in out.iterdir()) == ["MANIFEST", "fim.json", "fim.txt"]
+    assert sorted(p.name for p in out.iterdir()) == ["MANIFEST", "fim.json", "fim.md", "fim.txt"]
     assert VIEWS["nuisance"] in (out / "fim.txt").read_text()
+    # the table for the documentation: headed by the command, rendered from the JSON beside it
+    table = (out / "fim.md").read_text(encoding="utf-8")
+    assert table.startswith(f"<!-- written by `gearsym fim --json --out {out}`; do not edit")
+    written = json.loads((out / "fim.json").read_text(encoding="utf-8"))
+    assert table == hybrid_fim_markdown(written, f"gearsym fim --json --out {out}")
     for argv, option in (
         (("--carry-over",), "--carry-over"),
         (("--with-wheel-acceleration",), "--with-wheel-acceleration"),

@@ -1,5 +1,6 @@
 """MISRA C:2012 through cppcheck's add-on: every rule the emitted C breaks is a documented
-deviation (validation/checks/misra.py), and the table of the docs page docs/misra.md lists exactly
+deviation (validation/checks/misra.py), and the table the docs page docs/misra.md includes
+(docs/results/misra.md, written by ``python -m gearsym.validation.checks.misra``) lists exactly
 those rules.
 
 The files checked cover every template path: the full model, a torque-input and a μ-form
@@ -46,7 +47,36 @@ def test_every_misra_finding_is_a_documented_deviation():
 
 
 def test_the_docs_list_exactly_the_deviations():
-    text = (ROOT / "docs" / "misra.md").read_text(encoding="utf-8")
-    section = text.split("# MISRA C:2012", 1)[1].split("\n# ", 1)[0]
-    listed = set(re.findall(r"^\| (\d+\.\d+) \|", section, flags=re.M))
+    """docs/misra.md includes the table the check wrote (docs/results/misra.md, rendered from
+    its JSON: tests/test_docs_results_analyses.py); it lists exactly the deviations."""
+    page = (ROOT / "docs" / "misra.md").read_text(encoding="utf-8")
+    assert '--8<-- "results/misra.md"' in page
+    text = (ROOT / "docs" / "results" / "misra.md").read_text(encoding="utf-8")
+    listed = set(re.findall(r"^\| (\d+\.\d+) \|", text, flags=re.M))
     assert listed == set(DEVIATIONS)
+
+
+def test_the_table_says_what_is_not_justified(tmp_path):
+    """The rendered table flags a reported rule without a deviation and a deviation no longer
+    reported; the entry point refuses a folder without C files (exit 2, one line)."""
+    from gearsym.validation.checks.misra import main, misra_markdown
+
+    data = {
+        "tool": "Cppcheck 2.10",
+        "options": "--addon=misra --std=c99",
+        "folder": "generated/c",
+        "files": ["a.c"],
+        "counts": {"2.5": 3, "17.7": 1},
+        "deviations": {
+            "2.5": {"category": "advisory", "why": "API"},
+            "8.7": {"category": "advisory", "why": "API"},
+        },
+    }
+    table = misra_markdown(data, "python -m gearsym.validation.checks.misra --out x")
+    assert table.startswith("<!-- written by `python -m gearsym.validation.checks.misra --out x`")
+    assert "| 2.5 | advisory | 3 | API |" in table
+    assert "| 8.7 | advisory | 0 (no longer reported) | API |" in table
+    assert "| 17.7 | ? | 1 | **NOT JUSTIFIED**" in table
+    assert table.index("| 8.7 |") < table.index("| 17.7 |")  # numeric order
+    assert main(["--out", str(tmp_path / "out"), "--c-dir", str(tmp_path)]) == 2
+    assert not (tmp_path / "out").exists()

@@ -206,6 +206,7 @@ def fim_study(
     dy_all = np.concatenate([p[3] for p in pieces])
     windows.append(_window(whole, y_all, dy_all, sets, errors, floor, names, run.scales, gamma_max))
     settings = {
+        "shift": data.shift,
         "source": run.source,
         "sliding": mode,
         "restart": restart,
@@ -276,6 +277,103 @@ def study_json(study: FimStudy) -> dict[str, Any]:
 
 def _gamma_text(value: float) -> str:
     return "inf" if not np.isfinite(value) else f"{value:.3g}"
+
+
+def _output_label(outputs: Sequence[str]) -> str:
+    return ", ".join(o.removeprefix("y_") for o in outputs)
+
+
+def _gamma_md(value: float | str, gamma_max: float) -> str:
+    """γ of the JSON (a number or "inf") to three digits, bold where it meets the limit."""
+    if value == "inf":
+        return "∞"
+    text = f"{value:.3g}"
+    return f"**{text}**" if value <= gamma_max else text
+
+
+def fim_markdown(data: dict[str, Any], command: str) -> str:
+    """The study's JSON (:func:`study_json`, ``fim.json`` of ``gearsym fim --open-loop --out
+    DIR``) as the documentation's tables, headed by the command that wrote it: per phase and
+    set of measured outputs, what the elimination (3.3) keeps, γ (3.27) of every parameter, and
+    the parameter combinations of Figures 3.9–3.14. The command writes it as ``fim.md`` beside
+    the JSON; nobody types its numbers."""
+    s = data["settings"]
+    names = data["parameters"]
+    gamma_max = s["gamma_max"]
+    sets = [r["outputs"] for r in data["windows"][0]["output_sets"]]
+    labels = [_output_label(o) for o in sets]
+    errors = ", ".join(
+        f"{k.removeprefix('y_')} {v * 100:g} %" for k, v in s["relative_errors"].items()
+    )
+    p0 = ", ".join(f"{symbol(n)} = {v:g}" for n, v in data["nominal"].items())
+    order = " / ".join(f"[{label}]" for label in labels)
+    out = [
+        f"<!-- written by `{command}`; do not edit by hand: run the command again -->",
+        "",
+        f"*Written by `{command}`.*",
+        "",
+        f"- the open-loop shift model of the {s['shift']} shift (never locks), driven "
+        f"by the reference ({s['source']}); sliding: {s['sliding']}; sensitivities "
+        f"{s['sensitivities']}",
+        f"- noise (3.26): relative errors {errors}, floor {s['floor_fraction'] * 100:g} % of the "
+        f"largest value; samples every {s['sample_time_s'] * 1e3:g} ms; p0 (3.27): {p0}",
+        f"- measured outputs (3.31), (3.32), each cell in this order: {order}",
+        f"- γ (3.27); **bold**: γ ≤ γ_max = {gamma_max:g}; ∞: the information is singular in a "
+        "direction that involves the parameter",
+        "",
+        "Estimable after the elimination (3.3):",
+        "",
+        "| phase | from – to | samples | " + " | ".join(f"y = [{x}]" for x in labels) + " |",
+        "|---|---|---|" + "---|" * len(labels),
+    ]
+    for w in data["windows"]:
+        finals = [
+            ", ".join(symbol(n) for n in r["elimination"]["final"]) or "none"
+            for r in w["output_sets"]
+        ]
+        out.append(
+            f"| {w['name']} | {w['t_start']:.3f} – {w['t_end']:.3f} s | "
+            f"{w['output_sets'][0]['samples']} | " + " | ".join(finals) + " |"
+        )
+    out += [
+        "",
+        f"γ of all {len(names)} parameters together:",
+        "",
+        "| phase | " + " | ".join(symbol(n) for n in names) + " |",
+        "|---|" + "---|" * len(names),
+    ]
+    for w in data["windows"]:
+        cells = [
+            " / ".join(_gamma_md(r["full"]["gamma"][n], gamma_max) for r in w["output_sets"])
+            for n in names
+        ]
+        out.append(f"| {w['name']} | " + " | ".join(cells) + " |")
+    combos = [
+        (w["name"], k)
+        for w in data["windows"]
+        for k in range(len(w["output_sets"][0]["combinations"]))
+    ]
+    if combos:
+        out += [
+            "",
+            "The parameter combinations of Figures 3.9–3.14 (the others known):",
+            "",
+            "| phase | estimated together | γ | estimable |",
+            "|---|---|---|---|",
+        ]
+        windows = {w["name"]: w for w in data["windows"]}
+        for name, k in combos:
+            results = [r["combinations"][k] for r in windows[name]["output_sets"]]
+            together = results[0]["parameters"]
+            gammas = ", ".join(
+                f"{symbol(n)} " + " / ".join(_gamma_md(r["gamma"][n], gamma_max) for r in results)
+                for n in together
+            )
+            verdict = " / ".join("yes" if r["estimable"] else "no" for r in results)
+            out.append(
+                f"| {name} | {', '.join(symbol(n) for n in together)} | {gammas} | {verdict} |"
+            )
+    return "\n".join(out) + "\n"
 
 
 def format_text(study: FimStudy) -> str:

@@ -25,7 +25,7 @@ Three views, each labelled in the result:
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -47,6 +47,7 @@ from gearsym.symbolic.fisher import (
     fisher_information,
     noise_variances,
 )
+from gearsym.symbolic.parameters import symbol
 from gearsym.validation.sim.hybrid_result import HybridResult
 from gearsym.validation.sim.hybrid_simulation import HybridSimulator
 from gearsym.validation.sim.phases import Phase, detect_phases
@@ -95,6 +96,8 @@ class HybridFimStudy:
     outputs: tuple[str, ...]
     windows: tuple[HybridWindow, ...]
     nominal: HybridResult
+    #: the shift and the measurement assumptions (3.26), (3.27) the study was run with
+    settings: Mapping[str, Any] = field(default_factory=dict)
 
     @property
     def label(self) -> str:
@@ -227,6 +230,13 @@ def hybrid_fim(
         outputs=outputs,
         windows=tuple(result),
         nominal=nominal,
+        settings={
+            "shift": scenario.shift.name,
+            "sample_time_s": sample_time,
+            "speed_error": speed_error,
+            "floor_fraction": floor_fraction,
+            "gamma_max": gamma_max,
+        },
     )
 
 
@@ -282,14 +292,64 @@ def to_dict(study: HybridFimStudy) -> dict[str, Any]:
         "parameters": list(study.parameters),
         "nuisance": list(study.nuisance),
         "outputs": list(study.outputs),
+        "settings": dict(study.settings),
         "windows": [
             {
                 "name": w.name,
                 "t_start": w.t_start,
                 "t_end": w.t_end,
+                "samples": w.samples,
                 **w.analysis.to_dict(),
                 "elimination": w.elimination.to_dict(),
             }
             for w in study.windows
         ],
     }
+
+
+def _gamma_cell(value: float | str, gamma_max: float) -> str:
+    """γ to three digits, bold where it meets the limit; ∞ where the FIM is singular."""
+    if value == "inf":
+        return "∞"
+    text = f"{value:.3g}"
+    return f"**{text}**" if value <= gamma_max else text
+
+
+def hybrid_fim_markdown(data: dict[str, Any], command: str) -> str:
+    """The study's JSON (:func:`to_dict`, ``fim.json`` of ``gearsym fim --out DIR``) as the
+    documentation's table, headed by the command that wrote it: per phase, γ (3.27) of every
+    parameter and what the elimination (3.3) keeps. ``gearsym fim --out DIR`` writes it as
+    ``fim.md`` beside the JSON; nobody types its numbers."""
+    settings = data["settings"]
+    names = data["parameters"]
+    nuisance = ", ".join(symbol(n) for n in data["nuisance"])
+    out = [
+        f"<!-- written by `{command}`; do not edit by hand: run the command again -->",
+        "",
+        f"*Written by `{command}`.*",
+        "",
+        f"- the hybrid shift model of the {settings['shift']} shift (elements lock, slide and "
+        f"open); view: {data['label']}"
+        + (f"; unknown initial values per phase: {nuisance}" if nuisance else ""),
+        f"- outputs (3.31) {', '.join(data['outputs'])}; noise (3.26): relative error "
+        f"{settings['speed_error'] * 100:g} %, floor {settings['floor_fraction'] * 100:g} % of "
+        f"the largest value; samples every {settings['sample_time_s'] * 1e3:g} ms",
+        f"- γ (3.27) of all {len(names)} parameters together; **bold**: γ ≤ γ_max = "
+        f"{settings['gamma_max']:g}; ∞: the information is singular in a direction that "
+        "involves the parameter (no influence in that phase, or not separable from another)",
+        "",
+        "| phase | from – to | samples | "
+        + " | ".join(f"γ {symbol(n)}" for n in names)
+        + " | estimable after the elimination (3.3) | dropped, in order |",
+        "|---|---|---|" + "---|" * len(names) + "---|---|",
+    ]
+    for w in data["windows"]:
+        gammas = " | ".join(_gamma_cell(w["gamma"][n], w["gamma_max"]) for n in names)
+        elimination = w["elimination"]
+        final = ", ".join(symbol(n) for n in elimination["final"]) or "none"
+        dropped = [symbol(s["dropped"]) for s in elimination["steps"] if s["dropped"]]
+        out.append(
+            f"| {w['name']} | {w['t_start']:.3f} – {w['t_end']:.3f} s | {w['samples']} | "
+            f"{gammas} | {final} | {', '.join(dropped) or '—'} |"
+        )
+    return "\n".join(out) + "\n"
