@@ -43,9 +43,10 @@ from gearsym.symbolic import naming
 from gearsym.symbolic.defaults import EKF_RELATIVE_NOISE
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
+from gearsym.validation.sim.phases import phase_of as sim_phase_of
 from gearsym.validation.sim.simulation_result import SimulationResult
 from gearsym.validation.studies.estimation.bounds import NOT_IDENTIFIABLE, _phase_samples
-from gearsym.validation.studies.estimation.euio import EuioRun
+from gearsym.validation.studies.estimation.euio import EuioRun, existence_per_phase
 from gearsym.validation.studies.estimation.loop import (
     ParameterEstimate,
     _chi2_mean_band,
@@ -148,34 +149,20 @@ def prepare_euio(
     the EKF's mode logic (:func:`~gearsym.symbolic.estimators.ekf_modes.ekf_mode_update`)
     decides the element modes in each run, or "reference", the reference's (the truth)."""
     from gearsym.symbolic.estimators.ekf import default_parameters
-    from gearsym.symbolic.estimators.euio import ROAD_FREE, euio_existence, load_column
+    from gearsym.symbolic.estimators.euio import ROAD_FREE
 
     shift = result.scenario.shift.name
     parameters = [name for name in default_parameters(d, shift) if name != naming.GRADE]
     setup = prepare_ekf(d, result, sample_time, relative_noise, initial, parameters, modes=modes)
-    aug, discrete = setup.aug, setup.discrete
+    aug = setup.aug
     p = aug.parameter_values(ROAD_FREE)
     r_dyn = float(quantity(d, "vehicle", "r_dyn").value)
     i_wheel = float(p[[v.name for v in aug.model.parameters].index("I_wheel")])
-    t, names = setup.t, setup.names
-    truth0 = setup.truth0
-    existence: dict[str, list[Any]] = {}
-    held_by_phase: dict[str, list[int]] = {}
-    for phase in setup.phases:
-        mid = int(np.argmin(np.abs(t - 0.5 * (phase.t_start + phase.t_end))))
-        zop = truth0.copy()
-        zop[: aug.n_x] = setup.truth[mid, : aug.n_x]
-        e = load_column(discrete, zop, r_dyn, p, i_wheel)
-        existence[phase.name] = euio_existence(discrete, phase.name, zop, setup.u[mid], p, e)
-        held_by_phase[phase.name] = [
-            names.index(x.parameter) for x in existence[phase.name] if not x.exists
-        ]
+    t = setup.t
+    existence, held_by_phase = existence_per_phase(setup, p, r_dyn, i_wheel)
 
     def phase_of(time: float) -> str:
-        for ph in setup.phases:
-            if ph.t_start <= time < ph.t_end:
-                return ph.name
-        return setup.phases[-1].name
+        return sim_phase_of(setup.phases, time) or setup.phases[-1].name
 
     t_mid = np.r_[t[0], 0.5 * (t[1:] + t[:-1])]
     return EuioSetup(

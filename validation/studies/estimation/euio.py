@@ -14,9 +14,14 @@ from gearsym.symbolic.defaults import EKF_RELATIVE_NOISE
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
 from gearsym.validation.sim.phases import Phase
+from gearsym.validation.sim.phases import phase_of as sim_phase_of
 from gearsym.validation.sim.simulate import SimulationResult
-from gearsym.validation.studies.estimation.loop import ParameterEstimate, noisy_outputs
-from gearsym.validation.studies.estimation.setup import prepare_ekf
+from gearsym.validation.studies.estimation.loop import (
+    ParameterEstimate,
+    noisy_outputs,
+    parameter_estimates,
+)
+from gearsym.validation.studies.estimation.setup import EkfSetup, prepare_ekf
 from gearsym.validation.studies.estimation.uio import _rms
 
 
@@ -114,7 +119,6 @@ def run_euio(
     from gearsym.symbolic.estimators.ekf import default_parameters
     from gearsym.symbolic.estimators.euio import (
         ROAD_FREE,
-        euio_existence,
         euio_step,
         load_column,
     )
@@ -137,24 +141,10 @@ def run_euio(
     initial_values = z.copy()
     q = np.array(setup.q, dtype=float)
 
-    truth0 = setup.truth0
-    existence: dict[str, list[Any]] = {}
-    held_by_phase: dict[str, list[int]] = {}
-    for phase in setup.phases:
-        mid = int(np.argmin(np.abs(t - 0.5 * (phase.t_start + phase.t_end))))
-        zop = truth0.copy()
-        zop[: aug.n_x] = setup.truth[mid, : aug.n_x]
-        e = load_column(discrete, zop, r_dyn, p, i_wheel)
-        existence[phase.name] = euio_existence(discrete, phase.name, zop, setup.u[mid], p, e)
-        held_by_phase[phase.name] = [
-            names.index(x.parameter) for x in existence[phase.name] if not x.exists
-        ]
+    existence, held_by_phase = existence_per_phase(setup, p, r_dyn, i_wheel)
 
     def phase_of(time: float) -> str:
-        for ph in setup.phases:
-            if ph.t_start <= time < ph.t_end:
-                return ph.name
-        return setup.phases[-1].name
+        return sim_phase_of(setup.phases, time) or setup.phases[-1].name
 
     estimates = np.empty((len(t), n))
     sigmas = np.empty((len(t), n))
@@ -174,24 +164,9 @@ def run_euio(
     t_mid = np.r_[t[0], 0.5 * (t[1:] + t[:-1])]
     load_truth = np.interp(t_mid, result.t, result.signals[naming.ROAD_TORQUE])
 
-    truth, scored = setup.truth, setup.scored
-    by_parameter = []
-    for name in aug.parameters:
-        j = names.index(name)
-        inside = np.flatnonzero(scored[:, j])
-        last = inside[-1] if inside.size else len(t) - 1
-        err = estimates[inside, j] - truth[inside, j]
-        by_parameter.append(
-            ParameterEstimate(
-                name=name,
-                truth=float(truth[last, j]),
-                initial=float(initial_values[j]),
-                estimate=float(estimates[last, j]),
-                sigma=float(sigmas[last, j]),
-                rmse=float(np.sqrt(np.mean(err**2))) if inside.size else float("nan"),
-                scored=int(inside.size),
-            )
-        )
+    by_parameter = parameter_estimates(
+        aug.parameters, names, setup.truth, setup.scored, estimates, sigmas, initial_values
+    )
     return EuioRun(
         shift=setup.shift,
         sample_time=h,
@@ -200,8 +175,8 @@ def run_euio(
         t=t,
         estimates=estimates,
         sigmas=sigmas,
-        truth=truth,
-        scored=scored,
+        truth=setup.truth,
+        scored=setup.scored,
         held=held,
         load=load,
         load_sigma=load_sigma,
@@ -210,3 +185,26 @@ def run_euio(
         existence=existence,
         parameters=tuple(by_parameter),
     )
+
+
+def existence_per_phase(
+    setup: EkfSetup, p: Sequence[float], r_dyn: float, i_wheel: float
+) -> tuple[dict[str, list[Any]], dict[str, list[int]]]:
+    """The EUIO's existence test (4.4) per phase, on the linearisation at the truth at the
+    phase's middle (the design-time analysis, as the emitted header's masks), and per phase
+    the indices of the states it holds (those whose test fails)."""
+    from gearsym.symbolic.estimators.euio import euio_existence, load_column
+
+    t, names, aug, discrete = setup.t, setup.names, setup.aug, setup.discrete
+    existence: dict[str, list[Any]] = {}
+    held_by_phase: dict[str, list[int]] = {}
+    for phase in setup.phases:
+        mid = int(np.argmin(np.abs(t - 0.5 * (phase.t_start + phase.t_end))))
+        zop = setup.truth0.copy()
+        zop[: aug.n_x] = setup.truth[mid, : aug.n_x]
+        e = load_column(discrete, zop, r_dyn, p, i_wheel)
+        existence[phase.name] = euio_existence(discrete, phase.name, zop, setup.u[mid], p, e)
+        held_by_phase[phase.name] = [
+            names.index(x.parameter) for x in existence[phase.name] if not x.exists
+        ]
+    return existence, held_by_phase

@@ -132,6 +132,38 @@ class EkfRun:
         }
 
 
+def parameter_estimates(
+    parameters: Sequence[str],
+    names: Sequence[str],
+    truth: np.ndarray,
+    scored: np.ndarray,
+    estimates: np.ndarray,
+    sigmas: np.ndarray,
+    initial: np.ndarray,
+) -> list[ParameterEstimate]:
+    """Per parameter of one run (the EKF's or the EUIO's): the estimate and σ at its last
+    scored sample (μ: the last sliding one), the truth there, the initial value, the RMSE
+    over the scored samples."""
+    out = []
+    for name in parameters:
+        j = list(names).index(name)
+        inside = np.flatnonzero(scored[:, j])
+        last = inside[-1] if inside.size else len(estimates) - 1
+        err = estimates[inside, j] - truth[inside, j]
+        out.append(
+            ParameterEstimate(
+                name=name,
+                truth=float(truth[last, j]),
+                initial=float(initial[j]),
+                estimate=float(estimates[last, j]),
+                sigma=float(sigmas[last, j]),
+                rmse=float(np.sqrt(np.mean(err**2))) if inside.size else float("nan"),
+                scored=int(inside.size),
+            )
+        )
+    return out
+
+
 def _chi2_mean_band(dof: np.ndarray, probability: float = 0.95) -> tuple[float, float]:
     from scipy.stats import chi2
 
@@ -315,23 +347,9 @@ def filter_run(
         }
         switches = mode_switches(t, codes)
 
-    estimates_by_parameter = []
-    for name in s.aug.parameters:
-        j = names.index(name)
-        inside = np.flatnonzero(scored[:, j])
-        last = inside[-1] if inside.size else len(t) - 1
-        err = estimates[inside, j] - truth[inside, j]
-        estimates_by_parameter.append(
-            ParameterEstimate(
-                name=name,
-                truth=float(truth[last, j]),
-                initial=float(initial_values[j]),
-                estimate=float(estimates[last, j]),
-                sigma=float(sigmas[last, j]),
-                rmse=float(np.sqrt(np.mean(err**2))) if inside.size else float("nan"),
-                scored=int(inside.size),
-            )
-        )
+    estimates_by_parameter = parameter_estimates(
+        s.aug.parameters, names, truth, scored, estimates, sigmas, initial_values
+    )
     return EkfRun(
         shift=s.shift,
         sample_time=sample_time,
