@@ -78,11 +78,9 @@ def shade_phases(axes: Sequence[Any], phases: Sequence[Phase]) -> None:
         )
 
 
-def plot_ekf(run: EkfRun, path: Path) -> Path:
-    """Each augmented parameter's estimate against the truth with ±3σ, the phases shaded, and
-    the NEES against its per-sample 95 % χ² interval."""
-    from gearsym.validation.drawing.figures import save, subplots
-    from scipy.stats import chi2
+def _parameter_panels(run: Any) -> tuple[Any, Any, list[str]]:
+    """One panel per augmented parameter of a filter's run and one below, phases shaded."""
+    from gearsym.validation.drawing.figures import subplots
 
     names = [p.name for p in run.parameters]
     fig, axes = subplots(
@@ -93,12 +91,27 @@ def plot_ekf(run: EkfRun, path: Path) -> Path:
         sharex=True,
     )
     shade_phases(axes, run.phases)
+    return fig, axes, names
+
+
+def _estimate_band(ax: Any, run: Any, j: int, label: str) -> tuple[np.ndarray, np.ndarray]:
+    """State j's estimate with its ±3σ band; returns it and the truth where scored."""
+    est, sig = run.estimates[:, j], run.sigmas[:, j]
+    ax.fill_between(run.t, est - 3 * sig, est + 3 * sig, color="C0", alpha=0.2, lw=0)
+    ax.plot(run.t, est, color="C0", label=f"{label} estimate ±3σ")
+    return est, np.where(run.scored[:, j], run.truth[:, j], np.nan)
+
+
+def plot_ekf(run: EkfRun, path: Path) -> Path:
+    """Each augmented parameter's estimate against the truth with ±3σ, the phases shaded, and
+    the NEES against its per-sample 95 % χ² interval."""
+    from gearsym.validation.drawing.figures import save
+    from scipy.stats import chi2
+
+    fig, axes, names = _parameter_panels(run)
     for ax, name in zip(axes, names, strict=False):
         j = run.state_names.index(name)
-        est, sig = run.estimates[:, j], run.sigmas[:, j]
-        truth = np.where(run.scored[:, j], run.truth[:, j], np.nan)
-        ax.fill_between(run.t, est - 3 * sig, est + 3 * sig, color="C0", alpha=0.2, lw=0)
-        ax.plot(run.t, est, color="C0", label="EKF estimate ±3σ")
+        est, truth = _estimate_band(ax, run, j, "EKF")
         ax.plot(run.t, truth, color="k", lw=1.2, label="reference (where defined)")
         if name.startswith("mu_"):
             ax.plot(run.t, run.truth[:, j], color="k", lw=0.6, ls=":", label="reference μ map")
@@ -206,23 +219,12 @@ def plot_efficiency(mc: EkfMonteCarlo, path: Path) -> Path:
 def plot_euio(run: EuioRun, path: Path) -> Path:
     """Each parameter's estimate against the truth with ±3σ (held samples marked), the road
     load d̂ against the reference T_res, the phases shaded."""
-    from gearsym.validation.drawing.figures import save, subplots
+    from gearsym.validation.drawing.figures import save
 
-    names = [p.name for p in run.parameters]
-    fig, axes = subplots(
-        len(names) + 1,
-        1,
-        (8, 2.0 * (len(names) + 1)),
-        {"top": 0.93, "bottom": 0.05, "hspace": 0.12, "left": 0.1},
-        sharex=True,
-    )
-    shade_phases(axes, run.phases)
+    fig, axes, names = _parameter_panels(run)
     for ax, name in zip(axes, names, strict=False):
         j = run.state_names.index(name)
-        est, sig = run.estimates[:, j], run.sigmas[:, j]
-        truth = np.where(run.scored[:, j], run.truth[:, j], np.nan)
-        ax.fill_between(run.t, est - 3 * sig, est + 3 * sig, color="C0", alpha=0.2, lw=0)
-        ax.plot(run.t, est, color="C0", label="EUIO estimate ±3σ")
+        est, truth = _estimate_band(ax, run, j, "EUIO")
         held = np.where(run.held[:, j], est, np.nan)
         ax.plot(run.t, held, color="C1", lw=2.5, alpha=0.6, label="held (no UIO for it)")
         ax.plot(run.t, truth, color="k", lw=1.2, label="reference (where defined)")
