@@ -134,7 +134,7 @@ def test_a_full_disk_under_out_is_one_line_and_leaves_nothing(
     def full(path, data):
         raise OSError(errno.ENOSPC, "No space left on device", str(path))
 
-    monkeypatch.setattr(workflow, "_write_json", full)
+    monkeypatch.setattr(workflow, "write_json", full)  # the one the workflow calls
     out = tmp_path / "out"
     assert cli.main(["estimate", "--filter", "uio", "--out", str(out), "--no-plots"]) == 2
     err = capsys.readouterr().err
