@@ -5,6 +5,7 @@ set-up (:func:`ekf_bound`).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from gearsym.validation.sim.phases import Phase
@@ -51,6 +52,23 @@ class EkfBound:
     sigma_process: np.ndarray = field(repr=False)
 
 
+def truth_problem(setup: EkfSetup, relative_step: float = 1e-5) -> tuple[Any, Any, Any, Any, Any]:
+    """The filter's problem linearised along the truth, as the bound and the separability
+    analysis take it: f and h of the filter's model (4.1) lambdified to NumPy (not the
+    filter's CasADi functions), z0 = the truth, the inputs along the truth (``bound_u`` under
+    the μ-map scale form) and the central-difference steps per state."""
+    from gearsym.validation.studies.posterior_bound import lambdified
+
+    model = setup.aug.model
+    args = (model.state_symbols, model.input_symbols, model.parameter_symbols, setup.p)
+    f = lambdified(list(model.rhs), *args)
+    h = lambdified(list(model.output_expressions), *args)
+    z0 = setup.truth0
+    u = setup.u if setup.bound_u is None else setup.bound_u
+    steps = relative_step * np.maximum(np.abs(z0), setup.prior_sigma)
+    return f, h, z0, u, steps
+
+
 def ekf_bound(setup: EkfSetup, relative_step: float = 1e-5) -> EkfBound:
     """The posterior bound J_k = P0⁻¹ + Σ S_iᵀ R_i⁻¹ S_i (3.25, 3.26) of the EKF's problem
     (``setup``): sensitivities of the sampled speeds to z0 = [x0; p] by central differences
@@ -65,23 +83,16 @@ def ekf_bound(setup: EkfSetup, relative_step: float = 1e-5) -> EkfBound:
     from gearsym.validation.studies.posterior_bound import (
         bound_sigma,
         information_increments,
-        lambdified,
         output_sensitivities,
         posterior_information,
         process_noise_bound,
     )
     from gearsym.validation.studies.sensitivity_integration import nominal_scales
 
-    model = setup.aug.model
-    args = (model.state_symbols, model.input_symbols, model.parameter_symbols, setup.p)
-    f = lambdified(list(model.rhs), *args)
-    h = lambdified(list(model.output_expressions), *args)
+    f, h, z0, u, steps = truth_problem(setup, relative_step)
     names = setup.names
     n, n_x = len(names), setup.aug.n_x
-    z0 = setup.truth0
-    steps = relative_step * np.maximum(np.abs(z0), setup.prior_sigma)
     variances = setup.sigma_y**2
-    u = setup.u if setup.bound_u is None else setup.bound_u  # the inputs along the truth
     _, S, z, flow = output_sensitivities(f, h, z0, setup.t, u, steps, return_flow=True)
     # the speeds' prior (σ of their first measurement) *is* that measurement (filter_run
     # initialises them from it and skips it in the first update): counted once, as the prior

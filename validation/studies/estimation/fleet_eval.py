@@ -342,6 +342,32 @@ class FleetContext:
         )
 
 
+def calibration_setup(
+    d: GearboxDescription,
+    scenario: Scenario,
+    model: FilterModel,
+    sample_time: float,
+    relative_noise: Any,
+    modes: str = "filter",
+) -> Any:
+    """The filter's set-up on the calibration's own vehicle (the TCU engineer's simulation of
+    the commanded shift): what every vehicle's filter shares, the noise floor (3.26) and the
+    prior, never a run's truth."""
+    from gearsym.validation.sim.simulate import simulate
+    from gearsym.validation.studies.estimation.setup import prepare_ekf
+
+    return prepare_ekf(
+        d,
+        simulate(d, scenario),
+        sample_time,
+        relative_noise,
+        aug=model.aug,
+        discrete=model.discrete,
+        modes=modes,
+        logic=model.logic,
+    )
+
+
 def vehicle_setup(
     context: FleetContext, model: FilterModel, seed: int
 ) -> tuple[FleetDraw, Any, tuple[str, ...]] | str:
@@ -469,9 +495,7 @@ def run_fleet(
     ``client``: a ``dask.distributed`` client (:func:`~gearsym.validation.studies.
     dask_runner.connect`); the vehicles then run on its workers, one task each, every worker
     building the filter's model once; the same seeds, draws and numbers as without."""
-    from gearsym.validation.sim.simulate import simulate
     from gearsym.validation.studies.estimation.separability import torque_gain_separability
-    from gearsym.validation.studies.estimation.setup import prepare_ekf
 
     if runs < 1:
         raise GearsymError("estimate", "--runs", f"must be at least 1, got {runs}")
@@ -480,16 +504,7 @@ def run_fleet(
     # The noise floor of (3.26) is calibration: from the TCU engineer's own simulation of the
     # calibration's vehicle on the same commanded shift, never from a run's truth.
     report(0.0, "simulating the calibration's own vehicle (the noise floor)")
-    nominal = prepare_ekf(
-        d,
-        simulate(d, scenario),
-        sample_time,
-        relative_noise,
-        aug=model.aug,
-        discrete=model.discrete,
-        modes=modes,
-        logic=model.logic,
-    )
+    nominal = calibration_setup(d, scenario, model, sample_time, relative_noise, modes)
     report(0.0, "what one shift cannot separate (Fisher information with a torque gain)")
     separability = {"input_torque_gain": torque_gain_separability(nominal).to_dict()}
     initial = {

@@ -54,20 +54,14 @@ def torque_gain_separability(
     :class:`~gearsym.validation.studies.estimation.setup.EkfSetup` with a truth), linearised
     at its truth."""
     from gearsym.symbolic import naming
-    from gearsym.validation.studies.estimation.bounds import _phase_samples
+    from gearsym.validation.studies.estimation.bounds import _phase_samples, truth_problem
     from gearsym.validation.studies.hybrid_fisher import schur_complement
-    from gearsym.validation.studies.posterior_bound import lambdified, output_sensitivities
+    from gearsym.validation.studies.posterior_bound import output_sensitivities
     from gearsym.validation.studies.sensitivity_integration import nominal_scales
 
-    model = setup.aug.model
-    args = (model.state_symbols, model.input_symbols, model.parameter_symbols, setup.p)
-    f = lambdified(list(model.rhs), *args)
-    h = lambdified(list(model.output_expressions), *args)
+    f, h, z0, u, steps = truth_problem(setup, relative_step)
     names = setup.names
     n, n_x = len(names), setup.aug.n_x
-    z0 = setup.truth0
-    u = setup.u if setup.bound_u is None else setup.bound_u
-    steps = relative_step * np.maximum(np.abs(z0), setup.prior_sigma)
     _, S, _ = output_sensitivities(f, h, z0, setup.t, u, steps)
     column = list(setup.aug.input_names).index(naming.INPUT_TORQUE)
     ys = []

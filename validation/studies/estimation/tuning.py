@@ -101,28 +101,19 @@ def tune_model_error(
     (:func:`~gearsym.validation.studies.estimation.fleet_eval.each_vehicle`), the same
     numbers as without."""
     from gearsym.symbolic import naming
-    from gearsym.validation.sim.simulate import simulate
     from gearsym.validation.studies.estimation.fleet_eval import (
         FleetContext,
+        calibration_setup,
         each_vehicle,
         filter_model,
     )
-    from gearsym.validation.studies.estimation.setup import prepare_ekf
 
     if not seeds:
         raise GearsymError("estimate", "--runs", "tuning needs at least one seed")
     report = progress or (lambda fraction, message: None)
     model = filter_model(d, scenario.shift.name)
     aug = model.aug
-    nominal = prepare_ekf(
-        d,
-        simulate(d, scenario),
-        sample_time,
-        relative_noise,
-        aug=aug,
-        discrete=model.discrete,
-        logic=model.logic,
-    )
+    nominal = calibration_setup(d, scenario, model, sample_time, relative_noise)
     n_x = aug.n_x
     base = {name: float(q) for name, q in zip(aug.state_names[:n_x], nominal.q, strict=False)}
     grid = [(float(c), float(c_phi)) for c in factors for c_phi in twist_factors]
