@@ -21,6 +21,7 @@ from typing import NoReturn
 from gearsym import (
     cmd_analysis,
     cmd_draw,
+    cmd_drive,
     cmd_dynamics,
     cmd_estimate,
     cmd_export,
@@ -45,6 +46,7 @@ COMMAND_MODULES = (
     cmd_analysis,
     cmd_sweep,
     cmd_estimate,
+    cmd_drive,
     cmd_draw,
     cmd_export,
 )

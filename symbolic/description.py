@@ -20,6 +20,7 @@ from fractions import Fraction
 from pathlib import Path
 
 from gearsym.symbolic import set_kinds
+from gearsym.symbolic.drive_calibration import DriveCalibration, default_drive
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.estimator_calibration import EstimatorCalibration
 from gearsym.symbolic.io.package_data import data_file
@@ -285,6 +286,8 @@ class GearboxDescription:
     mu_map: str = "built-in"
     #: What the TCU's estimators assume (``[estimator]``: prior and tuning), not the truth.
     estimator: EstimatorCalibration = field(default_factory=EstimatorCalibration)
+    #: The powertrain around the gearbox and the TCU's shift schedule of a drive (``[drive]``).
+    drive: DriveCalibration = field(default_factory=default_drive)
 
     @property
     def shaft_names(self) -> tuple[str, ...]:

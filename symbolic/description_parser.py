@@ -42,6 +42,7 @@ from gearsym.symbolic.description import (
     pinion_pair_problem,
     planets_fit,
 )
+from gearsym.symbolic.drive_calibration import parse_drive_table
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.estimator_calibration import parse_estimator_table
 from gearsym.symbolic.io.input_files import parse_toml, shown
@@ -176,6 +177,7 @@ def parse_description(
         r.reject_unknown()
         sections[section] = values
     estimator_table = root.table("estimator", required=False)  # read once the shafts are checked
+    drive = parse_drive_table(root.table("drive", required=False))
     root.reject_unknown()
 
     description = GearboxDescription(
@@ -202,6 +204,7 @@ def parse_description(
     description = replace(
         description,
         estimator=parse_estimator_table(estimator_table, [s.name for s in shafts]),
+        drive=drive,
     )
     if not description.coordinates:
         # Default generalized coordinates: the first f shafts (thesis 2.28 names them).

@@ -4,6 +4,8 @@ bristles, the works integrated over each piece's dense output."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from gearsym.symbolic import naming
 from gearsym.symbolic.dynamics import gearbox_dynamics
@@ -13,27 +15,16 @@ from gearsym.validation.sim.hybrid_simulation import HybridSimulator
 from gearsym.validation.sim.simulation_result import EnergyAudit
 
 
-def energy_audit(
-    simulator: HybridSimulator, result: HybridResult, interval: float = 1e-3
-) -> EnergyAudit:
-    """W_in = ΔE_kin + ΔE_spring + W_friction + W_damper + W_road over the hybrid run (the
-    reference's audit without bristles): E_kin = ½ zᵀ Pᵀ M P z + ½ I_C^eff ω_C² (2.34, 2.46),
-    E_spring = k_ss φ² (two side shafts, 2.47), the powers T_In ω_in, Σ T_e Δω_e (sliding
-    elements; a locked one has Δω = 0, an open one T = 0), 2 d_ss φ̇², T_res ω_C (2.48). The
-    works are integrated over each piece's dense output by 5-point Gauss–Legendre on
-    sub-intervals of at most ``interval``. The maps at lock-up and break-away conserve E_kin
-    (zero slip); a residual would show an inconsistent reaction, sign or map."""
+def energy_functions(simulator: HybridSimulator) -> dict[str, tuple[Any, Any]]:
+    """Per mode, CasADi functions (x, u, p) → [T_In ω_in, Σ T_e Δω_e, 2 d_ss φ̇², T_res ω_C] (the
+    powers of :func:`energy_audit`) and (x, p) → [E_kin, E_spring]."""
     import casadi as ca
     from gearsym.symbolic.drivetrain import drivetrain_parts
     from gearsym.symbolic.hybrid import drivetrain_mass
 
     d = simulator.d
-    p = simulator.parameter_vector(result.values)
     mass = np.array(drivetrain_mass(d, gearbox_dynamics(d)), dtype=float)
     parts = drivetrain_parts(d)
-    names = simulator.parameter_names
-    k_ss = p[names.index("k_ss")]
-    d_ss = p[names.index("d_ss")]
     functions = {}
     for name, compiled in simulator.modes.items():
         mode = simulator.hybrid.modes[name]
@@ -57,14 +48,33 @@ def energy_audit(
         powers = ca.vertcat(
             compiled.u[0] * omega_in,
             friction,
-            2 * d_ss * phi_dot**2,
+            2 * _parameter(simulator, compiled, "d_ss") * phi_dot**2,
             to_casadi(parts.road_torque, mapping) * omega_c,
         )
-        energies = ca.vertcat(kinetic, k_ss * phi**2)
+        energies = ca.vertcat(kinetic, _parameter(simulator, compiled, "k_ss") * phi**2)
         functions[name] = (
             ca.Function("powers", [compiled.x, compiled.u, compiled.p], [powers]),
             ca.Function("energies", [compiled.x, compiled.p], [energies]),
         )
+    return functions
+
+
+def _parameter(simulator: HybridSimulator, compiled: Any, name: str) -> Any:
+    return compiled.p[simulator.parameter_names.index(name)]
+
+
+def energy_audit(
+    simulator: HybridSimulator, result: HybridResult, interval: float = 1e-3
+) -> EnergyAudit:
+    """W_in = ΔE_kin + ΔE_spring + W_friction + W_damper + W_road over the hybrid run (the
+    reference's audit without bristles): E_kin = ½ zᵀ Pᵀ M P z + ½ I_C^eff ω_C² (2.34, 2.46),
+    E_spring = k_ss φ² (two side shafts, 2.47), the powers T_In ω_in, Σ T_e Δω_e (sliding
+    elements; a locked one has Δω = 0, an open one T = 0), 2 d_ss φ̇², T_res ω_C (2.48). The
+    works are integrated over each piece's dense output by 5-point Gauss–Legendre on
+    sub-intervals of at most ``interval``. The maps at lock-up and break-away conserve E_kin
+    (zero slip); a residual would show an inconsistent reaction, sign or map."""
+    p = simulator.parameter_vector(result.values)
+    functions = energy_functions(simulator)
     nodes, weights = np.polynomial.legendre.leggauss(5)
     works = np.zeros(4)
     for piece in result.pieces:

@@ -1,0 +1,100 @@
+"""``gearsym drive``: a whole driving cycle through every shift in one continuous simulation
+(:mod:`gearsym.validation.sim.drive`)."""
+
+from __future__ import annotations
+
+import argparse
+from typing import TYPE_CHECKING
+
+from gearsym.commands import add_command, emit_json, load
+from gearsym.interrupts import check
+
+if TYPE_CHECKING:
+    from gearsym.commands import Subparsers
+
+__all__ = ["cmd_drive", "register"]
+
+
+def cmd_drive(args: argparse.Namespace) -> int:
+    """Drive the cycle with the description's vehicle; print the summary (or ``--json``) and
+    write drive.json, drive.csv, shifts.csv and drive.png to ``--out``."""
+    import json
+    import sys
+
+    from gearsym.cmd_dynamics import ProgressBar
+    from gearsym.symbolic.errors import GearsymError
+    from gearsym.symbolic.io.output_dir import OutputDir
+    from gearsym.validation.sim.cycles import load_cycle, load_grade
+    from gearsym.validation.sim.drive import DriveSimulator
+
+    d = load(args.config)
+    cycle = load_cycle(args.cycle)
+    if args.duration is not None:
+        if not 0 < args.duration:
+            raise GearsymError("--duration", "", f"must be positive, got {args.duration:g}")
+        if args.duration < cycle.duration_s:
+            cycle = cycle.window(args.duration)
+    grade = load_grade(args.grade) if args.grade is not None else None
+    with OutputDir(args.out, "drive", before_commit=check) as out:
+        bar = ProgressBar("drive")
+        shown = {"step": -1}
+        total = cycle.duration_s
+
+        def progress(t: float) -> None:
+            # one line per 5 % of the cycle when stderr is not a terminal
+            step = int(20 * t / total)
+            if step != shown["step"]:
+                shown["step"] = step
+                bar(t / total, f"t = {t:.0f} of {total:.0f} s")
+
+        try:
+            bar(0.0, "compiling the gear and shift models")
+            simulator = DriveSimulator(d, cycle, grade, progress=progress)
+            result = simulator.run()
+        finally:
+            bar.done()
+        from gearsym.validation.sim.drive_report import (
+            format_drive_summary,
+            plot_drive,
+            write_drive,
+        )
+
+        data = {"gearbox": d.name, **result.to_dict()}
+        data["calibration"] = d.drive.to_dict()
+        (out.path / "drive.json").write_text(json.dumps(data, indent=2) + "\n")
+        write_drive(result, out.path)
+        plot_drive(result, out.path / "drive.png")
+        paths = out.commit()
+    if args.json:
+        emit_json(data)
+    else:
+        print(format_drive_summary(result))
+        print(f"  wrote {len(paths)} files to {args.out}")
+    if result.failure:
+        print(f"gearsym: drive failed: {result.failure}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
+    """Register ``drive``."""
+    p = add_command(
+        subparsers,
+        "drive",
+        cmd_drive,
+        "Drive a standard cycle (or a CSV of t, v) through every shift in one simulation.",
+        common,
+    )
+    p.add_argument(
+        "--cycle",
+        default="wltc3b",
+        help="wltc3b (default), udds, us06, hwfet, or a CSV file with columns t (s), v (km/h)",
+    )
+    p.add_argument("--grade", help="CSV file with columns s (m), grade (%%, uphill positive)")
+    p.add_argument("--duration", type=float, help="drive only the cycle's first DURATION seconds")
+    p.add_argument(
+        "--out",
+        default="out/drive",
+        help="folder for drive.json, drive.csv, shifts.csv, drive.png (replaced atomically)",
+    )
+    p.add_argument("--json", action="store_true", help="print the result as JSON")

@@ -1,0 +1,204 @@
+"""A whole drive (validation/sim/drive.py, `gearsym drive`): every shift of a short cycle in one
+continuous simulation.
+
+Expected values come from physics and hand derivations, never from the code under test: the
+energy balance over the whole drive (input work = stored energy + clutch, damper, road and
+brake losses), the steady state at constant speed (input power = road-load power), the torque
+split's rules computed by hand, the cycle's own distance, the schedule's hysteresis condition.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.loader import load_description
+from gearsym.validation.sim.cycles import load_cycle
+from gearsym.validation.sim.drive import DriveSimulator
+from gearsym.validation.sim.drive_powertrain import Powertrain
+from gearsym.validation.sim.drive_shift import state_from_speeds
+
+#: A short cycle with a launch, upshifts, a cruise, a braked stop and a standstill (km/h).
+SHORT = "t,v\n0,0\n2,0\n8,25\n20,55\n32,55\n44,0\n47,0\n"
+
+
+@pytest.fixture(scope="module")
+def description():
+    return load_description()
+
+
+@pytest.fixture(scope="module")
+def short_drive(description, tmp_path_factory):
+    path = tmp_path_factory.mktemp("cycle") / "short.csv"
+    path.write_text(SHORT, encoding="utf-8")
+    cycle = load_cycle(path)
+    simulator = DriveSimulator(description, cycle)
+    return simulator, simulator.run()
+
+
+def test_short_drive_shifts_up_and_down_without_a_miss(short_drive):
+    _, result = short_drive
+    assert result.failure == ""
+    kinds = [s.kind for s in result.shifts]
+    assert "upshift" in kinds and "downshift" in kinds
+    assert all(s.completed for s in result.shifts)
+    # every shift ends with the on-coming element locked, within the plan's length
+    for s in result.shifts:
+        assert 0.0 < s.shift_time < 0.85
+    # each shift goes to an adjacent gear of the one before
+    gears = result.gears
+    current = gears[0]
+    for s in result.shifts:
+        a, b = s.name.split("-")
+        assert a == current
+        assert abs(gears.index(b) - gears.index(a)) == 1
+        current = b
+
+
+def test_energy_balance_closes_over_the_drive(short_drive):
+    """W_in = ΔE_stored + W_clutches + W_damper + W_road + W_brake, every term integrated
+    separately along the solution (gear segments, shifts, standstill)."""
+    _, result = short_drive
+    w = result.works
+    assert w.brake > 0, "the stop is braked"
+    assert w.friction > 0, "the shifts slide"
+    assert abs(w.residual) <= 1e-6 * (w.friction + w.damper + abs(w.road) + w.brake)
+
+
+def test_drive_follows_the_cycle(short_drive):
+    simulator, result = short_drive
+    s = result.samples
+    assert result.tracking_rms_kmh < 1.5
+    # the distance driven is the cycle's (trapezoid of the trace: 0.3972 km) within tracking
+    distance = np.trapezoid(simulator.cycle.v_kmh / 3.6, simulator.cycle.t)
+    assert s["s"][-1] == pytest.approx(distance, rel=0.01)
+    # at rest in the lowest gear at the end
+    assert s["v"][-1] == 0.0 and result.gears[int(s["gear"][-1])] == result.gears[0]
+
+
+def test_cruise_input_power_is_the_road_load(short_drive, description):
+    """At constant speed in a locked gear nothing is stored: T_In ω_in = T_res ω_C + 2 d_ss φ̇²
+    with φ̇ = 0, T_res ω_C = v (F_r + F_ad), thesis (2.48)-(2.49) with the description's
+    values: F_r = f_roll v m g (2.49a as printed), F_ad = ½ ρ c_W A v²."""
+    _, result = short_drive
+    s = result.samples
+    cruise = (s["t"] > 27.0) & (s["t"] < 31.5)
+    v = s["v"][cruise]
+    assert np.ptp(v) < 0.05
+    vehicle = {k: q.value for k, q in description.vehicle.items()}
+    m, g = vehicle["m_veh"], vehicle["g"]
+    road = v * (
+        vehicle["f_roll"] * v * m * g
+        + 0.5 * vehicle["rho_air"] * vehicle["c_W"] * vehicle["A_front"] * v**2
+    )
+    torque = s["T_engine"][cruise] + s["T_e_machine"][cruise]
+    power = torque * s["omega_in"][cruise]
+    # small acceleration is left in the samples: m v dv/dt bounds the difference
+    dv = np.gradient(v, s["t"][cruise])
+    assert np.all(np.abs(power - road) <= np.abs(m * v * dv) + 0.01 * road)
+
+
+def test_torque_split_by_hand(description):
+    """The stated rules (validation/sim/drive_powertrain.py) with the description's [drive]
+    numbers: engine 400 N·m / 143 kW above 800 rpm, e-machine 440 N·m / 90 kW."""
+    p = Powertrain(description, 1950.0)
+    r_dyn = description.vehicle["r_dyn"].value
+    i_d = description.drivetrain["i_D"].value
+    ratio = 3.243
+    overall = ratio * i_d
+    rpm = math.pi / 30
+    # below idle: electric only
+    split = p.split(100.0 * overall / r_dyn, ratio, 500 * rpm)
+    assert (split.engine, split.e_machine, split.brake) == pytest.approx((0.0, 100.0, 0.0))
+    # above idle: engine first, machine adds the rest
+    split = p.split(500.0 * overall / r_dyn, ratio, 2000 * rpm)
+    assert split.engine == pytest.approx(400.0)
+    assert split.e_machine == pytest.approx(100.0)
+    # at 2000 rpm (209.4 rad/s) the machine's power binds: 90 kW / 209.4 rad/s = 429.7 N·m
+    assert split.pedal == pytest.approx(500.0 / (400.0 + 90e3 / (2000 * rpm)))
+    # at 4000 rpm the power limits bind: 143 kW / 418.9 rad/s, 90 kW / 418.9 rad/s
+    w = 4000 * rpm
+    split = p.split(1000.0 * overall / r_dyn, ratio, w)
+    assert split.engine == pytest.approx(143e3 / w)
+    assert split.e_machine == pytest.approx(90e3 / w)
+    assert split.pedal == 1.0
+    # braking beyond the machine (at 1000 rpm its 440 N·m binds, 46 kW): the rest is the
+    # brake, at the wheel
+    split = p.split(-600.0 * overall / r_dyn, ratio, 1000 * rpm)
+    assert split.e_machine == pytest.approx(-440.0)
+    assert split.brake == pytest.approx(160.0 * overall)
+
+
+def test_gear_state_hand_over_keeps_the_shaft_speeds(short_drive):
+    simulator, _ = short_drive
+    for k in range(len(simulator.gears)):
+        sim, mode, fns = simulator.gear_model(k)
+        x = np.zeros(sim.modes[mode].n)
+        x[0] = 100.0
+        speeds = np.asarray(fns["speeds"](x)).ravel()
+        back = state_from_speeds(sim, mode, speeds, 0.01, 40.0)
+        assert np.asarray(fns["speeds"](back)).ravel() == pytest.approx(speeds, rel=1e-12)
+
+
+def test_hunting_schedule_is_refused(description, tmp_path):
+    """After a 1-2 upshift (step 5.354/3.243 = 1.651) at 1500 rpm the input turns at 909 rpm:
+    a downshift speed of 950 rpm would shift straight back."""
+    text = (
+        Path(description.file).read_text(encoding="utf-8")
+        if Path(description.file).exists()
+        else None
+    )
+    if text is None:
+        from gearsym.symbolic.io.package_data import data_file
+
+        text = data_file("thesis_9speed.toml").read_text(encoding="utf-8")
+    text = text.replace("[850.0, 1200.0, 2200.0]", "[950.0, 1200.0, 2200.0]")
+    path = tmp_path / "hunting.toml"
+    path.write_text(text, encoding="utf-8")
+    d = load_description(path)
+    with pytest.raises(GearsymError, match=r"drive.shift_schedule: after the 1-2 upshift"):
+        DriveSimulator(d, load_cycle("udds").window(5.0))
+
+
+def gearsym(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "gearsym", *args], capture_output=True, text=True, timeout=600
+    )
+
+
+def test_cli_drive_json_and_files(tmp_path):
+    out = tmp_path / "drive"
+    run = gearsym("drive", "--cycle", "udds", "--duration", "25", "--out", str(out), "--json")
+    assert run.returncode == 0, run.stderr
+    data = json.loads(run.stdout)
+    assert data["cycle"]["name"] == "udds[0:25 s]"
+    for key in ("shifts", "wall_s", "real_time_factor", "energy_residual", "tracking_rms_kmh"):
+        assert key in data
+    assert data["energy_residual"] < 1e-6
+    for name in ("drive.json", "drive.csv", "shifts.csv", "drive.png"):
+        assert (out / name).exists()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--cycle", "nope"], "nope: --cycle: neither a built-in cycle"),
+        (["--cycle", "{bad}"], "row 2, column v: not a number"),
+        (["--duration", "-3"], "--duration: must be positive"),
+    ],
+)
+def test_cli_drive_bad_input_is_one_line(tmp_path, args, message):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,v\n0,x\n1,0\n", encoding="utf-8")
+    args = [str(bad) if a == "{bad}" else a for a in args]
+    run = gearsym("drive", *args, "--out", str(tmp_path / "out"))
+    assert run.returncode == 2
+    assert message in run.stderr
+    assert len(run.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()

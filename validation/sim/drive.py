@@ -1,0 +1,524 @@
+"""A whole drive: every shift of a driving cycle in one continuous simulation (``gearsym drive``).
+
+The vehicle starts at rest in the lowest forward gear. Between shifts the engaged gear is the
+hybrid shift model's gear mode (:mod:`gearsym.symbolic.hybrid`: every element of the gear
+locked, 2.55–2.58, the elastic drivetrain 2.42–2.50) driven by the driver and the torque split
+of :mod:`gearsym.validation.sim.drive_powertrain` in continuous time, integrated by SciPy's
+``solve_ivp`` between the cycle's points, with the shift schedule's thresholds as terminal
+events. A shift runs through the hybrid simulation of that shift
+(:class:`~gearsym.validation.sim.hybrid_simulation.HybridSimulator`, every mode switch an
+event) with the TCU's open-loop shift plan (:mod:`gearsym.validation.sim.drive_shift`); the
+state is carried across by the shaft speeds, the twist and the wheel speed. The service brake
+is a torque at the wheel (2.45): I_C^eff ω̇_C = 2 T_ss − T_res − T_brake.
+
+At standstill (the cycle stands still and the vehicle is slower than
+:data:`STANDSTILL_SPEED`) the brake holds the vehicle: the state is set to rest and the kinetic
+energy left is counted as brake work.
+
+The energy audit closes over the whole drive: W_in = ΔE_kin + ΔE_spring + W_friction +
+W_damper + W_road + W_brake, every work integrated along the solution (the gear segments carry
+the works as quadrature states; the shifts use
+:func:`~gearsym.validation.sim.hybrid_energy.energy_audit`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from gearsym.symbolic import naming
+from gearsym.symbolic.description import GearboxDescription
+from gearsym.symbolic.drive_calibration import check_hysteresis
+from gearsym.symbolic.drivetrain import adjacent_shifts, drivetrain_parts, quantity
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.numeric import to_casadi
+from gearsym.symbolic.ratios import gear_ratio
+from gearsym.validation.sim.cycles import Cycle, GradeProfile
+from gearsym.validation.sim.drive_powertrain import Powertrain
+from gearsym.validation.sim.drive_shift import (
+    BRAKE_SPEED,
+    ShiftRecord,
+    ShiftRunner,
+    state_from_speeds,
+)
+from gearsym.validation.sim.hybrid_energy import energy_functions
+from gearsym.validation.sim.hybrid_simulation import HybridSimulator
+from scipy.integrate import solve_ivp
+
+__all__ = ["DriveResult", "DriveSimulator", "simulate_drive"]
+
+#: Below this speed (m/s) with the cycle at rest, the brake holds the vehicle.
+STANDSTILL_SPEED = 0.3
+
+#: Least time in a gear before the schedule may shift again (s): a driver's pedal moves
+#: faster than a TCU lets the gear follow (assumed, production schedules: 0.5-2 s).
+MIN_DWELL = 1.0
+
+#: Spacing of the recorded samples (s).
+RECORD_STEP = 0.1
+
+
+@dataclass
+class Works:
+    """Works (J) over the drive: input, friction, damper, road, brake, and the change of the
+    stored energies (kinetic, spring)."""
+
+    input: float = 0.0
+    friction: float = 0.0
+    damper: float = 0.0
+    road: float = 0.0
+    brake: float = 0.0
+    kinetic: float = 0.0
+    spring: float = 0.0
+
+    @property
+    def residual(self) -> float:
+        return self.input - (
+            self.kinetic + self.spring + self.friction + self.damper + self.road + self.brake
+        )
+
+    @property
+    def relative_residual(self) -> float:
+        scale = max(abs(self.input), self.friction + self.damper + abs(self.road) + self.brake)
+        return abs(self.residual) / scale if scale > 0 else 0.0
+
+    def to_dict(self) -> dict[str, float]:
+        return {
+            "input_J": self.input,
+            "kinetic_change_J": self.kinetic,
+            "spring_change_J": self.spring,
+            "friction_J": self.friction,
+            "damper_J": self.damper,
+            "road_J": self.road,
+            "brake_J": self.brake,
+            "residual_J": self.residual,
+            "relative_residual": self.relative_residual,
+        }
+
+
+@dataclass
+class DriveResult:
+    """The recorded drive: samples every :data:`RECORD_STEP` (``t``, ``v_ref``, ``v`` in m/s,
+    ``gear`` index into ``gears``, engine, e-machine and brake torque, input speed, pedal,
+    distance), the shifts, the energy audit and the wall time."""
+
+    cycle: Cycle
+    gears: tuple[str, ...]
+    samples: dict[str, np.ndarray]
+    shifts: list[ShiftRecord]
+    works: Works
+    wall_s: float
+    values: dict[str, float]
+    failure: str = ""
+    stats: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def tracking_rms_kmh(self) -> float:
+        e = (self.samples["v"] - self.samples["v_ref"]) * 3.6
+        return float(np.sqrt(np.mean(e * e)))
+
+    @property
+    def real_time_factor(self) -> float:
+        """Simulated seconds per wall-clock second."""
+        return float(self.samples["t"][-1]) / self.wall_s if self.wall_s > 0 else math.inf
+
+    def to_dict(self) -> dict[str, Any]:
+        t = self.samples["t"]
+        return {
+            "cycle": self.cycle.to_dict(),
+            "simulated_s": float(t[-1]),
+            "shifts": len(self.shifts),
+            "shift_list": [s.to_dict() for s in self.shifts],
+            "wall_s": self.wall_s,
+            "real_time_factor": self.real_time_factor,
+            "energy_residual": self.works.relative_residual,
+            "energy": self.works.to_dict(),
+            "tracking_rms_kmh": self.tracking_rms_kmh,
+            "tracking_max_kmh": float(
+                np.max(np.abs(self.samples["v"] - self.samples["v_ref"])) * 3.6
+            ),
+            "distance_km": float(self.samples["s"][-1] / 1000.0),
+            "failure": self.failure,
+            "truth": self.values,
+        }
+
+
+class DriveSimulator:
+    """A drive of one vehicle (``overrides``: its true parameters, default the description's)
+    along a cycle (module docstring)."""
+
+    def __init__(
+        self,
+        d: GearboxDescription,
+        cycle: Cycle,
+        grade: GradeProfile | None = None,
+        overrides: Mapping[str, float] | None = None,
+        progress: Callable[[float], None] | None = None,
+    ) -> None:
+        self.d = d
+        self.cycle = cycle
+        self.grade = grade
+        self.progress = progress
+        specs = adjacent_shifts(d)
+        double = [s.name for s in specs if not s.single]
+        if double:
+            raise GearsymError(
+                d.file,
+                "gears",
+                f"a drive shifts single swaps only; {', '.join(double)} swaps two elements",
+            )
+        if not specs:
+            raise GearsymError(d.file, "gears", "a drive needs at least two forward gears")
+        self.gears = (specs[0].from_gear, *(s.to_gear for s in specs))
+        self.ratios = tuple(float(gear_ratio(d, d.gear(g)).ratio) for g in self.gears)
+        check_hysteresis(
+            d.drive.file or d.file,
+            d.drive.schedule,
+            [
+                (a, b, ra / rb)
+                for a, b, ra, rb in zip(
+                    self.gears[:-1], self.gears[1:], self.ratios[:-1], self.ratios[1:], strict=True
+                )
+            ],
+        )
+        self.runners = {
+            (a, b): ShiftRunner(d, f"{a}-{b}")
+            for a, b in (
+                *zip(self.gears[:-1], self.gears[1:], strict=True),
+                *zip(self.gears[1:], self.gears[:-1], strict=True),
+            )
+        }
+        first = self.runners[(self.gears[0], self.gears[1])].simulator
+        values = first.values(overrides)
+        self.values = values
+        self.p = first.parameter_vector(values)
+        calibration_mass = d.estimator.prior_of("m_veh", values["m_veh"])[0]
+        self.powertrain = Powertrain(d, calibration_mass)
+        self.r_dyn = quantity(d, "vehicle", "r_dyn").value
+        self.zeta0 = values[naming.GRADE]
+        self._gear_model: dict[int, tuple[HybridSimulator, str, Any]] = {}
+        parts = drivetrain_parts(d)
+        self._wheel_parts = parts
+
+    # ------------------------------------------------------------------ gear models
+
+    def gear_model(self, k: int) -> tuple[HybridSimulator, str, Any]:
+        """(simulator, mode, functions) of gear ``k`` (index into ``gears``): the from-mode of
+        the upshift out of it (the to-mode of the last upshift for the top gear)."""
+        if k not in self._gear_model:
+            if k + 1 < len(self.gears):
+                runner = self.runners[(self.gears[k], self.gears[k + 1])]
+                mode = runner.simulator.hybrid.from_mode
+            else:
+                runner = self.runners[(self.gears[k - 1], self.gears[k])]
+                mode = runner.simulator.hybrid.to_mode
+            sim = runner.simulator
+            compiled = sim.modes[mode]
+            import casadi as ca
+
+            wheel = to_casadi(self._wheel_parts.wheel_inertia, compiled.mapping)
+            inertia = ca.Function("I_C", [compiled.p], [wheel])
+            if runner._energy is None:
+                runner._energy = energy_functions(sim)
+            powers, energies = runner._energy[mode]
+            self._gear_model[k] = (
+                sim,
+                mode,
+                {
+                    "inertia": float(inertia(self.p)),
+                    "powers": powers,
+                    "energies": energies,
+                    "speeds": sim.shaft_speeds(mode),
+                    "line": runner.line_forces(mode),
+                },
+            )
+        return self._gear_model[k]
+
+    # ------------------------------------------------------------------ the drive
+
+    def run(self, rtol: float = 1e-7, atol: float = 1e-8) -> DriveResult:
+        """Drive the cycle from rest in the lowest gear (module docstring)."""
+        started = time.perf_counter()
+        cycle = self.cycle
+        knots = [float(t) for t in cycle.t]
+        t = 0.0
+        k = 0
+        sim, mode, fns = self.gear_model(0)
+        x = np.zeros(sim.modes[mode].n)
+        integral = 0.0
+        distance = 0.0
+        works = Works()
+        records: list[dict[str, float]] = []
+        shifts: list[ShiftRecord] = []
+        last_shift = -math.inf
+        failure = ""
+        names = [v.name for v in sim.hybrid.modes[mode].model.states]
+        wheel = names.index(naming.WHEEL_SPEED)
+        e_start = self._energies(k, x)
+        segments = 0
+        while t < knots[-1] - 1e-9 and not failure:
+            sim, mode, fns = self.gear_model(k)
+            compiled = sim.modes[mode]
+            n = compiled.n
+            t_next = knots[int(np.searchsorted(knots, t, side="right"))]
+            v_now = x[wheel] * self.r_dyn
+            if float(cycle.speed(t)) == 0.0 and float(cycle.speed(t_next)) == 0.0:
+                if v_now < STANDSTILL_SPEED:
+                    # the brake holds the vehicle: what kinetic and spring energy is left goes
+                    # into the brake
+                    energy = self._energies(k, x)
+                    works.brake += float(energy.sum())
+                    x = np.zeros(n)
+                    integral = 0.0
+                    if k != 0:
+                        k = 0  # stopped: the TCU has shifted down to the lowest gear
+                        first_sim, first_mode, _ = self.gear_model(0)
+                        x = np.zeros(first_sim.modes[first_mode].n)
+                    self._record_rest(records, t, t_next, k, distance)
+                    t = t_next
+                    continue
+            segment = _GearSegment(self, k, fns, compiled)
+            events: list[Any] = []
+            if t - last_shift >= MIN_DWELL:
+                if k + 1 < len(self.gears):
+                    events.append(segment.upshift)
+                if k > 0:
+                    events.append(segment.downshift)
+            t_stop = t_next
+            if t - last_shift < MIN_DWELL:
+                t_stop = min(t_next, last_shift + MIN_DWELL)
+            y0 = np.concatenate([x, [integral, distance], np.zeros(5)])
+            sol = solve_ivp(
+                segment.rhs,
+                (t, t_stop),
+                y0,
+                method="RK45",
+                rtol=rtol,
+                atol=atol,
+                events=events or None,
+                dense_output=True,
+            )
+            segments += 1
+            if sol.status == -1:
+                failure = f"integration failed at t = {sol.t[-1]:.3f} s in gear {self.gears[k]}"
+                break
+            t_end = float(sol.t[-1])
+            self._record_dense(records, t, t_end, sol, segment.control, n, k, wheel)
+            y = sol.y[:, -1]
+            x, integral, distance = y[:n], y[n], y[n + 1]
+            works.input += y[n + 2]
+            works.friction += y[n + 3]
+            works.damper += y[n + 4]
+            works.road += y[n + 5]
+            works.brake += y[n + 6]
+            t = t_end
+            if self.progress is not None:
+                self.progress(t)
+            if sol.status != 1:
+                continue
+            fired = next(i for i, times in enumerate(sol.t_events) if len(times))
+            name = events[fired].__name__
+            target = k + 1 if name == "upshift" else k - 1
+            split, _ = segment.control(t, y)
+            runner = self.runners[(self.gears[k], self.gears[target])]
+            outcome = runner.run(
+                t_start=t,
+                speeds=np.asarray(fns["speeds"](x)).ravel(),
+                phi=x[names.index(naming.TWIST)],
+                omega_c=x[wheel],
+                split=split,
+                p=self.p,
+                zeta=self._zeta(distance) - self.zeta0,
+                calibration=self._calibration_vector(runner),
+                kind=name,
+                wheel_inertia=fns["inertia"],
+                v_ref=cycle.speed,
+                distance_start=distance,
+            )
+            shifts.append(outcome.record)
+            works.input += outcome.audit.input_work
+            works.friction += outcome.audit.friction_dissipation
+            works.damper += outcome.audit.damper_dissipation
+            works.road += outcome.audit.road_work
+            works.brake += outcome.brake_work
+            distance += outcome.distance
+            for row in outcome.samples:
+                records.append(row | {"gear": float(k if row["t"] < outcome.t_end else target)})
+            if outcome.failure:
+                failure = outcome.failure
+                break
+            k = target
+            sim, mode, fns = self.gear_model(k)
+            x = self._state_from(k, outcome.speeds, outcome.phi, outcome.omega_c)
+            t = outcome.t_end
+            last_shift = t
+        # the stored energies at the ends (the hand-overs between gear and shift models keep
+        # the physical speeds, so they keep the energy; the audit's residual would show if not)
+        e_end = self._energies(k, x)
+        works.kinetic = float(e_end[0] - e_start[0])
+        works.spring = float(e_end[1] - e_start[1])
+        samples = _samples(records)
+        return DriveResult(
+            cycle=cycle,
+            gears=self.gears,
+            samples=samples,
+            shifts=shifts,
+            works=works,
+            wall_s=time.perf_counter() - started,
+            values=self.values,
+            failure=failure,
+            stats={"gear_segments": float(segments)},
+        )
+
+    # ------------------------------------------------------------------ helpers
+
+    def _inputs(self, fns: dict[str, Any], torque: float, distance: float) -> np.ndarray:
+        line = fns["line"]
+        return np.array([torque, *line, self._zeta(distance) - self.zeta0])
+
+    def _zeta(self, distance: float) -> float:
+        return self.zeta0 if self.grade is None else self.grade.zeta(distance)
+
+    def _calibration_vector(self, runner: Any) -> np.ndarray:
+        """The TCU's parameter vector for the shift plan: the description's values with the
+        calibration's prior mass (never the truth)."""
+        sim = runner.simulator
+        mass = self.d.estimator.prior_of("m_veh", self.values["m_veh"])[0]
+        nominal = sim.values()
+        nominal["m_veh"] = mass
+        return sim.parameter_vector(nominal)
+
+    def _energies(self, k: int, x: np.ndarray) -> np.ndarray:
+        _, _, fns = self.gear_model(k)
+        return np.asarray(fns["energies"](x, self.p)).ravel()
+
+    def _state_from(self, k: int, speeds: np.ndarray, phi: float, omega_c: float) -> np.ndarray:
+        sim, mode, fns = self.gear_model(k)
+        return state_from_speeds(sim, mode, speeds, phi, omega_c)
+
+    def _record_rest(
+        self, records: list[dict[str, float]], t0: float, t1: float, k: int, distance: float
+    ) -> None:
+        for t in np.arange(_first_sample(t0), t1, RECORD_STEP):
+            records.append(
+                {
+                    "t": float(t),
+                    "v_ref": float(self.cycle.speed(t)),
+                    "v": 0.0,
+                    "gear": float(k),
+                    "T_engine": 0.0,
+                    "T_e_machine": 0.0,
+                    "T_brake": 0.0,
+                    "pedal": 0.0,
+                    "omega_in": 0.0,
+                    "s": distance,
+                }
+            )
+
+    def _record_dense(
+        self,
+        records: list[dict[str, float]],
+        t0: float,
+        t1: float,
+        sol: Any,
+        control: Callable[[float, np.ndarray], tuple[Any, float]],
+        n: int,
+        k: int,
+        wheel: int,
+    ) -> None:
+        for t in np.arange(_first_sample(t0), t1, RECORD_STEP):
+            y = sol.sol(t)
+            split, omega_in = control(float(t), y)
+            records.append(
+                {
+                    "t": float(t),
+                    "v_ref": float(self.cycle.speed(t)),
+                    "v": float(y[wheel] * self.r_dyn),
+                    "gear": float(k),
+                    "T_engine": split.engine,
+                    "T_e_machine": split.e_machine,
+                    "T_brake": split.brake,
+                    "pedal": split.pedal,
+                    "omega_in": omega_in,
+                    "s": float(y[n + 1]),
+                }
+            )
+
+
+class _GearSegment:
+    """The closed loop in one gear: driver, torque split, brake, the gear mode's right-hand side
+    with the works as quadrature states, and the shift schedule's thresholds as events."""
+
+    def __init__(self, drive: DriveSimulator, k: int, fns: dict[str, Any], compiled: Any) -> None:
+        self.drive = drive
+        self.fns = fns
+        self.compiled = compiled
+        self.n = compiled.n
+        self.ratio = drive.ratios[k]
+        names = [v.name for v in compiled.mode.model.states]
+        self.wheel = names.index(naming.WHEEL_SPEED)
+        self.input_index = [s.name for s in drive.d.shafts].index(drive.d.input_shaft)
+        self.schedule = drive.d.drive.schedule
+        self.upshift.__func__.terminal = True  # type: ignore[attr-defined]
+        self.upshift.__func__.direction = 1  # type: ignore[attr-defined]
+        self.downshift.__func__.terminal = True  # type: ignore[attr-defined]
+        self.downshift.__func__.direction = -1  # type: ignore[attr-defined]
+
+    def control(self, t: float, y: np.ndarray) -> tuple[Any, float]:
+        """(torque split, ω_in) at the state y = [x, ∫(v_ref − v), s, works]."""
+        drive = self.drive
+        x = y[: self.n]
+        omega_in = float(self.fns["speeds"](x)[self.input_index])
+        v = x[self.wheel] * drive.r_dyn
+        force = drive.powertrain.wheel_force(
+            float(drive.cycle.speed(t)), drive.cycle.acceleration(t), v, y[self.n]
+        )
+        return drive.powertrain.split(force, self.ratio, omega_in), omega_in
+
+    def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
+        drive, n = self.drive, self.n
+        x = y[:n]
+        split, _ = self.control(t, y)
+        u = drive._inputs(self.fns, split.input_torque, y[n + 1])
+        xdot = self.compiled.rhs(x, u, drive.p)
+        omega_c = x[self.wheel]
+        brake = split.brake * math.tanh(omega_c / BRAKE_SPEED)
+        xdot[self.wheel] -= brake / self.fns["inertia"]
+        v = omega_c * drive.r_dyn
+        powers = np.asarray(self.fns["powers"](x, u, drive.p)).ravel()
+        return np.concatenate(
+            [xdot, [float(drive.cycle.speed(t)) - v, v], powers, [brake * omega_c]]
+        )
+
+    def upshift(self, t: float, y: np.ndarray) -> float:
+        split, omega_in = self.control(t, y)
+        return omega_in - self.schedule.up(split.pedal)
+
+    def downshift(self, t: float, y: np.ndarray) -> float:
+        split, omega_in = self.control(t, y)
+        return omega_in - self.schedule.down(split.pedal)
+
+
+def _first_sample(t0: float) -> float:
+    return math.ceil(t0 / RECORD_STEP - 1e-9) * RECORD_STEP
+
+
+def _samples(records: list[dict[str, float]]) -> dict[str, np.ndarray]:
+    records = sorted(records, key=lambda r: r["t"])
+    keys = records[0].keys() if records else ()
+    return {key: np.array([r[key] for r in records]) for key in keys}
+
+
+def simulate_drive(
+    d: GearboxDescription,
+    cycle: Cycle,
+    grade: GradeProfile | None = None,
+    overrides: Mapping[str, float] | None = None,
+    progress: Callable[[float], None] | None = None,
+) -> DriveResult:
+    """Drive ``cycle`` with the description's vehicle (or ``overrides``), module docstring."""
+    return DriveSimulator(d, cycle, grade, overrides, progress).run()
