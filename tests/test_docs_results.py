@@ -53,17 +53,58 @@ def test_a_result_table_is_its_json_rendered_by_the_command_make_results_runs(
     assert command.removeprefix("gearsym ") in makefile
 
 
+#: Every estimator table and the page that includes it.
+EXPECTED = {
+    "fleet_ekf_2_3.md": "fleet.md",
+    "fleet_ekf_2_3_map_scale.md": "fleet.md",
+    "montecarlo_ekf_2_3.md": "ekf.md",
+    "montecarlo_ekf_2_3_1ms.md": "ekf.md",
+    "montecarlo_ekf_2_3_prior_draws.md": "ekf.md",
+    "montecarlo_ekf_2_3_reference_modes.md": "ekf.md",
+    "montecarlo_ekf_2_3_prior_draws_reference_modes.md": "euio.md",
+    "montecarlo_euio_2_3.md": "euio.md",
+    "montecarlo_euio_2_3_reference_modes.md": "euio.md",
+    "montecarlo_euio_2_3_prior_draws.md": "euio.md",
+    "montecarlo_euio_2_3_prior_draws_reference_modes.md": "euio.md",
+    "uio_2_3_10ms.md": "uio.md",
+    "uio_2_3_1ms.md": "uio.md",
+    "uio_2_3_noise.md": "uio.md",
+}
+
+
 def test_the_docs_have_every_estimator_table():
-    names = {table.name for table, _, _ in TABLES}
-    assert {
-        "fleet_ekf_2_3.md",
-        "fleet_ekf_2_3_map_scale.md",
-        "montecarlo_ekf_2_3.md",
-        "montecarlo_euio_2_3.md",
-        "uio_2_3_10ms.md",
-        "uio_2_3_1ms.md",
-        "uio_2_3_noise.md",
-    } <= names
+    assert {table.name for table, _, _ in TABLES} == set(EXPECTED)
+    for name, page in EXPECTED.items():
+        text = (RESULTS.parent / page).read_text(encoding="utf-8")
+        assert f'--8<-- "results/{name}"' in text, (page, name)
+
+
+def test_a_new_monte_carlo_table_runs_into_the_folder_it_is_named_after():
+    """The tables added with the switch table (issue 25) are written into a folder of their
+    own name, so ``make results`` copies each to the file it is named after."""
+    for table, _, _ in TABLES:
+        if table.stem.startswith("montecarlo_") and table.stem not in (
+            "montecarlo_ekf_2_3",
+            "montecarlo_euio_2_3",
+        ):
+            assert _command(table).endswith(f"--out build/results/{table.stem}"), table.name
+
+
+def test_the_switch_table_is_the_json_s_events():
+    """With the filter's own modes the Monte-Carlo table says, per switch of the truth, in how
+    many runs the filter found it and how late, from the JSON's ``events``."""
+    table = RESULTS / "montecarlo_ekf_2_3.md"
+    data = json.loads(table.with_suffix(".json").read_text(encoding="utf-8"))
+    text = table.read_text(encoding="utf-8")
+    assert data["events"]
+    for ev in data["events"]:
+        if ev.get("t_reference") is None:
+            continue
+        row = (
+            f"| {ev['element']} {ev['kind']} | {ev['t_reference']:.4f} s | "
+            f"{ev['detected_runs']} of {ev['runs']} runs | {ev['error_ms_mean']:+.1f} ms |"
+        )
+        assert row in text, row
 
 
 def test_a_hand_edit_is_caught():
