@@ -85,7 +85,8 @@ results: $(STAMP)
 	done
 # The analyses' tables (about 3 min more): the Fisher information of the 2-3 on the hybrid model
 # in both views (docs/hybrid.md), the open-loop study restarted per phase and carried over
-# (docs/sensitivities.md), and the MISRA findings of generated/c (docs/misra.md; cppcheck).
+# (docs/sensitivities.md), the freewheel shifts against the reference (docs/hybrid.md), and the
+# MISRA findings of generated/c (docs/misra.md; cppcheck).
 	rm -rf build/results/fim_hybrid_2_3 build/results/fim_hybrid_2_3_known_initial_state
 	$(BIN)/gearsym fim --out build/results/fim_hybrid_2_3
 	$(BIN)/gearsym fim --known-initial-state --out build/results/fim_hybrid_2_3_known_initial_state
@@ -96,6 +97,10 @@ results: $(STAMP)
 	  cp build/results/fim_$$run/fim.json $(RESULTS)/fim_$$run.json; \
 	  cp build/results/fim_$$run/fim.md $(RESULTS)/fim_$$run.md; \
 	done
+	rm -rf build/results/one_way_simpson
+	$(BIN)/python -m gearsym.validation.sim.one_way_comparison --out build/results/one_way_simpson
+	cp build/results/one_way_simpson/one_way.json $(RESULTS)/one_way_simpson.json
+	cp build/results/one_way_simpson/one_way.md $(RESULTS)/one_way_simpson.md
 	rm -rf build/results/misra
 	$(BIN)/python -m gearsym.validation.checks.misra --out build/results/misra
 	cp build/results/misra/misra.json $(RESULTS)/misra.json
