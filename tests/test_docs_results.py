@@ -113,3 +113,56 @@ def test_a_hand_edit_is_caught():
     data = json.loads(table.with_suffix(".json").read_text(encoding="utf-8"))
     data["parameters"]["m_veh"]["final"]["rmse"] *= 1.5
     assert fleet_markdown(data, _command(table)) != table.read_text(encoding="utf-8")
+
+
+#: The tables typed into the pages on purpose: inputs and definitions (targets, limits, set
+#: kinds, the thesis' printed values, published ratios, folders) and the exact findings of the
+#: analyses that tests assert (existence, rank), none a measured number. Any other table of a
+#: page is a result and is written by a command (``make results``) into ``docs/results``.
+TYPED_TABLES = {
+    ("architecture.md", "| folder | modules | what it holds |"),
+    ("architecture.md", "| stage | module | thesis |"),
+    ("development.md", "| target | what it does |"),
+    ("ekf.md", "| case | reproduce | tested |"),
+    ("euio.md", "| parameter | gear 2 | torque phase | speed phase | gear 3 |"),
+    (
+        "examples.md",
+        "| box | file | source of layout, ratios / teeth | ratios (reverse; forward) |",
+    ),
+    ("limits.md", "| what | limit | why |"),
+    ("observability.md", "| set | (4.12) | reproduce |"),
+    (
+        "set-kinds.md",
+        "| kind | stick diagram of a one-set description | Willis relation (carrier frame) |",
+    ),
+    ("set-kinds.md", "| kind | extra keys | checked (module units) |"),
+    ("thesis-slips.md", "| where | printed | status | test / why |"),
+    ("uio.md", "| unknown inputs (2-3 shift) | gear 2 | torque and speed phase | gear 3 |"),
+}
+
+
+def _table_headers(text: str) -> list[str]:
+    """The header row of every Markdown table outside fenced code."""
+    lines, fenced, headers = text.splitlines(), False, []
+    for line, following in zip(lines, [*lines[1:], ""], strict=True):
+        if line.lstrip().startswith("```"):
+            fenced = not fenced
+        elif not fenced and line.startswith("|") and re.fullmatch(r"\|[-:| ]+\|", following):
+            headers.append(line)
+    return headers
+
+
+def test_no_result_table_is_typed():
+    """Issue 25: a table of measured results is written by the command that measures it. A
+    page's typed table is one of the inputs and definitions above; a new table of results goes
+    to ``make results`` and is included (``--8<-- "results/..."``)."""
+    root = RESULTS.parents[1]
+    pages = [*sorted((root / "docs").glob("*.md")), root / "README.md"]
+    found = {
+        (page.name, header)
+        for page in pages
+        for header in _table_headers(page.read_text(encoding="utf-8"))
+    }
+    assert not found - TYPED_TABLES, "typed tables: write them with a command (make results)"
+    assert not TYPED_TABLES - found, "gone from the pages: remove them from TYPED_TABLES"
+    assert _table_headers("| a |\n|---|\n| 1 |\n```\n| b |\n|---|\n```\n") == ["| a |"]
