@@ -135,3 +135,23 @@ def test_the_codegen_harness_needs_eigen_only_with_symforce(symforce):
 
     source = bench_codegen_speed.harness_source([], symforce=symforce)
     assert ("Eigen" in source) == symforce
+
+
+def test_the_estimate_command_parses_and_prints_only():
+    """``gearsym/cmd_estimate.py`` reads the files and hands a request to the library's
+    workflow (``gearsym.load().estimate`` calls the same one, tests/test_estimate_workflow.py):
+    it imports no numeric library and nothing of the estimation but the workflow."""
+    tree = ast.parse((ROOT / "gearsym" / "cmd_estimate.py").read_text(encoding="utf-8"))
+    imported = {
+        node.module if isinstance(node, ast.ImportFrom) else alias.name
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Import | ast.ImportFrom)
+        for alias in node.names
+    }
+    validation = {m for m in imported if m and m.startswith("gearsym.validation")}
+    assert validation == {
+        "gearsym.validation.sim.scenario",
+        "gearsym.validation.sim.fleet",
+        "gearsym.validation.studies.estimation.workflow",
+    }
+    assert not {m for m in imported if m and m.split(".")[0] in ("numpy", "scipy", "casadi")}
