@@ -61,6 +61,20 @@ results: $(STAMP)
 	$(BIN)/gearsym estimate --filter euio --runs 50 --seed 0 --out build/results/euio_2_3
 	cp build/results/euio_2_3/euio.json $(RESULTS)/montecarlo_euio_2_3.json
 	cp build/results/euio_2_3/monte_carlo.md $(RESULTS)/montecarlo_euio_2_3.md
+# The same filters with the truth's modes, at 1 ms, with initial estimates drawn from the prior
+# (docs/ekf.md, docs/euio.md; about 5-15 s each).
+	rm -rf build/results/montecarlo_*
+	$(BIN)/gearsym estimate --filter ekf --runs 50 --seed 0 --modes reference --out build/results/montecarlo_ekf_2_3_reference_modes
+	$(BIN)/gearsym estimate --filter ekf --runs 10 --seed 0 --sample-time 0.001 --out build/results/montecarlo_ekf_2_3_1ms
+	$(BIN)/gearsym estimate --filter ekf --runs 50 --seed 0 --initial-from-prior --out build/results/montecarlo_ekf_2_3_prior_draws
+	$(BIN)/gearsym estimate --filter ekf --runs 50 --seed 0 --initial-from-prior --modes reference --out build/results/montecarlo_ekf_2_3_prior_draws_reference_modes
+	$(BIN)/gearsym estimate --filter euio --runs 50 --seed 0 --modes reference --out build/results/montecarlo_euio_2_3_reference_modes
+	$(BIN)/gearsym estimate --filter euio --runs 50 --seed 0 --initial-from-prior --out build/results/montecarlo_euio_2_3_prior_draws
+	$(BIN)/gearsym estimate --filter euio --runs 50 --seed 0 --initial-from-prior --modes reference --out build/results/montecarlo_euio_2_3_prior_draws_reference_modes
+	for run in build/results/montecarlo_*; do \
+	  cp $$run/*.json $(RESULTS)/$$(basename $$run).json; \
+	  cp $$run/monte_carlo.md $(RESULTS)/$$(basename $$run).md; \
+	done
 	rm -rf build/results/uio_2_3_10ms build/results/uio_2_3_1ms build/results/uio_2_3_noise
 	$(BIN)/gearsym estimate --filter uio --out build/results/uio_2_3_10ms
 	$(BIN)/gearsym estimate --filter uio --sample-time 0.001 --out build/results/uio_2_3_1ms
@@ -71,7 +85,8 @@ results: $(STAMP)
 	done
 # The analyses' tables (about 3 min more): the Fisher information of the 2-3 on the hybrid model
 # in both views (docs/hybrid.md), the open-loop study restarted per phase and carried over
-# (docs/sensitivities.md), and the MISRA findings of generated/c (docs/misra.md; cppcheck).
+# (docs/sensitivities.md), the freewheel shifts against the reference (docs/hybrid.md), and the
+# MISRA findings of generated/c (docs/misra.md; cppcheck).
 	rm -rf build/results/fim_hybrid_2_3 build/results/fim_hybrid_2_3_known_initial_state
 	$(BIN)/gearsym fim --out build/results/fim_hybrid_2_3
 	$(BIN)/gearsym fim --known-initial-state --out build/results/fim_hybrid_2_3_known_initial_state
@@ -82,6 +97,10 @@ results: $(STAMP)
 	  cp build/results/fim_$$run/fim.json $(RESULTS)/fim_$$run.json; \
 	  cp build/results/fim_$$run/fim.md $(RESULTS)/fim_$$run.md; \
 	done
+	rm -rf build/results/one_way_simpson
+	$(BIN)/python -m gearsym.validation.sim.one_way_comparison --out build/results/one_way_simpson
+	cp build/results/one_way_simpson/one_way.json $(RESULTS)/one_way_simpson.json
+	cp build/results/one_way_simpson/one_way.md $(RESULTS)/one_way_simpson.md
 	rm -rf build/results/misra
 	$(BIN)/python -m gearsym.validation.checks.misra --out build/results/misra
 	cp build/results/misra/misra.json $(RESULTS)/misra.json

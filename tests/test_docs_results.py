@@ -53,17 +53,58 @@ def test_a_result_table_is_its_json_rendered_by_the_command_make_results_runs(
     assert command.removeprefix("gearsym ") in makefile
 
 
+#: Every estimator table and the page that includes it.
+EXPECTED = {
+    "fleet_ekf_2_3.md": "fleet.md",
+    "fleet_ekf_2_3_map_scale.md": "fleet.md",
+    "montecarlo_ekf_2_3.md": "ekf.md",
+    "montecarlo_ekf_2_3_1ms.md": "ekf.md",
+    "montecarlo_ekf_2_3_prior_draws.md": "ekf.md",
+    "montecarlo_ekf_2_3_reference_modes.md": "ekf.md",
+    "montecarlo_ekf_2_3_prior_draws_reference_modes.md": "euio.md",
+    "montecarlo_euio_2_3.md": "euio.md",
+    "montecarlo_euio_2_3_reference_modes.md": "euio.md",
+    "montecarlo_euio_2_3_prior_draws.md": "euio.md",
+    "montecarlo_euio_2_3_prior_draws_reference_modes.md": "euio.md",
+    "uio_2_3_10ms.md": "uio.md",
+    "uio_2_3_1ms.md": "uio.md",
+    "uio_2_3_noise.md": "uio.md",
+}
+
+
 def test_the_docs_have_every_estimator_table():
-    names = {table.name for table, _, _ in TABLES}
-    assert {
-        "fleet_ekf_2_3.md",
-        "fleet_ekf_2_3_map_scale.md",
-        "montecarlo_ekf_2_3.md",
-        "montecarlo_euio_2_3.md",
-        "uio_2_3_10ms.md",
-        "uio_2_3_1ms.md",
-        "uio_2_3_noise.md",
-    } <= names
+    assert {table.name for table, _, _ in TABLES} == set(EXPECTED)
+    for name, page in EXPECTED.items():
+        text = (RESULTS.parent / page).read_text(encoding="utf-8")
+        assert f'--8<-- "results/{name}"' in text, (page, name)
+
+
+def test_a_new_monte_carlo_table_runs_into_the_folder_it_is_named_after():
+    """The tables added with the switch table (issue 25) are written into a folder of their
+    own name, so ``make results`` copies each to the file it is named after."""
+    for table, _, _ in TABLES:
+        if table.stem.startswith("montecarlo_") and table.stem not in (
+            "montecarlo_ekf_2_3",
+            "montecarlo_euio_2_3",
+        ):
+            assert _command(table).endswith(f"--out build/results/{table.stem}"), table.name
+
+
+def test_the_switch_table_is_the_json_s_events():
+    """With the filter's own modes the Monte-Carlo table says, per switch of the truth, in how
+    many runs the filter found it and how late, from the JSON's ``events``."""
+    table = RESULTS / "montecarlo_ekf_2_3.md"
+    data = json.loads(table.with_suffix(".json").read_text(encoding="utf-8"))
+    text = table.read_text(encoding="utf-8")
+    assert data["events"]
+    for ev in data["events"]:
+        if ev.get("t_reference") is None:
+            continue
+        row = (
+            f"| {ev['element']} {ev['kind']} | {ev['t_reference']:.4f} s | "
+            f"{ev['detected_runs']} of {ev['runs']} runs | {ev['error_ms_mean']:+.1f} ms |"
+        )
+        assert row in text, row
 
 
 def test_a_hand_edit_is_caught():
@@ -72,3 +113,56 @@ def test_a_hand_edit_is_caught():
     data = json.loads(table.with_suffix(".json").read_text(encoding="utf-8"))
     data["parameters"]["m_veh"]["final"]["rmse"] *= 1.5
     assert fleet_markdown(data, _command(table)) != table.read_text(encoding="utf-8")
+
+
+#: The tables typed into the pages on purpose: inputs and definitions (targets, limits, set
+#: kinds, the thesis' printed values, published ratios, folders) and the exact findings of the
+#: analyses that tests assert (existence, rank), none a measured number. Any other table of a
+#: page is a result and is written by a command (``make results``) into ``docs/results``.
+TYPED_TABLES = {
+    ("architecture.md", "| folder | modules | what it holds |"),
+    ("architecture.md", "| stage | module | thesis |"),
+    ("development.md", "| target | what it does |"),
+    ("ekf.md", "| case | reproduce | tested |"),
+    ("euio.md", "| parameter | gear 2 | torque phase | speed phase | gear 3 |"),
+    (
+        "examples.md",
+        "| box | file | source of layout, ratios / teeth | ratios (reverse; forward) |",
+    ),
+    ("limits.md", "| what | limit | why |"),
+    ("observability.md", "| set | (4.12) | reproduce |"),
+    (
+        "set-kinds.md",
+        "| kind | stick diagram of a one-set description | Willis relation (carrier frame) |",
+    ),
+    ("set-kinds.md", "| kind | extra keys | checked (module units) |"),
+    ("thesis-slips.md", "| where | printed | status | test / why |"),
+    ("uio.md", "| unknown inputs (2-3 shift) | gear 2 | torque and speed phase | gear 3 |"),
+}
+
+
+def _table_headers(text: str) -> list[str]:
+    """The header row of every Markdown table outside fenced code."""
+    lines, fenced, headers = text.splitlines(), False, []
+    for line, following in zip(lines, [*lines[1:], ""], strict=True):
+        if line.lstrip().startswith("```"):
+            fenced = not fenced
+        elif not fenced and line.startswith("|") and re.fullmatch(r"\|[-:| ]+\|", following):
+            headers.append(line)
+    return headers
+
+
+def test_no_result_table_is_typed():
+    """Issue 25: a table of measured results is written by the command that measures it. A
+    page's typed table is one of the inputs and definitions above; a new table of results goes
+    to ``make results`` and is included (``--8<-- "results/..."``)."""
+    root = RESULTS.parents[1]
+    pages = [*sorted((root / "docs").glob("*.md")), root / "README.md"]
+    found = {
+        (page.name, header)
+        for page in pages
+        for header in _table_headers(page.read_text(encoding="utf-8"))
+    }
+    assert not found - TYPED_TABLES, "typed tables: write them with a command (make results)"
+    assert not TYPED_TABLES - found, "gone from the pages: remove them from TYPED_TABLES"
+    assert _table_headers("| a |\n|---|\n| 1 |\n```\n| b |\n|---|\n```\n") == ["| a |"]

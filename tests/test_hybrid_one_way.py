@@ -78,6 +78,15 @@ def _coast_text() -> str:
     return text[:start]
 
 
+def test_the_coast_scenario_file_is_the_upshift_in_coast():
+    """tests/data/simpson_one_way_coast.toml (the freewheel comparison of docs/hybrid.md runs
+    it) is the scenario this module builds from the upshift's text."""
+    import tomllib
+
+    text = (DATA / "simpson_one_way_coast.toml").read_text(encoding="utf-8")
+    assert tomllib.loads(text) == tomllib.loads(_coast_text())
+
+
 @pytest.fixture(scope="module")
 def coast(box, tmp_path_factory):
     return _run(box, UPSHIFT, _coast_text(), tmp_path_factory.mktemp("coast"))

@@ -40,7 +40,9 @@ def monte_carlo_markdown(data: dict[str, Any], command: str) -> str:
         f"{', '.join(f'{r:g}' for r in data['relative_noise'])}; element modes: "
         f"{data.get('modes', 'filter')}; initial estimate: {data.get('initial_estimate', '—')}",
         f"- NEES mean {_band(data.get('nees_mean'), data.get('nees_band'))}; NIS mean "
-        f"{_band(data.get('nis_mean'), data.get('nis_band'))}",
+        f"{_band(data.get('nis_mean'), data.get('nis_band'))}{_nees_inside(data)}",
+        f"- one run {_g(data.get('seconds_per_run'), 2)} s on the machine that ran the command"
+        f"{_switches_per_run(data)}",
         "- bound: the posterior Cramér–Rao bound under the filter's own assumptions (constant "
         "parameters, exact model); with process noise: the filter's own random walks and model "
         "error; efficiency = RMSE / bound",
@@ -60,7 +62,51 @@ def monte_carlo_markdown(data: dict[str, Any], command: str) -> str:
                 f"{_g(s['efficiency_process_noise'])} | "
                 f"{'yes' if s['identifiable'] else 'no'} |"
             )
+    out += _events_table(data.get("events") or [])
     return "\n".join(out) + "\n"
+
+
+def _nees_inside(data: dict[str, Any]) -> str:
+    share = data.get("nees_inside_95")
+    if share is None:
+        return ""
+    return f"; samples whose {data['runs']}-run mean NEES lies inside its band: {share * 100:.0f} %"
+
+
+def _switches_per_run(data: dict[str, Any]) -> str:
+    mean = data.get("mode_switches_mean")
+    if mean is None or data.get("modes") != "filter":
+        return ""
+    return f"; mode switches decided per run: {mean:g} (mean)"
+
+
+def _events_table(events: Sequence[dict[str, Any]]) -> list[str]:
+    """Each switch of the truth: in how many runs the filter found it and how late (the
+    filter's time minus the reference's, in ms); then the switches the truth does not have."""
+    if not events:
+        return []
+    out = [
+        "",
+        "| switch of the reference | at | detected in | error mean | largest error |",
+        "|---|---|---|---|---|",
+    ]
+    extra = "none"
+    for ev in events:
+        if ev.get("t_reference") is None:
+            extra = f"{ev['count_mean']:.3g} per run (mean)"
+            continue
+        detected = ev["detected_runs"]
+        errors = (
+            f"{ev['error_ms_mean']:+.1f} ms | {ev['error_ms_max_abs']:.1f} ms"
+            if detected
+            else "— | —"
+        )
+        out.append(
+            f"| {ev['element']} {ev['kind']} | {ev['t_reference']:.4f} s | "
+            f"{detected} of {ev['runs']} runs | {errors} |"
+        )
+    out += ["", f"Switches the filter decided that the reference does not have: {extra}."]
+    return out
 
 
 def uio_markdown(data: dict[str, Any], command: str) -> str:
