@@ -174,7 +174,7 @@ def gearsym(*args: str) -> subprocess.CompletedProcess:
 
 def test_cli_drive_json_and_files(tmp_path):
     out = tmp_path / "drive"
-    run = gearsym("drive", "--cycle", "udds", "--duration", "25", "--out", str(out), "--json")
+    run = gearsym(*["drive", "--cycle", "udds", "--duration", "25", "--out", str(out), "--json"])
     assert run.returncode == 0, run.stderr
     data = json.loads(run.stdout)
     assert data["cycle"]["name"] == "udds[0:25 s]"
