@@ -105,6 +105,12 @@ results: $(STAMP)
 	$(BIN)/python -m gearsym.validation.checks.misra --out build/results/misra
 	cp build/results/misra/misra.json $(RESULTS)/misra.json
 	cp build/results/misra/misra.md $(RESULTS)/misra.md
+# A whole WLTC class 3b drive (docs/drive.md; about 5 min, the Python reference simulation).
+	rm -rf build/results/drive_wltc3b
+	$(BIN)/gearsym drive --cycle wltc3b --out build/results/drive_wltc3b
+	cp build/results/drive_wltc3b/drive.json $(RESULTS)/drive_wltc3b.json
+	cp build/results/drive_wltc3b/drive.md $(RESULTS)/drive_wltc3b.md
+	cp build/results/drive_wltc3b/drive.png $(RESULTS)/drive_wltc3b.png
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -17,7 +17,7 @@ __all__ = ["cmd_drive", "register"]
 
 def cmd_drive(args: argparse.Namespace) -> int:
     """Drive the cycle with the description's vehicle; print the summary (or ``--json``) and
-    write drive.json, drive.csv, shifts.csv and drive.png to ``--out``."""
+    write drive.json, drive.md, drive.csv, shifts.csv and drive.png to ``--out``."""
     import json
     import sys
 
@@ -54,6 +54,8 @@ def cmd_drive(args: argparse.Namespace) -> int:
         finally:
             bar.done()
         from gearsym.validation.sim.drive_report import (
+            drive_command,
+            drive_markdown,
             format_drive_summary,
             plot_drive,
             write_drive,
@@ -63,6 +65,8 @@ def cmd_drive(args: argparse.Namespace) -> int:
         data["calibration"] = d.drive.to_dict()
         (out.path / "drive.json").write_text(json.dumps(data, indent=2) + "\n")
         write_drive(result, out.path)
+        command = drive_command(args.cycle, args.duration)
+        (out.path / "drive.md").write_text(drive_markdown(data, command))
         plot_drive(result, out.path / "drive.png")
         paths = out.commit()
     if args.json:

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from gearsym.validation.sim.drive_report import drive_markdown
 from gearsym.validation.studies.estimation.fleet_report import fleet_markdown
 from gearsym.validation.studies.estimation.markdown import monte_carlo_markdown, uio_markdown
 
@@ -23,6 +24,7 @@ KINDS: tuple[tuple[str, Callable[[dict[str, Any], str], str], str], ...] = (
     ("fleet_*.md", fleet_markdown, "--fleet"),
     ("montecarlo_*.md", monte_carlo_markdown, "--runs"),
     ("uio_*.md", uio_markdown, "--filter uio"),
+    ("drive_*.md", drive_markdown, "drive --cycle"),
 )
 
 TABLES = [
@@ -46,7 +48,7 @@ def test_a_result_table_is_its_json_rendered_by_the_command_make_results_runs(
     table, render, marker
 ):
     command = _command(table)
-    assert command.startswith("gearsym estimate ") and marker in command
+    assert command.startswith(("gearsym estimate ", "gearsym drive ")) and marker in command
     data = json.loads(table.with_suffix(".json").read_text(encoding="utf-8"))
     assert render(data, command) == table.read_text(encoding="utf-8")
     makefile = (RESULTS.parents[1] / "Makefile").read_text(encoding="utf-8")
@@ -69,6 +71,7 @@ EXPECTED = {
     "uio_2_3_10ms.md": "uio.md",
     "uio_2_3_1ms.md": "uio.md",
     "uio_2_3_noise.md": "uio.md",
+    "drive_wltc3b.md": "drive.md",
 }
 
 
@@ -120,6 +123,7 @@ def test_a_hand_edit_is_caught():
 #: analyses that tests assert (existence, rank), none a measured number. Any other table of a
 #: page is a result and is written by a command (``make results``) into ``docs/results``.
 TYPED_TABLES = {
+    ("drive.md", "| name | source | published facts |"),
     ("architecture.md", "| folder | modules | what it holds |"),
     ("architecture.md", "| stage | module | thesis |"),
     ("development.md", "| target | what it does |"),

@@ -6,11 +6,18 @@ from __future__ import annotations
 import csv
 import io
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from gearsym.validation.sim.drive import DriveResult
 
-__all__ = ["format_drive_summary", "plot_drive", "write_drive"]
+__all__ = [
+    "drive_command",
+    "drive_markdown",
+    "format_drive_summary",
+    "plot_drive",
+    "write_drive",
+]
 
 
 def format_drive_summary(result: DriveResult) -> str:
@@ -131,3 +138,59 @@ def plot_drive(result: DriveResult, path: Path) -> Path:
     axes[4].set_ylabel("friction (kJ)")
     axes[4].set_xlabel("t (s)")
     return save(fig, path)
+
+
+def drive_command(cycle: str, duration: float | None) -> str:
+    """The command line a drive's Markdown names as its writer."""
+    extra = f" --duration {duration:g}" if duration is not None else ""
+    return f"gearsym drive --cycle {cycle}{extra}"
+
+
+def drive_markdown(data: dict[str, Any], command: str) -> str:
+    """The drive's JSON as Markdown for the documentation, headed by the command that wrote it
+    (the docs include this file; nobody types its numbers)."""
+    cycle = data["cycle"]
+    energy = data["energy"]
+    shifts = data["shift_list"]
+    out = [
+        f"<!-- written by `{command}`; do not edit by hand: run the command again -->",
+        "",
+        f"*Written by `{command}`.*",
+        "",
+        f"- cycle {cycle['name']}: {cycle['duration_s']:.0f} s, {cycle['distance_km']:.3f} km, "
+        f"at most {cycle['v_max_kmh']:.1f} km/h; driven {data['distance_km']:.3f} km",
+        f"- speed tracking RMS {data['tracking_rms_kmh']:.2f} km/h, worst "
+        f"{data['tracking_max_kmh']:.2f} km/h",
+        f"- {data['shifts']} shifts, "
+        f"{sum(1 for s in shifts if not s['completed'])} not completed"
+        + (f"; failed: {data['failure']}" if data["failure"] else ""),
+        f"- energy audit residual {data['energy_residual']:.1e} of the losses (input "
+        f"{energy['input_J'] / 1e3:.0f} kJ: road {energy['road_J'] / 1e3:.0f} kJ, clutches "
+        f"{energy['friction_J'] / 1e3:.1f} kJ, damper {energy['damper_J'] / 1e3:.1f} kJ, brake "
+        f"{energy['brake_J'] / 1e3:.1f} kJ, stored {energy['kinetic_change_J'] / 1e3:.1f} kJ)",
+        f"- wall time {data['wall_s']:.0f} s ({data['real_time_factor']:.1f}x real time): the "
+        "Python reference simulation on one core of the 2-core machine; the emitted-code drive "
+        "is not built yet",
+        "",
+        "Each kind of shift over the drive (open-loop shift plans from the calibration; jerk of "
+        "the vehicle acceleration low-pass filtered at 10 Hz):",
+        "",
+        "| shift | count | shift time median (s) | peak jerk median / max (m/s³) "
+        "| friction energy median / max (kJ) |",
+        "|---|---|---|---|---|",
+    ]
+    names = sorted(
+        {s["shift"] for s in shifts},
+        key=lambda n: (shifts[[s["shift"] for s in shifts].index(n)]["kind"], n),
+    )
+    for name in names:
+        group = [s for s in shifts if s["shift"] == name]
+        times = np.array([s["shift_time_s"] for s in group])
+        jerks = np.array([s["peak_jerk_m_s3"] for s in group])
+        energies = np.array([s["friction_energy_J"] for s in group]) / 1e3
+        out.append(
+            f"| {name} | {len(group)} | {np.nanmedian(times):.2f} | "
+            f"{np.median(jerks):.1f} / {np.max(jerks):.1f} | "
+            f"{np.median(energies):.2f} / {np.max(energies):.2f} |"
+        )
+    return "\n".join(out) + "\n"
