@@ -202,3 +202,52 @@ def test_cli_drive_bad_input_is_one_line(tmp_path, args, message):
     assert message in run.stderr
     assert len(run.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()
+
+
+@pytest.fixture(scope="module")
+def fleet_drive(description, tmp_path_factory):
+    """A fleet vehicle (heavier, other tolerances) on the short cycle: the TCU's calibration
+    apart from the truth."""
+    from gearsym.validation.sim.drive import DriveTruth
+    from gearsym.validation.sim.fleet import load_fleet
+
+    path = tmp_path_factory.mktemp("cycle") / "short.csv"
+    path.write_text(SHORT, encoding="utf-8")
+    draw = load_fleet(description).draw(10000)
+    truth = DriveTruth.from_draw(description, draw)
+    simulator = DriveSimulator(description, load_cycle(path), truth=truth)
+    return simulator, simulator.run()
+
+
+def test_fleet_vehicle_drive_keeps_calibration_and_truth_apart(fleet_drive, description):
+    simulator, result = fleet_drive
+    truth = simulator.truth
+    assert result.failure == ""
+    # the plant is the drawn vehicle, the TCU plans with the calibration's prior mass
+    assert result.values["m_veh"] == dict(truth.draw.values)["m_veh"]
+    assert simulator.calibration_values["m_veh"] == description.estimator.prior_of("m_veh", 0)[0]
+    w = result.works
+    assert abs(w.residual) <= 1e-6 * (w.friction + w.damper + abs(w.road) + w.brake)
+    # the μ of the truth is the map's times the draw's factor: the parameter values say so
+    scale = truth.mu_scale["K38"]
+    assert result.values["mu_38"] == pytest.approx(0.12 * scale)
+
+
+def test_tcu_log_is_what_the_tcu_commanded_on_its_grid(fleet_drive, description):
+    simulator, result = fleet_drive
+    log = result.log.arrays()
+    shifts = result.log.shifts()
+    t = log["t"]
+    assert np.allclose(np.diff(t), simulator.tcu_sample)
+    assert t[0] == 0.0 and t[-1] >= simulator.cycle.t[-1] - 0.011
+    line = description.drive.si("shift", "line_pressure")
+    gears = result.gears
+    in_gear = np.array([s == "" for s in shifts])
+    for i in np.flatnonzero(in_gear)[::50]:
+        closed = description.gear(gears[int(log["gear"][i])]).closed
+        for e in (e.name for e in description.shift_elements):
+            assert log[f"p_{e}"][i] == (line if e in closed else 0.0)
+    # μ has a truth only while an element slides: inside shifts, never in a gear
+    mu = np.column_stack([log[f"truth_mu_{e.name}"] for e in description.shift_elements])
+    assert not np.isfinite(mu[in_gear]).any()
+    assert np.isfinite(mu[~in_gear]).any()

@@ -38,18 +38,20 @@ from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.numeric import to_casadi
 from gearsym.symbolic.ratios import gear_ratio
 from gearsym.validation.sim.cycles import Cycle, GradeProfile
-from gearsym.validation.sim.drive_powertrain import Powertrain
+from gearsym.validation.sim.drive_log import TcuLog
+from gearsym.validation.sim.drive_powertrain import Powertrain, TorqueSplit
 from gearsym.validation.sim.drive_shift import (
     BRAKE_SPEED,
     ShiftRecord,
     ShiftRunner,
     state_from_speeds,
 )
+from gearsym.validation.sim.fleet import Actuators, FleetDraw, mu_scales, truth_description
 from gearsym.validation.sim.hybrid_energy import energy_functions
 from gearsym.validation.sim.hybrid_simulation import HybridSimulator
 from scipy.integrate import solve_ivp
 
-__all__ = ["DriveResult", "DriveSimulator", "simulate_drive"]
+__all__ = ["DriveResult", "DriveSimulator", "DriveTruth", "simulate_drive"]
 
 #: Below this speed (m/s) with the cycle at rest, the brake holds the vehicle.
 STANDSTILL_SPEED = 0.3
@@ -100,6 +102,32 @@ class Works:
         }
 
 
+@dataclass(frozen=True)
+class DriveTruth:
+    """The vehicle a drive drives, apart from what its TCU knows (the calibration): its
+    description (mass, grade, tolerances, inertias), what its engine, machine and valves
+    really give (:class:`~gearsym.validation.sim.fleet.Actuators`) and the factor on each
+    element's μ map. ``None`` in :class:`DriveSimulator`: the calibration is the truth."""
+
+    description: GearboxDescription
+    actuators: Actuators = field(default_factory=Actuators)
+    mu_scale: Mapping[str, float] = field(default_factory=dict)
+    draw: FleetDraw | None = None
+
+    @classmethod
+    def from_draw(
+        cls, d: GearboxDescription, draw: FleetDraw, constant_grade: bool = True
+    ) -> DriveTruth:
+        """A fleet's vehicle ``draw`` (its grade constant over the drive unless a grade
+        profile is driven)."""
+        return cls(
+            truth_description(d, draw, constant_grade),
+            Actuators.from_draw(draw),
+            mu_scales(d, draw),
+            draw,
+        )
+
+
 @dataclass
 class DriveResult:
     """The recorded drive: samples every :data:`RECORD_STEP` (``t``, ``v_ref``, ``v`` in m/s,
@@ -115,6 +143,8 @@ class DriveResult:
     values: dict[str, float]
     failure: str = ""
     stats: dict[str, float] = field(default_factory=dict)
+    #: the TCU's record of the drive at its sample time (:mod:`.drive_log`)
+    log: TcuLog | None = None
 
     @property
     def tracking_rms_kmh(self) -> float:
@@ -148,18 +178,22 @@ class DriveResult:
 
 
 class DriveSimulator:
-    """A drive of one vehicle (``overrides``: its true parameters, default the description's)
-    along a cycle (module docstring)."""
+    """A drive of one vehicle along a cycle (module docstring). ``d`` is the calibration: the
+    TCU's driver model, torque split, schedule and shift plans; ``truth`` the vehicle driven
+    (default: the calibration's own). ``tcu_sample``: the sample time of the TCU's log."""
 
     def __init__(
         self,
         d: GearboxDescription,
         cycle: Cycle,
         grade: GradeProfile | None = None,
-        overrides: Mapping[str, float] | None = None,
+        truth: DriveTruth | None = None,
         progress: Callable[[float], None] | None = None,
+        tcu_sample: float = 0.01,
     ) -> None:
         self.d = d
+        self.truth = truth if truth is not None else DriveTruth(d)
+        self.tcu_sample = tcu_sample
         self.cycle = cycle
         self.grade = grade
         self.progress = progress
@@ -185,24 +219,43 @@ class DriveSimulator:
                 )
             ],
         )
-        self.runners = {
-            (a, b): ShiftRunner(d, f"{a}-{b}")
-            for a, b in (
-                *zip(self.gears[:-1], self.gears[1:], strict=True),
-                *zip(self.gears[1:], self.gears[:-1], strict=True),
-            )
-        }
-        first = self.runners[(self.gears[0], self.gears[1])].simulator
-        values = first.values(overrides)
-        self.values = values
-        self.p = first.parameter_vector(values)
-        calibration_mass = d.estimator.prior_of("m_veh", values["m_veh"])[0]
-        self.powertrain = Powertrain(d, calibration_mass)
-        self.r_dyn = quantity(d, "vehicle", "r_dyn").value
-        self.zeta0 = values[naming.GRADE]
+        pairs = (
+            *zip(self.gears[:-1], self.gears[1:], strict=True),
+            *zip(self.gears[1:], self.gears[:-1], strict=True),
+        )
+        # the plant is the truth's; the TCU plans its shifts on the calibration's models
+        plant = self.truth.description
+        self.runners = {(a, b): ShiftRunner(plant, f"{a}-{b}") for a, b in pairs}
+        self.plan_runners = (
+            self.runners if plant is d else {(a, b): ShiftRunner(d, f"{a}-{b}") for a, b in pairs}
+        )
+        self.values = self._values(self.runners, self.truth.mu_scale)
+        self.calibration_values = self._values(self.plan_runners, {})
+        mass = d.estimator.prior_of("m_veh", self.calibration_values["m_veh"])[0]
+        self.calibration_values["m_veh"] = mass
+        self.powertrain = Powertrain(d, mass)
+        self.r_dyn = quantity(plant, "vehicle", "r_dyn").value
+        self.zeta0 = self.values[naming.GRADE]
         self._gear_model: dict[int, tuple[HybridSimulator, str, Any]] = {}
-        parts = drivetrain_parts(d)
-        self._wheel_parts = parts
+        self._wheel_parts = drivetrain_parts(plant)
+
+    @staticmethod
+    def _values(
+        runners: Mapping[tuple[str, str], ShiftRunner], mu_scale: Mapping[str, float]
+    ) -> dict[str, float]:
+        """Every parameter of every shift's hybrid model by name, each element's μ times its
+        map factor."""
+        values: dict[str, float] = {}
+        for runner in runners.values():
+            sim = runner.simulator
+            values |= sim.values()
+            for e, symbol in sim.hybrid.friction_coefficient.items():
+                values[str(symbol)] = sim.values()[str(symbol)] * mu_scale.get(e, 1.0)
+        return values
+
+    def parameters_of(self, sim: HybridSimulator, values: Mapping[str, float]) -> np.ndarray:
+        """``values`` in the order of ``sim``'s parameter vector."""
+        return np.array([values[name] for name in sim.parameter_names], dtype=float)
 
     # ------------------------------------------------------------------ gear models
 
@@ -225,15 +278,19 @@ class DriveSimulator:
             if runner._energy is None:
                 runner._energy = energy_functions(sim)
             powers, energies = runner._energy[mode]
+            p = self.parameters_of(sim, self.values)
+            line = self.truth.actuators.pressure(np.array([runner.line]))[0]
             self._gear_model[k] = (
                 sim,
                 mode,
                 {
-                    "inertia": float(inertia(self.p)),
+                    "p": p,
+                    "inertia": float(inertia(p)),
                     "powers": powers,
                     "energies": energies,
                     "speeds": sim.shaft_speeds(mode),
-                    "line": runner.line_forces(mode),
+                    "line": [f * line / runner.line for f in runner.line_forces(mode)],
+                    "closed": self.d.gear(self.gears[k]).closed,
                 },
             )
         return self._gear_model[k]
@@ -260,6 +317,11 @@ class DriveSimulator:
         wheel = names.index(naming.WHEEL_SPEED)
         e_start = self._energies(k, x)
         segments = 0
+        log = TcuLog(
+            self.tcu_sample,
+            [sh.name for sh in self.d.shafts],
+            [e.name for e in self.d.shift_elements if not e.one_way],
+        )
         while t < knots[-1] - 1e-9 and not failure:
             sim, mode, fns = self.gear_model(k)
             compiled = sim.modes[mode]
@@ -279,6 +341,7 @@ class DriveSimulator:
                         first_sim, first_mode, _ = self.gear_model(0)
                         x = np.zeros(first_sim.modes[first_mode].n)
                     self._record_rest(records, t, t_next, k, distance)
+                    self._log_rest(log, t, t_next, k, distance)
                     t = t_next
                     continue
             segment = _GearSegment(self, k, fns, compiled)
@@ -308,6 +371,7 @@ class DriveSimulator:
                 break
             t_end = float(sol.t[-1])
             self._record_dense(records, t, t_end, sol, segment.control, n, k, wheel)
+            self._log_gear(log, t, t_end, sol, segment, k)
             y = sol.y[:, -1]
             x, integral, distance = y[:n], y[n], y[n + 1]
             works.input += y[n + 2]
@@ -324,20 +388,28 @@ class DriveSimulator:
             name = events[fired].__name__
             target = k + 1 if name == "upshift" else k - 1
             split, _ = segment.control(t, y)
-            runner = self.runners[(self.gears[k], self.gears[target])]
+            pair = (self.gears[k], self.gears[target])
+            runner, planner = self.runners[pair], self.plan_runners[pair]
+            omega_in = segment.control(t, y)[1]
             outcome = runner.run(
                 t_start=t,
                 speeds=np.asarray(fns["speeds"](x)).ravel(),
                 phi=x[names.index(naming.TWIST)],
                 omega_c=x[wheel],
                 split=split,
-                p=self.p,
+                true_torque=self.true_torque(split, omega_in),
+                p=self.parameters_of(runner.simulator, self.values),
                 zeta=self._zeta(distance) - self.zeta0,
-                calibration=self._calibration_vector(runner),
+                planner=planner,
+                calibration=self.parameters_of(planner.simulator, self.calibration_values),
+                actuators=self.truth.actuators,
                 kind=name,
                 wheel_inertia=fns["inertia"],
                 v_ref=cycle.speed,
                 distance_start=distance,
+                log=log,
+                gear=k,
+                zeta_true=self._zeta(distance),
             )
             shifts.append(outcome.record)
             works.input += outcome.audit.input_work
@@ -372,6 +444,7 @@ class DriveSimulator:
             values=self.values,
             failure=failure,
             stats={"gear_segments": float(segments)},
+            log=log,
         )
 
     # ------------------------------------------------------------------ helpers
@@ -383,18 +456,59 @@ class DriveSimulator:
     def _zeta(self, distance: float) -> float:
         return self.zeta0 if self.grade is None else self.grade.zeta(distance)
 
-    def _calibration_vector(self, runner: Any) -> np.ndarray:
-        """The TCU's parameter vector for the shift plan: the description's values with the
-        calibration's prior mass (never the truth)."""
-        sim = runner.simulator
-        mass = self.d.estimator.prior_of("m_veh", self.values["m_veh"])[0]
-        nominal = sim.values()
-        nominal["m_veh"] = mass
-        return sim.parameter_vector(nominal)
+    def true_torque(self, split: TorqueSplit, omega_in: float) -> float:
+        """The input torque the vehicle's engine and machine really give for the commanded
+        split (the engine only while it is coupled, at idle speed or above)."""
+        actuators = self.truth.actuators
+        engine = actuators.engine(split.engine) if self.powertrain.coupled(omega_in) else 0.0
+        return float(engine + actuators.e_machine(split.e_machine))
+
+    def _log_gear(self, log: TcuLog, t0: float, t1: float, sol: Any, segment: Any, k: int) -> None:
+        """The TCU's samples of a gear segment from the dense output."""
+        fns, n = segment.fns, segment.n
+        line = self.plan_runners[next(iter(self.plan_runners))].line
+        pressures = {e: line for e in fns["closed"]}
+        names = [v.name for v in segment.compiled.mode.model.states]
+        twist, wheel = names.index(naming.TWIST), names.index(naming.WHEEL_SPEED)
+        for t in log.ticks(t0, t1):
+            y = sol.sol(t)
+            split, _ = segment.control(float(t), y)
+            speeds = np.asarray(fns["speeds"](y[:n])).ravel()
+            log.add(
+                t,
+                speeds,
+                y[twist],
+                y[wheel],
+                split.input_torque,
+                split.brake,
+                pressures,
+                k,
+                "",
+                {},
+                self._zeta(float(y[n + 1])),
+            )
+
+    def _log_rest(self, log: TcuLog, t0: float, t1: float, k: int, distance: float) -> None:
+        sim, mode, fns = self.gear_model(k)
+        line = self.plan_runners[next(iter(self.plan_runners))].line
+        for t in log.ticks(t0, t1):
+            log.add(
+                t,
+                np.zeros(len(self.d.shafts)),
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                {e: line for e in fns["closed"]},
+                k,
+                "",
+                {},
+                self._zeta(distance),
+            )
 
     def _energies(self, k: int, x: np.ndarray) -> np.ndarray:
         _, _, fns = self.gear_model(k)
-        return np.asarray(fns["energies"](x, self.p)).ravel()
+        return np.asarray(fns["energies"](x, fns["p"])).ravel()
 
     def _state_from(self, k: int, speeds: np.ndarray, phi: float, omega_c: float) -> np.ndarray:
         sim, mode, fns = self.gear_model(k)
@@ -482,14 +596,15 @@ class _GearSegment:
     def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
         drive, n = self.drive, self.n
         x = y[:n]
-        split, _ = self.control(t, y)
-        u = drive._inputs(self.fns, split.input_torque, y[n + 1])
-        xdot = self.compiled.rhs(x, u, drive.p)
+        split, omega_in = self.control(t, y)
+        u = drive._inputs(self.fns, drive.true_torque(split, omega_in), y[n + 1])
+        p = self.fns["p"]
+        xdot = self.compiled.rhs(x, u, p)
         omega_c = x[self.wheel]
         brake = split.brake * math.tanh(omega_c / BRAKE_SPEED)
         xdot[self.wheel] -= brake / self.fns["inertia"]
         v = omega_c * drive.r_dyn
-        powers = np.asarray(self.fns["powers"](x, u, drive.p)).ravel()
+        powers = np.asarray(self.fns["powers"](x, u, p)).ravel()
         return np.concatenate(
             [xdot, [float(drive.cycle.speed(t)) - v, v], powers, [brake * omega_c]]
         )
@@ -517,8 +632,9 @@ def simulate_drive(
     d: GearboxDescription,
     cycle: Cycle,
     grade: GradeProfile | None = None,
-    overrides: Mapping[str, float] | None = None,
+    truth: DriveTruth | None = None,
     progress: Callable[[float], None] | None = None,
 ) -> DriveResult:
-    """Drive ``cycle`` with the description's vehicle (or ``overrides``), module docstring."""
-    return DriveSimulator(d, cycle, grade, overrides, progress).run()
+    """Drive ``cycle`` with the calibration ``d`` on the vehicle ``truth`` (default: ``d``'s
+    own), module docstring."""
+    return DriveSimulator(d, cycle, grade, truth, progress).run()

@@ -73,9 +73,13 @@ class Powertrain:
         feed_forward = self.mass * a_ref + (self.rolling + self.air * v_ref * v_ref) * (v_ref > 0)
         return feed_forward + self.k_p * (v_ref - v) + self.k_i * integral
 
+    def coupled(self, omega_in: float) -> bool:
+        """The engine is coupled at idle speed or above (below it: electric drive)."""
+        return omega_in >= self.idle
+
     def engine_limit(self, omega_in: float) -> float:
         """Most engine torque at ω_in: 0 below idle (decoupled), else min(T_max, P_max/ω)."""
-        if omega_in < self.idle:
+        if not self.coupled(omega_in):
             return 0.0
         return min(self.engine_torque, self.engine_power / omega_in)
 

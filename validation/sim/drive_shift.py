@@ -215,23 +215,39 @@ class ShiftRunner:
         phi: float,
         omega_c: float,
         split: TorqueSplit,
+        true_torque: float,
         p: np.ndarray,
         zeta: float,
+        planner: ShiftRunner,
         calibration: np.ndarray,
+        actuators: Any,
         kind: str,
         wheel_inertia: float,
         v_ref: Any,
         distance_start: float = 0.0,
+        log: Any = None,
+        gear: int = 0,
+        zeta_true: float = 0.0,
     ) -> ShiftOutcome:
         """The shift from the from-gear state given by its shaft speeds, twist and wheel speed
-        (module docstring); ``p`` the truth, ``calibration`` what the TCU plans with, ``zeta``
-        the grade's deviation from the parameter ζ, held over the shift."""
+        (module docstring). This runner is the truth's (``p`` its parameters, ``true_torque``
+        and ``actuators`` what the vehicle really gets); ``planner`` is the calibration's,
+        whose plan from the commanded ``split`` and the ``calibration`` parameters is what the
+        TCU commands. ``zeta``: the grade's deviation from the parameter ζ, held over the
+        shift. ``log``: the TCU's log (:class:`~gearsym.validation.sim.drive_log.TcuLog`)
+        gets the shift's samples."""
         sim = self.simulator
         hybrid = sim.hybrid
         x0 = state_from_speeds(sim, hybrid.from_mode, speeds, phi, omega_c)
-        pressures = self.plan(x0, split, calibration, zeta)
+        planned = planner.simulator
+        x0_plan = state_from_speeds(planned, planned.hybrid.from_mode, speeds, phi, omega_c)
+        commanded = planner.plan(x0_plan, split, calibration, zeta)
+        pressures = {
+            e: (times, list(actuators.pressure(np.asarray(values, dtype=float))))
+            for e, (times, values) in commanded.items()
+        }
         t_end = PREPARE + self.torque_phase + self.speed_phase + TO_LINE + HOLD_LINE
-        sim.scenario = _scenario(self.d, self.spec, t_end, pressures, split.input_torque, zeta)
+        sim.scenario = _scenario(self.d, self.spec, t_end, pressures, true_torque, zeta)
         sim.zeta0 = 0.0  # the grade profile is the deviation itself
         sim.brake = split.brake
         sim.wheel_inertia = wheel_inertia
@@ -296,6 +312,8 @@ class ShiftRunner:
             else f"shift {self.spec.name} at t = {t_start:.2f} s ended in {last.mode}, not in "
             f"the {self.spec.to_gear} gear"
         )
+        if log is not None:
+            self._log(log, result, t_start, t_end, split, commanded, p, gear, zeta_true)
         return ShiftOutcome(
             record=record,
             audit=audit,
@@ -308,6 +326,52 @@ class ShiftRunner:
             distance=distance,
             failure=failure,
         )
+
+    def _log(
+        self,
+        log: Any,
+        result: Any,
+        t_start: float,
+        t_end: float,
+        split: TorqueSplit,
+        commanded: dict[str, tuple[list[float], list[float]]],
+        p: np.ndarray,
+        gear: int,
+        zeta: float,
+    ) -> None:
+        """The shift's samples on the TCU's grid: the truth from the pieces' dense output,
+        the commanded pressures from the plan (line pressure on the elements that stay
+        locked), μ of each element while it slides."""
+        sim = self.simulator
+        ticks = log.ticks(t_start, t_start + t_end)
+        if not len(ticks):
+            return
+        signals, modes, _ = sim._sample(result.pieces, ticks - t_start, p)
+        profiles = {e: Profile(np.array(t), np.array(v)) for e, (t, v) in commanded.items()}
+        shafts = [s.name for s in self.d.shafts]
+        for i, t in enumerate(ticks):
+            tau = float(t - t_start)
+            pressures = {e: self.line for e in self.spec.locked}
+            pressures |= {e: profile(tau) for e, profile in profiles.items()}
+            status = sim.hybrid.modes[modes[i]].status
+            mu = {
+                e: float(signals[str(symbol)][i])
+                for e, symbol in sim.hybrid.friction_coefficient.items()
+                if status[e][0] == "sliding"
+            }
+            log.add(
+                t,
+                [signals[naming.speed(s)][i] for s in shafts],
+                signals[naming.TWIST][i],
+                signals[naming.WHEEL_SPEED][i],
+                split.input_torque,
+                split.brake,
+                pressures,
+                gear,
+                self.spec.name,
+                mu,
+                zeta,
+            )
 
     def _capacity_per_force(self, element: str, p: np.ndarray) -> float:
         """2 n_disc r_m μ (2.69) with the calibration's μ: torque per newton of F_N."""

@@ -327,10 +327,51 @@ def _scaled(q: Quantity, factor: float) -> Quantity:
     return Quantity(q.value * factor, q.unit, f"{q.source}; x {factor:.6g} (fleet draw)")
 
 
-def truth_world(d: GearboxDescription, scenario: Scenario, draw: FleetDraw) -> TruthWorld:
-    """The vehicle ``draw`` on ``scenario``: what the reference simulates. ``d`` and
-    ``scenario`` are the calibration's and the commanded inputs; the returned world is the
-    truth (the filter never sees it)."""
+@dataclass(frozen=True)
+class Actuators:
+    """What the vehicle's engine, electric machine and valves really give for what the TCU
+    commands (a fleet draw's tolerances): T_eng = g_in g_eng T_eng,cmd + g_in T_offset,
+    T_em = g_in g_em T_em,cmd, p = max(g_p p_cmd + p_offset, 0) where p_cmd > 0 (a valve
+    commanded shut stays shut)."""
+
+    engine_gain: float = 1.0
+    engine_offset: float = 0.0
+    e_machine_gain: float = 1.0
+    pressure_gain: float = 1.0
+    pressure_offset: float = 0.0
+
+    @classmethod
+    def from_draw(cls, draw: FleetDraw) -> Actuators:
+        values = dict(draw.values)
+        gain = values.get("input_torque_gain", 1.0)
+        return cls(
+            engine_gain=gain * values.get("engine_torque_gain", 1.0),
+            engine_offset=gain * values.get("engine_torque_offset", 0.0),
+            e_machine_gain=gain * values.get("e_machine_torque_gain", 1.0),
+            pressure_gain=values.get("pressure_gain", 1.0),
+            pressure_offset=values.get("pressure_offset", 0.0),
+        )
+
+    def engine(self, commanded: Any) -> Any:
+        return self.engine_gain * commanded + self.engine_offset
+
+    def e_machine(self, commanded: Any) -> Any:
+        return self.e_machine_gain * commanded
+
+    def pressure(self, commanded: Any) -> Any:
+        return np.where(
+            commanded > 0,
+            np.maximum(self.pressure_gain * commanded + self.pressure_offset, 0.0),
+            0.0,
+        )
+
+
+def truth_description(
+    d: GearboxDescription, draw: FleetDraw, constant_grade: bool = True
+) -> GearboxDescription:
+    """The calibration ``d`` as the vehicle ``draw`` really is: its mass, its grade (when the
+    grade is ``constant_grade``, not a profile), every factor on the description's quantities
+    and the inertias."""
     values = dict(draw.values)
     vehicle = dict(d.vehicle)
     sections = {"vehicle": vehicle, "drivetrain": dict(d.drivetrain), "friction": dict(d.friction)}
@@ -341,7 +382,7 @@ def truth_world(d: GearboxDescription, scenario: Scenario, draw: FleetDraw) -> T
     if "m_veh" in values:
         vehicle["m_veh"] = Quantity(values["m_veh"], "kg", "fleet draw")
     zeta = values.get("zeta")
-    if zeta is not None and scenario.grade is None:
+    if zeta is not None and constant_grade:
         vehicle["zeta"] = Quantity(zeta, "rad", "fleet draw")
     truth = replace(
         d,
@@ -361,35 +402,42 @@ def truth_world(d: GearboxDescription, scenario: Scenario, draw: FleetDraw) -> T
                 for ps in truth.planetary_sets
             ),
         )
-    gain = values.get("input_torque_gain", 1.0)
-    engine_gain = gain * values.get("engine_torque_gain", 1.0)
-    e_gain = gain * values.get("e_machine_torque_gain", 1.0)
-    offset = gain * values.get("engine_torque_offset", 0.0)
-    p_gain, p_offset = values.get("pressure_gain", 1.0), values.get("pressure_offset", 0.0)
+    return truth
+
+
+def mu_scales(d: GearboxDescription, draw: FleetDraw) -> dict[str, float]:
+    """The truth's factor on each friction element's μ map (common and per element)."""
+    values = dict(draw.values)
+    common = values.get("mu_scale", 1.0)
+    return {
+        e.name: common * values.get(f"mu_scale_{e.name}", 1.0)
+        for e in d.shift_elements
+        if not e.one_way
+    }
+
+
+def truth_world(d: GearboxDescription, scenario: Scenario, draw: FleetDraw) -> TruthWorld:
+    """The vehicle ``draw`` on ``scenario``: what the reference simulates. ``d`` and
+    ``scenario`` are the calibration's and the commanded inputs; the returned world is the
+    truth (the filter never sees it)."""
+    truth = truth_description(d, draw, constant_grade=scenario.grade is None)
+    actuators = Actuators.from_draw(draw)
     pressure = {
-        e: Profile(
-            profile.time,
-            np.where(profile.value > 0, np.maximum(p_gain * profile.value + p_offset, 0.0), 0.0),
-        )
+        e: Profile(profile.time, actuators.pressure(np.asarray(profile.value, dtype=float)))
         for e, profile in scenario.pressure.items()
     }
+    zeta = dict(draw.values).get("zeta")
     grade = scenario.grade
     if zeta is not None and grade is not None:
         grade = Profile(grade.time, grade.value + zeta)
     true_scenario = replace(
         scenario,
-        engine=Profile(scenario.engine.time, engine_gain * scenario.engine.value + offset),
-        e_machine=Profile(scenario.e_machine.time, e_gain * scenario.e_machine.value),
+        engine=Profile(scenario.engine.time, actuators.engine(scenario.engine.value)),
+        e_machine=Profile(scenario.e_machine.time, actuators.e_machine(scenario.e_machine.value)),
         pressure=pressure,
         grade=grade,
     )
-    common = values.get("mu_scale", 1.0)
-    mu_scale = {
-        e.name: common * values.get(f"mu_scale_{e.name}", 1.0)
-        for e in d.shift_elements
-        if not e.one_way
-    }
-    return TruthWorld(truth, true_scenario, mu_scale, draw)
+    return TruthWorld(truth, true_scenario, mu_scales(d, draw), draw)
 
 
 def told_inputs(

@@ -1,0 +1,90 @@
+"""What a TCU records of a drive at its sample time (:mod:`gearsym.validation.sim.drive`): the
+true shaft speeds (the estimators add their sensors' noise), what the TCU commanded (input
+torque, every element's pressure, the brake), which gear or shift it was in, and the truth an
+estimator is scored against (never shown to it): μ of each sliding element and the grade."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["TcuLog"]
+
+
+@dataclass
+class TcuLog:
+    """Samples every ``sample_time`` (s). Columns: ``t``; ``omega_<shaft>`` of every shaft,
+    ``phi``, ``omega_C`` (truth); ``T_In_cmd`` (N·m, what the TCU commanded), ``T_brake``
+    (N·m at the wheel), ``p_<element>`` (Pa, commanded); ``gear`` (index into the drive's
+    gears) and ``shift`` (the shift under way, "" in a gear); ``truth_mu_<element>`` (NaN
+    unless the element slides) and ``truth_zeta`` (rad)."""
+
+    sample_time: float
+    shafts: Sequence[str]
+    elements: Sequence[str]
+    columns: dict[str, list[float]] = field(default_factory=dict)
+    shift: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        names = [
+            "t",
+            *(f"omega_{s}" for s in self.shafts),
+            "phi",
+            "omega_C",
+            "T_In_cmd",
+            "T_brake",
+            *(f"p_{e}" for e in self.elements),
+            "gear",
+            *(f"truth_mu_{e}" for e in self.elements),
+            "truth_zeta",
+        ]
+        self.columns = {name: [] for name in names}
+
+    def ticks(self, t0: float, t1: float) -> np.ndarray:
+        """The sample times in [t0, t1)."""
+        h = self.sample_time
+        first = math.ceil(t0 / h - 1e-9)
+        last = math.ceil(t1 / h - 1e-9)
+        return np.arange(first, last) * h
+
+    def add(
+        self,
+        t: float,
+        speeds: Sequence[float],
+        phi: float,
+        omega_c: float,
+        torque: float,
+        brake: float,
+        pressures: Mapping[str, float],
+        gear: int,
+        shift: str,
+        mu: Mapping[str, float],
+        zeta: float,
+    ) -> None:
+        c = self.columns
+        c["t"].append(float(t))
+        for s, w in zip(self.shafts, speeds, strict=True):
+            c[f"omega_{s}"].append(float(w))
+        c["phi"].append(float(phi))
+        c["omega_C"].append(float(omega_c))
+        c["T_In_cmd"].append(float(torque))
+        c["T_brake"].append(float(brake))
+        for e in self.elements:
+            c[f"p_{e}"].append(float(pressures.get(e, 0.0)))
+            c[f"truth_mu_{e}"].append(float(mu.get(e, math.nan)))
+        c["gear"].append(float(gear))
+        c["truth_zeta"].append(float(zeta))
+        self.shift.append(shift)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Every column as an array, in time order."""
+        order = np.argsort(np.asarray(self.columns["t"]), kind="stable")
+        out = {k: np.asarray(v, dtype=float)[order] for k, v in self.columns.items()}
+        return out
+
+    def shifts(self) -> list[str]:
+        order = np.argsort(np.asarray(self.columns["t"]), kind="stable")
+        return [self.shift[i] for i in order]
