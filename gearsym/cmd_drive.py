@@ -14,6 +14,9 @@ if TYPE_CHECKING:
 
 __all__ = ["cmd_drive", "register"]
 
+#: ``--fleet`` without a file: the shipped default fleet.
+DEFAULT_FLEET_ARGUMENT = "<default fleet>"
+
 
 def cmd_drive(args: argparse.Namespace) -> int:
     """Drive the cycle with the description's vehicle; print the summary (or ``--json``) and
@@ -25,7 +28,7 @@ def cmd_drive(args: argparse.Namespace) -> int:
     from gearsym.symbolic.errors import GearsymError
     from gearsym.symbolic.io.output_dir import OutputDir
     from gearsym.validation.sim.cycles import load_cycle, load_grade
-    from gearsym.validation.sim.drive import DriveSimulator
+    from gearsym.validation.sim.drive import DriveSimulator, DriveTruth
 
     d = load(args.config)
     cycle = load_cycle(args.cycle)
@@ -35,6 +38,12 @@ def cmd_drive(args: argparse.Namespace) -> int:
         if args.duration < cycle.duration_s:
             cycle = cycle.window(args.duration)
     grade = load_grade(args.grade) if args.grade is not None else None
+    truth = None
+    if args.fleet is not None:
+        from gearsym.validation.sim.fleet import load_fleet
+
+        fleet = load_fleet(d, None if args.fleet == DEFAULT_FLEET_ARGUMENT else args.fleet)
+        truth = DriveTruth.from_draw(d, fleet.draw(args.seed), constant_grade=grade is None)
     with OutputDir(args.out, "drive", before_commit=check) as out:
         bar = ProgressBar("drive")
         shown = {"step": -1}
@@ -49,10 +58,24 @@ def cmd_drive(args: argparse.Namespace) -> int:
 
         try:
             bar(0.0, "compiling the gear and shift models")
-            simulator = DriveSimulator(d, cycle, grade, progress=progress)
+            simulator = DriveSimulator(d, cycle, grade, truth=truth, progress=progress)
             result = simulator.run()
         finally:
             bar.done()
+        estimates = None
+        if args.estimate == "ekf" and not result.failure:
+            from gearsym.validation.studies.estimation.drive_ekf import run_drive_ekf
+
+            print("  … the EKF over the drive's TCU log", file=sys.stderr, flush=True)
+            assert result.log is not None
+            estimates = run_drive_ekf(
+                d,
+                result.log.arrays(),
+                result.log.shifts(),
+                result.gears,
+                result.values["m_veh"],
+                seed=args.seed,
+            )
         from gearsym.validation.sim.drive_report import (
             drive_command,
             drive_markdown,
@@ -63,6 +86,17 @@ def cmd_drive(args: argparse.Namespace) -> int:
 
         data = {"gearbox": d.name, **result.to_dict()}
         data["calibration"] = d.drive.to_dict()
+        data["vehicle"] = (
+            {"fleet": args.fleet, "seed": args.seed, **truth.draw.to_dict()}
+            if truth is not None and truth.draw is not None
+            else "the calibration's own (no --fleet)"
+        )
+        if estimates is not None:
+            from gearsym.validation.studies.estimation.drive_ekf import plot_drive_estimates
+
+            data["estimates"] = estimates.to_dict()
+            data["estimator"] = estimates.summary()
+            plot_drive_estimates(estimates, out.path / "estimates.png")
         (out.path / "drive.json").write_text(json.dumps(data, indent=2) + "\n")
         write_drive(result, out.path)
         command = drive_command(args.cycle, args.duration)
@@ -73,6 +107,9 @@ def cmd_drive(args: argparse.Namespace) -> int:
         emit_json(data)
     else:
         print(format_drive_summary(result))
+        if estimates is not None:
+            print("EKF carried over the drive (the TCU's view):")
+            print("\n".join(estimates.lines()))
         print(f"  wrote {len(paths)} files to {args.out}")
     if result.failure:
         print(f"gearsym: drive failed: {result.failure}", file=sys.stderr)
@@ -100,5 +137,22 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "--out",
         default="out/drive",
         help="folder for drive.json, drive.csv, shifts.csv, drive.png (replaced atomically)",
+    )
+    p.add_argument(
+        "--fleet",
+        nargs="?",
+        const=DEFAULT_FLEET_ARGUMENT,
+        metavar="FLEET.toml",
+        help="drive a vehicle of a fleet (default file: the shipped fleet) drawn by --seed; "
+        "the TCU keeps the description's calibration",
+    )
+    p.add_argument(
+        "--seed", type=int, default=0, help="the fleet vehicle and the sensors' noise (default 0)"
+    )
+    p.add_argument(
+        "--estimate",
+        choices=("ekf", "none"),
+        default="ekf",
+        help="carry the EKF over the drive from the TCU's log (default ekf)",
     )
     p.add_argument("--json", action="store_true", help="print the result as JSON")

@@ -1,0 +1,104 @@
+"""The EKF carried over a whole drive (validation/studies/estimation/drive_ekf.py).
+
+What is checked: the filter sees only the TCU's log (the truth changes its scores, never its
+estimates); its model hand-over between shifts keeps every common state's estimate and
+covariance by name and parks a μ it drops until its element comes back; on a drive whose
+vehicle is the calibration's own, the mass ends inside 3σ of the description's value with most
+of the prior's uncertainty removed, and the modes follow the TCU's gears.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from gearsym.symbolic.loader import load_description
+from gearsym.validation.sim.cycles import load_cycle
+from gearsym.validation.sim.drive import DriveSimulator
+from gearsym.validation.studies.estimation.drive_ekf import _hand_over, run_drive_ekf
+
+SHORT = "t,v\n0,0\n2,0\n8,25\n20,55\n32,55\n44,0\n47,0\n"
+
+
+@pytest.fixture(scope="module")
+def description():
+    return load_description()
+
+
+@pytest.fixture(scope="module")
+def drive(description, tmp_path_factory):
+    path = tmp_path_factory.mktemp("cycle") / "short.csv"
+    path.write_text(SHORT, encoding="utf-8")
+    return DriveSimulator(description, load_cycle(path)).run()
+
+
+@pytest.fixture(scope="module")
+def estimates(description, drive):
+    log = drive.log
+    return run_drive_ekf(
+        description, log.arrays(), log.shifts(), drive.gears, drive.values["m_veh"], seed=3
+    )
+
+
+def test_the_truth_changes_the_scores_not_the_estimates(description, drive, estimates):
+    log = drive.log
+    other = run_drive_ekf(description, log.arrays(), log.shifts(), drive.gears, 2500.0, seed=3)
+    for name in estimates.mean:
+        np.testing.assert_array_equal(estimates.mean[name], other.mean[name])
+    assert not np.allclose(estimates.nees, other.nees)
+
+
+def test_mass_of_the_calibration_s_own_vehicle(description, estimates):
+    """Truth 1800 kg (the description), prior 1950 ± 300 kg (the [estimator] table)."""
+    m = estimates.mean["m_veh"][-1]
+    sd = estimates.sigma["m_veh"][-1]
+    assert abs(m - 1800.0) <= 3 * sd
+    assert sd < 300.0 / 3  # most of the prior's variance is gone
+    zeta = estimates.mean["zeta"][-1]
+    assert abs(zeta) <= 3 * estimates.sigma["zeta"][-1]
+
+
+def test_models_follow_the_shifts(drive, estimates):
+    shifts = drive.log.shifts()
+    for k, name in enumerate(shifts):
+        if name:
+            assert estimates.model[k] == name
+    # between shifts the model of the last shift stays
+    first = f"{drive.gears[0]}-{drive.gears[1]}"  # the filter starts in the first upshift's
+    expected = [first]
+    for shift in drive.shifts:
+        if shift.name != expected[-1]:
+            expected.append(shift.name)
+    used = [m for i, m in enumerate(estimates.model) if i == 0 or m != estimates.model[i - 1]]
+    assert used == expected
+
+
+def _model(names):
+    return SimpleNamespace(state_names=list(names))
+
+
+def test_hand_over_by_name_and_the_mu_store():
+    old = _model(["omega_1", "omega_2", "phi", "omega_C", "m_veh", "mu_38", "mu_05", "zeta"])
+    new = _model(["omega_1", "omega_2", "phi", "omega_C", "m_veh", "mu_81", "mu_27", "zeta"])
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(8, 8))
+    P = a @ a.T + 8 * np.eye(8)
+    z = np.arange(8, dtype=float)
+    store = {"mu_27": (0.11, 4e-4)}
+    prior = {"mu_81": (0.12, 0.015)}
+    z_new, P_new = _hand_over(None, old, new, z, P, store, prior)
+    common = ["omega_1", "omega_2", "phi", "omega_C", "m_veh", "zeta"]
+    i_old = [old.state_names.index(n) for n in common]
+    i_new = [new.state_names.index(n) for n in common]
+    np.testing.assert_array_equal(z_new[i_new], z[i_old])
+    np.testing.assert_array_equal(P_new[np.ix_(i_new, i_new)], P[np.ix_(i_old, i_old)])
+    # μ_81 never seen: the prior; μ_27 from the store, which gives it up
+    j81, j27 = new.state_names.index("mu_81"), new.state_names.index("mu_27")
+    assert (z_new[j81], P_new[j81, j81]) == (0.12, pytest.approx(0.015**2))
+    assert (z_new[j27], P_new[j27, j27]) == (0.11, 4e-4)
+    assert "mu_27" not in store
+    # the μ the new model lacks wait in the store with their own variance
+    assert store["mu_38"] == (z[5], P[5, 5]) and store["mu_05"] == (z[6], P[6, 6])
+    # no correlation is invented for what comes from the store or the prior
+    assert np.count_nonzero(P_new[j81]) == 1 and np.count_nonzero(P_new[j27]) == 1

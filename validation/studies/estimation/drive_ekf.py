@@ -1,0 +1,421 @@
+"""The EKF (thesis 4.1, 4.3) carried over a whole drive (:mod:`gearsym.validation.sim.drive`),
+from the TCU's log only: the measured speeds with the sensors' noise (3.26), the commanded
+input torque and pressures, the brake; the truth is for scoring.
+
+**One filter, its model following the gearbox.** The filter runs the augmented model of one
+single-swap shift (:func:`~gearsym.symbolic.estimators.ekf.augmented_model`: the two swapping
+elements' torques by their modes, the others locked): between shifts the model of the last
+shift in its to-gear (the on-coming element sticking), at the start the first upshift's in its
+from-gear. When the TCU starts a shift whose model is another one, the filter hands over by
+state name: the speeds, the twist, m_veh and ζ with their covariance block; each element's μ
+from the model that had it, or from the store where the μ of elements outside the present
+model wait (mean and variance; their covariances with the rest are dropped there: a μ is only
+observable while its element slides, which decouples it between its shifts); a μ never seen
+starts at the prior. The modes start as the TCU knows them (the from-gear) and follow the
+filter's own mode logic (:func:`~gearsym.symbolic.estimators.ekf_modes.ekf_mode_update`)
+during the shift. In a gear the TCU holds line pressure on the gear's elements, so the
+filter's modes are the gear's (its own decision, no mode logic): a lock-up the logic had not
+decided by the shift's end is mapped there (the hybrid model's lock-up map).
+A μ's random walk runs only while its element slides (a locked or open element's μ does not
+move what the filter sees; :meth:`~gearsym.symbolic.estimators.ekf.AugmentedModel.frozen_states`).
+
+**What the filter cannot model.** Its model has no service brake and no standstill: while the
+TCU sees the brake applied or the vehicle standing (measured wheel speed below
+:data:`STANDSTILL_SPEED`, no torque), it holds the parameters and their covariance and sets
+the measured speeds from the measurement (their variance from R). Stated, not hidden: the
+samples held are counted.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from gearsym.symbolic import naming
+from gearsym.symbolic.defaults import EKF_FLOOR_FRACTION, EKF_RELATIVE_NOISE
+from gearsym.symbolic.description import GearboxDescription
+from gearsym.symbolic.drivetrain import element_short_name, quantity
+
+__all__ = ["DriveEstimates", "run_drive_ekf"]
+
+#: Below this measured vehicle speed (m/s), with no torque commanded, the vehicle stands.
+STANDSTILL_SPEED = 0.3
+
+#: The vehicle's parameters every model has, carried with their covariance block.
+CARRIED = ("m_veh", naming.GRADE)
+
+
+@dataclass
+class DriveEstimates:
+    """Per TCU sample: each estimated parameter's mean and σ (``m_veh``, ``zeta``,
+    ``mu_<short>``; a μ keeps its last value while its element is outside the model), its
+    truth (NaN where none: μ while its element does not slide), the NEES of (m_veh, ζ) and
+    the NIS of the update with its dof; and how many samples were held (brake, standstill)."""
+
+    t: np.ndarray
+    mean: dict[str, np.ndarray]
+    sigma: dict[str, np.ndarray]
+    truth: dict[str, np.ndarray]
+    nees: np.ndarray
+    nis: np.ndarray
+    nis_dof: np.ndarray
+    held: int
+    model: list[str] = field(default_factory=list)
+    elements: dict[str, str] = field(default_factory=dict)
+
+    def error_at(self, name: str, times: Sequence[float]) -> dict[str, float]:
+        """Relative error of ``name`` at the given times (s) and at the end."""
+        out = {}
+        truth = self.truth[name]
+        for time_ in times:
+            k = int(np.searchsorted(self.t, time_))
+            if k < len(self.t):
+                out[f"{time_:g}"] = float((self.mean[name][k] - truth[k]) / truth[k])
+        out["end"] = float((self.mean[name][-1] - truth[-1]) / truth[-1])
+        return out
+
+    def summary(self) -> dict[str, Any]:
+        """The filter's consistency over the drive: NEES of (m_veh, ζ) per dof (time mean;
+        the samples are strongly correlated, so no χ² band is claimed for it), NIS per dof over
+        every update, and the samples held (brake, standstill)."""
+        used = self.nis_dof > 0
+        return {
+            "nees_per_dof_mean": float(np.nanmean(self.nees) / len(CARRIED)),
+            "nis_per_dof": float(self.nis[used].sum() / self.nis_dof[used].sum()),
+            "held_samples": self.held,
+            "samples": len(self.t),
+            "note": "the sensors' noise (3.26) drawn from --seed; the filter sees the TCU's "
+            "log only (commanded torque and pressures, noisy speeds)",
+        }
+
+    def lines(self) -> list[str]:
+        """The estimates in a few lines of text."""
+        out = []
+        m = self.to_dict()["m_veh"]
+        errors = ", ".join(
+            f"{k if k == 'end' else k + ' s'} {100 * v:+.1f} %" for k, v in m["error_at"].items()
+        )
+        out.append(
+            f"  m_veh: {m['final']:.0f} ± {m['sigma']:.0f} kg (truth {m['truth']:.0f}); "
+            f"error at {errors}"
+        )
+        z = self.to_dict()[naming.GRADE]
+        out.append(
+            f"  ζ: {z['final']:+.4f} ± {z['sigma']:.4f} rad (truth {z['truth']:+.4f}) at the end"
+        )
+        for name, entry in self.to_dict().items():
+            if "truth_last_sliding" in entry:
+                out.append(
+                    f"  {name}: {entry['truth_last_sliding']:.4f} true when it last slid, "
+                    f"estimate {entry['truth_last_sliding'] + entry['error_last_sliding']:.4f} "
+                    f"± {entry['sigma_last_sliding']:.4f} ({entry['sliding_samples']} samples "
+                    "sliding)"
+                )
+        summary = self.summary()
+        out.append(
+            f"  NEES/dof (m_veh, ζ) time mean {summary['nees_per_dof_mean']:.2f}, NIS/dof "
+            f"{summary['nis_per_dof']:.2f}; {self.held} of {len(self.t)} samples held "
+            "(brake, standstill)"
+        )
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for name in self.mean:
+            truth = self.truth[name]
+            finite = np.flatnonzero(np.isfinite(truth))
+            entry: dict[str, Any] = {
+                "final": float(self.mean[name][-1]),
+                "sigma": float(self.sigma[name][-1]),
+            }
+            if name in CARRIED:
+                entry["truth"] = float(truth[-1])
+                if name == "m_veh":
+                    entry["error_at"] = self.error_at(name, (60.0, 300.0))
+                else:
+                    entry["error_at_rad"] = {
+                        "end": float(self.mean[name][-1] - truth[-1]),
+                    }
+            elif finite.size:
+                k = int(finite[-1])  # the truth while the element last slid
+                entry["truth_last_sliding"] = float(truth[k])
+                entry["error_last_sliding"] = float(self.mean[name][k] - truth[k])
+                entry["sigma_last_sliding"] = float(self.sigma[name][k])
+                entry["sliding_samples"] = int(finite.size)
+            out[name] = entry
+        return out
+
+
+class _Models:
+    """The augmented model, its discrete step and mode logic of each shift, built on first
+    use (the calibration's: the filter's model is what the TCU knows)."""
+
+    def __init__(self, d: GearboxDescription) -> None:
+        self.d = d
+        self._cache: dict[str, tuple[Any, Any, Any]] = {}
+
+    def get(self, shift: str) -> tuple[Any, Any, Any]:
+        if shift not in self._cache:
+            from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
+            from gearsym.symbolic.estimators.ekf_modes import ModeLogic
+
+            intensities = self.d.estimator.intensities()
+            aug = augmented_model(self.d, shift, intensities=intensities)
+            self._cache[shift] = (aug, DiscreteModel(aug), ModeLogic(self.d, aug))
+        return self._cache[shift]
+
+
+def run_drive_ekf(
+    d: GearboxDescription,
+    log: Mapping[str, np.ndarray],
+    shifts: Sequence[str],
+    gears: Sequence[str],
+    truth_mass: float,
+    seed: int = 0,
+    relative_noise: float = EKF_RELATIVE_NOISE,
+) -> DriveEstimates:
+    """The EKF over a drive's TCU log (module docstring). ``d`` is the calibration (model,
+    prior, tuning, piston areas); ``log`` the :class:`~gearsym.validation.sim.drive_log.TcuLog`
+    arrays and ``shifts`` its shift column; ``truth_mass`` scores m_veh (never shown to the
+    filter). The sensors' noise (3.26) is drawn from ``seed``."""
+    from gearsym.symbolic.estimators.ekf import ekf_predict, ekf_update
+    from gearsym.symbolic.estimators.ekf_modes import STICK, ekf_mode_update
+
+    models = _Models(d)
+    t = log["t"]
+    h = float(t[1] - t[0])
+    r_dyn = quantity(d, "vehicle", "r_dyn").value
+    element_names = [e.name for e in d.shift_elements]
+    short = {e: element_short_name(d, e) for e in element_names if not d.element(e).one_way}
+    mu_name = {e: naming.friction_coefficient(s) for e, s in short.items()}
+
+    # the sensors (every measured shaft and the wheel) with noise (3.26), the floor from the
+    # log's range; each model reads the ones it has as outputs
+    sensors = [naming.speed(s) for s in d.measured_shafts] + [naming.WHEEL_SPEED]
+    y_true = np.column_stack([log[name] for name in sensors])
+    floor_all = EKF_FLOOR_FRACTION * np.nanmax(np.abs(y_true), axis=0)
+    sigma_all = relative_noise * np.maximum(np.abs(y_true), floor_all[None, :])
+    y_all = y_true + np.random.default_rng(seed).normal(0.0, 1.0, y_true.shape) * sigma_all
+    first_shift = f"{gears[0]}-{gears[1]}"
+    aug, discrete, logic = models.get(first_shift)
+
+    def sensor_columns(aug: Any) -> list[int]:
+        return [sensors.index(name.removeprefix("y_")) for name in aug.output_names]
+
+    columns = sensor_columns(aug)
+    outputs = [sensors[c] for c in columns]
+
+    # the filter's start: the first upshift's model in the from-gear, the calibration's prior
+    current = first_shift
+    names = aug.state_names
+    nominal = {v.name: v.default for v in aug.model.states if v.default is not None}
+    z = np.zeros(len(names))
+    sig0 = np.zeros(len(names))
+    for j, name in enumerate(names):
+        if name in outputs:
+            c = sensors.index(name)
+            z[j], sig0[j] = y_all[0, c], sigma_all[0, c]
+        else:
+            z[j], sig0[j] = d.estimator.prior_of(name, nominal.get(name))
+    P = np.diag(sig0**2)
+    modes = logic.initial_modes()
+    store: dict[str, tuple[float, float]] = {}  # μ of elements outside the model
+
+    tracked = ["m_veh", naming.GRADE, *mu_name.values()]
+    mean = {name: np.full(len(t), np.nan) for name in tracked}
+    sigma = {name: np.full(len(t), np.nan) for name in tracked}
+    nees = np.full(len(t), np.nan)
+    nis = np.zeros(len(t))
+    nis_dof = np.zeros(len(t))
+    held_count = 0
+    model_at: list[str] = []
+    areas = {e: d.element(e).a_piston.value for e in short if d.element(e).a_piston is not None}
+    zeta_truth = log["truth_zeta"]
+
+    def known_inputs(k: int, aug: Any) -> np.ndarray:
+        u = np.zeros(len(aug.input_names))
+        for i, name in enumerate(aug.input_names):
+            if name == naming.INPUT_TORQUE:
+                u[i] = log["T_In_cmd"][k]
+            elif name.startswith("F_N"):
+                e = next(e for e, s in short.items() if naming.normal_force(s) == name)
+                u[i] = log[f"p_{e}"][k] * areas[e]
+        return u
+
+    for k in range(len(t)):
+        wanted = shifts[k] or current
+        if wanted != current:
+            new_aug, new_discrete, new_logic = models.get(wanted)
+            z, P = _hand_over(d, aug, new_aug, z, P, store, sig0_of=_prior_of(d, new_aug))
+            aug, discrete, logic, current = new_aug, new_discrete, new_logic, wanted
+            names = aug.state_names
+            columns = sensor_columns(aug)
+            outputs = [sensors[c] for c in columns]
+            modes = logic.initial_modes()
+        model_at.append(current)
+        in_gear = not shifts[k]
+        if in_gear:
+            # in a gear the TCU holds line pressure on the gear's elements: no element slides,
+            # the filter's modes are the gear's (a lock-up its own logic had not decided by
+            # the shift's end is mapped now)
+            target = _gear_modes(logic, current, gears[int(log["gear"][k])])
+            for e, code in target.items():
+                if code == STICK and modes[e] != STICK:
+                    z, P = logic.map_state(e, z, P)
+            modes = target
+        standing = (
+            log["omega_C"][k] * r_dyn < STANDSTILL_SPEED and log["T_In_cmd"][k] == 0.0
+        ) or log["T_brake"][k] > 0.0
+        u_known = known_inputs(k, aug)
+        p = aug.parameter_values()
+        if standing:
+            # the filter's model has no brake or standstill: hold the parameters, take the
+            # speeds from the measurement
+            held_count += 1
+            for c, name in zip(columns, outputs, strict=True):
+                if name not in names:
+                    continue
+                j = names.index(name)
+                P[j, :] = 0.0
+                P[:, j] = 0.0
+                z[j] = y_all[k, c]
+                P[j, j] = sigma_all[k, c] ** 2
+            modes = _gear_modes(logic, current, gears[int(log["gear"][k])])
+        else:
+            if k > 0:
+                u_prev = logic.inputs(known_inputs(k - 1, aug), modes)
+                q = [aug.intensities[name] for name in names]
+                z, P = ekf_predict(discrete, z, P, u_prev, h, p, q)
+            u_now = logic.inputs(u_known, modes)
+            relative = np.full(len(columns), relative_noise)
+            z, P, nis[k], nis_dof[k] = ekf_update(
+                discrete, z, P, u_now, y_all[k, columns], p, relative, floor_all[columns]
+            )
+            if not in_gear:
+                z, P, modes, _ = ekf_mode_update(logic, z, P, u_known, p, modes)
+        # record
+        for name in tracked:
+            if name in names:
+                j = names.index(name)
+                mean[name][k] = z[j]
+                sigma[name][k] = math.sqrt(max(P[j, j], 0.0))
+            elif name in store:
+                mean[name][k], var = store[name]
+                sigma[name][k] = math.sqrt(var)
+        idx = [names.index(n) for n in CARRIED]
+        error = z[idx] - np.array([truth_mass, zeta_truth[k]])
+        nees[k] = float(error @ np.linalg.solve(P[np.ix_(idx, idx)], error))
+    truth = {
+        "m_veh": np.full(len(t), truth_mass),
+        naming.GRADE: np.asarray(zeta_truth, dtype=float),
+        **{mu_name[e]: np.asarray(log[f"truth_mu_{e}"], dtype=float) for e in mu_name},
+    }
+    return DriveEstimates(
+        t=np.asarray(t, dtype=float),
+        mean=mean,
+        sigma=sigma,
+        truth=truth,
+        nees=nees,
+        nis=nis,
+        nis_dof=nis_dof,
+        held=held_count,
+        model=model_at,
+        elements={mu_name[e]: e for e in mu_name},
+    )
+
+
+def _gear_modes(logic: Any, shift: str, gear: str) -> dict[str, int]:
+    """The modes of ``shift``'s model in ``gear``: its from-gear (the off-going element
+    sticks, the on-coming one is open) or its to-gear (the other way round)."""
+    from gearsym.symbolic.estimators.ekf_modes import OPEN, STICK
+
+    off, on = logic.elements
+    if gear == shift.split("-")[0]:
+        return {off: STICK, on: OPEN}
+    return {off: OPEN, on: STICK}
+
+
+def _prior_of(d: GearboxDescription, aug: Any) -> dict[str, tuple[float, float]]:
+    """The calibration's prior (mean, σ) of every unmeasured state of ``aug``."""
+    nominal = {v.name: v.default for v in aug.model.states if v.default is not None}
+    out = {}
+    for name in aug.state_names:
+        try:
+            out[name] = d.estimator.prior_of(name, nominal.get(name))
+        except Exception:  # a state without a prior (the speeds): set from the old model
+            continue
+    return out
+
+
+def _hand_over(
+    d: GearboxDescription,
+    old: Any,
+    new: Any,
+    z: np.ndarray,
+    P: np.ndarray,
+    store: dict[str, tuple[float, float]],
+    sig0_of: Mapping[str, tuple[float, float]],
+) -> tuple[np.ndarray, np.ndarray]:
+    """z and P of the ``new`` model from the ``old`` one by state name (module docstring);
+    the μ of the old model that the new one lacks go to ``store`` (mean, variance)."""
+    old_names, new_names = old.state_names, new.state_names
+    for j, name in enumerate(old_names):
+        if name.startswith("mu_") and name not in new_names:
+            store[name] = (float(z[j]), float(P[j, j]))
+    n = len(new_names)
+    z_new = np.zeros(n)
+    P_new = np.zeros((n, n))
+    common = [name for name in new_names if name in old_names]
+    i_new = [new_names.index(name) for name in common]
+    i_old = [old_names.index(name) for name in common]
+    z_new[i_new] = z[i_old]
+    P_new[np.ix_(i_new, i_new)] = P[np.ix_(i_old, i_old)]
+    for j, name in enumerate(new_names):
+        if name in common:
+            continue
+        if name in store:
+            mean, var = store.pop(name)
+        elif name in sig0_of:
+            mean, sd = sig0_of[name]
+            var = sd * sd
+        else:
+            raise ValueError(f"{name}: neither in the previous model nor with a prior")
+        z_new[j] = mean
+        P_new[j, j] = var
+    return z_new, P_new
+
+
+def plot_drive_estimates(estimates: DriveEstimates, path: Any) -> Any:
+    """m_veh and ζ with ±3σ against the truth over the drive, and each element's μ estimate
+    against its truth while it slides."""
+    from gearsym.validation.drawing.figures import save, subplots
+
+    t = estimates.t
+    mus = [name for name in estimates.mean if name.startswith("mu_")]
+    fig, axes = subplots(3, 1, size=(10.0, 8.5), sharex=True, margins={"hspace": 0.3})
+    for ax, name, label in (
+        (axes[0], "m_veh", "m_veh (kg)"),
+        (axes[1], naming.GRADE, "ζ (rad)"),
+    ):
+        mean, sd = estimates.mean[name], estimates.sigma[name]
+        ax.fill_between(t, mean - 3 * sd, mean + 3 * sd, color="C0", alpha=0.2, lw=0, label="±3σ")
+        ax.plot(t, mean, color="C0", label="estimate")
+        ax.plot(t, estimates.truth[name], color="k", lw=1.5, ls="--", label="truth")
+        ax.set_ylabel(label)
+        ax.legend(loc="upper right")
+    axes[0].set_title("EKF carried over the drive (the TCU's view: commanded torque, noisy speeds)")
+    for i, name in enumerate(mus):
+        truth = estimates.truth[name]
+        sliding = np.isfinite(truth)
+        if not sliding.any():
+            continue
+        color = f"C{i % 10}"
+        axes[2].plot(t[sliding], truth[sliding], ".", ms=2, color=color, alpha=0.4)
+        axes[2].plot(t, estimates.mean[name], color=color, lw=0.8, label=f"{name} (dots: truth)")
+    axes[2].set_ylabel("μ")
+    axes[2].set_xlabel("t (s)")
+    axes[2].legend(loc="upper right", fontsize=7, ncol=3)
+    return save(fig, path)
