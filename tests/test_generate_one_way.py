@@ -172,3 +172,18 @@ def test_what_is_left_out_is_said_with_its_reason(tmp_path):
         assert f"- {line}" in listed
     files = {p.name for p in (out / "c").iterdir()}
     assert "gearsym_shift_element.c" not in files and "gearsym_shift_1_2_mu.c" in files
+
+
+def test_estimators_of_a_freewheel_shift_refuse_in_one_line(boxes):
+    """The EKF's and the extended UIO's augmented model (4.1) of a shift the freewheel swaps
+    in is refused with the reason (no normal force, no μ to decide its mode or estimate),
+    naming the freewheel; the 2-3 of the same box has one."""
+    from gearsym.symbolic.errors import GearsymError
+    from gearsym.symbolic.estimators.ekf import augmented_model
+
+    d, _ = boxes
+    for shift in ("1-2", "2-1"):
+        with pytest.raises(GearsymError, match="F1 is a one-way clutch") as err:
+            augmented_model(d, shift)
+        assert "\n" not in str(err.value)
+    assert augmented_model(d, "2-3").parameters == ("m_veh", "mu_1", "mu_C2", "zeta")
