@@ -141,3 +141,36 @@ def test_release_first_downshift_on_the_reference(hybrid_runs):
     t_s = abs(np.interp(1.0, t, s["T_B05"]))
     assert t_s < t_3  # B05 slides in the speed phase: it holds less than in gear 3
     assert gear2.t_start == pytest.approx(1.1 - 0.1 * 0.05 * t_3 / t_s, abs=1e-3)
+
+
+def test_an_empty_torque_phase_is_no_window_of_the_open_loop_study():
+    """The coast 2-3 empties K38 before B05 locks up: its torque phase is empty (t_start =
+    t_end, above), so the open-loop Fisher study (restarted per phase) has no window there
+    and no sample is lost: the windows are gear 2, speed phase, gear 3 and the whole shift,
+    and the phase windows' samples add up to the whole shift's."""
+    import json
+    import subprocess
+    import sys
+
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "gearsym",
+            "fim",
+            "--open-loop",
+            "--scenario",
+            str(DATA / "scenario_2_3_coast.toml"),
+            "--params",
+            "m_veh,mu_38",
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert run.returncode == 0, run.stderr
+    windows = json.loads(run.stdout)["windows"]
+    assert [w["name"] for w in windows] == ["gear 2", "speed phase", "gear 3", "whole shift"]
+    samples = [w["output_sets"][0]["samples"] for w in windows]
+    assert sum(samples[:-1]) == samples[-1]
