@@ -139,6 +139,8 @@ def cmd_generate(args: argparse.Namespace) -> int:
                 print(f"gearsym: {shown}: checks failed; the previous content is unchanged")
                 return 1
         out.commit()
+    for line in tree.skipped:
+        print(f"not generated: {line.replace('`', '')}")
     n_models = len(tree.models)
     print(
         f"wrote {len(tree.files)} files for {n_models} models of {d.name} to {shown} "

@@ -23,7 +23,7 @@ half of the differential belongs to I_wheel — instead of counting J_cs^eff twi
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from itertools import pairwise
 
 import sympy as sp
@@ -558,16 +558,28 @@ def shift_model(
 
     With ``friction_inputs`` the two element torques are sliding friction, k_sign 2 N r μ F_N
     (2.69, 3.14), with the slip directions of a power-on shift (:func:`power_on_slip_signs`),
-    μ_<element> as parameters and the normal forces as inputs: u = [T_In, F_N38, F_N05].
+    μ_<element> as parameters and the normal forces as inputs: u = [T_In, F_N38, F_N05]. A
+    swapping one-way clutch has no μ and no F_N: while neither swapping element is locked (the
+    shift model's premise) it overruns and carries no torque, so it is absent from u and p
+    (the metadata says so); locked, it is a constraint of the gear or hybrid mode instead.
     """
     # the μ form needs each element's power-on slip direction: a single swap only
     spec = shift_spec(d, shift, max_swaps=1 if friction_inputs else 2)
-    return drivetrain_model(
+    one_way = [e for e in spec.swapping if d.element(e).one_way] if friction_inputs else []
+    model = drivetrain_model(
         d,
         naming.shift_model_name(spec.from_gear, spec.to_gear, friction_inputs),
         locked=spec.locked,
-        torque_elements=spec.swapping,
+        torque_elements=tuple(e for e in spec.swapping if e not in one_way),
         keep=shift_keep(d, spec),
         with_wheel_acceleration=with_wheel_acceleration,
         slip_signs=power_on_slip_signs(d, spec) if friction_inputs else None,
     )
+    if not one_way:
+        return model
+    note = (
+        f"one-way clutch {', '.join(one_way)} overrunning (zero torque, no mu, no normal "
+        "force): this model holds while it overruns; locked, it is a constraint (the gear, or "
+        "the hybrid mode with it locked)"
+    )
+    return replace(model, metadata={**model.metadata, "overrunning": note})

@@ -10,7 +10,7 @@ inertia) but not on the state, so a TCU evaluates them once per parameter update
   (:mod:`gearsym.symbolic.hybrid`). A mode's form does not depend on its slip signs (a sliding
   element's torque is an input of (5.3), its sign is the input's), so the 15 modes of a
   single-swap shift share 8 forms: each swapping element locked, sliding or open, never both
-  locked.
+  locked; a one-way clutch is locked or overrunning (7 modes, 5 forms).
 
 Every form is :func:`linear_form`'s (of a gear, a shift model or a hybrid mode), the one
 derivation behind ``model --json``'s ``linear_form`` too.
@@ -27,7 +27,7 @@ from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import drivetrain_parts, shift_keep
 from gearsym.symbolic.dynamics import gearbox_dynamics
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.hybrid import LOCKED, OPEN, SLIDING, hybrid_shift
+from gearsym.symbolic.hybrid import LOCKED, OPEN, OVERRUNNING, SLIDING, hybrid_shift
 from gearsym.symbolic.model import Variable
 from gearsym.symbolic.shifts import ShiftSpec, shift_spec
 from gearsym.symbolic.sympy_utils import smart_jacobian
@@ -242,7 +242,9 @@ def gear_linear_forms(d: GearboxDescription) -> LinearFormSet:
 
 
 def shift_linear_forms(d: GearboxDescription, spec: ShiftSpec) -> LinearFormSet:
-    """(5.1) of every mode of the hybrid shift ``spec``: 8 forms for a single-swap shift.
+    """(5.1) of every mode of the hybrid shift ``spec``: 8 forms for a single-swap shift, 5
+    when one swapping element is a one-way clutch (locked or overrunning, as in the hybrid
+    model; overrunning it carries no torque, as an open element).
 
     The same locked set, torque inputs and state coordinates as the hybrid mode models
     (:func:`gearsym.symbolic.hybrid.hybrid_shift`), without deriving those models.
@@ -254,7 +256,12 @@ def shift_linear_forms(d: GearboxDescription, spec: ShiftSpec) -> LinearFormSet:
     dyn = gearbox_dynamics(d)
     elements = (spec.off_going, spec.on_coming)
     forms = []
-    for statuses in product((LOCKED, SLIDING, OPEN), repeat=2):
+
+    def statuses_of(e: str) -> tuple[str, ...]:
+        # a one-way clutch is locked or overrunning (no torque), as in the hybrid model
+        return (LOCKED, OVERRUNNING) if d.element(e).one_way else (LOCKED, SLIDING, OPEN)
+
+    for statuses in product(*(statuses_of(e) for e in elements)):
         status = dict(zip(elements, statuses, strict=True))
         swapped_locked = tuple(e for e in elements if status[e] == LOCKED)
         if len(swapped_locked) == 2:
@@ -264,7 +271,11 @@ def shift_linear_forms(d: GearboxDescription, spec: ShiftSpec) -> LinearFormSet:
         keep = mode_coordinates(d, dyn, locked)
         name = "_".join(f"{e}_{status[e]}" for e in elements)
         choices = [
-            [(SLIDING, 1), (SLIDING, -1)] if status[e] == SLIDING else [(status[e], 0)]
+            [(SLIDING, 1), (SLIDING, -1)]
+            if status[e] == SLIDING
+            else [(OVERRUNNING, -d.element(e).locks)]
+            if status[e] == OVERRUNNING
+            else [(status[e], 0)]
             for e in elements
         ]
         modes = tuple(

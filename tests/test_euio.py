@@ -196,3 +196,36 @@ def test_cli_refuses_bad_initial_in_one_line():
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "--initial" in lines[0] and "Traceback" not in result.stderr
+
+
+def test_masks_of_a_downshift_follow_its_phase_order(d):
+    """The design-time masks the emitted header states (euio_phase_masks, generic operating
+    point) for the power-on 3-2 list its phases in the order they happen when the off-going
+    B05 is released first (``scenario_3_2_power_on_release_first.toml``): speed phase (B05
+    slides, K38 open), then torque phase (B05 slides, K38 sticks). From (3.14), a μ acts only
+    while its element slides: μ38 is held in every phase, m_veh too (its column is the
+    load's, above). μ05 is estimable in the speed phase only: in the torque phase K38 holds
+    the gearbox rigid in gear 2, so B05's friction torque acts on it in the same direction as
+    the side shaft's twist, and a constant friction torque and a constant road load reach the
+    same steady state (a zero at s = 0, as for m_veh); in the speed phase the gearbox has two
+    degrees of freedom and both are measured. The masks equal run_euio's existence at the
+    midpoints of the reference's detected phases."""
+    from gearsym.symbolic.estimators.euio import euio_phase_masks
+
+    path = DATA / "scenario_3_2_power_on_release_first.toml"
+    result = simulate(d, load_scenario(d, path), check_models=False)
+    run = run_euio(d, result, noise=False)
+    masks = euio_phase_masks(d, "3-2")
+    assert [phase for phase, _, _ in masks] == [p.name for p in result.phases]
+    stated = {phase: {run.state_names[i] for i in held} for phase, held, _ in masks}
+    assert stated == {
+        "gear 3": {"m_veh", "mu_38", "mu_05"},
+        "speed phase": {"m_veh", "mu_38"},
+        "torque phase": {"m_veh", "mu_38", "mu_05"},
+        "gear 2": {"m_veh", "mu_38", "mu_05"},
+    }
+    found = {
+        phase: {x.parameter for x in tests if not x.exists}
+        for phase, tests in run.existence.items()
+    }
+    assert found == stated

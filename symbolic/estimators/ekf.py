@@ -189,6 +189,16 @@ def augmented_model(
     ``intensities`` override :data:`RANDOM_WALK` / :data:`MODEL_ERROR` by state name (a μ state
     takes the ``"mu"`` entry unless named itself)."""
     spec = shift_spec(d, shift)
+    one_way = [e for e in spec.swapping if d.element(e).one_way]
+    if one_way:
+        raise GearsymError(
+            d.file,
+            "shift",
+            f"{shift}: {one_way[0]} is a one-way clutch; the estimators (4.1-4.5) decide each "
+            "swapping element's mode from its normal force and estimate its mu, which a "
+            "freewheel has not (its shifts run through the hybrid model: gearsym fim, "
+            "gearsym observability --per-mode)",
+        )
     base = shift_model(d, shift, friction_inputs=True)
     torque_model = shift_model(d, shift)
     if parameters is None:

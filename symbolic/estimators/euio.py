@@ -151,8 +151,11 @@ GENERIC_POINT: dict[str, float] = {
 def euio_phase_masks(d: Any, shift: str = "2-3") -> tuple[tuple[str, tuple[int, ...], str], ...]:
     """The held mask of the extended UIO per phase of a single-swap power-on shift, from
     :func:`euio_existence` (4.4) on the filter's model at :data:`GENERIC_POINT` with each
-    phase's element modes: the from-gear (off-going sticks, on-coming open), the torque phase
-    (both slide), the speed phase (on-coming slides) and the to-gear (on-coming sticks).
+    phase's element modes: the from-gear (off-going sticks, on-coming open), then for an
+    upshift the torque phase (both slide) and the speed phase (on-coming slides), for a
+    downshift, whose off-going element is released first, the speed phase (off-going slides,
+    on-coming open) and the torque phase (off-going slides, on-coming sticks), and the to-gear
+    (on-coming sticks).
     Returns (phase name, held state indices, the reasons) per phase; the state indices are
     those of :func:`euio_filter_model`'s model."""
     import numpy as np
@@ -185,10 +188,24 @@ def euio_phase_masks(d: Any, shift: str = "2-3") -> tuple[tuple[str, tuple[int, 
         ]
     )
     off, on = spec.off_going, spec.on_coming
+    from gearsym.symbolic.ratios import gear_ratio
+
+    upshift = float(gear_ratio(d, d.gear(spec.to_gear)).ratio) < float(
+        gear_ratio(d, d.gear(spec.from_gear)).ratio
+    )
+    middle = (
+        (("torque phase", {off: "slide", on: "slide"}), ("speed phase", {off: "open", on: "slide"}))
+        if upshift  # power-on: the on-coming element takes the load first
+        else (
+            # power-on downshift: the off-going element released first, the load moves at
+            # synchronism (validation/sim/phases.py)
+            ("speed phase", {off: "slide", on: "open"}),
+            ("torque phase", {off: "slide", on: "stick"}),
+        )
+    )
     phases = (
         (f"gear {spec.from_gear}", {off: "stick", on: "open"}),
-        ("torque phase", {off: "slide", on: "slide"}),
-        ("speed phase", {off: "open", on: "slide"}),
+        *middle,
         (f"gear {spec.to_gear}", {off: "open", on: "stick"}),
     )
     inputs = aug.input_names
@@ -257,6 +274,14 @@ def _rank(m: np.ndarray) -> int:
     return int(np.sum(s > RANK_TOL * max(1.0, s[0])))
 
 
+def _pencil_rank(m: np.ndarray) -> int:
+    """The rank of ``m`` with its nonzero columns scaled to unit length."""
+    import numpy as np
+
+    norms = np.linalg.norm(m, axis=0)
+    return _rank(m / np.where(norms > 0, norms, 1.0))
+
+
 def rosenbrock(a: np.ndarray, e: np.ndarray, c: np.ndarray, s: complex) -> np.ndarray:
     """P(s) = [[sI − A, −E], [C, 0]]."""
     import numpy as np
@@ -271,13 +296,19 @@ def invariant_zeros(a: np.ndarray, e: np.ndarray, c: np.ndarray) -> tuple[int, l
     A tall pencil is squared down by two random left projections W (n+q × n+p); the zeros of
     P(s) are generalized eigenvalues of (W N, W M) for every W, spurious ones differ between
     the two draws, so the common ones are kept. A zero at s = 0 is confirmed by the rank of
-    P(0) directly."""
+    P(0) directly. Ranks of P(s) are taken with its columns scaled to unit length (which
+    leaves the rank unchanged): the columns of a model in SI units differ by 1e7 (a μ's
+    torque against the road load's 1/(I_wheel + m r²)), and unscaled, a direction that
+    vanishes only at s = 0 falls below the tolerance at |s| ~ 1 as well (a sliding
+    element's torque on a gearbox held rigid by a sticking one: parallel to the twist's)."""
     import numpy as np
     from scipy.linalg import eigvals
 
     n, q, p = a.shape[0], e.shape[1], c.shape[0]
     rng = np.random.default_rng(7)
-    normal = max(_rank(rosenbrock(a, e, c, complex(rng.normal(), rng.normal()))) for _ in range(2))
+    normal = max(
+        _pencil_rank(rosenbrock(a, e, c, complex(rng.normal(), rng.normal()))) for _ in range(2)
+    )
     mm = np.zeros((n + p, n + q))
     mm[:n, :n] = np.eye(n)
     nn = -rosenbrock(a, e, c, 0.0)  # P(s) = s M − N
@@ -291,9 +322,9 @@ def invariant_zeros(a: np.ndarray, e: np.ndarray, c: np.ndarray) -> tuple[int, l
     for z in sets[0]:
         if any(abs(z - y) <= 1e-6 * max(1.0, abs(z)) for y in sets[1]):
             common.append(complex(z))
-    zeros = [z for z in common if _rank(rosenbrock(a, e, c, z)) < normal]
+    zeros = [z for z in common if _pencil_rank(rosenbrock(a, e, c, z)) < normal]
     zeros = [0j if abs(z) < 1e-9 else z for z in zeros]
-    if _rank(rosenbrock(a, e, c, 0.0)) < normal and not any(abs(z) < 1e-9 for z in zeros):
+    if _pencil_rank(rosenbrock(a, e, c, 0.0)) < normal and not any(abs(z) < 1e-9 for z in zeros):
         zeros.append(0j)
     return normal, zeros
 

@@ -40,6 +40,7 @@ from gearsym.symbolic.drivetrain import (
     adjacent_shifts,
     element_short_name,
     full_model,
+    power_on_slip_signs,
     shift_model,
 )
 from gearsym.symbolic.errors import GearsymError
@@ -76,8 +77,10 @@ __all__ = [
     "mu_map_files",
     "mu_map_origin",
     "sample_ranges",
+    "missing_friction",
     "selected_shifts",
     "shift_element_model",
+    "skipped_models",
 ]
 
 #: First line of ``MANIFEST``; ``gearsym generate`` only replaces directories that carry it.
@@ -130,11 +133,54 @@ def _bounds(d: GearboxDescription, model: Model) -> dict[str, tuple[float | None
     return bounds
 
 
-def _has_friction_data(d: GearboxDescription) -> bool:
-    needed = ("sigma0", "sigma1", "z_ba_ratio", "mu_nominal")
-    return all(k in d.friction for k in needed) and all(
-        e.n_disc is not None and e.r_m is not None for e in d.shift_elements
+#: The ``[friction]`` values the elasto-plastic element model is emitted with (2.66-2.70).
+_FRICTION_KEYS = ("sigma0", "sigma1", "z_ba_ratio", "mu_nominal")
+
+
+def missing_friction(d: GearboxDescription, elements: Sequence[str] | None = None) -> str:
+    """Why the μ models of ``elements`` (default: the description's) cannot be derived, "" when
+    they can: no ``[friction] mu_nominal`` (the μ parameters' default), or a friction element
+    without ``n_disc`` and ``r_m`` (2.69). A one-way clutch needs neither: it carries no μ."""
+    absent = [k for k in ("mu_nominal",) if k not in d.friction]
+    if absent:
+        return f"[friction] has no {', '.join(absent)}"
+    names = [e.name for e in d.shift_elements] if elements is None else list(elements)
+    lacking = [
+        e
+        for e in names
+        if not d.element(e).one_way and (d.element(e).n_disc is None or d.element(e).r_m is None)
+    ]
+    if lacking:
+        verb = "has" if len(lacking) == 1 else "have"
+        return f"{', '.join(lacking)} {verb} no n_disc and r_m (2.69)"
+    return ""
+
+
+def _no_slip_direction(d: GearboxDescription, spec: ShiftSpec) -> str:
+    """Why the μ form of ``spec`` has no friction torque direction, "" when it has: a friction
+    element that does not slip in the gear that releases it (two gears of the same ratio,
+    such as a manual low and the freewheel's 1st) has no power-on slip sign (2.70)."""
+    signs = power_on_slip_signs(d, spec)
+    still = [e for e in spec.swapping if not d.element(e).one_way and signs[e] == 0]
+    if not still:
+        return ""
+    it, has = ("it", "torque has") if len(still) == 1 else ("them", "torques have")
+    return (
+        f"{', '.join(still)} would not slip: gears {spec.from_gear} and {spec.to_gear} leave "
+        f"{it} at zero slip, so the friction {has} no direction (2.70)"
     )
+
+
+def _estimator_obstacle(d: GearboxDescription, spec: ShiftSpec) -> str:
+    """Why the EKF and the extended UIO of ``spec`` are not emitted, "" when they are."""
+    one_way = [e for e in spec.swapping if d.element(e).one_way]
+    if one_way:
+        return (
+            f"the one-way clutch {', '.join(one_way)} swaps: the emitted filters' mode logic "
+            "reads a normal force and a μ of each swapping element (the library's hybrid model "
+            "runs such a shift)"
+        )
+    return missing_friction(d, spec.swapping)
 
 
 def _quantity_default(q: Quantity) -> tuple[float, str]:
@@ -211,8 +257,10 @@ def shift_element_model(d: GearboxDescription) -> Model:
 
 def sensitivity_parameters(d: GearboxDescription, spec: ShiftSpec) -> list[str]:
     """The thesis' parameter set (3.2) for a shift: m_veh, k_ss, d_ss, μ of the off-going
-    element, ζ."""
-    mu = naming.friction_coefficient(element_short_name(d, spec.off_going))
+    element (of the on-coming one when the off-going element is a one-way clutch, which has
+    no μ), ζ."""
+    element = spec.on_coming if d.element(spec.off_going).one_way else spec.off_going
+    mu = naming.friction_coefficient(element_short_name(d, element))
     return ["m_veh", "k_ss", "d_ss", mu, "zeta"]
 
 
@@ -318,13 +366,25 @@ def _model_plan(
 ) -> list[tuple[str, Callable[[Callable[[str], None]], EmittedModel]]]:
     """(name, builder) of every emitted model: the names come from the naming rules, so a
     caller can pick one model before any derivation."""
+    return _plan_and_skips(d, shifts_selected)[0]
+
+
+def skipped_models(d: GearboxDescription, shifts: str = "adjacent") -> tuple[str, ...]:
+    """What ``generate`` leaves out for ``d`` and why, one line each (printed, and listed in the
+    generated README); empty when every model is emitted."""
+    return _plan_and_skips(d, shifts)[1]
+
+
+def _plan_and_skips(
+    d: GearboxDescription, shifts_selected: str = "adjacent"
+) -> tuple[list[tuple[str, Callable[[Callable[[str], None]], EmittedModel]]], tuple[str, ...]]:
     from gearsym.symbolic.estimators.ekf import ekf_model_name
     from gearsym.symbolic.estimators.euio import euio_model_name
 
     if not adjacent_shifts(d):
         check_generatable(d)  # the one-line error (missing data fails in full_model below)
     shifts = selected_shifts(d, shifts_selected)
-    friction = _has_friction_data(d)
+    skipped: list[str] = []
 
     def full(say: Callable[[str], None]) -> EmittedModel:
         say("deriving the full model (2.53)")
@@ -374,17 +434,31 @@ def _model_plan(
     ]
     for spec in shifts:
         plan.append((naming.shift_model_name(spec.from_gear, spec.to_gear), torque_shift(spec)))
-        if friction and spec.single:  # a double swap: the torque-input model only
-            mu_name = naming.shift_model_name(spec.from_gear, spec.to_gear, True)
-            plan.append((mu_name, mu_shift(spec)))
-            plan.append((naming.sensitivity_model_name(mu_name), sensitivity(spec)))
+        if not spec.single:  # a double swap: the torque-input model only (README, its note)
+            continue
+        mu_name = naming.shift_model_name(spec.from_gear, spec.to_gear, True)
+        sens_name = naming.sensitivity_model_name(mu_name)
+        why = missing_friction(d, spec.swapping) or _no_slip_direction(d, spec)
+        if why:
+            skipped.append(f"`{mu_name}`, `{sens_name}`: {why}")
+            continue
+        plan.append((mu_name, mu_shift(spec)))
+        plan.append((sens_name, sensitivity(spec)))
     ekf_shift = next((spec for spec in shifts if spec.name == "2-3"), None)
-    if friction and ekf_shift is not None:
-        plan.append((ekf_model_name(ekf_shift.name), lambda say: ekf_model(d, ekf_shift, say)))
-        plan.append((euio_model_name(ekf_shift.name), lambda say: euio_model(d, ekf_shift, say)))
-    if friction:
+    if ekf_shift is not None:
+        ekf_name, euio_name = ekf_model_name(ekf_shift.name), euio_model_name(ekf_shift.name)
+        why = _estimator_obstacle(d, ekf_shift)
+        if why:
+            skipped.append(f"`{ekf_name}`, `{euio_name}`: {why}")
+        else:
+            plan.append((ekf_name, lambda say: ekf_model(d, ekf_shift, say)))
+            plan.append((euio_name, lambda say: euio_model(d, ekf_shift, say)))
+    absent = [k for k in _FRICTION_KEYS if k not in d.friction]
+    if absent:
+        skipped.append(f"`{naming.SHIFT_ELEMENT_MODEL}`: [friction] has no {', '.join(absent)}")
+    else:
         plan.append((naming.SHIFT_ELEMENT_MODEL, element))
-    return plan
+    return plan, tuple(skipped)
 
 
 def ekf_model(
@@ -487,7 +561,12 @@ def linear_system_sets(
             for named in group.forms
         )
         metadata = {"gearbox": d.name, "equations": "5.1-5.3", "content": group.summary}
-        one_way = [e for e in d.shift_elements if e.one_way]
+        # the note where a system locks a one-way clutch (not on sets it takes no part in)
+        one_way = [
+            e
+            for e in d.shift_elements
+            if e.one_way and any(e.name in named.locked for named in group.forms)
+        ]
         if one_way:
             metadata["one_way"] = (
                 f"systems that lock a one-way clutch ({', '.join(e.name for e in one_way)}) "
@@ -512,10 +591,11 @@ def hybrid_shift_names(d: GearboxDescription, hybrid_shifts: str | None = None) 
     if hybrid_shifts == "none":
         return []
     if hybrid_shifts is None:
-        if not _has_friction_data(d):  # the hybrid model needs n_disc and r_m (3.14)
+        specs = {spec.name: spec for spec in selected_shifts(d, "all")}
+        if DEFAULT_SHIFT not in specs or not specs[DEFAULT_SHIFT].single:
             return []
-        names = {spec.name for spec in selected_shifts(d, "all")}
-        return [DEFAULT_SHIFT] if DEFAULT_SHIFT in names else []
+        # the hybrid model needs n_disc and r_m of its friction elements (3.14)
+        return [] if missing_friction(d, specs[DEFAULT_SHIFT].swapping) else [DEFAULT_SHIFT]
     specs = selected_shifts(d, hybrid_shifts, "--hybrid-shifts")
     if hybrid_shifts not in SHIFT_SELECTIONS:
         for spec in specs:
@@ -612,6 +692,12 @@ def generate_tree(
     ``shifts`` selects the shift models (:func:`selected_shifts`)."""
     say = progress or (lambda message: None)
     models = gearbox_models(d, say, shifts=shifts)
+    skipped = list(skipped_models(d, shifts))
+    if hybrid_shifts is None and not hybrid_shift_names(d):
+        specs = {spec.name: spec for spec in selected_shifts(d, "all")}
+        if DEFAULT_SHIFT in specs and specs[DEFAULT_SHIFT].single:
+            why = missing_friction(d, specs[DEFAULT_SHIFT].swapping)
+            skipped.append(f"`hybrid_{DEFAULT_SHIFT.replace('-', '_')}_sens`: {why}")
     files: dict[str, str] = {}
     for m in models:
         say(f"emitting {m.model.name}")
@@ -640,7 +726,14 @@ def generate_tree(
     example = example_view(d, models)
     files[f"{C_DIR}/main.c"] = render("c_example_main.c.j2", example)
     files["README.md"] = readme(
-        d, models, example, mu_map, linear_sets, hybrid_sets=hybrid_sets, uio_rows=uio_rows
+        d,
+        models,
+        example,
+        mu_map,
+        linear_sets,
+        hybrid_sets=hybrid_sets,
+        uio_rows=uio_rows,
+        skipped=tuple(skipped),
     )
     files[MANIFEST] = manifest_text({k: v.encode("utf-8") for k, v in files.items()}, "generate")
     return GeneratedTree(
@@ -652,4 +745,5 @@ def generate_tree(
         tuple(hybrid_sets),
         uio_designs=uio_designs,
         uio_shift=DEFAULT_SHIFT if uio_designs else None,
+        skipped=tuple(skipped),
     )

@@ -224,6 +224,7 @@ class ReadmeView:
     uio_rows: tuple[str, ...] = ()  # Markdown table rows of the emitted UIOs
     double_swaps: tuple[str, ...] = ()  # "`shift_1_5`: K38 and B06 off, K81 and K27 on"
     double_swap_note: str = DOUBLE_SWAP_NOTE
+    skipped: tuple[str, ...] = ()  # "`shift_1_2_mu`, `shift_1_2_mu_sens`: B1 has no ..."
 
 
 @dataclass(frozen=True)
@@ -244,6 +245,7 @@ def readme(
     linear_sets: Sequence[EmittedLinearSet] = (),
     hybrid_sets: Sequence[EmittedHybridSet] = (),
     uio_rows: Sequence[str] = (),
+    skipped: Sequence[str] = (),
 ) -> str:
     rows = []
     for m in models:
@@ -277,6 +279,7 @@ def readme(
             for m in models
             if m.role == "shift" and m.shift is not None and not m.shift.single
         ),
+        skipped=tuple(skipped),
     )
     return render("generated_readme.md.j2", view)
 

@@ -91,3 +91,6 @@ class GeneratedTree:
     #: them) and their shift (``None``: no UIO emitted).
     uio_designs: tuple[Any, ...] = field(default=())
     uio_shift: str | None = None
+    #: What was left out and why, one line each (``gearsym generate`` prints them, the README
+    #: lists them).
+    skipped: tuple[str, ...] = field(default=())

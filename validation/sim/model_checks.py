@@ -45,7 +45,8 @@ def check_reduced_models(
         return speeds[:, compiled.shaft_names.index(name.removeprefix("omega_"))]
 
     jobs: list[tuple[Model, Phase, list[str]]] = []
-    gear_from, torque_phase, speed_phase, gear_to = phases
+    # from-gear, the torque and the speed phase in the order they happened, to-gear
+    gear_from, first, second, gear_to = phases
     # The rigid to-gear model is valid once the on-coming element has stuck, not merely
     # synchronised to 1 %: start its check at the first sample where the slip is below
     # 1e-4 of the initial one (about 0.02 rad/s here).
@@ -63,7 +64,7 @@ def check_reduced_models(
         )
         jobs.append((model, phase, ["T_In"]))
     shift = shift_model(d, spec.name)
-    merged = Phase("shift", torque_phase.t_start, speed_phase.t_end, "torque + speed phase")
+    merged = Phase("shift", first.t_start, second.t_end, f"{first.name} + {second.name}")
     jobs.append(
         (
             shift,

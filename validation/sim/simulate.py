@@ -9,8 +9,8 @@ friction map at each element's pressure, the oil temperature and the current sli
 What is derived from the result, never from the scenario's times:
 
 * the phases (:func:`gearsym.validation.sim.phases.detect_phases`): from-gear, torque phase
-  (the on-coming element takes over the load), speed phase (the input speed moves to the new
-  ratio), to-gear;
+  (the on-coming element takes over the load) and speed phase (the input speed moves to the
+  new ratio) in the order they happen, to-gear;
 * the energy audit (:class:`~gearsym.validation.sim.simulation_result.EnergyAudit`): input
   work = Δ kinetic + Δ spring + Δ bristle energy + friction dissipation + damper dissipation +
   road work, with the works integrated as extra ODE states at the solver's accuracy;

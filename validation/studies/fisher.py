@@ -182,6 +182,8 @@ def fim_study(
     pieces: list[tuple[Phase, np.ndarray, np.ndarray, np.ndarray]] = []
     for k, phase in enumerate(run.phases):
         last = k == len(run.phases) - 1
+        if phase.t_end <= phase.t_start:  # an empty phase (phases.py: nothing left to move)
+            continue
         if restart:
             say(f"restarting the sensitivities at the {phase.name}")
             sub = run_sensitivities(
@@ -197,7 +199,9 @@ def fim_study(
             pieces.append((phase, tr.t[mask], tr.y[mask], tr.dy[mask]))
 
     windows = []
-    for position, (phase, _, y, dy) in enumerate(pieces):
+    for k, (phase, _, y, dy) in enumerate(pieces):
+        # the thesis' combinations by what the window is (the phases come in either order)
+        position = 0 if k == 0 else {"torque phase": 1, "speed phase": 2}.get(phase.name)
         windows.append(
             _window(phase, y, dy, sets, errors, floor, names, run.scales, gamma_max, position)
         )

@@ -146,7 +146,7 @@ def hybrid_fim(
 ) -> HybridFimStudy:
     """The per-window FIM of the hybrid model (module docstring). ``windows`` default to the
     phases :func:`gearsym.validation.sim.phases.detect_phases` finds in the hybrid model's own
-    record (from-gear, torque phase, speed phase, to-gear)."""
+    record (from-gear, torque and speed phase in the order they happen, to-gear)."""
     if view not in VIEWS:
         raise GearsymError(d.file, "view", f"expected one of {tuple(VIEWS)}, got {view!r}")
     simulator = simulator or HybridSimulator(d, scenario)
