@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from gearsym.commands import add_command, emit_json, load
 from gearsym.interrupts import check
@@ -39,10 +39,20 @@ def cmd_drive(args: argparse.Namespace) -> int:
             cycle = cycle.window(args.duration)
     grade = load_grade(args.grade) if args.grade is not None else None
     truth = None
+    if args.runs < 1:
+        raise GearsymError("--runs", "", f"must be at least 1, got {args.runs}")
+    if (args.runs > 1 or args.scheduler is not None) and args.fleet is None:
+        raise GearsymError("--runs", "", "more than one drive, or --scheduler, needs --fleet")
+    if args.scheduler is not None:
+        from gearsym.validation.studies.dask_runner import check_scheduler
+
+        check_scheduler(args.scheduler, ("drive", "--scheduler"))
     if args.fleet is not None:
         from gearsym.validation.sim.fleet import load_fleet
 
         fleet = load_fleet(d, None if args.fleet == DEFAULT_FLEET_ARGUMENT else args.fleet)
+        if args.runs > 1:
+            return _drive_fleet(args, d, cycle, grade, fleet)
         truth = DriveTruth.from_draw(d, fleet.draw(args.seed), constant_grade=grade is None)
     with OutputDir(args.out, "drive", before_commit=check) as out:
         bar = ProgressBar("drive")
@@ -117,6 +127,54 @@ def cmd_drive(args: argparse.Namespace) -> int:
     return 0
 
 
+def _drive_fleet(args: argparse.Namespace, d: Any, cycle: Any, grade: Any, fleet: Any) -> int:
+    """``--runs N`` vehicles of the fleet (seeds --seed ... --seed + N - 1): fleet.json,
+    fleet.md and fleet.png (the mass error over time, percentiles over the fleet)."""
+    import json
+
+    from gearsym.cmd_dynamics import ProgressBar
+    from gearsym.symbolic.io.output_dir import OutputDir
+    from gearsym.validation.studies.drive_fleet import (
+        drive_fleet_markdown,
+        plot_drive_fleet,
+        run_drive_fleet,
+    )
+
+    seeds = list(range(args.seed, args.seed + args.runs))
+    with OutputDir(args.out, "drive", before_commit=check) as out:
+        bar = ProgressBar("drive fleet")
+        try:
+            bar(0.0, f"0 of {len(seeds)} vehicles")
+            result = run_drive_fleet(
+                d,
+                cycle,
+                grade,
+                fleet,
+                seeds,
+                scheduler=args.scheduler,
+                workers=args.workers,
+                progress=lambda done, total: bar(done / total, f"{done} of {total} vehicles"),
+            )
+        finally:
+            bar.done()
+        data = {"gearbox": d.name, **result.to_dict()}
+        duration = f" --duration {args.duration:g}" if args.duration is not None else ""
+        command = (
+            f"gearsym drive --cycle {args.cycle}{duration} --fleet --runs {args.runs} "
+            f"--seed {args.seed}"
+        )
+        (out.path / "fleet.json").write_text(json.dumps(data, indent=2) + "\n")
+        (out.path / "fleet.md").write_text(drive_fleet_markdown(data, command))
+        plot_drive_fleet(result, out.path / "fleet.png")
+        paths = out.commit()
+    if args.json:
+        emit_json(data)
+    else:
+        print(drive_fleet_markdown(data, command))
+        print(f"  wrote {len(paths)} files to {args.out}")
+    return 1 if data["failed"] else 0
+
+
 def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
     """Register ``drive``."""
     p = add_command(
@@ -149,6 +207,18 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--seed", type=int, default=0, help="the fleet vehicle and the sensors' noise (default 0)"
     )
+    p.add_argument(
+        "--runs",
+        type=int,
+        default=1,
+        help="with --fleet: drive N vehicles (seeds --seed ... --seed + N - 1) and report the "
+        "mass error's percentiles over the fleet",
+    )
+    p.add_argument(
+        "--scheduler",
+        help="with --runs: run the vehicles on Dask, local (a LocalCluster) or tcp://HOST:PORT",
+    )
+    p.add_argument("--workers", type=int, default=2, help="LocalCluster workers (default 2)")
     p.add_argument(
         "--estimate",
         choices=("ekf", "none"),

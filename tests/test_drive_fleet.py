@@ -1,0 +1,95 @@
+"""Drives of a fleet (validation/studies/drive_fleet.py, `gearsym drive --fleet --runs N`).
+
+The percentiles are checked against numbers computed by hand from synthetic traces; the
+fleet's run is checked to drive each vehicle of its seed (the truth differs, the calibration
+does not) and the command's options are checked for their one-line errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from gearsym.symbolic.loader import load_description
+from gearsym.validation.sim.cycles import load_cycle
+from gearsym.validation.sim.fleet import load_fleet
+from gearsym.validation.studies.drive_fleet import DriveFleet, run_drive_fleet
+
+
+def _run(seed: int, errors: list[float]) -> dict:
+    return {
+        "seed": seed,
+        "drive": {"failure": ""},
+        "trace_t": [0.0, 60.0, 300.0, 600.0][: len(errors)],
+        "trace_mass_error": errors,
+    }
+
+
+def test_percentiles_by_hand():
+    cycle = load_cycle("wltc3b")
+    runs = [
+        _run(0, [0.10, 0.04, 0.02, 0.010]),
+        _run(1, [-0.20, -0.05, 0.01, -0.005]),
+        _run(2, [0.05, 0.03, -0.03, 0.020]),
+    ]
+    stats = DriveFleet(cycle, runs, "test").percentiles()
+    # |errors| at 60 s: 0.03, 0.04, 0.05 -> median 0.04; p95 by linear interpolation:
+    # 0.04 + 0.9 (0.05 - 0.04) = 0.049
+    assert stats["error_at"]["60"]["p50"] == pytest.approx(0.04)
+    assert stats["error_at"]["60"]["p95"] == pytest.approx(0.049)
+    # the end: 0.005, 0.010, 0.020 -> 0.010 and 0.010 + 0.9 (0.010) = 0.019
+    assert stats["error_at"]["end"]["p50"] == pytest.approx(0.010)
+    assert stats["error_at"]["end"]["p95"] == pytest.approx(0.019)
+    assert stats["vehicles"] == 3
+
+
+def test_fleet_drives_each_vehicle_of_its_seed():
+    d = load_description()
+    fleet = load_fleet(d)
+    cycle = load_cycle("wltc3b").window(14.0)
+    result = run_drive_fleet(d, cycle, None, fleet, [10000, 10001])
+    masses = [run["drive"]["truth"]["m_veh"] for run in result.runs]
+    assert masses == [dict(fleet.draw(s).values)["m_veh"] for s in (10000, 10001)]
+    assert all(run["drive"]["failure"] == "" for run in result.runs)
+    stats = result.percentiles()
+    assert stats["vehicles"] == 2
+    # the filter's mass σ was kept per vehicle, and the estimate is a mass, not the truth
+    for run in result.runs:
+        assert np.all(np.asarray(run["trace_mass_sigma"]) > 0)
+        assert run["estimates"]["m_veh"]["final"] != run["drive"]["truth"]["m_veh"]
+
+
+def gearsym(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "gearsym", *args], capture_output=True, text=True, timeout=600
+    )
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--runs", "3"], "--runs: more than one drive, or --scheduler, needs --fleet"),
+        (["--runs", "0"], "--runs: must be at least 1"),
+        (["--fleet", "--runs", "2", "--scheduler", "udp://x"], "drive: --scheduler: expected"),
+    ],
+)
+def test_fleet_options_one_line(tmp_path, args, message):
+    run = gearsym(*["drive", "--duration", "5", *args, "--out", str(tmp_path / "out")])
+    assert run.returncode == 2
+    assert message in run.stderr
+    assert len(run.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+
+
+def test_cli_fleet_json(tmp_path):
+    out = tmp_path / "fleet"
+    args = ["drive", "--duration", "14", "--fleet", "--runs", "2", "--seed", "7", "--json"]
+    run = gearsym(*[*args, "--out", str(out)])
+    assert run.returncode == 0, run.stderr
+    data = json.loads(run.stdout)
+    assert [r["seed"] for r in data["runs"]] == [7, 8]
+    assert set(data["mass_error"]["error_at"]) == {"end"}
+    for name in ("fleet.json", "fleet.md", "fleet.png"):
+        assert (out / name).exists()

@@ -1,0 +1,187 @@
+"""Drives of a fleet (``gearsym drive --fleet --runs N``): each vehicle of the fleet drives the
+cycle with the TCU's calibration, the EKF runs on each TCU log, and the mass error is gathered
+over time as percentiles over the fleet. Each vehicle is one task, in this process or on Dask
+(:mod:`gearsym.validation.studies.dask_runner`), as the fleet evaluation of the estimation
+chapter does."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from gearsym.symbolic.description import GearboxDescription
+from gearsym.validation.sim.cycles import Cycle, GradeProfile
+
+__all__ = ["DriveFleet", "drive_vehicle", "run_drive_fleet"]
+
+WHERE = ("drive", "--scheduler")
+
+#: The times (s) at which the mass error is reported, beside the end.
+REPORT_TIMES = (60.0, 300.0)
+
+#: Spacing of the error trace kept per vehicle (s).
+TRACE_STEP = 1.0
+
+
+@dataclass(frozen=True)
+class DriveContext:
+    """What every vehicle's task carries: the calibration, the cycle, the grade, the fleet."""
+
+    description: GearboxDescription
+    cycle: Cycle
+    grade: GradeProfile | None
+    fleet: Any
+
+
+def drive_vehicle(context: DriveContext, seed: int) -> dict[str, Any]:
+    """One vehicle ``seed`` of the fleet: its drive and the EKF on its TCU log (the sensors'
+    noise from the same seed). Returns the drive's and the estimates' summaries and the mass
+    error's trace every :data:`TRACE_STEP`."""
+    from gearsym.validation.sim.drive import DriveSimulator, DriveTruth
+    from gearsym.validation.studies.estimation.drive_ekf import run_drive_ekf
+
+    d = context.description
+    truth = DriveTruth.from_draw(d, context.fleet.draw(seed), constant_grade=context.grade is None)
+    result = DriveSimulator(d, context.cycle, context.grade, truth=truth).run()
+    out: dict[str, Any] = {"seed": seed, "drive": result.to_dict()}
+    out["drive"].pop("shift_list")
+    if result.failure or result.log is None:
+        return out
+    estimates = run_drive_ekf(
+        d, result.log.arrays(), result.log.shifts(), result.gears, result.values["m_veh"], seed
+    )
+    out["estimates"] = estimates.to_dict()
+    out["estimator"] = estimates.summary()
+    grid = np.arange(0.0, estimates.t[-1] + 1e-9, TRACE_STEP)
+    index = np.searchsorted(estimates.t, grid)
+    truth_mass = result.values["m_veh"]
+    out["trace_t"] = grid.tolist()
+    out["trace_mass_error"] = ((estimates.mean["m_veh"][index] - truth_mass) / truth_mass).tolist()
+    out["trace_mass_sigma"] = (estimates.sigma["m_veh"][index] / truth_mass).tolist()
+    return out
+
+
+@dataclass
+class DriveFleet:
+    """Every vehicle's summary and the fleet's percentiles of |mass error| over time."""
+
+    cycle: Cycle
+    runs: list[dict[str, Any]]
+    fleet_name: str
+
+    def percentiles(self) -> dict[str, Any]:
+        """p50 and p95 of the relative |m_veh error| at :data:`REPORT_TIMES` and at the end,
+        and over time (every :data:`TRACE_STEP`)."""
+        done = [r for r in self.runs if "trace_mass_error" in r]
+        if not done:
+            return {}
+        length = min(len(r["trace_mass_error"]) for r in done)
+        errors = np.abs(np.array([r["trace_mass_error"][:length] for r in done]))
+        t = np.asarray(done[0]["trace_t"][:length])
+        out: dict[str, Any] = {
+            "vehicles": len(done),
+            "t": t.tolist(),
+            "p50": np.percentile(errors, 50, axis=0).tolist(),
+            "p95": np.percentile(errors, 95, axis=0).tolist(),
+            "error_at": {},
+        }
+        for time_ in (*REPORT_TIMES, None):
+            k = len(t) - 1 if time_ is None else int(np.searchsorted(t, time_))
+            if k >= len(t):
+                continue
+            key = "end" if time_ is None else f"{time_:g}"
+            out["error_at"][key] = {
+                "p50": float(np.percentile(errors[:, k], 50)),
+                "p95": float(np.percentile(errors[:, k], 95)),
+            }
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "cycle": self.cycle.to_dict(),
+            "fleet": self.fleet_name,
+            "runs": [{k: v for k, v in r.items() if not k.startswith("trace")} for r in self.runs],
+            "failed": [r["seed"] for r in self.runs if r["drive"]["failure"]],
+            "mass_error": self.percentiles(),
+        }
+
+
+def run_drive_fleet(
+    d: GearboxDescription,
+    cycle: Cycle,
+    grade: GradeProfile | None,
+    fleet: Any,
+    seeds: Sequence[int],
+    scheduler: str | None = None,
+    workers: int = 2,
+    progress: Callable[[int, int], None] | None = None,
+) -> DriveFleet:
+    """Every vehicle of ``seeds`` (:func:`drive_vehicle`), in this process (``scheduler``
+    None) or on Dask (``"local"``: a LocalCluster of ``workers``; ``tcp://HOST:PORT``)."""
+    context = DriveContext(d, cycle, grade, fleet)
+    runs: list[dict[str, Any]] = [{} for _ in seeds]
+    if scheduler is None:
+        for i, seed in enumerate(seeds):
+            runs[i] = drive_vehicle(context, seed)
+            if progress is not None:
+                progress(i + 1, len(seeds))
+    else:
+        from gearsym.validation.studies.dask_runner import completed, connect, submit_each
+
+        client, cluster = connect(scheduler, workers, where=WHERE)
+        try:
+            futures = submit_each(client, drive_vehicle, context, list(seeds))
+            for done, (i, outcome) in enumerate(completed(futures, WHERE), 1):
+                runs[i] = outcome
+                if progress is not None:
+                    progress(done, len(seeds))
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    return DriveFleet(cycle, runs, getattr(fleet, "name", "fleet"))
+
+
+def drive_fleet_markdown(data: dict[str, Any], command: str) -> str:
+    """The fleet's drive as Markdown for the documentation, headed by its command."""
+    mass = data["mass_error"]
+    cycle = data["cycle"]
+    out = [
+        f"<!-- written by `{command}`; do not edit by hand: run the command again -->",
+        "",
+        f"*Written by `{command}`.*",
+        "",
+        f"- {mass.get('vehicles', 0)} vehicles of the {data['fleet']} fleet on {cycle['name']} "
+        f"({cycle['duration_s']:.0f} s); {len(data['failed'])} drive(s) failed",
+        "- the TCU's view: commanded torque (the fleet's engine and machine torque errors), "
+        "noisy speeds, no grade sensor",
+        "",
+        "| time | p50 of mass error | p95 of mass error |",
+        "|---|---|---|",
+    ]
+    for key, entry in mass.get("error_at", {}).items():
+        label = "end" if key == "end" else f"{key} s"
+        out.append(f"| {label} | {100 * entry['p50']:.1f} % | {100 * entry['p95']:.1f} % |")
+    return "\n".join(out) + "\n"
+
+
+def plot_drive_fleet(fleet: DriveFleet, path: Any) -> Any:
+    """Each vehicle's relative mass error over time, with the fleet's p50 and p95 of |error|."""
+    from gearsym.validation.drawing.figures import save, subplots
+
+    fig, ax = subplots(1, 1, size=(9.0, 4.5))
+    for run in fleet.runs:
+        if "trace_mass_error" in run:
+            ax.plot(run["trace_t"], 100 * np.asarray(run["trace_mass_error"]), lw=0.5, alpha=0.5)
+    stats = fleet.percentiles()
+    if stats:
+        ax.plot(stats["t"], 100 * np.asarray(stats["p95"]), color="k", lw=1.5, label="p95 |error|")
+        ax.plot(stats["t"], -100 * np.asarray(stats["p95"]), color="k", lw=1.5)
+        ax.plot(stats["t"], 100 * np.asarray(stats["p50"]), color="k", ls="--", label="p50 |error|")
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("m_veh error (%)")
+    ax.set_title(f"{fleet.cycle.name}: mass estimate over the drive, {len(fleet.runs)} vehicles")
+    ax.legend(loc="upper right")
+    return save(fig, path)
