@@ -251,13 +251,19 @@ def ekf_mode_update(
     u: Sequence[float],
     p: Sequence[float],
     modes: Mapping[str, int],
+    sync_band: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, dict[str, int], list[ModeEvent]]:
     """One decision of the filter's own mode logic (module text), after the measurement update
     at a sample: from the posterior (``z``, ``P``), the known inputs ``u`` at the sample (its
     mode flags are ignored) and the fixed parameters ``p``, the modes held over the next sample
     interval. Returns (z, P, modes, events); z and P change only at a lock-up (the hybrid
-    model's map). The elements are taken in turn (off-going first), each seeing the other's
-    mode as already decided. Pure: the arguments are not modified."""
+    model's map). ``sync_band`` (rad/s, default 0: the emitted C's rule): a sliding element's
+    estimated slip within this distance of zero counts as having reached it (a TCU's
+    synchronisation window: at 10 ms a slip closing at 1000 rad/s² is 10 rad/s from zero one
+    sample before it crosses, and the on-coming pressure the TCU raises at synchronism then
+    drives the filter's μ down if the sliding model stays). The elements are taken in turn
+    (off-going first), each seeing the other's mode as already decided. Pure: the arguments
+    are not modified."""
     import numpy as np
 
     z = np.array(z, dtype=float)
@@ -283,7 +289,7 @@ def ekf_mode_update(
             if abs(torque[i]) > capacity[i]:
                 new[e] = _direction(torque[i], sign)
                 events.append(ModeEvent(e, BREAK_AWAY, code, new[e]))
-        elif code * sign * slip[i] <= 0:  # sliding, and the slip has reached zero
+        elif code * sign * slip[i] <= sync_band:  # sliding, and the slip has reached zero
             candidate = {**new, e: STICK}
             if new[other] == STICK:  # a tie-up: it cannot stick, it slides on
                 direction = _direction(torque[i], sign)

@@ -13,9 +13,10 @@ model wait (mean and variance; their covariances with the rest are dropped there
 observable while its element slides, which decouples it between its shifts); a μ never seen
 starts at the prior. The modes start as the TCU knows them (the from-gear) and follow the
 filter's own mode logic (:func:`~gearsym.symbolic.estimators.ekf_modes.ekf_mode_update`)
-during the shift. In a gear the TCU holds line pressure on the gear's elements, so the
-filter's modes are the gear's (its own decision, no mode logic): a lock-up the logic had not
-decided by the shift's end is mapped there (the hybrid model's lock-up map).
+during the shift, with a synchronisation window (:data:`SYNC_BAND`). In a gear the TCU holds
+line pressure on the gear's elements, so the filter's modes are the gear's (its own decision,
+no mode logic): a lock-up the logic had not decided by the shift's end is mapped there (the
+hybrid model's lock-up map).
 A μ's random walk runs only while its element slides (a locked or open element's μ does not
 move what the filter sees; :meth:`~gearsym.symbolic.estimators.ekf.AugmentedModel.frozen_states`).
 
@@ -43,6 +44,11 @@ __all__ = ["DriveEstimates", "run_drive_ekf"]
 
 #: Below this measured vehicle speed (m/s), with no torque commanded, the vehicle stands.
 STANDSTILL_SPEED = 0.3
+
+#: The TCU's synchronisation window (rad/s): a sliding element's estimated slip this close to
+#: zero counts as locking up (:func:`~gearsym.symbolic.estimators.ekf_modes.ekf_mode_update`).
+#: Assumed: about the slip one 10 ms sample covers at the end of a 0.35 s speed phase.
+SYNC_BAND = 2.0
 
 #: The vehicle's parameters every model has, carried with their covariance block.
 CARRIED = ("m_veh", naming.GRADE)
@@ -295,7 +301,9 @@ def run_drive_ekf(
                 discrete, z, P, u_now, y_all[k, columns], p, relative, floor_all[columns]
             )
             if not in_gear:
-                z, P, modes, _ = ekf_mode_update(logic, z, P, u_known, p, modes)
+                z, P, modes, _ = ekf_mode_update(
+                    logic, z, P, u_known, p, modes, sync_band=SYNC_BAND
+                )
         # record
         for name in tracked:
             if name in names:
