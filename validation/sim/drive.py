@@ -280,6 +280,18 @@ class DriveSimulator:
             powers, energies = runner._energy[mode]
             p = self.parameters_of(sim, self.values)
             line = self.truth.actuators.pressure(np.array([runner.line]))[0]
+            # one call per right-hand side: ẋ and the powers together (a CasADi call costs
+            # more than the arithmetic of this small model); ω_in is linear in x (ẏ = P z)
+            fused = ca.Function(
+                "gear",
+                [compiled.x, compiled.u, compiled.p],
+                [ca.vertcat(compiled.rhs_sx, powers(compiled.x, compiled.u, compiled.p))],
+            )
+            speeds = sim.shaft_speeds(mode)
+            index = [s.name for s in self.d.shafts].index(self.d.input_shaft)
+            input_row = np.array(
+                [float(speeds(np.eye(compiled.n)[j])[index]) for j in range(compiled.n)]
+            )
             self._gear_model[k] = (
                 sim,
                 mode,
@@ -288,7 +300,9 @@ class DriveSimulator:
                     "inertia": float(inertia(p)),
                     "powers": powers,
                     "energies": energies,
-                    "speeds": sim.shaft_speeds(mode),
+                    "speeds": speeds,
+                    "fused": fused,
+                    "input_row": input_row,
                     "line": [f * line / runner.line for f in runner.line_forces(mode)],
                     "closed": self.d.gear(self.gears[k]).closed,
                 },
@@ -586,7 +600,7 @@ class _GearSegment:
         """(torque split, ω_in) at the state y = [x, ∫(v_ref − v), s, works]."""
         drive = self.drive
         x = y[: self.n]
-        omega_in = float(self.fns["speeds"](x)[self.input_index])
+        omega_in = float(self.fns["input_row"] @ x)
         v = x[self.wheel] * drive.r_dyn
         force = drive.powertrain.wheel_force(
             float(drive.cycle.speed(t)), drive.cycle.acceleration(t), v, y[self.n]
@@ -598,13 +612,12 @@ class _GearSegment:
         x = y[:n]
         split, omega_in = self.control(t, y)
         u = drive._inputs(self.fns, drive.true_torque(split, omega_in), y[n + 1])
-        p = self.fns["p"]
-        xdot = self.compiled.rhs(x, u, p)
+        both = np.asarray(self.fns["fused"](x, u, self.fns["p"])).ravel()
+        xdot, powers = both[:n], both[n:]
         omega_c = x[self.wheel]
         brake = split.brake * math.tanh(omega_c / BRAKE_SPEED)
         xdot[self.wheel] -= brake / self.fns["inertia"]
         v = omega_c * drive.r_dyn
-        powers = np.asarray(self.fns["powers"](x, u, p)).ravel()
         return np.concatenate(
             [xdot, [float(drive.cycle.speed(t)) - v, v], powers, [brake * omega_c]]
         )
