@@ -33,7 +33,12 @@ import numpy as np
 from gearsym.symbolic import naming
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drive_calibration import check_hysteresis
-from gearsym.symbolic.drivetrain import adjacent_shifts, drivetrain_parts, quantity
+from gearsym.symbolic.drivetrain import (
+    adjacent_shifts,
+    drivetrain_parts,
+    element_short_name,
+    quantity,
+)
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.numeric import to_casadi
 from gearsym.symbolic.ratios import gear_ratio
@@ -219,18 +224,15 @@ class DriveSimulator:
                 )
             ],
         )
-        pairs = (
-            *zip(self.gears[:-1], self.gears[1:], strict=True),
-            *zip(self.gears[1:], self.gears[:-1], strict=True),
-        )
-        # the plant is the truth's; the TCU plans its shifts on the calibration's models
+        # the plant is the truth's; the TCU plans its shifts on the calibration's models. Each
+        # shift's models are compiled when the drive first needs them.
         plant = self.truth.description
-        self.runners = {(a, b): ShiftRunner(plant, f"{a}-{b}") for a, b in pairs}
-        self.plan_runners = (
-            self.runners if plant is d else {(a, b): ShiftRunner(d, f"{a}-{b}") for a, b in pairs}
-        )
-        self.values = self._values(self.runners, self.truth.mu_scale)
-        self.calibration_values = self._values(self.plan_runners, {})
+        self._runners: dict[tuple[str, str], ShiftRunner] = {}
+        self._planners: dict[tuple[str, str], ShiftRunner] = {}
+        self.line = d.drive.si("shift", "line_pressure")
+        first = (self.gears[0], self.gears[1])
+        self.values = self._values(plant, self.runner(first), self.truth.mu_scale)
+        self.calibration_values = self._values(d, self.planner(first), {})
         mass = d.estimator.prior_of("m_veh", self.calibration_values["m_veh"])[0]
         self.calibration_values["m_veh"] = mass
         self.powertrain = Powertrain(d, mass)
@@ -239,18 +241,34 @@ class DriveSimulator:
         self._gear_model: dict[int, tuple[HybridSimulator, str, Any]] = {}
         self._wheel_parts = drivetrain_parts(plant)
 
+    def runner(self, pair: tuple[str, str]) -> ShiftRunner:
+        """The truth's hybrid model of the shift ``pair`` (compiled on first use)."""
+        if pair not in self._runners:
+            self._runners[pair] = ShiftRunner(self.truth.description, "-".join(pair))
+        return self._runners[pair]
+
+    def planner(self, pair: tuple[str, str]) -> ShiftRunner:
+        """The calibration's model of the shift ``pair``, which the TCU plans with."""
+        if self.truth.description is self.d:
+            return self.runner(pair)
+        if pair not in self._planners:
+            self._planners[pair] = ShiftRunner(self.d, "-".join(pair))
+        return self._planners[pair]
+
     @staticmethod
     def _values(
-        runners: Mapping[tuple[str, str], ShiftRunner], mu_scale: Mapping[str, float]
+        d: GearboxDescription, runner: ShiftRunner, mu_scale: Mapping[str, float]
     ) -> dict[str, float]:
-        """Every parameter of every shift's hybrid model by name, each element's μ times its
-        map factor."""
-        values: dict[str, float] = {}
-        for runner in runners.values():
-            sim = runner.simulator
-            values |= sim.values()
-            for e, symbol in sim.hybrid.friction_coefficient.items():
-                values[str(symbol)] = sim.values()[str(symbol)] * mu_scale.get(e, 1.0)
+        """Every parameter of every shift's hybrid model by name: the vehicle's and the
+        drivetrain's (the same in every shift) and each friction element's μ (the
+        description's nominal μ, 2.69) times its map factor."""
+        values = runner.simulator.values()
+        mu = quantity(d, "friction", "mu_nominal").value
+        for e in d.shift_elements:
+            if e.one_way or e.n_disc is None or e.r_m is None:
+                continue
+            name = naming.friction_coefficient(element_short_name(d, e.name))
+            values[name] = mu * mu_scale.get(e.name, 1.0)
         return values
 
     def parameters_of(self, sim: HybridSimulator, values: Mapping[str, float]) -> np.ndarray:
@@ -264,10 +282,10 @@ class DriveSimulator:
         the upshift out of it (the to-mode of the last upshift for the top gear)."""
         if k not in self._gear_model:
             if k + 1 < len(self.gears):
-                runner = self.runners[(self.gears[k], self.gears[k + 1])]
+                runner = self.runner((self.gears[k], self.gears[k + 1]))
                 mode = runner.simulator.hybrid.from_mode
             else:
-                runner = self.runners[(self.gears[k - 1], self.gears[k])]
+                runner = self.runner((self.gears[k - 1], self.gears[k]))
                 mode = runner.simulator.hybrid.to_mode
             sim = runner.simulator
             compiled = sim.modes[mode]
@@ -403,7 +421,7 @@ class DriveSimulator:
             target = k + 1 if name == "upshift" else k - 1
             split, _ = segment.control(t, y)
             pair = (self.gears[k], self.gears[target])
-            runner, planner = self.runners[pair], self.plan_runners[pair]
+            runner, planner = self.runner(pair), self.planner(pair)
             omega_in = segment.control(t, y)[1]
             outcome = runner.run(
                 t_start=t,
@@ -480,7 +498,7 @@ class DriveSimulator:
     def _log_gear(self, log: TcuLog, t0: float, t1: float, sol: Any, segment: Any, k: int) -> None:
         """The TCU's samples of a gear segment from the dense output."""
         fns, n = segment.fns, segment.n
-        line = self.plan_runners[next(iter(self.plan_runners))].line
+        line = self.line
         pressures = {e: line for e in fns["closed"]}
         names = [v.name for v in segment.compiled.mode.model.states]
         twist, wheel = names.index(naming.TWIST), names.index(naming.WHEEL_SPEED)
@@ -504,7 +522,7 @@ class DriveSimulator:
 
     def _log_rest(self, log: TcuLog, t0: float, t1: float, k: int, distance: float) -> None:
         sim, mode, fns = self.gear_model(k)
-        line = self.plan_runners[next(iter(self.plan_runners))].line
+        line = self.line
         for t in log.ticks(t0, t1):
             log.add(
                 t,
