@@ -178,3 +178,30 @@ def sorted_torques(d: object, shift: str) -> list[str]:
 
     spec = shift_spec(d, shift)  # type: ignore[arg-type]
     return [f"T_{spec.off_going}", f"T_{spec.on_coming}"]
+
+
+def test_stick_diagram_draws_dogs_with_their_own_symbol(tmp_path: Path) -> None:
+    """A dog element is drawn as a claw coupling: interlocking teeth between its two plates
+    (three up, two down, overlapping: engaged); friction elements keep plain plates."""
+    from gearsym.validation.drawing.geometry import stick_diagram
+
+    stick = stick_diagram(load_description(BOX))
+    owners = {t.owner for t in stick.teeth}
+    assert owners == {"B06", "K27"}
+    for name in owners:
+        teeth = [t for t in stick.teeth if t.owner == name]
+        assert len(teeth) == 5
+        plates = sorted(p.start[1] for p in stick.plates if p.owner == name)
+        low, high = plates[0], plates[-1]
+        for t in teeth:
+            ys = sorted((t.start[1], t.end[1]))
+            assert low - 1e-12 <= ys[0] and ys[1] <= high + 1e-12
+            assert t.start[0] == t.end[0]  # vertical
+        rising = [t for t in teeth if t.start[1] == low]
+        hanging = [t for t in teeth if t.start[1] == high]
+        assert len(rising) == 3 and len(hanging) == 2
+        assert min(t.end[1] for t in rising) > max(t.end[1] for t in hanging)  # they overlap
+    assert stick_diagram(load_description(None)).teeth == ()
+    out = tmp_path / "stick.svg"
+    assert main(["draw", str(BOX), "--what", "stick", "--out", str(out)]) == 0
+    assert out.stat().st_size > 0
