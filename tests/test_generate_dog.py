@@ -91,3 +91,16 @@ def test_what_is_skipped_is_said(box, capsys: pytest.CaptureFixture[str], tmp_pa
     assert main(["generate", str(BOX), "--out", str(out), "--hybrid-shifts", "4-5"]) == 0
     printed = capsys.readouterr()
     assert "not generated: hybrid_4_5_sens: the dog element B06 swaps" in printed.out + printed.err
+
+
+def test_linear_forms_of_a_dog_shift_are_the_hybrid_modes(box) -> None:  # type: ignore[no-untyped-def]
+    """A dog is locked or open: 2 × 3 − 1 (the tie-up) = 5 forms, serving the 7 hybrid modes
+    as the hybrid model names them; none of them has the dog sliding."""
+    from gearsym.symbolic.linear_forms import shift_linear_forms
+    from gearsym.symbolic.shifts import shift_spec
+
+    forms = shift_linear_forms(box, shift_spec(box, "4-5")).forms
+    assert len(forms) == 5
+    assert not any("B06_sliding" in f.name for f in forms)
+    served = {m for f in forms for m in f.modes}
+    assert served == set(hybrid_shift(box, "4-5").modes)
