@@ -40,6 +40,7 @@ DATA = Path(__file__).parent / "data"
 BOX = DATA / "dog_9speed.toml"
 DOWN = DATA / "dog_5_4.toml"
 UP = DATA / "dog_4_5.toml"
+CLUTCH = DATA / "dog_3_4.toml"
 
 
 @pytest.fixture(scope="module")
@@ -55,11 +56,11 @@ def free_flare(box):  # type: ignore[no-untyped-def]
     return simulator, simulator.run()
 
 
-def _slip_time(simulator: HybridSimulator, result, value: float) -> float:  # type: ignore[no-untyped-def]
+def _slip_time(simulator: HybridSimulator, result, value: float, dog: str = "B06") -> float:  # type: ignore[no-untyped-def]
     """When the dog's slip passes ``value`` in the last piece (both elements open)."""
     piece = result.pieces[-1]
     compiled = simulator.modes[piece.mode]
-    k = simulator.hybrid.elements.index("B06")
+    k = simulator.hybrid.elements.index(dog)
     p = simulator.parameter_vector(result.values)
 
     def slip(t: float) -> float:
@@ -69,10 +70,12 @@ def _slip_time(simulator: HybridSimulator, result, value: float) -> float:  # ty
     return brentq(slip, piece.t_start, piece.t_end, xtol=1e-15, rtol=1e-15)
 
 
-def _commanded(box, tmp_path: Path, t_command: float) -> HybridSimulator:  # type: ignore[no-untyped-def]
-    """The 5-4 with the dog commanded engaged from ``t_command`` on."""
-    table = f'[pressure.B06]\nunit = "Pa"\ntime = [0.0, {t_command!r}, 1.2]\n'
-    text = DOWN.read_text(encoding="utf-8") + "\n" + table + "value = [0.0, 0.0, 1.0]\n"
+def _commanded(  # type: ignore[no-untyped-def]
+    box, tmp_path: Path, t_command: float, scenario: Path = DOWN, dog: str = "B06"
+) -> HybridSimulator:
+    """The scenario (default the 5-4) with the dog commanded engaged from ``t_command`` on."""
+    table = f'[pressure.{dog}]\nunit = "Pa"\ntime = [0.0, {t_command!r}, 1.2]\n'
+    text = scenario.read_text(encoding="utf-8") + "\n" + table + "value = [0.0, 0.0, 1.0]\n"
     path = tmp_path / "dog_5_4_commanded.toml"
     path.write_text(text, encoding="utf-8")
     return HybridSimulator(box, load_scenario(box, path))
@@ -178,3 +181,24 @@ def test_loaded_dog_holds_until_unloaded(box) -> None:  # type: ignore[no-untype
     assert energy_audit(simulator, result).relative_residual < 1e-8
     assert result.signals["ratio"][-1] == pytest.approx(1.211, abs=5e-4)
     assert result.modes[-1] == simulator.hybrid.to_mode
+
+
+def test_dog_clutch_synchronised_by_the_input_torque(box, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """3-4: the dog clutch K27 (between shafts 2 and 7) comes on. K81 is released and the
+    e-machine's −8 N·m pulls the input down to gear 4's speed; commanded at the instant its
+    slip ω_2 − ω_7 crosses zero, the dog engages without loss and holds 4th (1.636)."""
+    free = HybridSimulator(box, load_scenario(box, CLUTCH))
+    flare = free.run()
+    assert [e.kind for e in flare.events] == ["break-away", "opening"]
+    t_sync = _slip_time(free, flare, 0.0, "K27")
+    commanded = _commanded(box, tmp_path, t_sync, CLUTCH, "K27")
+    result = commanded.run()
+    (event,) = [e for e in result.events if e.element == "K27"]
+    assert event.kind == ENGAGEMENT and event.target == commanded.hybrid.to_mode
+    assert event.energy_loss < 1e-9
+    assert energy_audit(commanded, result).relative_residual < 1e-8
+    after = result.t > t_sync + 1e-3
+    assert np.max(np.abs(result.signals["slip_K27"][after])) < 1e-9
+    assert np.allclose(result.signals["ratio"][after], 1.636, atol=5e-4)
+    # engaged, it carries the load: the e-machine's torque now brakes the vehicle through it
+    assert np.all(np.abs(result.signals["T_K27"][after]) > 1.0)
