@@ -76,7 +76,17 @@ DEFAULT_CONFIG_NAME = "thesis_9speed.toml"
 #: Shift-element kinds: friction clutch (two shafts), friction brake (a shaft to the housing),
 #: one-way clutch / freewheel (two shafts, or one shaft to the housing).
 ONE_WAY = "one_way"
-ELEMENT_KINDS = ("clutch", "brake", ONE_WAY)
+#: Dog clutch / dog brake (form-locking, as the ZF 9HP's A and F): carries torque only when
+#: engaged, engages only within ``engage_slip``, releases only below ``release_torque``.
+DOG = "dog"
+ELEMENT_KINDS = ("clutch", "brake", ONE_WAY, DOG)
+#: Stated defaults of a dog element's keys (README "The gearbox description", dog clutches):
+#: the largest |slip| at which its teeth engage (3 rad/s ≈ 29 rpm, assumed: the order the
+#: synchronising control of production dog elements aims at) and the largest |reaction
+#: torque| at which it can be pulled out (5 N·m, assumed: the teeth's friction under load
+#: holds it engaged above that).
+DOG_ENGAGE_SLIP_DEFAULT = 3.0  # rad/s
+DOG_RELEASE_TORQUE_DEFAULT = 5.0  # N*m
 #: ``locks`` of a one-way clutch: the sign of the slip ω_a − ω_b it prevents.
 LOCK_DIRECTIONS = {"positive": 1, "negative": -1}
 
@@ -230,6 +240,9 @@ class ShiftElement:
     (``kind = "one_way"``) prevents the slip sign ``locks`` (+1: it blocks Δω > 0, −1: it blocks
     Δω < 0) and runs free the other way; locked, it carries a torque of the sign ``locks``
     (the sign a friction element resisting that slip would have, 2.70), never the other.
+    A dog element (``kind = "dog"``, clutch ``(a, b)`` or brake ``(b,)``) is form-locking:
+    engaged it is a constraint of unlimited capacity, open it carries nothing; it engages only
+    while |Δω| ≤ ``engage_slip`` and releases only while |T| ≤ ``release_torque``.
     """
 
     name: str
@@ -239,6 +252,10 @@ class ShiftElement:
     r_m: Quantity | None = None  # mean friction radius (2.69)
     a_piston: Quantity | None = None  # piston area: F_N = p_N·A (2.69)
     locks: int = 0  # one-way clutch: the blocked slip sign, +1 or −1; 0 for the others
+    #: dog element: the largest |slip| at which it engages (rad/s) and the largest |reaction
+    #: torque| at which it releases (N·m); None for the others
+    engage_slip: Quantity | None = None
+    release_torque: Quantity | None = None
 
     @property
     def a(self) -> str | None:
@@ -248,6 +265,12 @@ class ShiftElement:
     def one_way(self) -> bool:
         """A freewheel: a unilateral constraint, no pressure, no friction data."""
         return self.kind == ONE_WAY
+
+    @property
+    def dog(self) -> bool:
+        """A dog clutch or dog brake: a bilateral constraint when engaged, nothing when open;
+        no pressure-dependent capacity, no friction data."""
+        return self.kind == DOG
 
     @property
     def b(self) -> str:

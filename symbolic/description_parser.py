@@ -20,6 +20,9 @@ from typing import Any
 from gearsym.symbolic import set_kinds
 from gearsym.symbolic.description import (
     CENTRE_DISTANCE_TOLERANCE_MAX,
+    DOG,
+    DOG_ENGAGE_SLIP_DEFAULT,
+    DOG_RELEASE_TORQUE_DEFAULT,
     EXPECTED_UNITS,
     LOCK_DIRECTIONS,
     N_DISC_MAX,
@@ -49,6 +52,9 @@ from gearsym.symbolic.io.input_files import parse_toml, shown
 from gearsym.symbolic.io.table_reader import TableReader as _Reader
 from gearsym.symbolic.io.table_reader import short_integer
 from gearsym.symbolic.naming import check_names
+
+#: The keys only a dog element has.
+DOG_KEYS = ("engage_slip", "release_torque")
 
 
 def _label(reader: _Reader, name: str) -> None:
@@ -102,6 +108,10 @@ def parse_description(
             elements.append(_one_way(r, element_name))
             r.reject_unknown()
             continue
+        if kind == DOG:
+            elements.append(_dog(r, element_name))
+            r.reject_unknown()
+            continue
         if kind == "clutch":
             pair = r.string_list("shafts")
             if len(pair) != 2:
@@ -111,11 +121,16 @@ def parse_description(
         elif kind == "brake":
             pair = (r.string("shaft"),)
         else:
-            raise r.fail("kind", f"expected 'clutch', 'brake' or 'one_way', got {shown(kind)}")
+            raise r.fail(
+                "kind", f"expected 'clutch', 'brake', 'one_way' or 'dog', got {shown(kind)}"
+            )
         if "locks" in r.data:
             raise r.fail(
                 "locks", f"only a one-way clutch has a locking direction; this is a {kind}"
             )
+        for key in DOG_KEYS:
+            if key in r.data:
+                raise r.fail(key, f'only a dog element (kind = "dog") has {key}; this is a {kind}')
         has_friction = any(k in r.data for k in ("n_disc", "r_m", "a_piston"))
         elements.append(
             ShiftElement(
@@ -447,25 +462,7 @@ def _one_way(r: _Reader, name: str) -> ShiftElement:
     ``shaft = b`` (to the housing), and ``locks = "positive" | "negative"``, the sign of the
     slip ω_a − ω_b (2.59) it prevents. A freewheel has no piston and no discs: the friction
     keys of a clutch or brake are refused."""
-    if "shafts" in r.data and "shaft" in r.data:
-        raise r.fail(
-            "shaft",
-            "give shafts = [a, b] (between two shafts) or shaft = b (to the housing), not both",
-        )
-    if "shafts" in r.data:
-        pair = r.string_list("shafts")
-        if len(pair) != 2:
-            raise r.fail(
-                "shafts",
-                "a one-way clutch joins exactly two shafts [a, b] "
-                "(or shaft = b for one to the housing)",
-            )
-        if pair[0] == pair[1]:
-            raise r.fail(
-                "shafts", f"a one-way clutch must join two different shafts, got {list(pair)}"
-            )
-    else:
-        pair = (r.string("shaft"),)
+    pair = _clutch_or_brake_shafts(r, "a one-way clutch")
     direction = r.string("locks")
     if direction not in LOCK_DIRECTIONS:
         raise r.fail(
@@ -477,6 +474,58 @@ def _one_way(r: _Reader, name: str) -> ShiftElement:
         if key in r.data:
             raise r.fail(key, "a one-way clutch has no discs or piston (it is not pressed)")
     return ShiftElement(name, ONE_WAY, pair, locks=LOCK_DIRECTIONS[direction])
+
+
+def _clutch_or_brake_shafts(r: _Reader, what: str) -> tuple[str, ...]:
+    """``shafts = [a, b]`` (between two shafts) or ``shaft = b`` (to the housing) of a
+    one-way clutch or a dog element."""
+    if "shafts" in r.data and "shaft" in r.data:
+        raise r.fail(
+            "shaft",
+            "give shafts = [a, b] (between two shafts) or shaft = b (to the housing), not both",
+        )
+    if "shafts" in r.data:
+        pair = r.string_list("shafts")
+        if len(pair) != 2:
+            raise r.fail(
+                "shafts",
+                f"{what} joins exactly two shafts [a, b] (or shaft = b for one to the housing)",
+            )
+        if pair[0] == pair[1]:
+            raise r.fail("shafts", f"{what} must join two different shafts, got {list(pair)}")
+        return pair
+    if "shaft" not in r.data:
+        raise r.fail(
+            "shafts", f"{what} needs shafts = [a, b] (a clutch) or shaft = b (a brake); missing"
+        )
+    return (r.string("shaft"),)
+
+
+def _dog(r: _Reader, name: str) -> ShiftElement:
+    """A ``kind = "dog"`` element (README "Dog clutches"): ``shafts = [a, b]`` (a dog clutch)
+    or ``shaft = b`` (a dog brake), optional ``engage_slip`` (rad/s) and ``release_torque``
+    (N·m) with stated defaults. Form-locking: no discs, no piston, no locking direction."""
+    pair = _clutch_or_brake_shafts(r, "a dog element")
+    for key in ("n_disc", "r_m", "a_piston"):
+        if key in r.data:
+            raise r.fail(
+                key,
+                "a dog element is form-locking: it has no friction discs or piston (no sliding "
+                "friction, no μ, no F_N); leave out n_disc, r_m and a_piston",
+            )
+    if "locks" in r.data:
+        raise r.fail("locks", "only a one-way clutch has a locking direction; this is a dog")
+    engage = (
+        r.quantity("engage_slip", unit="rad/s")
+        if "engage_slip" in r.data
+        else Quantity(DOG_ENGAGE_SLIP_DEFAULT, "rad/s", "default (assumed)")
+    )
+    release = (
+        r.quantity("release_torque", unit="N*m")
+        if "release_torque" in r.data
+        else Quantity(DOG_RELEASE_TORQUE_DEFAULT, "N*m", "default (assumed)")
+    )
+    return ShiftElement(name, DOG, pair, engage_slip=engage, release_torque=release)
 
 
 def _replace_coordinates(d: GearboxDescription) -> GearboxDescription:

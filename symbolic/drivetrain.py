@@ -561,11 +561,16 @@ def shift_model(
     μ_<element> as parameters and the normal forces as inputs: u = [T_In, F_N38, F_N05]. A
     swapping one-way clutch has no μ and no F_N: while neither swapping element is locked (the
     shift model's premise) it overruns and carries no torque, so it is absent from u and p
-    (the metadata says so); locked, it is a constraint of the gear or hybrid mode instead.
+    (the metadata says so); locked, it is a constraint of the gear or hybrid mode instead. A
+    swapping dog element is open under the same premise (it cannot carry torque while it
+    slips): absent from the μ form, T = 0 in the torque form (metadata ``dog``).
     """
     # the μ form needs each element's power-on slip direction: a single swap only
     spec = shift_spec(d, shift, max_swaps=1 if friction_inputs else 2)
     one_way = [e for e in spec.swapping if d.element(e).one_way] if friction_inputs else []
+    dogs = [e for e in spec.swapping if d.element(e).dog]
+    if friction_inputs and dogs:
+        one_way += dogs  # open: no torque, no μ, no F_N (as an overrunning freewheel)
     model = drivetrain_model(
         d,
         naming.shift_model_name(spec.from_gear, spec.to_gear, friction_inputs),
@@ -575,11 +580,21 @@ def shift_model(
         with_wheel_acceleration=with_wheel_acceleration,
         slip_signs=power_on_slip_signs(d, spec) if friction_inputs else None,
     )
-    if not one_way:
+    metadata = dict(model.metadata)
+    if dogs:
+        metadata["dog"] = (
+            f"dog element {', '.join(dogs)}: form-locking, it carries no torque while open "
+            + ("(absent here: no mu, no normal force)" if friction_inputs else "(T = 0)")
+            + " and never slips loaded; engaged it is a constraint (the gear, or the hybrid "
+            "mode with it locked), engaging only within its engage_slip"
+        )
+    free = [e for e in one_way if not d.element(e).dog]
+    if free:
+        metadata["overrunning"] = (
+            f"one-way clutch {', '.join(free)} overrunning (zero torque, no mu, no normal "
+            "force): this model holds while it overruns; locked, it is a constraint (the gear, "
+            "or the hybrid mode with it locked)"
+        )
+    if metadata == model.metadata:
         return model
-    note = (
-        f"one-way clutch {', '.join(one_way)} overrunning (zero torque, no mu, no normal "
-        "force): this model holds while it overruns; locked, it is a constraint (the gear, or "
-        "the hybrid mode with it locked)"
-    )
-    return replace(model, metadata={**model.metadata, "overrunning": note})
+    return replace(model, metadata=metadata)

@@ -64,6 +64,23 @@ fails it keeps the freewheel overrunning. The state maps are the friction elemen
 projections: at a release P⁺ z⁺ = P⁻ z⁻ (an embedding), at a lock-up the slip is zero (a change
 of coordinates). A freewheel has no normal force and no μ: the shift's inputs and parameters
 carry those of its friction element only.
+
+**Dog elements** (``kind = "dog"``: form-locking, as the ZF 9HP's A and F) may be a swapping
+element too. A dog has two statuses, **locked** (a constraint of unlimited capacity: no
+break-away) and **open** (no torque); no sliding friction, no μ, no F_N. It is commanded, not
+pressed: the scenario's ``[pressure.<dog>]`` profile is its actuation command (engaged while
+> 0, the value itself does not matter; :mod:`gearsym.validation.sim.hybrid_simulation`). Its
+guards:
+
+* **engagement** (open → locked) fires when the command rises, *not* at a zero crossing; its
+  condition is ``engage_slip`` − |Δω| ≥ 0 and it has no ``otherwise``: a commanded engagement
+  away from synchronism is a failure the simulation states (the teeth would clash), never a
+  silent slip. The state map is the M-metric projection above, an impulsive engagement that
+  loses ½ Δẏᵀ M Δẏ (zero at zero slip), which the simulation reports per event;
+* **disengagement** (locked → open) when the command is off and |T_req| falls through
+  ``release_torque`` (a loaded dog cannot be pulled out: it stays locked until the friction
+  partner has taken its load); a dog already unloaded when the command falls opens at once.
+  An embedding, like a release.
 """
 
 from __future__ import annotations
@@ -103,10 +120,15 @@ LOCK_UP = "lock-up"
 OPENING = "opening"
 ENGAGEMENT = "engagement"
 RELEASE = "release"
+DISENGAGEMENT = "disengagement"
 
 #: The guards that depend on the state (located by a root search, with the event-time term of
-#: the sensitivity jump); opening and engagement depend on F_N alone.
-STATE_GUARDS = (BREAK_AWAY, LOCK_UP, RELEASE)
+#: the sensitivity jump); opening and engagement depend on F_N alone. A dog's disengagement is
+#: a state guard that is armed only while its command is off.
+STATE_GUARDS = (BREAK_AWAY, LOCK_UP, RELEASE, DISENGAGEMENT)
+
+#: Statuses of a dog element: locked or open (module docstring).
+DOG_STATUSES: tuple[tuple[str, int], ...] = ((LOCKED, 0), (OPEN, 0))
 
 
 def status_label(status: str, sign: int) -> str:
@@ -125,6 +147,8 @@ def element_statuses(d: GearboxDescription, element: str) -> tuple[tuple[str, in
     e = d.element(element)
     if e.one_way:
         return ((LOCKED, 0), (OVERRUNNING, -e.locks))
+    if e.dog:
+        return DOG_STATUSES
     return STATUSES
 
 
@@ -205,7 +229,8 @@ class HybridShift:
     one-way clutch among the elements has no F_N and no μ: ``normal_force`` and
     ``friction_coefficient`` name the friction elements only, and ``one_way`` maps a one-way
     swapping element to its ``locks``. ``from_mode`` is the from-gear (off-going locked,
-    on-coming open or overrunning), ``to_mode`` the to-gear.
+    on-coming open or overrunning), ``to_mode`` the to-gear. ``dog`` maps a dog swapping
+    element to its (``engage_slip`` in rad/s, ``release_torque`` in N·m).
     """
 
     spec: ShiftSpec
@@ -220,11 +245,13 @@ class HybridShift:
     from_mode: str
     to_mode: str
     one_way: dict[str, int] = field(default_factory=dict)
+    dog: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     @property
     def friction_elements(self) -> tuple[str, ...]:
-        """The swapping elements with a normal force and a μ (not one-way clutches)."""
-        return tuple(e for e in self.elements if e not in self.one_way)
+        """The swapping elements with a normal force and a μ (not one-way clutches, not dog
+        elements)."""
+        return tuple(e for e in self.elements if e not in self.one_way and e not in self.dog)
 
     def guards_from(self, mode: str) -> tuple[Guard, ...]:
         """Every guard whose source is ``mode``."""
@@ -322,7 +349,11 @@ def slip_acceleration_gain(
     whenever M (2.34) is positive definite. It fixes the slip direction after a break-away."""
     spec = shift_spec(d, shift)
     dyn = gearbox_dynamics(d)
-    friction = {e: _friction_symbols(d, e) for e in (spec.off_going, spec.on_coming)}
+    friction = {
+        e: _friction_symbols(d, e)
+        for e in (spec.off_going, spec.on_coming)
+        if not d.element(e).one_way and not d.element(e).dog
+    }
     locked = (*spec.locked, *locked_too, element)
     return _released(d, dyn, locked, {}, element, friction)[1]
 
@@ -343,7 +374,20 @@ def hybrid_shift(d: GearboxDescription, shift: str) -> HybridShift:
             f"shift {shift!r} swaps two one-way clutches ({', '.join(elements)}); the hybrid "
             "model needs a friction element that is pressed",
         )
-    friction = {e: _friction_symbols(d, e) for e in elements if e not in one_way}
+    dog = {
+        e: (d.element(e).engage_slip.value, d.element(e).release_torque.value)  # type: ignore[union-attr]
+        for e in elements
+        if d.element(e).dog
+    }
+    if len(dog) + len(one_way) == 2:
+        raise GearsymError(
+            d.file,
+            "shift",
+            f"shift {shift!r} swaps {', '.join(elements)}, neither a friction element: a dog "
+            "element or a freewheel is synchronised by a friction element of the shift, which "
+            "the hybrid model needs",
+        )
+    friction = {e: _friction_symbols(d, e) for e in elements if e not in one_way and e not in dog}
     modes: dict[str, Mode] = {}
     for statuses in product(*(element_statuses(d, e) for e in elements)):
         status = dict(zip(elements, statuses, strict=True))
@@ -399,6 +443,9 @@ def hybrid_shift(d: GearboxDescription, shift: str) -> HybridShift:
             if e in one_way:
                 guards.extend(_one_way_guards(mode, e, one_way[e], modes, to, mapped))
                 continue
+            if e in dog:
+                guards.extend(_dog_guards(mode, e, dog[e], to))
+                continue
             normal = friction[e][1].symbol
             if state == LOCKED:
                 for k in (1, -1):
@@ -439,7 +486,7 @@ def hybrid_shift(d: GearboxDescription, shift: str) -> HybridShift:
                     Guard(mode.name, e, ENGAGEMENT, normal, 1, forward, mode.slip[e], backward)
                 )
 
-    friction_elements = tuple(e for e in elements if e not in one_way)
+    friction_elements = tuple(e for e in elements if e in friction)
     parameters = drivetrain_parameters(d) + tuple(friction[e][2] for e in friction_elements)
     from_status = {spec.off_going: (LOCKED, 0), spec.on_coming: released_status(d, spec.on_coming)}
     to_status = {spec.off_going: released_status(d, spec.off_going), spec.on_coming: (LOCKED, 0)}
@@ -461,7 +508,33 @@ def hybrid_shift(d: GearboxDescription, shift: str) -> HybridShift:
         from_mode=u_in.name,
         to_mode=mode_name(spec, elements, to_status),
         one_way=one_way,
+        dog=dog,
     )
+
+
+def _dog_guards(
+    mode: Mode,
+    element: str,
+    limits: tuple[float, float],
+    to: Callable[[Mode, str, tuple[str, int]], str | None],
+) -> list[Guard]:
+    """The guards of a dog swapping element (module docstring): disengagement of a locked dog
+    when |T_req| falls through ``release_torque`` (armed while its command is off); engagement
+    of an open dog when its command rises, with the condition ``engage_slip`` − |Δω| ≥ 0 and
+    no ``otherwise`` (a failure). With the other element locked an engagement would be a
+    tie-up: no guard (the simulation states that failure too)."""
+    engage_slip, release_torque = (exact(v) for v in limits)
+    state, _ = mode.status[element]
+    if state == LOCKED:
+        target = to(mode, element, (OPEN, 0))
+        assert target is not None
+        expression = sp.Abs(mode.reaction[element]) - release_torque
+        return [Guard(mode.name, element, DISENGAGEMENT, expression, -1, target)]
+    target = to(mode, element, (LOCKED, 0))
+    if target is None:
+        return []
+    inside = engage_slip - sp.Abs(mode.slip[element])
+    return [Guard(mode.name, element, ENGAGEMENT, mode.slip[element], 0, target, inside, None)]
 
 
 def _one_way_guards(

@@ -244,7 +244,8 @@ def gear_linear_forms(d: GearboxDescription) -> LinearFormSet:
 def shift_linear_forms(d: GearboxDescription, spec: ShiftSpec) -> LinearFormSet:
     """(5.1) of every mode of the hybrid shift ``spec``: 8 forms for a single-swap shift, 5
     when one swapping element is a one-way clutch (locked or overrunning, as in the hybrid
-    model; overrunning it carries no torque, as an open element).
+    model; overrunning it carries no torque, as an open element) or a dog element (locked or
+    open).
 
     The same locked set, torque inputs and state coordinates as the hybrid mode models
     (:func:`gearsym.symbolic.hybrid.hybrid_shift`), without deriving those models.
@@ -258,8 +259,11 @@ def shift_linear_forms(d: GearboxDescription, spec: ShiftSpec) -> LinearFormSet:
     forms = []
 
     def statuses_of(e: str) -> tuple[str, ...]:
-        # a one-way clutch is locked or overrunning (no torque), as in the hybrid model
-        return (LOCKED, OVERRUNNING) if d.element(e).one_way else (LOCKED, SLIDING, OPEN)
+        # a one-way clutch is locked or overrunning (no torque), a dog element locked or open
+        # (it never slides), as in the hybrid model
+        if d.element(e).one_way:
+            return (LOCKED, OVERRUNNING)
+        return (LOCKED, OPEN) if d.element(e).dog else (LOCKED, SLIDING, OPEN)
 
     for statuses in product(*(statuses_of(e) for e in elements)):
         status = dict(zip(elements, statuses, strict=True))

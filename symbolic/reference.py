@@ -59,6 +59,14 @@ def reference_model(d: GearboxDescription, elements: Sequence[str] | None = None
     for e in (d.element(n) for n in chosen):
         if e.one_way:
             continue
+        if e.dog:
+            raise GearsymError(
+                d.file,
+                f'shift_element[name="{e.name}"].kind',
+                "a dog element (form-locking, engaged or open by command) is not part of the "
+                "reference simulation (bristle friction); simulate its shifts with the hybrid "
+                "model (gearsym.validation.sim.hybrid_simulation.simulate_hybrid)",
+            )
         if e.n_disc is None or e.r_m is None or e.a_piston is None:
             raise GearsymError(
                 d.file,

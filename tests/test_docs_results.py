@@ -136,6 +136,11 @@ TYPED_TABLES = {
     ("limits.md", "| what | limit | why |"),
     ("observability.md", "| set | (4.12) | reproduce |"),
     (
+        "README.md",
+        "| `kind` | joins | carries torque | statuses (hybrid model) | data it needs | "
+        "commanded by |",
+    ),
+    (
         "set-kinds.md",
         "| kind | stick diagram of a one-set description | Willis relation (carrier frame) |",
     ),

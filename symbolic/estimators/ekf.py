@@ -199,6 +199,15 @@ def augmented_model(
             "freewheel has not (its shifts run through the hybrid model: gearsym fim, "
             "gearsym observability --per-mode)",
         )
+    dogs = [e for e in spec.swapping if d.element(e).dog]
+    if dogs:
+        raise GearsymError(
+            d.file,
+            "shift",
+            f"{shift}: {dogs[0]} is a dog element; the estimators (4.1-4.5) decide each "
+            "swapping element's mode from its normal force and estimate its mu, which a dog "
+            "has not (it is locked or open, commanded: its shifts run through the hybrid model)",
+        )
     base = shift_model(d, shift, friction_inputs=True)
     torque_model = shift_model(d, shift)
     if parameters is None:

@@ -140,7 +140,8 @@ _FRICTION_KEYS = ("sigma0", "sigma1", "z_ba_ratio", "mu_nominal")
 def missing_friction(d: GearboxDescription, elements: Sequence[str] | None = None) -> str:
     """Why the μ models of ``elements`` (default: the description's) cannot be derived, "" when
     they can: no ``[friction] mu_nominal`` (the μ parameters' default), or a friction element
-    without ``n_disc`` and ``r_m`` (2.69). A one-way clutch needs neither: it carries no μ."""
+    without ``n_disc`` and ``r_m`` (2.69). A one-way clutch or a dog element needs neither:
+    it carries no μ."""
     absent = [k for k in ("mu_nominal",) if k not in d.friction]
     if absent:
         return f"[friction] has no {', '.join(absent)}"
@@ -148,7 +149,8 @@ def missing_friction(d: GearboxDescription, elements: Sequence[str] | None = Non
     lacking = [
         e
         for e in names
-        if not d.element(e).one_way and (d.element(e).n_disc is None or d.element(e).r_m is None)
+        if not (d.element(e).one_way or d.element(e).dog)
+        and (d.element(e).n_disc is None or d.element(e).r_m is None)
     ]
     if lacking:
         verb = "has" if len(lacking) == 1 else "have"
@@ -161,7 +163,9 @@ def _no_slip_direction(d: GearboxDescription, spec: ShiftSpec) -> str:
     element that does not slip in the gear that releases it (two gears of the same ratio,
     such as a manual low and the freewheel's 1st) has no power-on slip sign (2.70)."""
     signs = power_on_slip_signs(d, spec)
-    still = [e for e in spec.swapping if not d.element(e).one_way and signs[e] == 0]
+    still = [
+        e for e in spec.swapping if not (d.element(e).one_way or d.element(e).dog) and signs[e] == 0
+    ]
     if not still:
         return ""
     it, has = ("it", "torque has") if len(still) == 1 else ("them", "torques have")
@@ -179,6 +183,13 @@ def _estimator_obstacle(d: GearboxDescription, spec: ShiftSpec) -> str:
             f"the one-way clutch {', '.join(one_way)} swaps: the emitted filters' mode logic "
             "reads a normal force and a μ of each swapping element (the library's hybrid model "
             "runs such a shift)"
+        )
+    dogs = [e for e in spec.swapping if d.element(e).dog]
+    if dogs:
+        return (
+            f"the dog element {', '.join(dogs)} swaps: the emitted filters' mode logic reads a "
+            "normal force and a μ of each swapping element (the library's hybrid model runs "
+            "such a shift)"
         )
     return missing_friction(d, spec.swapping)
 
@@ -257,9 +268,10 @@ def shift_element_model(d: GearboxDescription) -> Model:
 
 def sensitivity_parameters(d: GearboxDescription, spec: ShiftSpec) -> list[str]:
     """The thesis' parameter set (3.2) for a shift: m_veh, k_ss, d_ss, μ of the off-going
-    element (of the on-coming one when the off-going element is a one-way clutch, which has
-    no μ), ζ."""
-    element = spec.on_coming if d.element(spec.off_going).one_way else spec.off_going
+    element (of the on-coming one when the off-going element is a one-way clutch or a dog
+    element, which have no μ), ζ."""
+    off = d.element(spec.off_going)
+    element = spec.on_coming if off.one_way or off.dog else spec.off_going
     mu = naming.friction_coefficient(element_short_name(d, element))
     return ["m_veh", "k_ss", "d_ss", mu, "zeta"]
 
@@ -581,6 +593,22 @@ def linear_system_sets(
     return sets
 
 
+def dog_hybrid_obstacle(d: GearboxDescription, spec: ShiftSpec) -> str:
+    """Why the hybrid sensitivities of ``spec`` are not emitted, "" when they are: a swapping
+    dog element, whose engagement and release are command events (not an input of the
+    emitted functions) and whose release guard |T_req| − release_torque has a kink the
+    emitted jump would differentiate."""
+    dogs = [e for e in spec.swapping if d.element(e).dog]
+    if not dogs:
+        return ""
+    return (
+        f"the dog element {', '.join(dogs)} swaps: its engagement and release are command "
+        "events, not inputs of the emitted functions, and its release guard "
+        "|T| - release_torque has a kink the emitted jump cannot differentiate (the library's "
+        "hybrid simulation runs such a shift)"
+    )
+
+
 def hybrid_shift_names(d: GearboxDescription, hybrid_shifts: str | None = None) -> list[str]:
     """The shifts whose hybrid sensitivities ``generate`` emits: ``hybrid_shifts`` as
     :func:`selected_shifts` reads it, ``"none"``, or by default the thesis' shift
@@ -595,7 +623,9 @@ def hybrid_shift_names(d: GearboxDescription, hybrid_shifts: str | None = None) 
         if DEFAULT_SHIFT not in specs or not specs[DEFAULT_SHIFT].single:
             return []
         # the hybrid model needs n_disc and r_m of its friction elements (3.14)
-        return [] if missing_friction(d, specs[DEFAULT_SHIFT].swapping) else [DEFAULT_SHIFT]
+        spec = specs[DEFAULT_SHIFT]
+        blocked = missing_friction(d, spec.swapping) or dog_hybrid_obstacle(d, spec)
+        return [] if blocked else [DEFAULT_SHIFT]
     specs = selected_shifts(d, hybrid_shifts, "--hybrid-shifts")
     if hybrid_shifts not in SHIFT_SELECTIONS:
         for spec in specs:
@@ -605,7 +635,7 @@ def hybrid_shift_names(d: GearboxDescription, hybrid_shifts: str | None = None) 
                     "--hybrid-shifts",
                     f"shift {spec.name} swaps two elements each way: {DOUBLE_SWAP_NOTE}",
                 )
-    return [spec.name for spec in specs if spec.single]
+    return [spec.name for spec in specs if spec.single and not dog_hybrid_obstacle(d, spec)]
 
 
 def hybrid_sensitivity_sets(
@@ -696,8 +726,15 @@ def generate_tree(
     if hybrid_shifts is None and not hybrid_shift_names(d):
         specs = {spec.name: spec for spec in selected_shifts(d, "all")}
         if DEFAULT_SHIFT in specs and specs[DEFAULT_SHIFT].single:
-            why = missing_friction(d, specs[DEFAULT_SHIFT].swapping)
+            why = dog_hybrid_obstacle(d, specs[DEFAULT_SHIFT]) or missing_friction(
+                d, specs[DEFAULT_SHIFT].swapping
+            )
             skipped.append(f"`hybrid_{DEFAULT_SHIFT.replace('-', '_')}_sens`: {why}")
+    if hybrid_shifts not in (None, "none"):
+        for spec in selected_shifts(d, hybrid_shifts, "--hybrid-shifts"):
+            why = dog_hybrid_obstacle(d, spec) if spec.single else ""
+            if why:
+                skipped.append(f"`hybrid_{spec.from_gear}_{spec.to_gear}_sens`: {why}")
     files: dict[str, str] = {}
     for m in models:
         say(f"emitting {m.model.name}")

@@ -465,6 +465,17 @@ class StickDiagram:
     labels: tuple[Label, ...]
     input_arrow: tuple[float, float, float]  # x_start, x_end, y
     output_arrow: tuple[float, float, float]
+    #: the interlocking teeth of dog elements (form-locking: a claw coupling's jaws between
+    #: its two plates, each half's teeth reaching past the other's; friction elements have none)
+    teeth: tuple[Segment, ...] = ()
+
+
+def _dog_teeth(name: str, x: float, ym: float) -> list[Segment]:
+    """A dog element's symbol between its two plates at ym ± 0.1: three teeth rising from the
+    lower jaw and two hanging from the upper one, interleaved and overlapping (engaged)."""
+    up = [Segment(name, (x + dx, ym - 0.1), (x + dx, ym + 0.04)) for dx in (-0.2, 0.0, 0.2)]
+    down = [Segment(name, (x + dx, ym + 0.1), (x + dx, ym - 0.04)) for dx in (-0.1, 0.1)]
+    return up + down
 
 
 #: Half-section heights of the stick symbols (display units).
@@ -497,6 +508,7 @@ def stick_diagram(d: GearboxDescription) -> StickDiagram:
             junctions.append((stem, levels[shaft]))
     xe = x0 + SET_PITCH * len(d.planetary_sets)
     plates: list[Segment] = []
+    teeth: list[Segment] = []
     grounds = []
     bottom = min(levels.values()) - 0.9
     for k, e in enumerate(d.shift_elements):
@@ -512,6 +524,8 @@ def stick_diagram(d: GearboxDescription) -> StickDiagram:
             for shaft in e.shafts:
                 attach[shaft].append(x)
                 junctions.append((x, levels[shaft]))
+            if e.dog:
+                teeth += _dog_teeth(e.name, x, ym)
             labels.append(Label(e.name, x + 0.3, ym, "left"))
         else:
             y = levels[e.b]
@@ -521,6 +535,8 @@ def stick_diagram(d: GearboxDescription) -> StickDiagram:
             plates.append(Segment(e.name, (x - 0.25, ym + 0.1), (x + 0.25, ym + 0.1)))
             plates.append(Segment(e.name, (x - 0.25, ym - 0.1), (x + 0.25, ym - 0.1)))
             grounds.append((e.name, x, bottom))
+            if e.dog:
+                teeth += _dog_teeth(e.name, x, ym)
             attach[e.b].append(x)
             junctions.append((x, y))
             labels.append(Label(e.name, x + 0.3, ym, "left"))
@@ -546,6 +562,7 @@ def stick_diagram(d: GearboxDescription) -> StickDiagram:
         labels=tuple(labels),
         input_arrow=(-1.6, 0.0, levels[d.input_shaft]),
         output_arrow=(right, right + 1.6, levels[d.output_shaft]),
+        teeth=tuple(teeth),
     )
 
 

@@ -353,6 +353,14 @@ def stick_figure(d: GearboxDescription, stick: StickDiagram) -> Any:
             lw=3.0,
             solid_capstyle="butt",
         )
+    for tooth in stick.teeth:  # a dog element's interlocking jaws
+        ax.plot(
+            [tooth.start[0], tooth.end[0]],
+            [tooth.start[1], tooth.end[1]],
+            color="k",
+            lw=1.8,
+            solid_capstyle="butt",
+        )
     for _, x, y in stick.grounds:
         _ground(ax, x, y, "k")
     xs_j, ys_j = zip(*stick.junctions, strict=True) if stick.junctions else ((), ())

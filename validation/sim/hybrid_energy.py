@@ -72,7 +72,9 @@ def energy_audit(
     elements; a locked one has Δω = 0, an open one T = 0), 2 d_ss φ̇², T_res ω_C (2.48). The
     works are integrated over each piece's dense output by 5-point Gauss–Legendre on
     sub-intervals of at most ``interval``. The maps at lock-up and break-away conserve E_kin
-    (zero slip); a residual would show an inconsistent reaction, sign or map."""
+    (zero slip); a residual would show an inconsistent reaction, sign or map. A dog element
+    engaged at non-zero slip loses ½ Δẏᵀ M Δẏ in its map (``Event.energy_loss``): counted in
+    W_friction, the impact's dissipation."""
     p = simulator.parameter_vector(result.values)
     functions = energy_functions(simulator)
     nodes, weights = np.polynomial.legendre.leggauss(5)
@@ -102,7 +104,7 @@ def energy_audit(
         kinetic_change=float(e1[0] - e0[0]),
         spring_change=float(e1[1] - e0[1]),
         bristle_change=0.0,
-        friction_dissipation=float(works[1]),
+        friction_dissipation=float(works[1]) + sum(e.energy_loss for e in result.events),
         damper_dissipation=float(works[2]),
         road_work=float(works[3]),
     )

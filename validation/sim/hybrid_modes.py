@@ -24,8 +24,8 @@ from gearsym.symbolic.numeric import bilinear, to_casadi
 
 class CompiledMode:
     """A mode's right-hand side, guards, shaft speeds, slips and element torques as CasADi
-    functions of (x, u, p), u = [T_In, F_N per swapping element (0 for a one-way clutch), Δζ],
-    p the hybrid's parameters (μ through the map with ``mu="map"``, module docstring)."""
+    functions of (x, u, p), u = [T_In, F_N per swapping element (0 for a one-way clutch or a
+    dog), Δζ], p the hybrid's parameters (μ through the map with ``mu="map"``, module docstring)."""
 
     def __init__(
         self,
@@ -58,7 +58,7 @@ class CompiledMode:
             p_grid, dw_grid, plane = mu_plane
             mu_nominal = quantity(d, "friction", "mu_nominal").value
             for k, e in enumerate(hybrid.elements):
-                if e in hybrid.one_way:
+                if e not in hybrid.friction_coefficient:  # a one-way clutch or a dog
                     continue
                 slip = to_casadi(mode.slip[e], mapping)
                 area = d.element(e).a_piston

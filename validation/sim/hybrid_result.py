@@ -21,6 +21,9 @@ class Event:
     element: str
     source: str
     target: str
+    #: ½ Δẏᵀ M Δẏ the state map took out of the gearbox (J): nonzero only for a dog element
+    #: engaged at non-zero slip (the impulsive engagement of :mod:`gearsym.symbolic.hybrid`)
+    energy_loss: float = 0.0
 
 
 @dataclass(frozen=True)

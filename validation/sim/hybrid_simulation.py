@@ -27,6 +27,18 @@ docstring) has no pressure, F_N or μ: its slot in u is 0, its guards (release, 
 state guards like break-away and lock-up, and its torque signal is the reaction while it is
 locked and 0 while it overruns.
 
+A dog element among the swapping elements (``kind = "dog"``) has no F_N or μ either (slot 0
+in u). Its scenario table ``[pressure.<dog>]`` is its actuation command: commanded engaged
+while the profile is > 0 (the value does not matter). The command changes only at the
+profile's breakpoints, where the simulation restarts anyway; there an open dog whose command
+is on engages if |Δω| ≤ ``engage_slip`` (the M-metric map, its loss ½ Δẏᵀ M Δẏ in
+:attr:`Event.energy_loss <gearsym.validation.sim.hybrid_result.Event>`), and otherwise the
+simulation **ends with a stated failure** (a :class:`GearsymError` naming the dog, the time,
+the slip and the window: the teeth would clash), as it does for a command while the other
+swapping element is locked (a tie-up). A locked dog whose command is off opens when
+|T_req| ≤ ``release_torque`` (at once, or at the crossing, a state event armed only while
+the command is off); until then it holds, loaded.
+
 Beside this module: each mode compiled to CasADi (:mod:`~gearsym.validation.sim.hybrid_modes`),
 the records a run returns (:mod:`~gearsym.validation.sim.hybrid_result`) and the energy audit
 of a run (:mod:`~gearsym.validation.sim.hybrid_energy`).
@@ -46,12 +58,15 @@ from gearsym.symbolic.dynamics import gearbox_dynamics
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.friction import load_mu_map
 from gearsym.symbolic.hybrid import (
+    DISENGAGEMENT,
     ENGAGEMENT,
+    LOCKED,
     OPEN,
     OPENING,
     RELEASE,
     Guard,
     HybridShift,
+    drivetrain_mass,
     hybrid_shift,
 )
 from gearsym.symbolic.numeric import to_casadi
@@ -102,6 +117,7 @@ class HybridSimulator:
         zeta = next(v for v in self.hybrid.parameters if v.name == naming.GRADE)
         self.zeta0 = float(zeta.default or 0.0)
         self._speeds: dict[str, Any] = {}
+        self._mass: np.ndarray | None = None
 
     # ------------------------------------------------------------------ inputs and parameters
 
@@ -220,7 +236,7 @@ class HybridSimulator:
         middle = (t + t_next) / 2
         forces = self.normal_forces(middle)
         for k, e in enumerate(self.hybrid.elements):
-            if e in self.hybrid.one_way:  # not pressed: its guards depend on the state
+            if e in self.hybrid.one_way or e in self.hybrid.dog:  # not pressed
                 continue
             status = self.hybrid.modes[mode].status[e][0]
             pressed = forces[k] > 0
@@ -243,7 +259,7 @@ class HybridSimulator:
         return switches
 
     def pending_releases(
-        self, mode: str, t: float, x: np.ndarray, p: np.ndarray
+        self, mode: str, t: float, x: np.ndarray, p: np.ndarray, t_next: float | None = None
     ) -> list[tuple[Guard, str, np.ndarray]]:
         """One-way clutches that are locked in ``mode`` but would carry torque of the sign they
         cannot carry at (t, x): their release is due now, not at a later zero crossing (the
@@ -252,12 +268,17 @@ class HybridSimulator:
         without one-way clutches."""
         switches = []
         done: set[str] = set()
+        # a dog's command as it holds on the segment ahead (it changes at breakpoints only)
+        middle = t if t_next is None else (t + t_next) / 2
         while True:
             compiled = self.modes[mode]
             due = [
                 (k, g)
                 for k, g in enumerate(compiled.continuous)
-                if g.kind == RELEASE
+                if (
+                    g.kind == RELEASE
+                    or (g.kind == DISENGAGEMENT and not self.commanded(g.element, middle))
+                )
                 and g.element not in done
                 and compiled.value(compiled.guard[k], x, self.inputs(t), p)[0] < 0
             ]
@@ -269,6 +290,79 @@ class HybridSimulator:
             switches.append((guard, guard.target, matrix))
             done.add(guard.element)
             mode = guard.target
+
+    def commanded(self, element: str, t: float) -> bool:
+        """A dog element's command at t (its ``[pressure.<dog>]`` profile > 0)."""
+        return self.scenario.pressure[element](t) > 0
+
+    def impulse_loss(self, source: str, target: str, x: np.ndarray, matrix: np.ndarray) -> float:
+        """½ Δẏᵀ M Δẏ of the switch source → target at x (Δẏ = P⁻ z⁻ − P⁺ z⁺, M of (2.34)
+        with the output-side inertias): the kinetic energy the state map takes out."""
+        if self._mass is None:
+            self._mass = np.array(drivetrain_mass(self.d, gearbox_dynamics(self.d)), dtype=float)
+        before, after = self.hybrid.modes[source], self.hybrid.modes[target]
+        z_old, z_new = x[: len(before.keep)], (matrix @ x)[: len(after.keep)]
+        dy = np.array(before.projection, dtype=float) @ z_old
+        dy -= np.array(after.projection, dtype=float) @ z_new
+        return float(0.5 * dy @ self._mass @ dy)
+
+    def dog_switches(
+        self, mode: str, t: float, t_next: float, x: np.ndarray, p: np.ndarray
+    ) -> list[tuple[Guard, str, np.ndarray]]:
+        """A dog's command at a breakpoint t (its value on the next segment, at the midpoint):
+        an open dog commanded engages if |Δω| ≤ ``engage_slip``, else the simulation ends
+        with a stated failure (module docstring); a locked dog no longer commanded opens now
+        if |T_req| ≤ ``release_torque`` (else its state event does it later). Returns (guard,
+        target, map matrix) in order."""
+        switches = []
+        middle = (t + t_next) / 2
+        for k, e in enumerate(self.hybrid.elements):
+            if e not in self.hybrid.dog:
+                continue
+            engage_slip, release_torque = self.hybrid.dog[e]
+            status = self.hybrid.modes[mode].status[e][0]
+            compiled = self.modes[mode]
+            on = self.commanded(e, middle)
+            if status == OPEN and on:
+                slip = compiled.value(compiled.slips, x, self.inputs(t), p)[k]
+                found = [
+                    g
+                    for g in self.hybrid.guards_from(mode)
+                    if g.element == e and g.kind == ENGAGEMENT
+                ]
+                if not found:
+                    other = next(o for o in self.hybrid.elements if o != e)
+                    raise GearsymError(
+                        self.scenario.file,
+                        f"pressure.{e}",
+                        f"dog {e} commanded engaged at t = {t:.6g} s while {other} is locked: "
+                        "a tie-up (both gears' elements closed); simulation ended",
+                    )
+                if abs(slip) > engage_slip:
+                    raise GearsymError(
+                        self.scenario.file,
+                        f"pressure.{e}",
+                        f"dog {e} commanded engaged at t = {t:.6g} s at slip {slip:.4g} rad/s, "
+                        f"outside its engage_slip {engage_slip:g} rad/s: the teeth would clash "
+                        "away from synchronism; simulation ended",
+                    )
+                guard = found[0]
+            elif status == LOCKED and not on:
+                (guard,) = [
+                    g
+                    for g in self.hybrid.guards_from(mode)
+                    if g.element == e and g.kind == DISENGAGEMENT
+                ]
+                torque = compiled.value(compiled.torques, x, self.inputs(t), p)[k]
+                if abs(torque) > release_torque:
+                    continue  # loaded: held until the state event
+            else:
+                continue
+            matrix = np.array(self.hybrid.maps[(mode, guard.target)].matrix, dtype=float)
+            switches.append((guard, guard.target, matrix))
+            x = matrix @ x
+            mode = guard.target
+        return switches
 
     def input_slope(self, ta: float, tb: float) -> np.ndarray:
         """du/dt inside the segment [ta, tb], where every profile is linear."""
@@ -340,9 +434,16 @@ class HybridSimulator:
                 events.append(Event(ta, guard.kind, guard.element, mode, target))
                 tau_p.append(np.zeros(m))
                 mode, x, sens = target, matrix @ x, matrix @ sens
+            dogs = self.dog_switches(mode, ta, tb, x, p) if self.hybrid.dog else []
+            for guard, target, matrix in dogs:
+                loss = self.impulse_loss(mode, target, x, matrix)
+                events.append(Event(ta, guard.kind, guard.element, mode, target, loss))
+                tau_p.append(np.zeros(m))
+                mode, x, sens = target, matrix @ x, matrix @ sens
+            switches += dogs
             if ta == t_start or switches:
                 # a one-way clutch whose reaction has the wrong sign already releases now
-                for guard, target, matrix in self.pending_releases(mode, ta, x, p):
+                for guard, target, matrix in self.pending_releases(mode, ta, x, p, tb):
                     events.append(Event(ta, guard.kind, guard.element, mode, target))
                     tau_p.append(np.zeros(m))
                     mode, x, sens = target, matrix @ x, matrix @ sens
@@ -353,11 +454,21 @@ class HybridSimulator:
                 fun = self._right_hand_side(compiled, indices, p)
                 functions = []
                 for guard, g in zip(compiled.continuous, compiled.guard, strict=True):
+                    armed = guard.kind != DISENGAGEMENT or not self.commanded(
+                        guard.element, (t + tb) / 2
+                    )
 
                     def event(
-                        time: float, y: np.ndarray, c: CompiledMode = compiled, g: Any = g
+                        time: float,
+                        y: np.ndarray,
+                        c: CompiledMode = compiled,
+                        g: Any = g,
+                        armed: bool = armed,
                     ) -> float:
-                        return float(c.value(g, y[: c.n], self.inputs(time), p)[0])
+                        # a dog's disengagement waits for its command to fall
+                        return (
+                            float(c.value(g, y[: c.n], self.inputs(time), p)[0]) if armed else 1.0
+                        )
 
                     event.terminal = True  # type: ignore[attr-defined]
                     event.direction = guard.direction  # type: ignore[attr-defined]
@@ -412,7 +523,7 @@ class HybridSimulator:
                 events.append(Event(t, guard.kind, guard.element, mode, target))
                 tau_p.append(dtau)
                 mode = target
-                for guard, target, matrix in self.pending_releases(mode, t, x, p):
+                for guard, target, matrix in self.pending_releases(mode, t, x, p, tb):
                     events.append(Event(t, guard.kind, guard.element, mode, target))
                     tau_p.append(np.zeros(m))
                     mode, x, sens = target, matrix @ x, matrix @ sens

@@ -196,9 +196,10 @@ def _sliding_from(
 ) -> int | None:
     """The first sample where the off-going friction element slides: its torque at
     ``capacity_fraction`` of its capacity 2 N_disc r_m μ F_N (2.69) with F_N > 0; None for a
-    one-way clutch (it never slides: it carries torque until it overruns by itself)."""
+    one-way clutch (it never slides: it carries torque until it overruns by itself) or a dog
+    element (it never slides either: it carries torque until it opens)."""
     element, short = d.element(off), element_short_name(d, off)
-    if element.one_way:
+    if element.one_way or element.dog:
         return None
     assert element.n_disc is not None and element.r_m is not None
     force = signals[naming.normal_force(short)]

@@ -19,10 +19,19 @@ A scenario is a TOML file::
     time = [0.0, 0.5, 0.75]
     value = [1.0e6, 1.0e6, 0.0]
 
+    [pressure.B06]              # a dog element (kind = "dog"): its actuation command,
+    unit = "Pa"                 # engaged while > 0 (the value does not matter); it engages
+    time = [0.0, 0.62, 0.63]    # only within its engage_slip, else the hybrid simulation
+    value = [0.0, 0.0, 1.0]     # ends with a stated failure
+
     [grade]                     # optional: road grade ζ(t) (2.49), piecewise linear in time
     unit = "rad"
     time = [0.0, 0.4, 0.41]
     value = [0.0, 0.0, 0.05]
+
+A one-way clutch takes no table (it is not pressed). A dog element's table is its command,
+read by the hybrid simulation (:mod:`gearsym.validation.sim.hybrid_simulation`); the reference
+simulation does not model dog elements.
 
 An optional ``[measurement]`` table maps the signals onto the channels of a bench recording
 (:mod:`gearsym.validation.sim.measurement`; ``--measurement FILE``).
