@@ -54,6 +54,8 @@ def cmd_drive(args: argparse.Namespace) -> int:
         if args.runs > 1:
             return _drive_fleet(args, d, cycle, grade, fleet)
         truth = DriveTruth.from_draw(d, fleet.draw(args.seed), constant_grade=grade is None)
+    # built before any output: a description the drive cannot serve is refused in one line
+    simulator = DriveSimulator(d, cycle, grade, truth=truth)
     with OutputDir(args.out, "drive", before_commit=check) as out:
         bar = ProgressBar("drive")
         shown = {"step": -1}
@@ -67,8 +69,8 @@ def cmd_drive(args: argparse.Namespace) -> int:
                 bar(t / total, f"t = {t:.0f} of {total:.0f} s")
 
         try:
-            bar(0.0, "compiling the gear and shift models")
-            simulator = DriveSimulator(d, cycle, grade, truth=truth, progress=progress)
+            simulator.progress = progress
+            bar(0.0, "driving (each shift's models compiled when first needed)")
             result = simulator.run()
         finally:
             bar.done()

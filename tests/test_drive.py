@@ -251,3 +251,19 @@ def test_tcu_log_is_what_the_tcu_commanded_on_its_grid(fleet_drive, description)
     mu = np.column_stack([log[f"truth_mu_{e.name}"] for e in description.shift_elements])
     assert not np.isfinite(mu[in_gear]).any()
     assert np.isfinite(mu[~in_gear]).any()
+
+
+@pytest.mark.parametrize(
+    ("box", "element", "what"),
+    [
+        ("tests/data/dog_9speed.toml", "K27", "a dog element"),
+        ("tests/data/simpson_3speed_one_way.toml", "F1", "a one-way clutch"),
+    ],
+)
+def test_cli_drive_refuses_a_box_its_shift_plans_cannot_serve(tmp_path, box, element, what):
+    root = Path(__file__).resolve().parents[1]
+    run = gearsym(*["drive", str(root / box), "--duration", "5", "--out", str(tmp_path / "o")])
+    assert run.returncode == 2
+    assert f'shift_element[name="{element}"]' in run.stderr and what in run.stderr
+    assert len(run.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()

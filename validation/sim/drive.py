@@ -212,6 +212,23 @@ class DriveSimulator:
             )
         if not specs:
             raise GearsymError(d.file, "gears", "a drive needs at least two forward gears")
+        for spec in specs:
+            for e in (spec.off_going, spec.on_coming):
+                element = d.element(e)
+                if element.one_way or element.dog or element.a_piston is None:
+                    what = (
+                        "a one-way clutch"
+                        if element.one_way
+                        else "a dog element"
+                        if element.dog
+                        else "without a_piston"
+                    )
+                    raise GearsymError(
+                        d.file,
+                        f'shift_element[name="{e}"]',
+                        f"the drive's shift plans swap friction elements with a piston; {e} "
+                        f"({what}) swaps in the {spec.name} shift",
+                    )
         self.gears = (specs[0].from_gear, *(s.to_gear for s in specs))
         self.ratios = tuple(float(gear_ratio(d, d.gear(g)).ratio) for g in self.gears)
         check_hysteresis(
