@@ -105,12 +105,19 @@ results: $(STAMP)
 	$(BIN)/python -m gearsym.validation.checks.misra --out build/results/misra
 	cp build/results/misra/misra.json $(RESULTS)/misra.json
 	cp build/results/misra/misra.md $(RESULTS)/misra.md
-# A whole WLTC class 3b drive (docs/drive.md; about 5 min, the Python reference simulation).
+# A whole WLTC class 3b drive with the EKF over it, the calibration's own vehicle and a fleet
+# vehicle (docs/drive.md; about 8 min each, the Python reference simulation).
 	rm -rf build/results/drive_wltc3b
 	$(BIN)/gearsym drive --cycle wltc3b --out build/results/drive_wltc3b
 	cp build/results/drive_wltc3b/drive.json $(RESULTS)/drive_wltc3b.json
 	cp build/results/drive_wltc3b/drive.md $(RESULTS)/drive_wltc3b.md
 	cp build/results/drive_wltc3b/drive.png $(RESULTS)/drive_wltc3b.png
+	cp build/results/drive_wltc3b/estimates.png $(RESULTS)/drive_wltc3b_estimates.png
+	rm -rf build/results/drive_wltc3b_fleet_10000
+	$(BIN)/gearsym drive --cycle wltc3b --fleet --seed 10000 --out build/results/drive_wltc3b_fleet_10000
+	cp build/results/drive_wltc3b_fleet_10000/drive.json $(RESULTS)/drive_wltc3b_fleet_10000.json
+	cp build/results/drive_wltc3b_fleet_10000/drive.md $(RESULTS)/drive_wltc3b_fleet_10000.md
+	cp build/results/drive_wltc3b_fleet_10000/estimates.png $(RESULTS)/drive_wltc3b_fleet_10000_estimates.png
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -111,7 +111,10 @@ def cmd_drive(args: argparse.Namespace) -> int:
             plot_drive_estimates(estimates, out.path / "estimates.png")
         (out.path / "drive.json").write_text(json.dumps(data, indent=2) + "\n")
         write_drive(result, out.path)
-        command = drive_command(args.cycle, args.duration)
+        fleet_argument = None
+        if args.fleet is not None:
+            fleet_argument = "" if args.fleet == DEFAULT_FLEET_ARGUMENT else args.fleet
+        command = drive_command(args.cycle, args.duration, fleet_argument, args.seed)
         (out.path / "drive.md").write_text(drive_markdown(data, command))
         plot_drive(result, out.path / "drive.png")
         paths = out.commit()

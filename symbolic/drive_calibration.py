@@ -18,6 +18,9 @@ wheel; a drive needs what produces T_In and when the TCU shifts. The table::
     pedal = [0.0, 0.5, 1.0]
     upshift = { value = [1500.0, 2300.0, 3800.0], unit = "rpm", source = "..." }
     downshift = { value = [900.0, 1200.0, 2200.0], unit = "rpm", source = "..." }
+    [drive.estimator]       # the EKF over a drive (optional; else the [estimator] table's)
+    twist_model_error = { value = 1.5e-2, unit = "rad^2/s", source = "..." }
+    tuned_on = "..."
     [drive.shift]           # the open-loop shift plan of each shift
     torque_phase = { value = 0.15, unit = "s", source = "..." }
     speed_phase = { value = 0.35, unit = "s", source = "..." }
@@ -105,9 +108,17 @@ class DriveCalibration:
     values: tuple[tuple[tuple[str, str], Entry], ...]
     schedule: ShiftSchedule
     file: str = field(default="", compare=False)
+    #: what ``[drive.estimator]`` was tuned on
+    tuned_on: str = ""
 
     def entry(self, section: str, key: str) -> Entry:
         return dict(self.values)[(section, key)]
+
+    def twist_model_error(self) -> float | None:
+        """q of the twist φ the EKF uses over a drive (``[drive.estimator] twist_model_error``,
+        rad²/s), or None: the ``[estimator]`` table's (tuned on single shifts)."""
+        entry = dict(self.values).get(("estimator", "twist_model_error"))
+        return None if entry is None else entry.value
 
     def si(self, section: str, key: str) -> float:
         """The entry in SI units (rpm as rad/s)."""
@@ -150,12 +161,18 @@ def parse_drive_table(table: Any) -> DriveCalibration:
                 q = sub.quantity(key, unit=unit)
                 values[(s, key)] = Entry(q.value, q.unit, q.source)
         sub.reject_unknown()
+    sub = table.table("estimator", required=False)
+    if "twist_model_error" in sub.data:
+        q = sub.quantity("twist_model_error", unit="rad^2/s")
+        values[("estimator", "twist_model_error")] = Entry(q.value, q.unit, q.source)
+    tuned_on = sub.string("tuned_on", required=False, default="")
+    sub.reject_unknown()
     schedule = base.schedule
     sub = table.table("shift_schedule", required=False)
     if sub.data:
         schedule = _schedule(sub)
     table.reject_unknown()
-    return DriveCalibration(tuple(values.items()), schedule, file=table.file)
+    return DriveCalibration(tuple(values.items()), schedule, file=table.file, tuned_on=tuned_on)
 
 
 def _schedule(sub: Any) -> ShiftSchedule:

@@ -72,6 +72,7 @@ EXPECTED = {
     "uio_2_3_1ms.md": "uio.md",
     "uio_2_3_noise.md": "uio.md",
     "drive_wltc3b.md": "drive.md",
+    "drive_wltc3b_fleet_10000.md": "drive.md",
 }
 
 

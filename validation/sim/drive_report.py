@@ -140,9 +140,14 @@ def plot_drive(result: DriveResult, path: Path) -> Path:
     return save(fig, path)
 
 
-def drive_command(cycle: str, duration: float | None) -> str:
-    """The command line a drive's Markdown names as its writer."""
+def drive_command(
+    cycle: str, duration: float | None, fleet: str | None = None, seed: int = 0
+) -> str:
+    """The command line a drive's Markdown names as its writer (``fleet``: the argument of
+    ``--fleet``, "" for the shipped fleet)."""
     extra = f" --duration {duration:g}" if duration is not None else ""
+    if fleet is not None:
+        extra += f" --fleet {fleet}".rstrip() + f" --seed {seed}"
     return f"gearsym drive --cycle {cycle}{extra}"
 
 
@@ -193,4 +198,45 @@ def drive_markdown(data: dict[str, Any], command: str) -> str:
             f"{np.median(jerks):.1f} / {np.max(jerks):.1f} | "
             f"{np.median(energies):.2f} / {np.max(energies):.2f} |"
         )
+    if "estimates" in data:
+        out += _estimates_markdown(data)
     return "\n".join(out) + "\n"
+
+
+def _estimates_markdown(data: dict[str, Any]) -> list[str]:
+    """The EKF carried over the drive: m_veh and ζ against the truth, each μ when its element
+    last slid, the filter's consistency."""
+    est = data["estimates"]
+    summary = data["estimator"]
+    vehicle = data.get("vehicle")
+    who = (
+        f"fleet vehicle {vehicle['seed']}" if isinstance(vehicle, dict) else "the calibration's own"
+    )
+    m, z = est["m_veh"], est["zeta"]
+    errors = ", ".join(
+        f"{'end' if k == 'end' else k + ' s'} {100 * v:+.1f} %" for k, v in m["error_at"].items()
+    )
+    out = [
+        "",
+        f"The EKF carried over the drive ({who} vehicle; the TCU's view: commanded torque, "
+        "noisy speeds, no grade sensor):",
+        "",
+        f"- m_veh {m['final']:.0f} ± {m['sigma']:.0f} kg, truth {m['truth']:.0f} kg; relative "
+        f"error at {errors}",
+        f"- ζ {z['final']:+.4f} ± {z['sigma']:.4f} rad, truth {z['truth']:+.4f} rad at the end",
+        f"- NEES/dof of (m_veh, ζ), time mean {summary['nees_per_dof_mean']:.2f} (samples "
+        f"correlated: no band claimed); NIS/dof {summary['nis_per_dof']:.2f}; "
+        f"{summary['held_samples']} of {summary['samples']} samples held (brake, standstill)",
+        "",
+        "| μ | truth when it last slid | estimate there | σ | samples sliding |",
+        "|---|---|---|---|---|",
+    ]
+    for name, entry in est.items():
+        if "truth_last_sliding" not in entry:
+            continue
+        truth = entry["truth_last_sliding"]
+        out.append(
+            f"| {name} | {truth:.4f} | {truth + entry['error_last_sliding']:.4f} | "
+            f"{entry['sigma_last_sliding']:.4f} | {entry['sliding_samples']} |"
+        )
+    return out

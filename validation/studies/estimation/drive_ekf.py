@@ -159,8 +159,9 @@ class _Models:
     """The augmented model, its discrete step and mode logic of each shift, built on first
     use (the calibration's: the filter's model is what the TCU knows)."""
 
-    def __init__(self, d: GearboxDescription) -> None:
+    def __init__(self, d: GearboxDescription, overrides: Mapping[str, float]) -> None:
         self.d = d
+        self.overrides = dict(overrides)
         self._cache: dict[str, tuple[Any, Any, Any]] = {}
 
     def get(self, shift: str) -> tuple[Any, Any, Any]:
@@ -168,7 +169,7 @@ class _Models:
             from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
             from gearsym.symbolic.estimators.ekf_modes import ModeLogic
 
-            intensities = self.d.estimator.intensities()
+            intensities = self.d.estimator.intensities() | self.overrides
             aug = augmented_model(self.d, shift, intensities=intensities)
             self._cache[shift] = (aug, DiscreteModel(aug), ModeLogic(self.d, aug))
         return self._cache[shift]
@@ -182,15 +183,20 @@ def run_drive_ekf(
     truth_mass: float,
     seed: int = 0,
     relative_noise: float = EKF_RELATIVE_NOISE,
+    twist_model_error: float | None = None,
 ) -> DriveEstimates:
     """The EKF over a drive's TCU log (module docstring). ``d`` is the calibration (model,
     prior, tuning, piston areas); ``log`` the :class:`~gearsym.validation.sim.drive_log.TcuLog`
     arrays and ``shifts`` its shift column; ``truth_mass`` scores m_veh (never shown to the
-    filter). The sensors' noise (3.26) is drawn from ``seed``."""
+    filter). The sensors' noise (3.26) is drawn from ``seed``. ``twist_model_error``: q of
+    the twist φ (rad²/s) over the drive (default: the ``[drive.estimator]`` table's, else the
+    ``[estimator]`` one's)."""
     from gearsym.symbolic.estimators.ekf import ekf_predict, ekf_update
     from gearsym.symbolic.estimators.ekf_modes import STICK, ekf_mode_update
 
-    models = _Models(d)
+    if twist_model_error is None:
+        twist_model_error = d.drive.twist_model_error()
+    models = _Models(d, {} if twist_model_error is None else {naming.TWIST: twist_model_error})
     t = log["t"]
     h = float(t[1] - t[0])
     r_dyn = quantity(d, "vehicle", "r_dyn").value
