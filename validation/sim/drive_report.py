@@ -210,7 +210,9 @@ def _estimates_markdown(data: dict[str, Any]) -> list[str]:
     summary = data["estimator"]
     vehicle = data.get("vehicle")
     who = (
-        f"fleet vehicle {vehicle['seed']}" if isinstance(vehicle, dict) else "the calibration's own"
+        f"fleet vehicle {vehicle['seed']}"
+        if isinstance(vehicle, dict)
+        else "the calibration's own vehicle"
     )
     m, z = est["m_veh"], est["zeta"]
     errors = ", ".join(
@@ -218,7 +220,7 @@ def _estimates_markdown(data: dict[str, Any]) -> list[str]:
     )
     out = [
         "",
-        f"The EKF carried over the drive ({who} vehicle; the TCU's view: commanded torque, "
+        f"The EKF carried over the drive ({who}; the TCU's view: commanded torque, "
         "noisy speeds, no grade sensor):",
         "",
         f"- m_veh {m['final']:.0f} ± {m['sigma']:.0f} kg, truth {m['truth']:.0f} kg; relative "
