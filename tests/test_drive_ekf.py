@@ -102,3 +102,48 @@ def test_hand_over_by_name_and_the_mu_store():
     assert store["mu_38"] == (z[5], P[5, 5]) and store["mu_05"] == (z[6], P[6, 6])
     # no correlation is invented for what comes from the store or the prior
     assert np.count_nonzero(P_new[j81]) == 1 and np.count_nonzero(P_new[j27]) == 1
+
+
+def _with_drive_estimator(tmp_path, table: str):
+    from gearsym.symbolic.io.package_data import data_file
+
+    text = data_file("thesis_9speed.toml").read_text(encoding="utf-8")
+    path = tmp_path / "box.toml"
+    path.write_text(text + "\n[drive.estimator]\n" + table, encoding="utf-8")
+    return path
+
+
+def test_drive_estimator_table(tmp_path):
+    path = _with_drive_estimator(
+        tmp_path,
+        'twist_model_error = { value = 2.0e-3, unit = "rad^2/s", source = "test" }\n'
+        'tuned_on = "seeds 1-2"\n',
+    )
+    d = load_description(path)
+    assert d.drive.twist_model_error() == 2.0e-3
+    assert d.drive.tuned_on == "seeds 1-2"
+    assert load_description().drive.twist_model_error() is None
+
+
+def test_drive_estimator_table_bad_unit(tmp_path):
+    from gearsym.symbolic.errors import GearsymError
+
+    path = _with_drive_estimator(
+        tmp_path, 'twist_model_error = { value = 2.0e-3, unit = "rad/s", source = "test" }\n'
+    )
+    with pytest.raises(GearsymError, match=r"drive.estimator.twist_model_error.unit: expected"):
+        load_description(path)
+
+
+def test_twist_model_error_reaches_the_filter(description, drive, estimates):
+    log = drive.log
+    other = run_drive_ekf(
+        description,
+        log.arrays(),
+        log.shifts(),
+        drive.gears,
+        drive.values["m_veh"],
+        seed=3,
+        twist_model_error=100 * description.estimator.intensities()["phi"],
+    )
+    assert not np.array_equal(other.mean["m_veh"], estimates.mean["m_veh"])
