@@ -52,7 +52,6 @@ from gearsym.validation.sim.drive_shift import (
     state_from_speeds,
 )
 from gearsym.validation.sim.fleet import Actuators, FleetDraw, mu_scales, truth_description
-from gearsym.validation.sim.hybrid_energy import energy_functions
 from gearsym.validation.sim.hybrid_simulation import HybridSimulator
 from scipy.integrate import solve_ivp
 
@@ -310,9 +309,7 @@ class DriveSimulator:
 
             wheel = to_casadi(self._wheel_parts.wheel_inertia, compiled.mapping)
             inertia = ca.Function("I_C", [compiled.p], [wheel])
-            if runner._energy is None:
-                runner._energy = energy_functions(sim)
-            powers, energies = runner._energy[mode]
+            powers, energies = runner.energy_functions()[mode]
             p = self.parameters_of(sim, self.values)
             line = self.truth.actuators.pressure(np.array([runner.line]))[0]
             # one call per right-hand side: ẋ and the powers together (a CasADi call costs
@@ -626,10 +623,6 @@ class _GearSegment:
         self.wheel = names.index(naming.WHEEL_SPEED)
         self.input_index = [s.name for s in drive.d.shafts].index(drive.d.input_shaft)
         self.schedule = drive.d.drive.schedule
-        self.upshift.__func__.terminal = True  # type: ignore[attr-defined]
-        self.upshift.__func__.direction = 1  # type: ignore[attr-defined]
-        self.downshift.__func__.terminal = True  # type: ignore[attr-defined]
-        self.downshift.__func__.direction = -1  # type: ignore[attr-defined]
 
     def control(self, t: float, y: np.ndarray) -> tuple[Any, float]:
         """(torque split, ω_in) at the state y = [x, ∫(v_ref − v), s, works]."""
@@ -664,6 +657,15 @@ class _GearSegment:
     def downshift(self, t: float, y: np.ndarray) -> float:
         split, omega_in = self.control(t, y)
         return omega_in - self.schedule.down(split.pedal)
+
+
+# solve_ivp reads an event's ``terminal`` and ``direction`` from the function: the schedule's
+# thresholds stop the gear segment when the input speed rises through the upshift speed or
+# falls through the downshift speed
+_GearSegment.upshift.terminal = True  # type: ignore[attr-defined]
+_GearSegment.upshift.direction = 1  # type: ignore[attr-defined]
+_GearSegment.downshift.terminal = True  # type: ignore[attr-defined]
+_GearSegment.downshift.direction = -1  # type: ignore[attr-defined]
 
 
 def _first_sample(t0: float) -> float:

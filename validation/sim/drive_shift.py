@@ -135,7 +135,15 @@ class ShiftRunner:
         self.torque_phase = d.drive.si("shift", "torque_phase")
         self.speed_phase = d.drive.si("shift", "speed_phase")
         self.r_dyn = quantity(d, "vehicle", "r_dyn").value
-        self._energy: Any = None
+        self._energy: dict[str, tuple[Any, Any]] | None = None
+
+    def energy_functions(self) -> dict[str, tuple[Any, Any]]:
+        """The powers and stored energies of every mode (built once, for the energy audit)."""
+        if self._energy is None:
+            from gearsym.validation.sim.hybrid_energy import energy_functions
+
+            self._energy = energy_functions(self.simulator)
+        return self._energy
 
     def line_forces(self, mode: str) -> list[float]:
         """F_N of the swapping elements in a gear mode: line pressure on the locked ones."""
