@@ -55,6 +55,7 @@ FILES = {
     "simpson_3speed_one_way": ROOT / "tests" / "data" / "simpson_3speed_one_way.toml",
     "simpson_overdrive_idle": ROOT / "tests" / "data" / "simpson_overdrive_idle.toml",
     "thesis_9speed_alt_teeth": ROOT / "tests" / "data" / "thesis_9speed_alt_teeth.toml",
+    "dog_9speed": ROOT / "tests" / "data" / "dog_9speed.toml",
     "lepelletier_6speed": ROOT / "gearsym" / "data" / "examples" / "lepelletier_6speed.toml",
     "mercedes_7g_tronic": ROOT / "gearsym" / "data" / "examples" / "mercedes_7g_tronic.toml",
     **{
