@@ -246,11 +246,11 @@ def report(
     ]
     survivors = [n for n, s in results.items() if s in ("survived", "no tests")]
     left = [n for n in survivors if verdicts.get(n) != "killed"]
-    out += [f"## Survivors after the recheck ({len(left)})", ""]
+    out += [f"### Survivors after the recheck ({len(left)})", ""]
     for name in left:
         out += _entry(name, results[name])
     rechecked = [n for n in survivors if verdicts.get(n) == "killed"]
-    out += [f"## Killed on the recheck ({len(rechecked)})", ""]
+    out += [f"### Killed on the recheck ({len(rechecked)})", ""]
     for name in rechecked:
         out += _entry(name, results[name])
     return "\n".join(out).rstrip() + "\n"
