@@ -9,7 +9,7 @@ STAMP  := $(VENV)/.installed
 
 PIP    := pip==26.3
 
-.PHONY: run test check check-installed lint format bench fuzz lock clean sketches results
+.PHONY: run test check check-installed lint format bench fuzz mutate lock clean sketches results
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null || { echo "make: $(PYTHON) not found (need Python 3.11+; set PYTHON=...)"; exit 2; }
@@ -145,6 +145,12 @@ check-installed:
 # The nightly hostile-input run: the property suite with a larger budget (fixed seed).
 fuzz: $(STAMP)
 	GEARSYM_FUZZ_EXAMPLES=$${GEARSYM_FUZZ_EXAMPLES:-2000} $(BIN)/python -m pytest -q tests/test_fuzz_cli.py
+
+# The periodic mutation run (not part of `make check`): mutmut over the dynamics, the EKF and
+# the C printer with a targeted fast test subset, staged in build/mutation/ (.ci/mutate.py says
+# why); writes the score and the survivors to docs/results/mutation.md. About 30 min on 2 cores.
+mutate: $(STAMP)
+	$(BIN)/python .ci/mutate.py
 
 format: $(STAMP)
 	$(BIN)/ruff format .

@@ -370,3 +370,31 @@ def test_estimate_ekf_command(tmp_path):
         assert result.returncode == 2 and key in result.stderr, (bad, result.stderr)
         assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
         assert not (tmp_path / "never").exists()
+
+
+def test_a_missing_first_speed_leaves_the_others_updating(aug, discrete):
+    """One sensor out (ω_1 NaN): the update must use the other two speeds as the batch Kalman
+    update with those rows does, K = P Hᵀ (H P Hᵀ + R)⁻¹, z⁺ = z + K ν, P⁺ = (I − K H) P
+    (the outputs are the states ω_2, ω_C, so H selects them; R from (3.26) at the measured
+    values), with its NIS νᵀ (H P Hᵀ + R)⁻¹ ν on 2 dof. In the torque phase both μ slide, so
+    no state is held out of the update."""
+    from gearsym.symbolic.estimators.ekf import ekf_update
+
+    u, p = MODES["torque phase (both slide)"], aug.parameter_values()
+    sigma = np.array([2.0, 0.6, 0.05, 0.3, 200.0, 0.01, 0.01, 0.02])
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(8, 8)) * 0.2
+    P = np.diag(sigma) @ (np.eye(8) + a @ a.T) @ np.diag(sigma)  # correlated, SPD
+    y = np.array([np.nan, 64.9, 25.7])  # ω_2 and ω_C measured, ω_1 lost
+    relative, floor = [0.01, 0.01, 0.01], [1.0, 1.0, 1.0]
+    z_new, P_new, nis, used = ekf_update(discrete, Z0, P, u, y, p, relative, floor)
+    H = np.zeros((2, 8))
+    H[0, 1] = H[1, 3] = 1.0  # ω_2, ω_C
+    R = np.diag((0.01 * y[1:]) ** 2)
+    S = H @ P @ H.T + R
+    K = P @ H.T @ np.linalg.inv(S)
+    nu = y[1:] - H @ Z0
+    assert used == 2
+    np.testing.assert_allclose(z_new, Z0 + K @ nu, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(P_new, (np.eye(8) - K @ H) @ P, rtol=1e-9, atol=1e-12)
+    assert nis == pytest.approx(float(nu @ np.linalg.solve(S, nu)), rel=1e-10)

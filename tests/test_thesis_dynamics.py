@@ -178,3 +178,21 @@ def test_mass_matrix_is_symmetric_positive_definite_numerically():
     m = dyn.mass_matrix
     assert m == m.T
     assert all(ev > 0 for ev in m.evalf().eigenvals(multiple=True))
+
+
+def test_free_gearbox_accelerations_deliver_the_input_power():
+    """ẋ = B u with B = M⁻¹ B̃ (2.41): the kinetic energy ½ ẏᵀ M ẏ then changes at the power
+    of the input torques ẏᵀ B̃ u (2.35) for every speed ẏ and every u, which holds only if
+    M B = B̃; checked at random speeds and torques (the inertias and teeth the built-in's)."""
+    import numpy as np
+
+    dyn = gearbox_dynamics(load_description())
+    m = np.array(dyn.mass_matrix.evalf(), dtype=float)
+    b_tilde = np.array(dyn.input_matrix.evalf(), dtype=float)
+    b = np.array(dyn.state_input_matrix().evalf(), dtype=float)
+    assert b.shape == b_tilde.shape
+    rng = np.random.default_rng(31)
+    for _ in range(5):
+        speeds, torques = rng.normal(size=m.shape[0]) * 100, rng.normal(size=b.shape[1]) * 50
+        power = speeds @ b_tilde @ torques
+        assert speeds @ m @ (b @ torques) == pytest.approx(power, rel=1e-10)

@@ -155,7 +155,7 @@ def run_euio(
     for k in range(1, len(t)):
         hold = sorted(set(held_by_phase[phase_of(t[k])]) | set(aug.frozen_states(setup.u[k - 1])))
         held[k, hold] = True
-        R = (setup.relative * np.maximum(np.abs(y[k]), setup.floor)) ** 2
+        R = measurement_variances(setup, y[k])
         e = load_column(discrete, z, r_dyn, p, i_wheel)
         z, P, load[k], load_sigma[k] = euio_step(
             discrete, z, P, setup.u[k - 1], setup.u[k], y[k], R, h, p, q, e, hold
@@ -185,6 +185,13 @@ def run_euio(
         existence=existence,
         parameters=tuple(by_parameter),
     )
+
+
+def measurement_variances(setup: EkfSetup, y: np.ndarray) -> np.ndarray:
+    """The EUIO's R per output at the measured values ``y``: r_i² max(|y_i|, y_i^min)²
+    (3.26), the EKF's measurement_variance (taken at the measurement: the TCU does not know
+    the true value)."""
+    return (setup.relative * np.maximum(np.abs(y), setup.floor)) ** 2
 
 
 def existence_per_phase(
