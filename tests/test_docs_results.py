@@ -124,6 +124,7 @@ def test_a_hand_edit_is_caught():
 #: analyses that tests assert (existence, rank), none a measured number. Any other table of a
 #: page is a result and is written by a command (``make results``) into ``docs/results``.
 TYPED_TABLES = {
+    ("verification.md", "| planted | where | fast tests that fail |"),
     ("drive.md", "| name | source | published facts |"),
     ("architecture.md", "| folder | modules | what it holds |"),
     ("architecture.md", "| stage | module | thesis |"),
