@@ -70,6 +70,9 @@ class DriveEstimates:
     nis_dof: np.ndarray
     held: int
     model: list[str] = field(default_factory=list)
+    #: the filter's mode per swapping element of its model after each sample
+    #: (:mod:`~gearsym.symbolic.estimators.ekf_modes` codes: 0 open, ±1 sliding, 2 sticking)
+    modes: list[dict[str, int]] = field(default_factory=list)
     elements: dict[str, str] = field(default_factory=dict)
 
     def error_at(self, name: str, times: Sequence[float]) -> dict[str, float]:
@@ -244,6 +247,7 @@ def run_drive_ekf(
     nis_dof = np.zeros(len(t))
     held_count = 0
     model_at: list[str] = []
+    modes_at: list[dict[str, int]] = []
     areas = {e: d.element(e).a_piston.value for e in short if d.element(e).a_piston is not None}
     zeta_truth = log["truth_zeta"]
 
@@ -319,6 +323,7 @@ def run_drive_ekf(
             elif name in store:
                 mean[name][k], var = store[name]
                 sigma[name][k] = math.sqrt(var)
+        modes_at.append(dict(modes))
         idx = [names.index(n) for n in CARRIED]
         error = z[idx] - np.array([truth_mass, zeta_truth[k]])
         nees[k] = float(error @ np.linalg.solve(P[np.ix_(idx, idx)], error))
@@ -337,6 +342,7 @@ def run_drive_ekf(
         nis_dof=nis_dof,
         held=held_count,
         model=model_at,
+        modes=modes_at,
         elements={mu_name[e]: e for e in mu_name},
     )
 
