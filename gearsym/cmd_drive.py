@@ -89,7 +89,6 @@ def cmd_drive(args: argparse.Namespace) -> int:
                 seed=args.seed,
             )
         from gearsym.validation.sim.drive_report import (
-            drive_command,
             drive_markdown,
             format_drive_summary,
             plot_drive,
@@ -111,10 +110,7 @@ def cmd_drive(args: argparse.Namespace) -> int:
             plot_drive_estimates(estimates, out.path / "estimates.png")
         (out.path / "drive.json").write_text(json.dumps(data, indent=2) + "\n")
         write_drive(result, out.path)
-        fleet_argument = None
-        if args.fleet is not None:
-            fleet_argument = "" if args.fleet == DEFAULT_FLEET_ARGUMENT else args.fleet
-        command = drive_command(args.cycle, args.duration, fleet_argument, args.seed)
+        command = _command(args)
         (out.path / "drive.md").write_text(drive_markdown(data, command))
         plot_drive(result, out.path / "drive.png")
         paths = out.commit()
@@ -130,6 +126,16 @@ def cmd_drive(args: argparse.Namespace) -> int:
         print(f"gearsym: drive failed: {result.failure}", file=sys.stderr)
         return 1
     return 0
+
+
+def _command(args: argparse.Namespace) -> str:
+    """The command line the written Markdown names (the shipped fleet as a bare --fleet)."""
+    from gearsym.validation.sim.drive_report import drive_command
+
+    fleet = None
+    if args.fleet is not None:
+        fleet = "" if args.fleet == DEFAULT_FLEET_ARGUMENT else args.fleet
+    return drive_command(args.cycle, args.duration, fleet, args.seed, args.runs)
 
 
 def _drive_fleet(args: argparse.Namespace, d: Any, cycle: Any, grade: Any, fleet: Any) -> int:
@@ -163,11 +169,7 @@ def _drive_fleet(args: argparse.Namespace, d: Any, cycle: Any, grade: Any, fleet
         finally:
             bar.done()
         data = {"gearbox": d.name, **result.to_dict()}
-        duration = f" --duration {args.duration:g}" if args.duration is not None else ""
-        command = (
-            f"gearsym drive --cycle {args.cycle}{duration} --fleet --runs {args.runs} "
-            f"--seed {args.seed}"
-        )
+        command = _command(args)
         (out.path / "fleet.json").write_text(json.dumps(data, indent=2) + "\n")
         (out.path / "fleet.md").write_text(drive_fleet_markdown(data, command))
         plot_drive_fleet(result, out.path / "fleet.png")

@@ -20,23 +20,13 @@ from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.ratios import gear_ratio
 
 from gearsym.cli import main
+from tests.test_ratios import TABLE_2_1
 
 DATA = Path(__file__).parent / "data"
 BOX = DATA / "dog_9speed.toml"
 
-#: Table 2.1 of the thesis (the published ratios of the 9G-Tronic), three decimals.
-PUBLISHED = {
-    "1": 5.354,
-    "2": 3.243,
-    "3": 2.252,
-    "4": 1.636,
-    "5": 1.211,
-    "6": 1.000,
-    "7": 0.865,
-    "8": 0.717,
-    "9": 0.601,
-    "R": -4.798,
-}
+#: Table 2.1 of the thesis (the published ratios), transcribed once in test_ratios.py.
+PUBLISHED = {gear: ratio for gear, ratio in TABLE_2_1.items() if ratio is not None}
 
 
 def _with_b06(tmp_path: Path, lines: str) -> Path:

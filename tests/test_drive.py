@@ -24,8 +24,8 @@ from gearsym.validation.sim.drive import DriveSimulator
 from gearsym.validation.sim.drive_powertrain import Powertrain
 from gearsym.validation.sim.drive_shift import state_from_speeds
 
-#: A short cycle with a launch, upshifts, a cruise, a braked stop and a standstill (km/h).
-SHORT = "t,v\n0,0\n2,0\n8,25\n20,55\n32,55\n44,0\n47,0\n"
+#: A short cycle with a launch, upshifts, a cruise, a braked stop and a standstill.
+SHORT = Path(__file__).parent / "data" / "cycle_short.csv"
 
 
 @pytest.fixture(scope="module")
@@ -34,10 +34,8 @@ def description():
 
 
 @pytest.fixture(scope="module")
-def short_drive(description, tmp_path_factory):
-    path = tmp_path_factory.mktemp("cycle") / "short.csv"
-    path.write_text(SHORT, encoding="utf-8")
-    cycle = load_cycle(path)
+def short_drive(description):
+    cycle = load_cycle(SHORT)
     simulator = DriveSimulator(description, cycle)
     return simulator, simulator.run()
 
@@ -205,17 +203,15 @@ def test_cli_drive_bad_input_is_one_line(tmp_path, args, message):
 
 
 @pytest.fixture(scope="module")
-def fleet_drive(description, tmp_path_factory):
+def fleet_drive(description):
     """A fleet vehicle (heavier, other tolerances) on the short cycle: the TCU's calibration
     apart from the truth."""
     from gearsym.validation.sim.drive import DriveTruth
     from gearsym.validation.sim.fleet import load_fleet
 
-    path = tmp_path_factory.mktemp("cycle") / "short.csv"
-    path.write_text(SHORT, encoding="utf-8")
     draw = load_fleet(description).draw(10000)
     truth = DriveTruth.from_draw(description, draw)
-    simulator = DriveSimulator(description, load_cycle(path), truth=truth)
+    simulator = DriveSimulator(description, load_cycle(SHORT), truth=truth)
     return simulator, simulator.run()
 
 

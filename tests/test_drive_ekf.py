@@ -18,7 +18,7 @@ from gearsym.validation.sim.cycles import load_cycle
 from gearsym.validation.sim.drive import DriveSimulator
 from gearsym.validation.studies.estimation.drive_ekf import _hand_over, run_drive_ekf
 
-SHORT = "t,v\n0,0\n2,0\n8,25\n20,55\n32,55\n44,0\n47,0\n"
+from tests.test_drive import SHORT
 
 
 @pytest.fixture(scope="module")
@@ -27,10 +27,8 @@ def description():
 
 
 @pytest.fixture(scope="module")
-def drive(description, tmp_path_factory):
-    path = tmp_path_factory.mktemp("cycle") / "short.csv"
-    path.write_text(SHORT, encoding="utf-8")
-    return DriveSimulator(description, load_cycle(path)).run()
+def drive(description):
+    return DriveSimulator(description, load_cycle(SHORT)).run()
 
 
 @pytest.fixture(scope="module")

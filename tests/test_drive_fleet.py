@@ -48,17 +48,18 @@ def test_percentiles_by_hand():
 def test_fleet_drives_each_vehicle_of_its_seed():
     d = load_description()
     fleet = load_fleet(d)
-    cycle = load_cycle("wltc3b").window(14.0)
+    cycle = load_cycle("wltc3b").window(18.0)  # the launch starts at 11 s
     result = run_drive_fleet(d, cycle, None, fleet, [10000, 10001])
     masses = [run["drive"]["truth"]["m_veh"] for run in result.runs]
     assert masses == [dict(fleet.draw(s).values)["m_veh"] for s in (10000, 10001)]
     assert all(run["drive"]["failure"] == "" for run in result.runs)
     stats = result.percentiles()
     assert stats["vehicles"] == 2
-    # the filter's mass σ was kept per vehicle, and the estimate is a mass, not the truth
+    # each vehicle's filter learned its mass from the launch: σ from the prior's 300 kg (the
+    # [estimator] table) to under half of it
     for run in result.runs:
-        assert np.all(np.asarray(run["trace_mass_sigma"]) > 0)
-        assert run["estimates"]["m_veh"]["final"] != run["drive"]["truth"]["m_veh"]
+        sigma = np.asarray(run["trace_mass_sigma"]) * run["drive"]["truth"]["m_veh"]
+        assert sigma[0] == pytest.approx(300.0) and sigma[-1] < 300.0 / 2
 
 
 def gearsym(*args: str) -> subprocess.CompletedProcess:
@@ -93,3 +94,18 @@ def test_cli_fleet_json(tmp_path):
     assert set(data["mass_error"]["error_at"]) == {"end"}
     for name in ("fleet.json", "fleet.md", "fleet.png"):
         assert (out / name).exists()
+    header = (out / "fleet.md").read_text(encoding="utf-8").splitlines()[0]
+    assert "`gearsym drive --cycle wltc3b --duration 14 --fleet --runs 2 --seed 7`" in header
+
+
+def test_a_fleet_file_is_named_in_the_command_line():
+    from gearsym.validation.sim.drive_report import drive_command
+
+    assert drive_command("udds", None, "my.toml", 3, 5) == (
+        "gearsym drive --cycle udds --fleet my.toml --runs 5 --seed 3"
+    )
+    assert (
+        drive_command("udds", 60.0, "", 3)
+        == "gearsym drive --cycle udds --duration 60 --fleet --seed 3"
+    )
+    assert drive_command("udds", None) == "gearsym drive --cycle udds"

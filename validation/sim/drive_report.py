@@ -141,13 +141,15 @@ def plot_drive(result: DriveResult, path: Path) -> Path:
 
 
 def drive_command(
-    cycle: str, duration: float | None, fleet: str | None = None, seed: int = 0
+    cycle: str, duration: float | None, fleet: str | None = None, seed: int = 0, runs: int = 1
 ) -> str:
-    """The command line a drive's Markdown names as its writer (``fleet``: the argument of
-    ``--fleet``, "" for the shipped fleet)."""
+    """The command line a drive's (or a fleet of drives') Markdown names as its writer
+    (``fleet``: the argument of ``--fleet``, "" for the shipped fleet)."""
     extra = f" --duration {duration:g}" if duration is not None else ""
     if fleet is not None:
-        extra += f" --fleet {fleet}".rstrip() + f" --seed {seed}"
+        extra += f" --fleet {fleet}".rstrip()
+        extra += f" --runs {runs}" if runs > 1 else ""
+        extra += f" --seed {seed}"
     return f"gearsym drive --cycle {cycle}{extra}"
 
 

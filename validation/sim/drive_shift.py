@@ -23,6 +23,7 @@ does not end in the to-gear is reported as failed.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -173,7 +174,8 @@ class ShiftRunner:
         phi, omega_c = x[names.index(naming.TWIST)], x[names.index(naming.WHEEL_SPEED)]
         # the on-coming element's torque in the to-gear at the same output speed
         to_mode = sim.modes[hybrid.to_mode]
-        x_to = _state_at_output(sim, hybrid.to_mode, speeds, phi, omega_c, self.d)
+        output = [s.name for s in self.d.shafts].index(self.d.output_shaft)
+        x_to = state_from_speeds(sim, hybrid.to_mode, speeds, phi, omega_c, shafts=[output])
         u_to = np.array([split.input_torque, *self.line_forces(hybrid.to_mode), zeta])
         carry = abs(to_mode.value(to_mode.torques, x_to, u_to, p_cal)[j_on]) / capacity[on]
         # the speed phase: F_N that brings the on-coming slip to zero within the phase
@@ -391,11 +393,17 @@ class ShiftRunner:
 
 
 def state_from_speeds(
-    sim: HybridSimulator, mode: str, speeds: np.ndarray, phi: float, omega_c: float
+    sim: HybridSimulator,
+    mode: str,
+    speeds: np.ndarray,
+    phi: float,
+    omega_c: float,
+    shafts: Sequence[int] | None = None,
 ) -> np.ndarray:
     """The state of ``mode`` with the given shaft speeds (least squares through its
     projection, exact when the speeds satisfy the mode's constraints), twist and wheel
-    speed."""
+    speed. ``shafts``: match only these shafts' speeds (indices into the description's
+    shafts), the others as the mode makes them (a gear at another gear's output speed)."""
     compiled = sim.modes[mode]
     names = [v.name for v in compiled.mode.model.states]
     n_gear = len(compiled.mode.keep)
@@ -406,7 +414,8 @@ def state_from_speeds(
         unit[j] = 1.0
         columns.append(np.asarray(function(unit)).ravel())
     basis = np.column_stack(columns)
-    z, *_ = np.linalg.lstsq(basis, speeds, rcond=None)
+    rows = slice(None) if shafts is None else list(shafts)
+    z, *_ = np.linalg.lstsq(basis[rows], np.asarray(speeds)[rows], rcond=None)
     x = np.zeros(compiled.n)
     x[:n_gear] = z
     x[names.index(naming.TWIST)] = phi
@@ -426,34 +435,6 @@ def vehicle_jerk(v: np.ndarray, dt: float) -> np.ndarray:
     if len(v) > 3 * max(len(a), len(b)):
         acceleration = filtfilt(b, a, acceleration)
     return np.gradient(acceleration, dt)
-
-
-def _state_at_output(
-    sim: HybridSimulator,
-    mode: str,
-    speeds: np.ndarray,
-    phi: float,
-    omega_c: float,
-    d: GearboxDescription,
-) -> np.ndarray:
-    """The state of a gear mode at the given output-shaft speed (its other shafts as the gear
-    makes them)."""
-    compiled = sim.modes[mode]
-    names = [v.name for v in compiled.mode.model.states]
-    n_gear = len(compiled.mode.keep)
-    out = [s.name for s in d.shafts].index(d.output_shaft)
-    function = sim.shaft_speeds(mode)
-    row = []
-    for j in range(n_gear):
-        unit = np.zeros(compiled.n)
-        unit[j] = 1.0
-        row.append(float(np.asarray(function(unit)).ravel()[out]))
-    z, *_ = np.linalg.lstsq(np.array([row]), np.array([speeds[out]]), rcond=None)
-    x = np.zeros(compiled.n)
-    x[:n_gear] = z
-    x[names.index(naming.TWIST)] = phi
-    x[names.index(naming.WHEEL_SPEED)] = omega_c
-    return x
 
 
 def _scenario(
