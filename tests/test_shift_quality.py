@@ -263,3 +263,28 @@ def test_shift_quality_refuses_an_uneven_time_base():
     x = np.zeros(4)
     with pytest.raises(ValueError, match="constant step"):
         shift_quality(t, x, x, x, x, 1.0, 1.0, {}, 0.5, 1.0)
+
+
+@pytest.mark.parametrize(("f", "within"), [(1.0, 1e-3), (10.0, 1e-3), (31.5, 4e-3), (80.0, 0.02)])
+def test_the_digital_weighting_follows_the_analog_one_at_1_khz(f, within):
+    """The bilinear transform's warping, as the docstring states it (the hand formula is the
+    analog W_d)."""
+    assert _steady_gain(f) == pytest.approx(_wd_by_hand(f), rel=within)
+
+
+def test_a_sample_time_too_long_for_the_100_hz_corner_is_refused():
+    with pytest.raises(ValueError, match="100 Hz"):
+        weighted_acceleration(np.zeros(10), 1 / 150)
+
+
+def test_shift_quality_reports_a_flare_and_a_tie_up():
+    """The off-going dips 70 rpm the wrong way, the output torque 150 N·m under the floor."""
+    t = np.arange(0.0, 1.0, DT)
+    on, off = _shift(1, -1, off_back=70 * RPM)
+    torque = _torque_trace(t, 1000.0, 700.0, 300.0)
+    args = (t, np.full_like(t, 20.0), on, off, torque, 1000.0, 700.0, {}, 0.5, 1.0)
+    quality = shift_quality(*args)
+    assert quality.flare and quality.flare_magnitude == pytest.approx(70 * RPM, rel=1e-3)
+    assert quality.tie_up and quality.tie_up_depth == pytest.approx(150.0, abs=1e-6)
+    assert quality.peak_jerk == 0.0 and quality.vdv == 0.0 and quality.friction_energy == {}
+    assert shift_quality(*args, off_direction=1.0).flare_magnitude == pytest.approx(150.0)
