@@ -30,7 +30,7 @@ DT = 1e-3
 #: |W_d| at one-third-octave band centres 10^(n/10) Hz: ISO 2631-1:1997 Table 3 (three
 #: figures; nominal 0.5, 2, 4, 8, 31.5, 80 Hz) as reproduced in
 #: github.com/laghbani/Road-Condition-Analysis-Tool-V2 iso_weighting.py, and ISO 8041-1:2017
-#: Annex B Table B.4 (four figures; 1 Hz, 20 Hz) as transcribed in
+#: Annex B (four figures; 1 Hz, 20 Hz) as transcribed in
 #: github.com/jmrplens/phonometry tests/vibration/human/test_human_vibration.py.
 WD_TABLE = {-3: 0.854, 0: 1.011, 3: 0.891, 6: 0.514, 9: 0.255, 13: 0.1004, 15: 0.0630, 19: 0.0213}
 #: ISO 8041-1 Table 1: W_d at its reference frequency 100 rad/s (also zetlab.com's table).

@@ -8,11 +8,12 @@ simulation records at :data:`~gearsym.validation.sim.drive_shift.SHIFT_SAMPLE`, 
 **Comfort** follows ISO 2631-1:1997 (*Mechanical vibration and shock: evaluation of human
 exposure to whole-body vibration, Part 1*): the longitudinal acceleration of a seated occupant
 is weighted with W_d (x-axis, Table 3; transfer functions of Annex A) and summarised by the
-vibration dose value (6.3.2), which, unlike the r.m.s., keeps the peaks a shift shock is made
-of. The weighting's parameters (Annex A, Table A.1, restated in ISO 8041-1 Table 3 and e.g.
-the Larson Davis HVM200 manual, Table 3.1): f1 = 0.4 Hz, f2 = 100 Hz (band limiting,
-Q1 = Q2 = 1/√2), f3 = f4 = 2 Hz, Q4 = 0.63 (acceleration-velocity transition), no upward
-step, gain 1. The peak jerk (the automotive shift-quality number) is kept beside it.
+vibration dose value (6.3.2, the fourth power vibration dose method), which, unlike the
+r.m.s., keeps the peaks a shift shock is made of. The weighting's parameters (Annex A,
+restated from ISO 8041 in e.g. the Larson Davis HVM200 reference manual, Table 3.1):
+f1 = 0.4 Hz, f2 = 100 Hz (band limiting, Q1 = Q2 = 1/√2), f3 = f4 = 2 Hz, Q4 = 0.63
+(acceleration-velocity transition), no upward step, gain 1. The peak jerk (the automotive
+shift-quality number) is kept beside it.
 
 **Sign conventions** (the caller's arrays, nothing else): the on-coming element's slip has the
 sign it has at the start of the record (it slides towards zero during the shift); the
@@ -26,6 +27,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
+from types import MappingProxyType
 
 import numpy as np
 from gearsym.validation.sim.drive_shift import vehicle_jerk
@@ -48,9 +50,9 @@ __all__ = [
     "wd_sections",
 ]
 
-#: ISO 2631-1:1997 Annex A, Table A.1, weighting W_d: band-limiting corners f1, f2 (Hz), the
+#: ISO 2631-1:1997 Annex A, weighting W_d: band-limiting corners f1, f2 (Hz), the
 #: acceleration-velocity transition f3, f4 (Hz) and its quality factor Q4. (No upward step.)
-W_D = {"f1": 0.4, "f2": 100.0, "f3": 2.0, "f4": 2.0, "q4": 0.63}
+W_D = MappingProxyType({"f1": 0.4, "f2": 100.0, "f3": 2.0, "f4": 2.0, "q4": 0.63})
 #: A slip reversal beyond 50 rpm (in rad/s) is a flare.
 FLARE_THRESHOLD = 50.0 * 2.0 * math.pi / 60.0
 #: The inertia phase starts when the on-coming slip has fallen by this fraction of its value at
@@ -121,7 +123,7 @@ def weighted_acceleration(a: np.ndarray, dt: float) -> np.ndarray:
 
 def vibration_dose_value(a: np.ndarray, dt: float) -> float:
     """VDV = (∫ a_w⁴ dt)^¼ (m/s^1.75) of the W_d-weighted acceleration a_w of ``a`` (ISO
-    2631-1:1997 6.3.2, eq. 5; the integral as a sum of samples times ``dt``): the fourth
+    2631-1:1997 6.3.2; the integral as a sum of samples times ``dt``): the fourth
     power makes the shift's shock, not the record's length, set the number. ``a`` is the
     vehicle's longitudinal acceleration, taken as the seat's (no seat transmissibility)."""
     weighted = weighted_acceleration(a, dt)
