@@ -20,6 +20,7 @@ from fractions import Fraction
 from pathlib import Path
 
 from gearsym.symbolic import set_kinds
+from gearsym.symbolic.control_calibration import ControlCalibration, default_control
 from gearsym.symbolic.drive_calibration import DriveCalibration, default_drive
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.estimator_calibration import EstimatorCalibration
@@ -311,6 +312,9 @@ class GearboxDescription:
     estimator: EstimatorCalibration = field(default_factory=EstimatorCalibration)
     #: The powertrain around the gearbox and the TCU's shift schedule of a drive (``[drive]``).
     drive: DriveCalibration = field(default_factory=default_drive)
+    #: The TCU's nominal valve and piston fill, its shift controller's tuning and adaptation
+    #: (``[control]``; the truth of a vehicle is the fleet's, ``validation/sim/actuator.py``).
+    control: ControlCalibration = field(default_factory=default_control)
 
     @property
     def shaft_names(self) -> tuple[str, ...]:

@@ -18,6 +18,7 @@ from fractions import Fraction
 from typing import Any
 
 from gearsym.symbolic import set_kinds
+from gearsym.symbolic.control_calibration import parse_control_table
 from gearsym.symbolic.description import (
     CENTRE_DISTANCE_TOLERANCE_MAX,
     DOG,
@@ -193,6 +194,7 @@ def parse_description(
         sections[section] = values
     estimator_table = root.table("estimator", required=False)  # read once the shafts are checked
     drive = parse_drive_table(root.table("drive", required=False))
+    control = parse_control_table(root.table("control", required=False))
     root.reject_unknown()
 
     description = GearboxDescription(
@@ -220,6 +222,7 @@ def parse_description(
         description,
         estimator=parse_estimator_table(estimator_table, [s.name for s in shafts]),
         drive=drive,
+        control=control,
     )
     if not description.coordinates:
         # Default generalized coordinates: the first f shafts (thesis 2.28 names them).
