@@ -29,7 +29,10 @@ The model, p_s the return-spring pressure, p_ff the fast-fill pressure, t_fill t
 Between the instants where the valve pressure changes, the fill completes, the pressure
 crosses the spring or the piston bottoms, each law is solved exactly (x linear in t,
 p − p_v exponential), so advancing in many small steps gives what one large step gives, and
-the response of a step command is known in closed form (tests/test_actuator.py).
+the response of a step command is known in closed form (tests/test_actuator.py). The samples
+:meth:`ClutchActuator.advance` returns are the plant's pressure of the element: joined over the
+controller's periods they make the piecewise-linear profile
+(:class:`~gearsym.validation.sim.scenario.Profile`) the plant presses with.
 """
 
 from __future__ import annotations
