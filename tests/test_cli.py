@@ -142,6 +142,19 @@ BAD_CASES = [
         "estimator.random_walk.m_veh.value",
         "must be finite and >= 0",
     ),
+    # the [control] table: the shift control's calibration
+    (
+        'slip_k_p = { value = 2000.0, unit = "Pa*s/rad"',
+        'slip_k_p = { value = 2000.0, unit = "Pa/rad"',
+        "control.shift.slip_k_p.unit",
+        "expected 'Pa*s/rad'",
+    ),
+    (
+        "[control.adaptation]\nfill_step",
+        "[control.adaptation]\nfill_stp = { value = 0.02, unit = 's', source = 'x' }\nfill_step",
+        "control.adaptation.fill_stp",
+        "unknown key",
+    ),
 ]
 
 

@@ -48,6 +48,9 @@ def test_the_default_fleet_states_a_source_for_every_range(d):
     )
     assert (names["mu_scale"].a, names["mu_scale"].b) == (0.8, 1.2)
     assert names["zeta"].b == pytest.approx(np.arctan(0.06), rel=1e-4)  # 6 % grade
+    # the adaptive-control issue's fill-time error, ±50 ms
+    assert (names["fill_time_error"].a, names["fill_time_error"].b) == (-0.05, 0.05)
+    assert names["fill_time_error"].unit == "s"
     for name, dist in fleet.entries:
         assert dist.source.strip(), name
 
@@ -123,6 +126,12 @@ def test_each_entry_has_its_own_stream(d):
             '[fleet.factor.vehicle]\nr_wheel = { value = 1.0, unit = "1", source = "x" }',
             "fleet.factor.vehicle.r_wheel",
             "the description has no [vehicle] r_wheel",
+        ),
+        (
+            'fill_time_error = { dist = "uniform", low = -0.1, high = 0.05, unit = "s", '
+            'source = "x" }',
+            "fleet.fill_time_error.dist",
+            "the true fill time (the description's 0.1 s plus the error) must stay positive",
         ),
         ("", "fleet.fleet", "draws nothing"),
     ],

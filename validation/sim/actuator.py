@@ -29,7 +29,10 @@ The model, p_s the return-spring pressure, p_ff the fast-fill pressure, t_fill t
 Between the instants where the valve pressure changes, the fill completes, the pressure
 crosses the spring or the piston bottoms, each law is solved exactly (x linear in t,
 p − p_v exponential), so advancing in many small steps gives what one large step gives, and
-the response of a step command is known in closed form (tests/test_actuator.py).
+the response of a step command is known in closed form (tests/test_actuator.py). The samples
+:meth:`ClutchActuator.advance` returns are the plant's pressure of the element: joined over the
+controller's periods they make the piecewise-linear profile
+(:class:`~gearsym.validation.sim.scenario.Profile`) the plant presses with.
 """
 
 from __future__ import annotations
@@ -138,23 +141,25 @@ class ClutchActuator:
 
     def effective(self, state: ActuatorState) -> float:
         """The pressure that presses the discs (Pa): p − p_s once filled, else 0."""
-        if state.fill < 1.0:
-            return 0.0
-        return max(state.pressure - self.return_spring, 0.0)
+        return self._effective(state.fill, state.pressure)
+
+    def _effective(self, fill: float, pressure: float) -> float:
+        return 0.0 if fill < 1.0 else max(pressure - self.return_spring, 0.0)
 
     def advance(
         self, state: ActuatorState, t0: float, t1: float, command: float, samples: int = 1
     ) -> tuple[ActuatorState, np.ndarray, np.ndarray]:
         """``command`` (Pa) given at ``t0`` and held to ``t1``: the state at ``t1``, the
         ``samples + 1`` instants from t0 to t1 (equally spaced) and the effective pressure
-        at each (times the piston area: F_N)."""
+        at each (times the piston area: F_N). Calls follow each other without a gap (``t0``
+        the previous call's ``t1``): the commands still inside the dead time are the state's."""
         if not t1 > t0 or samples < 1:
             raise ValueError(f"need t1 > t0 and samples >= 1, got {t0}, {t1}, {samples}")
         pending = [*state.pending, (t0 + self.dead_time, self.valve_pressure(command))]
         fill, p, valve, now = state.fill, state.pressure, state.valve, t0
         times = np.linspace(t0, t1, samples + 1)
         effective = np.empty(samples + 1)
-        for k, t in enumerate(times):
+        for k, t in enumerate(times.tolist()):
             while pending and pending[0][0] <= t:
                 at, v = pending.pop(0)
                 if at > now:
@@ -164,7 +169,7 @@ class ClutchActuator:
             if t > now:
                 fill, p = self._evolve(fill, p, valve, t - now)
                 now = t
-            effective[k] = self.effective(ActuatorState(fill, p))
+            effective[k] = self._effective(fill, p)
         return ActuatorState(fill, p, valve, tuple(pending)), times, effective
 
     def _evolve(self, fill: float, p: float, valve: float, dt: float) -> tuple[float, float]:

@@ -91,6 +91,13 @@ EFFECTS: dict[str, tuple[str, tuple[float, float], str]] = {
         "added to the true pressure of an applied element (valve, return spring) at each knot "
         "of the commanded profile where it is above zero; linear between the knots",
     ),
+    "fill_time_error": (
+        "s",
+        (-1.0, 1.0),
+        "added to the clutch's true fill time over the TCU's nominal [control.actuator] "
+        "fill_time (validation/sim/actuator.py: ClutchActuator.from_draw); the true fill time "
+        "must stay positive",
+    ),
 }
 
 #: Every name a ``[fleet]`` table may draw, beside ``mu_scale_<ELEMENT>``.
@@ -264,7 +271,15 @@ def parse_fleet(text: str, file: str, d: GearboxDescription) -> Fleet:
         else:
             known = [*FLEET_QUANTITIES, *(f"mu_scale_{e}" for e in sorted(elements))]
             raise table.fail(key, f"unknown fleet quantity (known: {', '.join(known)})")
-        entries.append((key, _distribution(table.table(key), unit, low, high)))
+        dist = _distribution(table.table(key), unit, low, high)
+        fill_time = d.control.si("actuator", "fill_time")
+        if key == "fill_time_error" and not dist.support()[0] > -fill_time:
+            raise table.table(key).fail(
+                "dist" if dist.kind != "fixed" else "value",
+                f"reaches {dist.support()[0]:g} s: the true fill time (the description's "
+                f"{fill_time:g} s plus the error) must stay positive",
+            )
+        entries.append((key, dist))
     factor = table.table("factor", required=False)
     for section in list(factor.data):
         if section == FACTOR_INERTIA:
