@@ -16,8 +16,8 @@ steps and limits::
     torque_phase = { value = 0.15, unit = "s", source = "..." }
     inertia_phase = { value = 0.35, unit = "s", source = "..." }      # target duration
     fill_hold = { value = 0.2e5, unit = "Pa", source = "..." }        # above the spring
-    slip_k_p = { value = 2000.0, unit = "Pa*s/rad", source = "..." }
-    slip_t_i = { value = 0.05, unit = "s", source = "..." }
+    slip_k_p = { value = 400.0, unit = "Pa*s/rad", source = "..." }
+    slip_t_i = { value = 0.2, unit = "s", source = "..." }
     lockup_slip = { value = 5.0, unit = "rad/s", source = "..." }
     off_going_margin = { value = 1.2, unit = "1", source = "..." }
     [control.adaptation]    # rule-based adaptation: step per shift and its limit
@@ -54,8 +54,8 @@ _SCALARS: dict[tuple[str, str], tuple[float, str]] = {
     ("shift", "torque_phase"): (0.15, "s"),
     ("shift", "inertia_phase"): (0.35, "s"),
     ("shift", "fill_hold"): (0.2e5, "Pa"),
-    ("shift", "slip_k_p"): (2000.0, "Pa*s/rad"),
-    ("shift", "slip_t_i"): (0.05, "s"),
+    ("shift", "slip_k_p"): (400.0, "Pa*s/rad"),
+    ("shift", "slip_t_i"): (0.2, "s"),
     ("shift", "lockup_slip"): (5.0, "rad/s"),
     ("shift", "off_going_margin"): (1.2, "1"),
     ("adaptation", "fill_step"): (0.020, "s"),

@@ -144,8 +144,8 @@ BAD_CASES = [
     ),
     # the [control] table: the shift control's calibration
     (
-        'slip_k_p = { value = 2000.0, unit = "Pa*s/rad"',
-        'slip_k_p = { value = 2000.0, unit = "Pa/rad"',
+        'slip_k_p = { value = 400.0, unit = "Pa*s/rad"',
+        'slip_k_p = { value = 400.0, unit = "Pa/rad"',
         "control.shift.slip_k_p.unit",
         "expected 'Pa*s/rad'",
     ),

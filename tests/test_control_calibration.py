@@ -23,8 +23,8 @@ STATED = {
     ("shift", "torque_phase"): (0.15, "s"),
     ("shift", "inertia_phase"): (0.35, "s"),
     ("shift", "fill_hold"): (0.2e5, "Pa"),
-    ("shift", "slip_k_p"): (2000.0, "Pa*s/rad"),
-    ("shift", "slip_t_i"): (0.05, "s"),
+    ("shift", "slip_k_p"): (400.0, "Pa*s/rad"),
+    ("shift", "slip_t_i"): (0.2, "s"),
     ("shift", "lockup_slip"): (5.0, "rad/s"),
     ("shift", "off_going_margin"): (1.2, "1"),
     ("adaptation", "fill_step"): (0.020, "s"),
@@ -64,7 +64,7 @@ def test_the_builtin_description_states_the_table_with_sources():
     table = d.control.to_dict()
     assert set(table) == {"actuator", "shift", "adaptation"}
     assert table["shift"]["slip_k_p"] == {
-        "value": 2000.0,
+        "value": 400.0,
         "unit": "Pa*s/rad",
         "source": d.control.entry("shift", "slip_k_p").source,
     }

@@ -288,3 +288,16 @@ def test_shift_quality_reports_a_flare_and_a_tie_up():
     assert quality.tie_up and quality.tie_up_depth == pytest.approx(150.0, abs=1e-6)
     assert quality.peak_jerk == 0.0 and quality.vdv == 0.0 and quality.friction_energy == {}
     assert shift_quality(*args, off_direction=1.0).flare_magnitude == pytest.approx(150.0)
+
+
+def test_torque_reversal_of_the_off_going_element():
+    """A from-gear torque of −150 N·m that swings to +20 before release is held against the
+    on-coming element (20 > 5 % of 150); one that falls to 0 is not."""
+    from gearsym.validation.studies.control.quality import torque_reversal
+
+    held = np.array([-150.0, -100.0, -20.0, 20.0, 0.0])
+    assert torque_reversal(held) == (True, 20.0)
+    clean = np.array([-150.0, -100.0, -20.0, 0.0, 0.0])
+    assert torque_reversal(clean) == (False, 0.0)
+    small = np.array([150.0, 50.0, -5.0, 0.0])
+    assert torque_reversal(small) == (False, 5.0)

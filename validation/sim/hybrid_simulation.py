@@ -167,18 +167,31 @@ class HybridSimulator:
             if v.name.startswith("omega_") and v.name != naming.WHEEL_SPEED
         ]
         x[out] = i_d * omega_c  # φ̇ = ω_out / i_D − ω_C = 0
-        u = self.inputs(0.0)
-        phi = names.index(naming.TWIST)
+        x[names.index(naming.TWIST)] = self.quasi_static_twist(
+            self.hybrid.from_mode, x, self.inputs(0.0), p
+        )
+        return x
+
+    def quasi_static_twist(self, mode: str, x: np.ndarray, u: np.ndarray, p: np.ndarray) -> float:
+        """The side-shaft twist φ at which the output shaft and the wheel accelerate together,
+        d(φ̇)/dt = 0 with φ̇ = ω_out / i_D − ω_C (2.44), at the speeds of ``x`` in ``mode``:
+        what a gear settles to under a steady load (affine in φ: two evaluations solve it;
+        ω_out is linear in the state, so its rate is the shaft-speed map of ẋ)."""
+        compiled = self.modes[mode]
+        names = [v.name for v in compiled.mode.model.states]
+        wheel, phi = names.index(naming.WHEEL_SPEED), names.index(naming.TWIST)
+        i_d = quantity(self.d, "drivetrain", "i_D").value
+        out = [s.name for s in self.d.shafts].index(self.d.output_shaft)
+        speeds = self.shaft_speeds(mode)
 
         def twist_acceleration(value: float) -> float:
-            y = x.copy()
+            y = np.array(x, dtype=float)
             y[phi] = value
-            xdot = mode.rhs(y, u, p)
-            return xdot[out] / i_d - xdot[names.index(naming.WHEEL_SPEED)]
+            xdot = compiled.rhs(y, u, p)
+            return float(np.asarray(speeds(xdot)).ravel()[out] / i_d - xdot[wheel])
 
         a0, a1 = twist_acceleration(0.0), twist_acceleration(1e-2)
-        x[phi] = -a0 * 1e-2 / (a1 - a0)
-        return x
+        return -a0 * 1e-2 / (a1 - a0)
 
     def initial_sensitivity(self, p: np.ndarray, parameters: Sequence[str]) -> np.ndarray:
         """S(0) = ∂x(0)/∂p of :meth:`initial_state`: the speeds are given by the vehicle speed

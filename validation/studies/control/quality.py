@@ -227,6 +227,20 @@ def tie_up(
     return depth > tolerance * abs(floor), depth
 
 
+def torque_reversal(off_torque: np.ndarray, tolerance: float = 0.05) -> tuple[bool, float]:
+    """Tie-up seen at the off-going element: its torque reversing from its from-gear direction
+    (the sign of the record's first sample) by more than ``tolerance`` of its first value,
+    that is the element held against the on-coming one, both carrying torque against each
+    other. Returns (the flag, the largest reversed torque, N·m, ≥ 0). Unlike the output-torque
+    dip of :func:`tie_up`, it does not count the side shafts' torsional swing, which dips the
+    output torque in any quick hand-over."""
+    torque = np.asarray(off_torque, dtype=float)
+    if not len(torque) or torque[0] == 0.0:
+        return False, 0.0
+    reversed_ = max(0.0, float(np.max(-np.sign(torque[0]) * torque)))
+    return reversed_ > tolerance * abs(float(torque[0])), reversed_
+
+
 def friction_energy(t: np.ndarray, friction_torque: np.ndarray, slip: np.ndarray) -> float:
     """Heat (J) one element's friction makes: ∫ |T_fric · slip| dt, trapezoidal."""
     power = np.abs(np.asarray(friction_torque, dtype=float) * np.asarray(slip, dtype=float))
@@ -261,6 +275,10 @@ class ShiftQuality:
     tie_up: bool
     tie_up_depth: float
     friction_energy: dict[str, float] = field(default_factory=dict)
+    #: the off-going element's reversed torque (N·m) and whether it exceeds the tolerance
+    #: (:func:`torque_reversal`; None and False when the caller gave no off-going torque)
+    reversal: float | None = None
+    reversal_tie_up: bool = False
 
     def to_dict(self) -> dict[str, object]:
         """Plain values (JSON-ready: bools, floats, a dict of floats)."""
@@ -286,6 +304,7 @@ def shift_quality(
     target_duration: float,
     lockup_slip: float,
     off_direction: float | None = None,
+    off_torque: np.ndarray | None = None,
 ) -> ShiftQuality:
     """All metrics of one shift's record: time ``t`` (s, constant step), vehicle speed ``v``
     (m/s), the swapping elements' slips (rad/s), the output torque (N·m) and the two gears'
@@ -293,13 +312,15 @@ def shift_quality(
     is the inertia phase's (:func:`inertia_phase`); its error is (duration − target) / target,
     NaN when the element did not lock. ``off_direction``: the off-going element's slip
     direction after release (:func:`flare_magnitude`), for a record that ends before it slips
-    that way (a failed shift)."""
+    that way (a failed shift). ``off_torque``: the off-going element's torque over the record,
+    for :func:`torque_reversal`."""
     t = np.asarray(t, dtype=float)
     dt = _sample_time(t)
     v = np.asarray(v, dtype=float)
     start, end = inertia_phase(t, slip_on, lockup_slip)
     duration = end - start
     tied, depth = tie_up(output_torque, from_gear_torque, to_gear_torque)
+    reversal_tie_up, reversal = (False, None) if off_torque is None else torque_reversal(off_torque)
     return ShiftQuality(
         duration=duration,
         duration_error=(duration - target_duration) / target_duration,
@@ -312,4 +333,6 @@ def shift_quality(
         friction_energy={
             name: friction_energy(t, torque, slip) for name, (torque, slip) in friction.items()
         },
+        reversal=reversal,
+        reversal_tie_up=reversal_tie_up,
     )

@@ -40,7 +40,7 @@ from gearsym.symbolic.defaults import EKF_FLOOR_FRACTION, EKF_RELATIVE_NOISE
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import element_short_name, quantity
 
-__all__ = ["DriveEstimates", "run_drive_ekf"]
+__all__ = ["DriveEstimates", "EkfCarry", "run_drive_ekf"]
 
 #: Below this measured vehicle speed (m/s), with no torque commanded, the vehicle stands.
 STANDSTILL_SPEED = 0.3
@@ -52,6 +52,21 @@ SYNC_BAND = 2.0
 
 #: The vehicle's parameters every model has, carried with their covariance block.
 CARRIED = ("m_veh", naming.GRADE)
+
+
+@dataclass(frozen=True)
+class EkfCarry:
+    """What the filter keeps from the end of one log to the start of the next (a TCU keeps it
+    over ignition cycles, the adaptive-control study from shift to shift): m_veh and ζ with
+    their covariance block (:data:`CARRIED` order), and each element's μ as mean and variance
+    (its covariances with the rest dropped, as in the store between shifts)."""
+
+    mean: tuple[float, ...]
+    covariance: tuple[tuple[float, ...], ...]
+    mu: tuple[tuple[str, float, float], ...]
+
+    def mu_of(self, name: str) -> tuple[float, float] | None:
+        return next(((m, v) for n, m, v in self.mu if n == name), None)
 
 
 @dataclass
@@ -74,6 +89,8 @@ class DriveEstimates:
     #: (:mod:`~gearsym.symbolic.estimators.ekf_modes` codes: 0 open, ±1 sliding, 2 sticking)
     modes: list[dict[str, int]] = field(default_factory=list)
     elements: dict[str, str] = field(default_factory=dict)
+    #: the filter's state at the end, to start the next log from
+    carry: EkfCarry | None = None
 
     def error_at(self, name: str, times: Sequence[float]) -> dict[str, float]:
         """Relative error of ``name`` at the given times (s) and at the end."""
@@ -187,18 +204,27 @@ def run_drive_ekf(
     seed: int = 0,
     relative_noise: float = EKF_RELATIVE_NOISE,
     twist_model_error: float | None = None,
+    start: EkfCarry | None = None,
+    mu_model: str | None = None,
+    truth_mu_scale: Mapping[str, float] | None = None,
 ) -> DriveEstimates:
     """The EKF over a drive's TCU log (module docstring). ``d`` is the calibration (model,
     prior, tuning, piston areas); ``log`` the :class:`~gearsym.validation.sim.drive_log.TcuLog`
     arrays and ``shifts`` its shift column; ``truth_mass`` scores m_veh (never shown to the
     filter). The sensors' noise (3.26) is drawn from ``seed``. ``twist_model_error``: q of
     the twist φ (rad²/s) over the drive (default: the ``[drive.estimator]`` table's, else the
-    ``[estimator]`` one's)."""
+    ``[estimator]`` one's). ``start``: m_veh, ζ and the μ where an earlier log left them
+    (:attr:`DriveEstimates.carry`) instead of the calibration's prior. ``mu_model``: the
+    filter's μ (default the ``[estimator]`` table's): "random_walk" (4.1) or "map_scale" (each
+    μ state the scale on the calibration's μ map,
+    :mod:`~gearsym.validation.studies.estimation.mu_map_form`; then ``truth_mu_scale``, the
+    truth's factor per element, scores it)."""
     from gearsym.symbolic.estimators.ekf import ekf_predict, ekf_update
     from gearsym.symbolic.estimators.ekf_modes import STICK, ekf_mode_update
 
     if twist_model_error is None:
         twist_model_error = d.drive.twist_model_error()
+    scale_form = (mu_model or d.estimator.mu_model) == "map_scale"
     models = _Models(d, {} if twist_model_error is None else {naming.TWIST: twist_model_error})
     t = log["t"]
     h = float(t[1] - t[0])
@@ -233,11 +259,23 @@ def run_drive_ekf(
         if name in outputs:
             c = sensors.index(name)
             z[j], sig0[j] = y_all[0, c], sigma_all[0, c]
+        elif scale_form and name.startswith("mu_"):
+            z[j], sig0[j] = d.estimator.scale_prior()
         else:
             z[j], sig0[j] = d.estimator.prior_of(name, nominal.get(name))
     P = np.diag(sig0**2)
     modes = logic.initial_modes()
     store: dict[str, tuple[float, float]] = {}  # μ of elements outside the model
+    if start is not None:
+        idx = [names.index(n) for n in CARRIED]
+        z[idx] = start.mean
+        P[np.ix_(idx, idx)] = np.asarray(start.covariance)
+        for name, mean_, var in start.mu:
+            if name in names:
+                j = names.index(name)
+                z[j], P[j, j] = mean_, var
+            else:
+                store[name] = (mean_, var)
 
     tracked = ["m_veh", naming.GRADE, *mu_name.values()]
     mean = {name: np.full(len(t), np.nan) for name in tracked}
@@ -261,11 +299,26 @@ def run_drive_ekf(
                 u[i] = log[f"p_{e}"][k] * areas[e]
         return u
 
+    forms: dict[str, Any] = {}
+
+    def mapped(z: np.ndarray, u: np.ndarray, aug: Any) -> np.ndarray:
+        """The F_N inputs times the μ map at the filter's own slip (map-scale form)."""
+        if not scale_form:
+            return u
+        if aug.shift not in forms:
+            from gearsym.validation.studies.estimation.mu_map_form import map_scale_form
+
+            forms[aug.shift] = map_scale_form(d, aug)
+        return forms[aug.shift](z, u)
+
     for k in range(len(t)):
         wanted = shifts[k] or current
         if wanted != current:
             new_aug, new_discrete, new_logic = models.get(wanted)
-            z, P = _hand_over(d, aug, new_aug, z, P, store, sig0_of=_prior_of(d, new_aug))
+            priors = _prior_of(d, new_aug)
+            if scale_form:
+                priors |= {n: d.estimator.scale_prior() for n in new_aug.mu_state.values()}
+            z, P = _hand_over(d, aug, new_aug, z, P, store, sig0_of=priors)
             aug, discrete, logic, current = new_aug, new_discrete, new_logic, wanted
             names = aug.state_names
             columns = sensor_columns(aug)
@@ -302,9 +355,15 @@ def run_drive_ekf(
             modes = _gear_modes(logic, current, gears[int(log["gear"][k])])
         else:
             if k > 0:
-                u_prev = logic.inputs(known_inputs(k - 1, aug), modes)
-                q = [aug.intensities[name] for name in names]
+                u_prev = logic.inputs(mapped(z, known_inputs(k - 1, aug), aug), modes)
+                q = [
+                    d.estimator.scale_random_walk()
+                    if scale_form and name.startswith("mu_")
+                    else aug.intensities[name]
+                    for name in names
+                ]
                 z, P = ekf_predict(discrete, z, P, u_prev, h, p, q)
+            u_known = mapped(z, u_known, aug)
             u_now = logic.inputs(u_known, modes)
             relative = np.full(len(columns), relative_noise)
             z, P, nis[k], nis_dof[k] = ekf_update(
@@ -327,11 +386,25 @@ def run_drive_ekf(
         idx = [names.index(n) for n in CARRIED]
         error = z[idx] - np.array([truth_mass, zeta_truth[k]])
         nees[k] = float(error @ np.linalg.solve(P[np.ix_(idx, idx)], error))
+    idx = [names.index(n) for n in CARRIED]
+    kept = dict(store)
+    for j, name in enumerate(names):
+        if name.startswith("mu_"):
+            kept[name] = (float(z[j]), float(P[j, j]))
+    carry = EkfCarry(
+        tuple(float(v) for v in z[idx]),
+        tuple(tuple(float(v) for v in row) for row in P[np.ix_(idx, idx)]),
+        tuple((name, m_, v_) for name, (m_, v_) in sorted(kept.items())),
+    )
     truth = {
         "m_veh": np.full(len(t), truth_mass),
         naming.GRADE: np.asarray(zeta_truth, dtype=float),
         **{mu_name[e]: np.asarray(log[f"truth_mu_{e}"], dtype=float) for e in mu_name},
     }
+    if scale_form:  # the state is the map's scale: the truth's factor where the element slides
+        for e, name in mu_name.items():
+            sliding = np.isfinite(truth[name])
+            truth[name] = np.where(sliding, (truth_mu_scale or {}).get(e, np.nan), np.nan)
     return DriveEstimates(
         t=np.asarray(t, dtype=float),
         mean=mean,
@@ -344,6 +417,7 @@ def run_drive_ekf(
         model=model_at,
         modes=modes_at,
         elements={mu_name[e]: e for e in mu_name},
+        carry=carry,
     )
 
 

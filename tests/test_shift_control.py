@@ -1,0 +1,192 @@
+"""The shift controller's phases in closed loop with the hybrid shift model and the actuator
+(the adaptive-control issue). Expected values come from the calibration's own numbers (the
+phases' timing), from physics (a piston that is not filled when the off-going element lets go
+gives no torque: the input flares; one filled early presses against the off-going element:
+tie-up) and from the target trajectory's closed form."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from gearsym.symbolic.drivetrain import quantity
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.hybrid import hybrid_shift
+from gearsym.symbolic.loader import load_description
+from gearsym.validation.sim.fleet import Actuators
+from gearsym.validation.sim.hybrid_simulation import HybridSimulator
+from gearsym.validation.sim.scenario import load_scenario
+from gearsym.validation.studies.control.controller import (
+    HOLD_AFTER_FILL,
+    TO_LINE,
+    Knowledge,
+    ShiftController,
+    TargetSlip,
+)
+from gearsym.validation.studies.control.study import (
+    OperatingPoint,
+    Vehicle,
+    measured_target,
+    run_vehicle,
+)
+
+
+@pytest.fixture(scope="module")
+def d():  # noqa: ANN201
+    return load_description(None)
+
+
+@pytest.fixture(scope="module")
+def point(d):  # noqa: ANN001, ANN201
+    return OperatingPoint.from_scenario(load_scenario(d))
+
+
+def _vehicle(d, fill_time_error: float = 0.0, m_veh: float | None = None) -> Vehicle:  # noqa: ANN001
+    """The calibration as the truth, but for the stated differences."""
+    truth = d
+    if m_veh is not None:
+        vehicle = dict(d.vehicle)
+        vehicle["m_veh"] = replace(vehicle["m_veh"], value=m_veh)
+        truth = replace(d, vehicle=vehicle)
+    return Vehicle(truth, {}, Actuators(), fill_time_error)
+
+
+# ------------------------------------------------------------------ the target trajectory
+
+
+def test_target_slip_closed_form() -> None:
+    """The trapezoidal slip acceleration integrates to σ0 over the phase; by symmetry half the
+    slip is gone at half the phase; the peak rate is σ0 / (T (1 − r))."""
+    target = TargetSlip(-200.0, 0.4, ramp=0.25)
+    assert target.slip(0.0) == pytest.approx(-200.0)
+    assert target.slip(0.4) == pytest.approx(0.0, abs=1e-12)
+    assert target.slip(0.2) == pytest.approx(-100.0)
+    assert target.rate(0.2) == pytest.approx(200.0 / (0.4 * 0.75))
+    assert target.rate(0.0) == 0.0 and target.rate(0.4) == 0.0
+    # by the ramp's closed form: at τ = r the slip has fallen by (r/2)/(1 − r) of σ0
+    assert target.slip(0.1) == pytest.approx(-200.0 * (1 - 0.125 / 0.75))
+    assert target.time_at(0.5) == pytest.approx(0.2, abs=1e-9)
+
+
+# ------------------------------------------------------------------ pressure from force
+
+
+def test_pressure_from_force_through_the_valve_view(d) -> None:  # noqa: ANN001
+    """p_cmd = (F / a_piston + p_spring + offset − valve offset) / valve gain, by hand."""
+    model = HybridSimulator(d, load_scenario(d), hybrid_shift(d, "2-3"))
+    knowledge = Knowledge(mu={}, m_veh=2000.0, zeta=0.0, valve_gain=0.95, valve_offset=5e3)
+    controller = ShiftController(d, model, knowledge)
+    area = d.element("B05").a_piston.value
+    spring = d.control.si("actuator", "return_spring")
+    expected = (1000.0 / area + spring + 2e3 - 5e3) / 0.95
+    assert controller.pressure("B05", 1000.0, 2e3) == pytest.approx(expected)
+
+
+# ------------------------------------------------------------------ the phases in closed loop
+
+
+@pytest.fixture(scope="module")
+def nominal(d, point):  # noqa: ANN001, ANN201
+    """The oracle on a vehicle that is the calibration (its knowledge exact)."""
+    return run_vehicle(d, "2-3", point, _vehicle(d), 1, ("oracle",), keep_records=True)["oracle"][0]
+
+
+def test_fill_phase_timing(d, nominal) -> None:  # noqa: ANN001
+    """Fast fill for the calibrated fill time, then the hold pressure until the torque phase
+    starts HOLD_AFTER_FILL later."""
+    record = nominal.record
+    fill = d.control.si("actuator", "fill_time")
+    fast = d.control.si("actuator", "fast_fill_pressure")
+    hold = d.control.si("actuator", "return_spring") + d.control.si("shift", "fill_hold")
+    on = record.commands["B05"]
+    ticks = record.ticks
+    assert np.all(on[ticks < fill - 1e-9] == fast)
+    between = (ticks >= fill - 1e-9) & (ticks < fill + HOLD_AFTER_FILL - 1e-9)
+    assert between.any() and np.all(on[between] == pytest.approx(hold))
+    first_torque = ticks[list(record.phases).index("torque")]
+    assert first_torque == pytest.approx(fill + HOLD_AFTER_FILL, abs=0.0101)
+
+
+def test_off_going_holds_until_the_torque_phase(nominal) -> None:  # noqa: ANN001
+    """At its holding margin the off-going element stays locked through the fill, and it is
+    commanded shut by the end of the torque phase (its estimated torque reached zero)."""
+    record = nominal.record
+    phases = np.array(record.phases)
+    first_torque = record.ticks[np.argmax(phases == "torque")]
+    releases = [e.t for e in record.events if e.element == "K38"]
+    assert releases and min(releases) > first_torque
+    last_torque = np.flatnonzero(phases == "torque")[-1]
+    assert record.commands["K38"][last_torque + 1] == 0.0
+
+
+def test_inertia_phase_meets_its_target_with_exact_knowledge(d, nominal) -> None:  # noqa: ANN001
+    """Knowledge exact and the actuator nominal: the inertia phase lasts its target within
+    10 %, no flare, the off-going element never held against the on-coming one (no tie-up),
+    the shift ends locked in the to-gear."""
+    quality = nominal.quality
+    assert nominal.completed
+    assert quality.duration == pytest.approx(measured_target(d), rel=0.10)
+    assert not quality.flare and not quality.reversal_tie_up
+
+
+def test_lockup_ramps_to_line_pressure(d, nominal) -> None:  # noqa: ANN001
+    """After the lock-up decision the on-coming command reaches line pressure within TO_LINE
+    and stays there."""
+    record = nominal.record
+    phases = np.array(record.phases)
+    first = record.ticks[np.argmax(phases == "lockup")]
+    line = d.drive.si("shift", "line_pressure")
+    late = record.ticks >= first + TO_LINE + 1e-9
+    assert late.any() and np.all(record.commands["B05"][late] == pytest.approx(line))
+    assert "done" in record.phases
+
+
+def test_underfill_flares_and_overfill_ties_up(d, point) -> None:  # noqa: ANN001
+    """A piston 50 ms slower to fill than the TCU believes has not reached the discs when the
+    off-going element lets go: the input flares. One 50 ms faster is pressed by the fast-fill
+    pressure against the still-closed off-going element: tie-up."""
+    slow = run_vehicle(d, "2-3", point, _vehicle(d, 0.05), 1, ("fixed",))["fixed"][0]
+    fast = run_vehicle(d, "2-3", point, _vehicle(d, -0.05), 1, ("fixed",))["fixed"][0]
+    assert slow.quality.flare and not slow.quality.reversal_tie_up
+    assert fast.quality.reversal_tie_up and not fast.quality.flare
+
+
+def test_rule_learns_the_fill_time(d, point) -> None:  # noqa: ANN001
+    """The rule adds a fill step after each flare until the flare is gone: a fill 50 ms slow
+    takes at most ceil(50 / 20) = 3 steps."""
+    outcomes = run_vehicle(d, "2-3", point, _vehicle(d, 0.05), 5, ("rule",))["rule"]
+    step = d.control.si("adaptation", "fill_step")
+    flares = [o.quality.flare for o in outcomes]
+    assert flares[0]
+    first_clean = flares.index(False)
+    assert first_clean <= math.ceil(0.05 / step)
+    assert outcomes[first_clean].knowledge["fill_offset"] == pytest.approx(first_clean * step)
+
+
+def test_controller_refuses_a_downshift(d) -> None:  # noqa: ANN001
+    """A power-on downshift needs the phases in the other order: refused in one line."""
+    model = HybridSimulator(d, load_scenario(d), hybrid_shift(d, "3-2"))
+    mu = quantity(d, "friction", "mu_nominal").value
+    knowledge = Knowledge(mu={"K38": mu, "B05": mu}, m_veh=2000.0, zeta=0.0)
+    controller = ShiftController(d, model, knowledge)
+    speeds = np.ones(len(d.shafts)) * 100.0
+    with pytest.raises(GearsymError) as info:
+        controller.step(0.0, speeds, 150.0)
+    assert "power-on upshifts only" in str(info.value)
+    assert "\n" not in str(info.value)
+
+
+def test_estimator_learns_the_on_coming_mu_and_carries_it(d, point) -> None:  # noqa: ANN001
+    """The estimator strategy's EKF, started from the calibration's prior, ends each shift with
+    the on-coming element's μ-map scale (the truth's: 15 % below the calibration) within 2 σ,
+    and the next shift's feed-forward uses that estimate (the map's factor μ_nominal · scale)."""
+    mu = quantity(d, "friction", "mu_nominal").value
+    vehicle = replace(_vehicle(d, m_veh=2300.0), mu_scale={"B05": 0.85, "K38": 1.0})
+    outcomes = run_vehicle(d, "2-3", point, vehicle, 2, ("estimator",), seed=7)["estimator"]
+    for outcome in outcomes:
+        mean, sigma = outcome.learned["mu_05"]
+        assert abs(mean - 0.85) < 2 * sigma, (mean, sigma)
+    assert outcomes[1].knowledge["mu"]["B05"] == pytest.approx(outcomes[0].learned["mu_05"][0] * mu)
+    assert outcomes[0].knowledge["mu"]["B05"] == mu

@@ -1,0 +1,186 @@
+"""Four shift-control strategies on the same vehicle and the same sequence of shifts (the
+adaptive-control issue). Each tells the controller (:mod:`.controller`) what it believes of the
+vehicle before a shift and learns after it; only the oracle is shown the truth.
+
+* ``fixed``: the calibration: nominal μ, the prior mass, level road, the nominal valve and
+  fill time; nothing learned.
+* ``rule``: a production-style adaptation per shift type (as open-source TCUs do it): after a
+  flare the fill time grows by ``fill_step``, after a tie-up it shrinks by it (within
+  ±``fill_limit``); an inertia phase more than 10 % longer than its target raises the
+  on-coming pressure offset by ``pressure_step``, one more than 10 % shorter lowers it (within
+  ±``pressure_limit``). The numbers are the description's ``[control.adaptation]``.
+* ``estimator``: the EKF (thesis 4.1, 4.3) runs over each shift's TCU log from where the last
+  shift left it (its μ per element shared by every shift that uses the element, m_veh and ζ
+  with their covariance) and the controller's feed-forward takes its means. Its μ states are
+  scales on the calibration's μ map (the map-scale form,
+  :mod:`~gearsym.validation.studies.estimation.mu_map_form`): the controller's model reads the
+  same map, so the scale is what it needs. The fill, which no estimate sees, is adapted by the
+  rule's fill law.
+* ``oracle``: the vehicle's true μ (the map's factor), mass, grade, torque gain, valve gain and
+  offset and fill time.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from gearsym.symbolic import naming
+from gearsym.symbolic.description import GearboxDescription
+from gearsym.symbolic.drivetrain import quantity
+from gearsym.validation.studies.control.controller import Knowledge
+
+__all__ = ["STRATEGIES", "Strategy", "TruthView", "calibration_knowledge", "make_strategy"]
+
+STRATEGIES = ("fixed", "rule", "estimator", "oracle")
+#: The rule's dead band on the inertia phase's relative duration error.
+RULE_BAND = 0.10
+
+
+@dataclass(frozen=True)
+class TruthView:
+    """What the oracle is told (and nothing else is): the vehicle's μ factors per element, its
+    mass and grade, the input torque per commanded torque, the valve's gain and offset and the
+    true fill time."""
+
+    mu: Mapping[str, float]
+    m_veh: float
+    zeta: float
+    torque_gain: float
+    valve_gain: float
+    valve_offset: float
+    fill_time: float
+
+
+def calibration_knowledge(d: GearboxDescription, elements: tuple[str, ...]) -> Knowledge:
+    """The TCU's calibration: each element's nominal μ, the estimator table's prior mass,
+    level road."""
+    mu = quantity(d, "friction", "mu_nominal").value
+    m_nominal = quantity(d, "vehicle", "m_veh").value
+    mass = d.estimator.prior_of("m_veh", m_nominal)[0]
+    return Knowledge(mu={e: mu for e in elements}, m_veh=mass, zeta=0.0)
+
+
+@dataclass
+class Strategy:
+    """A strategy's belief before each shift (:attr:`knowledge`) and its learning after it
+    (:meth:`learn`)."""
+
+    name: str
+    d: GearboxDescription
+    knowledge: Knowledge
+    history: list[dict[str, Any]] = field(default_factory=list)
+    #: what the strategy's estimator reported after the last shift: name → (mean, σ)
+    learned: dict[str, tuple[float, float]] = field(default_factory=dict)
+
+    def learn(self, quality: Any, result: Any, log: Any) -> None:
+        """After a shift: ``quality`` its metrics, ``result`` the closed-loop record,
+        ``log`` the TCU's log of it (what the TCU saw)."""
+        self.history.append(self.knowledge.to_dict())
+
+
+@dataclass
+class RuleStrategy(Strategy):
+    def _fill(self, quality: Any) -> float:
+        step = self.d.control.si("adaptation", "fill_step")
+        limit = self.d.control.si("adaptation", "fill_limit")
+        offset = self.knowledge.fill_offset
+        if quality.flare:
+            offset += step
+        elif quality.tie_up:
+            offset -= step
+        return min(max(offset, -limit), limit)
+
+    def learn(self, quality: Any, result: Any, log: Any) -> None:
+        super().learn(quality, result, log)
+        step = self.d.control.si("adaptation", "pressure_step")
+        limit = self.d.control.si("adaptation", "pressure_limit")
+        offset = self.knowledge.pressure_offset
+        error = quality.duration_error
+        if not math.isfinite(error) or error > RULE_BAND:
+            offset += step  # too slow (or never locked): more pressure
+        elif error < -RULE_BAND:
+            offset -= step
+        self.knowledge = replace(
+            self.knowledge,
+            fill_offset=self._fill(quality),
+            pressure_offset=min(max(offset, -limit), limit),
+        )
+
+
+@dataclass
+class EstimatorStrategy(RuleStrategy):
+    carry: Any = None
+    shift: str = ""
+    gears: tuple[str, str] = ("", "")
+    seed: int = 0
+
+    def learn(self, quality: Any, result: Any, log: Any) -> None:
+        Strategy.learn(self, quality, result, log)
+        from gearsym.validation.studies.estimation.drive_ekf import run_drive_ekf
+
+        arrays = log.arrays()
+        estimates = run_drive_ekf(
+            self.d,
+            arrays,
+            log.shifts(),
+            self.gears,
+            truth_mass=float("nan"),
+            seed=self.seed + len(self.history),
+            start=self.carry,
+            mu_model="map_scale",
+        )
+        self.carry = estimates.carry
+        self.learned = {
+            name: (float(estimates.mean[name][-1]), float(estimates.sigma[name][-1]))
+            for name in estimates.mean
+        }
+        mu = dict(self.knowledge.mu)
+        nominal = quantity(self.d, "friction", "mu_nominal").value
+        for name, element in estimates.elements.items():
+            value = estimates.mean[name][-1]
+            if element in mu and np.isfinite(value):
+                # the filter's state is the scale on the μ map; the controller's μ is the
+                # map's factor μ_nominal · scale (the plant's μ = μ · map / μ_nominal)
+                mu[element] = float(value) * nominal
+        self.knowledge = replace(
+            self.knowledge,
+            mu=mu,
+            m_veh=float(estimates.mean["m_veh"][-1]),
+            zeta=float(estimates.mean[naming.GRADE][-1]),
+            fill_offset=self._fill(quality),
+        )
+
+
+def make_strategy(
+    name: str,
+    d: GearboxDescription,
+    elements: tuple[str, ...],
+    truth: TruthView,
+    shift: str,
+    gears: tuple[str, str],
+    seed: int = 0,
+) -> Strategy:
+    """A fresh strategy ``name`` for one vehicle (``truth`` reaches only the oracle)."""
+    base = calibration_knowledge(d, elements)
+    if name == "fixed":
+        return Strategy(name, d, base)
+    if name == "rule":
+        return RuleStrategy(name, d, base)
+    if name == "estimator":
+        return EstimatorStrategy(name, d, base, shift=shift, gears=gears, seed=seed)
+    if name == "oracle":
+        oracle = Knowledge(
+            mu={e: truth.mu[e] for e in elements},
+            m_veh=truth.m_veh,
+            zeta=truth.zeta,
+            torque_gain=truth.torque_gain,
+            valve_gain=truth.valve_gain,
+            valve_offset=truth.valve_offset,
+            fill_time=truth.fill_time,
+        )
+        return Strategy(name, d, oracle)
+    raise ValueError(f"unknown strategy {name!r} (known: {', '.join(STRATEGIES)})")
