@@ -20,6 +20,7 @@ from typing import NoReturn
 
 from gearsym import (
     cmd_analysis,
+    cmd_control,
     cmd_draw,
     cmd_drive,
     cmd_dynamics,
@@ -47,6 +48,7 @@ COMMAND_MODULES = (
     cmd_sweep,
     cmd_estimate,
     cmd_drive,
+    cmd_control,
     cmd_draw,
     cmd_export,
 )

@@ -6,7 +6,10 @@ tie-up) and from the target trajectory's closed form."""
 
 from __future__ import annotations
 
+import json
 import math
+import subprocess
+import sys
 from dataclasses import replace
 
 import numpy as np
@@ -190,3 +193,57 @@ def test_estimator_learns_the_on_coming_mu_and_carries_it(d, point) -> None:  # 
         assert abs(mean - 0.85) < 2 * sigma, (mean, sigma)
     assert outcomes[1].knowledge["mu"]["B05"] == pytest.approx(outcomes[0].learned["mu_05"][0] * mu)
     assert outcomes[0].knowledge["mu"]["B05"] == mu
+
+
+# ------------------------------------------------------------------ the command
+
+
+def gearsym(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "gearsym", *args], capture_output=True, text=True, timeout=600
+    )
+
+
+def test_cli_control_json_and_files(tmp_path) -> None:  # noqa: ANN001
+    """Two shifts of the calibration's own vehicle: the JSON the issue names, every file."""
+    out = tmp_path / "control"
+    run = gearsym(
+        *["control", "--strategies", "fixed,oracle", "--shifts", "2", "--out", str(out), "--json"]
+    )
+    assert run.returncode == 0, run.stderr
+    data = json.loads(run.stdout)
+    for name in ("fixed", "oracle"):
+        entry = data["strategies"][name]
+        assert len(entry["per_shift"]) == 2
+        for key in (
+            "shift",
+            "jerk_mean",
+            "jerk_p95",
+            "vdv_p95",
+            "duration_error_p95",
+            "friction_energy_p95",
+            "flares",
+            "tie_ups",
+        ):
+            assert key in entry["per_shift"][0]
+        assert set(entry["shifts_to_converge"]) >= {"median", "p95"}
+    for name in ("control.json", "control.md", "runs.json", "sequence.png", "shift.png"):
+        assert (out / name).exists()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--strategies", "fixed,psychic"], "--strategies: expected some of"),
+        (["--shifts", "0"], "--shifts: must be at least 1"),
+        (["--runs", "3"], "--runs: more than one vehicle needs --fleet"),
+        (["--scenario", "{missing}"], "missing.toml"),
+    ],
+)
+def test_cli_control_bad_input_is_one_line(tmp_path, args, message) -> None:  # noqa: ANN001
+    args = [str(tmp_path / "missing.toml") if a == "{missing}" else a for a in args]
+    run = gearsym("control", *args, "--out", str(tmp_path / "out"))
+    assert run.returncode == 2, run.stderr
+    assert message in run.stderr
+    assert len(run.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()
