@@ -57,8 +57,20 @@ def cmd_control(args: argparse.Namespace) -> int:
     scenario = load_scenario(d, args.scenario)
     point = OperatingPoint.from_scenario(scenario)
     fleet = _fleet(d, args.fleet)
+    for item in args.fix or ():
+        if args.fleet is None:
+            raise GearsymError("--fix", "", "fixes an entry of a fleet: needs --fleet")
+        name, sep, raw = item.partition("=")
+        try:
+            value = float(raw)
+        except ValueError:
+            value = float("nan")
+        if not sep or not value == value:
+            raise GearsymError("--fix", "", f"expected NAME=NUMBER, got {item!r}")
+        fleet = fleet.fixed(name.strip(), value, "--fix")  # type: ignore[attr-defined]
     seeds = list(range(args.seed, args.seed + args.runs))
     command = control_command(
+        args.fix or (),
         args.scenario,
         None
         if args.fleet is None
@@ -149,6 +161,14 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         metavar="FLEET.toml",
         help="vehicles drawn from a fleet (default file: the shipped fleet); without it the "
         "vehicle is the calibration itself",
+    )
+    p.add_argument(
+        "--fix",
+        action="append",
+        metavar="NAME=VALUE",
+        help="fix one fleet entry for every vehicle (e.g. fill_time_error=0 to take the fill "
+        "out of the comparison, mu_scale=1.25 for cold oil); repeatable; the other entries "
+        "draw as before",
     )
     p.add_argument(
         "--strategies",

@@ -237,6 +237,9 @@ def test_cli_control_json_and_files(tmp_path) -> None:  # noqa: ANN001
         (["--strategies", "fixed,psychic"], "--strategies: expected some of"),
         (["--shifts", "0"], "--shifts: must be at least 1"),
         (["--runs", "3"], "--runs: more than one vehicle needs --fleet"),
+        (["--fix", "mu_scale=1.2"], "--fix: fixes an entry of a fleet: needs --fleet"),
+        (["--fleet", "--fix", "mu_scale"], "--fix: expected NAME=NUMBER"),
+        (["--fleet", "--fix", "mass=3"], "no fleet entry 'mass'"),
         (["--scenario", "{missing}"], "missing.toml"),
     ],
 )
@@ -247,3 +250,32 @@ def test_cli_control_bad_input_is_one_line(tmp_path, args, message) -> None:  # 
     assert message in run.stderr
     assert len(run.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()
+
+
+def test_rule_shortens_an_overfill(d, point) -> None:  # noqa: ANN001
+    """A piston 50 ms faster than the TCU believes ties the shift up; the rule takes a fill
+    step off after each tie-up until it is gone (at most ceil(50 / 20) = 3 steps), however the
+    shock flares the input afterwards."""
+    outcomes = run_vehicle(d, "2-3", point, _vehicle(d, -0.05), 5, ("rule",))["rule"]
+    step = d.control.si("adaptation", "fill_step")
+    tied = [o.quality.reversal_tie_up for o in outcomes]
+    assert tied[0]
+    first_clean = tied.index(False)
+    assert first_clean <= math.ceil(0.05 / step)
+    assert outcomes[first_clean].knowledge["fill_offset"] == pytest.approx(-first_clean * step)
+
+
+def test_fixing_a_fleet_entry_leaves_the_other_draws(d) -> None:  # noqa: ANN001
+    """--fix takes one entry out of the comparison: that entry is fixed, every other entry of
+    every vehicle draws as before (each entry has its own random stream)."""
+    from gearsym.validation.sim.fleet import load_fleet
+
+    fleet = load_fleet(d)
+    fixed = fleet.fixed("fill_time_error", 0.0, "--fix")
+    for seed in (3, 10000):
+        before, after = dict(fleet.draw(seed).values), dict(fixed.draw(seed).values)
+        assert after.pop("fill_time_error") == 0.0
+        before.pop("fill_time_error")
+        assert after == before
+    with pytest.raises(GearsymError, match="no fleet entry 'nope'"):
+        fleet.fixed("nope", 1.0, "--fix")

@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 from gearsym.symbolic.description import SECTION_UNITS, GearboxDescription, Quantity
+from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.io.input_files import parse_toml, read_text
 from gearsym.symbolic.io.package_data import data_file
 from gearsym.symbolic.io.table_reader import TableReader
@@ -204,6 +205,23 @@ class Fleet:
             rng = np.random.default_rng([seed, 2, zlib.crc32(name.encode())])
             values.append((name, dist.sample(rng)))
         return FleetDraw(seed, tuple(values))
+
+    def fixed(self, name: str, value: float, where: str) -> Fleet:
+        """The same fleet with entry ``name`` fixed at ``value`` (its other entries draw as
+        before: each has its own stream). ``where`` names the option in a refusal."""
+        names = [n for n, _ in self.entries]
+        if name not in names:
+            raise GearsymError(
+                self.file, where, f"no fleet entry {name!r} (entries: {', '.join(names)})"
+            )
+        dist = dict(self.entries)[name]
+        entries = tuple(
+            (n, Distribution("fixed", value, 0.0, dist.unit, f"fixed by {where}"))
+            if n == name
+            else (n, d)
+            for n, d in self.entries
+        )
+        return replace(self, name=f"{self.name}, {name} = {value:g}", entries=entries)
 
     def to_dict(self) -> dict[str, Any]:
         return {

@@ -4,6 +4,7 @@ jerk per strategy."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -12,6 +13,7 @@ __all__ = ["control_command", "control_markdown", "plot_control_sequence", "plot
 
 
 def control_command(
+    fixes: Sequence[str],
     shift_or_scenario: str | None,
     fleet: str | None,
     strategies: str,
@@ -25,6 +27,7 @@ def control_command(
         parts.append(f"--scenario {shift_or_scenario}")
     if fleet is not None:
         parts.append("--fleet" if not fleet else f"--fleet {fleet}")
+    parts += [f"--fix {item}" for item in fixes]
     parts += [
         f"--strategies {strategies}",
         f"--shifts {shifts}",

@@ -5,10 +5,11 @@ vehicle before a shift and learns after it; only the oracle is shown the truth.
 * ``fixed``: the calibration: nominal μ, the prior mass, level road, the nominal valve and
   fill time; nothing learned.
 * ``rule``: a production-style adaptation per shift type (as open-source TCUs do it): after a
-  flare the fill time grows by ``fill_step``, after a tie-up it shrinks by it (within
-  ±``fill_limit``); an inertia phase more than 10 % longer than its target raises the
-  on-coming pressure offset by ``pressure_step``, one more than 10 % shorter lowers it (within
-  ±``pressure_limit``). The numbers are the description's ``[control.adaptation]``.
+  tie-up (the off-going element held against the on-coming one) the fill time shrinks by
+  ``fill_step``, else after a flare it grows by it (within ±``fill_limit``); an inertia phase
+  more than 10 % longer than its target raises the on-coming pressure offset by
+  ``pressure_step``, one more than 10 % shorter lowers it (within ±``pressure_limit``). The
+  numbers are the description's ``[control.adaptation]``.
 * ``estimator``: the EKF (thesis 4.1, 4.3) runs over each shift's TCU log from where the last
   shift left it (its μ per element shared by every shift that uses the element, m_veh and ζ
   with their covariance) and the controller's feed-forward takes its means. Its μ states are
@@ -85,13 +86,18 @@ class Strategy:
 @dataclass
 class RuleStrategy(Strategy):
     def _fill(self, quality: Any) -> float:
+        """The fill-time offset after a shift: shorter after a tie-up (the piston was
+        stroked early and the fast-fill pressure pressed the on-coming element against the
+        off-going one), else longer after a flare (the piston was not on the discs when the
+        off-going element let go). A tie-up comes first: its shock can flare the input
+        afterwards, which must not lengthen the fill."""
         step = self.d.control.si("adaptation", "fill_step")
         limit = self.d.control.si("adaptation", "fill_limit")
         offset = self.knowledge.fill_offset
-        if quality.flare:
-            offset += step
-        elif quality.tie_up:
+        if quality.reversal_tie_up:
             offset -= step
+        elif quality.flare:
+            offset += step
         return min(max(offset, -limit), limit)
 
     def learn(self, quality: Any, result: Any, log: Any) -> None:
