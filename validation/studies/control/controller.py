@@ -51,7 +51,14 @@ from gearsym.symbolic.shifts import ShiftSpec
 from gearsym.validation.sim.drive_shift import state_from_speeds
 from gearsym.validation.sim.hybrid_simulation import HybridSimulator
 
-__all__ = ["Knowledge", "PHASES", "ShiftController", "TargetSlip"]
+__all__ = [
+    "Knowledge",
+    "PHASES",
+    "ShiftController",
+    "TargetSlip",
+    "make_controller",
+    "shift_direction",
+]
 
 PHASES = ("fill", "torque", "inertia", "lockup", "done")
 #: The TCU task's period (s): commands change only at its ticks.
@@ -65,6 +72,26 @@ HOLD_LINE = 0.1
 TIMEOUT_FACTOR = 2.0
 #: Fraction of the inertia phase over which the slip acceleration ramps in and out.
 RAMP_FRACTION = 0.25
+
+
+def shift_direction(d: GearboxDescription, spec: ShiftSpec) -> str:
+    """ "up" when the to-gear's ratio is the smaller (the input slows down), else "down"."""
+    from gearsym.symbolic.ratios import gear_ratio
+
+    ratio = [abs(float(gear_ratio(d, d.gear(g)).ratio)) for g in (spec.from_gear, spec.to_gear)]
+    return "up" if ratio[1] < ratio[0] else "down"
+
+
+def make_controller(
+    d: GearboxDescription, model: HybridSimulator, knowledge: Knowledge
+) -> ShiftController:
+    """The controller whose phases fit the shift: :class:`ShiftController` for an upshift,
+    :class:`~.downshift.DownshiftController` for a downshift."""
+    if shift_direction(d, model.hybrid.spec) == "up":
+        return ShiftController(d, model, knowledge)
+    from gearsym.validation.studies.control.downshift import DownshiftController
+
+    return DownshiftController(d, model, knowledge)
 
 
 @dataclass(frozen=True)
@@ -252,20 +279,16 @@ class ShiftController:
 
     # ------------------------------------------------------------------ the plan
 
-    def _make_plan(self, speeds: np.ndarray, torque: float) -> _Plan:
-        from gearsym.symbolic.ratios import gear_ratio
+    #: the shifts this controller's phases are for (:func:`make_controller` picks)
+    direction = "up"
 
-        ratio = [
-            float(gear_ratio(self.d, self.d.gear(g)).ratio)
-            for g in (self.spec.from_gear, self.spec.to_gear)
-        ]
-        if not (torque > 0 and abs(ratio[1]) < abs(ratio[0])):
+    def _make_plan(self, speeds: np.ndarray, torque: float) -> _Plan:
+        if not (torque > 0 and shift_direction(self.d, self.spec) == self.direction):
             raise GearsymError(
                 self.d.file,
                 "control",
-                f"shift {self.spec.name}: the controller handles power-on upshifts only "
-                f"(commanded input torque {torque:.1f} N*m, ratio {ratio[0]:.3f} to "
-                f"{ratio[1]:.3f})",
+                f"shift {self.spec.name}: the controller handles power-on up- and downshifts "
+                f"only (commanded input torque {torque:.1f} N*m)",
             )
         hybrid = self.model.hybrid
         j_off, j_on = hybrid.elements.index(self.off), hybrid.elements.index(self.on)

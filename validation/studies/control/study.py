@@ -34,7 +34,7 @@ from gearsym.validation.studies.control.closed_loop import (
     ClosedLoopShift,
     output_torque,
 )
-from gearsym.validation.studies.control.controller import ShiftController, TargetSlip
+from gearsym.validation.studies.control.controller import TargetSlip, make_controller
 from gearsym.validation.studies.control.quality import (
     INERTIA_FRACTION,
     ShiftQuality,
@@ -159,7 +159,7 @@ def run_vehicle(
         outcomes = []
         for i in range(1, n_shifts + 1):
             knowledge = strategy.knowledge
-            controller = ShiftController(d, model, knowledge)
+            controller = make_controller(d, model, knowledge)
             log = TcuLog(TICK, shafts, friction_elements)
             result = plant.run(
                 controller,

@@ -1,0 +1,157 @@
+"""The power-on downshift: the same controller (:mod:`.controller`), its phases in the other
+order. The input must speed up to the lower gear, which the input torque does by itself once
+the off-going element lets it slide; so the inertia phase comes first and the torque phase
+after it, at synchronism:
+
+* *fill*: as in an upshift (the on-coming piston to its kiss point, the off-going element to
+  its holding margin);
+* *inertia phase* (from the end of the fast fill): the off-going element slides; its force
+  is feed-forward from the shift model in the mode "off-going sliding, on-coming open" (the
+  on-coming slip's acceleration is affine in the off-going F_N) so that the on-coming slip
+  follows the target to zero in ``inertia_phase``, plus PI feedback on the slip error; the
+  target's acceleration ends at zero, so at synchronism the off-going element carries the
+  input torque with the speeds steady;
+* *torque phase* (once |slip| <= ``lockup_slip``): the on-coming force rises along the same
+  S-curve to what carries its torque in the to-gear, the off-going force falls to zero with it;
+* *lock-up*: the on-coming element to line pressure.
+
+Only the off-going element's sliding direction differs from the upshift's logic: it slides the
+way its reaction torque in the from-gear pushes (the sliding torque ± capacity continues the
+reaction at break-away).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from gearsym.validation.studies.control.controller import TICK, ShiftController, TargetSlip
+
+__all__ = ["DownshiftController"]
+
+#: The on-coming slip's fall (fraction of its start) that shows the off-going element slides.
+MOVING = 0.01
+
+
+class DownshiftController(ShiftController):
+    """The controller of one power-on downshift (module docstring)."""
+
+    direction = "down"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self._t_slide = self._t_fill_end  # the inertia phase starts after the fast fill
+        self._off_sign = 0
+        self._off_force = 0.0
+        self._t_sync = math.nan
+        self._t_moving = math.nan
+
+    def step(self, t: float, speeds: np.ndarray, torque: float) -> dict[str, float]:
+        """One TCU tick at ``t`` (s since the shift command): pressure commands (Pa)."""
+        if self._plan is None:
+            self._plan = self._make_plan(speeds, torque)
+            self._off_force = self._plan.hold_off
+        plan = self._plan
+        offset = self.knowledge.pressure_offset
+        hold = self.spring + self.fill_hold
+        on = self._fill_command(t)
+        if self.phase == "fill" and t >= self._t_slide:
+            self.phase = "inertia"
+        if self.phase == "fill":
+            commands = {self.off: self.pressure(self.off, plan.hold_off), self.on: on}
+        elif self.phase == "inertia":
+            off = self.pressure(self.off, self._inertia_down(t, speeds, torque))
+            commands = {self.off: off, self.on: on}
+            if self.phase == "torque":  # synchronism reached this tick
+                self._t_sync = t
+        if self.phase == "torque":
+            tau = min(max((t + self.lead - self._t_sync) / self.torque_phase, 0.0), 1.0)
+            share = (1.0 - math.cos(math.pi * tau)) / 2.0
+            on_force = share * plan.carry_on * self.margin
+            # the off-going element keeps the input at synchronism while it hands over
+            off_force = (1.0 - share) * self._inertia_down(t, speeds, torque, hold_sync=True)
+            commands = {
+                self.off: self.pressure(self.off, off_force) if off_force > 0 else 0.0,
+                self.on: max(self.pressure(self.on, on_force, offset), hold),
+            }
+            self._last_force = on_force
+            if tau >= 1.0:
+                self.phase = "lockup"
+                self._t_lock = t
+        if self.phase in ("lockup", "done"):
+            commands = {self.off: 0.0, self.on: self._lockup(t)}
+        self.log.append({"t": t, "phase": self.phase, **commands})
+        self._t_previous = t
+        return commands
+
+    def _fill_command(self, t: float) -> float:
+        """The on-coming piston's fill (as the upshift's) and then its kiss-point hold."""
+        hold = self.spring + self.fill_hold
+        if t + TICK <= self._t_fill_end + 1e-9:
+            return self.fast_fill
+        if t < self._t_fill_end:
+            part = (self._t_fill_end - t) / TICK
+            return max(self.spring + part * (self.fast_fill - self.spring), hold)
+        return hold
+
+    def _inertia_down(
+        self, t: float, speeds: np.ndarray, torque: float, hold_sync: bool = False
+    ) -> float:
+        """The off-going element's force (N) while it slides (module docstring); with
+        ``hold_sync`` (the torque phase) its target is the end of the slip trajectory:
+        synchronism held while the on-coming element takes over."""
+        hybrid = self.model.hybrid
+        j_off, j_on = hybrid.elements.index(self.off), hybrid.elements.index(self.on)
+        if not self._off_sign:
+            source = self.model.modes[hybrid.from_mode]
+            x0, u0 = self._state(
+                hybrid.from_mode, speeds, self._line_forces(hybrid.from_mode), torque
+            )
+            reaction = float(source.value(source.torques, x0, u0, self.p)[j_off])
+            self._off_sign = 1 if reaction > 0 else -1
+        status = {self.off: ("sliding", self._off_sign), self.on: ("open", 0)}
+        sliding = self.model.modes[hybrid.mode_of(status).name]
+        forces = [0.0, 0.0]
+        forces[j_off] = self._off_force
+        x, u = self._state(sliding.mode.name, speeds, forces, torque)
+        slip = float(sliding.value(sliding.slips, x, u, self.p)[j_on])
+        if self._target is None:
+            self._target = TargetSlip(slip, self.inertia_phase)
+            self._sign = 1.0 if slip > 0 else -1.0
+        target = self._target
+        # the target's clock starts when the measured slip starts to fall (the off-going
+        # element has broken away): until then the valve's lag, not the controller, holds
+        # the input, and an integrator running on that delay would overshoot later
+        if math.isnan(self._t_moving) and abs(slip) < (1.0 - MOVING) * abs(target.sigma0):
+            self._t_moving = t
+        tau = 0.0 if math.isnan(self._t_moving) else t - self._t_moving
+        if hold_sync:
+            tau = 2.0 * target.duration
+        elif (
+            abs(slip) <= self.lockup_slip
+            or slip * self._sign < 0
+            or t - self._t_slide > 3.0 * self.inertia_phase
+        ):
+            self.phase = "torque"
+
+        def slip_rate(force: float) -> float:
+            f = [0.0, 0.0]
+            f[j_off] = force
+            u_f = self._inputs(f, torque)
+            xdot = sliding.rhs(x, u_f, self.p)
+            return float(sliding.value(sliding.slips, xdot, u_f, self.p)[j_on])
+
+        f1 = max(self._plan.hold_off if self._plan else 0.0, 1e3)
+        r0, r1 = slip_rate(0.0), slip_rate(f1)
+        wanted = target.rate(tau + self.lead)
+        feed_forward = self._off_force if r1 == r0 else (wanted - r0) / (r1 - r0) * f1
+        error = self._sign * (slip - target.slip(tau))
+        if not math.isnan(self._t_moving):
+            self._integral += error * (t - self._t_previous)
+        # more off-going force holds the input back: it slows the on-coming slip's fall when
+        # the slip's rate per newton has the slip's own sign
+        direction = 1.0 if (r1 - r0) * self._sign > 0 else -1.0
+        correction = -direction * self.k_p * (error + self._integral / self.t_i)
+        self._off_force = max(feed_forward, 0.0)
+        area = self.model.area[self.off]
+        return max(self._off_force + correction * area, 0.0)
