@@ -290,3 +290,20 @@ def test_fixing_a_fleet_entry_leaves_the_other_draws(d) -> None:  # noqa: ANN001
         assert after == before
     with pytest.raises(GearsymError, match="no fleet entry 'nope'"):
         fleet.fixed("nope", 1.0, "--fix")
+
+
+def test_the_tcu_sees_what_the_truth_scores(d, point) -> None:  # noqa: ANN001
+    """The strategies learn from the TCU's own verdict (input and output speeds only); on an
+    underfill, an overfill and an exact shift it agrees with the truth's record on the flare,
+    the tie-up and the rule's reading of the duration (too slow, within the band, too fast)."""
+    from gearsym.validation.studies.control.strategies import RULE_BAND
+
+    def reading(error: float) -> int:
+        return 0 if abs(error) <= RULE_BAND else (1 if error > 0 else -1)
+
+    for error in (0.05, -0.05, 0.0):
+        (outcome,) = run_vehicle(d, "2-3", point, _vehicle(d, error), 1, ("fixed",))["fixed"]
+        seen, truth = outcome.observed, outcome.quality
+        assert seen.flare == truth.flare, error
+        assert seen.tie_up == truth.reversal_tie_up, error
+        assert reading(seen.duration_error) == reading(truth.duration_error), error

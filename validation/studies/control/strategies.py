@@ -77,15 +77,16 @@ class Strategy:
     #: what the strategy's estimator reported after the last shift: name → (mean, σ)
     learned: dict[str, tuple[float, float]] = field(default_factory=dict)
 
-    def learn(self, quality: Any, result: Any, log: Any) -> None:
-        """After a shift: ``quality`` its metrics, ``result`` the closed-loop record,
-        ``log`` the TCU's log of it (what the TCU saw)."""
+    def learn(self, observed: Any, log: Any) -> None:
+        """After a shift: ``observed`` the TCU's own verdict on it
+        (:class:`~.observed.Observed`: flare, tie-up and duration error from its speeds),
+        ``log`` the TCU's log of it. Never the truth's record."""
         self.history.append(self.knowledge.to_dict())
 
 
 @dataclass
 class RuleStrategy(Strategy):
-    def _fill(self, quality: Any) -> float:
+    def _fill(self, observed: Any) -> float:
         """The fill-time offset after a shift: shorter after a tie-up (the piston was
         stroked early and the fast-fill pressure pressed the on-coming element against the
         off-going one), else longer after a flare (the piston was not on the discs when the
@@ -94,25 +95,25 @@ class RuleStrategy(Strategy):
         step = self.d.control.si("adaptation", "fill_step")
         limit = self.d.control.si("adaptation", "fill_limit")
         offset = self.knowledge.fill_offset
-        if quality.reversal_tie_up:
+        if observed.tie_up:
             offset -= step
-        elif quality.flare:
+        elif observed.flare:
             offset += step
         return min(max(offset, -limit), limit)
 
-    def learn(self, quality: Any, result: Any, log: Any) -> None:
-        super().learn(quality, result, log)
+    def learn(self, observed: Any, log: Any) -> None:
+        super().learn(observed, log)
         step = self.d.control.si("adaptation", "pressure_step")
         limit = self.d.control.si("adaptation", "pressure_limit")
         offset = self.knowledge.pressure_offset
-        error = quality.duration_error
+        error = observed.duration_error
         if not math.isfinite(error) or error > RULE_BAND:
             offset += step  # too slow (or never locked): more pressure
         elif error < -RULE_BAND:
             offset -= step
         self.knowledge = replace(
             self.knowledge,
-            fill_offset=self._fill(quality),
+            fill_offset=self._fill(observed),
             pressure_offset=min(max(offset, -limit), limit),
         )
 
@@ -124,8 +125,8 @@ class EstimatorStrategy(RuleStrategy):
     gears: tuple[str, str] = ("", "")
     seed: int = 0
 
-    def learn(self, quality: Any, result: Any, log: Any) -> None:
-        Strategy.learn(self, quality, result, log)
+    def learn(self, observed: Any, log: Any) -> None:
+        Strategy.learn(self, observed, log)
         from gearsym.validation.studies.estimation.drive_ekf import run_drive_ekf
 
         arrays = log.arrays()
@@ -157,7 +158,7 @@ class EstimatorStrategy(RuleStrategy):
             mu=mu,
             m_veh=float(estimates.mean["m_veh"][-1]),
             zeta=float(estimates.mean[naming.GRADE][-1]),
-            fill_offset=self._fill(quality),
+            fill_offset=self._fill(observed),
         )
 
 

@@ -34,7 +34,12 @@ from gearsym.validation.studies.control.closed_loop import (
     ClosedLoopShift,
     output_torque,
 )
-from gearsym.validation.studies.control.controller import TargetSlip, make_controller
+from gearsym.validation.studies.control.controller import (
+    TargetSlip,
+    make_controller,
+    shift_direction,
+)
+from gearsym.validation.studies.control.observed import Observed, observe_shift
 from gearsym.validation.studies.control.quality import (
     INERTIA_FRACTION,
     ShiftQuality,
@@ -103,6 +108,8 @@ class ShiftOutcome:
     record: ClosedLoopResult | None = field(default=None, compare=False)
     #: the estimator's (mean, σ) per estimated parameter after the shift (estimator only)
     learned: dict[str, tuple[float, float]] = field(default_factory=dict)
+    #: the TCU's own verdict, what the strategy learned from (:mod:`.observed`)
+    observed: Observed | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -110,6 +117,7 @@ class ShiftOutcome:
             "completed": self.completed,
             "knowledge": self.knowledge,
             "learned": {k: {"mean": m, "sigma": s} for k, (m, s) in self.learned.items()},
+            "observed": None if self.observed is None else self.observed.to_dict(),
             **self.quality.to_dict(),
         }
 
@@ -153,6 +161,7 @@ def run_vehicle(
     gears = (spec.from_gear, spec.to_gear)
     shafts = [s.name for s in d.shafts]
     friction_elements = [e.name for e in d.shift_elements if not e.one_way]
+    upshift = shift_direction(d, spec) == "up"
     out: dict[str, list[ShiftOutcome]] = {}
     for name in strategies:
         strategy = make_strategy(name, d, elements, view, shift, gears, seed)
@@ -173,7 +182,9 @@ def run_vehicle(
             quality = evaluate(
                 d, truth, result, plant.values, ratio[spec.to_gear] / ratio[spec.from_gear]
             )
-            strategy.learn(quality, result, log)
+            arrays = log.arrays()
+            observed = observe_shift(d, model, arrays, result.phases, upshift)
+            strategy.learn(observed, log)
             outcomes.append(
                 ShiftOutcome(
                     i,
@@ -182,6 +193,7 @@ def run_vehicle(
                     result.completed,
                     result if keep_records else None,
                     dict(strategy.learned),
+                    observed,
                 )
             )
         out[name] = outcomes
