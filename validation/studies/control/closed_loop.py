@@ -64,7 +64,7 @@ class ClosedLoopShift:
         self.spec = shift_spec(truth, shift)
         self.vehicle_speed = vehicle_speed
         self.simulator = HybridSimulator(
-            truth, self._scenario(1.0, {}, 0.0), hybrid_shift(truth, shift)
+            truth, self.scenario(1.0, {}, 0.0), hybrid_shift(truth, shift)
         )
         values = self.simulator.values()
         mu = quantity(truth, "friction", "mu_nominal").value
@@ -113,7 +113,9 @@ class ClosedLoopShift:
             self.values[naming.GRADE],
         )
 
-    def _scenario(self, t_end: float, pressure: Mapping[str, Profile], torque: float) -> Scenario:
+    def scenario(self, t_end: float, pressure: Mapping[str, Profile], torque: float) -> Scenario:
+        """The plant's inputs up to ``t_end``: the pressures above the return springs (the
+        actuators' effective pressures) and the true input torque (the grade is the truth's ζ)."""
         return Scenario(
             name=f"closed-loop shift {self.spec.name}",
             file=f"<closed-loop shift {self.spec.name}>",
@@ -165,7 +167,7 @@ class ClosedLoopShift:
             off: Profile(np.array([0.0]), np.array([line_effective[off] - spring[off]])),
             on: Profile(np.array([0.0]), np.array([0.0])),
         }
-        sim.scenario = self._scenario(TICK, start, true_torque)
+        sim.scenario = self.scenario(TICK, start, true_torque)
         x = sim.initial_state(self.p)
         mode = hybrid.from_mode
         ticks = np.arange(0.0, t_end - 1e-12, TICK)
@@ -195,7 +197,7 @@ class ClosedLoopShift:
                     states[e], float(t0), float(t1), command[e], sub
                 )
                 profiles[e] = Profile(np.asarray(knots), np.asarray(effective))
-            sim.scenario = self._scenario(float(t1), profiles, true_torque)
+            sim.scenario = self.scenario(float(t1), profiles, true_torque)
             grid = np.arange(t0, t1 - RECORD / 2, RECORD)
             result = sim.run(
                 self.values,

@@ -138,7 +138,7 @@ def run_vehicle(
     off, on = spec.off_going, spec.on_coming
     truth = vehicle.description
     plant = ClosedLoopShift(truth, shift, point.vehicle_speed, vehicle.mu_scale)
-    model = HybridSimulator(d, plant._scenario(1.0, {}, 0.0), hybrid_shift(d, shift))
+    model = HybridSimulator(d, plant.scenario(1.0, {}, 0.0), hybrid_shift(d, shift))
     nominal = ClutchActuator.from_calibration(d.control)
     true = ClutchActuator.from_calibration(d.control, vehicle.actuators, vehicle.fill_time_error)
     believed = {off: nominal, on: nominal}
