@@ -98,6 +98,13 @@ def _p95(values: Sequence[float]) -> float | None:
     return float(np.percentile(finite, 95)) if finite else None
 
 
+def _p95_or_none(values: Sequence[float]) -> float | None:
+    """p95 where a value may be infinite (a shift that never locked): the nearest rank above
+    (no interpolation towards infinity); None (JSON null) when that rank is infinite."""
+    value = float(np.percentile(values, 95, method="higher"))
+    return value if np.isfinite(value) else None
+
+
 @dataclass
 class ControlFleet:
     """Every vehicle's sequences and the fleet's statistics per strategy and shift."""
@@ -113,7 +120,8 @@ class ControlFleet:
     def per_shift(self, strategy: str) -> list[dict[str, Any]]:
         """Per shift index: mean and p95 of peak |jerk| (m/s³), p95 of the VDV (m/s^1.75),
         of |duration error| (relative; a shift that never locked counts as not met) and of
-        the friction energy of both elements (J), the count of flares, of tie-ups (the
+        the friction energy of both elements (J; the duration's p95 by the nearest rank above, None
+        when that is a shift that never locked), the count of flares, of tie-ups (the
         off-going element held against the on-coming one) and of output-torque dips below
         the to-gear's steady torque, and how many shifts failed."""
         out = []
@@ -131,7 +139,7 @@ class ControlFleet:
                     "jerk_mean": float(np.mean(jerks)),
                     "jerk_p95": _p95(jerks),
                     "vdv_p95": _p95([s["vdv"] for s in shifts]),
-                    "duration_error_p95": float(np.percentile(errors, 95)),
+                    "duration_error_p95": _p95_or_none(errors),
                     "friction_energy_p95": _p95(energy),
                     "flares": int(sum(bool(s["flare"]) for s in shifts)),
                     "tie_ups": int(sum(bool(s["reversal_tie_up"]) for s in shifts)),
@@ -143,8 +151,9 @@ class ControlFleet:
 
     def shifts_to_converge(self, strategy: str) -> dict[str, Any]:
         """Per vehicle the first shift of three in a row with |duration error| < 10 %
-        (:func:`.quality.shifts_to_converge`); median and p95 over the fleet, a vehicle that
-        never gets there counted as beyond the sequence (reported as None when the p95 is)."""
+        (:func:`.quality.shifts_to_converge`); median and p95 over the fleet by the nearest
+        rank above, a vehicle that never gets there counted as beyond the sequence (None when
+        that rank is such a vehicle)."""
         from gearsym.validation.studies.control.quality import shifts_to_converge
 
         counts = []
@@ -152,7 +161,8 @@ class ControlFleet:
             errors = [s["duration_error"] for s in r["strategies"][strategy]]
             k = shifts_to_converge(errors)
             counts.append(np.inf if k is None else float(k))
-        median, p95 = (float(np.percentile(counts, q)) for q in (50, 95))
+        # nearest rank above: no interpolation towards a vehicle that never gets there
+        median, p95 = (float(np.percentile(counts, q, method="higher")) for q in (50, 95))
         return {
             "median": median if np.isfinite(median) else None,
             "p95": p95 if np.isfinite(p95) else None,
