@@ -264,7 +264,7 @@ class ShiftRunner:
         values = dict(zip(sim.parameter_names, (float(v) for v in p), strict=True))
         grid = np.arange(0.0, t_end + SHIFT_SAMPLE / 2, SHIFT_SAMPLE)
         result = sim.run(values, rtol=1e-8, atol=1e-8, x0=x0, t_eval=grid)
-        audit = energy_audit(sim, result)
+        audit = energy_audit(sim, result, functions=self.energy_functions())
         omega = result.signals[naming.WHEEL_SPEED]
         brake_power = split.brake * np.tanh(omega / BRAKE_SPEED) * omega
         brake_work = float(np.trapezoid(brake_power, grid))
