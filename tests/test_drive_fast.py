@@ -1,0 +1,149 @@
+"""The fast drive (validation/sim/drive_fast.py: the gear segments' closed loop compiled,
+RK4 over the TCU's ticks) against the Python reference (``run(reference=True)``: SciPy's RK45
+at rtol 1e-7, a Python call per right-hand side) on the same drive: the short test cycle
+(a launch, upshifts, a cruise, a braked stop and a standstill).
+
+The tolerances come from what the drive's outputs are for, never from this comparison's
+numbers:
+
+* **speeds** (the records' vehicle and input speed, every shaft speed in the TCU's log):
+  within a tenth of the speed sensors' noise, σ = r max(|y|, y_min) with r = 1 % and y_min =
+  1 % of the largest value (3.26, :data:`gearsym.symbolic.defaults.SPEED_ERROR`): what an
+  estimator reading the log cannot tell from the noise it is built for.
+* **shifts**: the same shifts in the same order, each starting within 1 ms, a tenth of the
+  TCU's 10 ms tick (the TCU cannot tell a shift 1 ms earlier from one at the same tick);
+  shift time and friction energy within 1 % (what the shift-quality table prints to: three
+  digits).
+* **energy**: the fast drive's audit closes as the reference's must (1e-6 of the energy
+  scale, tests/test_drive.py), and every work differs by less than ten times that closure,
+  the audit's own resolution.
+* **distance**: within 1e-5 of the distance, a fortieth of the precision the cycles'
+  published distances are stated to (WLTC 3b: 23.27 km, 4e-4).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from gearsym.symbolic.defaults import FLOOR_FRACTION, SPEED_ERROR
+from gearsym.symbolic.loader import load_description
+from gearsym.validation.sim.cycles import load_cycle
+from gearsym.validation.sim.drive import DriveSimulator
+from gearsym.validation.sim.drive_fast import piecewise_linear
+
+SHORT = Path(__file__).parent / "data" / "cycle_short.csv"
+#: The fraction of the sensors' noise σ (3.26) the two drives' speeds may differ by.
+NOISE_FRACTION = 0.1
+SHIFT_START_S = 1e-3
+SHIFT_QUALITY_REL = 0.01
+ENERGY_CLOSURE = 1e-6
+DISTANCE_REL = 1e-5
+
+
+@pytest.fixture(scope="module")
+def drives():
+    d = load_description()
+    cycle = load_cycle(SHORT)
+    fast = DriveSimulator(d, cycle).run()
+    reference = DriveSimulator(d, cycle).run(reference=True)
+    return fast, reference
+
+
+def _sigma(y: np.ndarray) -> np.ndarray:
+    """The speed sensor's σ (3.26) at each sample of ``y``."""
+    floor = FLOOR_FRACTION * np.max(np.abs(y))
+    return SPEED_ERROR * np.maximum(np.abs(y), floor)
+
+
+def _shift_offset(fast, reference) -> float:
+    """The largest difference of the two drives' shift starts (s)."""
+    pairs = zip(fast.shifts, reference.shifts, strict=True)
+    return max(abs(a.t_start - b.t_start) for a, b in pairs)
+
+
+def test_both_drives_complete_and_say_how_they_integrated(drives):
+    fast, reference = drives
+    assert fast.failure == "" and reference.failure == ""
+    assert fast.to_dict()["gear_integrator"] == "fast"
+    assert reference.to_dict()["gear_integrator"] == "reference"
+
+
+def test_same_shifts_at_the_same_times(drives):
+    fast, reference = drives
+    assert [(s.name, s.kind) for s in fast.shifts] == [(s.name, s.kind) for s in reference.shifts]
+    assert len(fast.shifts) >= 4  # the short cycle shifts up and down
+    for a, b in zip(fast.shifts, reference.shifts, strict=True):
+        assert a.completed and b.completed
+        assert abs(a.t_start - b.t_start) <= SHIFT_START_S, a.name
+        assert a.shift_time == pytest.approx(b.shift_time, rel=SHIFT_QUALITY_REL)
+        assert a.friction_energy == pytest.approx(b.friction_energy, rel=SHIFT_QUALITY_REL)
+
+
+def test_recorded_speeds_agree_within_the_sensor_noise(drives):
+    """Vehicle and input speed at the reference's record times (the fast drive's records
+    interpolated there: inside a shift the samples move with the shift's start; as in the
+    log, a slipping shaft's rate times that Δt is the shift's start, not the speed)."""
+    fast, reference = drives
+    t_ref, first = np.unique(reference.samples["t"], return_index=True)
+    t_fast, first_fast = np.unique(fast.samples["t"], return_index=True)
+    assert len(t_fast) == len(t_ref)
+    dt = _shift_offset(fast, reference)
+    for key in ("v", "omega_in"):
+        ref = reference.samples[key][first]
+        got = np.interp(t_ref, t_fast, fast.samples[key][first_fast])
+        rate = np.abs(np.gradient(ref, t_ref))
+        rate = np.maximum.reduce([rate, np.roll(rate, 1), np.roll(rate, -1)])
+        assert np.all(np.abs(got - ref) <= NOISE_FRACTION * _sigma(ref) + rate * dt), key
+    gear_ref = reference.samples["gear"][first]
+    gear = fast.samples["gear"][first_fast]
+    # the gear changes at the same samples, but for one at a shift's end (1 ms above)
+    assert np.count_nonzero(gear != gear_ref) <= len(fast.shifts)
+
+
+def test_tcu_log_agrees_within_the_sensor_noise(drives):
+    """Every shaft's speed and the wheel speed the TCU logged, tick by tick (the ticks are
+    the same: the TCU's clock, not the integrator's). Inside a shift the two shifts run
+    Δt apart (the largest difference of their starts), so a slipping shaft differs by its
+    own rate times Δt besides: that is the shift's start, checked above, not the speed."""
+    fast, reference = drives
+    a, b = fast.log.arrays(), reference.log.arrays()
+    assert np.array_equal(a["t"], b["t"])
+    dt = _shift_offset(fast, reference)
+    shifting = np.array([s != "" for s in reference.log.shifts()])
+    speeds = [k for k in a if k.startswith("omega_")]
+    assert "omega_C" in speeds
+    for key in speeds:
+        rate = np.abs(np.gradient(b[key], b["t"]))
+        rate = np.maximum.reduce([rate, np.roll(rate, 1), np.roll(rate, -1)])
+        bound = NOISE_FRACTION * _sigma(b[key]) + np.where(shifting, rate * dt, 0.0)
+        assert np.all(np.abs(a[key] - b[key]) <= bound), key
+
+
+def test_energy_audit_closes_and_agrees(drives):
+    fast, reference = drives
+    w, r = fast.works, reference.works
+    scale = max(abs(r.input), r.friction + r.damper + abs(r.road) + r.brake)
+    assert w.relative_residual <= ENERGY_CLOSURE
+    for name, value in w.to_dict().items():
+        if name == "relative_residual":
+            continue
+        assert abs(value - r.to_dict()[name]) <= 10 * ENERGY_CLOSURE * scale, name
+
+
+def test_distance_agrees(drives):
+    fast, reference = drives
+    s_fast, s_ref = fast.samples["s"][-1], reference.samples["s"][-1]
+    assert s_fast == pytest.approx(s_ref, rel=DISTANCE_REL)
+
+
+def test_piecewise_linear_is_numpys_interp_held_at_the_ends():
+    """The schedule's and the grade's interpolation in CasADi: NumPy's ``interp``."""
+    import casadi as ca
+
+    xs, ys = (0.0, 0.5, 1.0), (157.0, 240.9, 397.9)
+    x = ca.SX.sym("x")
+    f = ca.Function("f", [x], [piecewise_linear(x, xs, ys)])
+    for value in (-0.5, 0.0, 0.2, 0.5, 0.75, 1.0, 3.0):
+        assert float(f(value)) == pytest.approx(float(np.interp(value, xs, ys)), rel=1e-15)
