@@ -483,6 +483,7 @@ class DriveSimulator:
                 log=log,
                 gear=k,
                 zeta_true=self._zeta(distance),
+                fast=not reference,
             )
             shifts.append(outcome.record)
             works.input += outcome.audit.input_work

@@ -33,11 +33,16 @@ from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
 from gearsym.symbolic.hybrid import LOCK_UP, hybrid_shift
 from gearsym.symbolic.shifts import shift_spec
+from gearsym.validation.sim.compiled_c import CompiledFunctions, compiler_available
 from gearsym.validation.sim.drive_powertrain import TorqueSplit
 from gearsym.validation.sim.hybrid_energy import energy_audit
 from gearsym.validation.sim.hybrid_simulation import HybridSimulator
 from gearsym.validation.sim.scenario import Profile, Scenario
 from gearsym.validation.sim.simulation_result import EnergyAudit
+
+# at import, not in the first shift: SciPy's signal package takes over half a second to load,
+# which a drive's clock would count against its first shift
+from scipy.signal import butter, filtfilt
 
 __all__ = ["ShiftOutcome", "ShiftRecord", "ShiftRunner", "state_from_speeds", "vehicle_jerk"]
 
@@ -106,9 +111,17 @@ class _BrakedSimulator(HybridSimulator):
 
     brake: float = 0.0
     wheel_inertia: float = 1.0
+    #: the modes' right-hand sides emitted as C (the fast drive), or None: CasADi's calls
+    compiled_c: CompiledFunctions | None = None
 
     def _right_hand_side(self, compiled: Any, indices: tuple[int, ...], p: np.ndarray) -> Any:
-        base = super()._right_hand_side(compiled, indices, p)
+        if self.compiled_c is not None and not indices:
+            # the same arithmetic through ctypes: a CasADi call from Python costs more than
+            # the mode's arithmetic (:mod:`.compiled_c`)
+            f, inputs = self.compiled_c[compiled.mode.name], self.inputs
+            base = lambda time, y: f(y, inputs(time), p)  # noqa: E731
+        else:
+            base = super()._right_hand_side(compiled, indices, p)
         if self.brake == 0.0 or indices:
             return base
         names = [v.name for v in compiled.mode.model.states]
@@ -137,6 +150,15 @@ class ShiftRunner:
         self.speed_phase = d.drive.si("shift", "speed_phase")
         self.r_dyn = quantity(d, "vehicle", "r_dyn").value
         self._energy: dict[str, tuple[Any, Any]] | None = None
+        self._compiled_c: CompiledFunctions | None = None
+
+    def compiled_c(self) -> CompiledFunctions | None:
+        """Every mode's right-hand side emitted as C and compiled (built once, at the fast
+        drive's first use of this shift); None without a C compiler."""
+        if self._compiled_c is None and compiler_available():
+            modes = self.simulator.modes
+            self._compiled_c = CompiledFunctions({name: m.f for name, m in modes.items()})
+        return self._compiled_c
 
     def energy_functions(self) -> dict[str, tuple[Any, Any]]:
         """The powers and stored energies of every mode (built once, for the energy audit)."""
@@ -238,6 +260,7 @@ class ShiftRunner:
         log: Any = None,
         gear: int = 0,
         zeta_true: float = 0.0,
+        fast: bool = False,
     ) -> ShiftOutcome:
         """The shift from the from-gear state given by its shaft speeds, twist and wheel speed
         (module docstring). This runner is the truth's (``p`` its parameters, ``true_torque``
@@ -245,8 +268,10 @@ class ShiftRunner:
         whose plan from the commanded ``split`` and the ``calibration`` parameters is what the
         TCU commands. ``zeta``: the grade's deviation from the parameter ζ, held over the
         shift. ``log``: the TCU's log (:class:`~gearsym.validation.sim.drive_log.TcuLog`)
-        gets the shift's samples."""
+        gets the shift's samples. ``fast``: the modes' right-hand sides run as compiled C
+        (:meth:`compiled_c`), the same arithmetic as the reference's CasADi calls."""
         sim = self.simulator
+        sim.compiled_c = self.compiled_c() if fast else None
         hybrid = sim.hybrid
         x0 = state_from_speeds(sim, hybrid.from_mode, speeds, phi, omega_c)
         planned = planner.simulator
@@ -428,8 +453,6 @@ def vehicle_jerk(v: np.ndarray, dt: float) -> np.ndarray:
     :data:`JERK_BANDWIDTH` first (2nd-order Butterworth, forward and backward: no phase lag):
     an unfiltered derivative turns every step of acceleration at a mode switch into a spike
     of Δa/dt, which depends on the sample time, not on the shift."""
-    from scipy.signal import butter, filtfilt
-
     acceleration = np.gradient(v, dt)
     b, a = butter(2, JERK_BANDWIDTH * 2 * dt)
     if len(v) > 3 * max(len(a), len(b)):

@@ -94,7 +94,7 @@ def energy_audit(
         times = ((edges[:-1] + edges[1:]) / 2)[:, None] + half[:, None] * nodes[None, :]
         times = times.ravel()
         x = piece.state(times)[:, :n]
-        u = np.array([simulator.inputs(float(t)) for t in times])
+        u = simulator.inputs_many(times)
         power_of = functions[piece.mode][0].map(len(times))
         values = np.asarray(power_of(x.T, u.T, p).full()).T
         w = (half[:, None] * weights[None, :]).ravel()

@@ -148,6 +148,20 @@ class HybridSimulator:
         deviation = 0.0 if grade is None else grade(t) - self.zeta0
         return np.array([self.scenario.input_torque(t), *self.normal_forces(t), deviation])
 
+    def inputs_many(self, times: np.ndarray) -> np.ndarray:
+        """:meth:`inputs` at every time of ``times`` (rows), the same values without a Python
+        call per time (the samples and the energy audit read thousands per shift)."""
+        scenario, grade = self.scenario, self.scenario.grade
+        times = np.asarray(times, dtype=float)
+        columns = [scenario.engine.many(times) + scenario.e_machine.many(times)]
+        for e in self.hybrid.elements:
+            if e in self.area:
+                columns.append(scenario.pressure[e].many(times) * self.area[e])
+            else:
+                columns.append(np.zeros(len(times)))
+        columns.append(np.zeros(len(times)) if grade is None else grade.many(times) - self.zeta0)
+        return np.column_stack(columns)
+
     # ------------------------------------------------------------------ initial state
 
     def initial_state(self, p: np.ndarray) -> np.ndarray:
@@ -624,7 +638,7 @@ class HybridSimulator:
             n = compiled.n
             y = piece.state(grid[index])
             x = y[:, :n]
-            u = np.array([self.inputs(float(t)) for t in grid[index]])
+            u = self.inputs_many(grid[index])
             speeds_of = self.shaft_speeds(piece.mode).map(len(x))
             speeds = np.asarray(speeds_of(x.T).full()).T
             names = [v.name for v in compiled.mode.model.states]
