@@ -178,3 +178,29 @@ def test_compiled_c_is_casadis_arithmetic():
         x = rng.normal(scale=50.0, size=mode.n)
         u = np.array([80.0, 2e4, 1e4, 0.01])
         assert np.allclose(compiled[name](x, u, p), mode.rhs(x, u, p), rtol=1e-14, atol=0)
+
+
+def test_compiled_c_is_kept_in_the_cache(tmp_path, monkeypatch):
+    """The second build of the same functions loads the cached library, no compiler run;
+    GEARSYM_NO_CACHE=1 compiles again."""
+    import casadi as ca
+    from gearsym.validation.sim import compiled_c
+
+    if not compiled_c.compiler_available():
+        pytest.skip("no C compiler")
+    monkeypatch.setenv("GEARSYM_CACHE_DIR", str(tmp_path))
+    monkeypatch.delenv("GEARSYM_NO_CACHE", raising=False)
+    x = ca.SX.sym("x", 2)
+    functions = {"f": ca.Function("f", [x], [ca.vertcat(x[0] * x[1], ca.sin(x[0]))])}
+    first = compiled_c.CompiledFunctions(functions)
+    assert len(list((tmp_path / "c").glob("*.so"))) == 1
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("compiled again")
+
+    monkeypatch.setattr(compiled_c.subprocess, "run", refuse)
+    again = compiled_c.CompiledFunctions(functions)
+    assert np.array_equal(again["f"]([0.5, 2.0]), first["f"]([0.5, 2.0]))
+    monkeypatch.setenv("GEARSYM_NO_CACHE", "1")
+    with pytest.raises(AssertionError, match="compiled again"):
+        compiled_c.CompiledFunctions(functions)

@@ -7,14 +7,18 @@ floating-point operations. Called through ``ctypes`` on preallocated buffers the
 emitted code costs a few µs. The arithmetic is CasADi's own, emitted as C without fast-math,
 so the values are the same operations in the same order as CasADi's virtual machine.
 
-The shared library is built in a temporary folder once per :class:`CompiledFunctions` (the
-folder is removed once the library is loaded: the loaded code stays mapped), so its cost is
-paid where the models are compiled, at first use.
+The shared library is built once per :class:`CompiledFunctions`, where the models are
+compiled, at first use, and kept in the cache folder (``$GEARSYM_CACHE_DIR``, else
+``$XDG_CACHE_HOME/gearsym``, else ``~/.cache/gearsym``; the command cache's folder) under
+``c/<SHA-256 of the source, compiler and flags>.so``: the next process loads it instead of
+compiling. ``GEARSYM_NO_CACHE=1`` compiles every time (in a temporary folder).
 """
 
 from __future__ import annotations
 
 import ctypes
+import hashlib
+import os
 import shutil
 import subprocess
 import tempfile
@@ -88,12 +92,16 @@ class CompiledFunctions:
             for f in renamed.values():
                 generator.add(f)
             generator.generate(f"{folder}/")
+            command = [COMPILER, *FLAGS, "-o", "functions.so", source.name, "-lm"]
+            digest = hashlib.sha256(source.read_bytes() + " ".join(command).encode()).hexdigest()
+            cached = _cache_folder()
             library_path = Path(folder) / "functions.so"
-            subprocess.run(
-                [COMPILER, *FLAGS, "-o", str(library_path), str(source), "-lm"],
-                check=True,
-                capture_output=True,
-            )
+            if cached is not None and (cached / f"{digest}.so").exists():
+                library_path = cached / f"{digest}.so"
+            else:
+                subprocess.run(command, cwd=folder, check=True, capture_output=True)
+                if cached is not None:
+                    _store(library_path, cached / f"{digest}.so")
             library = ctypes.CDLL(str(library_path))
         self._library = library
         self.functions = {
@@ -102,3 +110,27 @@ class CompiledFunctions:
 
     def __getitem__(self, name: str) -> CompiledFunction:
         return self.functions[name]
+
+
+def _cache_folder() -> Path | None:
+    """Where compiled libraries are kept (module docstring), or None (caching off)."""
+    if os.environ.get("GEARSYM_NO_CACHE", "") not in ("", "0"):
+        return None
+    if os.environ.get("GEARSYM_CACHE_DIR"):
+        base = Path(os.environ["GEARSYM_CACHE_DIR"])
+    else:
+        home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        base = Path(home) / "gearsym"
+    return base / "c"
+
+
+def _store(library: Path, target: Path) -> None:
+    """Copy ``library`` to ``target`` through a temporary name and ``os.replace``: another
+    process sees the whole library or none. A cache that cannot be written is skipped."""
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        partial = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+        shutil.copyfile(library, partial)
+        os.replace(partial, target)
+    except OSError:
+        pass
