@@ -3,9 +3,11 @@
 The vehicle starts at rest in the lowest forward gear. Between shifts the engaged gear is the
 hybrid shift model's gear mode (:mod:`gearsym.symbolic.hybrid`: every element of the gear
 locked, 2.55–2.58, the elastic drivetrain 2.42–2.50) driven by the driver and the torque split
-of :mod:`gearsym.validation.sim.drive_powertrain` in continuous time, integrated by SciPy's
-``solve_ivp`` between the cycle's points, with the shift schedule's thresholds as terminal
-events. A shift runs through the hybrid simulation of that shift
+of :mod:`gearsym.validation.sim.drive_powertrain` in continuous time, integrated between the
+cycle's points with the shift schedule's thresholds as terminal events: by default as one
+compiled closed loop over the TCU's ticks (:mod:`gearsym.validation.sim.drive_fast`), with
+``run(reference=True)`` by SciPy's ``solve_ivp``, the reference the fast drive is checked
+against. A shift runs through the hybrid simulation of that shift
 (:class:`~gearsym.validation.sim.hybrid_simulation.HybridSimulator`, every mode switch an
 event) with the TCU's open-loop shift plan (:mod:`gearsym.validation.sim.drive_shift`); the
 state is carried across by the shaft speeds, the twist and the wheel speed. The service brake
@@ -447,6 +449,11 @@ class DriveSimulator:
                 t_end, y, fired_name = self._fast_segment(
                     k, t, t_stop, y0, segment, [e.__name__ for e in events], records, log
                 )
+                if not np.all(np.isfinite(y)):
+                    # fixed steps have no error control to fail: a state that is no longer
+                    # finite is the fast drive's integration failure
+                    failure = f"integration failed by t = {t_end:.3f} s in gear {self.gears[k]}"
+                    break
             x, integral, distance = y[:n], y[n], y[n + 1]
             works.input += y[n + 2]
             works.friction += y[n + 3]

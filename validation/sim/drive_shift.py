@@ -56,12 +56,12 @@ HOLD_LINE = 0.15
 SHIFT_SAMPLE = 1e-3
 #: rtol = atol of a shift's integration (DOP853) in the reference drive.
 REFERENCE_TOLERANCE = 1e-8
-#: rtol = atol of a shift's integration in the fast drive: looser, because the fast drive's
-#: comparison with the reference (tests/test_drive_fast.py's tolerances, on the short cycle
-#: and on the first 300 s of WLTC 3b) holds with it: the shifts' times and friction energies
-#: within 3e-5, the speeds within 0.16 of the sensors' noise, the energy audit closing to
-#: 3e-8. At 1e-5 it does not (a slipping shaft 7 noise σ off inside one shift).
-FAST_TOLERANCE = 1e-6
+#: rtol = atol of a shift's integration in the fast drive: the reference's. A looser 1e-6
+#: held the comparison's tolerances (tests/test_drive_fast.py) on the short cycle and on the
+#: first 300 s of WLTC 3b, but on the whole cycle one 3-4 shift chattered at K27's lock-up
+#: (more than 200 mode switches) and the drive failed: the lock-up's stick-or-slip decision
+#: is where the tolerance shows, so the fast drive keeps 1e-8.
+FAST_TOLERANCE = REFERENCE_TOLERANCE
 #: Speed scale of the brake's friction law T = T_brake tanh(ω_C / ω_b) (rad/s): the brake
 #: opposes the motion and fades to zero at rest (0.05 rad/s is 1.6 cm/s).
 BRAKE_SPEED = 0.05
@@ -277,8 +277,8 @@ class ShiftRunner:
         TCU commands. ``zeta``: the grade's deviation from the parameter ζ, held over the
         shift. ``log``: the TCU's log (:class:`~gearsym.validation.sim.drive_log.TcuLog`)
         gets the shift's samples. ``fast``: the modes' right-hand sides run as compiled C
-        (:meth:`compiled_c`), the same arithmetic as the reference's CasADi calls, at the
-        fast drive's tolerance (:data:`FAST_TOLERANCE`)."""
+        (:meth:`compiled_c`), the same arithmetic as the reference's CasADi calls, at
+        :data:`FAST_TOLERANCE`."""
         sim = self.simulator
         sim.compiled_c = self.compiled_c() if fast else None
         hybrid = sim.hybrid
