@@ -122,6 +122,12 @@ class _BrakedSimulator(HybridSimulator):
     #: the modes' right-hand sides emitted as C (the fast drive), or None: CasADi's calls
     compiled_c: CompiledFunctions | None = None
 
+    def _guard_function(self, compiled: Any, k: int, p: np.ndarray) -> Any:
+        if self.compiled_c is None:
+            return super()._guard_function(compiled, k, p)
+        g = self.compiled_c[guard_name(compiled.mode.name, k)]
+        return lambda x, u: float(g(x, u, p)[0])
+
     def _right_hand_side(self, compiled: Any, indices: tuple[int, ...], p: np.ndarray) -> Any:
         if self.compiled_c is not None and not indices:
             # the same arithmetic through ctypes: a CasADi call from Python costs more than
@@ -161,11 +167,15 @@ class ShiftRunner:
         self._compiled_c: CompiledFunctions | None = None
 
     def compiled_c(self) -> CompiledFunctions | None:
-        """Every mode's right-hand side emitted as C and compiled (built once, at the fast
-        drive's first use of this shift); None without a C compiler."""
+        """Every mode's right-hand side and continuous guards emitted as C and compiled (built
+        once, at the fast drive's first use of this shift); None without a C compiler."""
         if self._compiled_c is None and compiler_available():
-            modes = self.simulator.modes
-            self._compiled_c = CompiledFunctions({name: m.f for name, m in modes.items()})
+            functions = {}
+            for name, mode in self.simulator.modes.items():
+                functions[name] = mode.f
+                for k, guard in enumerate(mode.guard):
+                    functions[guard_name(name, k)] = guard
+            self._compiled_c = CompiledFunctions(functions)
         return self._compiled_c
 
     def energy_functions(self) -> dict[str, tuple[Any, Any]]:
@@ -425,6 +435,11 @@ class ShiftRunner:
         symbol = self.simulator.hybrid.friction_coefficient[element]
         mu = p[self.simulator.parameter_names.index(str(symbol))]
         return 2 * e.n_disc * e.r_m.value * mu
+
+
+def guard_name(mode: str, k: int) -> str:
+    """The name of mode ``mode``'s k-th continuous guard among a runner's compiled C."""
+    return f"{mode}#guard{k}"
 
 
 def state_from_speeds(

@@ -480,22 +480,21 @@ class HybridSimulator:
                 n = compiled.n
                 fun = self._right_hand_side(compiled, indices, p)
                 functions = []
-                for guard, g in zip(compiled.continuous, compiled.guard, strict=True):
+                for index, guard in enumerate(compiled.continuous):
                     armed = guard.kind != DISENGAGEMENT or not self.commanded(
                         guard.element, (t + tb) / 2
                     )
+                    value_of = self._guard_function(compiled, index, p)
 
                     def event(
                         time: float,
                         y: np.ndarray,
-                        c: CompiledMode = compiled,
-                        g: Any = g,
+                        g: Any = value_of,
+                        n: int = n,
                         armed: bool = armed,
                     ) -> float:
                         # a dog's disengagement waits for its command to fall
-                        return (
-                            float(c.value(g, y[: c.n], self.inputs(time), p)[0]) if armed else 1.0
-                        )
+                        return g(y[:n], self.inputs(time)) if armed else 1.0
 
                     event.terminal = True  # type: ignore[attr-defined]
                     event.direction = guard.direction  # type: ignore[attr-defined]
@@ -583,6 +582,11 @@ class HybridSimulator:
             sensitivities=sensitivities,
             event_time_sensitivities=np.array(tau_p).reshape(len(events), m),
         )
+
+    def _guard_function(self, compiled: CompiledMode, k: int, p: np.ndarray) -> Any:
+        """(x, u) → the value of the mode's k-th continuous guard, for the event functions."""
+        g = compiled.guard[k]
+        return lambda x, u: float(compiled.value(g, x, u, p)[0])
 
     def _right_hand_side(
         self, compiled: CompiledMode, indices: tuple[int, ...], p: np.ndarray
