@@ -223,3 +223,25 @@ def test_accelerations_are_the_cycles():
     times = np.array([-1.0, 0.0, 1.0, 2.0, 2.5, 8.0, 19.99, 44.0, 46.9, 47.0, 50.0])
     expected = [cycle.acceleration(float(t)) for t in times]
     assert accelerations(cycle, times).tolist() == expected
+
+
+#: The checks above, each taking the pair (fast, reference).
+CHECKS = (
+    test_both_drives_complete_and_say_how_they_integrated,
+    test_same_shifts_at_the_same_times,
+    test_recorded_speeds_agree_within_the_sensor_noise,
+    test_tcu_log_agrees_within_the_sensor_noise,
+    test_energy_audit_closes_and_agrees,
+    test_distance_agrees,
+)
+
+
+@pytest.mark.slow
+def test_the_whole_wltc_3b_agrees():
+    """The same checks over the whole WLTC 3b (114 shifts; the reference takes over a minute):
+    the short cycle does not cross every gear, nor the coasting downshifts."""
+    d = load_description()
+    simulator = DriveSimulator(d, load_cycle("wltc3b"))
+    pair = (simulator.run(), simulator.run(reference=True))
+    for check in CHECKS:
+        check(pair)
