@@ -225,6 +225,25 @@ def test_accelerations_are_the_cycles():
     assert accelerations(cycle, times).tolist() == expected
 
 
+def test_cli_drive_reference(tmp_path):
+    """``gearsym drive --reference`` drives with the reference and says so."""
+    import json
+    import subprocess
+    import sys
+
+    out = tmp_path / "drive"
+    args = ["drive", "--cycle", "udds", "--duration", "10", "--estimate", "none", "--json"]
+    run = subprocess.run(
+        [sys.executable, "-m", "gearsym", *args, "--reference", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert run.returncode == 0, run.stderr
+    assert json.loads(run.stdout)["gear_integrator"] == "reference"
+    assert "--reference" in (out / "drive.md").read_text(encoding="utf-8")
+
+
 #: The checks above, each taking the pair (fast, reference).
 CHECKS = (
     test_both_drives_complete_and_say_how_they_integrated,
