@@ -9,7 +9,8 @@ numbers:
 * **speeds** (the records' vehicle and input speed, every shaft speed in the TCU's log):
   within a tenth of the speed sensors' noise, σ = r max(|y|, y_min) with r = 1 % and y_min =
   1 % of the largest value (3.26, :data:`gearsym.symbolic.defaults.SPEED_ERROR`): what an
-  estimator reading the log cannot tell from the noise it is built for.
+  estimator reading the log cannot tell from the noise it is built for. Inside a shift, plus
+  what the difference of the two shifts' starts (bounded below) moves a slipping shaft by.
 * **shifts**: the same shifts in the same order, each starting within 1 ms, a tenth of the
   TCU's 10 ms tick (the TCU cannot tell a shift 1 ms earlier from one at the same tick);
   shift time and friction energy within 1 % (what the shift-quality table prints to: three
