@@ -43,6 +43,8 @@ def cmd_drive(args: argparse.Namespace) -> int:
         raise GearsymError("--runs", "", f"must be at least 1, got {args.runs}")
     if (args.runs > 1 or args.scheduler is not None) and args.fleet is None:
         raise GearsymError("--runs", "", "more than one drive, or --scheduler, needs --fleet")
+    if args.reference and args.runs > 1:
+        raise GearsymError("--reference", "", "drives one vehicle; a fleet runs the fast drive")
     if args.scheduler is not None:
         from gearsym.validation.studies.dask_runner import check_scheduler
 
@@ -71,7 +73,7 @@ def cmd_drive(args: argparse.Namespace) -> int:
         try:
             simulator.progress = progress
             bar(0.0, "driving (each shift's models compiled when first needed)")
-            result = simulator.run()
+            result = simulator.run(reference=args.reference)
         finally:
             bar.done()
         estimates = None
@@ -135,7 +137,8 @@ def _command(args: argparse.Namespace) -> str:
     fleet = None
     if args.fleet is not None:
         fleet = "" if args.fleet == DEFAULT_FLEET_ARGUMENT else args.fleet
-    return drive_command(args.cycle, args.duration, fleet, args.seed, args.runs)
+    command = drive_command(args.cycle, args.duration, fleet, args.seed, args.runs)
+    return command + (" --reference" if args.reference else "")
 
 
 def _drive_fleet(args: argparse.Namespace, d: Any, cycle: Any, grade: Any, fleet: Any) -> int:
@@ -231,5 +234,11 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         choices=("ekf", "none"),
         default="ekf",
         help="carry the EKF over the drive from the TCU's log (default ekf)",
+    )
+    p.add_argument(
+        "--reference",
+        action="store_true",
+        help="integrate the gears by the Python reference (SciPy RK45, a Python call per "
+        "right-hand side), which the compiled closed loop is checked against; one vehicle",
     )
     p.add_argument("--json", action="store_true", help="print the result as JSON")

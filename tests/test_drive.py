@@ -179,6 +179,7 @@ def test_cli_drive_json_and_files(tmp_path):
     for key in ("shifts", "wall_s", "real_time_factor", "energy_residual", "tracking_rms_kmh"):
         assert key in data
     assert data["energy_residual"] < 1e-6
+    assert data["gear_integrator"] == "fast"
     for name in ("drive.json", "drive.csv", "shifts.csv", "drive.png"):
         assert (out / name).exists()
 
@@ -189,6 +190,7 @@ def test_cli_drive_json_and_files(tmp_path):
         (["--cycle", "nope"], "nope: --cycle: neither a built-in cycle"),
         (["--cycle", "{bad}"], "row 2, column v: not a number"),
         (["--duration", "-3"], "--duration: must be positive"),
+        (["--fleet", "--runs", "2", "--reference"], "--reference: drives one vehicle"),
     ],
 )
 def test_cli_drive_bad_input_is_one_line(tmp_path, args, message):

@@ -3,9 +3,11 @@
 The vehicle starts at rest in the lowest forward gear. Between shifts the engaged gear is the
 hybrid shift model's gear mode (:mod:`gearsym.symbolic.hybrid`: every element of the gear
 locked, 2.55–2.58, the elastic drivetrain 2.42–2.50) driven by the driver and the torque split
-of :mod:`gearsym.validation.sim.drive_powertrain` in continuous time, integrated by SciPy's
-``solve_ivp`` between the cycle's points, with the shift schedule's thresholds as terminal
-events. A shift runs through the hybrid simulation of that shift
+of :mod:`gearsym.validation.sim.drive_powertrain` in continuous time, integrated between the
+cycle's points with the shift schedule's thresholds as terminal events: by default as one
+compiled closed loop over the TCU's ticks (:mod:`gearsym.validation.sim.drive_fast`), with
+``run(reference=True)`` by SciPy's ``solve_ivp``, the reference the fast drive is checked
+against. A shift runs through the hybrid simulation of that shift
 (:class:`~gearsym.validation.sim.hybrid_simulation.HybridSimulator`, every mode switch an
 event) with the TCU's open-loop shift plan (:mod:`gearsym.validation.sim.drive_shift`); the
 state is carried across by the shaft speeds, the twist and the wheel speed. The service brake
@@ -43,6 +45,13 @@ from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.numeric import to_casadi
 from gearsym.symbolic.ratios import gear_ratio
 from gearsym.validation.sim.cycles import Cycle, GradeProfile
+from gearsym.validation.sim.drive_fast import (
+    FastGearLoop,
+    integrate_segment,
+    log_segment,
+    records_of,
+    segment_grid,
+)
 from gearsym.validation.sim.drive_log import TcuLog
 from gearsym.validation.sim.drive_powertrain import Powertrain, TorqueSplit
 from gearsym.validation.sim.drive_shift import (
@@ -169,6 +178,7 @@ class DriveResult:
             "shift_list": [s.to_dict() for s in self.shifts],
             "wall_s": self.wall_s,
             "real_time_factor": self.real_time_factor,
+            "gear_integrator": "reference" if self.stats.get("reference") else "fast",
             "energy_residual": self.works.relative_residual,
             "energy": self.works.to_dict(),
             "tracking_rms_kmh": self.tracking_rms_kmh,
@@ -256,6 +266,7 @@ class DriveSimulator:
         self.zeta0 = self.values[naming.GRADE]
         self._gear_model: dict[int, tuple[HybridSimulator, str, Any]] = {}
         self._wheel_parts = drivetrain_parts(plant)
+        self._fast: dict[int, tuple[FastGearLoop, np.ndarray]] = {}
 
     def runner(self, pair: tuple[str, str]) -> ShiftRunner:
         """The truth's hybrid model of the shift ``pair`` (compiled on first use)."""
@@ -343,8 +354,11 @@ class DriveSimulator:
 
     # ------------------------------------------------------------------ the drive
 
-    def run(self, rtol: float = 1e-7, atol: float = 1e-8) -> DriveResult:
-        """Drive the cycle from rest in the lowest gear (module docstring)."""
+    def run(self, rtol: float = 1e-7, atol: float = 1e-8, reference: bool = False) -> DriveResult:
+        """Drive the cycle from rest in the lowest gear (module docstring). The gear segments
+        run as :mod:`~gearsym.validation.sim.drive_fast`'s compiled closed loop; with
+        ``reference`` as the Python reference (``solve_ivp`` RK45 at ``rtol``, ``atol``, a
+        Python call per right-hand side), which the fast drive is checked against."""
         started = time.perf_counter()
         cycle = self.cycle
         knots = [float(t) for t in cycle.t]
@@ -401,24 +415,45 @@ class DriveSimulator:
             if t - last_shift < MIN_DWELL:
                 t_stop = min(t_next, last_shift + MIN_DWELL)
             y0 = np.concatenate([x, [integral, distance], np.zeros(5)])
-            sol = solve_ivp(
-                segment.rhs,
-                (t, t_stop),
-                y0,
-                method="RK45",
-                rtol=rtol,
-                atol=atol,
-                events=events or None,
-                dense_output=True,
-            )
             segments += 1
-            if sol.status == -1:
-                failure = f"integration failed at t = {sol.t[-1]:.3f} s in gear {self.gears[k]}"
-                break
-            t_end = float(sol.t[-1])
-            self._record_dense(records, t, t_end, sol, segment.control, n, k, wheel)
-            self._log_gear(log, t, t_end, sol, segment, k)
-            y = sol.y[:, -1]
+            if reference:
+                sol = solve_ivp(
+                    segment.rhs,
+                    (t, t_stop),
+                    y0,
+                    method="RK45",
+                    rtol=rtol,
+                    atol=atol,
+                    events=events or None,
+                    dense_output=True,
+                )
+                if sol.status == -1:
+                    failure = f"integration failed at t = {sol.t[-1]:.3f} s in gear {self.gears[k]}"
+                    break
+                t_end = float(sol.t[-1])
+                if sol.status == 1 and abs(t_end - t_stop) < 1e-9:
+                    # a threshold that jumps at a point of the cycle (a_ref steps there, so
+                    # the pedal) is crossed at that point; SciPy's root search ends within a
+                    # few machine epsilons on either side of it, and the side decides which
+                    # a_ref the shift's held torque reads: the point itself, after the jump
+                    t_end = t_stop
+                self._record_dense(records, t, t_end, sol, segment.control, n, k, wheel)
+                self._log_gear(log, t, t_end, sol, segment, k)
+                y = sol.y[:, -1]
+                fired_name = (
+                    events[next(i for i, times in enumerate(sol.t_events) if len(times))].__name__
+                    if sol.status == 1
+                    else ""
+                )
+            else:
+                t_end, y, fired_name = self._fast_segment(
+                    k, t, t_stop, y0, segment, [e.__name__ for e in events], records, log
+                )
+                if not np.all(np.isfinite(y)):
+                    # fixed steps have no error control to fail: a state that is no longer
+                    # finite is the fast drive's integration failure
+                    failure = f"integration failed by t = {t_end:.3f} s in gear {self.gears[k]}"
+                    break
             x, integral, distance = y[:n], y[n], y[n + 1]
             works.input += y[n + 2]
             works.friction += y[n + 3]
@@ -428,10 +463,9 @@ class DriveSimulator:
             t = t_end
             if self.progress is not None:
                 self.progress(t)
-            if sol.status != 1:
+            if not fired_name:
                 continue
-            fired = next(i for i, times in enumerate(sol.t_events) if len(times))
-            name = events[fired].__name__
+            name = fired_name
             target = k + 1 if name == "upshift" else k - 1
             split, _ = segment.control(t, y)
             pair = (self.gears[k], self.gears[target])
@@ -456,6 +490,7 @@ class DriveSimulator:
                 log=log,
                 gear=k,
                 zeta_true=self._zeta(distance),
+                fast=not reference,
             )
             shifts.append(outcome.record)
             works.input += outcome.audit.input_work
@@ -489,11 +524,77 @@ class DriveSimulator:
             wall_s=time.perf_counter() - started,
             values=self.values,
             failure=failure,
-            stats={"gear_segments": float(segments)},
+            stats={"gear_segments": float(segments), "reference": float(reference)},
             log=log,
         )
 
     # ------------------------------------------------------------------ helpers
+
+    def fast_loop(self, k: int) -> tuple[FastGearLoop, np.ndarray]:
+        """Gear ``k``'s closed loop compiled for the fast drive, and its matrix x → every
+        shaft's speed (linear, ẏ = P z)."""
+        if k not in self._fast:
+            sim, mode, fns = self.gear_model(k)
+            compiled = sim.modes[mode]
+            names = [v.name for v in compiled.mode.model.states]
+            loop = FastGearLoop(
+                fused=fns["fused"],
+                n=compiled.n,
+                wheel=names.index(naming.WHEEL_SPEED),
+                input_row=fns["input_row"],
+                p=fns["p"],
+                line=fns["line"],
+                wheel_inertia=fns["inertia"],
+                powertrain=self.powertrain,
+                ratio=self.ratios[k],
+                schedule=self.d.drive.schedule,
+                actuators=self.truth.actuators,
+                r_dyn=self.r_dyn,
+                brake_speed=BRAKE_SPEED,
+                zeta0=self.zeta0,
+                grade=self.grade,
+            )
+            speeds = np.column_stack(
+                [np.asarray(fns["speeds"](column)).ravel() for column in np.eye(compiled.n)]
+            )
+            self._fast[k] = (loop, speeds)
+        return self._fast[k]
+
+    def _fast_segment(
+        self,
+        k: int,
+        t0: float,
+        t1: float,
+        y0: np.ndarray,
+        segment: _GearSegment,
+        events: list[str],
+        records: list[dict[str, float]],
+        log: TcuLog,
+    ) -> tuple[float, np.ndarray, str]:
+        """The gear segment [t0, t1] by the fast loop, its records and log samples; returns
+        (end time, end state, the event that ended it or "")."""
+        loop, speeds = self.fast_loop(k)
+        samples = np.arange(_first_sample(t0), t1, RECORD_STEP)
+        grid = segment_grid(t0, t1, [log.ticks(t0, t1), samples])
+        done = integrate_segment(
+            loop, self.cycle, grid, y0, "upshift" in events, "downshift" in events
+        )
+        n = segment.n
+        samples = samples[samples < done.t_end]
+        records += records_of(done, samples, self.cycle, k, segment.wheel, n, self.r_dyn)
+        names = [v.name for v in segment.compiled.mode.model.states]
+        pressures = {e: self.line for e in segment.fns["closed"]}
+        log_segment(
+            log,
+            done,
+            log.ticks(t0, done.t_end),
+            speeds,
+            names.index(naming.TWIST),
+            segment.wheel,
+            pressures,
+            k,
+        )
+        return done.t_end, done.y_end, done.event
 
     def _inputs(self, fns: dict[str, Any], torque: float, distance: float) -> np.ndarray:
         line = fns["line"]

@@ -79,6 +79,37 @@ class TcuLog:
         c["truth_zeta"].append(float(zeta))
         self.shift.append(shift)
 
+    def add_many(
+        self,
+        t: np.ndarray,
+        speeds: np.ndarray,
+        phi: np.ndarray,
+        omega_c: np.ndarray,
+        torque: np.ndarray,
+        brake: np.ndarray,
+        pressures: Mapping[str, float],
+        gear: int,
+        zeta: np.ndarray,
+    ) -> None:
+        """Samples in a gear (no shift under way, no element sliding) at the times ``t``, one
+        row of ``speeds`` (samples × shafts) each: :meth:`add` for a whole array at once (the
+        fast drive logs a second of ticks per call)."""
+        c = self.columns
+        count = len(t)
+        c["t"].extend(np.asarray(t, dtype=float).tolist())
+        for j, s in enumerate(self.shafts):
+            c[f"omega_{s}"].extend(np.asarray(speeds[:, j], dtype=float).tolist())
+        c["phi"].extend(np.asarray(phi, dtype=float).tolist())
+        c["omega_C"].extend(np.asarray(omega_c, dtype=float).tolist())
+        c["T_In_cmd"].extend(np.asarray(torque, dtype=float).tolist())
+        c["T_brake"].extend(np.asarray(brake, dtype=float).tolist())
+        for e in self.elements:
+            c[f"p_{e}"].extend([float(pressures.get(e, 0.0))] * count)
+            c[f"truth_mu_{e}"].extend([math.nan] * count)
+        c["gear"].extend([float(gear)] * count)
+        c["truth_zeta"].extend(np.asarray(zeta, dtype=float).tolist())
+        self.shift.extend([""] * count)
+
     def arrays(self) -> dict[str, np.ndarray]:
         """Every column as an array, in time order."""
         order = np.argsort(np.asarray(self.columns["t"]), kind="stable")

@@ -33,11 +33,16 @@ from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
 from gearsym.symbolic.hybrid import LOCK_UP, hybrid_shift
 from gearsym.symbolic.shifts import shift_spec
+from gearsym.validation.sim.compiled_c import CompiledFunctions, compiler_available
 from gearsym.validation.sim.drive_powertrain import TorqueSplit
 from gearsym.validation.sim.hybrid_energy import energy_audit
 from gearsym.validation.sim.hybrid_simulation import HybridSimulator
 from gearsym.validation.sim.scenario import Profile, Scenario
 from gearsym.validation.sim.simulation_result import EnergyAudit
+
+# at import, not in the first shift: SciPy's signal package takes over half a second to load,
+# which a drive's clock would count against its first shift
+from scipy.signal import butter, filtfilt
 
 __all__ = ["ShiftOutcome", "ShiftRecord", "ShiftRunner", "state_from_speeds", "vehicle_jerk"]
 
@@ -49,6 +54,14 @@ TO_LINE = 0.1
 HOLD_LINE = 0.15
 #: Sample time of a shift's record (s): fine enough for the jerk.
 SHIFT_SAMPLE = 1e-3
+#: rtol = atol of a shift's integration (DOP853) in the reference drive.
+REFERENCE_TOLERANCE = 1e-8
+#: rtol = atol of a shift's integration in the fast drive: the reference's. A looser 1e-6
+#: held the comparison's tolerances (tests/test_drive_fast.py) on the short cycle and on the
+#: first 300 s of WLTC 3b, but on the whole cycle one 3-4 shift chattered at K27's lock-up
+#: (more than 200 mode switches) and the drive failed: the lock-up's stick-or-slip decision
+#: is where the tolerance shows, so the fast drive keeps 1e-8.
+FAST_TOLERANCE = REFERENCE_TOLERANCE
 #: Speed scale of the brake's friction law T = T_brake tanh(ω_C / ω_b) (rad/s): the brake
 #: opposes the motion and fades to zero at rest (0.05 rad/s is 1.6 cm/s).
 BRAKE_SPEED = 0.05
@@ -106,9 +119,23 @@ class _BrakedSimulator(HybridSimulator):
 
     brake: float = 0.0
     wheel_inertia: float = 1.0
+    #: the modes' right-hand sides emitted as C (the fast drive), or None: CasADi's calls
+    compiled_c: CompiledFunctions | None = None
+
+    def _guard_function(self, compiled: Any, k: int, p: np.ndarray) -> Any:
+        if self.compiled_c is None:
+            return super()._guard_function(compiled, k, p)
+        g = self.compiled_c[guard_name(compiled.mode.name, k)]
+        return lambda x, u: float(g(x, u, p)[0])
 
     def _right_hand_side(self, compiled: Any, indices: tuple[int, ...], p: np.ndarray) -> Any:
-        base = super()._right_hand_side(compiled, indices, p)
+        if self.compiled_c is not None and not indices:
+            # the same arithmetic through ctypes: a CasADi call from Python costs more than
+            # the mode's arithmetic (:mod:`.compiled_c`)
+            f, inputs = self.compiled_c[compiled.mode.name], self.inputs
+            base = lambda time, y: f(y, inputs(time), p)  # noqa: E731
+        else:
+            base = super()._right_hand_side(compiled, indices, p)
         if self.brake == 0.0 or indices:
             return base
         names = [v.name for v in compiled.mode.model.states]
@@ -137,6 +164,19 @@ class ShiftRunner:
         self.speed_phase = d.drive.si("shift", "speed_phase")
         self.r_dyn = quantity(d, "vehicle", "r_dyn").value
         self._energy: dict[str, tuple[Any, Any]] | None = None
+        self._compiled_c: CompiledFunctions | None = None
+
+    def compiled_c(self) -> CompiledFunctions | None:
+        """Every mode's right-hand side and continuous guards emitted as C and compiled (built
+        once, at the fast drive's first use of this shift); None without a C compiler."""
+        if self._compiled_c is None and compiler_available():
+            functions = {}
+            for name, mode in self.simulator.modes.items():
+                functions[name] = mode.f
+                for k, guard in enumerate(mode.guard):
+                    functions[guard_name(name, k)] = guard
+            self._compiled_c = CompiledFunctions(functions)
+        return self._compiled_c
 
     def energy_functions(self) -> dict[str, tuple[Any, Any]]:
         """The powers and stored energies of every mode (built once, for the energy audit)."""
@@ -238,6 +278,7 @@ class ShiftRunner:
         log: Any = None,
         gear: int = 0,
         zeta_true: float = 0.0,
+        fast: bool = False,
     ) -> ShiftOutcome:
         """The shift from the from-gear state given by its shaft speeds, twist and wheel speed
         (module docstring). This runner is the truth's (``p`` its parameters, ``true_torque``
@@ -245,8 +286,11 @@ class ShiftRunner:
         whose plan from the commanded ``split`` and the ``calibration`` parameters is what the
         TCU commands. ``zeta``: the grade's deviation from the parameter ζ, held over the
         shift. ``log``: the TCU's log (:class:`~gearsym.validation.sim.drive_log.TcuLog`)
-        gets the shift's samples."""
+        gets the shift's samples. ``fast``: the modes' right-hand sides run as compiled C
+        (:meth:`compiled_c`), the same arithmetic as the reference's CasADi calls, at
+        :data:`FAST_TOLERANCE`."""
         sim = self.simulator
+        sim.compiled_c = self.compiled_c() if fast else None
         hybrid = sim.hybrid
         x0 = state_from_speeds(sim, hybrid.from_mode, speeds, phi, omega_c)
         planned = planner.simulator
@@ -263,8 +307,9 @@ class ShiftRunner:
         sim.wheel_inertia = wheel_inertia
         values = dict(zip(sim.parameter_names, (float(v) for v in p), strict=True))
         grid = np.arange(0.0, t_end + SHIFT_SAMPLE / 2, SHIFT_SAMPLE)
-        result = sim.run(values, rtol=1e-8, atol=1e-8, x0=x0, t_eval=grid)
-        audit = energy_audit(sim, result)
+        tolerance = FAST_TOLERANCE if fast else REFERENCE_TOLERANCE
+        result = sim.run(values, rtol=tolerance, atol=tolerance, x0=x0, t_eval=grid)
+        audit = energy_audit(sim, result, functions=self.energy_functions())
         omega = result.signals[naming.WHEEL_SPEED]
         brake_power = split.brake * np.tanh(omega / BRAKE_SPEED) * omega
         brake_work = float(np.trapezoid(brake_power, grid))
@@ -392,6 +437,11 @@ class ShiftRunner:
         return 2 * e.n_disc * e.r_m.value * mu
 
 
+def guard_name(mode: str, k: int) -> str:
+    """The name of mode ``mode``'s k-th continuous guard among a runner's compiled C."""
+    return f"{mode}#guard{k}"
+
+
 def state_from_speeds(
     sim: HybridSimulator,
     mode: str,
@@ -428,8 +478,6 @@ def vehicle_jerk(v: np.ndarray, dt: float) -> np.ndarray:
     :data:`JERK_BANDWIDTH` first (2nd-order Butterworth, forward and backward: no phase lag):
     an unfiltered derivative turns every step of acceleration at a mode switch into a spike
     of Δa/dt, which depends on the sample time, not on the shift."""
-    from scipy.signal import butter, filtfilt
-
     acceleration = np.gradient(v, dt)
     b, a = butter(2, JERK_BANDWIDTH * 2 * dt)
     if len(v) > 3 * max(len(a), len(b)):

@@ -64,7 +64,10 @@ def _parameter(simulator: HybridSimulator, compiled: Any, name: str) -> Any:
 
 
 def energy_audit(
-    simulator: HybridSimulator, result: HybridResult, interval: float = 1e-3
+    simulator: HybridSimulator,
+    result: HybridResult,
+    interval: float = 1e-3,
+    functions: dict[str, tuple[Any, Any]] | None = None,
 ) -> EnergyAudit:
     """W_in = ΔE_kin + ΔE_spring + W_friction + W_damper + W_road over the hybrid run (the
     reference's audit without bristles): E_kin = ½ zᵀ Pᵀ M P z + ½ I_C^eff ω_C² (2.34, 2.46),
@@ -74,9 +77,11 @@ def energy_audit(
     sub-intervals of at most ``interval``. The maps at lock-up and break-away conserve E_kin
     (zero slip); a residual would show an inconsistent reaction, sign or map. A dog element
     engaged at non-zero slip loses ½ Δẏᵀ M Δẏ in its map (``Event.energy_loss``): counted in
-    W_friction, the impact's dissipation."""
+    W_friction, the impact's dissipation. ``functions``: :func:`energy_functions` of this
+    simulator when the caller keeps them (building them costs more than a shift's audit)."""
     p = simulator.parameter_vector(result.values)
-    functions = energy_functions(simulator)
+    if functions is None:
+        functions = energy_functions(simulator)
     nodes, weights = np.polynomial.legendre.leggauss(5)
     works = np.zeros(4)
     for piece in result.pieces:
@@ -89,7 +94,7 @@ def energy_audit(
         times = ((edges[:-1] + edges[1:]) / 2)[:, None] + half[:, None] * nodes[None, :]
         times = times.ravel()
         x = piece.state(times)[:, :n]
-        u = np.array([simulator.inputs(float(t)) for t in times])
+        u = simulator.inputs_many(times)
         power_of = functions[piece.mode][0].map(len(times))
         values = np.asarray(power_of(x.T, u.T, p).full()).T
         w = (half[:, None] * weights[None, :]).ravel()

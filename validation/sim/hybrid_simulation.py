@@ -148,6 +148,20 @@ class HybridSimulator:
         deviation = 0.0 if grade is None else grade(t) - self.zeta0
         return np.array([self.scenario.input_torque(t), *self.normal_forces(t), deviation])
 
+    def inputs_many(self, times: np.ndarray) -> np.ndarray:
+        """:meth:`inputs` at every time of ``times`` (rows), the same values without a Python
+        call per time (the samples and the energy audit read thousands per shift)."""
+        scenario, grade = self.scenario, self.scenario.grade
+        times = np.asarray(times, dtype=float)
+        columns = [scenario.engine.many(times) + scenario.e_machine.many(times)]
+        for e in self.hybrid.elements:
+            if e in self.area:
+                columns.append(scenario.pressure[e].many(times) * self.area[e])
+            else:
+                columns.append(np.zeros(len(times)))
+        columns.append(np.zeros(len(times)) if grade is None else grade.many(times) - self.zeta0)
+        return np.column_stack(columns)
+
     # ------------------------------------------------------------------ initial state
 
     def initial_state(self, p: np.ndarray) -> np.ndarray:
@@ -466,22 +480,21 @@ class HybridSimulator:
                 n = compiled.n
                 fun = self._right_hand_side(compiled, indices, p)
                 functions = []
-                for guard, g in zip(compiled.continuous, compiled.guard, strict=True):
+                for index, guard in enumerate(compiled.continuous):
                     armed = guard.kind != DISENGAGEMENT or not self.commanded(
                         guard.element, (t + tb) / 2
                     )
+                    value_of = self._guard_function(compiled, index, p)
 
                     def event(
                         time: float,
                         y: np.ndarray,
-                        c: CompiledMode = compiled,
-                        g: Any = g,
+                        g: Any = value_of,
+                        n: int = n,
                         armed: bool = armed,
                     ) -> float:
                         # a dog's disengagement waits for its command to fall
-                        return (
-                            float(c.value(g, y[: c.n], self.inputs(time), p)[0]) if armed else 1.0
-                        )
+                        return g(y[:n], self.inputs(time)) if armed else 1.0
 
                     event.terminal = True  # type: ignore[attr-defined]
                     event.direction = guard.direction  # type: ignore[attr-defined]
@@ -570,6 +583,11 @@ class HybridSimulator:
             event_time_sensitivities=np.array(tau_p).reshape(len(events), m),
         )
 
+    def _guard_function(self, compiled: CompiledMode, k: int, p: np.ndarray) -> Any:
+        """(x, u) → the value of the mode's k-th continuous guard, for the event functions."""
+        g = compiled.guard[k]
+        return lambda x, u: float(compiled.value(g, x, u, p)[0])
+
     def _right_hand_side(
         self, compiled: CompiledMode, indices: tuple[int, ...], p: np.ndarray
     ) -> Any:
@@ -624,7 +642,7 @@ class HybridSimulator:
             n = compiled.n
             y = piece.state(grid[index])
             x = y[:, :n]
-            u = np.array([self.inputs(float(t)) for t in grid[index]])
+            u = self.inputs_many(grid[index])
             speeds_of = self.shaft_speeds(piece.mode).map(len(x))
             speeds = np.asarray(speeds_of(x.T).full()).T
             names = [v.name for v in compiled.mode.model.states]

@@ -98,6 +98,18 @@ class Profile:
         k = bisect.bisect_right(ts, t)
         return vs[k - 1] + (vs[k] - vs[k - 1]) * (t - ts[k - 1]) / (ts[k] - ts[k - 1])
 
+    def many(self, t: np.ndarray) -> np.ndarray:
+        """The signal at every time of ``t``: the same arithmetic as a call per time, in the
+        same order (so the same values), without a Python call per time."""
+        t = np.asarray(t, dtype=float)
+        ts, vs = self.time.astype(float), self.value.astype(float)
+        if len(ts) == 1:
+            return np.full(t.shape, vs[0])
+        k = np.clip(np.searchsorted(ts, t, side="right"), 1, len(ts) - 1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            inside = vs[k - 1] + (vs[k] - vs[k - 1]) * (t - ts[k - 1]) / (ts[k] - ts[k - 1])
+        return np.where(t <= ts[0], vs[0], np.where(t >= ts[-1], vs[-1], inside))
+
 
 @dataclass(frozen=True)
 class Scenario:
