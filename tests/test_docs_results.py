@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 from gearsym.validation.sim.drive_report import drive_markdown
+from gearsym.validation.studies.control.report import control_markdown
 from gearsym.validation.studies.estimation.fleet_report import fleet_markdown
 from gearsym.validation.studies.estimation.markdown import monte_carlo_markdown, uio_markdown
 
@@ -25,6 +26,7 @@ KINDS: tuple[tuple[str, Callable[[dict[str, Any], str], str], str], ...] = (
     ("montecarlo_*.md", monte_carlo_markdown, "--runs"),
     ("uio_*.md", uio_markdown, "--filter uio"),
     ("drive_*.md", drive_markdown, "drive --cycle"),
+    ("control_*.md", control_markdown, "control --fleet"),
 )
 
 TABLES = [
@@ -48,7 +50,8 @@ def test_a_result_table_is_its_json_rendered_by_the_command_make_results_runs(
     table, render, marker
 ):
     command = _command(table)
-    assert command.startswith(("gearsym estimate ", "gearsym drive ")) and marker in command
+    assert command.startswith(("gearsym estimate ", "gearsym drive ", "gearsym control "))
+    assert marker in command
     data = json.loads(table.with_suffix(".json").read_text(encoding="utf-8"))
     assert render(data, command) == table.read_text(encoding="utf-8")
     makefile = (RESULTS.parents[1] / "Makefile").read_text(encoding="utf-8")
@@ -73,6 +76,8 @@ EXPECTED = {
     "uio_2_3_noise.md": "uio.md",
     "drive_wltc3b.md": "drive.md",
     "drive_wltc3b_fleet_10000.md": "drive.md",
+    "control_2_3.md": "control.md",
+    "control_2_3_fill_known.md": "control.md",
 }
 
 
@@ -124,6 +129,11 @@ def test_a_hand_edit_is_caught():
 #: analyses that tests assert (existence, rank), none a measured number. Any other table of a
 #: page is a result and is written by a command (``make results``) into ``docs/results``.
 TYPED_TABLES = {
+    # definitions: what each strategy is told and learns
+    (
+        "control.md",
+        "| strategy | what the controller is told before a shift | what it learns after it |",
+    ),
     ("verification.md", "| planted | where | fast tests that fail |"),
     ("drive.md", "| name | source | published facts |"),
     ("architecture.md", "| folder | modules | what it holds |"),
