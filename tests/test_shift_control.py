@@ -28,11 +28,11 @@ from gearsym.validation.studies.control.controller import (
     Knowledge,
     ShiftController,
     TargetSlip,
-    make_controller,
 )
 from gearsym.validation.studies.control.study import (
     OperatingPoint,
     Vehicle,
+    make_controller,
     measured_target,
     run_vehicle,
 )

@@ -56,7 +56,6 @@ __all__ = [
     "PHASES",
     "ShiftController",
     "TargetSlip",
-    "make_controller",
     "shift_direction",
 ]
 
@@ -80,18 +79,6 @@ def shift_direction(d: GearboxDescription, spec: ShiftSpec) -> str:
 
     ratio = [abs(float(gear_ratio(d, d.gear(g)).ratio)) for g in (spec.from_gear, spec.to_gear)]
     return "up" if ratio[1] < ratio[0] else "down"
-
-
-def make_controller(
-    d: GearboxDescription, model: HybridSimulator, knowledge: Knowledge
-) -> ShiftController:
-    """The controller whose phases fit the shift: :class:`ShiftController` for an upshift,
-    :class:`~.downshift.DownshiftController` for a downshift."""
-    if shift_direction(d, model.hybrid.spec) == "up":
-        return ShiftController(d, model, knowledge)
-    from gearsym.validation.studies.control.downshift import DownshiftController
-
-    return DownshiftController(d, model, knowledge)
 
 
 @dataclass(frozen=True)
@@ -279,7 +266,7 @@ class ShiftController:
 
     # ------------------------------------------------------------------ the plan
 
-    #: the shifts this controller's phases are for (:func:`make_controller` picks)
+    #: the shifts this controller's phases are for (:func:`.study.make_controller` picks)
     direction = "up"
 
     def _make_plan(self, speeds: np.ndarray, torque: float) -> _Plan:

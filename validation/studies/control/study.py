@@ -35,10 +35,12 @@ from gearsym.validation.studies.control.closed_loop import (
     output_torque,
 )
 from gearsym.validation.studies.control.controller import (
+    Knowledge,
+    ShiftController,
     TargetSlip,
-    make_controller,
     shift_direction,
 )
+from gearsym.validation.studies.control.downshift import DownshiftController
 from gearsym.validation.studies.control.observed import Observed, observe_shift
 from gearsym.validation.studies.control.quality import (
     INERTIA_FRACTION,
@@ -47,13 +49,23 @@ from gearsym.validation.studies.control.quality import (
 )
 from gearsym.validation.studies.control.strategies import STRATEGIES, TruthView, make_strategy
 
-__all__ = ["OperatingPoint", "ShiftOutcome", "Vehicle", "run_vehicle"]
+__all__ = ["OperatingPoint", "ShiftOutcome", "Vehicle", "make_controller", "run_vehicle"]
 
 #: The slip (rad/s) at which the recorded inertia phase ends: the plant's lock-up sets it to 0.
 RECORDED_LOCKUP = 0.1
 #: Duration of each simulated shift (s): fill, torque phase, inertia phase, lock-up and the
 #: to-gear after it.
 SHIFT_DURATION = 1.2
+
+
+def make_controller(
+    d: GearboxDescription, model: HybridSimulator, knowledge: Knowledge
+) -> ShiftController:
+    """The controller whose phases fit the shift: :class:`.controller.ShiftController` for an
+    upshift, :class:`.downshift.DownshiftController` for a downshift."""
+    if shift_direction(d, model.hybrid.spec) == "up":
+        return ShiftController(d, model, knowledge)
+    return DownshiftController(d, model, knowledge)
 
 
 @dataclass(frozen=True)
