@@ -156,6 +156,39 @@ def completed(
         ) from None
 
 
+def run_each(
+    function: Callable[[Any, Any], Any],
+    shared: Any,
+    items: Sequence[Any],
+    scheduler: str | None,
+    workers: int,
+    where: tuple[str, str],
+    progress: Callable[[int, int], None] | None = None,
+) -> list[Any]:
+    """``function(shared, item)`` for every item, in item order: in this process
+    (``scheduler`` None) or one task each on Dask (``"local"``: a LocalCluster of ``workers``;
+    ``tcp://HOST:PORT``), ``progress(done, total)`` after each."""
+    results: list[Any] = [None] * len(items)
+    if scheduler is None:
+        for i, item in enumerate(items):
+            results[i] = function(shared, item)
+            if progress is not None:
+                progress(i + 1, len(items))
+        return results
+    client, cluster = connect(scheduler, workers, where=where)
+    try:
+        futures = submit_each(client, function, shared, list(items))
+        for done, (i, outcome) in enumerate(completed(futures, where), 1):
+            results[i] = outcome
+            if progress is not None:
+                progress(done, len(items))
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return results
+
+
 def _first_sentence(err: BaseException) -> str:
     text = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
     sentence = text.split(". ")[0].rstrip(".")

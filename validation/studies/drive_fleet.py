@@ -120,27 +120,10 @@ def run_drive_fleet(
 ) -> DriveFleet:
     """Every vehicle of ``seeds`` (:func:`drive_vehicle`), in this process (``scheduler``
     None) or on Dask (``"local"``: a LocalCluster of ``workers``; ``tcp://HOST:PORT``)."""
-    context = DriveContext(d, cycle, grade, fleet)
-    runs: list[dict[str, Any]] = [{} for _ in seeds]
-    if scheduler is None:
-        for i, seed in enumerate(seeds):
-            runs[i] = drive_vehicle(context, seed)
-            if progress is not None:
-                progress(i + 1, len(seeds))
-    else:
-        from gearsym.validation.studies.dask_runner import completed, connect, submit_each
+    from gearsym.validation.studies.dask_runner import run_each
 
-        client, cluster = connect(scheduler, workers, where=WHERE)
-        try:
-            futures = submit_each(client, drive_vehicle, context, list(seeds))
-            for done, (i, outcome) in enumerate(completed(futures, WHERE), 1):
-                runs[i] = outcome
-                if progress is not None:
-                    progress(done, len(seeds))
-        finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+    context = DriveContext(d, cycle, grade, fleet)
+    runs = run_each(drive_vehicle, context, list(seeds), scheduler, workers, WHERE, progress)
     return DriveFleet(cycle, runs, getattr(fleet, "name", "fleet"))
 
 

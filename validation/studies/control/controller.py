@@ -375,16 +375,8 @@ class ShiftController:
             self._t_lock = t
             return self._lockup(t)
         target = self._target
-
-        def slip_rate(force: float) -> float:
-            f = [0.0, 0.0]
-            f[j_on] = force
-            u_f = self._inputs(f, torque)
-            xdot = sliding.rhs(x, u_f, self.p)
-            return float(sliding.value(sliding.slips, xdot, u_f, self.p)[j_on])
-
         f1 = max(self._plan.carry_on if self._plan else 0.0, 1e3)
-        r0, r1 = slip_rate(0.0), slip_rate(f1)
+        r0, r1 = self._slip_rates(sliding, x, torque, j_on, j_on, f1)
         wanted = target.rate(tau + self.lead)
         feed_forward = self._last_force if r1 == r0 else (wanted - r0) / (r1 - r0) * f1
         error = self._sign * (slip - target.slip(tau))
@@ -394,6 +386,21 @@ class ShiftController:
         self._last_force = force
         area = self.model.area[self.on]
         return self.pressure(self.on, force + correction * area, offset)
+
+    def _slip_rates(
+        self, mode: Any, x: np.ndarray, torque: float, pressed: int, watched: int, force: float
+    ) -> tuple[float, float]:
+        """The slip acceleration of swapping element ``watched`` in ``mode`` at the state ``x``
+        with element ``pressed`` at F_N = 0 and at ``force``: two points of the affine map
+        the feed-forward inverts."""
+        rates = []
+        for value in (0.0, force):
+            forces = [0.0, 0.0]
+            forces[pressed] = value
+            u = self._inputs(forces, torque)
+            xdot = mode.rhs(x, u, self.p)
+            rates.append(float(mode.value(mode.slips, xdot, u, self.p)[watched]))
+        return rates[0], rates[1]
 
     def _lockup(self, t: float) -> float:
         if math.isnan(self._t_lock):

@@ -133,16 +133,8 @@ class DownshiftController(ShiftController):
             or t - self._t_slide > 3.0 * self.inertia_phase
         ):
             self.phase = "torque"
-
-        def slip_rate(force: float) -> float:
-            f = [0.0, 0.0]
-            f[j_off] = force
-            u_f = self._inputs(f, torque)
-            xdot = sliding.rhs(x, u_f, self.p)
-            return float(sliding.value(sliding.slips, xdot, u_f, self.p)[j_on])
-
         f1 = max(self._plan.hold_off if self._plan else 0.0, 1e3)
-        r0, r1 = slip_rate(0.0), slip_rate(f1)
+        r0, r1 = self._slip_rates(sliding, x, torque, j_off, j_on, f1)
         wanted = target.rate(tau + self.lead)
         feed_forward = self._off_force if r1 == r0 else (wanted - r0) / (r1 - r0) * f1
         error = self._sign * (slip - target.slip(tau))

@@ -232,26 +232,9 @@ def run_control_fleet(
     context = ControlContext(
         d, shift, point, fleet, tuple(strategies), n_shifts, trace_seed=seeds[0]
     )
-    runs: list[dict[str, Any]] = [{} for _ in seeds]
-    if scheduler is None:
-        for i, seed in enumerate(seeds):
-            runs[i] = control_vehicle(context, seed)
-            if progress is not None:
-                progress(i + 1, len(seeds))
-    else:
-        from gearsym.validation.studies.dask_runner import completed, connect, submit_each
+    from gearsym.validation.studies.dask_runner import run_each
 
-        client, cluster = connect(scheduler, workers, where=WHERE)
-        try:
-            futures = submit_each(client, control_vehicle, context, list(seeds))
-            for done, (i, outcome) in enumerate(completed(futures, WHERE), 1):
-                runs[i] = outcome
-                if progress is not None:
-                    progress(done, len(seeds))
-        finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+    runs = run_each(control_vehicle, context, list(seeds), scheduler, workers, WHERE, progress)
     traces = runs[0].pop("traces", {}) if runs else {}
     return ControlFleet(
         shift,
