@@ -307,3 +307,30 @@ def test_the_tcu_sees_what_the_truth_scores(d, point) -> None:  # noqa: ANN001
         assert seen.flare == truth.flare, error
         assert seen.tie_up == truth.reversal_tie_up, error
         assert reading(seen.duration_error) == reading(truth.duration_error), error
+
+
+def test_fill_ending_inside_a_tick_gets_the_same_oil_volume(d) -> None:  # noqa: ANN001
+    """A fill that ends 5 ms into a 10 ms tick: that tick is commanded p_s + ½ (p_ff − p_s),
+    the oil volume ∝ (p − p_s) t of the remaining 5 ms at the fast-fill pressure (the piston's
+    stroke law), spread over the tick; the next tick holds."""
+    model = HybridSimulator(d, load_scenario(d), hybrid_shift(d, "2-3"))
+    mu = quantity(d, "friction", "mu_nominal").value
+    fill = d.control.si("actuator", "fill_time")
+    knowledge = Knowledge(mu={"K38": mu, "B05": mu}, m_veh=2000.0, zeta=0.0, fill_offset=0.005)
+    controller = make_controller(d, model, knowledge)
+    speeds = np.asarray(
+        model.shaft_speeds(model.hybrid.from_mode)(
+            model.initial_state(model.parameter_vector(model.values()))
+        )
+    ).ravel()
+    commands = {
+        round(t, 3): controller.step(t, speeds, 150.0)["B05"]
+        for t in np.arange(0.0, fill + 0.025, 0.01)
+    }
+    fast = d.control.si("actuator", "fast_fill_pressure")
+    spring = d.control.si("actuator", "return_spring")
+    assert commands[round(fill - 0.01, 3)] == fast
+    assert commands[round(fill, 3)] == pytest.approx(spring + 0.5 * (fast - spring))
+    assert commands[round(fill + 0.01, 3)] == pytest.approx(
+        spring + d.control.si("shift", "fill_hold")
+    )

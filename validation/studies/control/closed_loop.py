@@ -134,7 +134,7 @@ class ClosedLoopShift:
         commanded_torque: float,
         true_torque: float,
         actuators: Mapping[str, Any],
-        believed: Mapping[str, Any] | None = None,
+        believed: Mapping[str, Any],
         log: Any = None,
         t_end: float = 1.5,
         sub: int = 5,
@@ -151,12 +151,10 @@ class ClosedLoopShift:
         sim = self.simulator
         hybrid = sim.hybrid
         off, on = self.spec.off_going, self.spec.on_coming
-        line_effective = {off: self.line}
         states = {
             off: actuators[off].initial(True, self.line),
             on: actuators[on].initial(False, 0.0),
         }
-        believed = believed or actuators
         beliefs = {
             off: believed[off].initial(True, self.line),
             on: believed[on].initial(False, 0.0),
@@ -164,7 +162,7 @@ class ClosedLoopShift:
         # the steady from-gear: the off-going element at line pressure
         spring = {e: float(actuators[e].return_spring) for e in (off, on)}
         start = {
-            off: Profile(np.array([0.0]), np.array([line_effective[off] - spring[off]])),
+            off: Profile(np.array([0.0]), np.array([self.line - spring[off]])),
             on: Profile(np.array([0.0]), np.array([0.0])),
         }
         sim.scenario = self.scenario(TICK, start, true_torque)

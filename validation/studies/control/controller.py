@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -109,9 +109,6 @@ class Knowledge:
             "fill_offset": self.fill_offset,
             "pressure_offset": self.pressure_offset,
         }
-
-    def adapted(self, **changes: float) -> Knowledge:
-        return replace(self, **changes)
 
 
 @dataclass(frozen=True)
@@ -183,7 +180,6 @@ class ShiftController:
     model: HybridSimulator
     knowledge: Knowledge
     phase: str = "fill"
-    log: list[dict[str, float | str]] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         control = self.d.control
@@ -314,18 +310,8 @@ class ShiftController:
         if self.phase == "torque" and t >= self._t_inertia:
             self.phase = "inertia"
         if self.phase == "fill":
-            hold = self.spring + self.fill_hold
-            if t + TICK <= self._t_fill_end + 1e-9:
-                on = self.fast_fill
-            elif t < self._t_fill_end:
-                # the fill ends inside this tick: the same oil volume at a lower pressure over
-                # the whole tick (the piston strokes at a rate ∝ p − p_spring), so the fill
-                # completes at the tick's end instead of overfilling by up to a tick
-                part = (self._t_fill_end - t) / TICK
-                on = self.spring + part * (self.fast_fill - self.spring)
-            else:
-                on = hold
-            commands = {self.off: self.pressure(self.off, plan.hold_off), self.on: max(on, hold)}
+            on = self._fill_command(t)
+            commands = {self.off: self.pressure(self.off, plan.hold_off), self.on: on}
         elif self.phase == "torque":
             tau = min(max((t + self.lead - self._t_torque) / self.torque_phase, 0.0), 1.0)
             # an S-shaped hand-over (raised cosine): no corner at either end to excite the
@@ -346,7 +332,6 @@ class ShiftController:
             commands = {self.off: 0.0, self.on: self._inertia(t, speeds, torque, offset)}
         else:
             commands = {self.off: 0.0, self.on: self._lockup(t)}
-        self.log.append({"t": t, "phase": self.phase, **commands})
         self._t_previous = t
         return commands
 
@@ -386,6 +371,19 @@ class ShiftController:
         self._last_force = force
         area = self.model.area[self.on]
         return self.pressure(self.on, force + correction * area, offset)
+
+    def _fill_command(self, t: float) -> float:
+        """The on-coming piston's command: the fast fill for the fill time, then the hold
+        just above the return spring. When the fill ends inside a tick, that tick gets the
+        same oil volume at a lower pressure (the piston strokes at a rate ∝ p − p_spring), so
+        the fill completes at the tick's end instead of overfilling by up to a tick."""
+        hold = self.spring + self.fill_hold
+        if t + TICK <= self._t_fill_end + 1e-9:
+            return self.fast_fill
+        if t < self._t_fill_end:
+            part = (self._t_fill_end - t) / TICK
+            return max(self.spring + part * (self.fast_fill - self.spring), hold)
+        return hold
 
     def _slip_rates(
         self, mode: Any, x: np.ndarray, torque: float, pressed: int, watched: int, force: float

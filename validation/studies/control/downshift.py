@@ -25,7 +25,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from gearsym.validation.studies.control.controller import TICK, ShiftController, TargetSlip
+from gearsym.validation.studies.control.controller import (
+    TIMEOUT_FACTOR,
+    ShiftController,
+    TargetSlip,
+)
 
 __all__ = ["DownshiftController"]
 
@@ -80,19 +84,8 @@ class DownshiftController(ShiftController):
                 self._t_lock = t
         if self.phase in ("lockup", "done"):
             commands = {self.off: 0.0, self.on: self._lockup(t)}
-        self.log.append({"t": t, "phase": self.phase, **commands})
         self._t_previous = t
         return commands
-
-    def _fill_command(self, t: float) -> float:
-        """The on-coming piston's fill (as the upshift's) and then its kiss-point hold."""
-        hold = self.spring + self.fill_hold
-        if t + TICK <= self._t_fill_end + 1e-9:
-            return self.fast_fill
-        if t < self._t_fill_end:
-            part = (self._t_fill_end - t) / TICK
-            return max(self.spring + part * (self.fast_fill - self.spring), hold)
-        return hold
 
     def _inertia_down(
         self, t: float, speeds: np.ndarray, torque: float, hold_sync: bool = False
@@ -130,7 +123,7 @@ class DownshiftController(ShiftController):
         elif (
             abs(slip) <= self.lockup_slip
             or slip * self._sign < 0
-            or t - self._t_slide > 3.0 * self.inertia_phase
+            or t - self._t_slide > TIMEOUT_FACTOR * self.inertia_phase
         ):
             self.phase = "torque"
         f1 = max(self._plan.hold_off if self._plan else 0.0, 1e3)
