@@ -31,6 +31,7 @@ from gearsym.symbolic.codegen import (
     float_repr,
     render,
 )
+from gearsym.symbolic.codegen.control import control_files
 from gearsym.symbolic.codegen.hybrid import emit_hybrid_files, hybrid_set_model
 from gearsym.symbolic.codegen.linear import LinearSystem, LinearSystemSet, emit_linear_files
 from gearsym.symbolic.codegen.mu_map import mu_map_files
@@ -757,6 +758,11 @@ def generate_tree(
             files[f"{folder}/{name}"] = text
     uio, uio_rows, uio_designs = uio_files(d, say, shifts, uio_unknown)
     files.update(uio)
+    default = next((s for s in selected_shifts(d, shifts) if s.name == DEFAULT_SHIFT), None)
+    why = _estimator_obstacle(d, default) if default is not None else ""
+    control, control_rows, control_skipped = control_files(d, default, why, C_DIR, say)
+    files.update(control)
+    skipped.extend(control_skipped)
     say("emitting the mu map and the example")
     mu_map = load_mu_map(d)
     files.update(mu_map_files(mu_map))
@@ -771,6 +777,7 @@ def generate_tree(
         hybrid_sets=hybrid_sets,
         uio_rows=uio_rows,
         skipped=tuple(skipped),
+        control_rows=control_rows,
     )
     files[MANIFEST] = manifest_text({k: v.encode("utf-8") for k, v in files.items()}, "generate")
     return GeneratedTree(

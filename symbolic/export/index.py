@@ -222,6 +222,7 @@ class ReadmeView:
     linear_sets: tuple[LinearSetRow, ...]
     hybrid_sets: tuple[LinearSetRow, ...] = ()
     uio_rows: tuple[str, ...] = ()  # Markdown table rows of the emitted UIOs
+    control_rows: tuple[str, ...] = ()  # Markdown table rows of the emitted controllers
     double_swaps: tuple[str, ...] = ()  # "`shift_1_5`: K38 and B06 off, K81 and K27 on"
     double_swap_note: str = DOUBLE_SWAP_NOTE
     skipped: tuple[str, ...] = ()  # "`shift_1_2_mu`, `shift_1_2_mu_sens`: B1 has no ..."
@@ -246,6 +247,7 @@ def readme(
     hybrid_sets: Sequence[EmittedHybridSet] = (),
     uio_rows: Sequence[str] = (),
     skipped: Sequence[str] = (),
+    control_rows: Sequence[str] = (),
 ) -> str:
     rows = []
     for m in models:
@@ -273,6 +275,7 @@ def readme(
         linear_sets=tuple(_linear_set_row(emitted.set) for emitted in linear_sets),
         hybrid_sets=tuple(_hybrid_set_row(emitted) for emitted in hybrid_sets),
         uio_rows=tuple(uio_rows),
+        control_rows=tuple(control_rows),
         double_swaps=tuple(
             f"`{m.model.name}`: {' and '.join(m.shift.off_elements)} off, "
             f"{' and '.join(m.shift.on_elements)} on"

@@ -147,7 +147,7 @@ class ObjectReport:
     undefined: list[str]  # external functions called (libm only, no malloc)
     call_graph: dict[str, set[str]]
     stack_bytes: dict[str, int]  # per function, from -fstack-usage
-    dynamic_stack: list[str]  # functions whose stack use is not static (VLA, alloca)
+    dynamic_stack: list[str]  # functions whose stack use is unbounded (VLA, alloca)
 
     def recursive_functions(self) -> list[str]:
         """Functions that can reach themselves in the call graph."""
@@ -193,7 +193,9 @@ def analyse_object(
             location, size, qualifier = line.split("\t")
             name = location.rsplit(":", 1)[-1]
             stack[name] = int(size)
-            if qualifier.strip() != "static":
+            # "dynamic,bounded": a known bound, the frame changing inside the function (x86-64
+            # pushes the arguments of a call with more than six); "dynamic": a VLA or alloca
+            if qualifier.strip() not in ("static", "dynamic,bounded"):
                 dynamic.append(name)
         for src, dst in re.findall(
             r'edge: \{ sourcename: "([^"]+)" targetname: "([^"]+)"',

@@ -1,0 +1,185 @@
+"""The emitted shift controller (``generated/c/gearsym_control_2_3.c``, issue 29 item 5)
+against the Python controller (:class:`~gearsym.validation.studies.control.controller.
+ShiftController`) on the closed loop of :mod:`gearsym.validation.studies.control.closed_loop`.
+
+Both controllers get the same measured speeds and commanded torque every tick (the Python one
+closes the loop, the C one rides along): the double build gives the same commands to rounding
+(its model parts are the same equations in closed form: exact-rational least squares for the
+state, the twist solved symbolically instead of a two-point secant, so about 1e-16 relative
+apart), the float build within a few float ulps of line pressure. Then the C controller
+closes the loop itself, and the shift it makes is the Python controller's.
+
+A vehicle that is not the calibration (heavier, on a grade, μ of both elements off) and a
+strategy's knowledge with every field away from its default (valve view, learned offsets,
+torque gain) exercise every input of the step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from gearsym.symbolic import naming
+from gearsym.symbolic.hybrid import hybrid_shift
+from gearsym.symbolic.loader import load_description
+from gearsym.validation.checks.control_c import CShiftController, build_control_library
+from gearsym.validation.sim.actuator import ClutchActuator
+from gearsym.validation.sim.hybrid_simulation import HybridSimulator
+from gearsym.validation.sim.scenario import load_scenario
+from gearsym.validation.studies.control.closed_loop import ClosedLoopShift
+from gearsym.validation.studies.control.controller import Knowledge, ShiftController
+from gearsym.validation.studies.control.study import OperatingPoint
+
+GENERATED_C = Path(__file__).resolve().parents[1] / "generated" / "c"
+HEADER = GENERATED_C / "gearsym_control_2_3.h"
+LINE = 1.5e6  # [drive.shift] line_pressure (Pa), checked below
+#: float: 32 ulps of line pressure (the ulp of 1.5e6 in float is 0.125 Pa): the commands are
+#: sums of a few rounded terms, the PI's integral adds one rounding per tick
+FLOAT_TOLERANCE = 32 * 0.125
+#: double: 1e-9 of line pressure, far above the 1e-16 relative the two forms differ by
+DOUBLE_TOLERANCE = 1e-9 * LINE
+
+
+@pytest.fixture(scope="module")
+def d():  # noqa: ANN201
+    return load_description(None)
+
+
+@pytest.fixture(scope="module")
+def libraries(d, tmp_path_factory):  # noqa: ANN001, ANN201
+    """The controller, the μ map and the EKF compiled strictly, in double and in float."""
+    assert d.drive.si("shift", "line_pressure") == LINE
+    out = tmp_path_factory.mktemp("control_c")
+    return {
+        single: build_control_library(GENERATED_C, "2-3", out, single) for single in (False, True)
+    }
+
+
+def _truth(d):  # noqa: ANN001, ANN202
+    vehicle = dict(d.vehicle)
+    vehicle["m_veh"] = replace(vehicle["m_veh"], value=2050.0)
+    return replace(d, vehicle=vehicle)
+
+
+KNOWLEDGE = Knowledge(
+    mu={"K38": 0.11, "B05": 0.13},
+    m_veh=1950.0,
+    zeta=0.02,
+    torque_gain=1.02,
+    valve_gain=0.97,
+    valve_offset=3e3,
+    fill_offset=0.01,
+    pressure_offset=2e3,
+)
+
+
+def _c_knowledge(controller: ShiftController) -> dict[str, float]:
+    k = controller.knowledge
+    return {
+        "mu_off": k.mu[controller.off],
+        "mu_on": k.mu[controller.on],
+        "m_veh": k.m_veh,
+        "zeta": k.zeta,
+        "torque_gain": k.torque_gain,
+        "valve_gain": k.valve_gain,
+        "valve_offset": k.valve_offset,
+        "fill_time": controller.fill_time,
+        "fill_offset": k.fill_offset,
+        "pressure_offset": k.pressure_offset,
+    }
+
+
+class Twin:
+    """The Python and the C controller fed the same speeds and torque each tick; ``drive``
+    says whose commands go to the plant."""
+
+    def __init__(self, python: ShiftController, c: CShiftController, drive: str) -> None:
+        self.python, self.c, self.drive = python, c, drive
+        self.ticks: list[tuple[float, str, str, dict, dict]] = []
+
+    @property
+    def phase(self) -> str:
+        return self.python.phase if self.drive == "python" else self.c.phase
+
+    def step(self, t: float, speeds: np.ndarray, torque: float) -> dict[str, float]:
+        py = self.python.step(t, speeds, torque)
+        c = self.c.step(t, speeds, torque, tuple(self.python.measured))
+        self.ticks.append((t, self.python.phase, self.c.phase, py, c))
+        return py if self.drive == "python" else c
+
+
+def _run(d, lib: Path, single: bool, drive: str):  # noqa: ANN001, ANN202
+    truth = _truth(d)
+    point = OperatingPoint.from_scenario(load_scenario(d))
+    plant = ClosedLoopShift(truth, "2-3", point.vehicle_speed, {"K38": 0.95, "B05": 1.05})
+    model = HybridSimulator(d, plant.scenario(1.0, {}, 0.0), hybrid_shift(d, "2-3"))
+    python = ShiftController(d, model, KNOWLEDGE)
+    c = CShiftController(lib, HEADER, "2-3", "K38", "B05", _c_knowledge(python), single=single)
+    twin = Twin(python, c, drive)
+    nominal = ClutchActuator.from_calibration(d.control)
+    actuators = {"K38": nominal, "B05": nominal}
+    result = plant.run(twin, point.torque, point.torque, actuators, actuators, t_end=1.2)
+    return twin, result
+
+
+@pytest.fixture(scope="module")
+def python_loop(d, libraries):  # noqa: ANN001, ANN201
+    """The Python controller closing the loop, the double and the float C builds riding along."""
+    double = _run(d, libraries[False], False, "python")
+    single = _run(d, libraries[True], True, "python")
+    return double, single
+
+
+def _differences(twin: Twin) -> np.ndarray:
+    return np.array([[abs(py[e] - c[e]) for e in ("K38", "B05")] for _, _, _, py, c in twin.ticks])
+
+
+def test_double_build_gives_the_python_commands_tick_by_tick(python_loop) -> None:  # noqa: ANN001
+    (twin, result), _ = python_loop
+    assert result.completed and all(a == b for _, a, b, _, _ in twin.ticks)
+    assert {"fill", "torque", "inertia", "lockup", "done"} <= {a for _, a, _, _, _ in twin.ticks}
+    worst = _differences(twin).max()
+    print(f"double build: largest command difference {worst:.3g} Pa")
+    assert worst <= DOUBLE_TOLERANCE
+
+
+def test_float_build_gives_the_python_commands_within_float_rounding(python_loop) -> None:  # noqa: ANN001
+    _, (twin, _) = python_loop
+    assert all(a == b for _, a, b, _, _ in twin.ticks)
+    worst = _differences(twin).max()
+    print(f"float build: largest command difference {worst:.3g} Pa ({worst / 0.125:.1f} ulps)")
+    assert worst <= FLOAT_TOLERANCE
+
+
+def test_the_float_c_controller_closes_the_loop_like_the_python_one(
+    d, libraries, python_loop
+) -> None:  # noqa: ANN001
+    """The C controller (float) drives the plant: it ends locked in the to-gear at the Python
+    loop's lock-up time (the plant's event, located to 1e-8 by the integrator) within 1 ms,
+    and the on-coming slip follows the Python loop's within 0.1 rad/s (5 % of the lock-up
+    slip, which is 5 rad/s)."""
+    (_, reference), _ = python_loop
+    twin, result = _run(d, libraries[True], True, "c")
+    assert result.completed and twin.c.status == 0
+    slip = naming.slip_column("B05")
+    lock_diff = abs(result.t_lockup - reference.t_lockup)
+    slip_diff = float(np.max(np.abs(result.signals[slip] - reference.signals[slip])))
+    print(
+        f"C loop: lock-up at {result.t_lockup:.4f} s (Python {reference.t_lockup:.4f} s), "
+        f"largest on-coming slip difference {slip_diff:.3g} rad/s"
+    )
+    assert lock_diff < 1e-3
+    assert slip_diff < 0.1
+
+
+def test_a_coast_shift_is_refused_and_the_from_gear_held(libraries) -> None:  # noqa: ANN001
+    """A commanded torque that does not pull (coast): ERR_NOT_POWER_ON (3), the off-going
+    element at line pressure, the on-coming vented, the plan not made."""
+    c = CShiftController(libraries[False], HEADER, "2-3", "K38", "B05", {})
+    speeds = np.full(8, 100.0)
+    commands = c.step(0.0, speeds, -40.0)
+    assert c.status == 3
+    assert commands == {"K38": LINE, "B05": 0.0}
+    assert c.state.planned == 0 and c.phase == "fill"

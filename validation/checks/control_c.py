@@ -1,0 +1,137 @@
+"""The emitted shift controller (``gearsym_control_<a>_<b>.c``) called from Python: a strict
+shared-library build and a ctypes controller with the interface of the Python one
+(:class:`gearsym.validation.studies.control.controller.ShiftController`: ``step(t, speeds,
+torque) -> {element: pressure}`` and ``phase``), so that it can close the loop on the plant of
+:mod:`gearsym.validation.studies.control.closed_loop` and be compared with the Python
+controller tick by tick.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import re
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from gearsym.validation.checks.c_check import STRICT_FLAGS, CompileError
+
+__all__ = ["CShiftController", "build_control_library", "struct_fields"]
+
+PHASES = ("fill", "torque", "inertia", "lockup", "done")
+KNOWLEDGE_FIELDS = (
+    "mu_off",
+    "mu_on",
+    "m_veh",
+    "zeta",
+    "torque_gain",
+    "valve_gain",
+    "valve_offset",
+    "fill_time",
+    "fill_offset",
+    "pressure_offset",
+)
+
+
+def build_control_library(c_dir: Path, shift: str, out: Path, single: bool) -> Path:
+    """Compile the controller of ``shift`` with the μ map and the shift's EKF from ``c_dir``
+    into a shared library in ``out`` (the project's strict flags, ``-O2``; a warning fails)."""
+    import subprocess
+
+    name = shift.replace("-", "_")
+    sources = [c_dir / f"gearsym_control_{name}.c", c_dir / "gearsym_mu_map.c"]
+    sources.append(c_dir / f"gearsym_ekf_{name}.c")
+    out.mkdir(parents=True, exist_ok=True)
+    lib = out / f"libgearsym_control_{name}_{'single' if single else 'double'}.so"
+    cmd = ["gcc", *STRICT_FLAGS, "-O2", "-fPIC", "-shared", f"-I{c_dir}"]
+    cmd += ["-DGEARSYM_SINGLE_PRECISION"] if single else []
+    cmd += ["-o", str(lib), *map(str, sources), "-lm"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    if proc.returncode != 0 or proc.stderr.strip() or proc.stdout.strip():
+        raise CompileError(f"{' '.join(cmd)}\n{proc.stdout}{proc.stderr}")
+    return lib
+
+
+def struct_fields(header: str, struct: str) -> list[tuple[str, str]]:
+    """(type, name) of each field of ``typedef struct <struct> {...}`` in a header's text."""
+    match = re.search(r"typedef struct " + struct + r" \{(.*?)\n\} ", header, flags=re.S)
+    if match is None:
+        raise ValueError(f"no struct {struct}")
+    fields = []
+    for line in match.group(1).splitlines():
+        found = re.match(r"\s+(\w+) (\w+)(\[[^\]]*\])?;", line)
+        if found:
+            fields.append((found.group(1), found.group(2)))
+    return fields
+
+
+def _structure(header: str, struct: str, real: Any) -> type[ctypes.Structure]:
+    types = {"gearsym_real": real, "int": ctypes.c_int}
+    fields = [(name, types[kind]) for kind, name in struct_fields(header, struct)]
+    return type(struct, (ctypes.Structure,), {"_fields_": fields})
+
+
+class CShiftController:
+    """The emitted controller of one shift through ctypes, in double or float."""
+
+    def __init__(
+        self,
+        lib_path: Path,
+        header: Path,
+        shift: str,
+        off: str,
+        on: str,
+        knowledge: Mapping[str, float],
+        single: bool = False,
+    ) -> None:
+        name = shift.replace("-", "_")
+        self.prefix = f"gearsym_control_{name}_"
+        text = header.read_text(encoding="utf-8")
+        real = ctypes.c_float if single else ctypes.c_double
+        self.real = real
+        self.Params = _structure(text, self.prefix + "params", real)
+        self.Knowledge = _structure(text, self.prefix + "knowledge", real)
+        self.Inputs = _structure(text, self.prefix + "inputs", real)
+        self.State = _structure(text, self.prefix + "state", real)
+        self.Outputs = _structure(text, self.prefix + "outputs", real)
+        self.lib = ctypes.CDLL(str(lib_path))
+        self.off, self.on = off, on
+        self.params = self.Params()
+        self.lib[self.prefix + "params_default"](ctypes.byref(self.params))
+        self.knowledge = self.Knowledge()
+        self.lib[self.prefix + "knowledge_default"](ctypes.byref(self.knowledge))
+        for key, value in knowledge.items():
+            setattr(self.knowledge, key, value)
+        self.state = self.State()
+        self.lib[self.prefix + "init"](ctypes.byref(self.knowledge), ctypes.byref(self.state))
+        self._step = self.lib[self.prefix + "step"]
+        self._step.restype = ctypes.c_int
+        self.status = 0
+
+    @property
+    def phase(self) -> str:
+        return PHASES[self.state.phase]
+
+    def step(
+        self, t: float, speeds: np.ndarray, torque: float, measured: tuple[int, int] = (0, 1)
+    ) -> dict[str, float]:
+        """One tick: ``speeds`` every shaft's speed (the input and output shafts at
+        ``measured``), ``torque`` the commanded input torque → the pressure commands (Pa)."""
+        inputs = self.Inputs(t, float(speeds[measured[0]]), float(speeds[measured[1]]), torque)
+        out = self.Outputs()
+        self.status = self._step(
+            ctypes.byref(self.params),
+            ctypes.byref(self.knowledge),
+            ctypes.byref(inputs),
+            ctypes.byref(self.state),
+            ctypes.byref(out),
+        )
+        return {self.off: float(out.p_off), self.on: float(out.p_on)}
+
+    def evaluate(self, function: str, values: list[float], n_out: int) -> np.ndarray:
+        """One of the model-part functions (``from_gear``, ``sliding_pos``, ...) at ``values``."""
+        v = (self.real * len(values))(*values)
+        out = (self.real * n_out)()
+        self.lib[self.prefix + function](ctypes.byref(self.params), v, out)
+        return np.array(list(out), dtype=float)

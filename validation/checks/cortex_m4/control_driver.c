@@ -1,0 +1,130 @@
+/*
+ * gearsym's Cortex-M4F driver of the TCU task: the emitted float shift controller of the 2-3
+ * upshift with its EKF (gearsym_control_2_3_tcu_task: EKF predict, update and mode update, then
+ * the controller's step) called once per 10 ms tick along a recorded closed-loop shift
+ * (control_case.h, written by gearsym.validation.checks.qemu_control). After each task the
+ * commands, the phase and the EKF's state are printed as float bit patterns, so that the host
+ * build and the emulated target can be compared exactly. On the target, SysTick counts each
+ * task call (instructions under `-icount shift=0`).
+ */
+#include <stdint.h>
+#include <string.h>
+
+#include "control_case.h"
+#include "gearsym_control_2_3.h"
+#include "harness.h"
+
+#define NX GEARSYM_EKF_2_3_NX
+
+static char line[16 + 12 * (NX + 8)];
+static size_t used_chars;
+
+static void put_char(char c)
+{
+    if (used_chars + 1u < sizeof line) {
+        line[used_chars++] = c;
+        line[used_chars] = '\0';
+    }
+}
+
+static void put_word(const char *w)
+{
+    while (*w != '\0') {
+        put_char(*w++);
+    }
+}
+
+static void put_hex(uint32_t v)
+{
+    static const char digits[] = "0123456789abcdef";
+    put_char(' ');
+    for (int shift = 28; shift >= 0; shift -= 4) {
+        put_char(digits[(v >> (unsigned)shift) & 0xFu]);
+    }
+}
+
+static void put_real(float v)
+{
+    uint32_t bits;
+    memcpy(&bits, &v, sizeof bits);
+    put_hex(bits);
+}
+
+static void flush(void)
+{
+    put_char('\n');
+    gearsym_m4_put(line);
+    used_chars = 0u;
+    line[0] = '\0';
+}
+
+#ifdef GEARSYM_M4_TARGET
+#define TICKS() gearsym_m4_ticks()
+#define ELAPSED(start, end) (((start) - (end)) & 0x00FFFFFFu)
+static void report(const char *name, uint32_t value)
+{
+    put_word(name);
+    put_hex(value);
+    flush();
+}
+#endif
+
+int main(void)
+{
+    gearsym_control_2_3_tcu_config config;
+    gearsym_control_2_3_knowledge knowledge;
+    gearsym_control_2_3_tcu_state state;
+    gearsym_control_2_3_outputs out;
+    gearsym_control_2_3_params_default(&config.control);
+    gearsym_ekf_2_3_params_default(&config.ekf);
+    memcpy(config.q, case_q, sizeof config.q);
+    memcpy(config.r, case_r, sizeof config.r);
+    memcpy(config.y_floor, case_floor, sizeof config.y_floor);
+    gearsym_control_2_3_knowledge_default(&knowledge);
+    gearsym_control_2_3_tcu_init(&knowledge, case_x0, case_P0, &state);
+#ifdef GEARSYM_M4_TARGET
+    uint32_t t_empty = 0u, t_total = 0u, t_max = 0u;
+    gearsym_m4_ticks_start();
+    for (int i = 0; i < 64; ++i) {
+        const uint32_t start = TICKS();
+        t_empty += ELAPSED(start, TICKS());
+    }
+    report("empty64", t_empty);
+    report("calibration", gearsym_m4_calibration(CASE_CALIBRATION_TURNS));
+#endif
+    for (int k = 0; k < CASE_TICKS; ++k) {
+        gearsym_control_2_3_tcu_inputs in;
+        in.control.t = case_in[k][0];
+        in.control.omega_in = case_in[k][1];
+        in.control.omega_out = case_in[k][2];
+        in.omega_wheel = case_in[k][3];
+        in.control.torque = case_in[k][4];
+#ifdef GEARSYM_M4_TARGET
+        const uint32_t t0 = TICKS();
+#endif
+        const int status = gearsym_control_2_3_tcu_task(&config, &knowledge, &in, &state, &out);
+#ifdef GEARSYM_M4_TARGET
+        const uint32_t elapsed = ELAPSED(t0, TICKS());
+        t_total += elapsed;
+        t_max = (elapsed > t_max) ? elapsed : t_max;
+#endif
+        put_word("ctl");
+        put_hex((uint32_t)k);
+        put_hex((uint32_t)status);
+        put_hex((uint32_t)out.phase);
+        put_real(out.p_off);
+        put_real(out.p_on);
+        for (int i = 0; i < NX; ++i) {
+            put_real(state.x[i]);
+        }
+        flush();
+    }
+#ifdef GEARSYM_M4_TARGET
+    report("ctl_ticks", (uint32_t)CASE_TICKS);
+    report("ctl_total", t_total);
+    report("ctl_max", t_max);
+#endif
+    put_word("done");
+    flush();
+    return 0;
+}
