@@ -5,8 +5,8 @@ those rules.
 
 The files checked cover every template path: the full model, a torque-input and a μ-form
 shift model, a sensitivity system, the EKF, the extended UIO, the UIO, the friction element,
-the μ map and the example; the other shift models come from the same templates. In CI a
-missing cppcheck fails the test.
+the μ map, the shift controller's TCU task and the example; the other shift models come from
+the same templates. In CI a missing cppcheck fails the test.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ FILES = [
     "gearsym_uio_2_3.c",
     "gearsym_shift_element.c",
     "gearsym_mu_map.c",
+    "gearsym_control_2_3.c",
     "main.c",
 ]
 
