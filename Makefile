@@ -86,7 +86,8 @@ results: $(STAMP)
 # The analyses' tables (about 3 min more): the Fisher information of the 2-3 on the hybrid model
 # in both views (docs/hybrid.md), the open-loop study restarted per phase and carried over
 # (docs/sensitivities.md), the freewheel shifts against the reference (docs/hybrid.md), and the
-# MISRA findings of generated/c (docs/misra.md; cppcheck).
+# MISRA findings of generated/c (docs/misra.md; cppcheck), and the emitted TCU task on the
+# emulated Cortex-M4F (docs/control.md: instructions per call, code size; QEMU).
 	rm -rf build/results/fim_hybrid_2_3 build/results/fim_hybrid_2_3_known_initial_state
 	$(BIN)/gearsym fim --out build/results/fim_hybrid_2_3
 	$(BIN)/gearsym fim --known-initial-state --out build/results/fim_hybrid_2_3_known_initial_state
@@ -105,6 +106,10 @@ results: $(STAMP)
 	$(BIN)/python -m gearsym.validation.checks.misra --out build/results/misra
 	cp build/results/misra/misra.json $(RESULTS)/misra.json
 	cp build/results/misra/misra.md $(RESULTS)/misra.md
+	rm -rf build/results/tcu_task_2_3
+	$(BIN)/python -m gearsym.validation.checks.qemu_control --out build/results/tcu_task_2_3
+	cp build/results/tcu_task_2_3/tcu_task_2_3.json $(RESULTS)/tcu_task_2_3.json
+	cp build/results/tcu_task_2_3/tcu_task_2_3.md $(RESULTS)/tcu_task_2_3.md
 # A whole WLTC class 3b drive with the EKF over it, the calibration's own vehicle and a fleet
 # vehicle (docs/drive.md; about 8 min each, the Python reference simulation).
 	rm -rf build/results/drive_wltc3b

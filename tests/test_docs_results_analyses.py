@@ -1,9 +1,9 @@
 """The analyses' result tables are written by commands, not typed (as the estimators' are,
 tests/test_docs_results.py): each Markdown file under ``docs/results`` that ``gearsym fim``, the
-MISRA check or the freewheel comparison wrote is rendered again from the JSON the same command
-wrote beside it, byte for byte; its first line names the command, ``make results`` runs that
-command into the folder the file is named after, and a page of the documentation includes the
-file."""
+MISRA check, the TCU task's Cortex-M4F run or the freewheel comparison wrote is rendered again
+from the JSON the same command wrote beside it, byte for byte; its first line names the
+command, ``make results`` runs that command into the folder the file is named after, and a
+page of the documentation includes the file."""
 
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from typing import Any
 
 import pytest
 from gearsym.validation.checks.misra import DEVIATIONS, misra_markdown
+from gearsym.validation.checks.qemu_control import task_markdown
 from gearsym.validation.sim.one_way_comparison import one_way_markdown
 from gearsym.validation.studies.fisher import fim_markdown
 from gearsym.validation.studies.hybrid_fisher import hybrid_fim_markdown
@@ -30,6 +31,7 @@ KINDS: dict[str, tuple[Renderer, str]] = {
     "fim_hybrid_*.md": (hybrid_fim_markdown, "gearsym fim "),
     "fim_open_loop_*.md": (fim_markdown, "gearsym fim --open-loop "),
     "misra.md": (misra_markdown, "python -m gearsym.validation.checks.misra "),
+    "tcu_task_*.md": (task_markdown, "python -m gearsym.validation.checks.qemu_control "),
     "one_way_*.md": (one_way_markdown, "python -m gearsym.validation.sim.one_way_comparison "),
 }
 TABLES = sorted((t, *kind) for pattern, kind in KINDS.items() for t in RESULTS.glob(pattern))
@@ -42,6 +44,7 @@ EXPECTED = {
     "fim_open_loop_2_3_carry_over.md": "sensitivities.md",
     "misra.md": "misra.md",
     "one_way_simpson.md": "hybrid.md",
+    "tcu_task_2_3.md": "control.md",
 }
 
 

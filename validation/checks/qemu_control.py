@@ -36,6 +36,7 @@ from gearsym.validation.checks.qemu_m4 import (
 
 __all__ = [
     "BUDGET",
+    "COMMAND",
     "SOURCES",
     "ControlCase",
     "ControlTiming",
@@ -44,6 +45,9 @@ __all__ = [
     "code_size",
     "control_case",
     "control_lines",
+    "main",
+    "task_markdown",
+    "task_report",
     "timing",
     "values",
 ]
@@ -246,3 +250,100 @@ def code_size(elf: Path, objects: list[Path]) -> tuple[dict[str, int], dict[str,
         )
         sizes[obj.stem] = int(out[0]) + int(out[1]) + int(out[2])
     return functions, sizes
+
+
+#: The command that writes the documentation's table (``make results``).
+COMMAND = "python -m gearsym.validation.checks.qemu_control"
+
+
+def task_report(c_dir: Path, build_dir: Path) -> dict[str, Any]:
+    """The task on the emulated target along :func:`control_case` as JSON-ready data:
+    instructions per call (mean, largest), the budget, the code size (the linked functions'
+    bytes, each object's text + data + bss), and how far its commands are from the Python
+    controller's (Pa) and whether the phases agree."""
+    from gearsym.symbolic.loader import load_description
+    from gearsym.validation.studies.control.controller import PHASES
+
+    case = control_case(load_description())
+    elf, _, objects = build(c_dir, case, build_dir)
+    target = qemu_m4.run_qemu(elf)
+    t = timing(target)
+    functions, objects_size = code_size(elf, objects)
+    results = [values(ln) for ln in control_lines(target)]
+    commands = np.array([v[:2] for _, _, v in results])
+    return {
+        "shift": "2-3",
+        "board": "QEMU mps2-an386 (Cortex-M4F), -icount shift=0",
+        "flags": " ".join((*COMMON_FLAGS, *TARGET_FLAGS)),
+        "calls": t.calls,
+        "instructions_mean": round(t.mean),
+        "instructions_max": round(t.largest),
+        "budget": BUDGET,
+        "code_bytes": sum(functions.values()),
+        "functions": dict(sorted(functions.items())),
+        "objects": objects_size,
+        "command_difference_pa": float(np.max(np.abs(commands - case.commands))),
+        "phases_agree": tuple(PHASES[p] for _, p, _ in results) == case.phases,
+    }
+
+
+def task_markdown(data: dict[str, Any], command: str) -> str:
+    """The report's JSON (:func:`task_report`) as the documentation's table."""
+    out = [
+        f"<!-- written by `{command}`; do not edit by hand: run the command again -->",
+        "",
+        f"*Written by `{command}`.*",
+        "",
+        f"- `gearsym_control_{data['shift'].replace('-', '_')}_tcu_task` on {data['board']}, "
+        f"float build (`{data['flags']}`), {data['calls']} calls along a closed-loop "
+        f"{data['shift']} upshift of the Python controller",
+        f"- its commands against the Python controller's on the same measurements: at most "
+        f"{data['command_difference_pa']:.3g} Pa apart, phases "
+        + ("the same at every tick" if data["phases_agree"] else "**differing**"),
+        "",
+        "| instructions per call (mean) | at most | budget | bytes of the linked functions "
+        "and tables |",
+        "|---|---|---|---|",
+        f"| {data['instructions_mean']} | {data['instructions_max']} | {data['budget']} | "
+        f"{data['code_bytes']} |",
+        "",
+        "| object | text + data + bss (bytes) |",
+        "|---|---|",
+        *(f"| {name}.o | {size} |" for name, size in data["objects"].items()),
+    ]
+    return "\n".join(out) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m gearsym.validation.checks.qemu_control --out DIR``: the task's report into
+    ``DIR/<name>.json`` and ``DIR/<name>.md``, ``<name>`` the folder's name."""
+    import argparse
+    import json
+    import sys
+    import tempfile
+
+    parser = argparse.ArgumentParser(prog=COMMAND, description="the TCU task on the Cortex-M4F")
+    parser.add_argument("--out", required=True, help="folder for the JSON and the table")
+    parser.add_argument("--c-dir", default="generated/c", help="the emitted C (generated/c)")
+    args = parser.parse_args(argv)
+    missing = qemu_m4.missing_tools()
+    if missing:
+        print(f"{COMMAND}: not installed: {', '.join(missing)}", file=sys.stderr)
+        return 2
+    with tempfile.TemporaryDirectory(prefix="gearsym-task-") as build_dir:
+        data = task_report(Path(args.c_dir).resolve(), Path(build_dir))
+    command = " ".join([COMMAND, *(argv if argv is not None else sys.argv[1:])])
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"{out.name}.json").write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+    (out / f"{out.name}.md").write_text(task_markdown(data, command), encoding="utf-8")
+    print(
+        f"{data['instructions_max']} instructions at most per task call (mean "
+        f"{data['instructions_mean']}, budget {BUDGET}), {data['code_bytes']} bytes of code; "
+        f"wrote {out}"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
