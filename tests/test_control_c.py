@@ -183,3 +183,56 @@ def test_a_coast_shift_is_refused_and_the_from_gear_held(libraries) -> None:  # 
     assert c.status == 3
     assert commands == {"K38": LINE, "B05": 0.0}
     assert c.state.planned == 0 and c.phase == "fill"
+
+
+def test_the_tcu_task_on_the_host_gives_the_python_controllers_commands(d, tmp_path) -> None:  # noqa: ANN001
+    """The whole 10 ms task (EKF and controller, float, the Cortex-M4F driver built for the
+    host) along the Python controller's closed-loop shift on the calibration's vehicle: the
+    Python controller's commands within FLOAT_TOLERANCE and phases at every tick, the EKF's
+    state finite (the emulated target's run: tests/test_cortex_m4_qemu.py)."""
+    from gearsym.validation.checks import qemu_control, qemu_m4
+    from gearsym.validation.studies.control.controller import PHASES
+
+    case = qemu_control.control_case(d)
+    host = qemu_control.build_host(GENERATED_C, case, tmp_path)
+    results = [qemu_control.values(ln) for ln in qemu_control.control_lines(qemu_m4.run_host(host))]
+    assert len(results) == len(case.inputs) and all(s == 0 for s, _, _ in results)
+    assert tuple(PHASES[phase] for _, phase, _ in results) == case.phases
+    commands = np.array([v[:2] for _, _, v in results])
+    assert np.max(np.abs(commands - case.commands)) <= FLOAT_TOLERANCE
+    assert np.all(np.isfinite(np.array([v[2:] for _, _, v in results])))
+
+
+def test_the_casadi_model_parts_equal_the_c_ones(libraries) -> None:  # noqa: ANN001
+    """generated/python/gearsym_control_2_3_casadi.py (the same CSE'd expressions through the
+    CasADi printer) against the double C build at random points of the operating range: to
+    1e-12 of each output's scale (the printers differ only in how they print)."""
+    import importlib.util
+
+    path = GENERATED_C.parent / "python" / "gearsym_control_2_3_casadi.py"
+    spec = importlib.util.spec_from_file_location("gearsym_control_2_3_casadi", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    functions = module.functions()
+    c = CShiftController(libraries[False], HEADER, "2-3", "K38", "B05", {})
+    p = module.parameter_defaults()
+    ranges = {
+        "omega_in": (50.0, 400.0),
+        "omega_out": (20.0, 150.0),
+        "T_In": (20.0, 400.0),
+        "m_veh": (1500.0, 2500.0),
+        "zeta": (-0.1, 0.1),
+        "F_last": (0.0, 1e4),
+        "mu_last": (0.08, 0.16),
+        "F_1": (1e3, 1e4),
+        "mu_1": (0.08, 0.16),
+    }
+    rng = np.random.default_rng(5)
+    assert set(functions) == set(module.ARGUMENTS)
+    for name, (arguments, n_out) in module.ARGUMENTS.items():
+        for _ in range(50):
+            v = [float(rng.uniform(*ranges[a])) for a in arguments]
+            ours = c.evaluate(name, v, n_out)
+            theirs = np.asarray(functions[name](p, v)).ravel()
+            assert np.allclose(ours, theirs, rtol=1e-12, atol=1e-12 * np.max(np.abs(theirs))), name

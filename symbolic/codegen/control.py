@@ -35,6 +35,8 @@ from dataclasses import dataclass
 import sympy as sp
 from gearsym.symbolic import naming
 from gearsym.symbolic.codegen.c.emitter import CFunctionView, MathMacro, _function_views
+from gearsym.symbolic.codegen.casadi.emitter import CasadiFunctionView, _function_view
+from gearsym.symbolic.codegen.casadi.printer import python_tuple
 from gearsym.symbolic.codegen.config import CodegenConfig, as_config
 from gearsym.symbolic.codegen.cse import CseForm, cse_function
 from gearsym.symbolic.codegen.printing import float_repr
@@ -366,6 +368,17 @@ class CControlView(ModelView):
 
 
 @dataclass(frozen=True)
+class CasadiControlView(ModelView):
+    """What ``casadi_control.py.j2`` prints."""
+
+    functions: tuple[CasadiFunctionView, ...]
+    defaults: str
+    parameter_names: str
+    model_name_repr: str
+    sizes: tuple[tuple[str, str, int], ...]  # name, its arguments (source), outputs
+
+
+@dataclass(frozen=True)
 class EkfInputs:
     """The index macros of the EKF's inputs the task sets."""
 
@@ -378,8 +391,9 @@ class EkfInputs:
 def emit_control_files(
     d: GearboxDescription, shift: str, config: CodegenConfig | None = None
 ) -> dict[str, str]:
-    """``{"gearsym_control_<a>_<b>.h", ".c"}``: the controller of a power-on upshift and the
-    TCU task that runs it with the shift's EKF (``gearsym_ekf_<a>_<b>``)."""
+    """``{"gearsym_control_<a>_<b>.h", ".c", "_casadi.py"}``: the controller of a power-on
+    upshift and the TCU task that runs it with the shift's EKF (``gearsym_ekf_<a>_<b>``), and
+    its model parts as CasADi functions."""
     table, hybrid = control_table(d, shift, config)
     forms: dict[str, CseForm] = {
         spec.name: cse_function(spec, table.config) for spec in table if spec.kind == "expr"
@@ -421,9 +435,33 @@ def emit_control_files(
         m_veh_default=_lit(defaults["m_veh"]),
         zeta_default=_lit(defaults[naming.GRADE]),
     )
+    casadi_functions = []
+    for row in table:
+        if row.kind == "expr":
+            casadi_view, used = _function_view(table, row, forms[row.name])
+            if used:
+                raise ValueError(f"controller {shift} needs CasADi helpers {sorted(used)}")
+            casadi_functions.append(casadi_view)
+    parameters = table.model.parameters
+    casadi = CasadiControlView(
+        **vars(base),
+        functions=tuple(casadi_functions),
+        defaults=python_tuple([float_repr(float(v.default or 0.0)) for v in parameters]),
+        parameter_names=python_tuple([repr(v.name) for v in parameters]),
+        model_name_repr=repr(table.model.name),
+        sizes=tuple(
+            (
+                name,
+                python_tuple([repr(a) for a in arguments]),
+                table[name].outputs[0].size,
+            )
+            for name, arguments in CONTROL_ARGUMENTS.items()
+        ),
+    )
     return {
         base.header_name: render("c_shift_control.h.j2", view),
         base.source_name: render("c_shift_control.c.j2", view),
+        base.casadi_name: render("casadi_control.py.j2", casadi),
     }
 
 
@@ -432,6 +470,7 @@ def control_files(
     spec: ShiftSpec | None,
     obstacle: str,
     c_dir: str,
+    python_dir: str,
     progress: Callable[[str], None] | None = None,
 ) -> tuple[dict[str, str], list[str], list[str]]:
     """What ``generate`` emits of the controller of ``spec`` (the default shift, ``None`` when
@@ -452,11 +491,14 @@ def control_files(
         return {}, [], [f"`{name}`: {why}"]
     if progress is not None:
         progress(f"deriving the shift controller of {spec.name} (TCU task with its EKF)")
-    files = {f"{c_dir}/{k}": v for k, v in emit_control_files(d, spec.name).items()}
+    files = {
+        (f"{python_dir}/{k}" if k.endswith(".py") else f"{c_dir}/{k}"): v
+        for k, v in emit_control_files(d, spec.name).items()
+    }
     names = naming.model_file_names(name)
     row = (
         f"| `{name}` | power-on upshift {spec.name}: {spec.off_going} off, {spec.on_coming} on; "
         f"task with `ekf_{spec.name.replace('-', '_')}` | {c_dir}/{names['header']}, "
-        f"{c_dir}/{names['source']} |"
+        f"{c_dir}/{names['source']} | {python_dir}/{names['casadi']} (model parts) |"
     )
     return files, [row], []

@@ -760,7 +760,7 @@ def generate_tree(
     files.update(uio)
     default = next((s for s in selected_shifts(d, shifts) if s.name == DEFAULT_SHIFT), None)
     why = _estimator_obstacle(d, default) if default is not None else ""
-    control, control_rows, control_skipped = control_files(d, default, why, C_DIR, say)
+    control, control_rows, control_skipped = control_files(d, default, why, C_DIR, PYTHON_DIR, say)
     files.update(control)
     skipped.extend(control_skipped)
     say("emitting the mu map and the example")

@@ -27,7 +27,6 @@ from gearsym.validation.checks.qemu_m4 import (
     EKF_FLOOR,
     EKF_R,
     HARNESS_DIR,
-    SAME_TRIG_FLAGS,
     TARGET_FLAGS,
     _array,
     _run,
@@ -41,6 +40,7 @@ __all__ = [
     "ControlCase",
     "ControlTiming",
     "build",
+    "build_host",
     "case_header",
     "code_size",
     "control_case",
@@ -149,37 +149,39 @@ def case_header(case: ControlCase) -> str:
     )
 
 
-def build(
-    c_dir: Path, case: ControlCase, out: Path, same_trig: bool = False
-) -> tuple[Path, Path, list[Path]]:
-    """The driver with the task's sources for the mps2-an386 board and for the host (both
-    float, ``-ffp-contract=off``), each with its own C library's sinf/cosf (the harness' stand-ins
-    of ``same_trig`` hold for |a| <= 0.8 only, and the torque phase's raised cosine takes
-    cos(pi tau) up to pi); and the target objects of the task's sources alone (for their
-    sizes)."""
+def build_host(c_dir: Path, case: ControlCase, out: Path) -> Path:
+    """The driver with the task's sources for the host (float, ``-ffp-contract=off``, glibc's
+    sinf/cosf): what :func:`build` builds beside the target, without the cross tools."""
     out.mkdir(parents=True, exist_ok=True)
     (out / "control_case.h").write_text(case_header(case), encoding="utf-8")
-    sources = [c_dir / s for s in SOURCES]
-    trig = SAME_TRIG_FLAGS if same_trig else ()
-    extra = [HARNESS_DIR / "harness_trig.c"] if same_trig else []
-    driver = HARNESS_DIR / "control_driver.c"
-    elf = build_target([driver, *sources, *extra], [out, c_dir], out / "control_m4.elf", trig)
     host = out / "control_host"
     _run(
         [
             "gcc",
             *COMMON_FLAGS,
-            *trig,
             *(f"-I{d}" for d in (out, c_dir, HARNESS_DIR)),
             "-o",
             str(host),
             str(HARNESS_DIR / "host.c"),
-            str(driver),
-            *map(str, sources + extra),
+            str(HARNESS_DIR / "control_driver.c"),
+            *(str(c_dir / s) for s in SOURCES),
             "-lm",
         ],
         out,
     )
+    return host
+
+
+def build(c_dir: Path, case: ControlCase, out: Path) -> tuple[Path, Path, list[Path]]:
+    """The driver with the task's sources for the mps2-an386 board and for the host (both
+    float, ``-ffp-contract=off``), each with its own C library's sinf/cosf (the harness'
+    stand-ins of ``qemu_m4.SAME_TRIG_FLAGS`` hold for |a| <= 0.8 only, and the torque phase's
+    raised cosine takes cos(pi tau) up to pi); and the target objects of the task's sources
+    alone (for their sizes)."""
+    host = build_host(c_dir, case, out)
+    sources = [c_dir / s for s in SOURCES]
+    driver = HARNESS_DIR / "control_driver.c"
+    elf = build_target([driver, *sources], [out, c_dir], out / "control_m4.elf")
     objects = []
     for source in sources:
         obj = out / (source.stem + ".o")
