@@ -388,6 +388,25 @@ class EkfInputs:
     stick_off: str
 
 
+def _check_ekf(d: GearboxDescription, hybrid: HybridShift) -> None:
+    """The task hands the EKF (4.3) its measurements as [omega_in, omega_out, omega_wheel] and
+    its modes in the hybrid's element order: refuse an EKF laid out otherwise."""
+    from gearsym.symbolic.estimators.ekf import augmented_model
+
+    aug = augmented_model(d, hybrid.spec.name)
+    outputs = [v.name for v in aug.model.outputs]
+    wanted = [
+        f"y_{naming.speed(d.input_shaft)}",
+        f"y_{naming.speed(d.output_shaft)}",
+        f"y_{naming.WHEEL_SPEED}",
+    ]
+    if outputs != wanted or tuple(aug.elements) != tuple(hybrid.elements):
+        raise ValueError(
+            f"controller {hybrid.spec.name}: the EKF measures {outputs} with elements "
+            f"{aug.elements}; the task needs {wanted} and {hybrid.elements}"
+        )
+
+
 def emit_control_files(
     d: GearboxDescription, shift: str, config: CodegenConfig | None = None
 ) -> dict[str, str]:
@@ -405,6 +424,7 @@ def emit_control_files(
         raise ValueError(f"controller {shift} needs math functions {sorted(used_macros)}")
     macros = sorted(used_macros | {"cos", "fabs"})  # the phase logic's own calls
     spec = hybrid.spec
+    _check_ekf(d, hybrid)
     base = model_view(table)
     ekf_name = "ekf_" + shift.replace("-", "_")
     ekf_macro = macro_prefix(ekf_name)
