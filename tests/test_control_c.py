@@ -236,3 +236,17 @@ def test_the_casadi_model_parts_equal_the_c_ones(libraries) -> None:  # noqa: AN
             ours = c.evaluate(name, v, n_out)
             theirs = np.asarray(functions[name](p, v)).ravel()
             assert np.allclose(ours, theirs, rtol=1e-12, atol=1e-12 * np.max(np.abs(theirs))), name
+
+
+def test_generate_says_why_a_shift_gets_no_controller(d) -> None:  # noqa: ANN001
+    """The controller's phases are an upshift's: for a downshift, generate emits nothing and
+    says so in one line (as it does when the EKF it runs with is not emitted)."""
+    from gearsym.symbolic.codegen.control import control_files
+    from gearsym.symbolic.shifts import shift_spec
+
+    files, rows, skipped = control_files(d, shift_spec(d, "3-2"), "", "c", "python")
+    assert not files and not rows
+    assert skipped == ["`control_3_2`: the controller's phases are those of an upshift"]
+    files, rows, skipped = control_files(d, shift_spec(d, "2-3"), "no EKF here", "c", "python")
+    assert not files and skipped == ["`control_2_3`: no EKF here"]
+    assert control_files(d, None, "", "c", "python") == ({}, [], [])
