@@ -524,6 +524,20 @@ def check_tree(
         except c_check.CompileError as err:
             report.failures.append(f"compilation: {err}")
             return report
+    controllers = sorted((root / C_DIR).glob("gearsym_control_*.c"))
+    if description is not None and controllers:
+        from gearsym.validation.checks.control_check import compare_control
+
+        for path in controllers:
+            shift = "-".join(path.stem.removeprefix("gearsym_control_").split("_", 1))
+            say(f"validating the shift controller's model parts of {shift}")
+            try:
+                report.comparisons += compare_control(
+                    description, shift, root, build_dir / "control", n_points
+                )
+            except c_check.CompileError as err:
+                report.failures.append(f"compilation: {err}")
+                return report
     euio = [m for m in models if m.role == "euio" and m.shift is not None]
     if description is not None and euio:
         from gearsym.symbolic.errors import GearsymError
