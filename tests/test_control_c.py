@@ -250,3 +250,16 @@ def test_generate_says_why_a_shift_gets_no_controller(d) -> None:  # noqa: ANN00
     files, rows, skipped = control_files(d, shift_spec(d, "2-3"), "no EKF here", "c", "python")
     assert not files and skipped == ["`control_2_3`: no EKF here"]
     assert control_files(d, None, "", "c", "python") == ({}, [], [])
+
+
+def test_params_validate_accepts_the_defaults_and_names_a_bad_one(libraries) -> None:  # noqa: ANN001
+    """The vehicle's parameters are checked against the parameter records' ranges, as every
+    emitted model's are: the defaults pass, a non-positive stiffness is ERR_RANGE at its index."""
+    import ctypes
+
+    c = CShiftController(libraries[False], HEADER, "2-3", "K38", "B05", {})
+    validate = c.lib[c.prefix + "params_validate"]
+    bad = ctypes.c_int(7)
+    assert validate(ctypes.byref(c.params), ctypes.byref(bad)) == 0 and bad.value == -1
+    c.params.k_ss = 0.0
+    assert validate(ctypes.byref(c.params), ctypes.byref(bad)) == 2 and bad.value == 0

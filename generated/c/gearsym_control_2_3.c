@@ -57,7 +57,7 @@ void gearsym_control_2_3_params_default(
  * Check every parameter in struct order. Returns OK, ERR_NONFINITE (NaN or inf) or ERR_RANGE
  * (outside the range given at generation time) for the first offending parameter, and stores
  * its index (or -1) in *bad_index unless bad_index is NULL.
- * Operations: 7 isfinite, 0 cmp.
+ * Operations: 7 isfinite, 14 cmp.
  */
 int gearsym_control_2_3_params_validate(
     const gearsym_control_2_3_params *p,
@@ -69,23 +69,44 @@ int gearsym_control_2_3_params_validate(
     if (!isfinite(p->k_ss)) {
         status = GEARSYM_CONTROL_2_3_ERR_NONFINITE;
         index = 0;
+    } else if (!(p->k_ss >= GEARSYM_LIT(1.0) && p->k_ss <= GEARSYM_LIT(10000000.0))) {
+        status = GEARSYM_CONTROL_2_3_ERR_RANGE;
+        index = 0;
     } else if (!isfinite(p->d_ss)) {
         status = GEARSYM_CONTROL_2_3_ERR_NONFINITE;
+        index = 1;
+    } else if (!(p->d_ss >= GEARSYM_LIT(0.0) && p->d_ss <= GEARSYM_LIT(100000.0))) {
+        status = GEARSYM_CONTROL_2_3_ERR_RANGE;
         index = 1;
     } else if (!isfinite(p->I_wheel)) {
         status = GEARSYM_CONTROL_2_3_ERR_NONFINITE;
         index = 2;
+    } else if (!(p->I_wheel >= GEARSYM_LIT(0.01) && p->I_wheel <= GEARSYM_LIT(1000.0))) {
+        status = GEARSYM_CONTROL_2_3_ERR_RANGE;
+        index = 2;
     } else if (!isfinite(p->rho_air)) {
         status = GEARSYM_CONTROL_2_3_ERR_NONFINITE;
+        index = 3;
+    } else if (!(p->rho_air >= GEARSYM_LIT(0.5) && p->rho_air <= GEARSYM_LIT(2.0))) {
+        status = GEARSYM_CONTROL_2_3_ERR_RANGE;
         index = 3;
     } else if (!isfinite(p->c_W)) {
         status = GEARSYM_CONTROL_2_3_ERR_NONFINITE;
         index = 4;
+    } else if (!(p->c_W >= GEARSYM_LIT(0.05) && p->c_W <= GEARSYM_LIT(2.0))) {
+        status = GEARSYM_CONTROL_2_3_ERR_RANGE;
+        index = 4;
     } else if (!isfinite(p->A_front)) {
         status = GEARSYM_CONTROL_2_3_ERR_NONFINITE;
         index = 5;
+    } else if (!(p->A_front >= GEARSYM_LIT(0.1) && p->A_front <= GEARSYM_LIT(20.0))) {
+        status = GEARSYM_CONTROL_2_3_ERR_RANGE;
+        index = 5;
     } else if (!isfinite(p->f_roll)) {
         status = GEARSYM_CONTROL_2_3_ERR_NONFINITE;
+        index = 6;
+    } else if (!(p->f_roll >= GEARSYM_LIT(0.0) && p->f_roll <= GEARSYM_LIT(0.1))) {
+        status = GEARSYM_CONTROL_2_3_ERR_RANGE;
         index = 6;
     } else {
         /* every parameter finite and in range: status stays OK (MISRA C:2012 rule 15.7) */

@@ -97,13 +97,13 @@ typedef double gearsym_real;
  * gearsym_control_2_3_params_default(), check with gearsym_control_2_3_params_validate().
  */
 typedef struct gearsym_control_2_3_params {
-    gearsym_real k_ss; /* [N*m/rad]; side-shaft torsional stiffness, per shaft (2.47); default 10000.0; source: assumed (public data: 5000-15000 per side shaft) */
-    gearsym_real d_ss; /* [N*m*s/rad]; side-shaft torsional damping, per shaft (2.47); default 40.0; source: assumed (public data: 20-60 per side shaft) */
-    gearsym_real I_wheel; /* [kg*m^2]; wheel-side inertia: wheels, side shafts, half the differential (2.46); default 6.4; source: (5.4), (5.5) row 4: I_C^eff = 0.108 m_veh + 6.4 */
-    gearsym_real rho_air; /* [kg/m^3]; air density (2.49b); default 1.2; source: assumed (air at 20 degC) */
-    gearsym_real c_W; /* [1]; drag coefficient (2.49b); default 0.2782; source: (3.8) row 4: r_dyn^3 rho c_W A = 14.7/526.9 with A = 2.35 */
-    gearsym_real A_front; /* [m^2]; frontal area (2.49b); default 2.35; source: assumed (public data for this vehicle class) */
-    gearsym_real f_roll; /* [s/m]; rolling-resistance factor of the thesis' form F_r = v f_roll cos(zeta) m g (2.49a); default 0.001; source: assumed: thesis form (2.49a), F_r = v f_roll cos(zeta) m g; equals f_R = 0.010 at 10 m/s */
+    gearsym_real k_ss; /* [N*m/rad]; side-shaft torsional stiffness, per shaft (2.47); default 10000.0; range [1.0, 10000000.0]; source: assumed (public data: 5000-15000 per side shaft) */
+    gearsym_real d_ss; /* [N*m*s/rad]; side-shaft torsional damping, per shaft (2.47); default 40.0; range [0.0, 100000.0]; source: assumed (public data: 20-60 per side shaft) */
+    gearsym_real I_wheel; /* [kg*m^2]; wheel-side inertia: wheels, side shafts, half the differential (2.46); default 6.4; range [0.01, 1000.0]; source: (5.4), (5.5) row 4: I_C^eff = 0.108 m_veh + 6.4 */
+    gearsym_real rho_air; /* [kg/m^3]; air density (2.49b); default 1.2; range [0.5, 2.0]; source: assumed (air at 20 degC) */
+    gearsym_real c_W; /* [1]; drag coefficient (2.49b); default 0.2782; range [0.05, 2.0]; source: (3.8) row 4: r_dyn^3 rho c_W A = 14.7/526.9 with A = 2.35 */
+    gearsym_real A_front; /* [m^2]; frontal area (2.49b); default 2.35; range [0.1, 20.0]; source: assumed (public data for this vehicle class) */
+    gearsym_real f_roll; /* [s/m]; rolling-resistance factor of the thesis' form F_r = v f_roll cos(zeta) m g (2.49a); default 0.001; range [0.0, 0.1]; source: assumed: thesis form (2.49a), F_r = v f_roll cos(zeta) m g; equals f_R = 0.010 at 10 m/s */
 } gearsym_control_2_3_params;
 
 /* What the strategy tells the controller (Knowledge of the Python controller). */
@@ -194,7 +194,7 @@ void gearsym_control_2_3_params_default(
  * Check every parameter in struct order. Returns OK, ERR_NONFINITE (NaN or inf) or ERR_RANGE
  * (outside the range given at generation time) for the first offending parameter, and stores
  * its index (or -1) in *bad_index unless bad_index is NULL.
- * Operations: 7 isfinite, 0 cmp.
+ * Operations: 7 isfinite, 14 cmp.
  */
 int gearsym_control_2_3_params_validate(
     const gearsym_control_2_3_params *p,

@@ -58,6 +58,7 @@ from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.hybrid import HybridShift, Mode, hybrid_shift
 from gearsym.symbolic.model import Model, Variable
 from gearsym.symbolic.naming import function_prefix, macro_prefix
+from gearsym.symbolic.parameters import RECORDS
 from gearsym.symbolic.ratios import gear_ratio
 from gearsym.symbolic.shifts import ShiftSpec
 
@@ -238,8 +239,11 @@ def control_table(
     """The function table of the controller's model parts: ``params_default``,
     ``params_validate`` and one row per entry of :data:`CONTROL_ARGUMENTS`, ``<name>(p, v,
     out)``."""
-    config = as_config(config)
     hybrid, fixed, exprs, args = control_expressions(d, shift)
+    if config is None:  # the ranges params_validate enforces: the parameter records' (as generate)
+        records = {r.key: r.bounds for r in RECORDS if r.bounds is not None and r.section != "mu"}
+        config = CodegenConfig(bounds={v.name: records[v.name] for v in fixed if v.name in records})
+    config = as_config(config)
     model = Model(
         name=control_model_name(shift),
         states=(),
