@@ -65,6 +65,7 @@ from gearsym.symbolic.shifts import ShiftSpec
 __all__ = [
     "CONTROL_ARGUMENTS",
     "control_files",
+    "ekf_mismatch",
     "ControlConstant",
     "control_model_name",
     "control_table",
@@ -392,9 +393,10 @@ class EkfInputs:
     stick_off: str
 
 
-def _check_ekf(d: GearboxDescription, hybrid: HybridShift) -> None:
-    """The task hands the EKF (4.3) its measurements as [omega_in, omega_out, omega_wheel] and
-    its modes in the hybrid's element order: refuse an EKF laid out otherwise."""
+def ekf_mismatch(d: GearboxDescription, hybrid: HybridShift) -> str:
+    """Why the shift's EKF (4.3) cannot run in the task, "" when it can: the task hands it its
+    measurements as [omega_in, omega_out, omega_wheel] and its modes in the hybrid's element
+    order."""
     from gearsym.symbolic.estimators.ekf import augmented_model
 
     aug = augmented_model(d, hybrid.spec.name)
@@ -405,10 +407,11 @@ def _check_ekf(d: GearboxDescription, hybrid: HybridShift) -> None:
         f"y_{naming.WHEEL_SPEED}",
     ]
     if outputs != wanted or tuple(aug.elements) != tuple(hybrid.elements):
-        raise ValueError(
-            f"controller {hybrid.spec.name}: the EKF measures {outputs} with elements "
-            f"{aug.elements}; the task needs {wanted} and {hybrid.elements}"
+        return (
+            f"its EKF measures {', '.join(outputs)} with the elements {', '.join(aug.elements)}; "
+            f"the task hands it {', '.join(wanted)} and {', '.join(hybrid.elements)}"
         )
+    return ""
 
 
 def emit_control_files(
@@ -428,7 +431,9 @@ def emit_control_files(
         raise ValueError(f"controller {shift} needs math functions {sorted(used_macros)}")
     macros = sorted(used_macros | {"cos", "fabs"})  # the phase logic's own calls
     spec = hybrid.spec
-    _check_ekf(d, hybrid)
+    mismatch = ekf_mismatch(d, hybrid)
+    if mismatch:
+        raise ValueError(f"controller {shift}: {mismatch}")
     base = model_view(table)
     ekf_name = "ekf_" + shift.replace("-", "_")
     ekf_macro = macro_prefix(ekf_name)
@@ -511,6 +516,8 @@ def control_files(
         why = "the controller's phases are those of an upshift"
     if not why and lacking:
         why = f"{', '.join(lacking)} has no a_piston (F_N = p a_piston)"
+    if not why:
+        why = ekf_mismatch(d, hybrid_shift(d, spec.name))
     if why:
         return {}, [], [f"`{name}`: {why}"]
     if progress is not None:
