@@ -13,7 +13,7 @@ truth.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -153,7 +153,6 @@ def run_vehicle(
     model = HybridSimulator(d, plant.scenario(1.0, {}, 0.0), hybrid_shift(d, shift))
     nominal = ClutchActuator.from_calibration(d.control)
     true = ClutchActuator.from_calibration(d.control, vehicle.actuators, vehicle.fill_time_error)
-    believed = {off: nominal, on: nominal}
     actuators = {off: true, on: true}
     true_torque = float(
         vehicle.actuators.engine(point.engine) + vehicle.actuators.e_machine(point.e_machine)
@@ -180,6 +179,13 @@ def run_vehicle(
         outcomes = []
         for i in range(1, n_shifts + 1):
             knowledge = strategy.knowledge
+            # the TCU's view of its pistons: the calibration's, or the fill time it has learned
+            belief = (
+                nominal
+                if knowledge.fill_time is None
+                else replace(nominal, fill_time=knowledge.fill_time)
+            )
+            believed = {off: belief, on: belief}
             controller = make_controller(d, model, knowledge)
             log = TcuLog(TICK, shafts, friction_elements)
             result = plant.run(
@@ -196,7 +202,7 @@ def run_vehicle(
             )
             arrays = log.arrays()
             observed = observe_shift(d, model, arrays, result.phases, upshift)
-            strategy.learn(observed, log)
+            strategy.learn(observed, log, result.commands, result.phases)
             outcomes.append(
                 ShiftOutcome(
                     i,
