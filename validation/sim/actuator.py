@@ -172,6 +172,15 @@ class ClutchActuator:
             effective[k] = self._effective(fill, p)
         return ActuatorState(fill, p, valve, tuple(pending)), times, effective
 
+    def stroke_time(self, command: float) -> float:
+        """How long the piston takes to stroke from empty under a constant ``command`` (s),
+        once the dead time has passed: t_fill (p_ff − p_s) / (p_v − p_s) by the fill law;
+        infinite when the valve gives no more than the return spring."""
+        above = self.valve_pressure(command) - self.return_spring
+        if not above > 0:
+            return math.inf
+        return self.fill_time * (self.fast_fill_pressure - self.return_spring) / above
+
     def at_ticks(
         self, state: ActuatorState, commands: np.ndarray, tick: float, t0: float = 0.0
     ) -> np.ndarray:

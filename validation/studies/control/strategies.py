@@ -45,8 +45,8 @@ RULE_BAND = 0.10
 @dataclass(frozen=True)
 class TruthView:
     """What the oracle is told (and nothing else is): the vehicle's μ factors per element, its
-    mass and grade, the input torque per commanded torque, the valve's gain and offset and the
-    true fill time."""
+    mass and grade, the input torque per commanded torque, the valve's gain and offset and how
+    long its piston takes to stroke at the fast-fill command."""
 
     mu: Mapping[str, float]
     m_veh: float

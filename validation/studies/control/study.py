@@ -166,7 +166,9 @@ def run_vehicle(
         torque_gain=true_torque / point.torque,
         valve_gain=true.pressure_gain,
         valve_offset=true.pressure_offset,
-        fill_time=true.fill_time,
+        # what the fill command must last: the vehicle's piston through its own valve (a valve
+        # offset strokes it faster or slower than its fill time at the nominal fast fill)
+        fill_time=true.stroke_time(nominal.fast_fill_pressure),
     )
     ratio = {g: float(gear_ratio(d, d.gear(g)).ratio) for g in (spec.from_gear, spec.to_gear)}
     gears = (spec.from_gear, spec.to_gear)
