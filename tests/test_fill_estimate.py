@@ -99,6 +99,16 @@ def test_replay_finds_a_planted_fill_error(d, point, planted: float) -> None:  #
     found = replay.estimate(knowledge, arrays, result.commands, result.phases)
     assert found.delta == pytest.approx(planted, abs=2e-3)
     assert found.rms_assumed > 20 * max(found.rms, 1e-3)
+    assert found.explains
+
+
+def test_a_right_fill_is_kept(d, point) -> None:  # noqa: ANN001
+    """The fill the shift assumed was the truth's: the record is reproduced already, nothing
+    is left for a fill to explain, and the estimate is not taken."""
+    arrays, result = _record(d, point, 0.0)
+    found = FillReplay(d, SHIFT).estimate(_exact(d), arrays, result.commands, result.phases)
+    assert found.rms_assumed < 1e-3
+    assert not found.explains
 
 
 def test_estimator_strategy_commands_the_estimated_fill(d, point) -> None:  # noqa: ANN001

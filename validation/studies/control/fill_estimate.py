@@ -37,13 +37,19 @@ from gearsym.validation.sim.actuator import ClutchActuator
 from gearsym.validation.studies.control.closed_loop import TICK, ClosedLoopShift
 from gearsym.validation.studies.control.controller import Knowledge
 
-__all__ = ["FILL_SEARCH", "GRID_STEP", "FillEstimate", "FillReplay"]
+__all__ = ["EXPLAINS", "FILL_SEARCH", "GRID_STEP", "FillEstimate", "FillReplay"]
 
 #: The fill-time errors searched about the shift's own (s): beyond the fleet's ±50 ms and
 #: the valve offset's share.
 FILL_SEARCH = 0.06
 #: The coarse search's spacing (s): one TCU tick.
 GRID_STEP = 0.01
+#: The residual's fraction an estimate must leave to be taken (:attr:`FillEstimate.explains`),
+#: chosen on the tuning vehicles (seeds 100000 and up) of the 2-3 and 3-4 shifts.
+EXPLAINS = 0.5
+#: ... and by at least this much (rad/s, about 1 rpm: below a speed sensor's resolution an
+#: improvement is no evidence).
+EXPLAINS_FLOOR = 0.1
 #: How far past the inertia phase's commanded start the replay is compared (s): a flare shows
 #: once the off-going element is vented, one valve delay after the torque phase.
 AFTER_TORQUE_PHASE = 0.06
@@ -59,8 +65,24 @@ class FillEstimate:
     rms: float
     rms_assumed: float
 
-    def to_dict(self) -> dict[str, float]:
-        return {"delta": self.delta, "rms": self.rms, "rms_assumed": self.rms_assumed}
+    @property
+    def explains(self) -> bool:
+        """Whether the fill explains the record: the best δ at least halves the residual of
+        the fill the shift assumed, by at least :data:`EXPLAINS_FLOOR`. Otherwise what is
+        left is the model's error (μ, mass, torque), which a fill must not be fitted to; and
+        a fill already right cannot be improved on."""
+        return (
+            self.rms <= EXPLAINS * self.rms_assumed
+            and self.rms_assumed - self.rms >= EXPLAINS_FLOOR
+        )
+
+    def to_dict(self) -> dict[str, float | bool]:
+        return {
+            "delta": self.delta,
+            "rms": self.rms,
+            "rms_assumed": self.rms_assumed,
+            "explains": self.explains,
+        }
 
 
 class _Replay:

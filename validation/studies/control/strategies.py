@@ -143,7 +143,10 @@ class EstimatorStrategy(RuleStrategy):
         fill = self.replay.estimate(self.knowledge, arrays, commands, phases)
         self.fills.append(fill)
         limit = self.d.control.si("adaptation", "fill_limit")
-        fill_time = self.replay.nominal.fill_time + min(max(fill.delta, -limit), limit)
+        nominal = self.replay.nominal.fill_time
+        fill_time = self.knowledge.fill_time if self.knowledge.fill_time is not None else nominal
+        if fill.explains:
+            fill_time = nominal + min(max(fill.delta, -limit), limit)
         # ... then the pressures the TCU believes its elements pressed with, rebuilt from its
         # commands with that fill, are what the filter is told
         belief = replace(self.replay.nominal, fill_time=fill_time)
