@@ -39,6 +39,14 @@ swapping element is locked (a tie-up). A locked dog whose command is off opens w
 |T_req| ≤ ``release_torque`` (at once, or at the crossing, a state event armed only while
 the command is off); until then it holds, loaded.
 
+**Compiled C** (``compiled=True``, opt-in; the reference is CasADi's calls): each mode's
+right-hand side and continuous guards emitted as C and called through ``ctypes``
+(:mod:`~gearsym.validation.sim.compiled_c`), built once per simulator at first use. A CasADi
+call from Python costs more than a mode's arithmetic; the emitted C is the same operations in
+the same order, so the integration is the reference's up to rounding. Without a C compiler
+(:func:`~gearsym.validation.sim.compiled_c.compiler_available`) the simulator keeps CasADi's
+calls. Sensitivities (``parameters``) always run through CasADi.
+
 Beside this module: each mode compiled to CasADi (:mod:`~gearsym.validation.sim.hybrid_modes`),
 the records a run returns (:mod:`~gearsym.validation.sim.hybrid_result`) and the energy audit
 of a run (:mod:`~gearsym.validation.sim.hybrid_energy`).
@@ -70,6 +78,7 @@ from gearsym.symbolic.hybrid import (
     hybrid_shift,
 )
 from gearsym.symbolic.numeric import to_casadi
+from gearsym.validation.sim.compiled_c import CompiledFunctions, compiler_available
 from gearsym.validation.sim.hybrid_modes import CompiledMode
 from gearsym.validation.sim.hybrid_result import Event, HybridResult, Piece
 from gearsym.validation.sim.scenario import SAMPLE_TIME, Scenario, load_scenario
@@ -91,6 +100,7 @@ class HybridSimulator:
         scenario: Scenario | None = None,
         hybrid: HybridShift | None = None,
         mu: str = "map",
+        compiled: bool = False,
     ) -> None:
         if mu not in MU_MODES:
             raise ValueError(f"mu must be one of {MU_MODES}, got {mu!r}")
@@ -118,6 +128,27 @@ class HybridSimulator:
         self.zeta0 = float(zeta.default or 0.0)
         self._speeds: dict[str, Any] = {}
         self._mass: np.ndarray | None = None
+        #: the modes' right-hand sides and guards run as emitted C (module docstring); may be
+        #: switched per run (the drive's shifts: fast or reference)
+        self.compiled = compiled
+        self._compiled_c: CompiledFunctions | None = None
+
+    def compiled_functions(self) -> CompiledFunctions | None:
+        """Every mode's right-hand side and continuous guards emitted as C and compiled (built
+        once, at first use: the compile, or the cache's load, is paid only by a simulator that
+        runs compiled); None without a C compiler (the callers keep CasADi's calls)."""
+        if self._compiled_c is None and compiler_available():
+            functions = {}
+            for name, mode in self.modes.items():
+                functions[name] = mode.f
+                for k, guard in enumerate(mode.guard):
+                    functions[guard_name(name, k)] = guard
+            self._compiled_c = CompiledFunctions(functions)
+        return self._compiled_c
+
+    def _c(self) -> CompiledFunctions | None:
+        """The compiled C when this simulator runs compiled and a compiler is there, else None."""
+        return self.compiled_functions() if self.compiled else None
 
     # ------------------------------------------------------------------ inputs and parameters
 
@@ -475,10 +506,11 @@ class HybridSimulator:
                     tau_p.append(np.zeros(m))
                     mode, x, sens = target, matrix @ x, matrix @ sens
             t = ta
+            inputs = self.segment_inputs(ta, tb)
             while t < tb:
                 compiled = self.modes[mode]
                 n = compiled.n
-                fun = self._right_hand_side(compiled, indices, p)
+                fun = self._right_hand_side(compiled, indices, p, inputs)
                 functions = []
                 for index, guard in enumerate(compiled.continuous):
                     armed = guard.kind != DISENGAGEMENT or not self.commanded(
@@ -492,9 +524,10 @@ class HybridSimulator:
                         g: Any = value_of,
                         n: int = n,
                         armed: bool = armed,
+                        u_of: Any = inputs,
                     ) -> float:
                         # a dog's disengagement waits for its command to fall
-                        return g(y[:n], self.inputs(time)) if armed else 1.0
+                        return g(y[:n], u_of(time)) if armed else 1.0
 
                     event.terminal = True  # type: ignore[attr-defined]
                     event.direction = guard.direction  # type: ignore[attr-defined]
@@ -585,19 +618,43 @@ class HybridSimulator:
 
     def _guard_function(self, compiled: CompiledMode, k: int, p: np.ndarray) -> Any:
         """(x, u) → the value of the mode's k-th continuous guard, for the event functions."""
+        c = self._c()
+        if c is not None:
+            g_c = c[guard_name(compiled.mode.name, k)]
+            return lambda x, u: float(g_c(x, u, p)[0])
         g = compiled.guard[k]
         return lambda x, u: float(compiled.value(g, x, u, p)[0])
 
     def _right_hand_side(
-        self, compiled: CompiledMode, indices: tuple[int, ...], p: np.ndarray
+        self,
+        compiled: CompiledMode,
+        indices: tuple[int, ...],
+        p: np.ndarray,
+        inputs: Any = None,
     ) -> Any:
-        """(t, y) → ẏ for solve_ivp: the mode's f, or the augmented [f; ∂f/∂x S + ∂f/∂p]."""
+        """(t, y) → ẏ for solve_ivp: the mode's f, or the augmented [f; ∂f/∂x S + ∂f/∂p];
+        ``inputs``: t → u(t) (default :meth:`inputs`)."""
+        inputs = self.inputs if inputs is None else inputs
+        c = self._c()
+        if c is not None and not indices:
+            # the same arithmetic through ctypes (module docstring)
+            f = c[compiled.mode.name]
+            return lambda time, y: f(y, inputs(time), p)
         if not indices:
-            return lambda time, y: compiled.rhs(y, self.inputs(time), p)
+            return lambda time, y: compiled.rhs(y, inputs(time), p)
         augmented = compiled.augmented(indices)
-        return lambda time, y: np.asarray(
-            augmented(y, self.inputs(time), p).full(), dtype=float
-        ).ravel()
+        return lambda time, y: np.asarray(augmented(y, inputs(time), p).full(), dtype=float).ravel()
+
+    def segment_inputs(self, ta: float, tb: float) -> Any:
+        """t → u(t) inside the segment [ta, tb] between two breakpoints: :meth:`inputs`, or
+        when running compiled the same line as u(ta) + (t − ta) u̇ (every profile is linear
+        there; equal up to rounding, 1e-16 relative), one NumPy expression instead of a
+        Python call per profile: at a few µs per right-hand side, the profiles' lookup was
+        what was left to pay."""
+        if self._c() is None:
+            return self.inputs
+        start, slope = self.inputs(ta), self.input_slope(ta, tb)
+        return lambda time: start + (time - ta) * slope
 
     def shaft_speeds(self, mode: str) -> Any:
         """CasADi function x → every shaft's speed in ``mode`` (ẏ = P z, then s(y), 2.29)."""
@@ -634,16 +691,22 @@ class HybridSimulator:
         owner = np.full(len(grid), -1)
         for k, piece in enumerate(pieces):
             owner[(grid >= piece.t_start) & (grid <= piece.t_end)] = k
+        # the states piece by piece, the mode's functions once per mode over all its samples
+        # (a CasADi map per piece cost more than the arithmetic: a closed-loop shift has
+        # hundreds of pieces)
+        by_mode: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
         for k, piece in enumerate(pieces):
             index = np.flatnonzero(owner == k)
-            if index.size == 0:
-                continue
-            compiled = self.modes[piece.mode]
+            if index.size:
+                by_mode.setdefault(piece.mode, []).append((index, piece.state(grid[index])))
+        for mode, parts in by_mode.items():
+            index = np.concatenate([i for i, _ in parts])
+            y = np.concatenate([v for _, v in parts])
+            compiled = self.modes[mode]
             n = compiled.n
-            y = piece.state(grid[index])
             x = y[:, :n]
             u = self.inputs_many(grid[index])
-            speeds_of = self.shaft_speeds(piece.mode).map(len(x))
+            speeds_of = self.shaft_speeds(mode).map(len(x))
             speeds = np.asarray(speeds_of(x.T).full()).T
             names = [v.name for v in compiled.mode.model.states]
             for j, s in enumerate(shafts):
@@ -670,11 +733,16 @@ class HybridSimulator:
                 signals[str(self.hybrid.normal_force[e])][index] = u[:, 1 + j]
                 signals[str(self.hybrid.friction_coefficient[e])][index] = mu[:, j]
             for i in index:
-                modes[i] = piece.mode
+                modes[i] = mode
         w_in = signals[naming.speed(self.d.input_shaft)]
         w_out = signals[naming.speed(self.d.output_shaft)]
         signals[naming.RATIO] = w_in / np.where(w_out != 0, w_out, np.nan)
         return signals, tuple(modes), sensitivities
+
+
+def guard_name(mode: str, k: int) -> str:
+    """The name of mode ``mode``'s k-th continuous guard among a simulator's compiled C."""
+    return f"{mode}#guard{k}"
 
 
 def simulate_hybrid(
