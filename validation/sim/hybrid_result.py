@@ -40,6 +40,10 @@ class Piece:
         """The state (and the sensitivities riding along) at the times ``t``: len(t) × size."""
         if self.solution is None:
             return np.repeat(self.x_start[None, :], len(t), axis=0)
+        if len(self.solution.interpolants) == 1:
+            # one step (most of a closed loop's pieces): its interpolant, which the
+            # OdeSolution would call after a search of its segments
+            return np.asarray(self.solution.interpolants[0](t)).T
         return np.asarray(self.solution(t)).T
 
 

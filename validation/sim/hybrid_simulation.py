@@ -148,7 +148,9 @@ class HybridSimulator:
 
     def _c(self) -> CompiledFunctions | None:
         """The compiled C when this simulator runs compiled and a compiler is there, else None."""
-        return self.compiled_functions() if self.compiled else None
+        if not self.compiled or self._compiled_c is not None:
+            return self._compiled_c if self.compiled else None
+        return self.compiled_functions()
 
     # ------------------------------------------------------------------ inputs and parameters
 
@@ -534,6 +536,11 @@ class HybridSimulator:
                     functions.append(event)
                 # S rides in the same error control as x (its columns in units of x per unit p)
                 y0 = np.concatenate([x, sens.T.ravel()])
+                # compiled: the first step tried is the rest of the segment (SciPy's estimate
+                # of it is capped there and mostly is it; a step too long is rejected and
+                # shortened by the same error control), which saves the estimate's
+                # evaluation and arithmetic at each of a closed loop's many restarts
+                first = {"first_step": tb - t} if self._c() is not None else {}
                 sol = solve_ivp(
                     fun,
                     (t, tb),
@@ -543,6 +550,7 @@ class HybridSimulator:
                     atol=atol,
                     events=functions or None,
                     dense_output=True,
+                    **first,
                 )
                 if sol.status == -1:
                     raise GearsymError(
@@ -653,7 +661,8 @@ class HybridSimulator:
         what was left to pay."""
         if self._c() is None:
             return self.inputs
-        start, slope = self.inputs(ta), self.input_slope(ta, tb)
+        start = self.inputs(ta)
+        slope = (self.inputs(tb) - start) / (tb - ta)
         return lambda time: start + (time - ta) * slope
 
     def shaft_speeds(self, mode: str) -> Any:
@@ -689,7 +698,7 @@ class HybridSimulator:
                 signals[key] = np.zeros(len(grid))
         modes = [""] * len(grid)
         owner = np.full(len(grid), -1)
-        for k, piece in enumerate(pieces):
+        for k, piece in enumerate(pieces if len(grid) else ()):
             owner[(grid >= piece.t_start) & (grid <= piece.t_end)] = k
         # the states piece by piece, the mode's functions once per mode over all its samples
         # (a CasADi map per piece cost more than the arithmetic: a closed-loop shift has
