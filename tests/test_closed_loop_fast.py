@@ -8,9 +8,11 @@ error estimate over the n states, each scaled by atol + rtol |y|, is below 1: on
 local error is at most √n (rtol max|y| + atol). Over N steps (one or more per piece: the
 plant restarts at every input knot; DOP853 evaluates the right-hand side at least 11 times a
 step, so N ≤ nfev / 11) the global errors add up to at most N times that, each
-path's from the exact solution; the paths differ by at most twice it. The rewrite changes the
-arithmetic only by rounding (the same C operations as CasADi's, the inputs' line evaluated as
-u(ta) + (t − ta) u̇), far below that bound. An event located on a slip that is off by δσ
+path's from the exact solution; the paths differ by at most twice it. The fast path changes
+the arithmetic by rounding (the same C operations as CasADi's, the inputs' line evaluated as
+u(ta) + (t − ta) u̇) and, where SciPy's first-step estimate falls short of a segment, the step
+sequence (it tries the whole segment first, under the same error control); both far below
+that bound. An event located on a slip that is off by δσ
 moves by δσ / |σ̇|: the lock-up time's tolerance, σ̇ the slip rate into lock-up (the reference
 record's, its smallest over the last 5 ms before lock-up).
 """
@@ -127,3 +129,27 @@ def test_a_simulator_without_a_compiler_keeps_casadis_calls(monkeypatch) -> None
     for key in [naming.speed(s.name) for s in d.shafts] + [naming.TWIST, naming.WHEEL_SPEED]:
         bound = _bound(reference.signals[key], steps, n)
         assert np.max(np.abs(compiled.signals[key] - reference.signals[key])) <= bound, key
+
+
+def test_pieces_evaluated_together_are_each_pieces_own_values() -> None:
+    """The record's states of many one-step pieces of a mode evaluated in one expression are,
+    value for value, what each piece's dense output gives (the same operations in the same
+    order); pieces of several steps go piece by piece."""
+    from gearsym.validation.sim.hybrid_result import Piece, states_of
+    from scipy.integrate import OdeSolution
+
+    d = load_description(None)
+    result = HybridSimulator(d).run(rtol=TOLERANCE, atol=TOLERANCE)
+    modes = [p.mode for p in result.pieces]
+    mode = max(set(modes), key=modes.count)
+    pieces = [p for p in result.pieces if p.t_end > p.t_start and p.mode == mode]
+    # every step of those pieces as a one-step piece, as a closed loop's pieces mostly are
+    steps = [
+        Piece(mode, s.t_old, s.t, OdeSolution([s.t_old, s.t], [s]), p.x_start)
+        for p in pieces
+        for s in p.solution.interpolants
+    ]
+    for group in (steps, pieces):
+        times = [np.linspace(p.t_start, p.t_end, 3) for p in group]
+        expected = np.concatenate([p.state(t) for p, t in zip(group, times, strict=True)])
+        assert np.array_equal(states_of(group, times), expected)

@@ -80,7 +80,7 @@ from gearsym.symbolic.hybrid import (
 from gearsym.symbolic.numeric import to_casadi
 from gearsym.validation.sim.compiled_c import CompiledFunctions, compiler_available
 from gearsym.validation.sim.hybrid_modes import CompiledMode
-from gearsym.validation.sim.hybrid_result import Event, HybridResult, Piece
+from gearsym.validation.sim.hybrid_result import Event, HybridResult, Piece, states_of
 from gearsym.validation.sim.scenario import SAMPLE_TIME, Scenario, load_scenario
 from scipy.integrate import solve_ivp
 
@@ -697,20 +697,20 @@ class HybridSimulator:
             for key in keys:
                 signals[key] = np.zeros(len(grid))
         modes = [""] * len(grid)
-        owner = np.full(len(grid), -1)
-        for k, piece in enumerate(pieces if len(grid) else ()):
-            owner[(grid >= piece.t_start) & (grid <= piece.t_end)] = k
+        owner = _owners(pieces, grid)
         # the states piece by piece, the mode's functions once per mode over all its samples
         # (a CasADi map per piece cost more than the arithmetic: a closed-loop shift has
         # hundreds of pieces)
-        by_mode: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+        by_mode: dict[str, list[tuple[np.ndarray, Piece]]] = {}
+        order = np.argsort(owner, kind="stable")
+        bounds = np.searchsorted(owner[order], np.arange(len(pieces) + 1))
         for k, piece in enumerate(pieces):
-            index = np.flatnonzero(owner == k)
+            index = order[bounds[k] : bounds[k + 1]]
             if index.size:
-                by_mode.setdefault(piece.mode, []).append((index, piece.state(grid[index])))
+                by_mode.setdefault(piece.mode, []).append((index, piece))
         for mode, parts in by_mode.items():
             index = np.concatenate([i for i, _ in parts])
-            y = np.concatenate([v for _, v in parts])
+            y = states_of([piece for _, piece in parts], [grid[i] for i, _ in parts])
             compiled = self.modes[mode]
             n = compiled.n
             x = y[:, :n]
@@ -747,6 +747,30 @@ class HybridSimulator:
         w_out = signals[naming.speed(self.d.output_shaft)]
         signals[naming.RATIO] = w_in / np.where(w_out != 0, w_out, np.nan)
         return signals, tuple(modes), sensitivities
+
+
+def _owners(pieces: Sequence[Piece], grid: np.ndarray) -> np.ndarray:
+    """The piece each grid time is sampled from (−1: none): the last piece whose
+    [t_start, t_end] holds it, so a sample at a switch takes the later piece. Pieces follow
+    each other in time: the last one starting at or before a time is found by bisection, and
+    a time it does not hold (only where pieces overlap by rounding) by the search over all."""
+    owner = np.full(len(grid), -1)
+    if not len(grid) or not pieces:
+        return owner
+    starts = np.array([piece.t_start for piece in pieces])
+    ends = np.array([piece.t_end for piece in pieces])
+    if np.any(np.diff(starts) < 0):
+        rest = np.arange(len(grid))
+    else:
+        last = np.searchsorted(starts, grid, side="right") - 1
+        held = (last >= 0) & (grid <= ends[np.maximum(last, 0)])
+        owner[held] = last[held]
+        rest = np.flatnonzero(~held)
+    for i in rest:
+        inside = np.flatnonzero((starts <= grid[i]) & (grid[i] <= ends))
+        if inside.size:
+            owner[i] = inside[-1]
+    return owner
 
 
 def guard_name(mode: str, k: int) -> str:
