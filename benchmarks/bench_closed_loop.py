@@ -85,7 +85,7 @@ def main() -> int:
     print(f"closed-loop 2-3 upshift, {SHIFT_DURATION:g} s at 10 ms ticks, {ROUNDS} rounds")
     print(f"  fast       {spread(times['fast'])}")
     print(f"  reference  {spread(times['reference'])}")
-    print(f"  fast / reference {ratio:.3f} (pairs, {min(ratios):.3f}–{max(ratios):.3f}); ")
+    print(f"  fast / reference {ratio:.3f} (pairs, {min(ratios):.3f}–{max(ratios):.3f})")
     print(f"  {reference / fast:.1f}x faster; the first fast shift {first_fast:.2f} s")
     print(f"  target fast / reference <= {BOUND}: {'met' if ratio <= BOUND else 'MISSED'}")
     what = f"one closed-loop 2-3 upshift ({SHIFT_DURATION:g} s, 10 ms ticks)"
