@@ -43,7 +43,10 @@ the command is off); until then it holds, loaded.
 right-hand side and continuous guards emitted as C and called through ``ctypes``
 (:mod:`~gearsym.validation.sim.compiled_c`), built once per simulator at first use. A CasADi
 call from Python costs more than a mode's arithmetic; the emitted C is the same operations in
-the same order, so the integration is the reference's up to rounding. Without a C compiler
+the same order. A compiled run also evaluates a segment's inputs as one line and tries the
+rest of the segment as its first step (both in :meth:`HybridSimulator.run`), so it is the
+reference's integration up to rounding, and to the integrator's tolerance where SciPy's own
+first step would have been shorter (tests/test_closed_loop_fast.py). Without a C compiler
 (:func:`~gearsym.validation.sim.compiled_c.compiler_available`) the simulator keeps CasADi's
 calls. Sensitivities (``parameters``) always run through CasADi.
 
@@ -54,7 +57,7 @@ of a run (:mod:`~gearsym.validation.sim.hybrid_energy`).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -638,7 +641,7 @@ class HybridSimulator:
         compiled: CompiledMode,
         indices: tuple[int, ...],
         p: np.ndarray,
-        inputs: Any = None,
+        inputs: Callable[[float], np.ndarray] | None = None,
     ) -> Any:
         """(t, y) → ẏ for solve_ivp: the mode's f, or the augmented [f; ∂f/∂x S + ∂f/∂p];
         ``inputs``: t → u(t) (default :meth:`inputs`)."""
@@ -653,7 +656,7 @@ class HybridSimulator:
         augmented = compiled.augmented(indices)
         return lambda time, y: np.asarray(augmented(y, inputs(time), p).full(), dtype=float).ravel()
 
-    def segment_inputs(self, ta: float, tb: float) -> Any:
+    def segment_inputs(self, ta: float, tb: float) -> Callable[[float], np.ndarray]:
         """t → u(t) inside the segment [ta, tb] between two breakpoints: :meth:`inputs`, or
         when running compiled the same line as u(ta) + (t − ta) u̇ (every profile is linear
         there; equal up to rounding, 1e-16 relative), one NumPy expression instead of a
