@@ -21,6 +21,7 @@ import render_results
 
 #: The programs each benchmark runs, beyond Python (and the Debian package that brings them).
 NEEDS: dict[str, tuple[tuple[str, str], ...]] = {
+    "bench_closed_loop.py": (("cc", "gcc"),),
     "bench_codegen_speed.py": (("gcc", "gcc"), ("g++", "g++")),
     "bench_cortex_m4.py": (("arm-none-eabi-gcc", "gcc-arm-none-eabi"),),
     "bench_cortex_m4_qemu.py": (

@@ -251,3 +251,17 @@ def test_from_calibration_nominal_and_a_vehicle_of_the_fleet():
 def test_an_impossible_actuator_is_refused(changes):
     with pytest.raises(ValueError):
         _actuator(**changes)
+
+
+def test_stroke_time_through_a_valve_with_gain_and_offset():
+    """What the oracle's fill command must last: STROKE / (g p_cmd + p_off − p_s), here with
+    g = 0.97 and p_off = +100 mbar at the fast fill; the nominal valve gives t_fill; a valve
+    that gives no more than the spring never strokes. Cross-checked against advancing the
+    actuator to that instant (minus the dead time)."""
+    a = _actuator(pressure_gain=0.97, pressure_offset=1.0e4)
+    expected = STROKE / (0.97 * P_FF + 1.0e4 - P_S)
+    assert a.stroke_time(P_FF) == pytest.approx(expected, rel=1e-15)
+    assert _actuator().stroke_time(P_FF) == pytest.approx(T_FILL, rel=1e-15)
+    assert math.isinf(_actuator().stroke_time(P_S))
+    state, _, _ = a.advance(a.initial(False), 0.0, T_D + 0.999 * expected, P_FF)
+    assert state.fill == pytest.approx(0.999, rel=1e-12)

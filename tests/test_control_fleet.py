@@ -63,7 +63,9 @@ def test_per_shift_percentiles_and_counts() -> None:
 def test_shifts_to_converge_and_near_oracle() -> None:
     """Vehicle 0 meets the duration target from its 3rd shift on, vehicle 1 never: the median
     over two vehicles with one infinite is infinite (None). The rule's p95 jerk equals the
-    oracle's from shift 4 on (within 10 %) and its energy from shift 2: near from shift 4."""
+    oracle's from shift 4 on (within 10 %) and its energy from shift 2: near from shift 4. A
+    strategy below the oracle is as good: the fixed one at half the oracle's jerk and energy
+    is near from shift 1."""
     errors = {0: [0.5, 0.3, 0.05, 0.02, 0.01, 0.0], 1: [0.5] * 6}
     jerks = [30.0, 20.0, 15.0, 10.5, 10.0, 10.0]
     runs = [
@@ -72,13 +74,15 @@ def test_shifts_to_converge_and_near_oracle() -> None:
             "strategies": {
                 "rule": [_shift(jerks[i], 100.0, errors[k][i]) for i in range(6)],
                 "oracle": [_shift(10.0, 100.0, 0.0) for _ in range(6)],
+                "fixed": [_shift(5.0, 50.0, 0.0) for _ in range(6)],
             },
         }
         for k in (0, 1)
     ]
-    fleet = _fleet(runs, ("rule", "oracle"), 6)
+    fleet = _fleet(runs, ("rule", "oracle", "fixed"), 6)
     converge = fleet.shifts_to_converge("rule")
     assert converge["never"] == 1 and converge["median"] is None
     assert fleet.shifts_to_converge("oracle") == {"median": 1.0, "p95": 1.0, "never": 0}
     assert fleet.near_oracle("rule") == 4
     assert fleet.near_oracle("oracle") == 1
+    assert fleet.near_oracle("fixed") == 1

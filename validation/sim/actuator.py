@@ -172,6 +172,28 @@ class ClutchActuator:
             effective[k] = self._effective(fill, p)
         return ActuatorState(fill, p, valve, tuple(pending)), times, effective
 
+    def stroke_time(self, command: float) -> float:
+        """How long the piston takes to stroke from empty under a constant ``command`` (s),
+        once the dead time has passed: t_fill (p_ff − p_s) / (p_v − p_s) by the fill law;
+        infinite when the valve gives no more than the return spring."""
+        above = self.valve_pressure(command) - self.return_spring
+        if not above > 0:
+            return math.inf
+        return self.fill_time * (self.fast_fill_pressure - self.return_spring) / above
+
+    def at_ticks(
+        self, state: ActuatorState, commands: np.ndarray, tick: float, t0: float = 0.0
+    ) -> np.ndarray:
+        """The effective pressure at the start of each tick (Pa) when ``commands`` are given
+        one per ``tick`` from ``t0``, starting in ``state``: what a TCU believes its element
+        pressed with, from its own commands and this model of the actuator."""
+        out = np.empty(len(commands))
+        for k, command in enumerate(np.asarray(commands, dtype=float).tolist()):
+            out[k] = self.effective(state)
+            start = t0 + k * tick
+            state, _, _ = self.advance(state, start, start + tick, command, 1)
+        return out
+
     def _evolve(self, fill: float, p: float, valve: float, dt: float) -> tuple[float, float]:
         """Fill and chamber pressure after ``dt`` at the constant valve pressure ``valve``,
         exactly: piece by piece between the fill's completion, the pressure's crossing of the

@@ -33,7 +33,6 @@ from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
 from gearsym.symbolic.hybrid import LOCK_UP, hybrid_shift
 from gearsym.symbolic.shifts import shift_spec
-from gearsym.validation.sim.compiled_c import CompiledFunctions, compiler_available
 from gearsym.validation.sim.drive_powertrain import TorqueSplit
 from gearsym.validation.sim.hybrid_energy import energy_audit
 from gearsym.validation.sim.hybrid_simulation import HybridSimulator
@@ -119,23 +118,11 @@ class _BrakedSimulator(HybridSimulator):
 
     brake: float = 0.0
     wheel_inertia: float = 1.0
-    #: the modes' right-hand sides emitted as C (the fast drive), or None: CasADi's calls
-    compiled_c: CompiledFunctions | None = None
 
-    def _guard_function(self, compiled: Any, k: int, p: np.ndarray) -> Any:
-        if self.compiled_c is None:
-            return super()._guard_function(compiled, k, p)
-        g = self.compiled_c[guard_name(compiled.mode.name, k)]
-        return lambda x, u: float(g(x, u, p)[0])
-
-    def _right_hand_side(self, compiled: Any, indices: tuple[int, ...], p: np.ndarray) -> Any:
-        if self.compiled_c is not None and not indices:
-            # the same arithmetic through ctypes: a CasADi call from Python costs more than
-            # the mode's arithmetic (:mod:`.compiled_c`)
-            f, inputs = self.compiled_c[compiled.mode.name], self.inputs
-            base = lambda time, y: f(y, inputs(time), p)  # noqa: E731
-        else:
-            base = super()._right_hand_side(compiled, indices, p)
+    def _right_hand_side(
+        self, compiled: Any, indices: tuple[int, ...], p: np.ndarray, inputs: Any = None
+    ) -> Any:
+        base = super()._right_hand_side(compiled, indices, p, inputs)
         if self.brake == 0.0 or indices:
             return base
         names = [v.name for v in compiled.mode.model.states]
@@ -164,19 +151,6 @@ class ShiftRunner:
         self.speed_phase = d.drive.si("shift", "speed_phase")
         self.r_dyn = quantity(d, "vehicle", "r_dyn").value
         self._energy: dict[str, tuple[Any, Any]] | None = None
-        self._compiled_c: CompiledFunctions | None = None
-
-    def compiled_c(self) -> CompiledFunctions | None:
-        """Every mode's right-hand side and continuous guards emitted as C and compiled (built
-        once, at the fast drive's first use of this shift); None without a C compiler."""
-        if self._compiled_c is None and compiler_available():
-            functions = {}
-            for name, mode in self.simulator.modes.items():
-                functions[name] = mode.f
-                for k, guard in enumerate(mode.guard):
-                    functions[guard_name(name, k)] = guard
-            self._compiled_c = CompiledFunctions(functions)
-        return self._compiled_c
 
     def energy_functions(self) -> dict[str, tuple[Any, Any]]:
         """The powers and stored energies of every mode (built once, for the energy audit)."""
@@ -287,10 +261,11 @@ class ShiftRunner:
         TCU commands. ``zeta``: the grade's deviation from the parameter ζ, held over the
         shift. ``log``: the TCU's log (:class:`~gearsym.validation.sim.drive_log.TcuLog`)
         gets the shift's samples. ``fast``: the modes' right-hand sides run as compiled C
-        (:meth:`compiled_c`), the same arithmetic as the reference's CasADi calls, at
+        (:class:`~gearsym.validation.sim.hybrid_simulation.HybridSimulator`'s ``compiled``),
+        the same arithmetic as the reference's CasADi calls, at
         :data:`FAST_TOLERANCE`."""
         sim = self.simulator
-        sim.compiled_c = self.compiled_c() if fast else None
+        sim.compiled = fast
         hybrid = sim.hybrid
         x0 = state_from_speeds(sim, hybrid.from_mode, speeds, phi, omega_c)
         planned = planner.simulator
@@ -435,11 +410,6 @@ class ShiftRunner:
         symbol = self.simulator.hybrid.friction_coefficient[element]
         mu = p[self.simulator.parameter_names.index(str(symbol))]
         return 2 * e.n_disc * e.r_m.value * mu
-
-
-def guard_name(mode: str, k: int) -> str:
-    """The name of mode ``mode``'s k-th continuous guard among a runner's compiled C."""
-    return f"{mode}#guard{k}"
 
 
 def state_from_speeds(

@@ -39,6 +39,17 @@ swapping element is locked (a tie-up). A locked dog whose command is off opens w
 |T_req| ≤ ``release_torque`` (at once, or at the crossing, a state event armed only while
 the command is off); until then it holds, loaded.
 
+**Compiled C** (``compiled=True``, opt-in; the reference is CasADi's calls): each mode's
+right-hand side and continuous guards emitted as C and called through ``ctypes``
+(:mod:`~gearsym.validation.sim.compiled_c`), built once per simulator at first use. A CasADi
+call from Python costs more than a mode's arithmetic; the emitted C is the same operations in
+the same order. A compiled run also evaluates a segment's inputs as one line and tries the
+rest of the segment as its first step (both in :meth:`HybridSimulator.run`), so it is the
+reference's integration up to rounding, and to the integrator's tolerance where SciPy's own
+first step would have been shorter (tests/test_closed_loop_fast.py). Without a C compiler
+(:func:`~gearsym.validation.sim.compiled_c.compiler_available`) the simulator keeps CasADi's
+calls. Sensitivities (``parameters``) always run through CasADi.
+
 Beside this module: each mode compiled to CasADi (:mod:`~gearsym.validation.sim.hybrid_modes`),
 the records a run returns (:mod:`~gearsym.validation.sim.hybrid_result`) and the energy audit
 of a run (:mod:`~gearsym.validation.sim.hybrid_energy`).
@@ -46,7 +57,7 @@ of a run (:mod:`~gearsym.validation.sim.hybrid_energy`).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -70,8 +81,9 @@ from gearsym.symbolic.hybrid import (
     hybrid_shift,
 )
 from gearsym.symbolic.numeric import to_casadi
+from gearsym.validation.sim.compiled_c import CompiledFunctions, compiler_available
 from gearsym.validation.sim.hybrid_modes import CompiledMode
-from gearsym.validation.sim.hybrid_result import Event, HybridResult, Piece
+from gearsym.validation.sim.hybrid_result import Event, HybridResult, Piece, states_of
 from gearsym.validation.sim.scenario import SAMPLE_TIME, Scenario, load_scenario
 from scipy.integrate import solve_ivp
 
@@ -91,6 +103,7 @@ class HybridSimulator:
         scenario: Scenario | None = None,
         hybrid: HybridShift | None = None,
         mu: str = "map",
+        compiled: bool = False,
     ) -> None:
         if mu not in MU_MODES:
             raise ValueError(f"mu must be one of {MU_MODES}, got {mu!r}")
@@ -118,6 +131,29 @@ class HybridSimulator:
         self.zeta0 = float(zeta.default or 0.0)
         self._speeds: dict[str, Any] = {}
         self._mass: np.ndarray | None = None
+        #: the modes' right-hand sides and guards run as emitted C (module docstring); may be
+        #: switched per run (the drive's shifts: fast or reference)
+        self.compiled = compiled
+        self._compiled_c: CompiledFunctions | None = None
+
+    def compiled_functions(self) -> CompiledFunctions | None:
+        """Every mode's right-hand side and continuous guards emitted as C and compiled (built
+        once, at first use: the compile, or the cache's load, is paid only by a simulator that
+        runs compiled); None without a C compiler (the callers keep CasADi's calls)."""
+        if self._compiled_c is None and compiler_available():
+            functions = {}
+            for name, mode in self.modes.items():
+                functions[name] = mode.f
+                for k, guard in enumerate(mode.guard):
+                    functions[guard_name(name, k)] = guard
+            self._compiled_c = CompiledFunctions(functions)
+        return self._compiled_c
+
+    def _c(self) -> CompiledFunctions | None:
+        """The compiled C when this simulator runs compiled and a compiler is there, else None."""
+        if not self.compiled or self._compiled_c is not None:
+            return self._compiled_c if self.compiled else None
+        return self.compiled_functions()
 
     # ------------------------------------------------------------------ inputs and parameters
 
@@ -475,10 +511,11 @@ class HybridSimulator:
                     tau_p.append(np.zeros(m))
                     mode, x, sens = target, matrix @ x, matrix @ sens
             t = ta
+            inputs = self.segment_inputs(ta, tb)
             while t < tb:
                 compiled = self.modes[mode]
                 n = compiled.n
-                fun = self._right_hand_side(compiled, indices, p)
+                fun = self._right_hand_side(compiled, indices, p, inputs)
                 functions = []
                 for index, guard in enumerate(compiled.continuous):
                     armed = guard.kind != DISENGAGEMENT or not self.commanded(
@@ -492,15 +529,21 @@ class HybridSimulator:
                         g: Any = value_of,
                         n: int = n,
                         armed: bool = armed,
+                        u_of: Any = inputs,
                     ) -> float:
                         # a dog's disengagement waits for its command to fall
-                        return g(y[:n], self.inputs(time)) if armed else 1.0
+                        return g(y[:n], u_of(time)) if armed else 1.0
 
                     event.terminal = True  # type: ignore[attr-defined]
                     event.direction = guard.direction  # type: ignore[attr-defined]
                     functions.append(event)
                 # S rides in the same error control as x (its columns in units of x per unit p)
                 y0 = np.concatenate([x, sens.T.ravel()])
+                # compiled: the first step tried is the rest of the segment (SciPy's estimate
+                # of it is capped there and mostly is it; a step too long is rejected and
+                # shortened by the same error control), which saves the estimate's
+                # evaluation and arithmetic at each of a closed loop's many restarts
+                first = {"first_step": tb - t} if self._c() is not None else {}
                 sol = solve_ivp(
                     fun,
                     (t, tb),
@@ -510,6 +553,7 @@ class HybridSimulator:
                     atol=atol,
                     events=functions or None,
                     dense_output=True,
+                    **first,
                 )
                 if sol.status == -1:
                     raise GearsymError(
@@ -585,19 +629,44 @@ class HybridSimulator:
 
     def _guard_function(self, compiled: CompiledMode, k: int, p: np.ndarray) -> Any:
         """(x, u) → the value of the mode's k-th continuous guard, for the event functions."""
+        c = self._c()
+        if c is not None:
+            g_c = c[guard_name(compiled.mode.name, k)]
+            return lambda x, u: float(g_c(x, u, p)[0])
         g = compiled.guard[k]
         return lambda x, u: float(compiled.value(g, x, u, p)[0])
 
     def _right_hand_side(
-        self, compiled: CompiledMode, indices: tuple[int, ...], p: np.ndarray
+        self,
+        compiled: CompiledMode,
+        indices: tuple[int, ...],
+        p: np.ndarray,
+        inputs: Callable[[float], np.ndarray] | None = None,
     ) -> Any:
-        """(t, y) → ẏ for solve_ivp: the mode's f, or the augmented [f; ∂f/∂x S + ∂f/∂p]."""
+        """(t, y) → ẏ for solve_ivp: the mode's f, or the augmented [f; ∂f/∂x S + ∂f/∂p];
+        ``inputs``: t → u(t) (default :meth:`inputs`)."""
+        inputs = self.inputs if inputs is None else inputs
+        c = self._c()
+        if c is not None and not indices:
+            # the same arithmetic through ctypes (module docstring)
+            f = c[compiled.mode.name]
+            return lambda time, y: f(y, inputs(time), p)
         if not indices:
-            return lambda time, y: compiled.rhs(y, self.inputs(time), p)
+            return lambda time, y: compiled.rhs(y, inputs(time), p)
         augmented = compiled.augmented(indices)
-        return lambda time, y: np.asarray(
-            augmented(y, self.inputs(time), p).full(), dtype=float
-        ).ravel()
+        return lambda time, y: np.asarray(augmented(y, inputs(time), p).full(), dtype=float).ravel()
+
+    def segment_inputs(self, ta: float, tb: float) -> Callable[[float], np.ndarray]:
+        """t → u(t) inside the segment [ta, tb] between two breakpoints: :meth:`inputs`, or
+        when running compiled the same line as u(ta) + (t − ta) u̇ (every profile is linear
+        there; equal up to rounding, 1e-16 relative), one NumPy expression instead of a
+        Python call per profile: at a few µs per right-hand side, the profiles' lookup was
+        what was left to pay."""
+        if self._c() is None:
+            return self.inputs
+        start = self.inputs(ta)
+        slope = (self.inputs(tb) - start) / (tb - ta)
+        return lambda time: start + (time - ta) * slope
 
     def shaft_speeds(self, mode: str) -> Any:
         """CasADi function x → every shaft's speed in ``mode`` (ẏ = P z, then s(y), 2.29)."""
@@ -631,19 +700,25 @@ class HybridSimulator:
             for key in keys:
                 signals[key] = np.zeros(len(grid))
         modes = [""] * len(grid)
-        owner = np.full(len(grid), -1)
+        owner = _owners(pieces, grid)
+        # the states piece by piece, the mode's functions once per mode over all its samples
+        # (a CasADi map per piece cost more than the arithmetic: a closed-loop shift has
+        # hundreds of pieces)
+        by_mode: dict[str, list[tuple[np.ndarray, Piece]]] = {}
+        order = np.argsort(owner, kind="stable")
+        bounds = np.searchsorted(owner[order], np.arange(len(pieces) + 1))
         for k, piece in enumerate(pieces):
-            owner[(grid >= piece.t_start) & (grid <= piece.t_end)] = k
-        for k, piece in enumerate(pieces):
-            index = np.flatnonzero(owner == k)
-            if index.size == 0:
-                continue
-            compiled = self.modes[piece.mode]
+            index = order[bounds[k] : bounds[k + 1]]
+            if index.size:
+                by_mode.setdefault(piece.mode, []).append((index, piece))
+        for mode, parts in by_mode.items():
+            index = np.concatenate([i for i, _ in parts])
+            y = states_of([piece for _, piece in parts], [grid[i] for i, _ in parts])
+            compiled = self.modes[mode]
             n = compiled.n
-            y = piece.state(grid[index])
             x = y[:, :n]
             u = self.inputs_many(grid[index])
-            speeds_of = self.shaft_speeds(piece.mode).map(len(x))
+            speeds_of = self.shaft_speeds(mode).map(len(x))
             speeds = np.asarray(speeds_of(x.T).full()).T
             names = [v.name for v in compiled.mode.model.states]
             for j, s in enumerate(shafts):
@@ -670,11 +745,40 @@ class HybridSimulator:
                 signals[str(self.hybrid.normal_force[e])][index] = u[:, 1 + j]
                 signals[str(self.hybrid.friction_coefficient[e])][index] = mu[:, j]
             for i in index:
-                modes[i] = piece.mode
+                modes[i] = mode
         w_in = signals[naming.speed(self.d.input_shaft)]
         w_out = signals[naming.speed(self.d.output_shaft)]
         signals[naming.RATIO] = w_in / np.where(w_out != 0, w_out, np.nan)
         return signals, tuple(modes), sensitivities
+
+
+def _owners(pieces: Sequence[Piece], grid: np.ndarray) -> np.ndarray:
+    """The piece each grid time is sampled from (−1: none): the last piece whose
+    [t_start, t_end] holds it, so a sample at a switch takes the later piece. Pieces follow
+    each other in time: the last one starting at or before a time is found by bisection, and
+    a time it does not hold (only where pieces overlap by rounding) by the search over all."""
+    owner = np.full(len(grid), -1)
+    if not len(grid) or not pieces:
+        return owner
+    starts = np.array([piece.t_start for piece in pieces])
+    ends = np.array([piece.t_end for piece in pieces])
+    if np.any(np.diff(starts) < 0):
+        rest = np.arange(len(grid))
+    else:
+        last = np.searchsorted(starts, grid, side="right") - 1
+        held = (last >= 0) & (grid <= ends[np.maximum(last, 0)])
+        owner[held] = last[held]
+        rest = np.flatnonzero(~held)
+    for i in rest:
+        inside = np.flatnonzero((starts <= grid[i]) & (grid[i] <= ends))
+        if inside.size:
+            owner[i] = inside[-1]
+    return owner
+
+
+def guard_name(mode: str, k: int) -> str:
+    """The name of mode ``mode``'s k-th continuous guard among a simulator's compiled C."""
+    return f"{mode}#guard{k}"
 
 
 def simulate_hybrid(

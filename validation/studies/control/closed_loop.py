@@ -29,6 +29,8 @@ __all__ = ["ClosedLoopResult", "ClosedLoopShift", "TICK"]
 
 #: Sample time of the recorded shift (s): fine enough for the jerk.
 RECORD = 1e-3
+#: rtol = atol of the plant's integration (DOP853).
+TOLERANCE = 1e-8
 
 
 @dataclass
@@ -48,6 +50,8 @@ class ClosedLoopResult:
     t_lockup: float
     spec: Any = None
     values: dict[str, float] = field(default_factory=dict)
+    #: right-hand-side evaluations of the plant's integration (its cost; a bound on its steps)
+    nfev: int = 0
 
 
 class ClosedLoopShift:
@@ -138,6 +142,7 @@ class ClosedLoopShift:
         log: Any = None,
         t_end: float = 1.5,
         sub: int = 5,
+        reference: bool = False,
     ) -> ClosedLoopResult:
         """The shift from steady from-gear at the operating point: ``controller`` commands,
         ``actuators`` (one :class:`~gearsym.validation.sim.actuator.ClutchActuator` per
@@ -147,8 +152,16 @@ class ClosedLoopShift:
         what the TCU knows (the shaft speeds, the commanded torque, and as each swapping
         element's pressure the effective pressure its ``believed`` actuator model gives for
         the commands: the TCU's nominal model, never the vehicle's) and the truth for scoring
-        (μ of a sliding element, the grade)."""
+        (μ of a sliding element, the grade).
+
+        The plant runs compiled (the modes as emitted C, :class:`HybridSimulator`'s
+        ``compiled``) and its record is sampled once, after the last tick, from every tick's
+        pieces and the whole shift's pressures; ``reference=True`` runs the reference it is
+        checked against (tests/test_closed_loop_fast.py): CasADi's calls and each tick's record
+        sampled in its own run. The same plant, inputs and tolerances: they differ by rounding
+        and what the integrator's error control lets it grow to."""
         sim = self.simulator
+        sim.compiled = not reference
         hybrid = sim.hybrid
         off, on = self.spec.off_going, self.spec.on_coming
         states = {
@@ -175,6 +188,10 @@ class ClosedLoopShift:
         times: list[np.ndarray] = []
         modes: list[str] = []
         events: list[Any] = []
+        pieces: list[Any] = []
+        knots: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {off: [], on: []}
+        no_samples = np.empty(0)
+        nfev = 0
         for t0 in ticks:
             t1 = t0 + TICK
             speeds = np.asarray(sim.shaft_speeds(mode)(x)).ravel()
@@ -191,30 +208,48 @@ class ClosedLoopShift:
                 beliefs[e], _, _ = believed[e].advance(
                     beliefs[e], float(t0), float(t1), command[e], 1
                 )
-                states[e], knots, effective = actuators[e].advance(
+                states[e], instants, effective = actuators[e].advance(
                     states[e], float(t0), float(t1), command[e], sub
                 )
-                profiles[e] = Profile(np.asarray(knots), np.asarray(effective))
+                profiles[e] = Profile(np.asarray(instants), np.asarray(effective))
+                knots[e].append((np.asarray(instants), np.asarray(effective)))
             sim.scenario = self.scenario(float(t1), profiles, true_torque)
             grid = np.arange(t0, t1 - RECORD / 2, RECORD)
             result = sim.run(
                 self.values,
-                rtol=1e-8,
-                atol=1e-8,
+                rtol=TOLERANCE,
+                atol=TOLERANCE,
                 x0=x,
                 t_start=float(t0),
                 mode=mode,
-                t_eval=grid,
+                t_eval=grid if reference else no_samples,
             )
-            chunks.append(result.signals)
+            if reference:
+                chunks.append(result.signals)
+                modes.extend(result.modes)
             times.append(grid)
-            modes.extend(result.modes)
+            pieces.extend(result.pieces)
+            nfev += int(result.stats["nfev"])
             events.extend(result.events)
             last = result.pieces[-1]
             mode = last.mode
             n = sim.modes[mode].n
             x = last.state(np.array([last.t_end]))[0, :n]
-        signals = {k: np.concatenate([c[k] for c in chunks]) for k in chunks[0]}
+        if reference:
+            signals = {k: np.concatenate([c[k] for c in chunks]) for k in chunks[0]}
+        else:
+            # every tick's profile joined: a tick's last knot is the next one's first (the
+            # actuator's state carries over), so each tick after the first drops its first
+            whole = {
+                e: Profile(
+                    np.concatenate([knots[e][0][0]] + [t[1:] for t, _ in knots[e][1:]]),
+                    np.concatenate([knots[e][0][1]] + [v[1:] for _, v in knots[e][1:]]),
+                )
+                for e in (off, on)
+            }
+            sim.scenario = self.scenario(float(ticks[-1] + TICK), whole, true_torque)
+            signals, sampled, _ = sim._sample(pieces, np.concatenate(times), self.p)
+            modes = list(sampled)
         lock = [
             e.t
             for e in events
@@ -232,6 +267,7 @@ class ClosedLoopShift:
             t_lockup=lock[-1] if lock else float("nan"),
             spec=self.spec,
             values=dict(self.values),
+            nfev=nfev,
         )
 
 

@@ -15,8 +15,9 @@ vehicle before a shift and learns after it; only the oracle is shown the truth.
   with their covariance) and the controller's feed-forward takes its means. Its μ states are
   scales on the calibration's μ map (the map-scale form,
   :mod:`~gearsym.validation.studies.estimation.mu_map_form`): the controller's model reads the
-  same map, so the scale is what it needs. The fill, which no estimate sees, is adapted by the
-  rule's fill law.
+  same map, so the scale is what it needs. The fill, which no filter state sees, is estimated
+  by a replay of the shift's commands through the TCU's own models
+  (:mod:`.fill_estimate`): the fill time whose replayed input speed matches the measured one.
 * ``oracle``: the vehicle's true μ (the map's factor), mass, grade, torque gain, valve gain and
   offset and fill time.
 """
@@ -32,7 +33,7 @@ import numpy as np
 from gearsym.symbolic import naming
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
-from gearsym.validation.studies.control.controller import Knowledge
+from gearsym.validation.studies.control.controller import TICK, Knowledge
 
 __all__ = ["STRATEGIES", "Strategy", "TruthView", "calibration_knowledge", "make_strategy"]
 
@@ -44,8 +45,8 @@ RULE_BAND = 0.10
 @dataclass(frozen=True)
 class TruthView:
     """What the oracle is told (and nothing else is): the vehicle's μ factors per element, its
-    mass and grade, the input torque per commanded torque, the valve's gain and offset and the
-    true fill time."""
+    mass and grade, the input torque per commanded torque, the valve's gain and offset and how
+    long its piston takes to stroke at the fast-fill command."""
 
     mu: Mapping[str, float]
     m_veh: float
@@ -77,10 +78,11 @@ class Strategy:
     #: what the strategy's estimator reported after the last shift: name → (mean, σ)
     learned: dict[str, tuple[float, float]] = field(default_factory=dict)
 
-    def learn(self, observed: Any, log: Any) -> None:
+    def learn(self, observed: Any, log: Any, commands: Any = None, phases: Any = None) -> None:
         """After a shift: ``observed`` the TCU's own verdict on it
         (:class:`~.observed.Observed`: flare, tie-up and duration error from its speeds),
-        ``log`` the TCU's log of it. Never the truth's record."""
+        ``log`` the TCU's log of it, ``commands`` (element → pressure command per tick) and
+        ``phases`` (per tick) what its controller did. Never the truth's record."""
         self.history.append(self.knowledge.to_dict())
 
 
@@ -101,8 +103,8 @@ class RuleStrategy(Strategy):
             offset += step
         return min(max(offset, -limit), limit)
 
-    def learn(self, observed: Any, log: Any) -> None:
-        super().learn(observed, log)
+    def learn(self, observed: Any, log: Any, commands: Any = None, phases: Any = None) -> None:
+        super().learn(observed, log, commands, phases)
         step = self.d.control.si("adaptation", "pressure_step")
         limit = self.d.control.si("adaptation", "pressure_limit")
         offset = self.knowledge.pressure_offset
@@ -124,12 +126,36 @@ class EstimatorStrategy(RuleStrategy):
     shift: str = ""
     gears: tuple[str, str] = ("", "")
     seed: int = 0
+    replay: Any = None
+    #: the fill estimate of each shift (:class:`.fill_estimate.FillEstimate`)
+    fills: list[Any] = field(default_factory=list)
 
-    def learn(self, observed: Any, log: Any) -> None:
-        Strategy.learn(self, observed, log)
+    def learn(self, observed: Any, log: Any, commands: Any = None, phases: Any = None) -> None:
+        Strategy.learn(self, observed, log, commands, phases)
+        from gearsym.validation.studies.control.fill_estimate import FillReplay
         from gearsym.validation.studies.estimation.drive_ekf import run_drive_ekf
 
+        if self.replay is None:
+            self.replay = FillReplay(self.d, self.shift)
         arrays = log.arrays()
+        # the fill first, from the replay with what was known before this shift (the filter's
+        # μ would otherwise take the blame for a piston that pressed early or late) ...
+        fill = self.replay.estimate(self.knowledge, arrays, commands, phases)
+        self.fills.append(fill)
+        limit = self.d.control.si("adaptation", "fill_limit")
+        nominal = self.replay.nominal.fill_time
+        fill_time = self.knowledge.fill_time if self.knowledge.fill_time is not None else nominal
+        if fill.explains:
+            fill_time = nominal + min(max(fill.delta, -limit), limit)
+        # ... then the pressures the TCU believes its elements pressed with, rebuilt from its
+        # commands with that fill, are what the filter is told
+        belief = replace(self.replay.nominal, fill_time=fill_time)
+        line = self.d.drive.si("shift", "line_pressure")
+        spec = self.replay.spec
+        for element, filled in ((spec.off_going, True), (spec.on_coming, False)):
+            arrays[f"p_{element}"] = belief.at_ticks(
+                belief.initial(filled, line), commands[element], TICK
+            )
         estimates = run_drive_ekf(
             self.d,
             arrays,
@@ -158,7 +184,8 @@ class EstimatorStrategy(RuleStrategy):
             mu=mu,
             m_veh=float(estimates.mean["m_veh"][-1]),
             zeta=float(estimates.mean[naming.GRADE][-1]),
-            fill_offset=self._fill(observed),
+            fill_time=fill_time,
+            fill_offset=0.0,
         )
 
 

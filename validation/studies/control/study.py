@@ -13,7 +13,7 @@ truth.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -153,7 +153,6 @@ def run_vehicle(
     model = HybridSimulator(d, plant.scenario(1.0, {}, 0.0), hybrid_shift(d, shift))
     nominal = ClutchActuator.from_calibration(d.control)
     true = ClutchActuator.from_calibration(d.control, vehicle.actuators, vehicle.fill_time_error)
-    believed = {off: nominal, on: nominal}
     actuators = {off: true, on: true}
     true_torque = float(
         vehicle.actuators.engine(point.engine) + vehicle.actuators.e_machine(point.e_machine)
@@ -167,7 +166,9 @@ def run_vehicle(
         torque_gain=true_torque / point.torque,
         valve_gain=true.pressure_gain,
         valve_offset=true.pressure_offset,
-        fill_time=true.fill_time,
+        # what the fill command must last: the vehicle's piston through its own valve (a valve
+        # offset strokes it faster or slower than its fill time at the nominal fast fill)
+        fill_time=true.stroke_time(nominal.fast_fill_pressure),
     )
     ratio = {g: float(gear_ratio(d, d.gear(g)).ratio) for g in (spec.from_gear, spec.to_gear)}
     gears = (spec.from_gear, spec.to_gear)
@@ -180,6 +181,13 @@ def run_vehicle(
         outcomes = []
         for i in range(1, n_shifts + 1):
             knowledge = strategy.knowledge
+            # the TCU's view of its pistons: the calibration's, or the fill time it has learned
+            belief = (
+                nominal
+                if knowledge.fill_time is None
+                else replace(nominal, fill_time=knowledge.fill_time)
+            )
+            believed = {off: belief, on: belief}
             controller = make_controller(d, model, knowledge)
             log = TcuLog(TICK, shafts, friction_elements)
             result = plant.run(
@@ -196,7 +204,7 @@ def run_vehicle(
             )
             arrays = log.arrays()
             observed = observe_shift(d, model, arrays, result.phases, upshift)
-            strategy.learn(observed, log)
+            strategy.learn(observed, log, result.commands, result.phases)
             outcomes.append(
                 ShiftOutcome(
                     i,

@@ -1,0 +1,137 @@
+"""The fill-time estimate from the TCU's replay of its own commands
+(:mod:`gearsym.validation.studies.control.fill_estimate`). Expected values are planted: the
+truth is the calibration itself with a fill-time error the test chooses, so the replay with
+that error is the same physics as the record (reproduced to the integrator's tolerance) and
+the estimate must find it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from gearsym.symbolic.drivetrain import quantity
+from gearsym.symbolic.hybrid import hybrid_shift
+from gearsym.symbolic.loader import load_description
+from gearsym.symbolic.shifts import shift_spec
+from gearsym.validation.sim.actuator import ClutchActuator
+from gearsym.validation.sim.drive_log import TcuLog
+from gearsym.validation.sim.fleet import Actuators
+from gearsym.validation.sim.hybrid_simulation import HybridSimulator
+from gearsym.validation.sim.scenario import load_scenario
+from gearsym.validation.studies.control.closed_loop import TICK, ClosedLoopShift
+from gearsym.validation.studies.control.controller import Knowledge
+from gearsym.validation.studies.control.fill_estimate import FillReplay, _detrended_rms
+from gearsym.validation.studies.control.study import (
+    SHIFT_DURATION,
+    OperatingPoint,
+    Vehicle,
+    make_controller,
+    run_vehicle,
+)
+
+SHIFT = "2-3"
+
+
+@pytest.fixture(scope="module")
+def d():  # noqa: ANN201
+    return load_description(None)
+
+
+@pytest.fixture(scope="module")
+def point(d):  # noqa: ANN001, ANN201
+    return OperatingPoint.from_scenario(load_scenario(d))
+
+
+def _exact(d) -> Knowledge:  # noqa: ANN001
+    """What the truth is when the truth is the calibration: nominal μ, the description's mass,
+    level road."""
+    mu = quantity(d, "friction", "mu_nominal").value
+    hybrid = hybrid_shift(d, SHIFT)
+    return Knowledge(
+        mu={e: mu for e in hybrid.friction_elements},
+        m_veh=quantity(d, "vehicle", "m_veh").value,
+        zeta=0.0,
+    )
+
+
+def _record(d, point, fill_time_error: float):  # noqa: ANN001, ANN202
+    """One shift of the calibration vehicle whose pistons fill ``fill_time_error`` late,
+    commanded with exact knowledge of everything but the fill: the TCU's log and its
+    commands."""
+    spec = shift_spec(d, SHIFT)
+    plant = ClosedLoopShift(d, SHIFT, point.vehicle_speed)
+    model = HybridSimulator(d, plant.scenario(1.0, {}, 0.0), hybrid_shift(d, SHIFT))
+    nominal = ClutchActuator.from_calibration(d.control)
+    true = ClutchActuator.from_calibration(d.control, None, fill_time_error)
+    log = TcuLog(TICK, [s.name for s in d.shafts], list(model.hybrid.friction_elements))
+    elements = (spec.off_going, spec.on_coming)
+    result = plant.run(
+        make_controller(d, model, _exact(d)),
+        point.torque,
+        point.torque,
+        {e: true for e in elements},
+        {e: nominal for e in elements},
+        log,
+        t_end=SHIFT_DURATION,
+    )
+    return log.arrays(), result
+
+
+def test_detrending_removes_a_straight_line_and_nothing_else() -> None:
+    """Against NumPy's own least-squares polynomial fit (an independent route): a line leaves
+    nothing, a parabola leaves its residual about the best line."""
+    t = np.linspace(0.0, 0.4, 41)
+    assert _detrended_rms(3.0 - 7.0 * t, t) == pytest.approx(0.0, abs=1e-12)
+    bump = 5.0 * (t - 0.1) ** 2 + 2.0 * t
+    line = np.polyval(np.polyfit(t, bump, 1), t)
+    assert _detrended_rms(bump, t) == pytest.approx(np.sqrt(np.mean((bump - line) ** 2)))
+
+
+@pytest.mark.parametrize("planted", [0.04, -0.03])
+def test_replay_finds_a_planted_fill_error(d, point, planted: float) -> None:  # noqa: ANN001
+    """Late (+40 ms: a flare) and early (−30 ms: a tie-up). With the planted error the replay
+    is the record's own physics: its input speed agrees to the integrators' tolerance
+    (1e-8, so far under 1e-3 rad/s); the search finds the error within 2 ms, and the
+    calibration's fill explains the record much worse."""
+    arrays, result = _record(d, point, planted)
+    replay = FillReplay(d, SHIFT)
+    knowledge = _exact(d)
+    assert replay.residual(planted, knowledge, arrays, result.commands, result.phases) < 1e-3
+    found = replay.estimate(knowledge, arrays, result.commands, result.phases)
+    assert found.delta == pytest.approx(planted, abs=2e-3)
+    assert found.rms_assumed > 20 * max(found.rms, 1e-3)
+    assert found.explains
+
+
+def test_a_right_fill_is_kept(d, point) -> None:  # noqa: ANN001
+    """The fill the shift assumed was the truth's: the record is reproduced already, nothing
+    is left for a fill to explain, and the estimate is not taken."""
+    arrays, result = _record(d, point, 0.0)
+    found = FillReplay(d, SHIFT).estimate(_exact(d), arrays, result.commands, result.phases)
+    assert found.rms_assumed < 1e-3
+    assert not found.explains
+
+
+def test_estimator_strategy_commands_the_estimated_fill(d, point) -> None:  # noqa: ANN001
+    """A fill 40 ms slow: the first shift flares (physics, as the controller's own test);
+    the estimator strategy's second shift believes a fill time within 5 ms of the truth's and
+    does not flare."""
+    fill = ClutchActuator.from_calibration(d.control).fill_time
+    vehicle = Vehicle(d, {}, Actuators(), 0.04)
+    outcomes = run_vehicle(d, SHIFT, point, vehicle, 2, ("estimator",))["estimator"]
+    assert outcomes[0].quality.flare
+    assert outcomes[1].knowledge["fill_time"] == pytest.approx(fill + 0.04, abs=5e-3)
+    assert not outcomes[1].quality.flare
+
+
+def test_rebuilt_pressures_are_the_logged_ones(d, point) -> None:  # noqa: ANN001
+    """Two routes to what the TCU believes its elements pressed with: the closed loop's log
+    (its nominal actuator advanced tick by tick beside the plant) and the actuator's
+    ``at_ticks`` over the recorded commands, which the estimator uses to re-tell the filter
+    with a learned fill: equal."""
+    arrays, result = _record(d, point, 0.02)
+    spec = shift_spec(d, SHIFT)
+    nominal = ClutchActuator.from_calibration(d.control)
+    line = d.drive.si("shift", "line_pressure")
+    for element, filled in ((spec.off_going, True), (spec.on_coming, False)):
+        rebuilt = nominal.at_ticks(nominal.initial(filled, line), result.commands[element], TICK)
+        np.testing.assert_allclose(rebuilt, arrays[f"p_{element}"], rtol=0, atol=1e-6)
