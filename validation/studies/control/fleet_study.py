@@ -180,9 +180,7 @@ class ControlFleet:
 
         def close(a: dict[str, Any], b: dict[str, Any]) -> bool:
             return all(
-                a[k] is not None
-                and b[k] is not None
-                and a[k] <= (1.0 + ORACLE_MARGIN) * b[k]
+                a[k] is not None and b[k] is not None and a[k] <= (1.0 + ORACLE_MARGIN) * b[k]
                 for k in ("jerk_p95", "friction_energy_p95")
             )
 
