@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from gearsym.symbolic.drivetrain import quantity
+from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.hybrid import hybrid_shift
 from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.shifts import shift_spec
@@ -135,3 +136,22 @@ def test_rebuilt_pressures_are_the_logged_ones(d, point) -> None:  # noqa: ANN00
     for element, filled in ((spec.off_going, True), (spec.on_coming, False)):
         rebuilt = nominal.at_ticks(nominal.initial(filled, line), result.commands[element], TICK)
         np.testing.assert_allclose(rebuilt, arrays[f"p_{element}"], rtol=0, atol=1e-6)
+
+
+def test_a_fill_the_model_cannot_follow_is_no_candidate(d, point, monkeypatch) -> None:  # noqa: ANN001
+    """A replay whose simulation fails (in the fleet study once an element's break-away
+    chattered in the TCU's model) rules that fill out instead of ending the study: here every
+    early fill fails, and the planted late one is still found."""
+    arrays, result = _record(d, point, 0.04)
+    replay = FillReplay(d, SHIFT)
+    run = ClosedLoopShift.run
+
+    def failing(self, controller, torque, true_torque, actuators, *args, **kwargs):  # noqa: ANN001, ANN002, ANN003, ANN202
+        if next(iter(actuators.values())).fill_time < replay.nominal.fill_time:
+            raise GearsymError("<replay>", "scenario", "chattering break-away")
+        return run(self, controller, torque, true_torque, actuators, *args, **kwargs)
+
+    monkeypatch.setattr(ClosedLoopShift, "run", failing)
+    assert replay.residual(-0.02, _exact(d), arrays, result.commands, result.phases) == np.inf
+    found = replay.estimate(_exact(d), arrays, result.commands, result.phases)
+    assert found.delta == pytest.approx(0.04, abs=2e-3) and found.explains

@@ -25,6 +25,7 @@ absorbed into δ, which is what the fill command must correct.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
@@ -32,6 +33,7 @@ import numpy as np
 from gearsym.symbolic import naming
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
+from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.shifts import shift_spec
 from gearsym.validation.sim.actuator import ClutchActuator
 from gearsym.validation.studies.control.closed_loop import TICK, ClosedLoopShift
@@ -154,14 +156,19 @@ class FillReplay:
         believed = replace(self.nominal, fill_time=fill_time)
         elements = (plant.spec.off_going, plant.spec.on_coming)
         torque = float(log["T_In_cmd"][0])
-        result = plant.run(
-            _Replay(commands, phases),
-            torque,
-            knowledge.torque_gain * torque,
-            {e: believed for e in elements},
-            {e: self.nominal for e in elements},
-            t_end=n * TICK,
-        )
+        try:
+            result = plant.run(
+                _Replay(commands, phases),
+                torque,
+                knowledge.torque_gain * torque,
+                {e: believed for e in elements},
+                {e: self.nominal for e in elements},
+                t_end=n * TICK,
+            )
+        except GearsymError:
+            # the TCU's model cannot follow this fill (e.g. an element's break-away chatters
+            # in its model): that fill does not explain the record, the others are tried
+            return math.inf
         every = int(round(TICK / float(result.t[1] - result.t[0])))
         replayed = result.signals[naming.speed(self.d.input_shaft)][::every][:n]
         return _detrended_rms(measured[: len(replayed)] - replayed, t[: len(replayed)])
