@@ -23,12 +23,12 @@ from gearsym.validation.checks.control_c import CShiftController, build_control_
 
 __all__ = ["RANGES", "compare_control"]
 
-#: Sampling range of each argument (SI units): speeds, torque, mass, grade, forces, μ.
+#: Sampling range of each argument (SI units): speeds, torque, grade, forces, μ; the mass is
+#: sampled within its prior's ±σ about the description's (:func:`_ranges`).
 RANGES: dict[str, tuple[float, float]] = {
     "omega_in": (50.0, 400.0),
     "omega_out": (20.0, 150.0),
     "T_In": (20.0, 400.0),
-    "m_veh": (1500.0, 2500.0),
     "zeta": (-0.1, 0.1),
     "F_last": (0.0, 1e4),
     "mu_last": (0.08, 0.16),
@@ -68,6 +68,17 @@ def _conditioned(
     return out
 
 
+def _ranges(d: Any) -> dict[str, tuple[float, float]]:
+    """:data:`RANGES` and m_veh within the parameter record's prior σ of the description's."""
+    from gearsym.symbolic.drivetrain import quantity
+    from gearsym.symbolic.parameters import record
+
+    mass = quantity(d, "vehicle", "m_veh").value
+    sigma = record("m_veh").prior_sigma
+    assert sigma is not None, "m_veh's parameter record states its prior sigma"
+    return {**RANGES, "m_veh": (mass * (1.0 - sigma), mass * (1.0 + sigma))}
+
+
 def compare_control(
     d: Any, shift: str, root: Path, build_dir: Path, n_points: int = 1000, seed: int = 0
 ) -> list[c_check.ComparisonReport]:
@@ -78,10 +89,11 @@ def compare_control(
     rng = np.random.default_rng(seed)
     name = shift.replace("-", "_")
     c_dir = root / "c"
+    ranges = _ranges(d)
     points = {
         f: rng.uniform(
-            [RANGES[a][0] for a in arguments],
-            [RANGES[a][1] for a in arguments],
+            [ranges[a][0] for a in arguments],
+            [ranges[a][1] for a in arguments],
             (n_points, len(arguments)),
         )
         for f, arguments in CONTROL_ARGUMENTS.items()
