@@ -26,7 +26,7 @@ KINDS: tuple[tuple[str, Callable[[dict[str, Any], str], str], str], ...] = (
     ("montecarlo_*.md", monte_carlo_markdown, "--runs"),
     ("uio_*.md", uio_markdown, "--filter uio"),
     ("drive_*.md", drive_markdown, "drive --cycle"),
-    ("control_*.md", control_markdown, "control --fleet"),
+    ("control_*.md", control_markdown, "--fleet"),
 )
 
 TABLES = [
@@ -77,7 +77,8 @@ EXPECTED = {
     "drive_wltc3b.md": "drive.md",
     "drive_wltc3b_fleet_10000.md": "drive.md",
     "control_2_3.md": "control.md",
-    "control_2_3_fill_known.md": "control.md",
+    "control_2_3_cold.md": "control.md",
+    "control_3_4.md": "control.md",
 }
 
 
