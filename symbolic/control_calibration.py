@@ -37,7 +37,36 @@ from typing import Any
 
 from gearsym.symbolic.drive_calibration import Entry
 
-__all__ = ["ControlCalibration", "Entry", "default_control", "parse_control_table"]
+__all__ = [
+    "HOLD_AFTER_FILL",
+    "HOLD_LINE",
+    "RAMP_FRACTION",
+    "SECANT_FORCE_MIN",
+    "TICK",
+    "TIMEOUT_FACTOR",
+    "TO_LINE",
+    "ControlCalibration",
+    "Entry",
+    "default_control",
+    "parse_control_table",
+]
+
+# The shift controller's fixed numbers (not calibration: the phases' structure), one place
+# for the Python controller (validation/studies/control/controller.py) and the emitted C
+# task (symbolic/codegen/control.py).
+#: The TCU task's period (s): commands change only at its ticks.
+TICK = 0.01
+#: Fill hold after the fast fill (s) before the torque phase starts.
+HOLD_AFTER_FILL = 0.03
+#: Ramp to line pressure and hold after lock-up (s).
+TO_LINE = 0.1
+HOLD_LINE = 0.1
+#: The inertia phase gives up on its target after this many target durations.
+TIMEOUT_FACTOR = 2.0
+#: Fraction of the inertia phase over which the slip acceleration ramps in and out.
+RAMP_FRACTION = 0.25
+#: The least F₁ of the inertia phase feed-forward's secant (N).
+SECANT_FORCE_MIN = 1e3
 
 _DEFAULT = "gearsym default (assumed; the description states none)"
 

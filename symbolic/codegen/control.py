@@ -51,6 +51,15 @@ from gearsym.symbolic.codegen.table import (
     real_symbols,
 )
 from gearsym.symbolic.codegen.views import ModelView, model_view
+from gearsym.symbolic.control_calibration import (
+    HOLD_AFTER_FILL,
+    HOLD_LINE,
+    RAMP_FRACTION,
+    SECANT_FORCE_MIN,
+    TICK,
+    TIMEOUT_FACTOR,
+    TO_LINE,
+)
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import element_short_name, quantity
 from gearsym.symbolic.dynamics import gearbox_dynamics
@@ -72,16 +81,6 @@ __all__ = [
     "emit_control_files",
 ]
 
-#: The controller task's period (s), as ``validation/studies/control/controller.py`` TICK.
-TICK = 0.01
-#: The phase logic's fixed numbers (same names and values as the Python controller's).
-HOLD_AFTER_FILL = 0.03
-TO_LINE = 0.1
-HOLD_LINE = 0.1
-TIMEOUT_FACTOR = 2.0
-RAMP_FRACTION = 0.25
-#: The least F₁ of the feed-forward's secant (N).
-SECANT_FORCE_MIN = 1e3
 
 #: The strategy's values the expressions take as arguments (the rest of the parameters are
 #: the vehicle's fixed ones, in the params struct).

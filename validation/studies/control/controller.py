@@ -44,6 +44,15 @@ from typing import Any
 
 import numpy as np
 from gearsym.symbolic import naming
+from gearsym.symbolic.control_calibration import (
+    HOLD_AFTER_FILL,
+    HOLD_LINE,
+    RAMP_FRACTION,
+    SECANT_FORCE_MIN,
+    TICK,
+    TIMEOUT_FACTOR,
+    TO_LINE,
+)
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
 from gearsym.symbolic.errors import GearsymError
@@ -60,17 +69,6 @@ __all__ = [
 ]
 
 PHASES = ("fill", "torque", "inertia", "lockup", "done")
-#: The TCU task's period (s): commands change only at its ticks.
-TICK = 0.01
-#: Fill hold after the fast fill (s) before the torque phase starts.
-HOLD_AFTER_FILL = 0.03
-#: Ramp to line pressure and hold after lock-up (s).
-TO_LINE = 0.1
-HOLD_LINE = 0.1
-#: The inertia phase gives up on its target after this many target durations.
-TIMEOUT_FACTOR = 2.0
-#: Fraction of the inertia phase over which the slip acceleration ramps in and out.
-RAMP_FRACTION = 0.25
 
 
 def shift_direction(d: GearboxDescription, spec: ShiftSpec) -> str:
@@ -360,7 +358,7 @@ class ShiftController:
             self._t_lock = t
             return self._lockup(t)
         target = self._target
-        f1 = max(self._plan.carry_on if self._plan else 0.0, 1e3)
+        f1 = max(self._plan.carry_on if self._plan else 0.0, SECANT_FORCE_MIN)
         r0, r1 = self._slip_rates(sliding, x, torque, j_on, j_on, f1)
         wanted = target.rate(tau + self.lead)
         feed_forward = self._last_force if r1 == r0 else (wanted - r0) / (r1 - r0) * f1
