@@ -23,6 +23,7 @@ def cmd_control(args: argparse.Namespace) -> int:
     """Run the study; print the comparison (or ``--json``) and write control.json,
     control.md, runs.json, sequence.png and shift.png to ``--out``."""
     import json
+    import sys
 
     from gearsym.cmd_dynamics import ProgressBar
     from gearsym.symbolic.errors import GearsymError
@@ -98,6 +99,11 @@ def cmd_control(args: argparse.Namespace) -> int:
             )
         finally:
             bar.done()
+        for failed in result.failed:
+            print(
+                f"warning: vehicle {failed['seed']} failed and is left out: {failed['reason']}",
+                file=sys.stderr,
+            )
         data = {"gearbox": d.name, "command": command, **result.to_dict()}
         data["calibration"] = d.control.to_dict()
         (out.path / "control.json").write_text(json.dumps(data, indent=2) + "\n")

@@ -86,3 +86,50 @@ def test_shifts_to_converge_and_near_oracle() -> None:
     assert fleet.near_oracle("rule") == 4
     assert fleet.near_oracle("oracle") == 1
     assert fleet.near_oracle("fixed") == 1
+
+
+def test_a_failing_vehicle_is_reported_and_left_out_of_the_statistics() -> None:
+    """A vehicle whose simulation failed carries no shifts: the statistics are the others',
+    the JSON names it with its reason and the Markdown says so above the table."""
+    from gearsym.validation.studies.control.report import control_markdown
+
+    ok = {"seed": 0, "vehicle": {}, "strategies": {"fixed": [_shift(4.0, 100.0, 0.0)]}}
+    failed = {"seed": 1, "vehicle": {}, "failed": "scenario: more than 200 mode switches"}
+    fleet = _fleet([ok, failed], ("fixed",), 1)
+    (row,) = fleet.per_shift("fixed")
+    assert row["jerk_p95"] == 4.0 and row["friction_energy_p95"] == 100.0
+    data = fleet.to_dict()
+    assert data["vehicles"] == 1 and data["seeds"] == [0]
+    assert data["vehicles_failed"] == [{"seed": 1, "reason": failed["failed"]}]
+    text = control_markdown(data, "gearsym control --fleet")
+    assert "1 more vehicle(s) failed" in text and "seed 1: scenario: more than 200" in text
+
+
+def test_a_simulation_failure_ends_the_vehicle_not_the_fleet(monkeypatch) -> None:
+    """control_vehicle turns the hybrid simulation's GearsymError into a failed vehicle; a
+    fleet where every vehicle failed is an error, not an empty table."""
+    from gearsym.symbolic.errors import GearsymError
+    from gearsym.validation.studies.control import fleet_study, study
+
+    def broken(*_args, **_kwargs):
+        raise GearsymError("scenario.toml", "scenario", "hybrid integration failed at t = 1 s")
+
+    class Draw:
+        def to_dict(self) -> dict:
+            return {"seed": 7}
+
+    class Fleet:
+        name = "test"
+
+        def draw(self, seed: int) -> Draw:
+            return Draw()
+
+    monkeypatch.setattr(study, "run_vehicle", broken)
+    monkeypatch.setattr(study.Vehicle, "from_draw", classmethod(lambda cls, d, draw: None))
+    point = OperatingPoint(8.0, 120.0, 30.0)
+    context = fleet_study.ControlContext(None, "2-3", point, Fleet(), ("fixed",), 2)
+    out = fleet_study.control_vehicle(context, 7)
+    assert out["seed"] == 7 and "hybrid integration failed" in out["failed"]
+    assert "strategies" not in out
+    with pytest.raises(GearsymError, match="every vehicle failed"):
+        fleet_study.run_control_fleet(None, "2-3", point, Fleet(), [7, 8], ("fixed",), 2)

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 from gearsym.symbolic.description import GearboxDescription
+from gearsym.symbolic.errors import GearsymError
 from gearsym.validation.studies.control.study import OperatingPoint
 
 __all__ = ["ControlContext", "ControlFleet", "control_vehicle", "run_control_fleet"]
@@ -64,23 +65,29 @@ def _trace(record: Any, d: GearboxDescription) -> dict[str, list[float]]:
 
 def control_vehicle(context: ControlContext, seed: int) -> dict[str, Any]:
     """One vehicle ``seed`` of the fleet: every strategy's sequence of shifts (the sensors'
-    noise of the estimator from the same seed)."""
+    noise of the estimator from the same seed). A vehicle whose simulation the model cannot
+    carry through (a :class:`~gearsym.symbolic.errors.GearsymError` of the hybrid simulation:
+    chattering, a failed integration) is returned with ``"failed"``, its reason, and no
+    shifts: the fleet goes on and reports it (:attr:`ControlFleet.failed`)."""
     from gearsym.validation.studies.control.study import Vehicle, run_vehicle
 
     d = context.description
     draw = context.fleet.draw(seed)
     vehicle = Vehicle.from_draw(d, draw)
     keep = seed == context.trace_seed
-    outcomes = run_vehicle(
-        d,
-        context.shift,
-        context.point,
-        vehicle,
-        context.n_shifts,
-        context.strategies,
-        seed=seed,
-        keep_records=keep,
-    )
+    try:
+        outcomes = run_vehicle(
+            d,
+            context.shift,
+            context.point,
+            vehicle,
+            context.n_shifts,
+            context.strategies,
+            seed=seed,
+            keep_records=keep,
+        )
+    except GearsymError as err:
+        return {"seed": seed, "vehicle": draw.to_dict(), "failed": str(err)}
     out: dict[str, Any] = {
         "seed": seed,
         "vehicle": draw.to_dict(),
@@ -118,6 +125,16 @@ class ControlFleet:
     fleet_name: str
     traces: dict[str, Any] = field(default_factory=dict)
 
+    @property
+    def completed(self) -> list[dict[str, Any]]:
+        """The vehicles whose every strategy's sequence ran (the statistics are theirs)."""
+        return [r for r in self.runs if "failed" not in r]
+
+    @property
+    def failed(self) -> list[dict[str, Any]]:
+        """The vehicles the simulation could not carry through: seed and reason."""
+        return [{"seed": r["seed"], "reason": r["failed"]} for r in self.runs if "failed" in r]
+
     def per_shift(self, strategy: str) -> list[dict[str, Any]]:
         """Per shift index: mean and p95 of peak |jerk| (m/s³), p95 of the VDV (m/s^1.75),
         of |duration error| (relative; a shift that never locked counts as not met) and of
@@ -127,7 +144,7 @@ class ControlFleet:
         the to-gear's steady torque, and how many shifts failed."""
         out = []
         for i in range(self.n_shifts):
-            shifts = [r["strategies"][strategy][i] for r in self.runs]
+            shifts = [r["strategies"][strategy][i] for r in self.completed]
             jerks = [s["peak_jerk"] for s in shifts]
             errors = [
                 abs(s["duration_error"]) if np.isfinite(s["duration_error"]) else np.inf
@@ -158,7 +175,7 @@ class ControlFleet:
         from gearsym.validation.studies.control.quality import shifts_to_converge
 
         counts = []
-        for r in self.runs:
+        for r in self.completed:
             errors = [s["duration_error"] for s in r["strategies"][strategy]]
             k = shifts_to_converge(errors)
             counts.append(np.inf if k is None else float(k))
@@ -199,8 +216,9 @@ class ControlFleet:
                 "e_machine_Nm": self.point.e_machine,
             },
             "fleet": self.fleet_name,
-            "vehicles": len(self.runs),
-            "seeds": [r["seed"] for r in self.runs],
+            "vehicles": len(self.completed),
+            "seeds": [r["seed"] for r in self.completed],
+            "vehicles_failed": self.failed,
             "shifts_per_vehicle": self.n_shifts,
             "strategies": {
                 name: {
@@ -234,6 +252,13 @@ def run_control_fleet(
     from gearsym.validation.studies.dask_runner import run_each
 
     runs = run_each(control_vehicle, context, list(seeds), scheduler, workers, WHERE, progress)
+    if runs and all("failed" in r for r in runs):
+        first = runs[0]
+        raise GearsymError(
+            "control",
+            "--seed",
+            f"every vehicle failed ({len(runs)}); vehicle {first['seed']}: {first['failed']}",
+        )
     traces = runs[0].pop("traces", {}) if runs else {}
     return ControlFleet(
         shift,

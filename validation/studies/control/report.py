@@ -41,6 +41,18 @@ def _f(value: Any, digits: int = 3) -> str:
     return "—" if value is None else f"{value:.{digits}g}"
 
 
+def _failed_lines(data: dict[str, Any]) -> list[str]:
+    """A line per vehicle the simulation could not carry through (left out of every
+    statistic below)."""
+    failed = data.get("vehicles_failed") or []
+    if not failed:
+        return []
+    return [
+        f"- **{len(failed)} more vehicle(s) failed** and are left out of every number below:",
+        *(f"  - seed {f['seed']}: {f['reason']}" for f in failed),
+    ]
+
+
 def control_markdown(data: dict[str, Any], command: str) -> str:
     """The study's comparison table for the documentation."""
     point = data["operating_point"]
@@ -54,6 +66,7 @@ def control_markdown(data: dict[str, Any], command: str) -> str:
         f"{data['shifts_per_vehicle']} times in a row per strategy from "
         f"{point['vehicle_speed_m_s']:.1f} m/s with {point['engine_Nm']:.0f} + "
         f"{point['e_machine_Nm']:.0f} N·m commanded",
+        *_failed_lines(data),
         "- the truth per vehicle: the fleet's mass, grade, inertias, stiffness, μ factor (the "
         "μ reset), engine and e-machine torque errors, valve gain and offset, fill-time error; "
         "the TCU knows the calibration and what it measures; only the oracle is told the truth",
