@@ -465,6 +465,7 @@ def ekf_update(
     p: Sequence[float],
     relative: Sequence[float],
     floor: Sequence[float],
+    consider: Sequence[int] = (),
 ) -> tuple[np.ndarray, np.ndarray, float, int]:
     """Measurement update, one output at a time (R is diagonal, (3.26)), Joseph form.
 
@@ -473,7 +474,10 @@ def ekf_update(
     "consider" state: it still correlates, but is not corrected), z += k ν and
     P = (I − k h_i) P (I − k h_i)ᵀ + R_i k kᵀ. The Joseph form is the covariance of *any* gain,
     so the zeroed entries keep P exact; a frozen state's row of I − k h_i is a unit row, so its
-    variance is unchanged to the bit. A NaN (or infinite) measurement is skipped.
+    variance is unchanged to the bit. ``consider``: further state indices held the same way in
+    this update (a μ whose element's mode is in doubt,
+    :func:`~gearsym.symbolic.estimators.ekf_modes.ambiguous_mu`). A NaN (or infinite)
+    measurement is skipped.
     Returns (z, P, NIS = Σ ν²/s over the used outputs, number of outputs used); sequential
     innovations of a diagonal R are independent, so this NIS is the batch one.
     """
@@ -481,7 +485,7 @@ def ekf_update(
 
     z = np.array(z, dtype=float)
     P = np.array(P, dtype=float)
-    frozen = discrete.aug.frozen_states(u)
+    frozen = sorted({*discrete.aug.frozen_states(u), *consider})
     nis, used = 0.0, 0
     n = len(z)
     for i, measured in enumerate(y):

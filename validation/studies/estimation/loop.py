@@ -261,12 +261,14 @@ def filter_run(
     truth's); "filter" starts in the from-gear and, after each update, lets
     :func:`~gearsym.symbolic.estimators.ekf_modes.ekf_mode_update` decide the modes held over
     the next interval from the posterior, the measured speeds' estimate and F_N (a lock-up
-    maps z and P through the hybrid model's state map). The estimate, σ and NEES recorded at
-    a sample are the update's; a switch decided there acts from the next prediction on (at a
-    lock-up the mapped covariance is singular in the slip until the prediction adds its
-    model error)."""
+    maps z and P through the hybrid model's state map); a μ whose element it holds sliding
+    but whose estimated slip is within two σ of zero is not corrected in that update
+    (:func:`~gearsym.symbolic.estimators.ekf_modes.ambiguous_mu`). The estimate, σ and NEES
+    recorded at a sample are the update's; a switch decided there acts from the next
+    prediction on (at a lock-up the mapped covariance is singular in the slip until the
+    prediction adds its model error)."""
     from gearsym.symbolic.estimators.ekf import ekf_predict, ekf_update
-    from gearsym.symbolic.estimators.ekf_modes import ekf_mode_update
+    from gearsym.symbolic.estimators.ekf_modes import ambiguous_mu, ekf_mode_update
 
     s = setup
     t, names, n = s.t, s.names, len(s.names)
@@ -321,8 +323,10 @@ def filter_run(
             z, P = ekf_predict(s.discrete, z, P, u_before, sample_time, s.p, s.q)
         if form is not None:
             u_now = form(z, u_now)
+        # a μ whose element may already stick is not corrected (ambiguous_mu)
+        consider = [] if logic is None else ambiguous_mu(logic, z, P, u_now, s.p, modes)
         z, P, nis[k], nis_dof[k] = ekf_update(
-            s.discrete, z, P, u_now, first if k == 0 else y[k], s.p, s.relative, s.floor
+            s.discrete, z, P, u_now, first if k == 0 else y[k], s.p, s.relative, s.floor, consider
         )
         estimates[k] = z
         sigmas[k] = np.sqrt(np.diag(P))
