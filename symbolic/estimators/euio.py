@@ -466,8 +466,12 @@ def euio_step_full(
     q: np.ndarray,
     e: np.ndarray,
     held: Sequence[int],
+    consider: Sequence[int] = (),
 ) -> EuioStep:
-    """:func:`euio_step` with the NIS of :class:`EuioStep` (NaN, dof 0, without an update)."""
+    """:func:`euio_step` with the NIS of :class:`EuioStep` (NaN, dof 0, without an update).
+    ``consider``: further states not corrected in this update but, unlike ``held``, still
+    given their process noise (a μ whose element's mode is in doubt,
+    :func:`~gearsym.symbolic.estimators.ekf_modes.ambiguous_mu`)."""
     import numpy as np
 
     z_pred, F = discrete.step(z, u_prev, h, p)
@@ -490,7 +494,7 @@ def euio_step_full(
     d_hat = float(m @ nu)
     K = P_pred @ C.T @ rt_inv
     L = K @ (np.eye(len(y)) - np.outer(ce, m)) + np.outer(ed, m)
-    L[list(held), :] = 0.0
+    L[sorted({*held, *consider}), :] = 0.0
     z_new = z_pred + L @ nu
     A = np.eye(len(z)) - L @ C
     P_new = A @ P_pred @ A.T + L @ np.diag(R) @ L.T

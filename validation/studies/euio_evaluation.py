@@ -207,9 +207,11 @@ def euio_filter_run(
     F_N; a lock-up maps z and P through the hybrid model's state map) decide after each
     sample the modes held over the next interval, with the held mask of that mode combination
     (:meth:`EuioSetup.held_for_modes`), as
-    :func:`~gearsym.validation.studies.estimation.loop.filter_run` does for the EKF. The estimate
+    :func:`~gearsym.validation.studies.estimation.loop.filter_run` does for the EKF, including
+    its rule for a mode in doubt (:func:`~gearsym.symbolic.estimators.ekf_modes.ambiguous_mu`,
+    judged on the posterior before each step). The estimate
     and NEES recorded at a sample are the update's."""
-    from gearsym.symbolic.estimators.ekf_modes import ekf_mode_update
+    from gearsym.symbolic.estimators.ekf_modes import ambiguous_mu, ekf_mode_update
     from gearsym.symbolic.estimators.euio import euio_step_full, load_column
 
     s = setup.ekf
@@ -255,7 +257,12 @@ def euio_filter_run(
             held[k, hold] = True
             R = (s.relative * np.maximum(np.abs(y[k]), s.floor)) ** 2
             e = load_column(discrete, z, setup.r_dyn, setup.p, setup.i_wheel)
-            step = euio_step_full(discrete, z, P, u_before, u_now, y[k], R, h, setup.p, q, e, hold)
+            # a μ whose element may already have locked up is not corrected (judged on the
+            # posterior before the step, which predicts inside)
+            consider = [] if logic is None else ambiguous_mu(logic, z, P, s.u[k], setup.p, modes)
+            step = euio_step_full(
+                discrete, z, P, u_before, u_now, y[k], R, h, setup.p, q, e, hold, consider
+            )
             z, P = step.z, step.P
             load[k], load_sigma[k] = step.d_hat, step.sigma_d
             nis[k], nis_dof[k] = step.nis, step.nis_dof
