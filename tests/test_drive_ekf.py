@@ -170,3 +170,29 @@ def test_the_filter_s_lock_ups_follow_the_plant_s(description, drive, estimates)
         assert abs(filter_lock - truth_lock) <= 0.05 + 1e-9, (record.name, truth_lock, filter_lock)
         checked += 1
     assert checked >= 3
+
+
+def test_the_grade_rms_error_by_hand():
+    """The grade's RMS error over the drive and from 60 s on, against a hand computation: an
+    estimate 0.03 rad off for the first 60 s and 0.01 rad off after, on a 120 s record at
+    1 s: RMS √((60·0.03² + 60·0.01²)/120) = √5 · 0.01 over all, 0.01 from 60 s on."""
+    from gearsym.validation.studies.estimation.drive_ekf import GRADE_RMS_FROM, DriveEstimates
+
+    t = np.arange(120.0)
+    truth = np.full(len(t), 0.02)
+    mean = truth + np.where(t < 60.0, 0.03, -0.01)
+    est = DriveEstimates(
+        t=t,
+        mean={"zeta": mean},
+        sigma={"zeta": np.full(len(t), 0.01)},
+        truth={"zeta": truth},
+        nees=np.zeros(len(t)),
+        nis=np.zeros(len(t)),
+        nis_dof=np.zeros(len(t)),
+        held=0,
+    )
+    assert GRADE_RMS_FROM == 60.0
+    rms = est.rms_error("zeta", GRADE_RMS_FROM)
+    assert rms["all"] == pytest.approx(np.sqrt(5.0) * 0.01)
+    assert rms["after_60"] == pytest.approx(0.01)
+    assert est.to_dict()["zeta"]["rms_rad"] == rms

@@ -96,6 +96,11 @@ def test_cli_fleet_json(tmp_path):
         assert (out / name).exists()
     header = (out / "fleet.md").read_text(encoding="utf-8").splitlines()[0]
     assert "`gearsym drive --cycle wltc3b --duration 14 --fleet --runs 2 --seed 7`" in header
+    # the grade's RMS error: p50 and p95 over the vehicles, each vehicle's its own
+    own = sorted(r["estimates"]["zeta"]["rms_rad"]["all"] for r in data["runs"])
+    grade = data["grade_rms_rad"]["all"]
+    assert grade["p50"] == pytest.approx(sum(own) / 2) and own[0] <= grade["p95"] <= own[1]
+    assert "| grade's RMS error | p50 | p95 |" in (out / "fleet.md").read_text(encoding="utf-8")
 
 
 def test_a_fleet_file_is_named_in_the_command_line():

@@ -232,7 +232,13 @@ def _estimates_markdown(data: dict[str, Any]) -> list[str]:
         "",
         f"- m_veh {m['final']:.0f} ± {m['sigma']:.0f} kg, truth {m['truth']:.0f} kg; relative "
         f"error at {errors}",
-        f"- ζ {z['final']:+.4f} ± {z['sigma']:.4f} rad, truth {z['truth']:+.4f} rad at the end",
+        f"- ζ {z['final']:+.4f} ± {z['sigma']:.4f} rad, truth {z['truth']:+.4f} rad at the end; "
+        "RMS error "
+        + ", ".join(
+            f"{v:.4f} rad "
+            + ("over the drive" if k == "all" else f"from {k.removeprefix('after_')} s on")
+            for k, v in z["rms_rad"].items()
+        ),
         f"- NEES/dof of (m_veh, ζ), time mean {summary['nees_per_dof_mean']:.2f} (samples "
         f"correlated: no band claimed); NIS/dof {summary['nis_per_dof']:.2f}; "
         f"{summary['held_samples']} of {summary['samples']} samples held (brake, standstill)",

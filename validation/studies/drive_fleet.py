@@ -98,6 +98,22 @@ class DriveFleet:
             }
         return out
 
+    def grade_rms(self) -> dict[str, Any]:
+        """p50 and p95 over the vehicles of each drive's RMS grade error (rad; over the whole
+        drive and from :data:`~.estimation.drive_ekf.GRADE_RMS_FROM` on)."""
+        from gearsym.symbolic import naming
+
+        done = [r["estimates"][naming.GRADE]["rms_rad"] for r in self.runs if "estimates" in r]
+        if not done:
+            return {}
+        return {
+            key: {
+                "p50": float(np.percentile([r[key] for r in done], 50)),
+                "p95": float(np.percentile([r[key] for r in done], 95)),
+            }
+            for key in done[0]
+        }
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "cycle": self.cycle.to_dict(),
@@ -105,6 +121,7 @@ class DriveFleet:
             "runs": [{k: v for k, v in r.items() if not k.startswith("trace")} for r in self.runs],
             "failed": [r["seed"] for r in self.runs if r["drive"]["failure"]],
             "mass_error": self.percentiles(),
+            "grade_rms_rad": self.grade_rms(),
         }
 
 
@@ -147,6 +164,12 @@ def drive_fleet_markdown(data: dict[str, Any], command: str) -> str:
     for key, entry in mass.get("error_at", {}).items():
         label = "end" if key == "end" else f"{key} s"
         out.append(f"| {label} | {100 * entry['p50']:.1f} % | {100 * entry['p95']:.1f} % |")
+    grade = data.get("grade_rms_rad") or {}
+    if grade:
+        out += ["", "| grade's RMS error | p50 | p95 |", "|---|---|---|"]
+        for key, entry in grade.items():
+            label = "over the drive" if key == "all" else f"from {key.removeprefix('after_')} s on"
+            out.append(f"| {label} | {entry['p50']:.4f} rad | {entry['p95']:.4f} rad |")
     return "\n".join(out) + "\n"
 
 

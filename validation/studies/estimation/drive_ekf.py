@@ -50,6 +50,10 @@ STANDSTILL_SPEED = 0.3
 #: Assumed: about the slip one 10 ms sample covers at the end of a 0.35 s speed phase.
 SYNC_BAND = 2.0
 
+#: The grade's RMS error is also reported from this time on (s): the first minute is the
+#: prior's (the grade is learned only once the vehicle drives).
+GRADE_RMS_FROM = 60.0
+
 #: The vehicle's parameters every model has, carried with their covariance block.
 CARRIED = ("m_veh", naming.GRADE)
 
@@ -129,8 +133,11 @@ class DriveEstimates:
             f"error at {errors}"
         )
         z = self.to_dict()[naming.GRADE]
+        rms = z["rms_rad"]
         out.append(
-            f"  ζ: {z['final']:+.4f} ± {z['sigma']:.4f} rad (truth {z['truth']:+.4f}) at the end"
+            f"  ζ: {z['final']:+.4f} ± {z['sigma']:.4f} rad (truth {z['truth']:+.4f}) at the "
+            f"end; RMS error {rms['all']:.4f} rad over the drive, "
+            f"{rms[f'after_{GRADE_RMS_FROM:g}']:.4f} rad from {GRADE_RMS_FROM:g} s on"
         )
         for name, entry in self.to_dict().items():
             if "truth_last_sliding" in entry:
@@ -147,6 +154,18 @@ class DriveEstimates:
             "(brake, standstill)"
         )
         return out
+
+    def rms_error(self, name: str, after: float) -> dict[str, float]:
+        """The RMS of the estimate's error against the truth over the whole drive and over
+        the samples from ``after`` s on (the start's prior excluded), in the state's unit."""
+        error = self.mean[name] - self.truth[name]
+        late = self.t >= after
+        return {
+            "all": float(np.sqrt(np.nanmean(error**2))),
+            f"after_{after:g}": float(np.sqrt(np.nanmean(error[late] ** 2)))
+            if late.any()
+            else float("nan"),
+        }
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
@@ -165,6 +184,7 @@ class DriveEstimates:
                     entry["error_at_rad"] = {
                         "end": float(self.mean[name][-1] - truth[-1]),
                     }
+                    entry["rms_rad"] = self.rms_error(name, GRADE_RMS_FROM)
             elif finite.size:
                 k = int(finite[-1])  # the truth while the element last slid
                 entry["truth_last_sliding"] = float(truth[k])
