@@ -196,3 +196,34 @@ def test_the_grade_rms_error_by_hand():
     assert rms["all"] == pytest.approx(np.sqrt(5.0) * 0.01)
     assert rms["after_60"] == pytest.approx(0.01)
     assert est.to_dict()["zeta"]["rms_rad"] == rms
+
+
+def test_slides_and_the_score_after_the_third_by_hand():
+    """A μ whose element slides over samples 10-19, 30-31 and 33-35 (a re-lock 0.1 s long,
+    under SLIDE_GAP: one slide), 60-69 and 90-94 of a record at 0.1 s: four slides; after the
+    third (its last sample 69, t = 6.9 s) the estimate is 0.01 off with σ 0.004: outside
+    2 σ."""
+    from gearsym.validation.studies.estimation.drive_ekf import SLIDE_GAP, THIRD, DriveEstimates
+
+    t = 0.1 * np.arange(100)
+    truth = np.full(len(t), np.nan)
+    for a, b in ((10, 20), (30, 32), (33, 36), (60, 70), (90, 95)):
+        truth[a:b] = 0.12
+    mean = np.full(len(t), 0.13)
+    est = DriveEstimates(
+        t=t,
+        mean={"mu_05": mean},
+        sigma={"mu_05": np.full(len(t), 0.004)},
+        truth={"mu_05": truth},
+        nees=np.zeros(len(t)),
+        nis=np.zeros(len(t)),
+        nis_dof=np.zeros(len(t)),
+        held=0,
+    )
+    assert SLIDE_GAP == 0.5
+    assert est.sliding_episodes("mu_05") == [(10, 19), (30, 35), (60, 69), (90, 94)]
+    entry = est.to_dict()["mu_05"]
+    assert THIRD == 3 and entry["slides"] == 4
+    third = entry["after_third_slide"]
+    assert third["t"] == pytest.approx(6.9) and third["error"] == pytest.approx(0.01)
+    assert third["sigma"] == 0.004 and third["inside_2_sigma"] is False

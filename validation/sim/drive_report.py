@@ -243,15 +243,24 @@ def _estimates_markdown(data: dict[str, Any]) -> list[str]:
         f"correlated: no band claimed); NIS/dof {summary['nis_per_dof']:.2f}; "
         f"{summary['held_samples']} of {summary['samples']} samples held (brake, standstill)",
         "",
-        "| μ | truth when it last slid | estimate there | σ | samples sliding |",
-        "|---|---|---|---|---|",
+        "| μ | truth when it last slid | estimate there | σ | samples sliding | slides | "
+        "error / σ after its 3rd slide |",
+        "|---|---|---|---|---|---|---|",
     ]
     for name, entry in est.items():
         if "truth_last_sliding" not in entry:
             continue
         truth = entry["truth_last_sliding"]
+        third = entry.get("after_third_slide")
+        after = (
+            "—"
+            if third is None
+            else f"{third['error']:+.4f} / {third['sigma']:.4f}"
+            + ("" if third["inside_2_sigma"] else " (outside 2 σ)")
+        )
         out.append(
             f"| {name} | {truth:.4f} | {truth + entry['error_last_sliding']:.4f} | "
-            f"{entry['sigma_last_sliding']:.4f} | {entry['sliding_samples']} |"
+            f"{entry['sigma_last_sliding']:.4f} | {entry['sliding_samples']} | "
+            f"{entry.get('slides', '—')} | {after} |"
         )
     return out

@@ -54,6 +54,12 @@ SYNC_BAND = 2.0
 #: prior's (the grade is learned only once the vehicle drives).
 GRADE_RMS_FROM = 60.0
 
+#: Slides of an element closer than this (s) count as one (a shift's break-away and re-lock).
+SLIDE_GAP = 0.5
+#: Each μ is also scored at the end of its element's third slide (the drive issue's "after
+#: its third shift").
+THIRD = 3
+
 #: The vehicle's parameters every model has, carried with their covariance block.
 CARRIED = ("m_veh", naming.GRADE)
 
@@ -155,6 +161,19 @@ class DriveEstimates:
         )
         return out
 
+    def sliding_episodes(self, name: str) -> list[tuple[int, int]]:
+        """(first, last) sample of each slide of the element of μ ``name``: runs of samples
+        where the truth's element slides (its μ has a truth), runs closer than
+        :data:`SLIDE_GAP` merged (a shift's break-away and re-lock are one slide)."""
+        inside = np.flatnonzero(np.isfinite(self.truth[name]))
+        if inside.size == 0:
+            return []
+        gap = max(int(round(SLIDE_GAP / float(self.t[1] - self.t[0]))), 1)
+        breaks = np.flatnonzero(np.diff(inside) > gap)
+        starts = np.r_[inside[0], inside[breaks + 1]]
+        ends = np.r_[inside[breaks], inside[-1]]
+        return [(int(a), int(b)) for a, b in zip(starts, ends, strict=True)]
+
     def rms_error(self, name: str, after: float) -> dict[str, float]:
         """The RMS of the estimate's error against the truth over the whole drive and over
         the samples from ``after`` s on (the start's prior excluded), in the state's unit."""
@@ -191,6 +210,19 @@ class DriveEstimates:
                 entry["error_last_sliding"] = float(self.mean[name][k] - truth[k])
                 entry["sigma_last_sliding"] = float(self.sigma[name][k])
                 entry["sliding_samples"] = int(finite.size)
+                episodes = self.sliding_episodes(name)
+                entry["slides"] = len(episodes)
+                if len(episodes) >= THIRD:
+                    k = episodes[THIRD - 1][1]  # the last sample of its third slide
+                    error = float(self.mean[name][k] - truth[k])
+                    sigma = float(self.sigma[name][k])
+                    entry["after_third_slide"] = {
+                        "t": float(self.t[k]),
+                        "truth": float(truth[k]),
+                        "error": error,
+                        "sigma": sigma,
+                        "inside_2_sigma": bool(abs(error) <= 2.0 * sigma),
+                    }
             out[name] = entry
         return out
 
