@@ -172,25 +172,33 @@ def test_the_filter_s_lock_ups_follow_the_plant_s(description, drive, estimates)
     assert checked >= 3
 
 
+def _one_parameter(name, t, mean, sigma, truth):
+    """DriveEstimates of one parameter made by hand (σ constant; no NEES, NIS or held)."""
+    from gearsym.validation.studies.estimation.drive_ekf import DriveEstimates
+
+    zeros = np.zeros(len(t))
+    return DriveEstimates(
+        t=t,
+        mean={name: mean},
+        sigma={name: np.full(len(t), sigma)},
+        truth={name: truth},
+        nees=zeros,
+        nis=zeros,
+        nis_dof=zeros,
+        held=0,
+    )
+
+
 def test_the_grade_rms_error_by_hand():
     """The grade's RMS error over the drive and from 60 s on, against a hand computation: an
     estimate 0.03 rad off for the first 60 s and 0.01 rad off after, on a 120 s record at
     1 s: RMS √((60·0.03² + 60·0.01²)/120) = √5 · 0.01 over all, 0.01 from 60 s on."""
-    from gearsym.validation.studies.estimation.drive_ekf import GRADE_RMS_FROM, DriveEstimates
+    from gearsym.validation.studies.estimation.drive_ekf import GRADE_RMS_FROM
 
     t = np.arange(120.0)
     truth = np.full(len(t), 0.02)
     mean = truth + np.where(t < 60.0, 0.03, -0.01)
-    est = DriveEstimates(
-        t=t,
-        mean={"zeta": mean},
-        sigma={"zeta": np.full(len(t), 0.01)},
-        truth={"zeta": truth},
-        nees=np.zeros(len(t)),
-        nis=np.zeros(len(t)),
-        nis_dof=np.zeros(len(t)),
-        held=0,
-    )
+    est = _one_parameter("zeta", t, mean, 0.01, truth)
     assert GRADE_RMS_FROM == 60.0
     rms = est.rms_error("zeta", GRADE_RMS_FROM)
     assert rms["all"] == pytest.approx(np.sqrt(5.0) * 0.01)
@@ -203,23 +211,14 @@ def test_slides_and_the_score_after_the_third_by_hand():
     under SLIDE_GAP: one slide), 60-69 and 90-94 of a record at 0.1 s: four slides; after the
     third (its last sample 69, t = 6.9 s) the estimate is 0.01 off with σ 0.004: outside
     2 σ."""
-    from gearsym.validation.studies.estimation.drive_ekf import SLIDE_GAP, THIRD, DriveEstimates
+    from gearsym.validation.studies.estimation.drive_ekf import SLIDE_GAP, THIRD
 
     t = 0.1 * np.arange(100)
     truth = np.full(len(t), np.nan)
     for a, b in ((10, 20), (30, 32), (33, 36), (60, 70), (90, 95)):
         truth[a:b] = 0.12
     mean = np.full(len(t), 0.13)
-    est = DriveEstimates(
-        t=t,
-        mean={"mu_05": mean},
-        sigma={"mu_05": np.full(len(t), 0.004)},
-        truth={"mu_05": truth},
-        nees=np.zeros(len(t)),
-        nis=np.zeros(len(t)),
-        nis_dof=np.zeros(len(t)),
-        held=0,
-    )
+    est = _one_parameter("mu_05", t, mean, 0.004, truth)
     assert SLIDE_GAP == 0.5
     assert est.sliding_episodes("mu_05") == [(10, 19), (30, 35), (60, 69), (90, 94)]
     entry = est.to_dict()["mu_05"]
