@@ -35,6 +35,7 @@ __all__ = [
     "MU_MODELS",
     "MU_SCALE",
     "PRIOR_NAMES",
+    "VALVE_OFFSET",
     "EstimatorCalibration",
     "Prior",
     "Tuning",
@@ -50,12 +51,17 @@ MU_MODELS: tuple[str, ...] = ("random_walk", "map_scale")
 #: The scale state's name in the tables (the state keeps the element's ``mu_<E>`` name).
 MU_SCALE = "mu_scale"
 
+#: The valve's pressure offset (Pa) as a filter state (the adaptive-control study's estimator:
+#: every applied element's effective pressure off the TCU's nominal valve by one constant).
+VALVE_OFFSET = "valve_offset"
+
 #: The names ``[estimator.prior]`` may give: the unmeasured state φ (side-shaft twist) and
 #: every quantity whose record states a prior (``mu`` stands for every ``mu_<element>``).
 PRIOR_NAMES: tuple[str, ...] = (
     "phi",
     *(r.key for r in RECORDS if r.prior_sigma is not None),
     MU_SCALE,
+    VALVE_OFFSET,
 )
 
 #: The names ``[estimator.random_walk]`` may give (``mu``: every ``mu_<element>``; ``mu_scale``:
@@ -63,6 +69,7 @@ PRIOR_NAMES: tuple[str, ...] = (
 RANDOM_WALK_NAMES: tuple[str, ...] = (
     *(r.key for r in RECORDS if r.random_walk is not None),
     MU_SCALE,
+    VALVE_OFFSET,
 )
 
 #: The states beside the shaft speeds ``omega_<shaft>`` that ``[estimator.model_error]`` may
@@ -70,11 +77,16 @@ RANDOM_WALK_NAMES: tuple[str, ...] = (
 MODEL_ERROR_NAMES: tuple[str, ...] = ("phi", "omega_C")
 
 #: Units of the prior entries that have no record (φ, the μ-map scale).
-_PRIOR_UNITS = {"phi": "rad", MU_SCALE: "1"}
+_PRIOR_UNITS = {"phi": "rad", MU_SCALE: "1", VALVE_OFFSET: "Pa"}
 
 #: Default priors of the entries without a record: φ untwisted, σ 0.05 rad; the μ-map scale
-#: 1 (the calibration's map), σ 0.2 (assumed).
-_DEFAULT_PRIORS = {"phi": (0.0, 0.05), MU_SCALE: (1.0, 0.2)}
+#: 1 (the calibration's map), σ 0.2; the valve's offset 0 (the nominal valve), σ 6 000 Pa
+#: (uniform within ±100 mbar); all assumed.
+_DEFAULT_PRIORS = {"phi": (0.0, 0.05), MU_SCALE: (1.0, 0.2), VALVE_OFFSET: (0.0, 6.0e3)}
+
+#: Default random walk of the valve's offset (Pa²/s): constant within a drive, allowed to
+#: drift by about 50 Pa per root second (oil temperature; assumed).
+VALVE_OFFSET_RANDOM_WALK = 2.5e3
 
 #: Default random walk of the μ-map scale (1/s): it moves with oil temperature and wear over
 #: minutes, not within a shift (assumed).
@@ -156,11 +168,25 @@ class EstimatorCalibration:
         given = dict(self.random_walk).get(MU_SCALE)
         return MU_SCALE_RANDOM_WALK if given is None else given.value
 
+    def valve_offset_prior(self) -> tuple[float, float]:
+        """(mean, σ) of the valve's pressure offset state (Pa)."""
+        given = dict(self.prior).get(VALVE_OFFSET)
+        if given is None:
+            return _DEFAULT_PRIORS[VALVE_OFFSET]
+        return (0.0 if given.mean is None else float(given.mean)), given.sd
+
+    def valve_offset_random_walk(self) -> float:
+        """q of the valve's pressure offset state (Pa²/s)."""
+        given = dict(self.random_walk).get(VALVE_OFFSET)
+        return VALVE_OFFSET_RANDOM_WALK if given is None else given.value
+
     def intensities(self) -> dict[str, float]:
         """Every stated intensity by state name (``mu``: every μ state), the overrides
         :func:`gearsym.symbolic.estimators.ekf.augmented_model` takes."""
         return {
-            name: t.value for name, t in (*self.random_walk, *self.model_error) if name != MU_SCALE
+            name: t.value
+            for name, t in (*self.random_walk, *self.model_error)
+            if name not in (MU_SCALE, VALVE_OFFSET)
         }
 
     def to_dict(self) -> dict[str, Any]:

@@ -265,3 +265,23 @@ def test_stroke_time_through_a_valve_with_gain_and_offset():
     assert math.isinf(_actuator().stroke_time(P_S))
     state, _, _ = a.advance(a.initial(False), 0.0, T_D + 0.999 * expected, P_FF)
     assert state.fill == pytest.approx(0.999, rel=1e-12)
+
+
+def test_tick_means_of_a_first_order_step() -> None:
+    """A stroked piston at p0 whose valve steps to p_v (no dead time): over a tick of length
+    h starting at the step, the chamber's mean is p_v + (p0 − p_v) τ/h (1 − e^(−h/τ)) (the
+    first-order law integrated by hand); the effective pressure is that less the spring. The
+    trapezoid on 64 sub-intervals is within h²/(12·64²) of the second derivative's bound."""
+    actuator = _actuator(dead_time=0.0)
+    p0, p_v, h = 1.5e5, 2.5e5, 0.010
+    state = ActuatorState(1.0, p0, p0)
+    means = actuator.at_ticks(state, np.array([p_v, p_v]), h, mean_over=64)
+    first = p_v + (p0 - p_v) * TAU / h * (1.0 - math.exp(-h / TAU))
+    later = p_v + (p0 - p_v) * math.exp(-h / TAU) * TAU / h * (1.0 - math.exp(-h / TAU))
+    bound = (p_v - p0) / TAU**2 * h**2 / (12 * 64**2)
+    assert means[0] == pytest.approx(first - P_S, abs=bound)
+    assert means[1] == pytest.approx(later - P_S, abs=bound)
+    # the start values are the law at 0 and h
+    starts = actuator.at_ticks(state, np.array([p_v, p_v]), h)
+    assert starts[0] == pytest.approx(p0 - P_S, abs=1e-6)
+    assert starts[1] == pytest.approx(p_v + (p0 - p_v) * math.exp(-h / TAU) - P_S, rel=1e-12)

@@ -85,7 +85,7 @@ def test_hand_over_by_name_and_the_mu_store():
     z = np.arange(8, dtype=float)
     store = {"mu_27": (0.11, 4e-4)}
     prior = {"mu_81": (0.12, 0.015)}
-    z_new, P_new = _hand_over(None, old, new, z, P, store, prior)
+    z_new, P_new = _hand_over(old.state_names, new.state_names, z, P, store, prior)
     common = ["omega_1", "omega_2", "phi", "omega_C", "m_veh", "zeta"]
     i_old = [old.state_names.index(n) for n in common]
     i_new = [new.state_names.index(n) for n in common]
@@ -226,3 +226,42 @@ def test_slides_and_the_score_after_the_third_by_hand():
     third = entry["after_third_slide"]
     assert third["t"] == pytest.approx(6.9) and third["error"] == pytest.approx(0.01)
     assert third["sigma"] == 0.004 and third["inside_2_sigma"] is False
+
+
+def test_an_appended_state_steps_through_the_inputs(description):
+    """A state appended after the model's (the valve's offset, :class:`AppendedState`) moves
+    the step only through the inputs: its Jacobian column is CasADi's ∂Φ/∂u times ∂u/∂θ,
+    checked against central differences of the whole step with the inputs moved (the step is
+    a polynomial in u, so the difference is exact to rounding), and the outputs do not depend
+    on it."""
+    from gearsym.symbolic.estimators.ekf_modes import OPEN, SLIDE_POS
+    from gearsym.validation.studies.estimation.drive_ekf import _Appended, _Models
+
+    aug, discrete, logic = _Models(description, {}).get("2-3")
+    names = aug.state_names
+    nominal = {v.name: v.default for v in aug.model.states if v.default is not None}
+    rng = np.random.default_rng(5)
+    z = np.array([nominal.get(n, 0.0) or rng.uniform(50.0, 200.0) for n in names])
+    z[names.index("m_veh")] = 1900.0
+    u = np.zeros(len(aug.input_names))
+    u[aug.input_names.index("T_In")] = 150.0
+    off, on = logic.elements
+    u = logic.inputs(u, {off: OPEN, on: SLIDE_POS})  # the inertia phase
+    on_force = logic.normal_force[on]
+    u[on_force] = 4.0e3
+    du_dtheta = np.zeros((len(u), 1))
+    du_dtheta[on_force, 0] = 7.5e-3  # an area, m²: a pressure offset's newtons per pascal
+    model = _Appended(discrete, du_dtheta)
+    p = aug.parameter_values()
+    h = 0.01
+    z_ext = np.append(z, 0.0)
+    z_next, jac = model.step(z_ext, u, h, p)
+    eps = 50.0
+    up, _ = discrete.step(z, u + eps * du_dtheta[:, 0], h, p)
+    down, _ = discrete.step(z, u - eps * du_dtheta[:, 0], h, p)
+    column = (up - down) / (2 * eps)
+    assert np.abs(column).max() > 0  # the offset acts
+    np.testing.assert_allclose(jac[:-1, -1], column, rtol=1e-6, atol=1e-12)
+    assert jac[-1, -1] == 1.0 and z_next[-1] == 0.0
+    _, H = model.outputs(z_ext, u, p)
+    assert np.all(H[:, -1] == 0.0)

@@ -155,3 +155,19 @@ def test_a_fill_the_model_cannot_follow_is_no_candidate(d, point, monkeypatch) -
     assert replay.residual(-0.02, _exact(d), arrays, result.commands, result.phases) == np.inf
     found = replay.estimate(_exact(d), arrays, result.commands, result.phases)
     assert found.delta == pytest.approx(0.04, abs=2e-3) and found.explains
+
+
+def test_fill_time_and_command_duration_through_the_valve_view(d) -> None:  # noqa: ANN001
+    """The replay's fill time is its actuator view's (the stroke at the nominal fast fill);
+    what the controller commands is how long the fast fill lasts through its view of the
+    valve. By the fill law (stroke volume (p_ff − p_s) t_fill, rate p_valve − p_s), a view
+    with gain g and offset c strokes in t_fill (p_ff − p_s) / (g p_ff + c − p_s)."""
+    replay = FillReplay(d, SHIFT)
+    p_ff, p_s = replay.nominal.fast_fill_pressure, replay.nominal.return_spring
+    view = Knowledge(mu={}, m_veh=1.0, zeta=0.0, valve_gain=1.02, valve_offset=8.0e3)
+    fill_time = 0.09
+    expected = fill_time * (p_ff - p_s) / (1.02 * p_ff + 8.0e3 - p_s)
+    assert replay.duration(view, fill_time) == pytest.approx(expected, rel=1e-12)
+    assert replay.parameter(view, expected) == pytest.approx(fill_time, rel=1e-12)
+    nominal = Knowledge(mu={}, m_veh=1.0, zeta=0.0)
+    assert replay.duration(nominal, fill_time) == pytest.approx(fill_time, rel=1e-12)

@@ -395,6 +395,9 @@ class DiscreteModel:
         self.step_fn = ca.Function("rk4_step", [z, u, h, p], [z_next, jac])
         #: CasADi's AD of the same step: the independent check of the chain rule (tests).
         self.step_ad = ca.Function("rk4_step_ad", [z, u, h, p], [z_next, ca.jacobian(z_next, z)])
+        #: ∂z_{k+1}/∂u of the same step by CasADi's AD: for a state that acts through an input
+        #: (the valve's pressure offset in the normal forces, drive EKF)
+        self.step_du_fn = ca.Function("rk4_step_du", [z, u, h, p], [ca.jacobian(z_next, u)])
 
     def step(
         self, z: Sequence[float], u: Sequence[float], h: float, p: Sequence[float]
@@ -404,6 +407,14 @@ class DiscreteModel:
 
         z_next, jac = self.step_fn(z, u, h, p)
         return np.asarray(z_next, dtype=float).ravel(), np.asarray(jac, dtype=float)
+
+    def step_du(
+        self, z: Sequence[float], u: Sequence[float], h: float, p: Sequence[float]
+    ) -> np.ndarray:
+        """∂z_{k+1}/∂u of one RK4 step of size h with u held."""
+        import numpy as np
+
+        return np.asarray(self.step_du_fn(z, u, h, p), dtype=float)
 
     def outputs(
         self, z: Sequence[float], u: Sequence[float], p: Sequence[float]

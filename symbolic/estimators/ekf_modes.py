@@ -246,6 +246,10 @@ class ModeLogic:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         import numpy as np
 
+        # entries after the model's states (a state the filter appends outside the model,
+        # e.g. the valve's pressure offset of the drive EKF) are not the model's
+        z = np.asarray(z, dtype=float)[: len(self.aug.state_names)]
+
         def run(fn: object) -> np.ndarray:
             return np.asarray(fn(z, u, p), dtype=float).ravel()  # type: ignore[operator]
 

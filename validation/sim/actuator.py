@@ -182,16 +182,28 @@ class ClutchActuator:
         return self.fill_time * (self.fast_fill_pressure - self.return_spring) / above
 
     def at_ticks(
-        self, state: ActuatorState, commands: np.ndarray, tick: float, t0: float = 0.0
+        self,
+        state: ActuatorState,
+        commands: np.ndarray,
+        tick: float,
+        t0: float = 0.0,
+        mean_over: int = 0,
     ) -> np.ndarray:
         """The effective pressure at the start of each tick (Pa) when ``commands`` are given
         one per ``tick`` from ``t0``, starting in ``state``: what a TCU believes its element
-        pressed with, from its own commands and this model of the actuator."""
+        pressed with, from its own commands and this model of the actuator. ``mean_over``
+        > 0: instead the mean over each tick (the trapezoid rule on that many sub-intervals),
+        the value a model that holds its input over the tick needs (a pressure rising at
+        10⁶ Pa/s is 5 000 Pa above its start value in the middle of a 10 ms tick)."""
         out = np.empty(len(commands))
         for k, command in enumerate(np.asarray(commands, dtype=float).tolist()):
-            out[k] = self.effective(state)
             start = t0 + k * tick
-            state, _, _ = self.advance(state, start, start + tick, command, 1)
+            if mean_over > 0:
+                state, _, pressed = self.advance(state, start, start + tick, command, mean_over)
+                out[k] = float(np.mean(0.5 * (pressed[1:] + pressed[:-1])))
+            else:
+                out[k] = self.effective(state)
+                state, _, _ = self.advance(state, start, start + tick, command, 1)
         return out
 
     def _evolve(self, fill: float, p: float, valve: float, dt: float) -> tuple[float, float]:

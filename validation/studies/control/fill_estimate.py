@@ -121,6 +121,31 @@ class FillReplay:
         self.spec = shift_spec(d, shift)
         self._model: ClosedLoopShift | None = None
 
+    def view(self, knowledge: Knowledge, fill_time: float) -> ClutchActuator:
+        """The TCU's view of its actuator: the nominal one with ``knowledge``'s valve (gain and
+        offset, which its commands were corrected for) and the fill time ``fill_time``."""
+        return replace(
+            self.nominal,
+            fill_time=fill_time,
+            pressure_gain=knowledge.valve_gain,
+            pressure_offset=knowledge.valve_offset,
+        )
+
+    def parameter(self, knowledge: Knowledge, duration: float) -> float:
+        """The fill time of the TCU's view (:meth:`view`) whose piston strokes in ``duration``
+        (s) at the fast-fill command: what its controller commands the fast fill for is a
+        stroke time through its view of the valve, the view's fill time is at the nominal
+        fast-fill pressure (the fill law, :meth:`ClutchActuator.stroke_time`)."""
+        view = self.view(knowledge, self.nominal.fill_time)
+        above = view.valve_pressure(self.nominal.fast_fill_pressure) - view.return_spring
+        return duration * above / (view.fast_fill_pressure - view.return_spring)
+
+    def duration(self, knowledge: Knowledge, fill_time: float) -> float:
+        """How long the view with ``fill_time`` strokes at the fast-fill command (s): the
+        inverse of :meth:`parameter`."""
+        view = self.view(knowledge, fill_time)
+        return view.stroke_time(self.nominal.fast_fill_pressure)
+
     def _plant(self, vehicle_speed: float, knowledge: Knowledge) -> ClosedLoopShift:
         if self._model is None or self._model.vehicle_speed != vehicle_speed:
             self._model = ClosedLoopShift(self.d, self.shift, vehicle_speed)
@@ -153,7 +178,7 @@ class FillReplay:
         plant = self._plant(output / self.i_d * self.r_dyn, knowledge)
         # a fill shorter than a millisecond is an instant one (the actuator needs t_fill > 0)
         fill_time = max(self.nominal.fill_time + delta, 1e-3)
-        believed = replace(self.nominal, fill_time=fill_time)
+        believed = self.view(knowledge, fill_time)
         elements = (plant.spec.off_going, plant.spec.on_coming)
         torque = float(log["T_In_cmd"][0])
         try:
@@ -197,8 +222,9 @@ class FillReplay:
             return self.residual(delta, knowledge, log, commands, phases)
 
         # the search is centred on what this shift assumed, where the answer most likely is
-        believed = self.nominal.fill_time if knowledge.fill_time is None else knowledge.fill_time
-        centre = believed - self.nominal.fill_time + knowledge.fill_offset
+        commanded = self.nominal.fill_time if knowledge.fill_time is None else knowledge.fill_time
+        believed = self.parameter(knowledge, commanded + knowledge.fill_offset)
+        centre = believed - self.nominal.fill_time
         # the residual is not unimodal far from its minimum (an early fill's tie-up first
         # grows, then its shock moves out of the window): a grid picks the valley, the
         # bounded Brent search refines inside it; between grid points the residual has small

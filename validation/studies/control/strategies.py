@@ -33,6 +33,7 @@ import numpy as np
 from gearsym.symbolic import naming
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
+from gearsym.symbolic.estimator_calibration import VALVE_OFFSET
 from gearsym.validation.studies.control.controller import TICK, Knowledge
 
 __all__ = ["STRATEGIES", "Strategy", "TruthView", "calibration_knowledge", "make_strategy"]
@@ -133,7 +134,7 @@ class EstimatorStrategy(RuleStrategy):
     def learn(self, observed: Any, log: Any, commands: Any = None, phases: Any = None) -> None:
         Strategy.learn(self, observed, log, commands, phases)
         from gearsym.validation.studies.control.fill_estimate import FillReplay
-        from gearsym.validation.studies.estimation.drive_ekf import run_drive_ekf
+        from gearsym.validation.studies.estimation.drive_ekf import AppendedState, run_drive_ekf
 
         if self.replay is None:
             self.replay = FillReplay(self.d, self.shift)
@@ -144,18 +145,50 @@ class EstimatorStrategy(RuleStrategy):
         self.fills.append(fill)
         limit = self.d.control.si("adaptation", "fill_limit")
         nominal = self.replay.nominal.fill_time
-        fill_time = self.knowledge.fill_time if self.knowledge.fill_time is not None else nominal
+        commanded = self.knowledge.fill_time if self.knowledge.fill_time is not None else nominal
+        # the replay's fill time is its view's (at the nominal fast fill); the knowledge holds
+        # how long to command the fast fill, the stroke time through the view of the valve
+        fill_time = self.replay.parameter(self.knowledge, commanded)
         if fill.explains:
             fill_time = nominal + min(max(fill.delta, -limit), limit)
         # ... then the pressures the TCU believes its elements pressed with, rebuilt from its
         # commands with that fill, are what the filter is told
-        belief = replace(self.replay.nominal, fill_time=fill_time)
+        belief = self.replay.view(self.knowledge, fill_time)
         line = self.d.drive.si("shift", "line_pressure")
         spec = self.replay.spec
+        by_offset, by_fill = {}, {}
         for element, filled in ((spec.off_going, True), (spec.on_coming, False)):
+            start = belief.initial(filled, line)
             arrays[f"p_{element}"] = belief.at_ticks(
-                belief.initial(filled, line), commands[element], TICK
+                start, commands[element], TICK, mean_over=MEAN_OVER
             )
+            # and how each pressure moves with the valve's offset and with the fill time
+            # through the same actuator (its lag, the stroke): what the filter's offset state
+            # acts through, and the fill's remaining doubt it must not learn from
+            by_offset[element] = _sensitivity(
+                belief, "pressure_offset", OFFSET_STEP, start, commands[element]
+            )
+            by_fill[element] = _sensitivity(
+                belief, "fill_time", FILL_STEP, start, commands[element]
+            )
+        offset = self.knowledge.valve_offset
+        appended = (
+            AppendedState(
+                VALVE_OFFSET,
+                self.d.estimator.valve_offset_prior(),
+                self.d.estimator.valve_offset_random_walk(),
+                by_offset,
+                logged=offset,
+            ),
+            AppendedState(
+                "fill_time",
+                (fill_time, FILL_TIME_SIGMA),
+                0.0,
+                by_fill,
+                logged=fill_time,
+                corrected=False,
+            ),
+        )
         estimates = run_drive_ekf(
             self.d,
             arrays,
@@ -165,6 +198,7 @@ class EstimatorStrategy(RuleStrategy):
             seed=self.seed + len(self.history),
             start=self.carry,
             mu_model="map_scale",
+            appended=appended,
         )
         self.carry = estimates.carry
         self.learned = {
@@ -184,9 +218,38 @@ class EstimatorStrategy(RuleStrategy):
             mu=mu,
             m_veh=float(estimates.mean["m_veh"][-1]),
             zeta=float(estimates.mean[naming.GRADE][-1]),
-            fill_time=fill_time,
+            valve_offset=float(estimates.mean[VALVE_OFFSET][-1]),
+            fill_time=self.replay.duration(self.knowledge, fill_time),
             fill_offset=0.0,
         )
+
+
+#: The filter holds each tick's pressures over the tick: it is told their mean over it, on
+#: this many sub-intervals (:meth:`~gearsym.validation.sim.actuator.ClutchActuator.at_ticks`).
+MEAN_OVER = 8
+
+#: The steps of the central differences in :func:`_sensitivity`: the valve's offset (Pa) and
+#: the fill time (s).
+OFFSET_STEP = 1.0e3
+FILL_STEP = 1.0e-3
+#: The fill time's remaining doubt (s) after the replay's estimate, which the filter considers
+#: but does not learn from (assumed: the replay finds a planted fill within 2 ms on the
+#: calibration's vehicle, a fleet vehicle's other errors move it by more).
+FILL_TIME_SIGMA = 0.01
+
+
+def _sensitivity(
+    belief: Any, field_name: str, step: float, state: Any, commands: np.ndarray
+) -> np.ndarray:
+    """∂p/∂θ at each tick: how the effective pressure the TCU believes in moves with its
+    actuator model's ``field_name`` (a central difference of ``step`` through ``belief``)."""
+    value = getattr(belief, field_name)
+    up = replace(belief, **{field_name: value + step})
+    down = replace(belief, **{field_name: value - step})
+    return (
+        up.at_ticks(state, commands, TICK, mean_over=MEAN_OVER)
+        - down.at_ticks(state, commands, TICK, mean_over=MEAN_OVER)
+    ) / (2.0 * step)
 
 
 def make_strategy(

@@ -40,7 +40,7 @@ from gearsym.symbolic.defaults import EKF_FLOOR_FRACTION, EKF_RELATIVE_NOISE
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import element_short_name, quantity
 
-__all__ = ["DriveEstimates", "EkfCarry", "run_drive_ekf"]
+__all__ = ["AppendedState", "DriveEstimates", "EkfCarry", "run_drive_ekf"]
 
 #: Below this measured vehicle speed (m/s), with no torque commanded, the vehicle stands.
 STANDSTILL_SPEED = 0.3
@@ -67,16 +67,76 @@ CARRIED = ("m_veh", naming.GRADE)
 @dataclass(frozen=True)
 class EkfCarry:
     """What the filter keeps from the end of one log to the start of the next (a TCU keeps it
-    over ignition cycles, the adaptive-control study from shift to shift): m_veh and ζ with
-    their covariance block (:data:`CARRIED` order), and each element's μ as mean and variance
-    (its covariances with the rest dropped, as in the store between shifts)."""
+    over ignition cycles, the adaptive-control study from shift to shift): the states
+    ``names`` with their joint mean and covariance (m_veh and ζ, the valve's offset when the
+    filter has it, the μ of the model it ended in), and the μ of the elements outside that
+    model as mean and variance (their covariances with the rest dropped, as in the store
+    between shifts)."""
 
+    names: tuple[str, ...]
     mean: tuple[float, ...]
     covariance: tuple[tuple[float, ...], ...]
     mu: tuple[tuple[str, float, float], ...]
 
-    def mu_of(self, name: str) -> tuple[float, float] | None:
-        return next(((m, v) for n, m, v in self.mu if n == name), None)
+    def of(self, name: str) -> tuple[float, float]:
+        """(mean, σ) of a carried state."""
+        if name in self.names:
+            j = self.names.index(name)
+            return self.mean[j], math.sqrt(max(self.covariance[j][j], 0.0))
+        for other, mean, var in self.mu:
+            if other == name:
+                return mean, math.sqrt(max(var, 0.0))
+        raise KeyError(name)
+
+
+@dataclass(frozen=True)
+class AppendedState:
+    """A state the filter appends to its model's (4.1) that acts only through the normal
+    forces: each element's pressure in the log moves by ``sensitivity[element][k]`` per unit
+    of the state (what the TCU's own actuator model says, :mod:`~gearsym.validation.sim.actuator`),
+    so the filter presses with p + (θ − ``logged``) ∂p/∂θ. ``logged`` is the value the log's
+    pressures were rebuilt with. ``corrected`` False makes it a consider state (Schmidt): it
+    is never corrected, but its variance enters the filter's covariance where the pressures
+    depend on it (an uncertainty the filter must not learn from, e.g. a fill time that a
+    separate estimate fixed within a stated σ)."""
+
+    name: str
+    prior: tuple[float, float]
+    random_walk: float
+    sensitivity: Mapping[str, np.ndarray]
+    logged: float = 0.0
+    corrected: bool = True
+    #: the truth, for scoring only (NaN: not known)
+    truth: float = math.nan
+
+
+class _Appended:
+    """The filter's discrete model (:class:`~gearsym.symbolic.estimators.ekf.DiscreteModel`)
+    with :class:`AppendedState` s after its states: they are constant over a step and act only
+    through the inputs u(θ), so the step's Jacobian gains the columns ∂Φ/∂u · ∂u/∂θ
+    (``du_dtheta``, this sample's) and the outputs do not depend on them."""
+
+    def __init__(self, discrete: Any, du_dtheta: np.ndarray) -> None:
+        self.discrete = discrete
+        self.aug = discrete.aug
+        self.du_dtheta = du_dtheta
+        self.m = du_dtheta.shape[1]
+
+    def step(
+        self, z: np.ndarray, u: np.ndarray, h: float, p: Sequence[float]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        n = len(z) - self.m
+        z_next, F = self.discrete.step(z[:n], u, h, p)
+        jac = np.eye(len(z))
+        jac[:n, :n] = F
+        jac[:n, n:] = self.discrete.step_du(z[:n], u, h, p) @ self.du_dtheta
+        return np.concatenate([z_next, z[n:]]), jac
+
+    def outputs(
+        self, z: np.ndarray, u: np.ndarray, p: Sequence[float]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        y, H = self.discrete.outputs(z[: len(z) - self.m], u, p)
+        return y, np.hstack([H, np.zeros((H.shape[0], self.m))])
 
 
 @dataclass
@@ -259,6 +319,7 @@ def run_drive_ekf(
     start: EkfCarry | None = None,
     mu_model: str | None = None,
     truth_mu_scale: Mapping[str, float] | None = None,
+    appended: Sequence[AppendedState] = (),
 ) -> DriveEstimates:
     """The EKF over a drive's TCU log (module docstring). ``d`` is the calibration (model,
     prior, tuning, piston areas); ``log`` the :class:`~gearsym.validation.sim.drive_log.TcuLog`
@@ -270,7 +331,9 @@ def run_drive_ekf(
     filter's μ (default the ``[estimator]`` table's): "random_walk" (4.1) or "map_scale" (each
     μ state the scale on the calibration's μ map,
     :mod:`~gearsym.validation.studies.estimation.mu_map_form`; then ``truth_mu_scale``, the
-    truth's factor per element, scores it)."""
+    truth's factor per element, scores it). ``appended``: states outside the model that act
+    through the pressures (:class:`AppendedState`; the adaptive-control study's valve offset,
+    estimated, and fill time, considered); a corrected one is carried in :attr:`carry`."""
     from gearsym.symbolic.estimators.ekf import ekf_predict, ekf_update
     from gearsym.symbolic.estimators.ekf_modes import STICK, ekf_mode_update
 
@@ -301,9 +364,15 @@ def run_drive_ekf(
     columns = sensor_columns(aug)
     outputs = [sensors[c] for c in columns]
 
+    extra = {a.name: a for a in appended}
+    considered = [a.name for a in appended if not a.corrected]
+
+    def state_names(aug: Any) -> list[str]:
+        return [*aug.state_names, *(a.name for a in appended)]
+
     # the filter's start: the first upshift's model in the from-gear, the calibration's prior
     current = first_shift
-    names = aug.state_names
+    names = state_names(aug)
     nominal = {v.name: v.default for v in aug.model.states if v.default is not None}
     z = np.zeros(len(names))
     sig0 = np.zeros(len(names))
@@ -313,15 +382,23 @@ def run_drive_ekf(
             z[j], sig0[j] = y_all[0, c], sigma_all[0, c]
         elif scale_form and name.startswith("mu_"):
             z[j], sig0[j] = d.estimator.scale_prior()
+        elif name in extra:
+            z[j], sig0[j] = extra[name].prior
         else:
             z[j], sig0[j] = d.estimator.prior_of(name, nominal.get(name))
     P = np.diag(sig0**2)
     modes = logic.initial_modes()
     store: dict[str, tuple[float, float]] = {}  # μ of elements outside the model
     if start is not None:
-        idx = [names.index(n) for n in CARRIED]
-        z[idx] = start.mean
-        P[np.ix_(idx, idx)] = np.asarray(start.covariance)
+        carried_mean = np.asarray(start.mean, dtype=float)
+        carried_cov = np.asarray(start.covariance, dtype=float)
+        present = [i for i, name in enumerate(start.names) if name in names]
+        idx = [names.index(start.names[i]) for i in present]
+        z[idx] = carried_mean[present]
+        P[np.ix_(idx, idx)] = carried_cov[np.ix_(present, present)]
+        for i, name in enumerate(start.names):
+            if name not in names:
+                store[name] = (float(carried_mean[i]), float(carried_cov[i, i]))
         for name, mean_, var in start.mu:
             if name in names:
                 j = names.index(name)
@@ -329,7 +406,12 @@ def run_drive_ekf(
             else:
                 store[name] = (mean_, var)
 
-    tracked = ["m_veh", naming.GRADE, *mu_name.values()]
+    tracked = [
+        "m_veh",
+        naming.GRADE,
+        *mu_name.values(),
+        *(a.name for a in appended if a.corrected),
+    ]
     mean = {name: np.full(len(t), np.nan) for name in tracked}
     sigma = {name: np.full(len(t), np.nan) for name in tracked}
     nees = np.full(len(t), np.nan)
@@ -341,14 +423,22 @@ def run_drive_ekf(
     areas = {e: d.element(e).a_piston.value for e in short if d.element(e).a_piston is not None}
     zeta_truth = log["truth_zeta"]
 
-    def known_inputs(k: int, aug: Any) -> np.ndarray:
+    def known_inputs(k: int, aug: Any, theta: Sequence[float] = ()) -> np.ndarray:
         u = np.zeros(len(aug.input_names))
         for i, name in enumerate(aug.input_names):
             if name == naming.INPUT_TORQUE:
                 u[i] = log["T_In_cmd"][k]
             elif name.startswith("F_N"):
                 e = next(e for e, s in short.items() if naming.normal_force(s) == name)
-                u[i] = log[f"p_{e}"][k] * areas[e]
+                pressure = log[f"p_{e}"][k]
+                if len(appended):
+                    moved = sum(
+                        (value - a.logged) * a.sensitivity[e][k]
+                        for a, value in zip(appended, theta, strict=True)
+                        if e in a.sensitivity
+                    )
+                    pressure = max(pressure + moved, 0.0)
+                u[i] = pressure * areas[e]
         return u
 
     forms: dict[str, Any] = {}
@@ -363,6 +453,32 @@ def run_drive_ekf(
             forms[aug.shift] = map_scale_form(d, aug)
         return forms[aug.shift](z, u)
 
+    n_model = len(aug.state_names)
+
+    def filter_inputs(
+        z: np.ndarray, k: int, aug: Any, logic: Any, modes: Mapping[str, int]
+    ) -> tuple[np.ndarray, np.ndarray, Any]:
+        """The known inputs at sample ``k`` (mapped, for the mode logic), the model's inputs
+        with ``modes``, and the model the filter steps (with the appended states: ∂u/∂θ by a
+        forward difference of 1 % of each one's prior σ, exact but for the clip at zero
+        pressure and the μ map's pressure slope)."""
+        zm = z[:n_model]
+        theta = np.asarray(z[n_model:], dtype=float)
+        known = mapped(zm, known_inputs(k, aug, theta), aug)
+        u = logic.inputs(known, modes)
+        if not appended:
+            return known, u, discrete_of[aug.shift]
+        columns_ = []
+        for i, a in enumerate(appended):
+            step = 0.01 * a.prior[1]
+            moved = theta.copy()
+            moved[i] += step
+            u_plus = logic.inputs(mapped(zm, known_inputs(k, aug, moved), aug), modes)
+            columns_.append((u_plus - u) / step)
+        return known, u, _Appended(discrete_of[aug.shift], np.column_stack(columns_))
+
+    discrete_of = {aug.shift: discrete}
+
     for k in range(len(t)):
         wanted = shifts[k] or current
         if wanted != current:
@@ -370,9 +486,12 @@ def run_drive_ekf(
             priors = _prior_of(d, new_aug)
             if scale_form:
                 priors |= {n: d.estimator.scale_prior() for n in new_aug.mu_state.values()}
-            z, P = _hand_over(d, aug, new_aug, z, P, store, sig0_of=priors)
+            new_names = state_names(new_aug)
+            z, P = _hand_over(names, new_names, z, P, store, sig0_of=priors)
             aug, discrete, logic, current = new_aug, new_discrete, new_logic, wanted
-            names = aug.state_names
+            discrete_of[aug.shift] = discrete
+            names = new_names
+            n_model = len(aug.state_names)
             columns = sensor_columns(aug)
             outputs = [sensors[c] for c in columns]
             modes = logic.initial_modes()
@@ -390,7 +509,6 @@ def run_drive_ekf(
         standing = (
             log["omega_C"][k] * r_dyn < STANDSTILL_SPEED and log["T_In_cmd"][k] == 0.0
         ) or log["T_brake"][k] > 0.0
-        u_known = known_inputs(k, aug)
         p = aug.parameter_values()
         if standing:
             # the filter's model has no brake or standstill: hold the parameters, take the
@@ -407,19 +525,28 @@ def run_drive_ekf(
             modes = _gear_modes(logic, current, gears[int(log["gear"][k])])
         else:
             if k > 0:
-                u_prev = logic.inputs(mapped(z, known_inputs(k - 1, aug), aug), modes)
+                _, u_prev, model = filter_inputs(z, k - 1, aug, logic, modes)
                 q = [
                     d.estimator.scale_random_walk()
                     if scale_form and name.startswith("mu_")
+                    else extra[name].random_walk
+                    if name in extra
                     else aug.intensities[name]
                     for name in names
                 ]
-                z, P = ekf_predict(discrete, z, P, u_prev, h, p, q)
-            u_known = mapped(z, u_known, aug)
-            u_now = logic.inputs(u_known, modes)
+                z, P = ekf_predict(model, z, P, u_prev, h, p, q)
+            u_known, u_now, model = filter_inputs(z, k, aug, logic, modes)
             relative = np.full(len(columns), relative_noise)
             z, P, nis[k], nis_dof[k] = ekf_update(
-                discrete, z, P, u_now, y_all[k, columns], p, relative, floor_all[columns]
+                model,
+                z,
+                P,
+                u_now,
+                y_all[k, columns],
+                p,
+                relative,
+                floor_all[columns],
+                consider=[names.index(name) for name in considered],
             )
             if not in_gear:
                 z, P, modes, _ = ekf_mode_update(
@@ -438,20 +565,23 @@ def run_drive_ekf(
         idx = [names.index(n) for n in CARRIED]
         error = z[idx] - np.array([truth_mass, zeta_truth[k]])
         nees[k] = float(error @ np.linalg.solve(P[np.ix_(idx, idx)], error))
-    idx = [names.index(n) for n in CARRIED]
-    kept = dict(store)
-    for j, name in enumerate(names):
-        if name.startswith("mu_"):
-            kept[name] = (float(z[j]), float(P[j, j]))
+    joint = [
+        *CARRIED,
+        *(a.name for a in appended if a.corrected),
+        *(name for name in names if name.startswith("mu_")),
+    ]
+    idx = [names.index(n) for n in joint]
     carry = EkfCarry(
+        tuple(joint),
         tuple(float(v) for v in z[idx]),
         tuple(tuple(float(v) for v in row) for row in P[np.ix_(idx, idx)]),
-        tuple((name, m_, v_) for name, (m_, v_) in sorted(kept.items())),
+        tuple((name, m_, v_) for name, (m_, v_) in sorted(store.items())),
     )
     truth = {
         "m_veh": np.full(len(t), truth_mass),
         naming.GRADE: np.asarray(zeta_truth, dtype=float),
         **{mu_name[e]: np.asarray(log[f"truth_mu_{e}"], dtype=float) for e in mu_name},
+        **{a.name: np.full(len(t), a.truth) for a in appended if a.corrected},
     }
     if scale_form:  # the state is the map's scale: the truth's factor where the element slides
         for e, name in mu_name.items():
@@ -497,17 +627,16 @@ def _prior_of(d: GearboxDescription, aug: Any) -> dict[str, tuple[float, float]]
 
 
 def _hand_over(
-    d: GearboxDescription,
-    old: Any,
-    new: Any,
+    old_names: Sequence[str],
+    new_names: Sequence[str],
     z: np.ndarray,
     P: np.ndarray,
     store: dict[str, tuple[float, float]],
     sig0_of: Mapping[str, tuple[float, float]],
 ) -> tuple[np.ndarray, np.ndarray]:
-    """z and P of the ``new`` model from the ``old`` one by state name (module docstring);
-    the μ of the old model that the new one lacks go to ``store`` (mean, variance)."""
-    old_names, new_names = old.state_names, new.state_names
+    """z and P of the filter with the states ``new_names`` from the one with ``old_names``,
+    by state name (module docstring); the μ of the old model that the new one lacks go to
+    ``store`` (mean, variance)."""
     for j, name in enumerate(old_names):
         if name.startswith("mu_") and name not in new_names:
             store[name] = (float(z[j]), float(P[j, j]))
