@@ -156,12 +156,18 @@ class EstimatorCalibration:
         sd = r.prior_sigma * abs(float(mean)) if r.prior_relative else r.prior_sigma
         return float(mean), float(sd)
 
+    def _stated_prior(self, key: str) -> tuple[float, float]:
+        """(mean, σ) of a prior entry without a record: the table's, else the default
+        (a stated σ without a mean keeps the default mean)."""
+        default = _DEFAULT_PRIORS[key]
+        given = dict(self.prior).get(key)
+        if given is None:
+            return default
+        return (default[0] if given.mean is None else float(given.mean)), given.sd
+
     def scale_prior(self) -> tuple[float, float]:
         """(mean, σ) of every element's μ-map scale (``mu_model = "map_scale"``)."""
-        given = dict(self.prior).get(MU_SCALE)
-        if given is None:
-            return _DEFAULT_PRIORS[MU_SCALE]
-        return (1.0 if given.mean is None else float(given.mean)), given.sd
+        return self._stated_prior(MU_SCALE)
 
     def scale_random_walk(self) -> float:
         """q of every element's μ-map scale (1/s)."""
@@ -170,10 +176,7 @@ class EstimatorCalibration:
 
     def valve_offset_prior(self) -> tuple[float, float]:
         """(mean, σ) of the valve's pressure offset state (Pa)."""
-        given = dict(self.prior).get(VALVE_OFFSET)
-        if given is None:
-            return _DEFAULT_PRIORS[VALVE_OFFSET]
-        return (0.0 if given.mean is None else float(given.mean)), given.sd
+        return self._stated_prior(VALVE_OFFSET)
 
     def valve_offset_random_walk(self) -> float:
         """q of the valve's pressure offset state (Pa²/s)."""

@@ -137,6 +137,12 @@ BAD_CASES = [
         "expected one of random_walk, map_scale",
     ),
     (
+        "[estimator.prior]\nm_veh",
+        "[estimator.prior]\nvalve_offset = { sd = 6.0e3, unit = 'bar', source = 'x' }\nm_veh",
+        "estimator.prior.valve_offset.unit",
+        "expected 'Pa'",
+    ),
+    (
         "[estimator.random_walk]\nm_veh = { value = 1.0",
         "[estimator.random_walk]\nm_veh = { value = -1.0",
         "estimator.random_walk.m_veh.value",

@@ -265,3 +265,29 @@ def test_an_appended_state_steps_through_the_inputs(description):
     assert jac[-1, -1] == 1.0 and z_next[-1] == 0.0
     _, H = model.outputs(z_ext, u, p)
     assert np.all(H[:, -1] == 0.0)
+
+
+def test_the_valve_offsets_prior_and_random_walk_come_from_the_table(tmp_path):
+    """The description's ``[estimator]`` table states the offset state's prior and random
+    walk; without them the stated defaults (0 ± 6 000 Pa, 2 500 Pa²/s)."""
+    from gearsym.symbolic.description import default_config_text
+
+    assert load_description().estimator.valve_offset_prior() == (0.0, 6.0e3)
+    assert load_description().estimator.valve_offset_random_walk() == 2.5e3
+    text = default_config_text()
+    text = text.replace(
+        "[estimator.prior]\n",
+        "[estimator.prior]\n"
+        "valve_offset = { mean = 500.0, sd = 4.0e3, unit = 'Pa', source = 'x' }\n",
+        1,
+    ).replace(
+        "[estimator.random_walk]\n",
+        "[estimator.random_walk]\n"
+        "valve_offset = { value = 100.0, unit = 'Pa^2/s', source = 'x' }\n",
+        1,
+    )
+    path = tmp_path / "box.toml"
+    path.write_text(text)
+    d = load_description(path)
+    assert d.estimator.valve_offset_prior() == (500.0, 4.0e3)
+    assert d.estimator.valve_offset_random_walk() == 100.0

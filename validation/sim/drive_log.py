@@ -18,7 +18,8 @@ __all__ = ["TcuLog"]
 class TcuLog:
     """Samples every ``sample_time`` (s). Columns: ``t``; ``omega_<shaft>`` of every shaft,
     ``phi``, ``omega_C`` (truth); ``T_In_cmd`` (N·m, what the TCU commanded), ``T_brake``
-    (N·m at the wheel), ``p_<element>`` (Pa, commanded); ``gear`` (index into the drive's
+    (N·m at the wheel), ``p_<element>`` (Pa, commanded: in a shift the mean over the tick the
+    sample starts); ``gear`` (index into the drive's
     gears) and ``shift`` (the shift under way, "" in a gear); ``truth_mu_<element>`` (NaN
     unless the element slides) and ``truth_zeta`` (rad)."""
 

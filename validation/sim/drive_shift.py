@@ -370,8 +370,10 @@ class ShiftRunner:
         zeta: float,
     ) -> None:
         """The shift's samples on the TCU's grid: the truth from the pieces' dense output,
-        the commanded pressures from the plan (line pressure on the elements that stay
-        locked), μ of each element while it slides."""
+        the commanded pressures from the plan as their mean over the tick each sample starts
+        (line pressure on the elements that stay locked; a filter holds its inputs over a
+        tick, and a ramp's start value is half a tick's rise below that mean), μ of each
+        element while it slides."""
         sim = self.simulator
         ticks = log.ticks(t_start, t_start + t_end)
         if not len(ticks):
@@ -382,7 +384,8 @@ class ShiftRunner:
         for i, t in enumerate(ticks):
             tau = float(t - t_start)
             pressures = {e: self.line for e in self.spec.locked}
-            pressures |= {e: profile(tau) for e, profile in profiles.items()}
+            h = log.sample_time
+            pressures |= {e: profile.mean(tau, tau + h) for e, profile in profiles.items()}
             status = sim.hybrid.modes[modes[i]].status
             mu = {
                 e: float(signals[str(symbol)][i])

@@ -98,6 +98,19 @@ class Profile:
         k = bisect.bisect_right(ts, t)
         return vs[k - 1] + (vs[k] - vs[k - 1]) * (t - ts[k - 1]) / (ts[k] - ts[k - 1])
 
+    def mean(self, t0: float, t1: float) -> float:
+        """The signal's mean over [t0, t1] (t1 > t0): exact, the trapezoid rule between the
+        knots inside the interval and its ends."""
+        if not t1 > t0:
+            raise ValueError(f"need t1 > t0, got {t0}, {t1}")
+        points = [t0, *(t for t in self._t if t0 < t < t1), t1]
+        values = [self(t) for t in points]
+        area = sum(
+            (b - a) * 0.5 * (va + vb)
+            for a, b, va, vb in zip(points, points[1:], values, values[1:], strict=False)
+        )
+        return area / (t1 - t0)
+
     def many(self, t: np.ndarray) -> np.ndarray:
         """The signal at every time of ``t``: the same arithmetic as a call per time, in the
         same order (so the same values), without a Python call per time."""
