@@ -15,9 +15,12 @@ vehicle before a shift and learns after it; only the oracle is shown the truth.
   with their covariance) and the controller's feed-forward takes its means. Its μ states are
   scales on the calibration's μ map (the map-scale form,
   :mod:`~gearsym.validation.studies.estimation.mu_map_form`): the controller's model reads the
-  same map, so the scale is what it needs. The fill, which no filter state sees, is estimated
-  by a replay of the shift's commands through the TCU's own models
-  (:mod:`.fill_estimate`): the fill time whose replayed input speed matches the measured one.
+  same map, so the scale is what it needs. The filter also estimates the valve's pressure
+  offset (an :class:`~gearsym.validation.studies.estimation.drive_ekf.AppendedState` acting
+  through the pressures), which the controller's view of the valve takes. The fill, which no
+  filter state sees, is estimated by a replay of the shift's commands through the TCU's own
+  models (:mod:`.fill_estimate`): the fill time whose replayed input speed matches the
+  measured one; the filter considers its remaining doubt.
 * ``oracle``: the vehicle's true μ (the map's factor), mass, grade, torque gain, valve gain and
   offset and fill time.
 """
