@@ -171,3 +171,20 @@ def test_fill_time_and_command_duration_through_the_valve_view(d) -> None:  # no
     assert replay.parameter(view, expected) == pytest.approx(fill_time, rel=1e-12)
     nominal = Knowledge(mu={}, m_veh=1.0, zeta=0.0)
     assert replay.duration(nominal, fill_time) == pytest.approx(fill_time, rel=1e-12)
+
+
+@pytest.mark.parametrize("planted", [-8.0e3, 8.0e3])
+def test_estimator_strategy_learns_a_planted_valve_offset(d, point, planted: float) -> None:  # noqa: ANN001
+    """The calibration's own vehicle with only a valve offset planted (±80 mbar, the fleet's
+    range): over four shifts the filter's offset state moves from its prior (0 ± 6 000 Pa)
+    towards the planted value, its σ shrinks, and the truth stays inside 3 σ; the controller is
+    told the learned value. Broken sensitivities (no ∂p/∂δ) would leave σ at the prior's, a
+    wrong sign would move the estimate away from the truth."""
+    vehicle = Vehicle(d, {}, Actuators(pressure_offset=planted), 0.0)
+    outcomes = run_vehicle(d, SHIFT, point, vehicle, 4, ("estimator",))["estimator"]
+    learned = outcomes[-1].learned["valve_offset"]
+    mean, sigma = learned
+    assert sigma < 0.7 * 6.0e3
+    assert abs(mean - planted) < 3.0 * sigma
+    assert mean * planted > 0 and abs(mean) > 0.3 * abs(planted)
+    assert outcomes[-1].knowledge["valve_offset"] == outcomes[-2].learned["valve_offset"][0]
