@@ -78,7 +78,11 @@ def cmd_drive(args: argparse.Namespace) -> int:
             bar.done()
         estimates = None
         if args.estimate == "ekf" and not result.failure:
-            from gearsym.validation.studies.estimation.drive_ekf import run_drive_ekf
+            from gearsym.validation.studies.estimation.drive_ekf import (
+                run_drive_ekf,
+                stiffness_state,
+                stiffness_truth,
+            )
 
             print("  … the EKF over the drive's TCU log", file=sys.stderr, flush=True)
             assert result.log is not None
@@ -89,6 +93,7 @@ def cmd_drive(args: argparse.Namespace) -> int:
                 result.gears,
                 result.values["m_veh"],
                 seed=args.seed,
+                appended=(stiffness_state(d, stiffness_truth(d, result.values)),),
             )
         from gearsym.validation.sim.drive_report import (
             drive_markdown,

@@ -35,6 +35,7 @@ __all__ = [
     "MU_MODELS",
     "MU_SCALE",
     "PRIOR_NAMES",
+    "STIFFNESS_FACTOR",
     "VALVE_OFFSET",
     "EstimatorCalibration",
     "Prior",
@@ -55,6 +56,11 @@ MU_SCALE = "mu_scale"
 #: every applied element's effective pressure off the TCU's nominal valve by one constant).
 VALVE_OFFSET = "valve_offset"
 
+#: The side shafts' stiffness as a factor on the description's k_ss (a filter state over a
+#: drive: the twist's frequency is seen in every speed, and a stiffness off the calibration's
+#: is otherwise read as mass, the vehicle's inertia being in that frequency too).
+STIFFNESS_FACTOR = "k_ss_factor"
+
 #: The names ``[estimator.prior]`` may give: the unmeasured state φ (side-shaft twist) and
 #: every quantity whose record states a prior (``mu`` stands for every ``mu_<element>``).
 PRIOR_NAMES: tuple[str, ...] = (
@@ -62,6 +68,7 @@ PRIOR_NAMES: tuple[str, ...] = (
     *(r.key for r in RECORDS if r.prior_sigma is not None),
     MU_SCALE,
     VALVE_OFFSET,
+    STIFFNESS_FACTOR,
 )
 
 #: The names ``[estimator.random_walk]`` may give (``mu``: every ``mu_<element>``; ``mu_scale``:
@@ -70,6 +77,7 @@ RANDOM_WALK_NAMES: tuple[str, ...] = (
     *(r.key for r in RECORDS if r.random_walk is not None),
     MU_SCALE,
     VALVE_OFFSET,
+    STIFFNESS_FACTOR,
 )
 
 #: The states beside the shaft speeds ``omega_<shaft>`` that ``[estimator.model_error]`` may
@@ -77,16 +85,27 @@ RANDOM_WALK_NAMES: tuple[str, ...] = (
 MODEL_ERROR_NAMES: tuple[str, ...] = ("phi", "omega_C")
 
 #: Units of the prior entries that have no record (φ, the μ-map scale).
-_PRIOR_UNITS = {"phi": "rad", MU_SCALE: "1", VALVE_OFFSET: "Pa"}
+_PRIOR_UNITS = {"phi": "rad", MU_SCALE: "1", VALVE_OFFSET: "Pa", STIFFNESS_FACTOR: "1"}
 
 #: Default priors of the entries without a record: φ untwisted, σ 0.05 rad; the μ-map scale
 #: 1 (the calibration's map), σ 0.2; the valve's offset 0 (the nominal valve), σ 6 000 Pa
-#: (uniform within ±100 mbar); all assumed.
-_DEFAULT_PRIORS = {"phi": (0.0, 0.05), MU_SCALE: (1.0, 0.2), VALVE_OFFSET: (0.0, 6.0e3)}
+#: (uniform within ±100 mbar); the side shafts' stiffness factor 1, σ 0.058 (uniform within
+#: ±10 %: production spread and temperature); all assumed.
+_DEFAULT_PRIORS = {
+    "phi": (0.0, 0.05),
+    MU_SCALE: (1.0, 0.2),
+    VALVE_OFFSET: (0.0, 6.0e3),
+    STIFFNESS_FACTOR: (1.0, 0.058),
+}
 
 #: Default random walk of the valve's offset (Pa²/s): constant within a drive, allowed to
 #: drift by about 50 Pa per root second (oil temperature; assumed).
 VALVE_OFFSET_RANDOM_WALK = 2.5e3
+
+#: Default random walk of the side shafts' stiffness factor (1/s): constant within a drive but
+#: for temperature, about 0.001 per root second (assumed; it also keeps the factor from
+#: becoming certain of a value that lumps other errors of the twist's frequency).
+STIFFNESS_FACTOR_RANDOM_WALK = 1.0e-6
 
 #: Default random walk of the μ-map scale (1/s): it moves with oil temperature and wear over
 #: minutes, not within a shift (assumed).
@@ -183,13 +202,22 @@ class EstimatorCalibration:
         given = dict(self.random_walk).get(VALVE_OFFSET)
         return VALVE_OFFSET_RANDOM_WALK if given is None else given.value
 
+    def stiffness_factor_prior(self) -> tuple[float, float]:
+        """(mean, σ) of the side shafts' stiffness factor state."""
+        return self._stated_prior(STIFFNESS_FACTOR)
+
+    def stiffness_factor_random_walk(self) -> float:
+        """q of the side shafts' stiffness factor state (1/s)."""
+        given = dict(self.random_walk).get(STIFFNESS_FACTOR)
+        return STIFFNESS_FACTOR_RANDOM_WALK if given is None else given.value
+
     def intensities(self) -> dict[str, float]:
         """Every stated intensity by state name (``mu``: every μ state), the overrides
         :func:`gearsym.symbolic.estimators.ekf.augmented_model` takes."""
         return {
             name: t.value
             for name, t in (*self.random_walk, *self.model_error)
-            if name not in (MU_SCALE, VALVE_OFFSET)
+            if name not in (MU_SCALE, VALVE_OFFSET, STIFFNESS_FACTOR)
         }
 
     def to_dict(self) -> dict[str, Any]:

@@ -291,3 +291,73 @@ def test_the_valve_offsets_prior_and_random_walk_come_from_the_table(tmp_path):
     d = load_description(path)
     assert d.estimator.valve_offset_prior() == (500.0, 4.0e3)
     assert d.estimator.valve_offset_random_walk() == 100.0
+
+
+def test_a_state_that_scales_a_parameter_steps_through_it(description):
+    """A state that scales a fixed parameter (:attr:`AppendedState.scales`, the side shafts'
+    stiffness factor): its Jacobian column is CasADi's ∂Φ/∂p times the calibration's value,
+    checked against central differences of the whole step with k_ss moved."""
+    from gearsym.symbolic.estimators.ekf_modes import OPEN, STICK
+    from gearsym.validation.studies.estimation.drive_ekf import _Appended, _Models
+
+    aug, discrete, logic = _Models(description, {}).get("2-3")
+    names = aug.state_names
+    z = np.zeros(len(names))
+    z[names.index("m_veh")] = 1900.0
+    z[names.index("phi")] = 0.02  # twisted: the stiffness acts
+    for name in names:
+        if name.startswith("omega"):
+            z[names.index(name)] = 100.0
+    u = np.zeros(len(aug.input_names))
+    u[aug.input_names.index("T_In")] = 150.0
+    off, on = logic.elements
+    u = logic.inputs(u, {off: OPEN, on: STICK})
+    parameters = [v.name for v in aug.model.parameters]
+    j = parameters.index("k_ss")
+    p = aug.parameter_values()
+    dp = np.zeros((len(p), 1))
+    dp[j, 0] = p[j]
+    model = _Appended(discrete, np.zeros((len(u), 1)), dp)
+    h = 0.01
+    _, jac = model.step(np.append(z, 1.0), u, h, p)
+    eps = 1e-3
+    up, down = list(p), list(p)
+    up[j] *= 1 + eps
+    down[j] *= 1 - eps
+    column = (discrete.step(z, u, h, up)[0] - discrete.step(z, u, h, down)[0]) / (2 * eps)
+    assert abs(column[names.index("omega_C")]) > 0  # the stiffness acts on the wheel
+    np.testing.assert_allclose(jac[:-1, -1], column, rtol=1e-6, atol=1e-12)
+
+
+def test_a_stiffer_vehicle_is_not_read_as_a_lighter_one(description, tmp_path):
+    """A vehicle whose side shafts are 9 % stiffer than the calibration's, nothing else
+    changed: the filter with the stiffness factor state learns the factor (inside 3 σ) and
+    keeps the mass inside 3 σ of the truth; with the calibration's k_ss fixed it read the
+    twist's higher frequency as a lighter vehicle, its mass more than 3 σ low (the planted
+    error this state exists for)."""
+    from gearsym.validation.sim.drive import DriveTruth
+    from gearsym.validation.sim.fleet import load_fleet
+    from gearsym.validation.studies.estimation.drive_ekf import stiffness_state, stiffness_truth
+
+    fleet_file = tmp_path / "stiff.toml"
+    fleet_file.write_text(
+        '[fleet]\nname = "stiff"\nsource = "test"\n'
+        'm_veh = { value = 1800.0, unit = "kg", source = "test" }\n'
+        "[fleet.factor]\n"
+        'drivetrain.k_ss = { value = 1.09, unit = "1", source = "test" }\n'
+    )
+    truth = DriveTruth.from_draw(description, load_fleet(description, fleet_file).draw(0))
+    drive = DriveSimulator(description, load_cycle(SHORT), truth=truth).run()
+    log = drive.log
+    factor = stiffness_truth(description, drive.values)
+    assert factor == pytest.approx(1.09)
+    args = (description, log.arrays(), log.shifts(), drive.gears, drive.values["m_veh"])
+    with_state = run_drive_ekf(*args, seed=3, appended=(stiffness_state(description, factor),))
+    without = run_drive_ekf(*args, seed=3)
+    entry = with_state.to_dict()["k_ss_factor"]
+    assert abs(entry["final"] - factor) <= 3 * entry["sigma"]
+    assert entry["sigma"] < 0.058 / 3  # learned, not the prior
+    m, sd = with_state.mean["m_veh"][-1], with_state.sigma["m_veh"][-1]
+    assert abs(m - 1800.0) <= 3 * sd
+    m0, sd0 = without.mean["m_veh"][-1], without.sigma["m_veh"][-1]
+    assert m0 < 1800.0 - 3 * sd0

@@ -398,6 +398,9 @@ class DiscreteModel:
         #: ∂z_{k+1}/∂u of the same step by CasADi's AD: for a state that acts through an input
         #: (the valve's pressure offset in the normal forces, drive EKF)
         self.step_du_fn = ca.Function("rk4_step_du", [z, u, h, p], [ca.jacobian(z_next, u)])
+        #: ∂z_{k+1}/∂p likewise: for a state that scales a fixed parameter (the side shafts'
+        #: stiffness over a drive)
+        self.step_dp_fn = ca.Function("rk4_step_dp", [z, u, h, p], [ca.jacobian(z_next, p)])
 
     def step(
         self, z: Sequence[float], u: Sequence[float], h: float, p: Sequence[float]
@@ -415,6 +418,14 @@ class DiscreteModel:
         import numpy as np
 
         return np.asarray(self.step_du_fn(z, u, h, p), dtype=float)
+
+    def step_dp(
+        self, z: Sequence[float], u: Sequence[float], h: float, p: Sequence[float]
+    ) -> np.ndarray:
+        """∂z_{k+1}/∂p of one RK4 step of size h with u held."""
+        import numpy as np
+
+        return np.asarray(self.step_dp_fn(z, u, h, p), dtype=float)
 
     def outputs(
         self, z: Sequence[float], u: Sequence[float], p: Sequence[float]

@@ -9,7 +9,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from gearsym.symbolic.estimator_calibration import STIFFNESS_FACTOR
 from gearsym.validation.sim.drive import DriveResult
+
+#: What a state the filter appends over a drive is, for the report.
+APPENDED_MEANING = {STIFFNESS_FACTOR: "the side shafts' stiffness on the calibration's k_ss"}
 
 __all__ = [
     "drive_command",
@@ -52,8 +56,13 @@ def format_drive_summary(result: DriveResult) -> str:
         f"{w.road / 1e3:.1f} + brake {w.brake / 1e3:.1f} kJ; residual {w.relative_residual:.1e}"
     )
     lines.append(
-        f"  wall time {result.wall_s:.1f} s, {result.real_time_factor:.1f}x real time "
-        "(Python reference simulation, one core)"
+        f"  wall time {result.wall_s:.1f} s, {result.real_time_factor:.1f}x real time, one core ("
+        + (
+            "the Python reference simulation"
+            if result.stats.get("reference")
+            else "the fast drive: compiled gears and shifts"
+        )
+        + ")"
     )
     if result.failure:
         lines.append(f"  FAILED: {result.failure}")
@@ -238,6 +247,12 @@ def _estimates_markdown(data: dict[str, Any]) -> list[str]:
             f"{v:.4f} rad "
             + ("over the drive" if k == "all" else f"from {k.removeprefix('after_')} s on")
             for k, v in z["rms_rad"].items()
+        ),
+        *(
+            f"- {name} {entry['final']:.4f} ± {entry['sigma']:.4f}, truth {entry['truth']:.4f} "
+            "at the end" + (f" ({APPENDED_MEANING[name]})" if name in APPENDED_MEANING else "")
+            for name, entry in est.items()
+            if "truth" in entry and name not in ("m_veh", "zeta")
         ),
         f"- NEES/dof of (m_veh, ζ), time mean {summary['nees_per_dof_mean']:.2f} (samples "
         f"correlated: no band claimed); NIS/dof {summary['nis_per_dof']:.2f}; "

@@ -40,7 +40,11 @@ def drive_vehicle(context: DriveContext, seed: int) -> dict[str, Any]:
     noise from the same seed). Returns the drive's and the estimates' summaries and the mass
     error's trace every :data:`TRACE_STEP`."""
     from gearsym.validation.sim.drive import DriveSimulator, DriveTruth
-    from gearsym.validation.studies.estimation.drive_ekf import run_drive_ekf
+    from gearsym.validation.studies.estimation.drive_ekf import (
+        run_drive_ekf,
+        stiffness_state,
+        stiffness_truth,
+    )
 
     d = context.description
     truth = DriveTruth.from_draw(d, context.fleet.draw(seed), constant_grade=context.grade is None)
@@ -50,7 +54,13 @@ def drive_vehicle(context: DriveContext, seed: int) -> dict[str, Any]:
     if result.failure or result.log is None:
         return out
     estimates = run_drive_ekf(
-        d, result.log.arrays(), result.log.shifts(), result.gears, result.values["m_veh"], seed
+        d,
+        result.log.arrays(),
+        result.log.shifts(),
+        result.gears,
+        result.values["m_veh"],
+        seed,
+        appended=(stiffness_state(d, stiffness_truth(d, result.values)),),
     )
     out["estimates"] = estimates.to_dict()
     out["estimator"] = estimates.summary()

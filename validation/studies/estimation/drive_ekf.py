@@ -40,7 +40,7 @@ from gearsym.symbolic.defaults import EKF_FLOOR_FRACTION, EKF_RELATIVE_NOISE
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import element_short_name, quantity
 
-__all__ = ["AppendedState", "DriveEstimates", "EkfCarry", "run_drive_ekf"]
+__all__ = ["AppendedState", "DriveEstimates", "EkfCarry", "run_drive_ekf", "stiffness_state"]
 
 #: Below this measured vehicle speed (m/s), with no torque commanded, the vehicle stands.
 STANDSTILL_SPEED = 0.3
@@ -98,28 +98,66 @@ class AppendedState:
     pressures were rebuilt with. ``corrected`` False makes it a consider state (Schmidt): it
     is never corrected, but its variance enters the filter's covariance where the pressures
     depend on it (an uncertainty the filter must not learn from, e.g. a fill time that a
-    separate estimate fixed within a stated σ)."""
+    separate estimate fixed within a stated σ).
+
+    With ``scales`` naming one of the model's fixed parameters the state is instead that
+    parameter's factor: the filter's model uses the calibration's value times θ (a tolerance
+    the TCU cannot know per vehicle, e.g. the side shafts' stiffness, whose frequency would
+    otherwise be read as mass); ``sensitivity`` is then empty."""
 
     name: str
     prior: tuple[float, float]
     random_walk: float
-    sensitivity: Mapping[str, np.ndarray]
+    sensitivity: Mapping[str, np.ndarray] = field(default_factory=dict)
     logged: float = 0.0
     corrected: bool = True
     #: the truth, for scoring only (NaN: not known)
     truth: float = math.nan
+    #: the fixed parameter the state scales ("" : the state acts through the pressures)
+    scales: str = ""
+
+
+def stiffness_state(d: GearboxDescription, truth: float = math.nan) -> AppendedState:
+    """The side shafts' stiffness as a filter state over a drive: the factor on the
+    calibration's k_ss (2.47), prior and random walk from the ``[estimator]`` table
+    (:data:`~gearsym.symbolic.estimator_calibration.STIFFNESS_FACTOR`). The twist's frequency,
+    seen in every measured speed, holds the stiffness against the inertias on both sides of
+    it, the vehicle's among them: with the calibration's k_ss fixed, a vehicle 9 % stiffer
+    had its mass read 10 % low over a WLTC drive. ``truth``: the vehicle's factor, for
+    scoring only."""
+    from gearsym.symbolic.estimator_calibration import STIFFNESS_FACTOR
+
+    return AppendedState(
+        STIFFNESS_FACTOR,
+        d.estimator.stiffness_factor_prior(),
+        d.estimator.stiffness_factor_random_walk(),
+        scales="k_ss",
+        truth=truth,
+    )
+
+
+def stiffness_truth(d: GearboxDescription, values: Mapping[str, float]) -> float:
+    """The driven vehicle's stiffness factor (``values``: the plant's parameters), for
+    scoring; NaN when they do not name k_ss."""
+    if "k_ss" not in values:
+        return math.nan
+    return float(values["k_ss"]) / quantity(d, "drivetrain", "k_ss").value
 
 
 class _Appended:
     """The filter's discrete model (:class:`~gearsym.symbolic.estimators.ekf.DiscreteModel`)
     with :class:`AppendedState` s after its states: they are constant over a step and act only
-    through the inputs u(θ), so the step's Jacobian gains the columns ∂Φ/∂u · ∂u/∂θ
-    (``du_dtheta``, this sample's) and the outputs do not depend on them."""
+    through the inputs u(θ) and the fixed parameters p(θ), so the step's Jacobian gains the
+    columns ∂Φ/∂u · ∂u/∂θ + ∂Φ/∂p · ∂p/∂θ (``du_dtheta``, this sample's; ``dp_dtheta``) and
+    the outputs (speeds) do not depend on them. The p the filter passes is already p(θ)."""
 
-    def __init__(self, discrete: Any, du_dtheta: np.ndarray) -> None:
+    def __init__(
+        self, discrete: Any, du_dtheta: np.ndarray, dp_dtheta: np.ndarray | None = None
+    ) -> None:
         self.discrete = discrete
         self.aug = discrete.aug
         self.du_dtheta = du_dtheta
+        self.dp_dtheta = dp_dtheta
         self.m = du_dtheta.shape[1]
 
     def step(
@@ -130,6 +168,8 @@ class _Appended:
         jac = np.eye(len(z))
         jac[:n, :n] = F
         jac[:n, n:] = self.discrete.step_du(z[:n], u, h, p) @ self.du_dtheta
+        if self.dp_dtheta is not None:
+            jac[:n, n:] += self.discrete.step_dp(z[:n], u, h, p) @ self.dp_dtheta
         return np.concatenate([z_next, z[n:]]), jac
 
     def outputs(
@@ -161,6 +201,8 @@ class DriveEstimates:
     elements: dict[str, str] = field(default_factory=dict)
     #: the filter's state at the end, to start the next log from
     carry: EkfCarry | None = None
+    #: the corrected :class:`AppendedState` s (scored at the end against their truth)
+    appended: tuple[str, ...] = ()
 
     def error_at(self, name: str, times: Sequence[float]) -> dict[str, float]:
         """Relative error of ``name`` at the given times (s) and at the end."""
@@ -206,6 +248,11 @@ class DriveEstimates:
             f"{rms[f'after_{GRADE_RMS_FROM:g}']:.4f} rad from {GRADE_RMS_FROM:g} s on"
         )
         for name, entry in self.to_dict().items():
+            if name in self.appended:
+                out.append(
+                    f"  {name}: {entry['final']:.4g} ± {entry['sigma']:.2g} at the end "
+                    f"(truth {entry['truth']:.4g})"
+                )
             if "truth_last_sliding" in entry:
                 out.append(
                     f"  {name}: {entry['truth_last_sliding']:.4f} true when it last slid, "
@@ -255,7 +302,9 @@ class DriveEstimates:
                 "final": float(self.mean[name][-1]),
                 "sigma": float(self.sigma[name][-1]),
             }
-            if name in CARRIED:
+            if name in self.appended:
+                entry["truth"] = float(truth[-1])
+            elif name in CARRIED:
                 entry["truth"] = float(truth[-1])
                 if name == "m_veh":
                     entry["error_at"] = self.error_at(name, (60.0, 300.0))
@@ -365,6 +414,10 @@ def run_drive_ekf(
     outputs = [sensors[c] for c in columns]
 
     extra = {a.name: a for a in appended}
+    scaling = [(i, a) for i, a in enumerate(appended) if a.scales]
+    for _, a in scaling:
+        if a.scales not in [v.name for v in aug.model.parameters]:
+            raise ValueError(f"{a.name}: scales {a.scales!r}, not a parameter of the model")
     considered = [a.name for a in appended if not a.corrected]
 
     def state_names(aug: Any) -> list[str]:
@@ -470,12 +523,35 @@ def run_drive_ekf(
             return known, u, discrete_of[aug.shift]
         columns_ = []
         for i, a in enumerate(appended):
+            if a.scales:
+                columns_.append(np.zeros(len(u)))
+                continue
             step = 0.01 * a.prior[1]
             moved = theta.copy()
             moved[i] += step
             u_plus = logic.inputs(mapped(zm, known_inputs(k, aug, moved), aug), modes)
             columns_.append((u_plus - u) / step)
-        return known, u, _Appended(discrete_of[aug.shift], np.column_stack(columns_))
+        dp = None
+        if any(a.scales for a in appended):
+            nominal = aug.parameter_values()
+            parameters = [v.name for v in aug.model.parameters]
+            dp = np.zeros((len(nominal), len(appended)))
+            for i, a in enumerate(appended):
+                if a.scales:
+                    j = parameters.index(a.scales)
+                    dp[j, i] = nominal[j]
+        return known, u, _Appended(discrete_of[aug.shift], np.column_stack(columns_), dp)
+
+    def parameters_at(z: np.ndarray, aug: Any) -> list[float]:
+        """The fixed parameters the filter's model uses: the calibration's, each one a scaling
+        state names times that state (:attr:`AppendedState.scales`)."""
+        p = aug.parameter_values()
+        if scaling:
+            parameters = [v.name for v in aug.model.parameters]
+            n = len(aug.state_names)
+            for i, a in scaling:
+                p[parameters.index(a.scales)] *= float(z[n + i])
+        return p
 
     discrete_of = {aug.shift: discrete}
 
@@ -509,7 +585,6 @@ def run_drive_ekf(
         standing = (
             log["omega_C"][k] * r_dyn < STANDSTILL_SPEED and log["T_In_cmd"][k] == 0.0
         ) or log["T_brake"][k] > 0.0
-        p = aug.parameter_values()
         if standing:
             # the filter's model has no brake or standstill: hold the parameters, take the
             # speeds from the measurement
@@ -525,6 +600,7 @@ def run_drive_ekf(
             modes = _gear_modes(logic, current, gears[int(log["gear"][k])])
         else:
             if k > 0:
+                p = parameters_at(z, aug)
                 _, u_prev, model = filter_inputs(z, k - 1, aug, logic, modes)
                 q = [
                     d.estimator.scale_random_walk()
@@ -535,6 +611,7 @@ def run_drive_ekf(
                     for name in names
                 ]
                 z, P = ekf_predict(model, z, P, u_prev, h, p, q)
+            p = parameters_at(z, aug)
             u_known, u_now, model = filter_inputs(z, k, aug, logic, modes)
             relative = np.full(len(columns), relative_noise)
             z, P, nis[k], nis_dof[k] = ekf_update(
@@ -549,6 +626,7 @@ def run_drive_ekf(
                 consider=[names.index(name) for name in considered],
             )
             if not in_gear:
+                p = parameters_at(z, aug)
                 z, P, modes, _ = ekf_mode_update(
                     logic, z, P, u_known, p, modes, sync_band=SYNC_BAND
                 )
@@ -600,6 +678,7 @@ def run_drive_ekf(
         modes=modes_at,
         elements={mu_name[e]: e for e in mu_name},
         carry=carry,
+        appended=tuple(a.name for a in appended if a.corrected),
     )
 
 
