@@ -47,9 +47,10 @@ def drive_vehicle(context: DriveContext, seed: int) -> dict[str, Any]:
     )
 
     d = context.description
-    truth = DriveTruth.from_draw(d, context.fleet.draw(seed), constant_grade=context.grade is None)
+    draw = context.fleet.draw(seed)
+    truth = DriveTruth.from_draw(d, draw, constant_grade=context.grade is None)
     result = DriveSimulator(d, context.cycle, context.grade, truth=truth).run()
-    out: dict[str, Any] = {"seed": seed, "drive": result.to_dict()}
+    out: dict[str, Any] = {"seed": seed, "vehicle": draw.to_dict(), "drive": result.to_dict()}
     out["drive"].pop("shift_list")
     if result.failure or result.log is None:
         return out
