@@ -222,3 +222,97 @@ def test_a_grade_step_changes_what_it_should(description, tmp_path):
     zeta = 0.05
     expected = -r * m * g * (np.sin(zeta) + v["f_roll"].value * speed * (np.cos(zeta) - 1))
     assert rates[1] - rates[0] == pytest.approx(expected / inertia, rel=1e-3)
+
+
+#: A 3-2 power-on downshift of a fleet vehicle's WLTC drive (vehicle 10006 of the default
+#: fleet, at 684 s: 2158 kg on a 5.9 % grade, μ 1.19 times nominal): the TCU's plan as the
+#: vehicle's actuators delivered it (pressures in Pa), the truth's parameters and the from-gear
+#: state. K38 reaches synchronism at a capacity 0.06 % short of what gear 2 needs: its lock-up
+#: reverses, the reversed slip dips by about 1e-10 rad/s and returns within one integration step.
+MARGINAL_3_2 = {
+    "pressures": {
+        "B05": ([0.0, 0.05, 0.2], [1481864.6790712888, 46777.312262816864, 0.0]),
+        "K38": (
+            [0.0, 0.05, 0.2, 0.22, 0.55, 0.65],
+            [
+                0.0,
+                0.0,
+                113758.69967463866,
+                113758.69967463866,
+                113758.69967463866,
+                1481864.6790712888,
+            ],
+        ),
+    },
+    "torque": 76.16905323374851,
+    "t_end": 0.8,
+    "values": {
+        "m_veh": 2157.5310694585037,
+        "k_ss": 9616.231601186375,
+        "d_ss": 47.791648451106575,
+        "zeta": 0.05916007840567117,
+        "c_W": 0.2819390332729782,
+        "f_roll": 0.0011252791100255018,
+        "mu_05": 0.14319178060266477,
+        "mu_38": 0.14319178060266477,
+    },
+    "x0": {
+        "omega_2": 39.78664673589695,
+        "phi": 0.0016497508973140752,
+        "omega_C": 16.117763472032788,
+    },
+}
+
+
+@pytest.mark.parametrize("compiled", [False, True], ids=["casadi", "compiled"])
+def test_a_lock_up_at_the_capacity_limit_never_slides_against_its_slip(description, compiled):
+    """Physics: a sliding element's friction torque opposes its slip, so at every sample of
+    every sliding mode the slip has the mode's sign and friction only dissipates; the shift
+    ends in the to-gear and the energy audit closes. Before a reversed element started off the
+    guard (SLIP_START) the compiled run of this case chattered (more than 200 lock-ups of K38
+    within 2 ms), and in the drive it came from the shift slid on in ``K38_slide_neg`` with
+    K38's slip positive for 0.5 s: 71 kJ of negative friction work, out of gear at the end."""
+    from gearsym.symbolic.hybrid import hybrid_shift
+    from gearsym.validation.sim.compiled_c import compiler_available
+    from gearsym.validation.sim.hybrid_energy import energy_audit
+    from gearsym.validation.sim.scenario import Profile, Scenario
+
+    if compiled and not compiler_available():
+        pytest.skip("no C compiler")
+    case = MARGINAL_3_2
+    spec = shift_spec(description, "3-2")
+
+    def constant(value):
+        return Profile(np.array([0.0]), np.array([value]))
+
+    scenario = Scenario(
+        name="marginal 3-2",
+        file="<marginal 3-2>",
+        shift=spec,
+        t_end=case["t_end"],
+        vehicle_speed=0.0,
+        engine=constant(case["torque"]),
+        e_machine=constant(0.0),
+        pressure={e: Profile(np.array(t), np.array(v)) for e, (t, v) in case["pressures"].items()},
+        grade=constant(0.0),
+    )
+    simulator = HybridSimulator(
+        description, scenario, hybrid_shift(description, "3-2"), compiled=compiled
+    )
+    simulator.zeta0 = 0.0  # the grade is ζ itself, no profile on top
+    names = [v.name for v in simulator.modes[simulator.hybrid.from_mode].mode.model.states]
+    x0 = np.array([case["x0"][name] for name in names])
+    result = simulator.run(case["values"], rtol=1e-8, atol=1e-8, x0=x0)
+    reversed_first = [e for e in result.events if e.kind == LOCK_UP][0]
+    assert simulator.hybrid.modes[reversed_first.target].status["K38"] == (SLIDING, -1)
+    for element in simulator.hybrid.elements:
+        sign = np.array([simulator.hybrid.modes[m].status[element][1] for m in result.modes])
+        sliding = np.array(
+            [simulator.hybrid.modes[m].status[element][0] == SLIDING for m in result.modes]
+        )
+        slip = result.signals[f"slip_{element}"]
+        assert np.all(sign[sliding] * slip[sliding] > -1e-6), element
+    assert result.modes[-1] == simulator.hybrid.to_mode
+    audit = energy_audit(simulator, result)
+    assert audit.friction_dissipation > 0
+    assert audit.relative_residual < 1e-6, audit.to_dict()
