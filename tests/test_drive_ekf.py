@@ -361,3 +361,33 @@ def test_a_stiffer_vehicle_is_not_read_as_a_lighter_one(description, tmp_path):
     assert abs(m - 1800.0) <= 3 * sd
     m0, sd0 = without.mean["m_veh"][-1], without.sigma["m_veh"][-1]
     assert m0 < 1800.0 - 3 * sd0
+
+
+def test_a_larger_tyre_reads_as_the_wheel_side_mass(description, tmp_path):
+    """Tyres 6 % larger than the calibration's r_dyn, nothing else changed: the wheel equation
+    (2.49) carries m_veh r_dyn², the TCU measures the wheel's speed, so the filter (with the
+    calibration's r_dyn) identifies m_veh (r_dyn / r_dyn,cal)² = 1.1236 m_veh, the wheel-side
+    mass of the fleet's report: the estimate lies inside 3 σ of it and more than 3 σ above the
+    vehicle's mass itself (a 12 % gap, about four times the filter's σ on this short cycle)."""
+    from gearsym.validation.sim.drive import DriveTruth
+    from gearsym.validation.sim.fleet import load_fleet
+    from gearsym.validation.studies.drive_fleet import R_DYN_FACTOR, wheel_side_mass
+
+    fleet_file = tmp_path / "tyre.toml"
+    fleet_file.write_text(
+        '[fleet]\nname = "tyre"\nsource = "test"\n'
+        'm_veh = { value = 1800.0, unit = "kg", source = "test" }\n'
+        "[fleet.factor]\n"
+        'vehicle.r_dyn = { value = 1.06, unit = "1", source = "test" }\n'
+    )
+    draw = load_fleet(description, fleet_file).draw(0)
+    assert draw.get(R_DYN_FACTOR, 1.0) == pytest.approx(1.06)
+    truth = DriveTruth.from_draw(description, draw)
+    drive = DriveSimulator(description, load_cycle(SHORT), truth=truth).run()
+    assert drive.failure == ""
+    log = drive.log
+    args = (description, log.arrays(), log.shifts(), drive.gears, drive.values["m_veh"])
+    estimates = run_drive_ekf(*args, seed=3)
+    m, sd = estimates.mean["m_veh"][-1], estimates.sigma["m_veh"][-1]
+    assert abs(m - wheel_side_mass(1800.0, 1.06)) <= 3 * sd
+    assert m > 1800.0 + 3 * sd

@@ -60,6 +60,15 @@ def test_fleet_drives_each_vehicle_of_its_seed():
     for run in result.runs:
         sigma = np.asarray(run["trace_mass_sigma"]) * run["drive"]["truth"]["m_veh"]
         assert sigma[0] == pytest.approx(300.0) and sigma[-1] < 300.0 / 2
+        # the wheel-side mass is the draw's m_veh times its tyre factor squared, and its error
+        # trace the same estimate against it
+        m, factor = run["drive"]["truth"]["m_veh"], run["vehicle"]["factor.vehicle.r_dyn"]
+        assert factor != 1.0
+        assert run["wheel_side_mass"]["truth"] == pytest.approx(m * factor**2, rel=1e-12)
+        estimate = m * (1 + np.asarray(run["trace_mass_error"]))
+        wheel = run["wheel_side_mass"]["truth"] * (1 + np.asarray(run["trace_wheel_mass_error"]))
+        np.testing.assert_allclose(wheel, estimate, rtol=1e-12)
+    assert result.to_dict()["wheel_side_mass_error"]["vehicles"] == 2
 
 
 def gearsym(*args: str) -> subprocess.CompletedProcess:
