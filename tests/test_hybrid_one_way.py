@@ -310,33 +310,13 @@ def test_downshift_follows_the_reference(box, downshift):
     the whole run compares: F1 takes torque within 1 ms of the hybrid's lock-up (measured
     0.05 ms), speeds within 1 % of their peak (0.24 %), φ 1 % (0.32 %), ω_C 1e-4 (5.8e-6).
 
-    Which stiff integrator gets through this scenario's first microseconds (the freewheel's
-    contact law max(0, k z + c ż) has a kink the Newton iterations straddle) depends on the
-    machine's BLAS rounding: one machine's CVODES failed at 6e-5 s with CV_CONV_FAILURE and its
-    Radau passed; another's Radau failed at 1e-6 s ("required step size is less than spacing
-    between numbers") unless OpenBLAS ran its Haswell kernels, and its CVODES passed. The
-    reference is therefore the first of Radau, CVODES and Radau with a differenced Jacobian that
-    completes, a finding about the reference left for its owners; the comparison's limits hold
-    for each of them."""
-    from gearsym.symbolic.errors import GearsymError
-    from gearsym.validation.sim.simulate import simulate
+    The reference is the first integrator that completes on this machine
+    (:func:`~gearsym.validation.sim.one_way_comparison.reference_downshift`: which stiff
+    integrator fails here depends on the machine's rounding); the limits hold for each."""
+    from gearsym.validation.sim.one_way_comparison import reference_downshift
 
     _, hybrid = downshift
-    failures = []
-    for options in (
-        {"method": "Radau"},
-        {"method": "cvodes"},
-        {"method": "Radau", "analytic_jacobian": False},
-    ):
-        try:
-            reference = simulate(
-                box, load_scenario(box, DOWNSHIFT), check_models=False, phases=False, **options
-            )
-            break
-        except GearsymError as error:
-            failures.append((options, str(error)))
-    else:
-        pytest.fail(f"no reference integrator completed: {failures}")
+    reference, _ = reference_downshift(box, load_scenario(box, DOWNSHIFT))
     window = np.ones(len(reference.t), dtype=bool)
     errors = _differences(hybrid, reference, window)
     for key in SPEEDS:
