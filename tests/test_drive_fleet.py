@@ -45,6 +45,50 @@ def test_percentiles_by_hand():
     assert stats["vehicles"] == 3
 
 
+def test_aggregates_by_hand():
+    """μ after the third slide counted per element and over all, NEES/NIS percentiles and the
+    real-time factor from synthetic run summaries (numbers by hand)."""
+    from gearsym.validation.studies.drive_fleet import drive_fleet_markdown, fleet_aggregates
+
+    def run(seed, inside, nees, factor, failure=""):
+        third = {"t": 1.0, "truth": 0.1, "error": 0.0, "sigma": 0.01}
+        return {
+            "seed": seed,
+            "drive": {"failure": failure, "real_time_factor": factor, "wall_s": 1800 / factor},
+            "estimates": {
+                "m_veh": {"final": 1.0},
+                "zeta": {"rms_rad": {"all": 0.01}},
+                "mu_38": {"after_third_slide": {**third, "inside_2_sigma": inside[0]}},
+                "mu_05": {"after_third_slide": {**third, "inside_2_sigma": inside[1]}},
+                "mu_08": {"after_third_slide": None},
+            },
+            "estimator": {"nees_per_dof_mean": nees, "nis_per_dof": nees / 2},
+        }
+
+    runs = [run(0, (True, False), 1.0, 100.0), run(1, (True, True), 3.0, 200.0)]
+    out = fleet_aggregates(runs)
+    assert out["mu_after_third_slide"]["per_element"] == {
+        "mu_38": {"pairs": 2, "inside_2_sigma": 2},
+        "mu_05": {"pairs": 2, "inside_2_sigma": 1},
+    }
+    assert (
+        out["mu_after_third_slide"]["pairs"],
+        out["mu_after_third_slide"]["inside_2_sigma"],
+    ) == (
+        4,
+        3,
+    )
+    # two values: p50 the mean, p95 = 1 + 0.95 (3 - 1) = 2.9
+    assert out["nees_per_dof"] == pytest.approx({"p50": 2.0, "p95": 2.9})
+    assert out["nis_per_dof"] == pytest.approx({"p50": 1.0, "p95": 1.45})
+    assert out["real_time_factor"] == pytest.approx({"p50": 150.0, "min": 100.0})
+    assert out["drive_wall_s"] == pytest.approx(18.0 + 9.0)
+    data = DriveFleet(load_cycle("wltc3b"), runs, "test", 60.0, "in one process").to_dict()
+    text = drive_fleet_markdown(data, "gearsym drive --fleet --runs 2")
+    assert "3 of 4 (vehicle, element) pairs (mu_38 2 of 2, mu_05 1 of 2)" in text
+    assert "1.0 min in one process" in text
+
+
 def test_fleet_drives_each_vehicle_of_its_seed():
     d = load_description()
     fleet = load_fleet(d)
