@@ -14,14 +14,17 @@ from typing import Any
 import pytest
 from gearsym.validation.sim.drive_report import drive_markdown
 from gearsym.validation.studies.control.report import control_markdown
+from gearsym.validation.studies.drive_fleet import drive_fleet_markdown
 from gearsym.validation.studies.estimation.fleet_report import fleet_markdown
 from gearsym.validation.studies.estimation.markdown import monte_carlo_markdown, uio_markdown
 
 RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
 HEADER = re.compile(r"^<!-- written by `(?P<command>[^`]+)`; do not edit by hand")
 
-#: (file pattern, renderer, what the command must contain)
+#: (file pattern, renderer, what the command must contain); a table takes the first pattern
+#: it matches
 KINDS: tuple[tuple[str, Callable[[dict[str, Any], str], str], str], ...] = (
+    ("drive_*_fleet.md", drive_fleet_markdown, "--runs"),
     ("fleet_*.md", fleet_markdown, "--fleet"),
     ("montecarlo_*.md", monte_carlo_markdown, "--runs"),
     ("uio_*.md", uio_markdown, "--filter uio"),
@@ -30,9 +33,9 @@ KINDS: tuple[tuple[str, Callable[[dict[str, Any], str], str], str], ...] = (
 )
 
 TABLES = [
-    (table, render, marker)
-    for pattern, render, marker in KINDS
-    for table in sorted(RESULTS.glob(pattern))
+    next((table, render, marker) for pattern, render, marker in KINDS if table.match(pattern))
+    for table in sorted(RESULTS.glob("*.md"))
+    if any(table.match(pattern) for pattern, _, _ in KINDS)
 ]
 
 
@@ -76,6 +79,7 @@ EXPECTED = {
     "uio_2_3_noise.md": "uio.md",
     "drive_wltc3b.md": "drive.md",
     "drive_wltc3b_fleet_10000.md": "drive.md",
+    "drive_wltc3b_fleet.md": "drive.md",
     "control_2_3.md": "control.md",
     "control_2_3_cold.md": "control.md",
     "control_3_4.md": "control.md",

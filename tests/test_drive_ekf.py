@@ -370,8 +370,7 @@ def test_a_larger_tyre_reads_as_the_wheel_side_mass(description, tmp_path):
     mass of the fleet's report: the estimate lies inside 3 σ of it and more than 3 σ above the
     vehicle's mass itself (a 12 % gap, about four times the filter's σ on this short cycle)."""
     from gearsym.validation.sim.drive import DriveTruth
-    from gearsym.validation.sim.fleet import load_fleet
-    from gearsym.validation.studies.drive_fleet import R_DYN_FACTOR, wheel_side_mass
+    from gearsym.validation.sim.fleet import R_DYN_FACTOR, load_fleet, wheel_side_mass
 
     fleet_file = tmp_path / "tyre.toml"
     fleet_file.write_text(

@@ -167,3 +167,15 @@ def test_a_fleet_file_is_named_in_the_command_line():
         == "gearsym drive --cycle udds --duration 60 --fleet --seed 3"
     )
     assert drive_command("udds", None) == "gearsym drive --cycle udds"
+
+
+def test_a_fleet_vehicle_s_report_gives_its_wheel_side_mass():
+    """A fleet vehicle with tyres 2 % larger than calibrated, truth 2000 kg, estimate 2100 kg:
+    the wheel-side mass is 2000 x 1.02² = 2080.8 kg and the estimate's error against it
+    +0.92 % (by hand); the calibration's own vehicle (no draw) gets no such line."""
+    from gearsym.validation.sim.drive_report import _wheel_side_line
+
+    mass = {"final": 2100.0, "truth": 2000.0}
+    (line,) = _wheel_side_line(mass, {"seed": 1, "factor.vehicle.r_dyn": 1.02})
+    assert "is 2081 kg" in line and "error against it +0.9 %" in line
+    assert _wheel_side_line(mass, None) == []

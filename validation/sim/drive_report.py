@@ -219,6 +219,24 @@ def drive_markdown(data: dict[str, Any], command: str) -> str:
     return "\n".join(out) + "\n"
 
 
+def _wheel_side_line(mass: dict[str, Any], vehicle: Any) -> list[str]:
+    """For a fleet vehicle whose tyres differ from the calibration's: the final estimate
+    against the wheel-side mass (:func:`~gearsym.validation.sim.fleet.wheel_side_mass`), what
+    the filter can identify without a vehicle-speed source."""
+    from gearsym.validation.sim.fleet import R_DYN_FACTOR, wheel_side_mass
+
+    if not isinstance(vehicle, dict) or R_DYN_FACTOR not in vehicle:
+        return []
+    factor = vehicle[R_DYN_FACTOR]
+    wheel = wheel_side_mass(mass["truth"], factor)
+    return [
+        f"- its tyres' r_dyn {factor:.4f} x the calibration's: the wheel-side mass "
+        f"m_veh (r_dyn / r_dyn,cal)² is {wheel:.0f} kg, the final estimate's error against it "
+        f"{100 * (mass['final'] - wheel) / wheel:+.1f} % (the filter sees wheel speeds, not the "
+        "vehicle's: it identifies this product, docs/drive.md)"
+    ]
+
+
 def _estimates_markdown(data: dict[str, Any]) -> list[str]:
     """The EKF carried over the drive: m_veh and ζ against the truth, each μ when its element
     last slid, the filter's consistency."""
@@ -241,6 +259,7 @@ def _estimates_markdown(data: dict[str, Any]) -> list[str]:
         "",
         f"- m_veh {m['final']:.0f} ± {m['sigma']:.0f} kg, truth {m['truth']:.0f} kg; relative "
         f"error at {errors}",
+        *_wheel_side_line(m, vehicle),
         f"- ζ {z['final']:+.4f} ± {z['sigma']:.4f} rad, truth {z['truth']:+.4f} rad at the end; "
         "RMS error "
         + ", ".join(

@@ -52,9 +52,11 @@ __all__ = [
     "Fleet",
     "FleetDraw",
     "TruthWorld",
+    "R_DYN_FACTOR",
     "load_fleet",
     "told_inputs",
     "truth_world",
+    "wheel_side_mass",
 ]
 
 #: The shipped fleet (``--fleet`` without a file name uses it).
@@ -503,3 +505,16 @@ def told_inputs(
 
 def _knots(profile: Profile) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(profile.time, dtype=float), np.asarray(profile.value, dtype=float)
+
+
+#: The fleet's draw of the tyres' dynamic radius, as a factor on the calibration's r_dyn.
+R_DYN_FACTOR = "factor.vehicle.r_dyn"
+
+
+def wheel_side_mass(m_veh: float, r_dyn_factor: float) -> float:
+    """The vehicle's mass as the wheel's speed sees it through the calibration's r_dyn:
+    m_veh (r_dyn / r_dyn,cal)². The wheel equation (2.49) has m_veh r_dyn² beside I_wheel
+    and the TCU measures wheel and shaft speeds, not the vehicle's speed, so a filter with the
+    calibration's r_dyn identifies this product, not m_veh: a tyre 1 % larger reads as 2 %
+    more mass. It is the inertia a shift's inertia-phase feed-forward needs."""
+    return m_veh * r_dyn_factor**2

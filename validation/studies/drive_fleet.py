@@ -15,8 +15,9 @@ from typing import Any
 import numpy as np
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.validation.sim.cycles import Cycle, GradeProfile
+from gearsym.validation.sim.fleet import R_DYN_FACTOR, wheel_side_mass
 
-__all__ = ["DriveFleet", "drive_vehicle", "fleet_aggregates", "run_drive_fleet", "wheel_side_mass"]
+__all__ = ["DriveFleet", "drive_vehicle", "fleet_aggregates", "run_drive_fleet"]
 
 WHERE = ("drive", "--scheduler")
 
@@ -80,19 +81,6 @@ def drive_vehicle(context: DriveContext, seed: int) -> dict[str, Any]:
     return out
 
 
-#: The fleet's draw of the tyres' dynamic radius, as a factor on the calibration's r_dyn.
-R_DYN_FACTOR = "factor.vehicle.r_dyn"
-
-
-def wheel_side_mass(m_veh: float, r_dyn_factor: float) -> float:
-    """The vehicle's mass as the wheel's speed sees it through the calibration's r_dyn:
-    m_veh (r_dyn / r_dyn,cal)². The wheel equation (2.49) has m_veh r_dyn² beside I_wheel
-    and the TCU measures wheel and shaft speeds, not the vehicle's speed, so a filter with the
-    calibration's r_dyn identifies this product, not m_veh: a tyre 1 % larger reads as 2 %
-    more mass. It is the inertia a shift's inertia-phase feed-forward needs."""
-    return m_veh * r_dyn_factor**2
-
-
 @dataclass
 class DriveFleet:
     """Every vehicle's summary and the fleet's percentiles of |mass error| over time."""
@@ -108,7 +96,8 @@ class DriveFleet:
     def percentiles(self, trace: str = "trace_mass_error") -> dict[str, Any]:
         """p50 and p95 of the relative |m_veh error| at :data:`REPORT_TIMES` and at the end,
         and over time (every :data:`TRACE_STEP`); ``trace="trace_wheel_mass_error"``: of the
-        error against the wheel-side mass (:func:`wheel_side_mass`)."""
+        error against the wheel-side mass
+        (:func:`~gearsym.validation.sim.fleet.wheel_side_mass`)."""
         done = [r for r in self.runs if trace in r]
         if not done:
             return {}
@@ -302,7 +291,8 @@ def drive_fleet_markdown(data: dict[str, Any], command: str) -> str:
 
 def plot_drive_fleet(fleet: DriveFleet, path: Any) -> Any:
     """Each vehicle's relative mass error over time, with the fleet's p50 and p95 of |error|
-    and the p95 of the error against the wheel-side mass (:func:`wheel_side_mass`)."""
+    and the p95 of the error against the wheel-side mass
+    (:func:`~gearsym.validation.sim.fleet.wheel_side_mass`)."""
     from gearsym.validation.drawing.figures import save, subplots
 
     fig, ax = subplots(1, 1, size=(9.0, 4.5))
