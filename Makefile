@@ -111,7 +111,8 @@ results: $(STAMP)
 	cp build/results/tcu_task_2_3/tcu_task_2_3.json $(RESULTS)/tcu_task_2_3.json
 	cp build/results/tcu_task_2_3/tcu_task_2_3.md $(RESULTS)/tcu_task_2_3.md
 # A whole WLTC class 3b drive with the EKF over it, the calibration's own vehicle and a fleet
-# vehicle (docs/drive.md; about 8 min each, the Python reference simulation).
+# vehicle (docs/drive.md; about 2 min each: the fast drive and the EKF over its log), then 20
+# vehicles of the fleet (about 32 min on two cores).
 	rm -rf build/results/drive_wltc3b
 	$(BIN)/gearsym drive --cycle wltc3b --out build/results/drive_wltc3b
 	cp build/results/drive_wltc3b/drive.json $(RESULTS)/drive_wltc3b.json
@@ -123,6 +124,11 @@ results: $(STAMP)
 	cp build/results/drive_wltc3b_fleet_10000/drive.json $(RESULTS)/drive_wltc3b_fleet_10000.json
 	cp build/results/drive_wltc3b_fleet_10000/drive.md $(RESULTS)/drive_wltc3b_fleet_10000.md
 	cp build/results/drive_wltc3b_fleet_10000/estimates.png $(RESULTS)/drive_wltc3b_fleet_10000_estimates.png
+	rm -rf build/results/drive_wltc3b_fleet
+	$(BIN)/gearsym drive --cycle wltc3b --fleet --runs 20 --seed 10000 --scheduler local --out build/results/drive_wltc3b_fleet
+	cp build/results/drive_wltc3b_fleet/fleet.json $(RESULTS)/drive_wltc3b_fleet.json
+	cp build/results/drive_wltc3b_fleet/fleet.md $(RESULTS)/drive_wltc3b_fleet.md
+	cp build/results/drive_wltc3b_fleet/fleet.png $(RESULTS)/drive_wltc3b_fleet.png
 # The adaptive-control study (docs/control.md): 100 vehicles of the default fleet x 20 2-3
 # upshifts x 4 strategies (the issue's size), 20 vehicles with cold oil (every element's mu
 # +25 %) and 30 vehicles of 3-4 (about 36, 5 and 12 min on two cores).

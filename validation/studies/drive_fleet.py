@@ -242,7 +242,8 @@ def drive_fleet_markdown(data: dict[str, Any], command: str) -> str:
         "m_veh (r_dyn / r_dyn,cal)², the inertia a shift's feed-forward needs; a tyre 1 % "
         "larger than calibrated reads as 2 % more mass",
         "",
-        "| time | m_veh: p50 of |error| | m_veh: p95 | wheel-side mass: p50 | wheel-side: p95 |",
+        "| time | m_veh: p50 of \\|error\\| | m_veh: p95 | wheel-side mass: p50 "
+        "| wheel-side: p95 |",
         "|---|---|---|---|---|",
     ]
     wheel = data.get("wheel_side_mass_error", {}).get("error_at", {})
@@ -271,9 +272,11 @@ def drive_fleet_markdown(data: dict[str, Any], command: str) -> str:
             )
     if "real_time_factor" in data:
         out.append(
-            f"- the fast drive's real-time factor: p50 {data['real_time_factor']['p50']:.0f}x, "
-            f"slowest {data['real_time_factor']['min']:.0f}x; {data['drive_wall_s']:.0f} s of "
-            "drive wall time in all (the EKF over each log not counted)"
+            f"- the fast drive's real-time factor in this run: p50 "
+            f"{data['real_time_factor']['p50']:.0f}x, slowest "
+            f"{data['real_time_factor']['min']:.0f}x; {data['drive_wall_s']:.0f} s of drive wall "
+            "time in all (each drive beside the other worker's drive or filter, and building "
+            "its shifts' C in its first drives; the EKF over each log not counted)"
         )
     if data.get("fleet_wall_s") is not None and math.isfinite(data["fleet_wall_s"]):
         out.append(
