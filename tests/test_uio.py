@@ -157,6 +157,51 @@ def test_the_weighted_decoupling_holds_for_unequal_output_weights(modes):
         design_uio(mode, ["T_res_star"], 0.01, measurement_weight=[1.0, 0.0, 1.0])
 
 
+def test_the_gain_solves_the_riccati_equation_as_scipy_does(modes):
+    """The design's Riccati solution (mpmath, doubling) against SciPy's solve_discrete_are
+    (LAPACK's QZ, an independent method) on the same T A_d and C: the gain K and F agree to
+    1e-9 of their largest entry."""
+    from scipy.linalg import solve_discrete_are
+
+    mode = modes["torque and speed phase"]
+    uio = design_uio(mode, ["T_res_star"], 0.01, measurement_weight=[0.09, 1e-4, 1e-3])
+    a1, c = uio.T @ uio.Ad, uio.C
+    r = np.diag([0.09, 1e-4, 1e-3])
+    x = solve_discrete_are(a1.T, c.T, np.eye(len(a1)), r)
+    k1 = a1 @ x @ c.T @ np.linalg.inv(c @ x @ c.T + r)
+    f = a1 - k1 @ c
+    np.testing.assert_allclose(uio.F, f, atol=1e-9 * np.max(np.abs(f)))
+    np.testing.assert_allclose(uio.K, k1 + f @ uio.H, atol=1e-9 * np.max(np.abs(k1)))
+
+
+def test_the_design_does_not_depend_on_the_machine_s_blas():
+    """The gains are emitted as literals into generated/: the design gives the same doubles
+    whichever kernels OpenBLAS picks (two processes, one forced to its generic kernels; a
+    floating-point design differed at 1e-13 between two machines and made generated/ stale)."""
+    import os
+    import subprocess
+    import sys
+
+    script = (
+        "from gearsym.symbolic.estimators import design_uio, linear_modes\n"
+        "from gearsym.symbolic.loader import load_description\n"
+        "m = {x.phase: x for x in linear_modes(load_description(), '2-3')}\n"
+        "u = design_uio(m['torque and speed phase'], ['T_res_star'], 0.01)\n"
+        "print([float(v).hex() for v in [*u.K.ravel(), *u.F.ravel(), *u.H.ravel()]])\n"
+    )
+    outputs = []
+    for core in (None, "Prescott"):
+        env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"}
+        if core:
+            env["OPENBLAS_CORETYPE"] = core
+        run = subprocess.run(
+            [sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=600
+        )
+        assert run.returncode == 0, run.stderr
+        outputs.append(run.stdout)
+    assert outputs[0] == outputs[1]
+
+
 # --------------------------------------------------------------- on the reference simulation
 
 

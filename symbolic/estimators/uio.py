@@ -361,58 +361,75 @@ def design_uio(
 
     Refuses (:class:`GearsymError` naming the phase and the condition) when a UIO does not
     exist; the known inputs are the others of the form, in its order."""
+    import mpmath
     import numpy as np
-    from scipy.linalg import expm, solve_discrete_are
 
     existence = existence or uio_existence(mode, unknown, parameters)
     if not existence.exists:
         raise GearsymError("uio", mode.phase, f"no UIO exists: {existence.reason()}")
     if not (sample_time > 0 and np.isfinite(sample_time)):
         raise GearsymError("uio", "--sample-time", f"must be positive, got {sample_time!r}")
+    if hold not in ("zoh", "foh"):
+        raise GearsymError("uio", "hold", f"must be zoh or foh, got {hold!r}")
+    weights = np.broadcast_to(np.asarray(measurement_weight, dtype=float), (mode.C.shape[0],))
+    if np.any(~np.isfinite(weights)) or np.any(weights <= 0):
+        raise GearsymError("uio", "measurement_weight", "must be positive and finite")
     values = {
         v.symbol: float((parameters or {}).get(v.name, v.default)) for v in mode.form.parameters
     }
-    a = np.array(mode.form.A.xreplace(values).evalf(), dtype=float)
-    b = np.array(mode.form.B.xreplace(values).evalf(), dtype=float)
-    c = np.array(mode.C.evalf(), dtype=float)
     chosen = list(existence.unknown)
     unknown_cols = [mode.form.inputs.index(name) for name in chosen]
     dropped = set(existence.collinear)
     known = [
         j for j, name in enumerate(mode.form.inputs) if name not in chosen and name not in dropped
     ]
-    if hold not in ("zoh", "foh"):
-        raise GearsymError("uio", "hold", f"must be zoh or foh, got {hold!r}")
-    n = a.shape[0]
-    # expm of [[A, I, 0], [0, 0, I/h], [0, 0, 0]] h holds e^{Ah}, Γ = ∫₀ʰ e^{Aτ} dτ and
-    # Λ = ∫₀ʰ e^{A(h−τ)} τ/h dτ (Van Loan's block form of the hold integrals)
-    block = np.zeros((3 * n, 3 * n))
-    block[:n, :n], block[:n, n : 2 * n] = a, np.eye(n)
-    block[n : 2 * n, 2 * n :] = np.eye(n) / sample_time
-    phi = expm(block * sample_time)
-    ad, gamma, lam = phi[:n, :n], phi[:n, n : 2 * n], phi[:n, 2 * n :]
-    bd, ed = gamma @ b[:, known], gamma @ b[:, unknown_cols]
-    b1 = lam @ b[:, known] if hold == "foh" else np.zeros_like(bd)
-    weights = np.broadcast_to(np.asarray(measurement_weight, dtype=float), (c.shape[0],))
-    if np.any(~np.isfinite(weights)) or np.any(weights <= 0):
-        raise GearsymError("uio", "measurement_weight", "must be positive and finite")
-    r_matrix = np.diag(weights)
-    # decoupling with the noise-weighted left inverse of C E_d (minimum-variance among all H
-    # with (I - H C) E_d = 0; the plain pseudo-inverse when all weights are equal)
-    ce = c @ ed
-    w = np.diag(1.0 / weights)
-    left_inverse = np.linalg.solve(ce.T @ w @ ce, ce.T @ w)
-    h = ed @ left_inverse
-    t = np.eye(n) - h @ c
-    a1 = t @ ad
-    try:
-        riccati = solve_discrete_are(a1.T, c.T, process_weight * np.eye(n), r_matrix)
-    except (np.linalg.LinAlgError, ValueError) as err:
-        raise GearsymError(
-            "uio", mode.phase, f"no stabilising gain for (T A_d, C): {err}"
-        ) from None
-    k1 = a1 @ riccati @ c.T @ np.linalg.inv(c @ riccati @ c.T + r_matrix)
-    f = a1 - k1 @ c
+    # The design runs in mpmath at DESIGN_DIGITS and is rounded to doubles at the end: the
+    # gains are emitted into generated/ as literals, and LAPACK's last digits follow the
+    # machine's BLAS kernels (two machines gave gains differing at 1e-13), so a design in
+    # floating point would make the emitted code differ from machine to machine.
+    with mpmath.workdps(DESIGN_DIGITS):
+        a = _mp_matrix(mode.form.A.xreplace(values))
+        b = _mp_matrix(mode.form.B.xreplace(values))
+        c = _mp_matrix(mode.C)
+        n = a.rows
+        eye = mpmath.eye(n)
+        h_s = mpmath.mpf(sample_time)
+        # expm of [[A, I, 0], [0, 0, I/h], [0, 0, 0]] h holds e^{Ah}, Γ = ∫₀ʰ e^{Aτ} dτ and
+        # Λ = ∫₀ʰ e^{A(h−τ)} τ/h dτ (Van Loan's block form of the hold integrals)
+        block = mpmath.zeros(3 * n, 3 * n)
+        for i in range(n):
+            for j in range(n):
+                block[i, j] = a[i, j] * h_s
+            block[i, n + i] = h_s
+            block[n + i, 2 * n + i] = mpmath.mpf(1)
+        phi = mpmath.expm(block)
+        ad = phi[:n, :n]
+        gamma, lam = phi[:n, n : 2 * n], phi[:n, 2 * n :]
+        b_known, b_unknown = _mp_columns(b, known), _mp_columns(b, unknown_cols)
+        bd, ed = gamma * b_known, gamma * b_unknown
+        b1 = lam * b_known if hold == "foh" else mpmath.zeros(n, len(known))
+        r_matrix = mpmath.diag([mpmath.mpf(float(w)) for w in weights])
+        # decoupling with the noise-weighted left inverse of C E_d (minimum-variance among all
+        # H with (I - H C) E_d = 0; the plain pseudo-inverse when all weights are equal)
+        ce = c * ed
+        w = r_matrix**-1
+        left_inverse = (ce.T * w * ce) ** -1 * ce.T * w
+        h = ed * left_inverse
+        t = eye - h * c
+        a1 = t * ad
+        riccati = _filter_riccati(a1, c, mpmath.mpf(float(process_weight)) * eye, r_matrix)
+        if riccati is None:
+            raise GearsymError(
+                "uio",
+                mode.phase,
+                "no stabilising gain for (T A_d, C): the Riccati equation's "
+                "doubling iteration did not converge",
+            )
+        k1 = a1 * riccati * c.T * (c * riccati * c.T + r_matrix) ** -1
+        f = a1 - k1 * c
+        ad, bd, b1, ed, c, h, left_inverse, t, f, k = (
+            _to_numpy(m) for m in (ad, bd, b1, ed, c, h, left_inverse, t, f, k1 + f * h)
+        )
     return UioDesign(
         phase=mode.phase,
         unknown=tuple(chosen),
@@ -430,8 +447,66 @@ def design_uio(
         left_inverse=left_inverse,
         T=t,
         F=f,
-        K=k1 + f @ h,
+        K=k,
     )
+
+
+#: Decimal digits of the UIO design's arithmetic (:func:`design_uio`).
+DESIGN_DIGITS = 40
+
+
+def _mp_matrix(matrix: Any) -> Any:
+    """A SymPy matrix of numbers as an mpmath matrix at the working precision."""
+    import mpmath
+
+    rows, cols = matrix.shape
+    out = mpmath.zeros(rows, cols)
+    for i in range(rows):
+        for j in range(cols):
+            out[i, j] = mpmath.mpmathify(str(sp.N(matrix[i, j], DESIGN_DIGITS + 10)))
+    return out
+
+
+def _mp_columns(matrix: Any, columns: Sequence[int]) -> Any:
+    import mpmath
+
+    out = mpmath.zeros(matrix.rows, len(columns))
+    for k, j in enumerate(columns):
+        for i in range(matrix.rows):
+            out[i, k] = matrix[i, j]
+    return out
+
+
+def _to_numpy(matrix: Any) -> Any:
+    import numpy as np
+
+    return np.array(
+        [[float(matrix[i, j]) for j in range(matrix.cols)] for i in range(matrix.rows)],
+        dtype=float,
+    ).reshape(matrix.rows, matrix.cols)
+
+
+def _filter_riccati(a: Any, c: Any, q: Any, r: Any, iterations: int = 200) -> Any:
+    """The stabilising solution X of the filter's discrete Riccati equation
+    X = A X Aᵀ − A X Cᵀ (C X Cᵀ + R)⁻¹ C X Aᵀ + Q (what SciPy's ``solve_discrete_are(Aᵀ, Cᵀ,
+    Q, R)`` returns), by the structure-preserving doubling algorithm (Chu, Fan, Lin & Wang
+    2004; quadratic convergence) in mpmath; None when it does not converge."""
+    import mpmath
+
+    n = a.rows
+    eye = mpmath.eye(n)
+    a_k, g_k, h_k = a.T, c.T * r**-1 * c, q
+    tolerance = mpmath.mpf(10) ** (-(mpmath.mp.dps - 5))
+    for _ in range(iterations):
+        w = (eye + g_k * h_k) ** -1
+        a_next = a_k * w * a_k
+        g_next = g_k + a_k * w * g_k * a_k.T
+        h_next = h_k + a_k.T * h_k * w * a_k
+        change = mpmath.mnorm(h_next - h_k, 1)
+        a_k, g_k, h_k = a_next, g_next, h_next
+        if change <= tolerance * mpmath.mnorm(h_k, 1):
+            return (h_k + h_k.T) / 2
+    return None
 
 
 def shift_uio_designs(
