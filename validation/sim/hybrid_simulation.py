@@ -51,8 +51,9 @@ first step would have been shorter (tests/test_closed_loop_fast.py). Without a C
 calls. Sensitivities (``parameters``) always run through CasADi.
 
 Beside this module: each mode compiled to CasADi (:mod:`~gearsym.validation.sim.hybrid_modes`),
-the records a run returns (:mod:`~gearsym.validation.sim.hybrid_result`) and the energy audit
-of a run (:mod:`~gearsym.validation.sim.hybrid_energy`).
+the records a run returns (:mod:`~gearsym.validation.sim.hybrid_result`), the energy audit
+of a run (:mod:`~gearsym.validation.sim.hybrid_energy`) and the sliding elements' slips at the
+switches (:mod:`~gearsym.validation.sim.hybrid_slips`).
 """
 
 from __future__ import annotations
@@ -75,7 +76,6 @@ from gearsym.symbolic.hybrid import (
     OPEN,
     OPENING,
     RELEASE,
-    SLIDING,
     Guard,
     HybridShift,
     drivetrain_mass,
@@ -85,6 +85,7 @@ from gearsym.symbolic.numeric import to_casadi
 from gearsym.validation.sim.compiled_c import CompiledFunctions, compiler_available
 from gearsym.validation.sim.hybrid_modes import CompiledMode
 from gearsym.validation.sim.hybrid_result import Event, HybridResult, Piece, states_of
+from gearsym.validation.sim.hybrid_slips import check_slip_signs, onto_sliding_side
 from gearsym.validation.sim.scenario import SAMPLE_TIME, Scenario, load_scenario
 from scipy.integrate import solve_ivp
 
@@ -93,18 +94,6 @@ MU_MODES = ("map", "constant")
 #: Most switches one simulation follows: a guard that chatters (slip crossing zero back and
 #: forth at the capacity limit) is a modelling problem to report, not to integrate for ever.
 EVENTS_MAX = 200
-
-#: Slip (rad/s) a sliding element starts with after a switch that leaves it at zero slip
-#: (break-away, engagement at zero slip, a lock-up that slides on the other way): on its
-#: mode's side of the lock-up guard. Starting *on* the guard, a rounding residue of the wrong
-#: sign (1e-14) hides the next crossing when the slip dips and returns within one step (a
-#: 3-2 downshift of the fleet's drive slid on with K38's slip of the wrong sign for 0.5 s and
-#: negative friction work). 1e-9 rad/s is far below any slip the model resolves.
-SLIP_START = 1e-9
-#: A sliding element whose slip has the wrong sign by more than this (rad/s) at the end of an
-#: integration piece ends the simulation with a stated failure (a missed lock-up), never with
-#: a result that dissipates negative friction work.
-SLIP_WRONG_SIGN = 1e-6
 
 
 class HybridSimulator:
@@ -367,46 +356,6 @@ class HybridSimulator:
             done.add(guard.element)
             mode = guard.target
 
-    def onto_sliding_side(
-        self, mode: str, element: str, x: np.ndarray, t: float, p: np.ndarray
-    ) -> np.ndarray:
-        """``x`` with the slip of ``element``, if it slides in ``mode`` and sits within
-        :data:`SLIP_START` of zero, moved to ``SLIP_START`` on its sliding side (along the
-        slip's gradient, the smallest change of x): the lock-up guard then starts strictly on
-        its armed side. Any other ``x`` is returned unchanged."""
-        state, sign = self.hybrid.modes[mode].status[element]
-        if state != SLIDING:
-            return x
-        compiled = self.modes[mode]
-        k = self.hybrid.elements.index(element)
-        u = self.inputs(t)
-        slip = compiled.value(compiled.slips, x, u, p)[k]
-        if sign * slip >= SLIP_START or abs(slip) > SLIP_START:
-            return x
-        # the slips are linear in the mode's speeds: the gradient from unit steps
-        base = compiled.value(compiled.slips, np.zeros_like(x), u, p)[k]
-        gradient = np.array(
-            [compiled.value(compiled.slips, row, u, p)[k] - base for row in np.eye(len(x))]
-        )
-        return x + (sign * SLIP_START - slip) * gradient / float(gradient @ gradient)
-
-    def check_slip_signs(self, mode: str, x: np.ndarray, t: float, p: np.ndarray) -> None:
-        """A stated failure if a sliding element of ``mode`` ends a piece at ``x`` with its
-        slip of the wrong sign (beyond :data:`SLIP_WRONG_SIGN`): a lock-up the event search
-        missed, whose continuation would dissipate negative friction work."""
-        status = self.hybrid.modes[mode].status
-        compiled = self.modes[mode]
-        slips = compiled.value(compiled.slips, x, self.inputs(t), p)
-        for k, e in enumerate(self.hybrid.elements):
-            state, sign = status[e]
-            if state == SLIDING and sign * slips[k] < -SLIP_WRONG_SIGN:
-                raise GearsymError(
-                    self.scenario.file,
-                    "scenario",
-                    f"the slip of {e} is {slips[k]:.3g} rad/s at t = {t:.6g} s, against its "
-                    f"sliding direction in {mode} (a lock-up the event search missed)",
-                )
-
     def commanded(self, element: str, t: float) -> bool:
         """A dog element's command at t (its ``[pressure.<dog>]`` profile > 0)."""
         return self.scenario.pressure[element](t) > 0
@@ -550,7 +499,7 @@ class HybridSimulator:
                 events.append(Event(ta, guard.kind, guard.element, mode, target))
                 tau_p.append(np.zeros(m))
                 mode, x, sens = target, matrix @ x, matrix @ sens
-                x = self.onto_sliding_side(mode, guard.element, x, ta, p)
+                x = onto_sliding_side(self, mode, guard.element, x, ta, p)
             dogs = self.dog_switches(mode, ta, tb, x, p) if self.hybrid.dog else []
             for guard, target, matrix in dogs:
                 loss = self.impulse_loss(mode, target, x, matrix)
@@ -619,7 +568,7 @@ class HybridSimulator:
                 nfev += sol.nfev
                 pieces.append(Piece(mode, t, float(sol.t[-1]), sol.sol, y0.copy()))
                 t = float(sol.t[-1])
-                self.check_slip_signs(mode, sol.y[:n, -1], t, p)
+                check_slip_signs(self, mode, sol.y[:n, -1], t, p)
                 if sol.status != 1:
                     x, sens = sol.y[:n, -1], sol.y[n:, -1].reshape(m, n).T
                     break
@@ -644,7 +593,7 @@ class HybridSimulator:
                     ]
                     dtau = -(g_x @ sens + g_theta).ravel() / rate
                     sens = matrix @ sens + np.outer(matrix @ f_minus - f_plus, dtau)
-                x = self.onto_sliding_side(target, guard.element, x_plus, t, p)
+                x = onto_sliding_side(self, target, guard.element, x_plus, t, p)
                 events.append(Event(t, guard.kind, guard.element, mode, target))
                 tau_p.append(dtau)
                 mode = target
