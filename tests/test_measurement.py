@@ -200,18 +200,33 @@ def test_mdf4_round_trip_through_export_measurement(tmp_path, box, scenario, ref
     assert "--out" in line and "not written by gearsym" in line
 
 
-def test_shipped_example_is_the_export_of_its_scenario(tmp_path):
-    """The example regenerates byte for byte (fixed start time and history block), < 300 kB."""
-    out = tmp_path / "again.mf4"
-    result = gearsym_cli(
-        "export-measurement", "--scenario", str(SCENARIO), "--seed", "0", "--out", str(out)
-    )
-    assert result.returncode == 0, result.stderr
+def test_shipped_example_is_the_export_of_its_scenario(tmp_path, scenario):
+    """The example is the export of its scenario, < 300 kB: the same channels and sample
+    times, no sample different by more than 1e-6 of its channel's peak (a stale model moves
+    them by far more). Not byte for byte across machines: the reference simulation's last
+    digits follow the machine's BLAS kernels, and where they straddle a step of the
+    recording's resolution a sample moves by that step (measured between two machines:
+    1.3e-5 rad/s of 239 rad/s, in 16 of 151 samples); on one machine two exports are
+    byte-identical (fixed start time and history block)."""
+    out, again = tmp_path / "again.mf4", tmp_path / "twice.mf4"
+    for path in (out, again):
+        result = gearsym_cli(
+            "export-measurement", "--scenario", str(SCENARIO), "--seed", "0", "--out", str(path)
+        )
+        assert result.returncode == 0, result.stderr
+    assert out.read_bytes() == again.read_bytes()
     assert EXAMPLE.stat().st_size < 300_000
-    assert out.read_bytes() == EXAMPLE.read_bytes(), (
+    stale = (
         "stale: gearsym export-measurement --scenario gearsym/data/scenario_2_3_measured.toml "
         "--out gearsym/data/measurement_2_3.mf4"
     )
+    shipped = M.read_measurement(EXAMPLE, scenario.measurement, scenario.t_end)
+    fresh = M.read_measurement(out, scenario.measurement, scenario.t_end)
+    assert np.array_equal(shipped.t, fresh.t), stale
+    assert sorted(shipped.values) == sorted(fresh.values), stale
+    for name, values in shipped.values.items():
+        peak = float(np.max(np.abs(values)))
+        assert np.max(np.abs(fresh.values[name] - values)) <= 1e-6 * peak, (name, stale)
 
 
 def test_recorded_speed_noise_follows_3_26(scenario, reference):
