@@ -1,18 +1,17 @@
 """The slips of a hybrid simulation's sliding elements at its switches
 (:mod:`gearsym.validation.sim.hybrid_simulation`): where a sliding element starts after a
 switch that leaves it at zero slip, and the check that no sliding element's slip has turned
-against its mode's sign (a lock-up the event search missed)."""
+against its mode's sign (a lock-up the event search missed). ``simulator`` is the
+:class:`~gearsym.validation.sim.hybrid_simulation.HybridSimulator` (untyped here: this module
+sits below it, the simulator imports it)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.hybrid import SLIDING
-
-if TYPE_CHECKING:
-    from gearsym.validation.sim.hybrid_simulation import HybridSimulator
 
 __all__ = ["SLIP_START", "SLIP_WRONG_SIGN", "check_slip_signs", "onto_sliding_side"]
 
@@ -30,7 +29,7 @@ SLIP_WRONG_SIGN = 1e-6
 
 
 def onto_sliding_side(
-    simulator: HybridSimulator, mode: str, element: str, x: np.ndarray, t: float, p: np.ndarray
+    simulator: Any, mode: str, element: str, x: np.ndarray, t: float, p: np.ndarray
 ) -> np.ndarray:
     """``x`` with the slip of ``element``, if it slides in ``mode`` and sits within
     :data:`SLIP_START` of zero, moved to ``SLIP_START`` on its sliding side (along the
@@ -53,9 +52,7 @@ def onto_sliding_side(
     return x + (sign * SLIP_START - slip) * gradient / float(gradient @ gradient)
 
 
-def check_slip_signs(
-    simulator: HybridSimulator, mode: str, x: np.ndarray, t: float, p: np.ndarray
-) -> None:
+def check_slip_signs(simulator: Any, mode: str, x: np.ndarray, t: float, p: np.ndarray) -> None:
     """A stated failure if a sliding element of ``mode`` ends a piece at ``x`` with its
     slip of the wrong sign (beyond :data:`SLIP_WRONG_SIGN`): a lock-up the event search
     missed, whose continuation would dissipate negative friction work."""
