@@ -368,7 +368,7 @@ def test_a_larger_tyre_reads_as_the_wheel_side_mass(description, tmp_path):
     (2.49) carries m_veh r_dyn², the TCU measures the wheel's speed, so the filter (with the
     calibration's r_dyn) identifies m_veh (r_dyn / r_dyn,cal)² = 1.1236 m_veh, the wheel-side
     mass of the fleet's report: the estimate lies inside 3 σ of it and more than 3 σ above the
-    vehicle's mass itself (a 12 % gap, about four times the filter's σ on this short cycle)."""
+    vehicle's mass itself (a 12 % gap, more than three times the filter's σ on this short cycle)."""
     from gearsym.validation.sim.drive import DriveTruth
     from gearsym.validation.sim.fleet import R_DYN_FACTOR, load_fleet, wheel_side_mass
 
