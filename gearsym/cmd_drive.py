@@ -78,23 +78,11 @@ def cmd_drive(args: argparse.Namespace) -> int:
             bar.done()
         estimates = None
         if args.estimate == "ekf" and not result.failure:
-            from gearsym.validation.studies.estimation.drive_ekf import (
-                run_drive_ekf,
-                stiffness_state,
-                stiffness_truth,
-            )
+            from gearsym.validation.studies.estimation.drive_ekf import ekf_over_drive
 
             print("  … the EKF over the drive's TCU log", file=sys.stderr, flush=True)
             assert result.log is not None
-            estimates = run_drive_ekf(
-                d,
-                result.log.arrays(),
-                result.log.shifts(),
-                result.gears,
-                result.values["m_veh"],
-                seed=args.seed,
-                appended=(stiffness_state(d, stiffness_truth(d, result.values)),),
-            )
+            estimates = ekf_over_drive(d, result, seed=args.seed)
         from gearsym.validation.sim.drive_report import (
             drive_markdown,
             format_drive_summary,

@@ -42,7 +42,7 @@ def onto_sliding_side(
     k = simulator.hybrid.elements.index(element)
     u = simulator.inputs(t)
     slip = compiled.value(compiled.slips, x, u, p)[k]
-    if sign * slip >= SLIP_START or abs(slip) > SLIP_START:
+    if abs(slip) > SLIP_START or sign * slip == SLIP_START:
         return x
     # the slips are linear in the mode's speeds: the gradient from unit steps
     base = compiled.value(compiled.slips, np.zeros_like(x), u, p)[k]

@@ -43,11 +43,7 @@ def drive_vehicle(context: DriveContext, seed: int) -> dict[str, Any]:
     noise from the same seed). Returns the drive's and the estimates' summaries and the mass
     error's trace every :data:`TRACE_STEP`."""
     from gearsym.validation.sim.drive import DriveSimulator, DriveTruth
-    from gearsym.validation.studies.estimation.drive_ekf import (
-        run_drive_ekf,
-        stiffness_state,
-        stiffness_truth,
-    )
+    from gearsym.validation.studies.estimation.drive_ekf import ekf_over_drive
 
     d = context.description
     draw = context.fleet.draw(seed)
@@ -57,15 +53,7 @@ def drive_vehicle(context: DriveContext, seed: int) -> dict[str, Any]:
     out["drive"].pop("shift_list")
     if result.failure or result.log is None:
         return out
-    estimates = run_drive_ekf(
-        d,
-        result.log.arrays(),
-        result.log.shifts(),
-        result.gears,
-        result.values["m_veh"],
-        seed,
-        appended=(stiffness_state(d, stiffness_truth(d, result.values)),),
-    )
+    estimates = ekf_over_drive(d, result, seed)
     out["estimates"] = estimates.to_dict()
     out["estimator"] = estimates.summary()
     grid = np.arange(0.0, estimates.t[-1] + 1e-9, TRACE_STEP)

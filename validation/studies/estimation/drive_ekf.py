@@ -40,7 +40,14 @@ from gearsym.symbolic.defaults import EKF_FLOOR_FRACTION, EKF_RELATIVE_NOISE
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import element_short_name, quantity
 
-__all__ = ["AppendedState", "DriveEstimates", "EkfCarry", "run_drive_ekf", "stiffness_state"]
+__all__ = [
+    "AppendedState",
+    "DriveEstimates",
+    "EkfCarry",
+    "ekf_over_drive",
+    "run_drive_ekf",
+    "stiffness_state",
+]
 
 #: Below this measured vehicle speed (m/s), with no torque commanded, the vehicle stands.
 STANDSTILL_SPEED = 0.3
@@ -142,6 +149,22 @@ def stiffness_truth(d: GearboxDescription, values: Mapping[str, float]) -> float
     if "k_ss" not in values:
         return math.nan
     return float(values["k_ss"]) / quantity(d, "drivetrain", "k_ss").value
+
+
+def ekf_over_drive(d: GearboxDescription, drive: Any, seed: int) -> DriveEstimates:
+    """The EKF over a finished drive's TCU log (:class:`~gearsym.validation.sim.drive.DriveResult`
+    with a log), as ``gearsym drive`` and the fleet's drives run it: the side shafts'
+    stiffness factor as a state (:func:`stiffness_state`), the drive's truth for scoring only
+    (its mass and stiffness factor), the sensors' noise from ``seed``."""
+    return run_drive_ekf(
+        d,
+        drive.log.arrays(),
+        drive.log.shifts(),
+        drive.gears,
+        drive.values["m_veh"],
+        seed,
+        appended=(stiffness_state(d, stiffness_truth(d, drive.values)),),
+    )
 
 
 class _Appended:
