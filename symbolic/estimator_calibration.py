@@ -19,6 +19,8 @@ The table::
     mu = { value = 4.0e-3, unit = "1/s", source = "..." }
     [estimator.model_error]    # q_x of a state of the filter's model, unit^2/s
     omega_1 = { value = 6.0, unit = "rad^2/s^3", source = "..." }
+    [estimator.model_error_k_ss]    # the same, of a filter that also estimates k_ss
+    phi = { value = 4.7e-5, unit = "rad^2/s", source = "..." }
 """
 
 from __future__ import annotations
@@ -32,9 +34,11 @@ from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.parameters import RECORDS, is_mu, record
 
 __all__ = [
+    "MODEL_ERROR_WITH_STIFFNESS",
     "MU_MODELS",
     "MU_SCALE",
     "PRIOR_NAMES",
+    "STIFFNESS",
     "STIFFNESS_FACTOR",
     "VALVE_OFFSET",
     "EstimatorCalibration",
@@ -79,6 +83,17 @@ RANDOM_WALK_NAMES: tuple[str, ...] = (
     VALVE_OFFSET,
     STIFFNESS_FACTOR,
 )
+
+#: The fixed parameter a shift filter may estimate as a state beside the thesis' (4.1)
+#: (``gearsym estimate --fleet --params ...,k_ss``): the side shafts' stiffness, whose prior and
+#: random walk are the stiffness factor's times the calibration's value.
+STIFFNESS = "k_ss"
+
+#: The table of the model-error intensities of a filter that estimates the stiffness
+#: (:data:`STIFFNESS`), beside ``model_error`` (the thesis' filter): the stiffness tolerance is
+#: then in its model, so its twist and speeds are tuned on their own; a state it does not name
+#: takes ``model_error``'s value.
+MODEL_ERROR_WITH_STIFFNESS = "model_error_k_ss"
 
 #: The states beside the shaft speeds ``omega_<shaft>`` that ``[estimator.model_error]`` may
 #: name: the side-shaft twist and the wheel speed (2.43, 2.44).
@@ -139,6 +154,9 @@ class EstimatorCalibration:
     prior: tuple[tuple[str, Prior], ...] = ()
     random_walk: tuple[tuple[str, Tuning], ...] = ()
     model_error: tuple[tuple[str, Tuning], ...] = ()
+    #: ``[estimator.model_error_k_ss]``: the intensities of a filter that estimates the
+    #: stiffness (:data:`MODEL_ERROR_WITH_STIFFNESS`)
+    model_error_k_ss: tuple[tuple[str, Tuning], ...] = ()
     tuned_on: str = ""
     #: :data:`MU_MODELS`
     mu_model: str = "random_walk"
@@ -153,6 +171,9 @@ class EstimatorCalibration:
         given = dict(self.prior).get(key)
         if given is None and key in _DEFAULT_PRIORS:
             return _DEFAULT_PRIORS[key]
+        if given is None and key == STIFFNESS and nominal is not None:
+            mean_factor, sd_factor = self.stiffness_factor_prior()
+            return float(nominal) * mean_factor, abs(float(nominal)) * sd_factor
         mean = given.mean if given is not None and given.mean is not None else nominal
         if mean is None:
             raise GearsymError(
@@ -220,6 +241,11 @@ class EstimatorCalibration:
             if name not in (MU_SCALE, VALVE_OFFSET, STIFFNESS_FACTOR)
         }
 
+    def intensities_with_stiffness(self) -> dict[str, float]:
+        """The model-error intensities of a filter that estimates the stiffness, by state
+        name (``[estimator.model_error_k_ss]``, empty when the table is absent)."""
+        return {name: t.value for name, t in self.model_error_k_ss}
+
     def to_dict(self) -> dict[str, Any]:
         """For a report: what the filter was told, with the sources."""
         return {
@@ -228,6 +254,11 @@ class EstimatorCalibration:
             },
             "random_walk": {n: t.value for n, t in self.random_walk},
             "model_error": {n: t.value for n, t in self.model_error},
+            **(
+                {MODEL_ERROR_WITH_STIFFNESS: {n: t.value for n, t in self.model_error_k_ss}}
+                if self.model_error_k_ss
+                else {}
+            ),
             "tuned_on": self.tuned_on,
             "mu_model": self.mu_model,
         }
@@ -270,7 +301,7 @@ def parse_estimator_table(table: Any, shafts: Sequence[str] = ()) -> EstimatorCa
         priors.append((name, Prior(sd=sd, mean=mean, source=source)))
     prior_table.reject_unknown()
     tables = {}
-    for kind in ("random_walk", "model_error"):
+    for kind in ("random_walk", "model_error", MODEL_ERROR_WITH_STIFFNESS):
         sub = table.table(kind, required=False)
         values: list[tuple[str, Tuning]] = []
         for name in list(sub.data):
@@ -279,7 +310,7 @@ def parse_estimator_table(table: Any, shafts: Sequence[str] = ()) -> EstimatorCa
                     name,
                     f"not a random-walk parameter (known: {', '.join(RANDOM_WALK_NAMES)})",
                 )
-            if kind == "model_error" and not (name in MODEL_ERROR_NAMES or name in shaft_states):
+            if kind != "random_walk" and not (name in MODEL_ERROR_NAMES or name in shaft_states):
                 known = ", ".join((*MODEL_ERROR_NAMES, *sorted(shaft_states)))
                 raise sub.fail(name, f"not a state of a filter's model (known: {known})")
             entry = sub.table(name)
@@ -300,6 +331,7 @@ def parse_estimator_table(table: Any, shafts: Sequence[str] = ()) -> EstimatorCa
         prior=tuple(priors),
         random_walk=tables["random_walk"],
         model_error=tables["model_error"],
+        model_error_k_ss=tables[MODEL_ERROR_WITH_STIFFNESS],
         tuned_on=tuned_on,
         mu_model=mu_model,
         file=table.file,

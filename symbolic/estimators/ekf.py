@@ -45,6 +45,7 @@ from gearsym.symbolic.drivetrain import (
     shift_model,
 )
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.estimator_calibration import STIFFNESS
 from gearsym.symbolic.model import Model, Variable
 from gearsym.symbolic.parameters import RECORDS
 from gearsym.symbolic.shifts import shift_spec
@@ -317,6 +318,12 @@ def augmented_model(
         for name, value in d.estimator.intensities().items()
         if name == "mu" or name in {v.name for v in states}
     }
+    if STIFFNESS in parameters:
+        # the stiffness a state: its random walk is the stiffness factor's times k_ss², and
+        # the states take the intensities tuned for a filter that estimates it, where stated
+        k_ss = next(v.default for v in base.parameters if v.name == STIFFNESS)
+        stated.setdefault(STIFFNESS, d.estimator.stiffness_factor_random_walk() * k_ss**2)
+        stated.update(d.estimator.intensities_with_stiffness())
     stated.update(intensities or {})
     rates: dict[str, float] = {}
     for v in states:

@@ -298,12 +298,19 @@ class FilterModel:
     logic: Any = None
 
 
-def filter_model(d: GearboxDescription, shift: str, modes: str = "filter") -> FilterModel:
-    """Build the EKF's model of the calibration ``d`` for ``shift`` (the thesis' (4.1))."""
+def filter_model(
+    d: GearboxDescription,
+    shift: str,
+    modes: str = "filter",
+    parameters: Sequence[str] | None = None,
+) -> FilterModel:
+    """Build the EKF's model of the calibration ``d`` for ``shift``: the thesis' (4.1), or
+    with ``parameters`` its states appended (e.g. the side shafts' stiffness k_ss beside
+    them, :data:`~gearsym.symbolic.estimator_calibration.STIFFNESS`)."""
     from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
     from gearsym.symbolic.estimators.ekf_modes import ModeLogic
 
-    aug = augmented_model(d, shift)
+    aug = augmented_model(d, shift, parameters)
     return FilterModel(aug, DiscreteModel(aug), ModeLogic(d, aug) if modes == "filter" else None)
 
 
@@ -325,20 +332,25 @@ class FleetContext:
     grid: np.ndarray = field(repr=False)
     bound: bool = True
     filter_noise: Any = None
+    #: the filter's augmented parameters (``None``: the thesis' 4.1)
+    parameters: tuple[str, ...] | None = None
 
     @property
     def key(self) -> str:
         """What the filter's model is built from, as a key of the workers' cache."""
         from gearsym.validation.studies.dask_runner import content_key
 
-        return content_key("fleet filter model", self.d, self.scenario.shift.name, self.modes)
+        return content_key(
+            "fleet filter model", self.d, self.scenario.shift.name, self.modes, self.parameters
+        )
 
     def model(self) -> FilterModel:
         """The filter's model, built once per process and calibration."""
         from gearsym.validation.studies.dask_runner import worker_cached
 
         return worker_cached(
-            self.key, lambda: filter_model(self.d, self.scenario.shift.name, self.modes)
+            self.key,
+            lambda: filter_model(self.d, self.scenario.shift.name, self.modes, self.parameters),
         )
 
 
@@ -483,6 +495,7 @@ def run_fleet(
     progress: Progress | None = None,
     filter_noise: Any = None,
     client: Any = None,
+    parameters: Sequence[str] | None = None,
 ) -> FleetEvaluation:
     """The EKF of the calibration ``d`` over ``runs`` vehicles of ``fleet`` (run i: seed
     ``seed`` + i draws the vehicle and, in its own stream, the speed noise) on ``scenario``
@@ -500,7 +513,7 @@ def run_fleet(
     if runs < 1:
         raise GearsymError("estimate", "--runs", f"must be at least 1, got {runs}")
     report = progress or (lambda fraction, message: None)
-    model = filter_model(d, scenario.shift.name, modes)
+    model = filter_model(d, scenario.shift.name, modes, parameters)
     # The noise floor of (3.26) is calibration: from the TCU engineer's own simulation of the
     # calibration's vehicle on the same commanded shift, never from a run's truth.
     report(0.0, "simulating the calibration's own vehicle (the noise floor)")
@@ -523,6 +536,7 @@ def run_fleet(
         nominal.t,
         bound,
         filter_noise,
+        None if parameters is None else tuple(parameters),
     )
     seeds = tuple(range(seed, seed + runs))
 

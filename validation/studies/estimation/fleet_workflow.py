@@ -63,11 +63,21 @@ def check_fleet_request(request: EstimateRequest) -> None:
             request.initial_from_prior,
             "each vehicle is drawn from the fleet; the filter starts from the calibration's prior",
         ),
-        ("--params", cal.parameters is not None, "the fleet evaluation runs the thesis' (4.1)"),
         ("--dropout", request.dropout is not None, "not available over a fleet yet"),
         ("--dropout-outputs", request.dropout_outputs is not None, "needs --dropout"),
     ):
         refuse(option, given, f"is not available with --fleet: {reason}")
+    if cal.parameters is not None:
+        from gearsym.symbolic.estimator_calibration import STIFFNESS
+        from gearsym.symbolic.estimators.ekf import default_parameters
+
+        thesis = default_parameters(cal.description, request.truth.scenario.shift.name)
+        refuse(
+            "--params",
+            sorted(cal.parameters) not in (sorted(thesis), sorted((*thesis, STIFFNESS))),
+            f"with --fleet: the thesis' (4.1) {','.join(thesis)}, optionally with {STIFFNESS} "
+            f"(the side shafts' stiffness), got {','.join(cal.parameters)}",
+        )
 
 
 def run_fleet_request(
@@ -100,6 +110,7 @@ def run_fleet_request(
                 modes=cal.mode_source,
                 progress=update,
                 client=client,
+                parameters=cal.parameters,
             )
         finally:
             done()
@@ -164,6 +175,7 @@ def _tune(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> 
                 relative_noise=filter_noise(cal),
                 progress=update,
                 client=client,
+                parameters=cal.parameters,
             )
         finally:
             done()

@@ -14,6 +14,7 @@ from gearsym.symbolic.defaults import EKF_FLOOR_FRACTION, EKF_RELATIVE_NOISE
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.estimator_calibration import STIFFNESS
 from gearsym.validation.sim.phases import Phase
 from gearsym.validation.sim.simulate import SimulationResult
 from gearsym.validation.studies.estimation.modes import (
@@ -207,6 +208,9 @@ def prepare_ekf(
             scored[:, j] = True
         elif name == "m_veh":
             truth[:, j] = quantity(truth_description, "vehicle", "m_veh").value
+            scored[:, j] = True
+        elif name == STIFFNESS:  # the stiffness as a state (--params ...,k_ss)
+            truth[:, j] = quantity(truth_description, "drivetrain", STIFFNESS).value
             scored[:, j] = True
     scale_form = d.estimator.mu_model == "map_scale"
     for e, mu in aug.mu_state.items():

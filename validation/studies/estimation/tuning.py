@@ -29,10 +29,13 @@ if TYPE_CHECKING:
 
 __all__ = ["FACTORS", "TWIST_FACTORS", "TuningResult", "tune_model_error", "tuning_sums"]
 
-#: The factors on the speeds' model-error intensities tried.
-FACTORS: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0, 4.0)
-#: The factors on the twist φ's model-error intensity tried.
-TWIST_FACTORS: tuple[float, ...] = (1.0, 10.0, 100.0, 1000.0, 10000.0)
+#: The factors on the speeds' model-error intensities tried (around the description's).
+FACTORS: tuple[float, ...] = (0.5, 1.0, 2.0)
+#: The factors on the twist φ's model-error intensity tried: around the description's, √10
+#: apart (the twist's intensity stands for errors of the fleet that the speeds' do not: the
+#: stiffness tolerance and the torque errors, and moves by decades between filters with and
+#: without the stiffness as a state).
+TWIST_FACTORS: tuple[float, ...] = (0.01, 0.0316, 0.1, 0.316, 1.0, 3.16)
 
 
 @dataclass(frozen=True)
@@ -48,6 +51,9 @@ class TuningResult:
     chosen: tuple[float, float]
     intensities: dict[str, float]
     base: dict[str, float]
+    #: the description's table the intensities belong in (``model_error``, or
+    #: ``model_error_k_ss`` for a filter that also estimates the stiffness)
+    table: str = "model_error"
 
     def criterion(self, k: int) -> float:
         return math.log(self.nees_per_dof[k]) ** 2 + math.log(self.nis_per_dof[k]) ** 2
@@ -61,6 +67,7 @@ class TuningResult:
             "nis_per_dof": list(self.nis_per_dof),
             "chosen_factors": list(self.chosen),
             "model_error": self.intensities,
+            "table": f"estimator.{self.table}",
             "from": self.base,
         }
 
@@ -77,7 +84,7 @@ class TuningResult:
                 f"    {c:>6g} {c_phi:>7g} {self.nees_per_dof[k]:>9.3f} "
                 f"{self.nis_per_dof[k]:>9.3f} {self.criterion(k):>10.4f}{mark}"
             )
-        lines.append("  for the description's [estimator.model_error] table:")
+        lines.append(f"  for the description's [estimator.{self.table}] table:")
         for name, value in self.intensities.items():
             lines.append(f"    {name} = {value:.3g}")
         return "\n".join(lines)
@@ -94,13 +101,16 @@ def tune_model_error(
     twist_factors: Sequence[float] = TWIST_FACTORS,
     progress: Callable[[float, str], None] | None = None,
     client: Any = None,
+    parameters: Sequence[str] | None = None,
 ) -> TuningResult:
     """Choose the factors on the calibration's model-error intensities (module text): every
     tuning vehicle simulated once, the filter run once per pair of factors on the same
     noise. ``client``: a ``dask.distributed`` client; the vehicles then run on its workers
     (:func:`~gearsym.validation.studies.estimation.fleet_eval.each_vehicle`), the same
-    numbers as without."""
+    numbers as without. ``parameters``: the filter's augmented parameters (``None``: the
+    thesis' 4.1), e.g. with the side shafts' stiffness k_ss."""
     from gearsym.symbolic import naming
+    from gearsym.symbolic.estimator_calibration import MODEL_ERROR_WITH_STIFFNESS, STIFFNESS
     from gearsym.validation.studies.estimation.fleet_eval import (
         FleetContext,
         calibration_setup,
@@ -108,17 +118,28 @@ def tune_model_error(
         filter_model,
     )
 
+    # a filter that estimates the stiffness has its own table of intensities
+    with_stiffness = parameters is not None and STIFFNESS in parameters
+    table = MODEL_ERROR_WITH_STIFFNESS if with_stiffness else "model_error"
     if not seeds:
         raise GearsymError("estimate", "--runs", "tuning needs at least one seed")
     report = progress or (lambda fraction, message: None)
-    model = filter_model(d, scenario.shift.name)
+    model = filter_model(d, scenario.shift.name, parameters=parameters)
     aug = model.aug
     nominal = calibration_setup(d, scenario, model, sample_time, relative_noise)
     n_x = aug.n_x
     base = {name: float(q) for name, q in zip(aug.state_names[:n_x], nominal.q, strict=False)}
     grid = [(float(c), float(c_phi)) for c in factors for c_phi in twist_factors]
     context = FleetContext(
-        d, scenario, fleet, sample_time, relative_noise, "filter", nominal.floor, nominal.t
+        d,
+        scenario,
+        fleet,
+        sample_time,
+        relative_noise,
+        "filter",
+        nominal.floor,
+        nominal.t,
+        parameters=None if parameters is None else tuple(parameters),
     )
 
     def told(done: int, total: int, outcome: Any) -> None:
@@ -152,6 +173,7 @@ def tune_model_error(
         intensities={
             name: (chosen[1] if name == naming.TWIST else chosen[0]) * q for name, q in base.items()
         },
+        table=table,
         base=base,
     )
 
