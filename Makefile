@@ -54,11 +54,11 @@ results: $(STAMP)
 	cp build/results/fleet_ekf_2_3_map_scale/fleet.json $(RESULTS)/fleet_ekf_2_3_map_scale.json
 	cp build/results/fleet_ekf_2_3_map_scale/fleet.md $(RESULTS)/fleet_ekf_2_3_map_scale.md
 	cp build/results/fleet_ekf_2_3_map_scale/fleet.png $(RESULTS)/fleet_ekf_2_3_map_scale.png
-	rm -rf build/results/fleet_ekf_2_3_k_ss
-	$(BIN)/gearsym estimate --filter ekf --fleet --params m_veh,mu_38,mu_05,zeta,k_ss --runs 200 --seed 10000 --scheduler local --out build/results/fleet_ekf_2_3_k_ss
-	cp build/results/fleet_ekf_2_3_k_ss/fleet.json $(RESULTS)/fleet_ekf_2_3_k_ss.json
-	cp build/results/fleet_ekf_2_3_k_ss/fleet.md $(RESULTS)/fleet_ekf_2_3_k_ss.md
-	cp build/results/fleet_ekf_2_3_k_ss/fleet.png $(RESULTS)/fleet_ekf_2_3_k_ss.png
+	rm -rf build/results/fleet_ekf_2_3_augmented
+	$(BIN)/gearsym estimate --filter ekf --fleet --params m_veh,mu_38,mu_05,zeta,k_ss,input_torque_gain --runs 200 --seed 10000 --scheduler local --out build/results/fleet_ekf_2_3_augmented
+	cp build/results/fleet_ekf_2_3_augmented/fleet.json $(RESULTS)/fleet_ekf_2_3_augmented.json
+	cp build/results/fleet_ekf_2_3_augmented/fleet.md $(RESULTS)/fleet_ekf_2_3_augmented.md
+	cp build/results/fleet_ekf_2_3_augmented/fleet.png $(RESULTS)/fleet_ekf_2_3_augmented.png
 	rm -rf build/results/ekf_2_3 build/results/euio_2_3
 	$(BIN)/gearsym estimate --filter ekf --runs 50 --seed 0 --out build/results/ekf_2_3
 	cp build/results/ekf_2_3/ekf.json $(RESULTS)/montecarlo_ekf_2_3.json

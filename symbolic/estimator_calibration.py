@@ -19,7 +19,7 @@ The table::
     mu = { value = 4.0e-3, unit = "1/s", source = "..." }
     [estimator.model_error]    # q_x of a state of the filter's model, unit^2/s
     omega_1 = { value = 6.0, unit = "rad^2/s^3", source = "..." }
-    [estimator.model_error_k_ss]    # the same, of a filter that also estimates k_ss
+    [estimator.model_error_augmented]    # the same, of a filter that estimates more (k_ss, gain)
     phi = { value = 4.7e-5, unit = "rad^2/s", source = "..." }
 """
 
@@ -34,7 +34,9 @@ from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.parameters import RECORDS, is_mu, record
 
 __all__ = [
-    "MODEL_ERROR_WITH_STIFFNESS",
+    "AUGMENTED_STATES",
+    "INPUT_TORQUE_GAIN",
+    "MODEL_ERROR_AUGMENTED",
     "MU_MODELS",
     "MU_SCALE",
     "PRIOR_NAMES",
@@ -65,6 +67,16 @@ VALVE_OFFSET = "valve_offset"
 #: is otherwise read as mass, the vehicle's inertia being in that frequency too).
 STIFFNESS_FACTOR = "k_ss_factor"
 
+#: The gain on the input torque a shift filter may estimate as a state (``--params
+#: ...,input_torque_gain``): the true T_In over the one the TCU is told (the engine's torque
+#: model, the e-machine's command), the fleet's name for the same quantity.
+INPUT_TORQUE_GAIN = "input_torque_gain"
+
+#: Default random walk of the input-torque gain (1/s): the engine's and the e-machine's errors
+#: differ, so the gain of their sum moves with the torque split, by about 0.02 over the
+#: built-in 2-3 shift's 1.5 s for a 5 % engine error (assumed).
+INPUT_TORQUE_GAIN_RANDOM_WALK = 3.0e-4
+
 #: The names ``[estimator.prior]`` may give: the unmeasured state φ (side-shaft twist) and
 #: every quantity whose record states a prior (``mu`` stands for every ``mu_<element>``).
 PRIOR_NAMES: tuple[str, ...] = (
@@ -73,6 +85,7 @@ PRIOR_NAMES: tuple[str, ...] = (
     MU_SCALE,
     VALVE_OFFSET,
     STIFFNESS_FACTOR,
+    INPUT_TORQUE_GAIN,
 )
 
 #: The names ``[estimator.random_walk]`` may give (``mu``: every ``mu_<element>``; ``mu_scale``:
@@ -82,6 +95,7 @@ RANDOM_WALK_NAMES: tuple[str, ...] = (
     MU_SCALE,
     VALVE_OFFSET,
     STIFFNESS_FACTOR,
+    INPUT_TORQUE_GAIN,
 )
 
 #: The fixed parameter a shift filter may estimate as a state beside the thesis' (4.1)
@@ -89,28 +103,40 @@ RANDOM_WALK_NAMES: tuple[str, ...] = (
 #: random walk are the stiffness factor's times the calibration's value.
 STIFFNESS = "k_ss"
 
-#: The table of the model-error intensities of a filter that estimates the stiffness
-#: (:data:`STIFFNESS`), beside ``model_error`` (the thesis' filter): the stiffness tolerance is
-#: then in its model, so its twist and speeds are tuned on their own; a state it does not name
-#: takes ``model_error``'s value.
-MODEL_ERROR_WITH_STIFFNESS = "model_error_k_ss"
+#: The states a shift filter over a fleet may carry beside the thesis' (4.1).
+AUGMENTED_STATES: tuple[str, ...] = (STIFFNESS, INPUT_TORQUE_GAIN)
+
+#: The table of the model-error intensities of a filter that estimates more than the thesis'
+#: parameters (any of :data:`AUGMENTED_STATES`), beside ``model_error`` (the thesis' filter):
+#: the stiffness tolerance and the torque error are then in its model, so its twist and speeds
+#: are tuned on their own (with every one of them a state); a state it does not name takes
+#: ``model_error``'s value.
+MODEL_ERROR_AUGMENTED = "model_error_augmented"
 
 #: The states beside the shaft speeds ``omega_<shaft>`` that ``[estimator.model_error]`` may
 #: name: the side-shaft twist and the wheel speed (2.43, 2.44).
 MODEL_ERROR_NAMES: tuple[str, ...] = ("phi", "omega_C")
 
 #: Units of the prior entries that have no record (φ, the μ-map scale).
-_PRIOR_UNITS = {"phi": "rad", MU_SCALE: "1", VALVE_OFFSET: "Pa", STIFFNESS_FACTOR: "1"}
+_PRIOR_UNITS = {
+    "phi": "rad",
+    MU_SCALE: "1",
+    VALVE_OFFSET: "Pa",
+    STIFFNESS_FACTOR: "1",
+    INPUT_TORQUE_GAIN: "1",
+}
 
 #: Default priors of the entries without a record: φ untwisted, σ 0.05 rad; the μ-map scale
 #: 1 (the calibration's map), σ 0.2; the valve's offset 0 (the nominal valve), σ 6 000 Pa
 #: (uniform within ±100 mbar); the side shafts' stiffness factor 1, σ 0.058 (uniform within
-#: ±10 %: production spread and temperature); all assumed.
+#: ±10 %: production spread and temperature); the input-torque gain 1, σ 0.029 (the engine's
+#: torque model uniform within ±5 %); all assumed.
 _DEFAULT_PRIORS = {
     "phi": (0.0, 0.05),
     MU_SCALE: (1.0, 0.2),
     VALVE_OFFSET: (0.0, 6.0e3),
     STIFFNESS_FACTOR: (1.0, 0.058),
+    INPUT_TORQUE_GAIN: (1.0, 0.029),
 }
 
 #: Default random walk of the valve's offset (Pa²/s): constant within a drive, allowed to
@@ -154,9 +180,9 @@ class EstimatorCalibration:
     prior: tuple[tuple[str, Prior], ...] = ()
     random_walk: tuple[tuple[str, Tuning], ...] = ()
     model_error: tuple[tuple[str, Tuning], ...] = ()
-    #: ``[estimator.model_error_k_ss]``: the intensities of a filter that estimates the
-    #: stiffness (:data:`MODEL_ERROR_WITH_STIFFNESS`)
-    model_error_k_ss: tuple[tuple[str, Tuning], ...] = ()
+    #: ``[estimator.model_error_augmented]``: the intensities of a filter that estimates more
+    #: than the thesis' parameters (:data:`MODEL_ERROR_AUGMENTED`)
+    model_error_augmented: tuple[tuple[str, Tuning], ...] = ()
     tuned_on: str = ""
     #: :data:`MU_MODELS`
     mu_model: str = "random_walk"
@@ -238,13 +264,19 @@ class EstimatorCalibration:
         return {
             name: t.value
             for name, t in (*self.random_walk, *self.model_error)
-            if name not in (MU_SCALE, VALVE_OFFSET, STIFFNESS_FACTOR)
+            if name not in (MU_SCALE, VALVE_OFFSET, STIFFNESS_FACTOR, INPUT_TORQUE_GAIN)
         }
 
-    def intensities_with_stiffness(self) -> dict[str, float]:
-        """The model-error intensities of a filter that estimates the stiffness, by state
-        name (``[estimator.model_error_k_ss]``, empty when the table is absent)."""
-        return {name: t.value for name, t in self.model_error_k_ss}
+    def input_torque_gain_random_walk(self) -> float:
+        """q of the input-torque gain state (1/s)."""
+        given = dict(self.random_walk).get(INPUT_TORQUE_GAIN)
+        return INPUT_TORQUE_GAIN_RANDOM_WALK if given is None else given.value
+
+    def intensities_augmented(self) -> dict[str, float]:
+        """The model-error intensities of a filter that estimates any of
+        :data:`AUGMENTED_STATES`, by state name (``[estimator.model_error_augmented]``, empty
+        when the table is absent)."""
+        return {name: t.value for name, t in self.model_error_augmented}
 
     def to_dict(self) -> dict[str, Any]:
         """For a report: what the filter was told, with the sources."""
@@ -255,8 +287,8 @@ class EstimatorCalibration:
             "random_walk": {n: t.value for n, t in self.random_walk},
             "model_error": {n: t.value for n, t in self.model_error},
             **(
-                {MODEL_ERROR_WITH_STIFFNESS: {n: t.value for n, t in self.model_error_k_ss}}
-                if self.model_error_k_ss
+                {MODEL_ERROR_AUGMENTED: {n: t.value for n, t in self.model_error_augmented}}
+                if self.model_error_augmented
                 else {}
             ),
             "tuned_on": self.tuned_on,
@@ -301,7 +333,7 @@ def parse_estimator_table(table: Any, shafts: Sequence[str] = ()) -> EstimatorCa
         priors.append((name, Prior(sd=sd, mean=mean, source=source)))
     prior_table.reject_unknown()
     tables = {}
-    for kind in ("random_walk", "model_error", MODEL_ERROR_WITH_STIFFNESS):
+    for kind in ("random_walk", "model_error", MODEL_ERROR_AUGMENTED):
         sub = table.table(kind, required=False)
         values: list[tuple[str, Tuning]] = []
         for name in list(sub.data):
@@ -331,7 +363,7 @@ def parse_estimator_table(table: Any, shafts: Sequence[str] = ()) -> EstimatorCa
         prior=tuple(priors),
         random_walk=tables["random_walk"],
         model_error=tables["model_error"],
-        model_error_k_ss=tables[MODEL_ERROR_WITH_STIFFNESS],
+        model_error_augmented=tables[MODEL_ERROR_AUGMENTED],
         tuned_on=tuned_on,
         mu_model=mu_model,
         file=table.file,

@@ -65,7 +65,7 @@ def test_a_result_table_is_its_json_rendered_by_the_command_make_results_runs(
 EXPECTED = {
     "fleet_ekf_2_3.md": "fleet.md",
     "fleet_ekf_2_3_map_scale.md": "fleet.md",
-    "fleet_ekf_2_3_k_ss.md": "fleet.md",
+    "fleet_ekf_2_3_augmented.md": "fleet.md",
     "montecarlo_ekf_2_3.md": "ekf.md",
     "montecarlo_ekf_2_3_1ms.md": "ekf.md",
     "montecarlo_ekf_2_3_prior_draws.md": "ekf.md",

@@ -45,7 +45,7 @@ from gearsym.symbolic.drivetrain import (
     shift_model,
 )
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.estimator_calibration import STIFFNESS
+from gearsym.symbolic.estimator_calibration import AUGMENTED_STATES, INPUT_TORQUE_GAIN, STIFFNESS
 from gearsym.symbolic.model import Model, Variable
 from gearsym.symbolic.parameters import RECORDS
 from gearsym.symbolic.shifts import shift_spec
@@ -214,19 +214,34 @@ def augmented_model(
     if parameters is None:
         parameters = default_parameters(d, shift)
     names = [v.name for v in base.parameters]
-    unknown = [p for p in parameters if p not in names]
+    unknown = [p for p in parameters if p not in names and p != INPUT_TORQUE_GAIN]
     if unknown or len(set(parameters)) != len(parameters) or not parameters:
         raise GearsymError(
             d.file,
             "params",
             f"{', '.join(unknown) or 'a repeated name'}: choose distinct parameters of the "
-            f"{shift} model ({', '.join(names)})",
+            f"{shift} model ({', '.join(names)}) or {INPUT_TORQUE_GAIN}",
         )
     elements = (spec.off_going, spec.on_coming)
     parts = drivetrain_parts(d, spec.locked, elements)
     signs = power_on_slip_signs(d, spec)
     by_param = {v.name: v for v in base.parameters}
     sym = {v.name: v.symbol for v in (*base.states, *base.inputs, *base.parameters)}
+    torque_rhs = torque_model.rhs
+    if INPUT_TORQUE_GAIN in parameters:
+        # the input torque the TCU is told, times a gain the filter estimates: the true T_In
+        # over the told one (the engine's torque model, the e-machine's command)
+        gain = Variable(
+            INPUT_TORQUE_GAIN,
+            sp.Symbol(INPUT_TORQUE_GAIN, real=True),
+            "1",
+            "the true input torque over the one the TCU is told",
+            1.0,
+            "assumed: the TCU's torque model is right on average",
+        )
+        by_param[INPUT_TORQUE_GAIN] = gain
+        told = sym[naming.INPUT_TORQUE]
+        torque_rhs = torque_rhs.xreplace({told: gain.symbol * told})
 
     # The element torques in terms of the modes: slide -> k_sign 2 N r μ F_N (2.69, 3.14),
     # stick -> the constraint torque that holds its slip rate at zero, open -> 0.
@@ -240,7 +255,7 @@ def augmented_model(
             gain * sym[naming.friction_coefficient(short)] * sym[naming.normal_force(short)]
         )
     torque_symbols = {e: torque_model.variable(naming.torque(e)).symbol for e in elements}
-    gearbox = torque_model.rhs[: len(parts.speeds), :]  # ω̇ of the kept shafts (2.39)
+    gearbox = torque_rhs[: len(parts.speeds), :]  # ω̇ of the kept shafts (2.39)
     slip = {}
     for e in elements:
         element = d.element(e)
@@ -281,7 +296,7 @@ def augmented_model(
         sticking = -(a_e0 + a_eo * sliding_other) / a_ee
         sticking_torque[e] = sticking
         torque[e] = flags[e][0].symbol * friction[e] + flags[e][1].symbol * sticking
-    rhs_x = torque_model.rhs.xreplace({torque_symbols[e]: torque[e] for e in elements})
+    rhs_x = torque_rhs.xreplace({torque_symbols[e]: torque[e] for e in elements})
 
     # the torque model's states and fixed parameters are those of the μ model (same derivation)
     augmented = [by_param[p] for p in parameters]
@@ -318,12 +333,14 @@ def augmented_model(
         for name, value in d.estimator.intensities().items()
         if name == "mu" or name in {v.name for v in states}
     }
-    if STIFFNESS in parameters:
-        # the stiffness a state: its random walk is the stiffness factor's times k_ss², and
-        # the states take the intensities tuned for a filter that estimates it, where stated
+    if STIFFNESS in parameters:  # its random walk: the stiffness factor's times k_ss²
         k_ss = next(v.default for v in base.parameters if v.name == STIFFNESS)
         stated.setdefault(STIFFNESS, d.estimator.stiffness_factor_random_walk() * k_ss**2)
-        stated.update(d.estimator.intensities_with_stiffness())
+    if INPUT_TORQUE_GAIN in parameters:
+        stated.setdefault(INPUT_TORQUE_GAIN, d.estimator.input_torque_gain_random_walk())
+    if any(name in parameters for name in AUGMENTED_STATES):
+        # the states take the intensities tuned for a filter that estimates more, where stated
+        stated.update(d.estimator.intensities_augmented())
     stated.update(intensities or {})
     rates: dict[str, float] = {}
     for v in states:

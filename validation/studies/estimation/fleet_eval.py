@@ -508,6 +508,7 @@ def run_fleet(
     ``client``: a ``dask.distributed`` client (:func:`~gearsym.validation.studies.
     dask_runner.connect`); the vehicles then run on its workers, one task each, every worker
     building the filter's model once; the same seeds, draws and numbers as without."""
+    from gearsym.symbolic.estimator_calibration import INPUT_TORQUE_GAIN
     from gearsym.validation.studies.estimation.separability import torque_gain_separability
 
     if runs < 1:
@@ -518,8 +519,10 @@ def run_fleet(
     # calibration's vehicle on the same commanded shift, never from a run's truth.
     report(0.0, "simulating the calibration's own vehicle (the noise floor)")
     nominal = calibration_setup(d, scenario, model, sample_time, relative_noise, modes)
-    report(0.0, "what one shift cannot separate (Fisher information with a torque gain)")
-    separability = {"input_torque_gain": torque_gain_separability(nominal).to_dict()}
+    separability = {}
+    if INPUT_TORQUE_GAIN not in model.aug.parameters:  # else the gain is the filter's own state
+        report(0.0, "what one shift cannot separate (Fisher information with a torque gain)")
+        separability = {INPUT_TORQUE_GAIN: torque_gain_separability(nominal).to_dict()}
     initial = {
         name: (float(nominal.initial[j]), float(nominal.prior_sigma[j]))
         for j, name in enumerate(nominal.names)

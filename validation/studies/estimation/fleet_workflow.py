@@ -68,15 +68,19 @@ def check_fleet_request(request: EstimateRequest) -> None:
     ):
         refuse(option, given, f"is not available with --fleet: {reason}")
     if cal.parameters is not None:
-        from gearsym.symbolic.estimator_calibration import STIFFNESS
+        from gearsym.symbolic.estimator_calibration import INPUT_TORQUE_GAIN, STIFFNESS
         from gearsym.symbolic.estimators.ekf import default_parameters
 
         thesis = default_parameters(cal.description, request.truth.scenario.shift.name)
+        extra = set(cal.parameters) - set(thesis)
         refuse(
             "--params",
-            sorted(cal.parameters) not in (sorted(thesis), sorted((*thesis, STIFFNESS))),
+            not set(thesis) <= set(cal.parameters)
+            or not extra <= {STIFFNESS, INPUT_TORQUE_GAIN}
+            or len(set(cal.parameters)) != len(cal.parameters),
             f"with --fleet: the thesis' (4.1) {','.join(thesis)}, optionally with {STIFFNESS} "
-            f"(the side shafts' stiffness), got {','.join(cal.parameters)}",
+            f"(the side shafts' stiffness) and {INPUT_TORQUE_GAIN}, got "
+            f"{','.join(cal.parameters)}",
         )
 
 

@@ -14,7 +14,7 @@ from gearsym.symbolic.defaults import EKF_FLOOR_FRACTION, EKF_RELATIVE_NOISE
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.estimator_calibration import STIFFNESS
+from gearsym.symbolic.estimator_calibration import INPUT_TORQUE_GAIN, STIFFNESS
 from gearsym.validation.sim.phases import Phase
 from gearsym.validation.sim.simulate import SimulationResult
 from gearsym.validation.studies.estimation.modes import (
@@ -90,6 +90,11 @@ class EkfSetup:
         )
         z0[:n_x] = self.truth[0, :n_x]
         return z0
+
+
+#: |told T_In| (N·m) below which the input-torque gain has no truth: the ratio of two
+#: torques near zero says nothing about a gain (and the filter learns nothing of it there).
+GAIN_TORQUE_FLOOR = 5.0
 
 
 def prepare_ekf(
@@ -212,6 +217,11 @@ def prepare_ekf(
         elif name == STIFFNESS:  # the stiffness as a state (--params ...,k_ss)
             truth[:, j] = quantity(truth_description, "drivetrain", STIFFNESS).value
             scored[:, j] = True
+        elif name == INPUT_TORQUE_GAIN:  # the true T_In over the told one, where it is told
+            told_torque = u[:, aug.input_names.index(naming.INPUT_TORQUE)]
+            defined = np.abs(told_torque) > GAIN_TORQUE_FLOOR
+            truth[defined, j] = sampled(naming.INPUT_TORQUE)[defined] / told_torque[defined]
+            scored[:, j] = defined
     scale_form = d.estimator.mu_model == "map_scale"
     for e, mu in aug.mu_state.items():
         j = names.index(mu)

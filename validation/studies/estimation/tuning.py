@@ -52,7 +52,7 @@ class TuningResult:
     intensities: dict[str, float]
     base: dict[str, float]
     #: the description's table the intensities belong in (``model_error``, or
-    #: ``model_error_k_ss`` for a filter that also estimates the stiffness)
+    #: ``model_error_augmented`` for a filter that estimates more than the thesis' parameters)
     table: str = "model_error"
 
     def criterion(self, k: int) -> float:
@@ -110,7 +110,7 @@ def tune_model_error(
     numbers as without. ``parameters``: the filter's augmented parameters (``None``: the
     thesis' 4.1), e.g. with the side shafts' stiffness k_ss."""
     from gearsym.symbolic import naming
-    from gearsym.symbolic.estimator_calibration import MODEL_ERROR_WITH_STIFFNESS, STIFFNESS
+    from gearsym.symbolic.estimator_calibration import AUGMENTED_STATES, MODEL_ERROR_AUGMENTED
     from gearsym.validation.studies.estimation.fleet_eval import (
         FleetContext,
         calibration_setup,
@@ -118,9 +118,9 @@ def tune_model_error(
         filter_model,
     )
 
-    # a filter that estimates the stiffness has its own table of intensities
-    with_stiffness = parameters is not None and STIFFNESS in parameters
-    table = MODEL_ERROR_WITH_STIFFNESS if with_stiffness else "model_error"
+    # a filter that estimates more than the thesis' parameters has its own table
+    augmented = parameters is not None and any(p in AUGMENTED_STATES for p in parameters)
+    table = MODEL_ERROR_AUGMENTED if augmented else "model_error"
     if not seeds:
         raise GearsymError("estimate", "--runs", "tuning needs at least one seed")
     report = progress or (lambda fraction, message: None)

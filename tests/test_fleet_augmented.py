@@ -1,4 +1,5 @@
-"""The side shafts' stiffness k_ss as a state of the shift filter over a fleet
+"""States a shift filter over a fleet may carry beside the thesis' (4.1): the side shafts'
+stiffness k_ss and the input-torque gain. The stiffness
 (``gearsym estimate --fleet --params m_veh,mu_38,mu_05,zeta,k_ss``): its prior and random walk
 are the description's stiffness factor's times the calibration's k_ss, the twist takes the
 intensity tuned for that filter, the truth is the vehicle's own stiffness (for scoring only),
@@ -12,7 +13,7 @@ import sys
 
 import pytest
 from gearsym.symbolic.drivetrain import quantity
-from gearsym.symbolic.estimator_calibration import MODEL_ERROR_WITH_STIFFNESS, STIFFNESS
+from gearsym.symbolic.estimator_calibration import MODEL_ERROR_AUGMENTED, STIFFNESS
 from gearsym.symbolic.estimators.ekf import augmented_model, default_parameters
 from gearsym.symbolic.loader import load_description
 from gearsym.validation.sim.fleet import parse_fleet
@@ -40,7 +41,7 @@ def test_the_stiffness_state_takes_the_factors_prior_and_random_walk(d):
     """k_ss = 10 000 N·m/rad in the description; its prior is the stiffness factor's (1 ±
     0.058: the fleet's uniform ±10 %, 0.1/√3) times it, its random walk the factor's (about
     0.001 per root second) times k_ss², and the states' intensities the
-    [estimator.model_error_k_ss] table's, not the thesis filter's [estimator.model_error]."""
+    [estimator.model_error_augmented] table's, not the thesis filter's [estimator.model_error]."""
     k_ss = quantity(d, "drivetrain", STIFFNESS).value
     mean, sd = d.estimator.stiffness_factor_prior()
     assert mean == 1.0 and sd == pytest.approx(0.1 / 3**0.5, rel=0.01)
@@ -51,7 +52,7 @@ def test_the_stiffness_state_takes_the_factors_prior_and_random_walk(d):
     assert aug.intensities[STIFFNESS] == pytest.approx(walk * k_ss**2)
     thesis = augmented_model(d, "2-3", default_parameters(d, "2-3"))
     for name in ("phi", "omega_1", "omega_2", "omega_C"):
-        _, own = _stated(d, MODEL_ERROR_WITH_STIFFNESS, name)
+        _, own = _stated(d, MODEL_ERROR_AUGMENTED, name)
         _, thesis_value = _stated(d, "model_error", name)
         assert aug.intensities[name] == own != thesis_value
         # the thesis' filter keeps its own intensities
@@ -87,7 +88,7 @@ def test_one_shift_moves_the_stiffness_towards_a_stiffer_vehicle(d, scenario):
 
 
 def test_tuning_with_the_stiffness_names_its_own_table(d, scenario):
-    """Tuned with the stiffness as a state, the result belongs in [estimator.model_error_k_ss]
+    """Tuned with the stiffness as a state, the result belongs in [estimator.model_error_augmented]
     and multiplies that table's values, so that the thesis filter's stay their own."""
     from gearsym.validation.sim.fleet import load_fleet
     from gearsym.validation.studies.estimation.tuning import tune_model_error
@@ -101,10 +102,10 @@ def test_tuning_with_the_stiffness_names_its_own_table(d, scenario):
         twist_factors=(0.5,),
         parameters=THESIS_AND_STIFFNESS,
     )
-    _, twist = _stated(d, MODEL_ERROR_WITH_STIFFNESS, "phi")
+    _, twist = _stated(d, MODEL_ERROR_AUGMENTED, "phi")
     assert result.intensities["phi"] == pytest.approx(0.5 * twist)
-    assert result.table == MODEL_ERROR_WITH_STIFFNESS
-    assert f"[estimator.{MODEL_ERROR_WITH_STIFFNESS}]" in result.text()
+    assert result.table == MODEL_ERROR_AUGMENTED
+    assert f"[estimator.{MODEL_ERROR_AUGMENTED}]" in result.text()
 
 
 def _gearsym(*args: str) -> subprocess.CompletedProcess:
@@ -138,3 +139,63 @@ def test_the_fleet_takes_the_thesis_parameters_with_the_stiffness_or_without_onl
     assert result.returncode == 2 and result.stdout == ""
     (line,) = result.stderr.strip().splitlines()
     assert "--params" in line and "optionally with k_ss" in line, line
+
+
+# ------------------------------------------------------------------ the input-torque gain
+
+
+def test_the_gain_state_multiplies_the_told_input_torque(d):
+    """With input_torque_gain a state, the model's right-hand side is the thesis filter's with
+    T_In replaced by g T_In: equal at g = 1, and ∂f/∂g = T_In ∂f/∂T_In (the chain rule)."""
+    import sympy as sp
+    from gearsym.symbolic import naming
+    from gearsym.symbolic.estimator_calibration import INPUT_TORQUE_GAIN
+
+    thesis = augmented_model(d, "2-3", default_parameters(d, "2-3"))
+    gained = augmented_model(d, "2-3", (*default_parameters(d, "2-3"), INPUT_TORQUE_GAIN))
+    g = next(v.symbol for v in gained.model.states if v.name == INPUT_TORQUE_GAIN)
+    t_in = next(v.symbol for v in gained.model.inputs if v.name == naming.INPUT_TORQUE)
+    n = len(thesis.model.rhs)
+    for i in range(n):
+        f_gain = gained.model.rhs[i]
+        assert sp.simplify(f_gain.subs(g, 1) - thesis.model.rhs[i]) == 0
+        assert sp.simplify(sp.diff(f_gain, g) - t_in * sp.diff(f_gain, t_in).subs(g, 1)) == 0
+    assert gained.model.rhs[n] == 0  # a random walk
+    # the sticking torque the mode logic compares with the capacity sees the gain too
+    for e in gained.elements:
+        expr = gained.sticking_torque[e]
+        assert sp.simplify(expr.subs(g, 1) - thesis.sticking_torque[e]) == 0
+
+
+def test_the_gains_truth_is_the_true_over_the_told_torque(d, scenario):
+    """A vehicle whose engine gives 4 % more than its torque model and the e-machine exactly
+    its command: the gain's truth is (1.04 T_eng + T_em) / (T_eng + T_em) of the scenario's
+    commanded profiles wherever the told torque exceeds the floor, and absent elsewhere;
+    the filter starts at 1 ± 0.029 (the engine's ±5 %, uniform)."""
+    import numpy as np
+    from gearsym.symbolic.estimator_calibration import INPUT_TORQUE_GAIN
+    from gearsym.validation.studies.estimation.fleet_eval import run_fleet
+    from gearsym.validation.studies.estimation.setup import GAIN_TORQUE_FLOOR
+
+    fleet = parse_fleet(
+        '[fleet]\nname = "strong"\n'
+        'engine_torque_gain = { value = 1.04, unit = "1", source = "test" }\n',
+        "strong.toml",
+        d,
+    )
+    parameters = (*default_parameters(d, "2-3"), INPUT_TORQUE_GAIN)
+    evaluation = run_fleet(
+        d, scenario, fleet, runs=1, seed=700010, bound=False, parameters=parameters
+    )
+    run = evaluation.runs[0].run
+    j = list(run.state_names).index(INPUT_TORQUE_GAIN)
+    engine = np.array([scenario.engine(float(t)) for t in run.t])
+    e_machine = np.array([scenario.e_machine(float(t)) for t in run.t])
+    told = engine + e_machine
+    defined = np.abs(told) > GAIN_TORQUE_FLOOR
+    assert defined.any() and (run.scored[:, j] == defined).all()
+    expected = (1.04 * engine + e_machine)[defined] / told[defined]
+    np.testing.assert_allclose(run.truth[defined, j], expected, rtol=1e-9)
+    assert run.estimates[0, j] == pytest.approx(1.0, abs=0.02)  # one update from its prior
+    assert evaluation.initial[INPUT_TORQUE_GAIN] == pytest.approx((1.0, 0.029))
+    assert evaluation.separability == {}  # the gain is the filter's own state
