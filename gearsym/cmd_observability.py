@@ -303,7 +303,8 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "--params",
         default=None,
         help="estimated parameters, comma-separated (default m_veh, the mu of the two swapping "
-        f"elements, zeta: {','.join(DEFAULT_PARAMETERS)} for 2-3 as in (4.1); '' for none)",
+        f"elements, zeta: {','.join(DEFAULT_PARAMETERS)} for 2-3 as in (4.1); '' for none; "
+        "input_torque_gain: the input torque as told times an unknown gain)",
     )
     p.add_argument(
         "--outputs",

@@ -85,3 +85,25 @@ class Model:
             if v.name == name:
                 return v
         raise KeyError(name)
+
+
+def with_input_gain(model: Model, input_name: str, gain: Variable) -> Model:
+    """``model`` with its input ``input_name`` acting through ``gain`` times itself: every
+    occurrence of u in f and h becomes g u, and g joins the parameters (its default the
+    nominal gain, 1 for a calibrated input). A TCU is told an input torque through its
+    engine's torque model; the true one is g times it, and an estimator or an observability
+    analysis that takes g as an unknown parameter needs this model. ``model`` is unchanged."""
+    told = model.variable(input_name)
+    if told not in model.inputs:
+        raise KeyError(f"{input_name!r} is not an input of model {model.name!r}")
+    scaled = {told.symbol: gain.symbol * told.symbol}
+    return Model(
+        name=model.name,
+        states=model.states,
+        inputs=model.inputs,
+        parameters=(*model.parameters, gain),
+        outputs=model.outputs,
+        rhs=model.rhs.xreplace(scaled),
+        output_expressions=model.output_expressions.xreplace(scaled),
+        metadata={**model.metadata, "input_gain": f"{gain.name} on {input_name}"},
+    )

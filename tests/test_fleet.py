@@ -557,3 +557,37 @@ def test_in_the_steady_gear_the_gain_is_not_separable(separability):
     assert gear2["input_torque_gain"] is None and gear2["m_veh"] is None
     whole = separability["shift"]["gamma_gain_unknown"]
     assert whole["input_torque_gain"] is not None and whole["m_veh"] is not None
+
+
+def test_the_nees_interval_over_vehicles_is_a_bootstrap_of_their_means(d, scenario):
+    """Fake vehicles with a constant NEES per sample: all alike, the interval is that value;
+    half at 4 and half at 8 (40 vehicles, 5 dof), the bootstrap mean of 20 draws of each kind
+    sits at 6 with a 95 % interval of 6 ± 1.96 x 2/√40 (binomial share of the 8s: sd
+    √(0.25/40) x 4 = 0.316), and the expected value is the mean dof, 5."""
+    from types import SimpleNamespace
+
+    from gearsym.validation.studies.estimation.fleet_eval import FleetEvaluation
+
+    def vehicle(value: float) -> SimpleNamespace:
+        return SimpleNamespace(
+            run=SimpleNamespace(nees=np.full(30, value), nees_dof=np.full(30, 5.0))
+        )
+
+    alike = FleetEvaluation(load_fleet(d), d, scenario, (0, 1), [vehicle(5.5), vehicle(5.5)])
+    spread = alike.nees_over_vehicles(resamples=200)
+    assert spread["interval"] == pytest.approx([5.5, 5.5]) and spread["expected"] == 5.0
+    mixed = FleetEvaluation(
+        load_fleet(d),
+        d,
+        scenario,
+        tuple(range(40)),
+        [vehicle(4.0 + 4.0 * (k % 2)) for k in range(40)],
+    )
+    low, high = mixed.nees_over_vehicles(resamples=4000)["interval"]
+    half_width = 1.96 * 4.0 * np.sqrt(0.25 / 40)
+    assert low == pytest.approx(6.0 - half_width, abs=0.1)
+    assert high == pytest.approx(6.0 + half_width, abs=0.1)
+    assert (
+        FleetEvaluation(load_fleet(d), d, scenario, (0,), [vehicle(5.0)]).nees_over_vehicles()
+        is None
+    )

@@ -199,3 +199,70 @@ def test_the_gains_truth_is_the_true_over_the_told_torque(d, scenario):
     assert run.estimates[0, j] == pytest.approx(1.0, abs=0.02)  # one update from its prior
     assert evaluation.initial[INPUT_TORQUE_GAIN] == pytest.approx((1.0, 0.029))
     assert evaluation.separability == {}  # the gain is the filter's own state
+
+
+def test_an_input_gain_scales_that_input_only(d):
+    """with_input_gain: f and h with u replaced by g u, g a new parameter (default 1), the
+    model unchanged; a name that is not an input is refused."""
+    import sympy as sp
+    from gearsym.symbolic.drivetrain import shift_model
+    from gearsym.symbolic.input_gain import input_torque_gain_variable, with_input_torque_gain
+    from gearsym.symbolic.model import with_input_gain
+
+    model = shift_model(d, "2-3")
+    gained = with_input_torque_gain(model)
+    g = gained.variable("input_torque_gain")
+    assert g.default == 1.0 and g not in model.parameters and g in gained.parameters
+    t_in = model.variable("T_In").symbol
+    other = next(v.symbol for v in model.inputs if v.name != "T_In")
+    for f, f_gain in zip(model.rhs, gained.rhs, strict=True):
+        assert sp.expand(f_gain.subs(g.symbol, 1) - f) == 0
+        assert sp.expand(sp.diff(f_gain, g.symbol) - t_in * sp.diff(f, t_in)) == 0
+        assert (
+            sp.expand(sp.diff(f_gain, other) - sp.diff(f, other).subs(t_in, g.symbol * t_in)) == 0
+        )
+    with pytest.raises(KeyError, match="not an input"):
+        with_input_gain(model, "m_veh", input_torque_gain_variable())
+
+
+def test_observability_takes_the_gain_beside_the_parameters():
+    """`gearsym observability --params m_veh,zeta,input_torque_gain --json`: the gain is one of
+    the unknowns the Lie-derivative rank (4.4) judges."""
+    result = _gearsym("observability", "--params", "m_veh,zeta,input_torque_gain", "--json")
+    assert result.returncode == 0, result.stderr
+    data = json.loads(result.stdout)
+    assert "input_torque_gain" in data["observable"]
+    assert data["n_unknowns"] == len(data["observable"])
+
+
+def test_with_constant_inputs_the_gain_is_tied_to_each_sliding_elements_mu():
+    """The Lie-derivative rank (4.4) per mode with T_In and F_N held constant, against a hand
+    count of the gearbox's torque balance: the gearbox speeds the mode keeps give one equation
+    each, and g T_In and every sliding element's μ F_N are constants in them. One speed (one
+    element locked, the other sliding): two constants in one equation, so that μ and g are
+    one unobservable direction. Two speeds and both sliding: three constants in two, one
+    direction through both μ and g. Two speeds and one sliding (the other open): two in two,
+    full rank; no element sliding: g alone, full rank."""
+    result = _gearsym(
+        "observability",
+        "--params",
+        "m_veh,mu_38,mu_05,zeta,input_torque_gain",
+        "--per-mode",
+        "--input-model",
+        "all=constant",
+        "--json",
+    )
+    assert result.returncode == 0, result.stderr
+    modes = json.loads(result.stdout)["modes"]
+    assert len(modes) == 15
+    for mode in modes:
+        status = mode["status"]
+        sliding = sorted(
+            {"K38": "mu_38", "B05": "mu_05"}[e] for e, s in status.items() if s.startswith("slide")
+        )
+        locked = any(s == "locked" for s in status.values())
+        if sliding and (locked or len(sliding) == 2):
+            assert sorted(mode["unobservable"]) == sorted([*sliding, "input_torque_gain"]), mode
+            assert mode["rank"] == mode["n_unknowns"] - 1, mode
+        else:
+            assert mode["unobservable"] == [] and mode["full_rank"], mode

@@ -46,6 +46,7 @@ from gearsym.symbolic.drivetrain import (
 )
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.estimator_calibration import AUGMENTED_STATES, INPUT_TORQUE_GAIN, STIFFNESS
+from gearsym.symbolic.input_gain import with_input_torque_gain
 from gearsym.symbolic.model import Model, Variable
 from gearsym.symbolic.parameters import RECORDS
 from gearsym.symbolic.shifts import shift_spec
@@ -227,21 +228,12 @@ def augmented_model(
     signs = power_on_slip_signs(d, spec)
     by_param = {v.name: v for v in base.parameters}
     sym = {v.name: v.symbol for v in (*base.states, *base.inputs, *base.parameters)}
-    torque_rhs = torque_model.rhs
     if INPUT_TORQUE_GAIN in parameters:
         # the input torque the TCU is told, times a gain the filter estimates: the true T_In
         # over the told one (the engine's torque model, the e-machine's command)
-        gain = Variable(
-            INPUT_TORQUE_GAIN,
-            sp.Symbol(INPUT_TORQUE_GAIN, real=True),
-            "1",
-            "the true input torque over the one the TCU is told",
-            1.0,
-            "assumed: the TCU's torque model is right on average",
-        )
-        by_param[INPUT_TORQUE_GAIN] = gain
-        told = sym[naming.INPUT_TORQUE]
-        torque_rhs = torque_rhs.xreplace({told: gain.symbol * told})
+        torque_model = with_input_torque_gain(torque_model)
+        by_param[INPUT_TORQUE_GAIN] = torque_model.variable(INPUT_TORQUE_GAIN)
+    torque_rhs = torque_model.rhs
 
     # The element torques in terms of the modes: slide -> k_sign 2 N r μ F_N (2.69, 3.14),
     # stick -> the constraint torque that holds its slip rate at zero, open -> 0.

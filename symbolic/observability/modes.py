@@ -132,6 +132,7 @@ def analyze_modes(
     ``--input-model``. Raises :class:`GearsymError` for bad input.
     """
     from gearsym.symbolic.hybrid import hybrid_shift, status_label
+    from gearsym.symbolic.input_gain import INPUT_TORQUE_GAIN, with_input_torque_gain
     from gearsym.symbolic.observability.errors import BudgetExceeded, ObservabilityError
 
     try:
@@ -141,8 +142,9 @@ def analyze_modes(
             raise GearsymError(err.file, "--shift", err.reason) from None
         raise
     mus = {str(mu): e for e, mu in hybrid.friction_coefficient.items()}
-    known = {v.name for v in hybrid.parameters}
+    known = {v.name for v in hybrid.parameters} | {INPUT_TORQUE_GAIN}
     requested = list(params) if params is not None else ["m_veh", *mus, "zeta"]
+    gained = INPUT_TORQUE_GAIN in requested  # T_In told, times a gain (input_gain)
     stray = [p for p in requested if p not in known]
     if stray:
         raise GearsymError(
@@ -160,7 +162,7 @@ def analyze_modes(
     results = []
     for name in mode_order(hybrid):
         mode = hybrid.modes[name]
-        model = mode.model
+        model = with_input_torque_gain(mode.model) if gained else mode.model
         present = {v.name for v in model.parameters}
         variables = {v.name for v in (*model.states, *model.inputs, *model.parameters)}
         excluded = {}

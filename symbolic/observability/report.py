@@ -340,6 +340,7 @@ def analyze_shift(
     ``partial`` attribute holds the sound partial result.
     """
     from gearsym.symbolic.drivetrain import shift_model
+    from gearsym.symbolic.input_gain import INPUT_TORQUE_GAIN, with_input_torque_gain
 
     started = time.perf_counter()
     try:
@@ -350,6 +351,9 @@ def analyze_shift(
         if err.key == "shift":
             raise GearsymError(err.file, "--shift", err.reason) from None
         raise
+    if params is not None and INPUT_TORQUE_GAIN in params:
+        # the input torque as the TCU is told it, times a gain to be told apart (input_gain)
+        model = with_input_torque_gain(model)
     if outputs:
         model = select_outputs(d, model, outputs)
     if params is None:

@@ -44,6 +44,9 @@ __all__ = [
 #: The 95 % interval of a Gaussian estimate: ±1.96 σ.
 COVERAGE_Z = 1.959963984540054
 
+#: Bootstrap draws of the fleet's vehicles for :meth:`FleetEvaluation.nees_over_vehicles`.
+NEES_RESAMPLES = 2000
+
 Progress = Callable[[float, str], None]
 
 
@@ -217,6 +220,29 @@ class FleetEvaluation:
             float(chi2.ppf(0.975, total) / runs),
         )
 
+    def nees_over_vehicles(
+        self, resamples: int = NEES_RESAMPLES, seed: int = 0
+    ) -> dict[str, Any] | None:
+        """How far the NEES mean moves with the fleet's vehicles: the 95 % interval of
+        :meth:`nees`'s mean when the vehicles are drawn again with replacement (``resamples``
+        bootstrap draws from ``seed``), beside the value a consistent filter expects (the mean
+        dof). The χ² band of :meth:`nees` assumes every vehicle the same filter with an exact
+        model; vehicles that differ in what no state carries scatter more than that, which this
+        interval shows (``None`` with fewer than two vehicles)."""
+        if len(self.runs) < 2:
+            return None
+        nees = np.array([fr.run.nees for fr in self.runs])
+        dof = np.array([fr.run.nees_dof for fr in self.runs])
+        rng = np.random.default_rng(seed)
+        picks = rng.integers(0, len(self.runs), size=(resamples, len(self.runs)))
+        means = np.array([float(np.mean(np.mean(nees[k], axis=0))) for k in picks])
+        low, high = np.percentile(means, [2.5, 97.5])
+        return {
+            "interval": [float(low), float(high)],
+            "expected": float(np.mean(dof)),
+            "resamples": resamples,
+        }
+
     def nis(self) -> tuple[float | None, tuple[float, float] | None]:
         """Mean NIS over every used update of every run and its band (innovations are white:
         the summed NIS is χ² with the summed dof)."""
@@ -267,6 +293,7 @@ class FleetEvaluation:
             },
             "nees_mean": nees,
             "nees_band": list(nees_band),
+            "nees_over_vehicles": self.nees_over_vehicles(),
             "nis_mean": nis,
             "nis_band": None if nis_band is None else list(nis_band),
             "separability": self.separability,

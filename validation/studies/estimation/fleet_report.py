@@ -60,6 +60,21 @@ def _band(value: float | None, band: Sequence[float] | None) -> str:
     return f"{value:.3g} in [{band[0]:.3g}, {band[1]:.3g}]: {'inside' if inside else 'OUTSIDE'}"
 
 
+def _over_vehicles(data: dict[str, Any]) -> list[str]:
+    """The NEES mean's bootstrap interval over the vehicles, where the JSON has it."""
+    spread = data.get("nees_over_vehicles")
+    if not spread:
+        return []
+    low, high = spread["interval"]
+    expected = spread["expected"]
+    verdict = "inside" if low <= expected <= high else "OUTSIDE"
+    return [
+        f"NEES mean over the vehicles drawn again ({spread['resamples']} bootstrap draws): "
+        f"95 % interval [{low:.3g}, {high:.3g}]; a consistent filter's {expected:.3g} (the mean "
+        f"dof) {verdict} (the χ² band assumes every vehicle the same filter with an exact model)"
+    ]
+
+
 def _has_bound(data: dict[str, Any]) -> bool:
     return any(
         stats.get("bound") is not None
@@ -179,6 +194,7 @@ def format_fleet_text(data: dict[str, Any]) -> str:
         )
     lines.append("")
     lines.append(f"  NEES mean {_band(data['nees_mean'], data['nees_band'])}")
+    lines += [f"  {line}" for line in _over_vehicles(data)]
     lines.append(f"  NIS mean {_band(data['nis_mean'], data['nis_band'])}")
     if data["failed"]:
         lines.append(
@@ -225,6 +241,7 @@ def fleet_markdown(data: dict[str, Any], command: str) -> str:
     out += [
         f"- NEES mean {_band(data['nees_mean'], data['nees_band'])}; "
         f"NIS mean {_band(data['nis_mean'], data['nis_band'])}",
+        *(f"- {line}" for line in _over_vehicles(data)),
         f"- {len(data['failed'])} vehicle(s) not simulated"
         if data["failed"]
         else "- every vehicle simulated",
