@@ -23,3 +23,19 @@ def generated_tree() -> Any:
     from gearsym.symbolic.loader import load_description
 
     return generate_tree(load_description(None))
+
+
+@pytest.fixture(scope="session")
+def default_description() -> Any:
+    """The built-in gearbox's description (the calibration of the fleet studies), loaded once."""
+    from gearsym.symbolic.loader import load_description
+
+    return load_description(None)
+
+
+@pytest.fixture(scope="session")
+def default_scenario(default_description: Any) -> Any:
+    """The built-in power-on 2-3 scenario on the built-in gearbox, loaded once."""
+    from gearsym.validation.sim.scenario import load_scenario
+
+    return load_scenario(default_description, None)

@@ -15,21 +15,9 @@ import pytest
 from gearsym.symbolic.drivetrain import quantity
 from gearsym.symbolic.estimator_calibration import MODEL_ERROR_AUGMENTED, STIFFNESS
 from gearsym.symbolic.estimators.ekf import augmented_model, default_parameters
-from gearsym.symbolic.loader import load_description
 from gearsym.validation.sim.fleet import parse_fleet
-from gearsym.validation.sim.scenario import load_scenario
 
 THESIS_AND_STIFFNESS = ("m_veh", "mu_38", "mu_05", "zeta", STIFFNESS)
-
-
-@pytest.fixture(scope="module")
-def d():
-    return load_description(None)
-
-
-@pytest.fixture(scope="module")
-def scenario(d):
-    return load_scenario(d, None)
 
 
 def _stated(d, table: str, name: str) -> tuple[None, float]:
@@ -37,11 +25,12 @@ def _stated(d, table: str, name: str) -> tuple[None, float]:
     return None, dict(getattr(d.estimator, table))[name].value
 
 
-def test_the_stiffness_state_takes_the_factors_prior_and_random_walk(d):
+def test_the_stiffness_state_takes_the_factors_prior_and_random_walk(default_description):
     """k_ss = 10 000 N·m/rad in the description; its prior is the stiffness factor's (1 ±
     0.058: the fleet's uniform ±10 %, 0.1/√3) times it, its random walk the factor's (about
     0.001 per root second) times k_ss², and the states' intensities the
     [estimator.model_error_augmented] table's, not the thesis filter's [estimator.model_error]."""
+    d = default_description
     k_ss = quantity(d, "drivetrain", STIFFNESS).value
     mean, sd = d.estimator.stiffness_factor_prior()
     assert mean == 1.0 and sd == pytest.approx(0.1 / 3**0.5, rel=0.01)
@@ -60,11 +49,15 @@ def test_the_stiffness_state_takes_the_factors_prior_and_random_walk(d):
     assert STIFFNESS not in thesis.state_names
 
 
-def test_one_shift_moves_the_stiffness_towards_a_stiffer_vehicle(d, scenario):
+def test_one_shift_moves_the_stiffness_towards_a_stiffer_vehicle(
+    default_description, default_scenario
+):
     """A vehicle whose side shafts are 10 % stiffer and otherwise the calibration's: the truth
     column is its k_ss (11 000), the filter starts at the calibration's 10 000 ± 580 and ends
     the shift within 3 σ of 11 000, having closed more than half of the gap (the twist's
     oscillation after the lock-up carries the stiffness against the inertias)."""
+    d = default_description
+    scenario = default_scenario
     from gearsym.validation.studies.estimation.fleet_eval import run_fleet
 
     fleet = parse_fleet(
@@ -87,9 +80,11 @@ def test_one_shift_moves_the_stiffness_towards_a_stiffer_vehicle(d, scenario):
     assert evaluation.final_stats(STIFFNESS).runs == 1
 
 
-def test_tuning_with_the_stiffness_names_its_own_table(d, scenario):
+def test_tuning_with_the_stiffness_names_its_own_table(default_description, default_scenario):
     """Tuned with the stiffness as a state, the result belongs in [estimator.model_error_augmented]
     and multiplies that table's values, so that the thesis filter's stay their own."""
+    d = default_description
+    scenario = default_scenario
     from gearsym.validation.sim.fleet import load_fleet
     from gearsym.validation.studies.estimation.tuning import tune_model_error
 
@@ -144,9 +139,10 @@ def test_the_fleet_takes_the_thesis_parameters_with_the_stiffness_or_without_onl
 # ------------------------------------------------------------------ the input-torque gain
 
 
-def test_the_gain_state_multiplies_the_told_input_torque(d):
+def test_the_gain_state_multiplies_the_told_input_torque(default_description):
     """With input_torque_gain a state, the model's right-hand side is the thesis filter's with
     T_In replaced by g T_In: equal at g = 1, and ∂f/∂g = T_In ∂f/∂T_In (the chain rule)."""
+    d = default_description
     import sympy as sp
     from gearsym.symbolic import naming
     from gearsym.symbolic.estimator_calibration import INPUT_TORQUE_GAIN
@@ -167,11 +163,13 @@ def test_the_gain_state_multiplies_the_told_input_torque(d):
         assert sp.simplify(expr.subs(g, 1) - thesis.sticking_torque[e]) == 0
 
 
-def test_the_gains_truth_is_the_true_over_the_told_torque(d, scenario):
+def test_the_gains_truth_is_the_true_over_the_told_torque(default_description, default_scenario):
     """A vehicle whose engine gives 4 % more than its torque model and the e-machine exactly
     its command: the gain's truth is (1.04 T_eng + T_em) / (T_eng + T_em) of the scenario's
     commanded profiles wherever the told torque exceeds the floor, and absent elsewhere;
     the filter starts at 1 ± 0.029 (the engine's ±5 %, uniform)."""
+    d = default_description
+    scenario = default_scenario
     import numpy as np
     from gearsym.symbolic.estimator_calibration import INPUT_TORQUE_GAIN
     from gearsym.validation.studies.estimation.fleet_eval import run_fleet
@@ -201,9 +199,10 @@ def test_the_gains_truth_is_the_true_over_the_told_torque(d, scenario):
     assert evaluation.separability == {}  # the gain is the filter's own state
 
 
-def test_an_input_gain_scales_that_input_only(d):
+def test_an_input_gain_scales_that_input_only(default_description):
     """with_input_gain: f and h with u replaced by g u, g a new parameter (default 1), the
     model unchanged; a name that is not an input is refused."""
+    d = default_description
     import sympy as sp
     from gearsym.symbolic.drivetrain import shift_model
     from gearsym.symbolic.input_gain import input_torque_gain_variable, with_input_torque_gain
