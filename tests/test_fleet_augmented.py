@@ -129,8 +129,15 @@ def test_the_command_reports_the_stiffness_beside_the_thesis_parameters():
     assert data["parameters"][STIFFNESS]["final"]["runs"] == 1
 
 
-def test_the_fleet_takes_the_thesis_parameters_with_the_stiffness_or_without_only():
-    result = _gearsym("estimate", "--filter", "ekf", "--fleet", "--params", "m_veh,k_ss")
+@pytest.mark.parametrize(
+    "params",
+    [
+        "m_veh,k_ss",  # a thesis parameter missing
+        "m_veh,mu_38,mu_05,zeta,d_ss",  # an extra the fleet's filter does not carry
+    ],
+)
+def test_the_fleet_takes_the_thesis_parameters_with_the_stiffness_or_without_only(params):
+    result = _gearsym("estimate", "--filter", "ekf", "--fleet", "--params", params)
     assert result.returncode == 2 and result.stdout == ""
     (line,) = result.stderr.strip().splitlines()
     assert "--params" in line and "optionally with k_ss" in line, line
