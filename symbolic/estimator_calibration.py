@@ -43,6 +43,7 @@ __all__ = [
     "STIFFNESS",
     "STIFFNESS_FACTOR",
     "VALVE_OFFSET",
+    "FILL_TIME_ERROR",
     "EstimatorCalibration",
     "Prior",
     "Tuning",
@@ -61,6 +62,10 @@ MU_SCALE = "mu_scale"
 #: The valve's pressure offset (Pa) as a filter state (the adaptive-control study's estimator:
 #: every applied element's effective pressure off the TCU's nominal valve by one constant).
 VALVE_OFFSET = "valve_offset"
+
+#: The on-coming piston's fill time off the calibration's (s): the adaptive-control study's
+#: belief over shifts (not a filter state: the replay of each shift estimates it).
+FILL_TIME_ERROR = "fill_time_error"
 
 #: The side shafts' stiffness as a factor on the description's k_ss (a filter state over a
 #: drive: the twist's frequency is seen in every speed, and a stiffness off the calibration's
@@ -84,6 +89,7 @@ PRIOR_NAMES: tuple[str, ...] = (
     *(r.key for r in RECORDS if r.prior_sigma is not None),
     MU_SCALE,
     VALVE_OFFSET,
+    FILL_TIME_ERROR,
     STIFFNESS_FACTOR,
     INPUT_TORQUE_GAIN,
 )
@@ -122,19 +128,22 @@ _PRIOR_UNITS = {
     "phi": "rad",
     MU_SCALE: "1",
     VALVE_OFFSET: "Pa",
+    FILL_TIME_ERROR: "s",
     STIFFNESS_FACTOR: "1",
     INPUT_TORQUE_GAIN: "1",
 }
 
 #: Default priors of the entries without a record: φ untwisted, σ 0.05 rad; the μ-map scale
 #: 1 (the calibration's map), σ 0.2; the valve's offset 0 (the nominal valve), σ 6 000 Pa
-#: (uniform within ±100 mbar); the side shafts' stiffness factor 1, σ 0.058 (uniform within
+#: (uniform within ±100 mbar); the fill time's error 0, σ 0.029 s (production fill times
+#: uniform within ±50 ms); the side shafts' stiffness factor 1, σ 0.058 (uniform within
 #: ±10 %: production spread and temperature); the input-torque gain 1, σ 0.029 (the engine's
 #: torque model uniform within ±5 %); all assumed.
 _DEFAULT_PRIORS = {
     "phi": (0.0, 0.05),
     MU_SCALE: (1.0, 0.2),
     VALVE_OFFSET: (0.0, 6.0e3),
+    FILL_TIME_ERROR: (0.0, 0.029),
     STIFFNESS_FACTOR: (1.0, 0.058),
     INPUT_TORQUE_GAIN: (1.0, 0.029),
 }
@@ -248,6 +257,10 @@ class EstimatorCalibration:
         """q of the valve's pressure offset state (Pa²/s)."""
         given = dict(self.random_walk).get(VALVE_OFFSET)
         return VALVE_OFFSET_RANDOM_WALK if given is None else given.value
+
+    def fill_time_error_prior(self) -> tuple[float, float]:
+        """(mean, σ) of the fill time's error against the calibration's (s)."""
+        return self._stated_prior(FILL_TIME_ERROR)
 
     def stiffness_factor_prior(self) -> tuple[float, float]:
         """(mean, σ) of the side shafts' stiffness factor state."""

@@ -18,9 +18,16 @@ from gearsym.validation.sim.drive_log import TcuLog
 from gearsym.validation.sim.fleet import Actuators
 from gearsym.validation.sim.hybrid_simulation import HybridSimulator
 from gearsym.validation.sim.scenario import load_scenario
+from gearsym.validation.studies.control import fill_estimate
 from gearsym.validation.studies.control.closed_loop import TICK, ClosedLoopShift
 from gearsym.validation.studies.control.controller import Knowledge
-from gearsym.validation.studies.control.fill_estimate import FillReplay, _detrended_rms
+from gearsym.validation.studies.control.fill_estimate import (
+    GRID_STEP,
+    FillBelief,
+    FillEstimate,
+    FillReplay,
+    _detrended_rms,
+)
 from gearsym.validation.studies.control.study import (
     SHIFT_DURATION,
     OperatingPoint,
@@ -91,8 +98,10 @@ def test_detrending_removes_a_straight_line_and_nothing_else() -> None:
 def test_replay_finds_a_planted_fill_error(d, point, planted: float) -> None:  # noqa: ANN001
     """Late (+40 ms: a flare) and early (−30 ms: a tie-up). With the planted error the replay
     is the record's own physics: its input speed agrees to the integrators' tolerance
-    (1e-8, so far under 1e-3 rad/s); the search finds the error within 2 ms, and the
-    calibration's fill explains the record much worse."""
+    (1e-8, so far under 1e-3 rad/s); the search finds the error within 2 ms, the
+    calibration's fill explains the record much worse, and the estimate counts as sure (σ
+    under 1 ms: nothing is left but the sensors' resolution, and a step off the fill leaves a
+    large residual)."""
     arrays, result = _record(d, point, planted)
     replay = FillReplay(d, SHIFT)
     knowledge = _exact(d)
@@ -100,16 +109,60 @@ def test_replay_finds_a_planted_fill_error(d, point, planted: float) -> None:  #
     found = replay.estimate(knowledge, arrays, result.commands, result.phases)
     assert found.delta == pytest.approx(planted, abs=2e-3)
     assert found.rms_assumed > 20 * max(found.rms, 1e-3)
+    assert found.rms_side > 20 * max(found.rms, 1e-3)
+    assert np.sqrt(found.variance) < 1e-3
     assert found.explains
 
 
 def test_a_right_fill_is_kept(d, point) -> None:  # noqa: ANN001
-    """The fill the shift assumed was the truth's: the record is reproduced already, nothing
-    is left for a fill to explain, and the estimate is not taken."""
+    """The fill the shift assumed was the truth's: the record is reproduced already: nothing
+    is left for a fill to explain outright, and a belief that held it (here within its
+    prior's ±29 ms) ends within 1 ms of it, sure of it."""
     arrays, result = _record(d, point, 0.0)
     found = FillReplay(d, SHIFT).estimate(_exact(d), arrays, result.commands, result.phases)
     assert found.rms_assumed < 1e-3
     assert not found.explains
+    after = FillBelief(0.0, 0.029**2).updated(found)
+    assert abs(after.delta) < 1e-3 and after.sigma < 1e-3
+
+
+def test_fill_variance_is_the_least_squares_variance(monkeypatch) -> None:  # noqa: ANN001
+    """For a signature linear in δ (y = g δ + e, n independent samples) the variance from the
+    residual's valley is the textbook least-squares one, σ̂² / Σ g² with σ̂² the residual's mean
+    square, computed here by NumPy's least squares on the same data (an independent route)."""
+    rng = np.random.default_rng(7)
+    n = 40
+    g = rng.normal(3.0, 1.0, n)
+    y = g * 0.012 + rng.normal(0.0, 0.2, n)
+    (delta,), *_ = np.linalg.lstsq(g[:, None], y, rcond=None)
+
+    def rms(x: float) -> float:
+        return float(np.sqrt(np.mean((y - g * x) ** 2)))
+
+    side = np.sqrt((rms(delta - GRID_STEP) ** 2 + rms(delta + GRID_STEP) ** 2) / 2.0)
+    monkeypatch.setattr(fill_estimate, "INDEPENDENT_SAMPLES", float(n))
+    found = FillEstimate(float(delta), rms(delta), float(side), rms(0.0))
+    assert found.variance == pytest.approx(rms(delta) ** 2 / np.sum(g**2), rel=1e-9)
+
+
+def test_fill_belief_is_a_scalar_kalman_filter() -> None:
+    """Hand-computed: prior 0 ± 20 ms, drift 0, an estimate of +30 ms with σ 20 ms: the gain is
+    ½, the belief +15 ms with variance half the prior's; a record that pins nothing down
+    (infinite variance) leaves the belief and, with a drift, widens it by the drift."""
+    prior = FillBelief(0.0, 0.02**2)
+    # the valley's side that gives σ 20 ms with 0.1 rad/s left: rms_side² = rms² (1 + h² / (σ² N))
+    n = fill_estimate.INDEPENDENT_SAMPLES
+    side = 0.1 * np.sqrt(1.0 + GRID_STEP**2 / (0.02**2 * n))
+    found = FillEstimate(0.03, 0.1, float(side), 0.2)
+    assert found.variance == pytest.approx(0.02**2, rel=1e-9)
+    after = prior.updated(found)
+    assert after.delta == pytest.approx(0.015, rel=1e-9)
+    assert after.variance == pytest.approx(0.02**2 / 2.0, rel=1e-9)
+    flat = FillEstimate(0.05, 0.3, 0.3, 0.3)
+    assert flat.variance == np.inf
+    drifting = FillBelief(0.01, 1e-4, drift=0.002)
+    kept = drifting.updated(flat)
+    assert kept.delta == 0.01 and kept.variance == pytest.approx(1e-4 + 0.002**2)
 
 
 def test_estimator_strategy_commands_the_estimated_fill(d, point) -> None:  # noqa: ANN001
@@ -154,7 +207,7 @@ def test_a_fill_the_model_cannot_follow_is_no_candidate(d, point, monkeypatch) -
     monkeypatch.setattr(ClosedLoopShift, "run", failing)
     assert replay.residual(-0.02, _exact(d), arrays, result.commands, result.phases) == np.inf
     found = replay.estimate(_exact(d), arrays, result.commands, result.phases)
-    assert found.delta == pytest.approx(0.04, abs=2e-3) and found.explains
+    assert found.delta == pytest.approx(0.04, abs=2e-3) and np.sqrt(found.variance) < 1e-3
 
 
 def test_fill_time_and_command_duration_through_the_valve_view(d) -> None:  # noqa: ANN001

@@ -18,6 +18,13 @@ torque phase and the start of the inertia phase (bounded scalar minimisation, Sc
 difference first: an error in the assumed input torque, mass or grade changes the input's
 acceleration over the whole window, which the fill does not, and must not be read as a fill.
 
+An estimate that at least halves the residual of the fill the shift assumed explains the
+record and is taken outright; any other is one shift's evidence, with a variance from how
+sharply the residual's valley pins δ down (:attr:`FillEstimate.variance`), weighed against
+what the earlier shifts said by a scalar Kalman filter over the shifts (:class:`FillBelief`):
+a small fill error, whose signature is below what the TCU's model errors leave, is learnt
+over several shifts that say the same thing instead of never.
+
 What the estimate holds: the fill time at the fast-fill pressure as the nominal valve would
 stroke it. A valve offset (the fleet's ±100 mbar) changes how fast the piston strokes and is
 absorbed into δ, which is what the fill command must correct.
@@ -39,19 +46,29 @@ from gearsym.validation.sim.actuator import ClutchActuator
 from gearsym.validation.studies.control.closed_loop import TICK, ClosedLoopShift
 from gearsym.validation.studies.control.controller import Knowledge
 
-__all__ = ["EXPLAINS", "FILL_SEARCH", "GRID_STEP", "FillEstimate", "FillReplay"]
+__all__ = ["FILL_SEARCH", "GRID_STEP", "FillBelief", "FillEstimate", "FillReplay"]
 
 #: The fill-time errors searched about the shift's own (s): beyond the fleet's ±50 ms and
 #: the valve offset's share.
 FILL_SEARCH = 0.06
 #: The coarse search's spacing (s): one TCU tick.
 GRID_STEP = 0.01
-#: The residual's fraction an estimate must leave to be taken (:attr:`FillEstimate.explains`),
-#: chosen on the tuning vehicles (seeds 100000 and up) of the 2-3 and 3-4 shifts.
+#: The residual's fraction an estimate must leave to be taken outright
+#: (:attr:`FillEstimate.explains`), chosen on the tuning vehicles (seeds 100000 and up) of the
+#: 2-3 and 3-4 shifts.
 EXPLAINS = 0.5
 #: ... and by at least this much (rad/s, about 1 rpm: below a speed sensor's resolution an
 #: improvement is no evidence).
 EXPLAINS_FLOOR = 0.1
+#: How many independent pieces of evidence one shift's residual holds (the per-shift variance
+#: of :meth:`FillEstimate.variance`): what the TCU's model gets wrong (μ, mass, torque) is
+#: smooth over the compared window, so its samples are not independent; chosen on the tuning
+#: vehicles (seeds 100000 and up) of the 2-3 shift.
+INDEPENDENT_SAMPLES = 4.0
+#: The smallest residual RMS a replay is credited with (rad/s): the speed sensors' resolution,
+#: well above the integrators' 1e-8 (a replay that reproduces the record to its tolerance is
+#: not infinitely sure).
+RESIDUAL_FLOOR = 0.01
 #: How far past the inertia phase's commanded start the replay is compared (s): a flare shows
 #: once the off-going element is vented, one valve delay after the torque phase.
 AFTER_TORQUE_PHASE = 0.06
@@ -60,19 +77,34 @@ AFTER_TORQUE_PHASE = 0.06
 @dataclass(frozen=True)
 class FillEstimate:
     """δ (s, the fill time's error against the calibration's) and the replay's residual RMS
-    (rad/s) at δ and at the fill the shift was commanded with (how much the estimate
-    explains)."""
+    (rad/s) at δ, one grid step either side of it (root mean square of both sides: how sharply
+    the record pins δ down) and at the fill the shift was commanded with."""
 
     delta: float
     rms: float
+    rms_side: float
     rms_assumed: float
 
     @property
+    def variance(self) -> float:
+        """The variance of δ (s²) as one shift's evidence: the residual left at δ is what the
+        TCU's model cannot explain, e; the fill's signature grows the residual's mean square
+        by g² h² one step h away. For a least-squares fit of one parameter to n samples,
+        var(δ) = σ_e² / (n g²) = h² rms² / (rms_side² − rms²) over the independent samples
+        (:data:`INDEPENDENT_SAMPLES`). A record the fill explains (a sharp valley, little left)
+        pins δ down; a flat one (the model's own error) tells little."""
+        floor = max(self.rms, RESIDUAL_FLOOR)
+        rise = self.rms_side**2 - floor**2
+        if not math.isfinite(self.rms_side):
+            rise = math.inf
+        if rise <= 0.0 or not math.isfinite(floor):
+            return math.inf
+        return GRID_STEP**2 * floor**2 / rise / INDEPENDENT_SAMPLES
+
+    @property
     def explains(self) -> bool:
-        """Whether the fill explains the record: the best δ at least halves the residual of
-        the fill the shift assumed, by at least :data:`EXPLAINS_FLOOR`. Otherwise what is
-        left is the model's error (μ, mass, torque), which a fill must not be fitted to; and
-        a fill already right cannot be improved on."""
+        """Whether the fill explains the record outright: the best δ at least halves the
+        residual of the fill the shift assumed, by at least :data:`EXPLAINS_FLOOR`."""
         return (
             self.rms <= EXPLAINS * self.rms_assumed
             and self.rms_assumed - self.rms >= EXPLAINS_FLOOR
@@ -81,10 +113,42 @@ class FillEstimate:
     def to_dict(self) -> dict[str, float | bool]:
         return {
             "delta": self.delta,
-            "rms": self.rms,
-            "rms_assumed": self.rms_assumed,
             "explains": self.explains,
+            "rms": self.rms,
+            "rms_side": self.rms_side,
+            "rms_assumed": self.rms_assumed,
+            "sigma": math.sqrt(self.variance),
         }
+
+
+@dataclass(frozen=True)
+class FillBelief:
+    """What the TCU believes of the fill time over a sequence of shifts: δ (s, against the
+    calibration's fill time, in the replay's view) and its variance, a scalar Kalman filter
+    over the shifts' estimates (each with :attr:`FillEstimate.variance`), the fill drifting
+    by ``drift`` (s per shift, oil temperature and wear) between them."""
+
+    delta: float
+    variance: float
+    drift: float = 0.0
+
+    def updated(self, found: FillEstimate) -> FillBelief:
+        """After one shift's estimate ``found``: the prediction over one shift, then the
+        update with it (a record that pins nothing down leaves the belief as it was)."""
+        predicted = self.variance + self.drift**2
+        measured = found.variance
+        if not math.isfinite(measured) and math.isfinite(predicted):
+            return replace(self, variance=predicted)
+        gain = predicted / (predicted + measured) if math.isfinite(predicted) else 1.0
+        return replace(
+            self,
+            delta=self.delta + gain * (found.delta - self.delta),
+            variance=(1.0 - gain) * predicted if math.isfinite(predicted) else measured,
+        )
+
+    @property
+    def sigma(self) -> float:
+        return math.sqrt(self.variance)
 
 
 class _Replay:
@@ -240,4 +304,9 @@ class FillReplay:
         delta, rms = (float(found.x), float(found.fun))
         if min(costs) < rms:
             delta, rms = best, min(costs)
-        return FillEstimate(delta, rms, costs[n])
+        # how sharply the record pins δ down: the residual one grid step either side (a side
+        # the TCU's model cannot follow counts as the other's)
+        sides = [cost(delta - step), cost(delta + step)]
+        finite = [c for c in sides if math.isfinite(c)]
+        side = math.sqrt(sum(c**2 for c in finite) / len(finite)) if finite else math.inf
+        return FillEstimate(delta, rms, side, costs[n])

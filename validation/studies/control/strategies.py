@@ -20,7 +20,9 @@ vehicle before a shift and learns after it; only the oracle is shown the truth.
   through the pressures), which the controller's view of the valve takes. The fill, which no
   filter state sees, is estimated by a replay of the shift's commands through the TCU's own
   models (:mod:`.fill_estimate`): the fill time whose replayed input speed matches the
-  measured one; the filter considers its remaining doubt.
+  measured one, taken outright when it explains the record, else weighed against the earlier
+  shifts' by how sharply the record pins it down (:class:`.fill_estimate.FillBelief`); the
+  filter considers its remaining doubt.
 * ``oracle``: the vehicle's true μ (the map's factor), mass, grade, torque gain, valve gain and
   offset and fill time.
 """
@@ -133,6 +135,8 @@ class EstimatorStrategy(RuleStrategy):
     replay: Any = None
     #: the fill estimate of each shift (:class:`.fill_estimate.FillEstimate`)
     fills: list[Any] = field(default_factory=list)
+    #: the belief of the fill over the shifts so far (:class:`.fill_estimate.FillBelief`)
+    fill: Any = None
 
     def learn(self, observed: Any, log: Any, commands: Any = None, phases: Any = None) -> None:
         Strategy.learn(self, observed, log, commands, phases)
@@ -143,17 +147,22 @@ class EstimatorStrategy(RuleStrategy):
             self.replay = FillReplay(self.d, self.shift)
         arrays = log.arrays()
         # the fill first, from the replay with what was known before this shift (the filter's
-        # μ would otherwise take the blame for a piston that pressed early or late) ...
-        fill = self.replay.estimate(self.knowledge, arrays, commands, phases)
-        self.fills.append(fill)
+        # μ would otherwise take the blame for a piston that pressed early or late), weighed
+        # against what the earlier shifts said by how sharply this record pins it down ...
+        found = self.replay.estimate(self.knowledge, arrays, commands, phases)
+        self.fills.append(found)
+        if self.fill is None:
+            self.fill = fill_prior(self.d)
+        if found.explains:
+            # a record the fill explains outright replaces what was believed (no surer than
+            # the belief was when its valley is flat: a fill far off leaves no sharp minimum)
+            variance = min(found.variance, self.fill.variance + self.fill.drift**2)
+            self.fill = replace(self.fill, delta=found.delta, variance=variance)
+        else:
+            self.fill = self.fill.updated(found)
         limit = self.d.control.si("adaptation", "fill_limit")
         nominal = self.replay.nominal.fill_time
-        commanded = self.knowledge.fill_time if self.knowledge.fill_time is not None else nominal
-        # the replay's fill time is its view's (at the nominal fast fill); the knowledge holds
-        # how long to command the fast fill, the stroke time through the view of the valve
-        fill_time = self.replay.parameter(self.knowledge, commanded)
-        if fill.explains:
-            fill_time = nominal + min(max(fill.delta, -limit), limit)
+        fill_time = nominal + min(max(self.fill.delta, -limit), limit)
         # ... then the pressures the TCU believes its elements pressed with, rebuilt from its
         # commands with that fill, are what the filter is told
         belief = self.replay.view(self.knowledge, fill_time)
@@ -185,7 +194,7 @@ class EstimatorStrategy(RuleStrategy):
             ),
             AppendedState(
                 "fill_time",
-                (fill_time, FILL_TIME_SIGMA),
+                (fill_time, max(self.fill.sigma, FILL_SIGMA_FLOOR)),
                 0.0,
                 by_fill,
                 logged=fill_time,
@@ -216,15 +225,17 @@ class EstimatorStrategy(RuleStrategy):
                 # the filter's state is the scale on the μ map; the controller's μ is the
                 # map's factor μ_nominal · scale (the plant's μ = μ · map / μ_nominal)
                 mu[element] = float(value) * nominal
-        self.knowledge = replace(
+        learned = replace(
             self.knowledge,
             mu=mu,
             m_veh=float(estimates.mean["m_veh"][-1]),
             zeta=float(estimates.mean[naming.GRADE][-1]),
             valve_offset=float(estimates.mean[VALVE_OFFSET][-1]),
-            fill_time=self.replay.duration(self.knowledge, fill_time),
             fill_offset=0.0,
         )
+        # the fill command lasts what strokes the believed piston through the newly learned
+        # view of the valve (the replay's fill time is the stroke at the nominal fast fill)
+        self.knowledge = replace(learned, fill_time=self.replay.duration(learned, fill_time))
 
 
 #: The filter holds each tick's pressures over the tick: it is told their mean over it, on
@@ -235,10 +246,25 @@ MEAN_OVER = 8
 #: the fill time (s).
 OFFSET_STEP = 1.0e3
 FILL_STEP = 1.0e-3
-#: The fill time's remaining doubt (s) after the replay's estimate, which the filter considers
-#: but does not learn from (assumed: the replay finds a planted fill within 2 ms on the
-#: calibration's vehicle, a fleet vehicle's other errors move it by more).
-FILL_TIME_SIGMA = 0.01
+#: The smallest doubt of the fill time (s) the filter considers (it does not learn from it),
+#: whatever the belief's σ: a fleet vehicle's other errors move the replay's estimate by more
+#: than its valley's sharpness says (assumed; in a trial on the tuning vehicles that also took
+#: no estimate outright, the belief's own σ floored at 1 ms let the filter's valve offset run
+#: to 3-4 σ of its prior).
+FILL_SIGMA_FLOOR = 1.0e-2
+#: How far the fill time may drift between two shifts (s; oil temperature, wear; assumed): the
+#: belief's variance grows by its square per shift, so it never stops learning.
+FILL_DRIFT = 2.0e-3
+
+
+def fill_prior(d: GearboxDescription) -> Any:
+    """The TCU's belief of the fill before its first shift: the calibration's fill time, off
+    by the ``[estimator.prior] fill_time_error`` (default 0 ± 29 ms: production fill times
+    uniform within ±50 ms, assumed)."""
+    from gearsym.validation.studies.control.fill_estimate import FillBelief
+
+    mean, sigma = d.estimator.fill_time_error_prior()
+    return FillBelief(mean, sigma**2, FILL_DRIFT)
 
 
 def _sensitivity(

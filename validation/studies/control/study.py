@@ -122,6 +122,9 @@ class ShiftOutcome:
     learned: dict[str, tuple[float, float]] = field(default_factory=dict)
     #: the TCU's own verdict, what the strategy learned from (:mod:`.observed`)
     observed: Observed | None = None
+    #: the fill estimate the strategy made of this shift (estimator only,
+    #: :class:`.fill_estimate.FillEstimate` as a dict)
+    fill: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -130,6 +133,7 @@ class ShiftOutcome:
             "knowledge": self.knowledge,
             "learned": {k: {"mean": m, "sigma": s} for k, (m, s) in self.learned.items()},
             "observed": None if self.observed is None else self.observed.to_dict(),
+            "fill": self.fill,
             **self.quality.to_dict(),
         }
 
@@ -205,6 +209,7 @@ def run_vehicle(
             arrays = log.arrays()
             observed = observe_shift(d, model, arrays, result.phases, upshift)
             strategy.learn(observed, log, result.commands, result.phases)
+            fills = getattr(strategy, "fills", [])
             outcomes.append(
                 ShiftOutcome(
                     i,
@@ -214,6 +219,7 @@ def run_vehicle(
                     result if keep_records else None,
                     dict(strategy.learned),
                     observed,
+                    fills[-1].to_dict() if fills else None,
                 )
             )
         out[name] = outcomes
