@@ -143,6 +143,12 @@ BAD_CASES = [
         "expected 'Pa'",
     ),
     (
+        "[estimator.prior]\nm_veh",
+        "[estimator.prior]\nfill_time_error = { sd = 0.03, unit = 'ms', source = 'x' }\nm_veh",
+        "estimator.prior.fill_time_error.unit",
+        "expected 's'",
+    ),
+    (
         "[estimator.random_walk]\nm_veh = { value = 1.0",
         "[estimator.random_walk]\nm_veh = { value = -1.0",
         "estimator.random_walk.m_veh.value",

@@ -241,3 +241,22 @@ def test_estimator_strategy_learns_a_planted_valve_offset(d, point, planted: flo
     assert abs(mean - planted) < 3.0 * sigma
     assert mean * planted > 0 and abs(mean) > 0.3 * abs(planted)
     assert outcomes[-1].knowledge["valve_offset"] == outcomes[-2].learned["valve_offset"][0]
+
+
+def test_the_fill_prior_comes_from_the_table(tmp_path) -> None:  # noqa: ANN001
+    """``[estimator.prior] fill_time_error`` states the belief before the first shift; without
+    it the stated default 0 ± 29 ms (±50 ms uniform)."""
+    from gearsym.symbolic.description import default_config_text
+    from gearsym.validation.studies.control.strategies import FILL_DRIFT, fill_prior
+
+    assert fill_prior(load_description(None)) == FillBelief(0.0, 0.029**2, FILL_DRIFT)
+    text = default_config_text().replace(
+        "[estimator.prior]\n",
+        "[estimator.prior]\n"
+        "fill_time_error = { mean = 0.01, sd = 0.005, unit = 's', source = 'x' }\n",
+        1,
+    )
+    path = tmp_path / "box.toml"
+    path.write_text(text)
+    belief = fill_prior(load_description(path))
+    assert (belief.delta, belief.sigma) == pytest.approx((0.01, 0.005), rel=1e-12)
