@@ -260,3 +260,23 @@ def test_the_fill_prior_comes_from_the_table(tmp_path) -> None:  # noqa: ANN001
     path.write_text(text)
     belief = fill_prior(load_description(path))
     assert (belief.delta, belief.sigma) == pytest.approx((0.01, 0.005), rel=1e-12)
+
+
+def test_an_estimate_that_explains_the_record_replaces_the_belief() -> None:
+    """Hand-built cases of the strategy's rule (:meth:`FillBelief.after`): an estimate that
+    halves the assumed fill's residual (0.2 of 2.0 rad/s) replaces the belief outright, with
+    its own variance, or the predicted one when its valley is flat; one that does not (1.5 of
+    2.0) is weighed in, here with the gain ½ of equal variances."""
+    prior = FillBelief(0.0, 0.02**2)
+    n = fill_estimate.INDEPENDENT_SAMPLES
+    sharp = FillEstimate(0.04, 0.2, 0.2 * float(np.sqrt(1.0 + GRID_STEP**2 / (1e-3**2 * n))), 2.0)
+    assert sharp.explains and sharp.variance == pytest.approx(1e-6, rel=1e-9)
+    taken = prior.after(sharp)
+    assert taken.delta == 0.04 and taken.variance == pytest.approx(1e-6, rel=1e-9)
+    flat = FillEstimate(0.04, 0.2, 0.2, 2.0)
+    assert flat.explains and prior.after(flat) == FillBelief(0.04, 0.02**2)
+    weak = FillEstimate(0.04, 1.5, 1.5 * float(np.sqrt(1.0 + GRID_STEP**2 / (0.02**2 * n))), 2.0)
+    assert not weak.explains
+    weighed = prior.after(weak)
+    assert weighed.delta == pytest.approx(0.02, rel=1e-9)
+    assert weighed.variance == pytest.approx(0.02**2 / 2.0, rel=1e-9)

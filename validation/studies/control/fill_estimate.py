@@ -62,8 +62,8 @@ EXPLAINS = 0.5
 EXPLAINS_FLOOR = 0.1
 #: How many independent pieces of evidence one shift's residual holds (the per-shift variance
 #: of :meth:`FillEstimate.variance`): what the TCU's model gets wrong (μ, mass, torque) is
-#: smooth over the compared window, so its samples are not independent; chosen on the tuning
-#: vehicles (seeds 100000 and up) of the 2-3 shift.
+#: smooth over the compared window, so its samples are not independent (assumed; only this
+#: value was tried, on the tuning vehicles, seeds 100000-100039 of the 2-3 shift).
 INDEPENDENT_SAMPLES = 4.0
 #: The smallest residual RMS a replay is credited with (rad/s): the speed sensors' resolution,
 #: well above the integrators' 1e-8 (a replay that reproduces the record to its tolerance is
@@ -110,14 +110,15 @@ class FillEstimate:
             and self.rms_assumed - self.rms >= EXPLAINS_FLOOR
         )
 
-    def to_dict(self) -> dict[str, float | bool]:
+    def to_dict(self) -> dict[str, float | bool | None]:
         return {
             "delta": self.delta,
             "explains": self.explains,
             "rms": self.rms,
             "rms_side": self.rms_side,
             "rms_assumed": self.rms_assumed,
-            "sigma": math.sqrt(self.variance),
+            # JSON has no infinity: a record that pins nothing down has no σ
+            "sigma": math.sqrt(self.variance) if math.isfinite(self.variance) else None,
         }
 
 
@@ -137,14 +138,24 @@ class FillBelief:
         update with it (a record that pins nothing down leaves the belief as it was)."""
         predicted = self.variance + self.drift**2
         measured = found.variance
-        if not math.isfinite(measured) and math.isfinite(predicted):
+        if not math.isfinite(measured):
             return replace(self, variance=predicted)
-        gain = predicted / (predicted + measured) if math.isfinite(predicted) else 1.0
+        gain = predicted / (predicted + measured)
         return replace(
             self,
             delta=self.delta + gain * (found.delta - self.delta),
-            variance=(1.0 - gain) * predicted if math.isfinite(predicted) else measured,
+            variance=(1.0 - gain) * predicted,
         )
+
+    def after(self, found: FillEstimate) -> FillBelief:
+        """The belief after one shift: an estimate that explains the record
+        (:attr:`FillEstimate.explains`) replaces it outright, no surer than the predicted
+        belief (a fill far off leaves a flat valley); any other is weighed in
+        (:meth:`updated`)."""
+        if not found.explains:
+            return self.updated(found)
+        variance = min(found.variance, self.variance + self.drift**2)
+        return replace(self, delta=found.delta, variance=variance)
 
     @property
     def sigma(self) -> float:

@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from gearsym.symbolic import naming
@@ -40,6 +40,9 @@ from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
 from gearsym.symbolic.estimator_calibration import VALVE_OFFSET
 from gearsym.validation.studies.control.controller import TICK, Knowledge
+
+if TYPE_CHECKING:
+    from gearsym.validation.studies.control.fill_estimate import FillBelief
 
 __all__ = ["STRATEGIES", "Strategy", "TruthView", "calibration_knowledge", "make_strategy"]
 
@@ -135,8 +138,8 @@ class EstimatorStrategy(RuleStrategy):
     replay: Any = None
     #: the fill estimate of each shift (:class:`.fill_estimate.FillEstimate`)
     fills: list[Any] = field(default_factory=list)
-    #: the belief of the fill over the shifts so far (:class:`.fill_estimate.FillBelief`)
-    fill: Any = None
+    #: the belief of the fill over the shifts so far
+    fill: FillBelief | None = None
 
     def learn(self, observed: Any, log: Any, commands: Any = None, phases: Any = None) -> None:
         Strategy.learn(self, observed, log, commands, phases)
@@ -151,15 +154,7 @@ class EstimatorStrategy(RuleStrategy):
         # against what the earlier shifts said by how sharply this record pins it down ...
         found = self.replay.estimate(self.knowledge, arrays, commands, phases)
         self.fills.append(found)
-        if self.fill is None:
-            self.fill = fill_prior(self.d)
-        if found.explains:
-            # a record the fill explains outright replaces what was believed (no surer than
-            # the belief was when its valley is flat: a fill far off leaves no sharp minimum)
-            variance = min(found.variance, self.fill.variance + self.fill.drift**2)
-            self.fill = replace(self.fill, delta=found.delta, variance=variance)
-        else:
-            self.fill = self.fill.updated(found)
+        self.fill = (self.fill or fill_prior(self.d)).after(found)
         limit = self.d.control.si("adaptation", "fill_limit")
         nominal = self.replay.nominal.fill_time
         fill_time = nominal + min(max(self.fill.delta, -limit), limit)
@@ -257,7 +252,7 @@ FILL_SIGMA_FLOOR = 1.0e-2
 FILL_DRIFT = 2.0e-3
 
 
-def fill_prior(d: GearboxDescription) -> Any:
+def fill_prior(d: GearboxDescription) -> FillBelief:
     """The TCU's belief of the fill before its first shift: the calibration's fill time, off
     by the ``[estimator.prior] fill_time_error`` (default 0 ± 29 ms: production fill times
     uniform within ±50 ms, assumed)."""
