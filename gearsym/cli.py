@@ -132,6 +132,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                     return status
             return int(args.func(args))
     except GearsymError as err:
+        if terminate_requested():
+            # native code (CasADi's integrator) turned the Terminated into its own failure,
+            # which the library reported as an error of the run: the signal came first
+            print("gearsym: terminated; nothing was written", file=sys.stderr)
+            return 143
         print(f"gearsym: {err}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # `gearsym ... | head`: the reader left; say nothing more
@@ -142,6 +147,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         if err.errno not in STORAGE_ERRORS:
             raise
+        if terminate_requested():
+            print("gearsym: terminated; nothing was written", file=sys.stderr)
+            return 143
         # the one output writer discarded its staging folder: nothing half-written remains
         where = err.filename or "output"
         print(

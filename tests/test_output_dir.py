@@ -14,6 +14,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 from typing import Any
 from unittest import mock
@@ -332,3 +333,33 @@ def test_sigterm_during_a_run_leaves_nothing(tmp_path: Path) -> None:
     assert rest.strip().splitlines()[-1] == "gearsym: terminated; nothing was written"
     assert "Traceback" not in rest
     assert list(tmp_path.iterdir()) == []
+
+
+def test_sigterm_turned_into_a_library_error_still_exits_143(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """CasADi's integrator may swallow the Terminated its signal check raised and fail; the
+    library then reports an error of the run (a GearsymError). The signal came first: exit 143,
+    not the bad-input exit 2 (the CI of stop 41 saw 2 here)."""
+    import argparse
+
+    from gearsym.interrupts import Terminated
+
+    def swallowing_native_call(args: argparse.Namespace) -> int:
+        try:
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(30)  # the handler runs here, as in a native call that checks signals
+        except Terminated:
+            raise GearsymError(
+                "gearbox.toml", "simulate", "integration failed at t = 0.1 s"
+            ) from None
+        raise AssertionError("SIGTERM was not delivered")
+
+    parsed = argparse.Namespace(func=swallowing_native_call, cacheable=False)
+    with mock.patch.object(cli, "build_parser") as build:
+        build.return_value.parse_args.return_value = parsed
+        status = cli.main([])
+    assert status == 143
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "gearsym: terminated; nothing was written"
+    ]
