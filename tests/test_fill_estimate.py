@@ -6,6 +6,8 @@ the estimate must find it."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from gearsym.symbolic.drivetrain import quantity
@@ -61,15 +63,15 @@ def _exact(d) -> Knowledge:  # noqa: ANN001
     )
 
 
-def _record(d, point, fill_time_error: float):  # noqa: ANN001, ANN202
-    """One shift of the calibration vehicle whose pistons fill ``fill_time_error`` late,
-    commanded with exact knowledge of everything but the fill: the TCU's log and its
-    commands."""
+def _record(d, point, fill_time_error: float, valve: Actuators | None = None):  # noqa: ANN001, ANN202
+    """One shift of the calibration vehicle whose pistons fill ``fill_time_error`` late
+    (through ``valve``'s errors, if given), commanded with exact knowledge of everything but
+    the fill (and the valve): the TCU's log and its commands."""
     spec = shift_spec(d, SHIFT)
     plant = ClosedLoopShift(d, SHIFT, point.vehicle_speed)
     model = HybridSimulator(d, plant.scenario(1.0, {}, 0.0), hybrid_shift(d, SHIFT))
     nominal = ClutchActuator.from_calibration(d.control)
-    true = ClutchActuator.from_calibration(d.control, None, fill_time_error)
+    true = ClutchActuator.from_calibration(d.control, valve, fill_time_error)
     log = TcuLog(TICK, [s.name for s in d.shafts], list(model.hybrid.friction_elements))
     elements = (spec.off_going, spec.on_coming)
     result = plant.run(
@@ -112,6 +114,26 @@ def test_replay_finds_a_planted_fill_error(d, point, planted: float) -> None:  #
     assert found.rms_side > 20 * max(found.rms, 1e-3)
     assert np.sqrt(found.variance) < 1e-3
     assert found.explains
+
+
+def test_a_fill_is_found_jointly_with_a_valve_offset(d, point) -> None:  # noqa: ANN001
+    """A piston 35 ms late behind a valve 80 mbar low, the TCU believing the valve exact: the
+    replay that searches the offset with the fill (σ 60 mbar, the prior's) reproduces the
+    record at the planted pair (the same physics) and finds the fill within 3 ms and the
+    offset within 15 mbar; holding the offset at zero, the fill alone must take the blame
+    for the torque the low valve did not give, and lands more than 5 ms off."""
+    planted, offset = 0.035, -8.0e3
+    arrays, result = _record(d, point, planted, Actuators(pressure_offset=offset))
+    replay = FillReplay(d, SHIFT)
+    knowledge = _exact(d)
+    truth = replace(knowledge, valve_offset=offset)
+    assert replay.residual(planted, truth, arrays, result.commands, result.phases) < 1e-3
+    joint = replay.estimate(knowledge, arrays, result.commands, result.phases, offset_sigma=6e3)
+    assert joint.delta == pytest.approx(planted, abs=3e-3)
+    assert joint.offset == pytest.approx(offset, abs=1.5e3)
+    alone = replay.estimate(knowledge, arrays, result.commands, result.phases)
+    assert abs(alone.delta - planted) > 5e-3
+    assert alone.rms > 3 * max(joint.rms, 1e-2)
 
 
 def test_a_right_fill_is_kept(d, point) -> None:  # noqa: ANN001

@@ -69,6 +69,9 @@ INDEPENDENT_SAMPLES = 4.0
 #: well above the integrators' 1e-8 (a replay that reproduces the record to its tolerance is
 #: not infinitely sure).
 RESIDUAL_FLOOR = 0.01
+#: The valve offsets searched with δ (:meth:`FillReplay.estimate`), in σ of the TCU's doubt
+#: about its belief: the coarse grid whose best cell bounded Brent refines.
+OFFSET_GRID = (-2.0, -1.0, 0.0, 1.0, 2.0)
 #: How far past the inertia phase's commanded start the replay is compared (s): a flare shows
 #: once the off-going element is vented, one valve delay after the torque phase.
 AFTER_TORQUE_PHASE = 0.06
@@ -84,6 +87,8 @@ class FillEstimate:
     rms: float
     rms_side: float
     rms_assumed: float
+    #: the valve offset (Pa) the replay found with δ (the one it assumed when not searched)
+    offset: float = 0.0
 
     @property
     def variance(self) -> float:
@@ -117,6 +122,7 @@ class FillEstimate:
             "rms": self.rms,
             "rms_side": self.rms_side,
             "rms_assumed": self.rms_assumed,
+            "offset": self.offset,
             # JSON has no infinity: a record that pins nothing down has no σ
             "sigma": math.sqrt(self.variance) if math.isfinite(self.variance) else None,
         }
@@ -287,14 +293,24 @@ class FillReplay:
         log: Mapping[str, np.ndarray],
         commands: Mapping[str, np.ndarray],
         phases: Sequence[str],
+        offset_sigma: float = 0.0,
     ) -> FillEstimate:
         """δ minimising :meth:`residual` within ±:data:`FILL_SEARCH` about the fill the
         shift was commanded with: a grid every :data:`GRID_STEP`, then bounded Brent about
-        its best point, to 1 ms."""
+        its best point, to 1 ms.
+
+        With ``offset_sigma`` (Pa, the TCU's doubt of its valve's offset) δ is searched
+        jointly with the offset, over :data:`OFFSET_GRID` of those σ about ``knowledge``'s:
+        an offset changes the pressure over the whole shift, and a replay that holds it at a
+        wrong value makes up for the on-coming torque it gets wrong with a wrong fill (a
+        valve 100 mbar low flares the input like a piston stroked 20 ms late). δ is then the
+        piston's own fill time (at the nominal fast fill through a valve without offset), the
+        offset the replay's :attr:`FillEstimate.offset`."""
         from scipy.optimize import minimize_scalar
 
-        def cost(delta: float) -> float:
-            return self.residual(delta, knowledge, log, commands, phases)
+        def cost(delta: float, offset: float) -> float:
+            view = replace(knowledge, valve_offset=offset)
+            return self.residual(delta, view, log, commands, phases)
 
         # the search is centred on what this shift assumed, where the answer most likely is
         commanded = self.nominal.fill_time if knowledge.fill_time is None else knowledge.fill_time
@@ -307,17 +323,42 @@ class FillReplay:
         step = GRID_STEP
         n = int(round(FILL_SEARCH / step))
         grid = [centre + k * step for k in range(-n, n + 1)]
-        costs = [cost(delta) for delta in grid]
+        assumed = knowledge.valve_offset
+        offsets = [assumed + k * offset_sigma for k in OFFSET_GRID] if offset_sigma > 0 else []
+        offsets = [assumed, *[o for o in offsets if o != assumed]]
+        table = {o: [cost(delta, o) for delta in grid] for o in offsets}
+        offset = min(offsets, key=lambda o: min(table[o]))
+        costs = table[offset]
         best = grid[int(np.argmin(costs))]
-        found = minimize_scalar(
-            cost, bounds=(best - step, best + step), method="bounded", options={"xatol": 1e-3}
-        )
-        delta, rms = (float(found.x), float(found.fun))
+
+        def refine_delta(around: float, at: float) -> tuple[float, float]:
+            found = minimize_scalar(
+                lambda x: cost(x, at),
+                bounds=(around - step, around + step),
+                method="bounded",
+                options={"xatol": 1e-3},
+            )
+            return float(found.x), float(found.fun)
+
+        delta, rms = refine_delta(best, offset)
         if min(costs) < rms:
             delta, rms = best, min(costs)
+        if offset_sigma > 0:
+            # the offset refined at that δ (to 1 mbar), then δ once more at that offset
+            found = minimize_scalar(
+                lambda o: cost(delta, o),
+                bounds=(offset - offset_sigma, offset + offset_sigma),
+                method="bounded",
+                options={"xatol": 100.0},
+            )
+            if float(found.fun) < rms:
+                offset, rms = float(found.x), float(found.fun)
+                again, again_rms = refine_delta(delta, offset)
+                if again_rms < rms:
+                    delta, rms = again, again_rms
         # how sharply the record pins δ down: the residual one grid step either side (a side
         # the TCU's model cannot follow counts as the other's)
-        sides = [cost(delta - step), cost(delta + step)]
+        sides = [cost(delta - step, offset), cost(delta + step, offset)]
         finite = [c for c in sides if math.isfinite(c)]
         side = math.sqrt(sum(c**2 for c in finite) / len(finite)) if finite else math.inf
-        return FillEstimate(delta, rms, side, costs[n])
+        return FillEstimate(delta, rms, side, table[assumed][n], offset)

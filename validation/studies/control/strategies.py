@@ -152,9 +152,20 @@ class EstimatorStrategy(RuleStrategy):
         # the fill first, from the replay with what was known before this shift (the filter's
         # μ would otherwise take the blame for a piston that pressed early or late), weighed
         # against what the earlier shifts said by how sharply this record pins it down ...
-        found = self.replay.estimate(self.knowledge, arrays, commands, phases)
+        # (jointly with the valve's offset while the fill is still in doubt: a replay that
+        # holds a wrong offset blames the fill for the torque it gets wrong)
+        before = self.fill or fill_prior(self.d)
+        offset_sigma = 0.0
+        if before.sigma > FILL_JOINT_ABOVE:
+            learned = self.learned.get(VALVE_OFFSET)
+            offset_sigma = (
+                self.d.estimator.valve_offset_prior()[1] if learned is None else learned[1]
+            )
+        found = self.replay.estimate(
+            self.knowledge, arrays, commands, phases, offset_sigma=offset_sigma
+        )
         self.fills.append(found)
-        self.fill = (self.fill or fill_prior(self.d)).after(found)
+        self.fill = before.after(found)
         limit = self.d.control.si("adaptation", "fill_limit")
         nominal = self.replay.nominal.fill_time
         fill_time = nominal + min(max(self.fill.delta, -limit), limit)
@@ -247,6 +258,10 @@ FILL_STEP = 1.0e-3
 #: no estimate outright, the belief's own σ floored at 1 ms let the filter's valve offset run
 #: to 3-4 σ of its prior).
 FILL_SIGMA_FLOOR = 1.0e-2
+#: The fill belief's σ (s) above which the replay searches the fill jointly with the valve's
+#: offset (:meth:`.fill_estimate.FillReplay.estimate`; about four times the cost of a search
+#: of the fill alone): before the first shift, and whenever the fill is in doubt again.
+FILL_JOINT_ABOVE = 5.0e-3
 #: How far the fill time may drift between two shifts (s; oil temperature, wear; assumed): the
 #: belief's variance grows by its square per shift, so it never stops learning.
 FILL_DRIFT = 2.0e-3
