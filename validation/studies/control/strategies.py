@@ -20,7 +20,8 @@ vehicle before a shift and learns after it; only the oracle is shown the truth.
   through the pressures), which the controller's view of the valve takes. The fill, which no
   filter state sees, is estimated by a replay of the shift's commands through the TCU's own
   models (:mod:`.fill_estimate`): the fill time whose replayed input speed matches the
-  measured one, taken outright when it explains the record, else weighed against the earlier
+  measured one (searched jointly with the valve's offset while the fill is in doubt), taken
+  outright when it explains the record, else weighed against the earlier
   shifts' by how sharply the record pins it down (:class:`.fill_estimate.FillBelief`); the
   filter considers its remaining doubt.
 * ``oracle``: the vehicle's true μ (the map's factor), mass, grade, torque gain, valve gain and
@@ -44,7 +45,14 @@ from gearsym.validation.studies.control.controller import TICK, Knowledge
 if TYPE_CHECKING:
     from gearsym.validation.studies.control.fill_estimate import FillBelief
 
-__all__ = ["STRATEGIES", "Strategy", "TruthView", "calibration_knowledge", "make_strategy"]
+__all__ = [
+    "STRATEGIES",
+    "Strategy",
+    "TruthView",
+    "calibration_knowledge",
+    "joint_offset_sigma",
+    "make_strategy",
+]
 
 STRATEGIES = ("fixed", "rule", "estimator", "oracle")
 #: The rule's dead band on the inertia phase's relative duration error.
@@ -155,12 +163,9 @@ class EstimatorStrategy(RuleStrategy):
         # (jointly with the valve's offset while the fill is still in doubt: a replay that
         # holds a wrong offset blames the fill for the torque it gets wrong)
         before = self.fill or fill_prior(self.d)
-        offset_sigma = 0.0
-        if before.sigma > FILL_JOINT_ABOVE:
-            learned = self.learned.get(VALVE_OFFSET)
-            offset_sigma = (
-                self.d.estimator.valve_offset_prior()[1] if learned is None else learned[1]
-            )
+        offset_sigma = joint_offset_sigma(
+            before, self.learned.get(VALVE_OFFSET), self.d.estimator.valve_offset_prior()[1]
+        )
         found = self.replay.estimate(
             self.knowledge, arrays, commands, phases, offset_sigma=offset_sigma
         )
@@ -275,6 +280,18 @@ def fill_prior(d: GearboxDescription) -> FillBelief:
 
     mean, sigma = d.estimator.fill_time_error_prior()
     return FillBelief(mean, sigma**2, FILL_DRIFT)
+
+
+def joint_offset_sigma(
+    belief: FillBelief, learned: tuple[float, float] | None, prior_sigma: float
+) -> float:
+    """The valve offset's σ (Pa) the fill replay searches over with the fill
+    (:meth:`.fill_estimate.FillReplay.estimate`): the filter's σ of it (the prior's,
+    ``prior_sigma``, before the filter has run) while the fill ``belief`` is in doubt (σ over
+    :data:`FILL_JOINT_ABOVE`), else 0 (the fill alone, at the offset the TCU believes)."""
+    if belief.sigma <= FILL_JOINT_ABOVE:
+        return 0.0
+    return prior_sigma if learned is None else learned[1]
 
 
 def _sensitivity(
