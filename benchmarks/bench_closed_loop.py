@@ -52,7 +52,7 @@ def main() -> int:
 
     def shift(reference: bool) -> float:
         """One shift with a fresh controller (it keeps state); its wall time."""
-        controller = make_controller(d, model, knowledge)
+        controller = make_controller(d, model, knowledge, point.torque)
         start = time.perf_counter()
         result = plant.run(
             controller,

@@ -52,7 +52,7 @@ def runs():  # noqa: ANN201
     knowledge = calibration_knowledge(d, tuple(model.hybrid.friction_elements))
     out = {}
     for reference in (True, False):
-        controller = make_controller(d, model, knowledge)
+        controller = make_controller(d, model, knowledge, point.torque)
         out[reference] = plant.run(
             controller,
             point.torque,

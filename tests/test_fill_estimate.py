@@ -80,7 +80,7 @@ def _record(d, point, fill_time_error: float, valve: Actuators | None = None):  
     log = TcuLog(TICK, [s.name for s in d.shafts], list(model.hybrid.friction_elements))
     elements = (spec.off_going, spec.on_coming)
     result = plant.run(
-        make_controller(d, model, _exact(d)),
+        make_controller(d, model, _exact(d), point.torque),
         point.torque,
         point.torque,
         {e: true for e in elements},

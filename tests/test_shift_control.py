@@ -14,21 +14,25 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from gearsym.symbolic import naming
 from gearsym.symbolic.drivetrain import quantity
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.hybrid import hybrid_shift
 from gearsym.symbolic.io.package_data import data_file
 from gearsym.symbolic.loader import load_description
+from gearsym.symbolic.ratios import gear_ratio
 from gearsym.validation.sim.fleet import Actuators
 from gearsym.validation.sim.hybrid_simulation import HybridSimulator
 from gearsym.validation.sim.scenario import load_scenario
 from gearsym.validation.studies.control.controller import (
     HOLD_AFTER_FILL,
+    TIMEOUT_FACTOR,
     TO_LINE,
     Knowledge,
     ShiftController,
     TargetSlip,
 )
+from gearsym.validation.studies.control.downshift import DownshiftController
 from gearsym.validation.studies.control.study import (
     OperatingPoint,
     Vehicle,
@@ -170,17 +174,24 @@ def test_rule_learns_the_fill_time(d, point) -> None:  # noqa: ANN001
     assert outcomes[first_clean].knowledge["fill_offset"] == pytest.approx(first_clean * step)
 
 
-def test_controller_refuses_a_coast_shift(d) -> None:  # noqa: ANN001
-    """A coast shift (no input torque pulling) needs other phases: refused in one line."""
+def test_the_torque_sign_picks_the_phase_order(d) -> None:  # noqa: ANN001
+    """A 2-3 upshift under drive torque needs the on-coming element to pull the input down
+    (torque phase first); under drag (a coast upshift) the drag slows the input by itself
+    once the off-going element slides (inertia phase first, the downshift's order). A
+    controller stepped with the other sign refuses in one line, and so does zero torque."""
     model = HybridSimulator(d, load_scenario(d), hybrid_shift(d, "2-3"))
     mu = quantity(d, "friction", "mu_nominal").value
     knowledge = Knowledge(mu={"K38": mu, "B05": mu}, m_veh=2000.0, zeta=0.0)
-    controller = make_controller(d, model, knowledge)
+    assert type(make_controller(d, model, knowledge, 150.0)) is ShiftController
+    assert type(make_controller(d, model, knowledge, -40.0)) is DownshiftController
+    controller = make_controller(d, model, knowledge, 150.0)
     speeds = np.ones(len(d.shafts)) * 100.0
     with pytest.raises(GearsymError) as info:
         controller.step(0.0, speeds, -40.0)
-    assert "power-on up- and downshifts only" in str(info.value)
+    assert "phases are for a power-on upshift or a coast downshift" in str(info.value)
     assert "\n" not in str(info.value)
+    with pytest.raises(GearsymError, match="no commanded input torque"):
+        make_controller(d, model, knowledge, 0.0)
 
 
 @pytest.fixture(scope="module")
@@ -204,6 +215,75 @@ def test_downshift_slides_the_off_going_first_then_hands_over(d, downshift) -> N
     quality = downshift.quality
     assert quality.duration == pytest.approx(measured_target(d), rel=0.15)
     assert not quality.flare and not quality.reversal_tie_up
+
+
+def _coast_scenario(d, tmp_path_factory):  # noqa: ANN001, ANN202
+    """The shipped power-on 3-2 scenario with drag instead of drive torque (engine −20 N·m,
+    the electric machine recuperating −20 N·m): a coast downshift."""
+    text = data_file("scenario_3_2_power_on.toml").read_text()
+    text = text.replace("engine =    [120.0]", "engine =    [-20.0]")
+    text = text.replace("e_machine = [30.0]", "e_machine = [-20.0]")
+    assert "[-20.0]" in text
+    path = tmp_path_factory.mktemp("coast") / "scenario_3_2_coast.toml"
+    path.write_text(text)
+    return path
+
+
+@pytest.fixture(scope="module")
+def coast(d, tmp_path_factory):  # noqa: ANN001, ANN201
+    """The oracle's coast 2-3 upshift (the shipped scenario) and coast 3-2 downshift on the
+    calibration's own vehicle."""
+    out = {}
+    for shift, path in (
+        ("2-3", data_file("scenario_2_3_coast.toml")),
+        ("3-2", _coast_scenario(d, tmp_path_factory)),
+    ):
+        point = OperatingPoint.from_scenario(load_scenario(d, path))
+        assert point.torque < 0
+        outcome = run_vehicle(d, shift, point, _vehicle(d), 1, ("oracle",), keep_records=True)
+        out[shift] = outcome["oracle"][0]
+    return out
+
+
+@pytest.mark.parametrize(
+    ("shift", "order"),
+    [("2-3", ("inertia", "torque", "lockup")), ("3-2", ("torque", "inertia", "lockup"))],
+)
+def test_coast_shifts_take_the_mirrored_phase_order(d, coast, shift: str, order) -> None:  # noqa: ANN001
+    """Under drag the phase order flips: a coast upshift lets the drag slow the input while
+    the off-going element slides (inertia phase first, handed over at synchronism); a coast
+    downshift needs the on-coming element to pull the input up against the drag (torque
+    phase first). Either way the shift completes with the input at the to-gear's speed
+    (ω_in = i_to ω_out, 1 %), ends its inertia phase by synchronism rather than the
+    timeout, and neither flares nor ties up (the off-going element's torque never reverses:
+    the study's tie-up count; the output torque's dip below the to-gear's, which also counts
+    the side shafts' swing after a hand-over, is not asserted)."""
+    outcome = coast[shift]
+    record = outcome.record
+    phases = list(record.phases)
+    assert [phases.index(p) for p in order] == sorted(phases.index(p) for p in order)
+    assert outcome.completed
+    spec = record.spec
+    ratio = float(gear_ratio(d, d.gear(spec.to_gear)).ratio)
+    w_in = record.signals[naming.speed(d.input_shaft)][-1]
+    w_out = record.signals[naming.speed(d.output_shaft)][-1]
+    assert w_in == pytest.approx(ratio * w_out, rel=0.01)
+    timeout = TIMEOUT_FACTOR * d.control.si("shift", "inertia_phase")
+    assert outcome.quality.duration < timeout
+    assert not outcome.quality.flare
+    assert not outcome.quality.reversal_tie_up
+
+
+def test_the_estimator_does_not_learn_from_a_coast_shift(d) -> None:  # noqa: ANN001
+    """Two coast 2-3 upshifts of a vehicle 20 ms late and heavier than the calibration: the
+    estimator strategy goes into the second with the knowledge it had before the first (no
+    fill estimate, no filter run), as the fixed calibration does."""
+    point = OperatingPoint.from_scenario(load_scenario(d, data_file("scenario_2_3_coast.toml")))
+    vehicle = _vehicle(d, fill_time_error=0.02, m_veh=2100.0)
+    outcomes = run_vehicle(d, "2-3", point, vehicle, 2, ("fixed", "estimator"))
+    estimator, fixed = outcomes["estimator"], outcomes["fixed"]
+    assert estimator[1].knowledge == estimator[0].knowledge == fixed[1].knowledge
+    assert estimator[0].fill is None and estimator[1].learned == {}
 
 
 # ------------------------------------------------------------------ the command
@@ -317,7 +397,7 @@ def test_fill_ending_inside_a_tick_gets_the_same_oil_volume(d) -> None:  # noqa:
     mu = quantity(d, "friction", "mu_nominal").value
     fill = d.control.si("actuator", "fill_time")
     knowledge = Knowledge(mu={"K38": mu, "B05": mu}, m_veh=2000.0, zeta=0.0, fill_offset=0.005)
-    controller = make_controller(d, model, knowledge)
+    controller = make_controller(d, model, knowledge, 150.0)
     speeds = np.asarray(
         model.shaft_speeds(model.hybrid.from_mode)(
             model.initial_state(model.parameter_vector(model.values()))

@@ -1,5 +1,5 @@
 """The TCU's clutch-to-clutch shift controller (the adaptive-control issue): what runs every
-TCU tick (10 ms) during a power-on upshift and turns the vehicle knowledge of a strategy into
+TCU tick (10 ms) during a clutch-to-clutch shift and turns the vehicle knowledge of a strategy into
 the two swapping elements' pressure commands.
 
 **Phases** (the numbers in the description's ``[control.shift]`` and ``[control.actuator]``):
@@ -31,8 +31,11 @@ model state it evaluates is rebuilt from those two speeds (least squares through
 projection) with the side-shaft twist at its quasi-static value (the output and the wheel
 accelerating together), the twist it cannot measure.
 
-Only power-on upshifts (the on-coming slip pulled to zero against the input torque) are
-controlled here; a downshift or a coast shift is refused in one line.
+These phases are those of a shift whose on-coming element must pull the input speed over
+against the input torque: a power-on upshift, and mirrored (negative torque, every force and
+slip direction taken from the model) a coast downshift. A shift the input torque drives by
+itself (a power-on downshift, a coast upshift) slides the off-going element first
+(:mod:`.downshift`); :func:`torque_drives_the_shift` tells which.
 """
 
 from __future__ import annotations
@@ -66,6 +69,7 @@ __all__ = [
     "ShiftController",
     "TargetSlip",
     "shift_direction",
+    "torque_drives_the_shift",
 ]
 
 PHASES = ("fill", "torque", "inertia", "lockup", "done")
@@ -77,6 +81,23 @@ def shift_direction(d: GearboxDescription, spec: ShiftSpec) -> str:
 
     ratio = [abs(float(gear_ratio(d, d.gear(g)).ratio)) for g in (spec.from_gear, spec.to_gear)]
     return "up" if ratio[1] < ratio[0] else "down"
+
+
+def torque_drives_the_shift(d: GearboxDescription, spec: ShiftSpec, torque: float) -> bool:
+    """Whether the input torque by itself moves the input speed towards the to-gear's once
+    the off-going element lets go: a power-on downshift (the engine speeds the input up) or a
+    coast upshift (the drag slows it down). Such a shift slides the off-going element first
+    and hands over at synchronism (:class:`.downshift.DownshiftController`); the others (a
+    power-on upshift, a coast downshift) need the on-coming element to pull the input over,
+    torque phase first (:class:`ShiftController`). Zero torque drives neither way: refused."""
+    if torque == 0.0:
+        raise GearsymError(
+            d.file,
+            "control",
+            f"shift {spec.name}: no commanded input torque: neither a power-on nor a coast "
+            "shift (the controller's phase order depends on the torque's sign)",
+        )
+    return (shift_direction(d, spec) == "down") == (torque > 0.0)
 
 
 @dataclass(frozen=True)
@@ -168,7 +189,8 @@ class _Plan:
 
 @dataclass
 class ShiftController:
-    """The controller of one power-on upshift (module docstring). ``model`` is the
+    """The controller of one power-on upshift or coast downshift (module docstring).
+    ``model`` is the
     calibration's hybrid model of the shift (the TCU's own, never the truth's); ``knowledge``
     the strategy's values. :meth:`step` is the TCU task: the time since the shift command,
     the measured shaft speeds, the commanded input torque → a pressure command per swapping
@@ -260,16 +282,19 @@ class ShiftController:
 
     # ------------------------------------------------------------------ the plan
 
-    #: the shifts this controller's phases are for (:func:`.study.make_controller` picks)
-    direction = "up"
+    #: whether this controller's phases are for a shift the input torque drives
+    #: (:func:`torque_drives_the_shift`; :func:`.study.make_controller` picks)
+    driven = False
+    #: what the shifts it is for are called, for the refusal
+    handles = "a power-on upshift or a coast downshift"
 
     def _make_plan(self, speeds: np.ndarray, torque: float) -> _Plan:
-        if not (torque > 0 and shift_direction(self.d, self.spec) == self.direction):
+        if torque_drives_the_shift(self.d, self.spec, torque) != self.driven:
             raise GearsymError(
                 self.d.file,
                 "control",
-                f"shift {self.spec.name}: the controller handles power-on up- and downshifts "
-                f"only (commanded input torque {torque:.1f} N*m)",
+                f"shift {self.spec.name}: this controller's phases are for {self.handles} "
+                f"(commanded input torque {torque:.1f} N*m)",
             )
         hybrid = self.model.hybrid
         j_off, j_on = hybrid.elements.index(self.off), hybrid.elements.index(self.on)

@@ -1,7 +1,8 @@
-"""The power-on downshift: the same controller (:mod:`.controller`), its phases in the other
-order. The input must speed up to the lower gear, which the input torque does by itself once
-the off-going element lets it slide; so the inertia phase comes first and the torque phase
-after it, at synchronism:
+"""The shift the input torque drives (a power-on downshift; mirrored, a coast upshift): the
+same controller (:mod:`.controller`), its phases in the other order. The input must speed up
+to the lower gear (slow down to the higher one, in coast), which the input torque does by
+itself once the off-going element lets it slide; so the inertia phase comes first and the
+torque phase after it, at synchronism:
 
 * *fill*: as in an upshift (the on-coming piston to its kiss point, the off-going element to
   its holding margin);
@@ -38,9 +39,10 @@ MOVING = 0.01
 
 
 class DownshiftController(ShiftController):
-    """The controller of one power-on downshift (module docstring)."""
+    """The controller of one power-on downshift or coast upshift (module docstring)."""
 
-    direction = "down"
+    driven = True
+    handles = "a power-on downshift or a coast upshift"
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -24,6 +24,8 @@ vehicle before a shift and learns after it; only the oracle is shown the truth.
   outright when it explains the record, else weighed against the earlier
   shifts' by how sharply the record pins it down (:class:`.fill_estimate.FillBelief`); the
   filter considers its remaining doubt.
+  It learns from power-on shifts only: a coast shift's record is not learned from (its
+  drag barely excites μ or the valve's offset).
 * ``oracle``: the vehicle's true μ (the map's factor), mass, grade, torque gain, valve gain and
   offset and fill time.
 """
@@ -154,9 +156,17 @@ class EstimatorStrategy(RuleStrategy):
         from gearsym.validation.studies.control.fill_estimate import FillReplay
         from gearsym.validation.studies.estimation.drive_ekf import AppendedState, run_drive_ekf
 
+        arrays = log.arrays()
+        if float(arrays["T_In_cmd"][0]) <= 0.0:
+            # a coast shift: at tens of N·m of drag the torque phase's ramp barely excites μ
+            # or the valve's offset, and on a trial (two fleet vehicles, three coast 2-3
+            # upshifts) the filter's μ of B05 fell to half the truth's and its offset ran
+            # to -16 000 Pa against +7 000: adapt on power-on shifts only, as production
+            # TCUs gate their adaptation, and keep what those taught
+            self.fills.append(None)
+            return
         if self.replay is None:
             self.replay = FillReplay(self.d, self.shift)
-        arrays = log.arrays()
         # the fill first, from the replay with what was known before this shift (the filter's
         # μ would otherwise take the blame for a piston that pressed early or late), weighed
         # against what the earlier shifts said by how sharply this record pins it down ...

@@ -39,6 +39,7 @@ from gearsym.validation.studies.control.controller import (
     ShiftController,
     TargetSlip,
     shift_direction,
+    torque_drives_the_shift,
 )
 from gearsym.validation.studies.control.downshift import DownshiftController
 from gearsym.validation.studies.control.observed import Observed, observe_shift
@@ -59,13 +60,15 @@ SHIFT_DURATION = 1.2
 
 
 def make_controller(
-    d: GearboxDescription, model: HybridSimulator, knowledge: Knowledge
+    d: GearboxDescription, model: HybridSimulator, knowledge: Knowledge, torque: float
 ) -> ShiftController:
-    """The controller whose phases fit the shift: :class:`.controller.ShiftController` for an
-    upshift, :class:`.downshift.DownshiftController` for a downshift."""
-    if shift_direction(d, model.hybrid.spec) == "up":
-        return ShiftController(d, model, knowledge)
-    return DownshiftController(d, model, knowledge)
+    """The controller whose phases fit the shift at the commanded input ``torque`` (N·m):
+    :class:`.downshift.DownshiftController` for one the torque drives (a power-on downshift,
+    a coast upshift: :func:`.controller.torque_drives_the_shift`), else
+    :class:`.controller.ShiftController` (a power-on upshift, a coast downshift)."""
+    if torque_drives_the_shift(d, model.hybrid.spec, torque):
+        return DownshiftController(d, model, knowledge)
+    return ShiftController(d, model, knowledge)
 
 
 @dataclass(frozen=True)
@@ -178,7 +181,8 @@ def run_vehicle(
     gears = (spec.from_gear, spec.to_gear)
     shafts = [s.name for s in d.shafts]
     friction_elements = [e.name for e in d.shift_elements if not e.one_way]
-    upshift = shift_direction(d, spec) == "up"
+    # the TCU's tie-up test reads the torque phase of a power-on upshift only (observed.py)
+    power_on_upshift = shift_direction(d, spec) == "up" and point.torque > 0
     out: dict[str, list[ShiftOutcome]] = {}
     for name in strategies:
         strategy = make_strategy(name, d, elements, view, shift, gears, seed)
@@ -192,7 +196,7 @@ def run_vehicle(
                 else replace(nominal, fill_time=knowledge.fill_time)
             )
             believed = {off: belief, on: belief}
-            controller = make_controller(d, model, knowledge)
+            controller = make_controller(d, model, knowledge, point.torque)
             log = TcuLog(TICK, shafts, friction_elements)
             result = plant.run(
                 controller,
@@ -207,7 +211,7 @@ def run_vehicle(
                 d, truth, result, plant.values, ratio[spec.to_gear] / ratio[spec.from_gear]
             )
             arrays = log.arrays()
-            observed = observe_shift(d, model, arrays, result.phases, upshift)
+            observed = observe_shift(d, model, arrays, result.phases, power_on_upshift)
             strategy.learn(observed, log, result.commands, result.phases)
             fills = getattr(strategy, "fills", [])
             outcomes.append(
@@ -219,7 +223,7 @@ def run_vehicle(
                     result if keep_records else None,
                     dict(strategy.learned),
                     observed,
-                    fills[-1].to_dict() if fills else None,
+                    fills[-1].to_dict() if fills and fills[-1] is not None else None,
                 )
             )
         out[name] = outcomes
