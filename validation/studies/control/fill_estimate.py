@@ -25,9 +25,12 @@ what the earlier shifts said by a scalar Kalman filter over the shifts (:class:`
 a small fill error, whose signature is below what the TCU's model errors leave, is learnt
 over several shifts that say the same thing instead of never.
 
-What the estimate holds: the fill time at the fast-fill pressure as the nominal valve would
-stroke it. A valve offset (the fleet's ±100 mbar) changes how fast the piston strokes and is
-absorbed into δ, which is what the fill command must correct.
+What the estimate holds: the fill time at the nominal fast-fill pressure through the valve
+the replay assumed. A valve offset (the fleet's ±100 mbar) changes how fast the piston strokes
+and how hard every element presses; held at a wrong value, the replay makes up for the torque
+it gets wrong with a wrong fill (a valve 100 mbar low flares the input like a piston 20 ms
+late). So while the fill is in doubt (the first shift) the offset is searched with it, and δ
+is the piston's own; later shifts hold the offset the filter has learned.
 """
 
 from __future__ import annotations
