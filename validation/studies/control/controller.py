@@ -1,6 +1,6 @@
 """The TCU's clutch-to-clutch shift controller (the adaptive-control issue): what runs every
-TCU tick (10 ms) during a clutch-to-clutch shift and turns the vehicle knowledge of a strategy into
-the two swapping elements' pressure commands.
+TCU tick (10 ms) during a shift and turns the vehicle knowledge of a strategy into the two
+swapping elements' pressure commands.
 
 **Phases** (the numbers in the description's ``[control.shift]`` and ``[control.actuator]``):
 
@@ -190,11 +190,10 @@ class _Plan:
 @dataclass
 class ShiftController:
     """The controller of one power-on upshift or coast downshift (module docstring).
-    ``model`` is the
-    calibration's hybrid model of the shift (the TCU's own, never the truth's); ``knowledge``
-    the strategy's values. :meth:`step` is the TCU task: the time since the shift command,
-    the measured shaft speeds, the commanded input torque → a pressure command per swapping
-    element (Pa)."""
+    ``model`` is the calibration's hybrid model of the shift (the TCU's own, never the
+    truth's); ``knowledge`` the strategy's values. :meth:`step` is the TCU task: the time
+    since the shift command, the measured shaft speeds, the commanded input torque → a
+    pressure command per swapping element (Pa)."""
 
     d: GearboxDescription
     model: HybridSimulator
