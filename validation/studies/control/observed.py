@@ -11,11 +11,12 @@ From them:
 * **duration error** of the inertia phase against its target, measured on the slip as the
   truth's is (:func:`.quality.inertia_phase`, the same 2 % start, lock-up at the
   controller's ``lockup_slip`` since a 10 ms sample rarely lands on zero);
-* **tie-up** (upshifts): the input speed pulled down by more than :data:`PULL_DOWN` below its
-  running maximum before the inertia phase starts. Until then the off-going element is locked
-  and the input turns with the vehicle, which a power-on upshift accelerates: a fall is the
-  on-coming element pressed against the off-going one. A downshift's torque phase comes at
-  synchronism, where the same test does not apply: its tie-up is not detected.
+* **tie-up** (power-on upshifts): the input speed pulled down by more than :data:`PULL_DOWN`
+  below its running maximum before the inertia phase starts. Until then the off-going element
+  is locked and the input turns with the vehicle, which a power-on upshift accelerates: a fall
+  is the on-coming element pressed against the off-going one. A downshift's torque phase comes at
+  synchronism, and in coast the input slows with the vehicle, where the same test does not
+  apply: their tie-up is not detected.
 
 The speeds are the plant's (the controller's view too; sensor noise and quantisation are not
 modelled here).
@@ -60,7 +61,7 @@ def observe_shift(
     model: HybridSimulator,
     log: Mapping[str, np.ndarray],
     phases: Sequence[str],
-    upshift: bool,
+    power_on_upshift: bool,
 ) -> Observed:
     """The verdict from the log's input and output speeds and the controller's ``phases``
     (one per tick); ``model`` is the calibration's hybrid model of the shift. The duration's
@@ -97,7 +98,7 @@ def observe_shift(
     wanted = target.time_at(min(lockup / sigma0, 1.0)) - target.time_at(1.0 - INERTIA_FRACTION)
     error = (end - start - wanted) / wanted
     tied = False
-    if upshift and "inertia" in phases:
+    if power_on_upshift and "inertia" in phases:
         before = speeds[: list(phases).index("inertia"), measured[0]]
         if len(before):
             tied = bool(np.max(np.maximum.accumulate(before) - before) > PULL_DOWN)
