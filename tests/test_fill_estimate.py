@@ -30,11 +30,6 @@ from gearsym.validation.studies.control.fill_estimate import (
     FillReplay,
     _detrended_rms,
 )
-from gearsym.validation.studies.control.strategies import (
-    FILL_JOINT_ABOVE,
-    fill_prior,
-    joint_offset_sigma,
-)
 from gearsym.validation.studies.control.study import (
     SHIFT_DURATION,
     OperatingPoint,
@@ -307,16 +302,3 @@ def test_an_estimate_that_explains_the_record_replaces_the_belief() -> None:
     weighed = prior.after(weak)
     assert weighed.delta == pytest.approx(0.02, rel=1e-9)
     assert weighed.variance == pytest.approx(0.02**2 / 2.0, rel=1e-9)
-
-
-def test_the_offset_is_searched_with_the_fill_only_while_the_fill_is_in_doubt(d) -> None:  # noqa: ANN001
-    """Before the first shift (the prior's 29 ms) the replay searches the offset over the
-    prior's σ; once the filter has run, over the filter's σ of it; once the fill is known
-    within :data:`FILL_JOINT_ABOVE`, not at all (the fill alone: a quarter of the replays)."""
-    prior = fill_prior(d)
-    prior_sigma = d.estimator.valve_offset_prior()[1]
-    assert prior.sigma > FILL_JOINT_ABOVE
-    assert joint_offset_sigma(prior, None, prior_sigma) == prior_sigma
-    assert joint_offset_sigma(prior, (-4e3, 3e3), prior_sigma) == 3e3
-    known = FillBelief(0.01, (0.5 * FILL_JOINT_ABOVE) ** 2)
-    assert joint_offset_sigma(known, (-4e3, 3e3), prior_sigma) == 0.0

@@ -29,8 +29,9 @@ What the estimate holds: the fill time at the nominal fast-fill pressure through
 the replay assumed. A valve offset (the fleet's ±100 mbar) changes how fast the piston strokes
 and how hard every element presses; held at a wrong value, the replay makes up for the torque
 it gets wrong with a wrong fill (a valve 100 mbar low flares the input like a piston 20 ms
-late). So while the fill is in doubt (the first shift) the offset is searched with it, and δ
-is the piston's own; later shifts hold the offset the filter has learned.
+late). :meth:`FillReplay.estimate` can search the offset with the fill (``offset_sigma``; δ is
+then the piston's own); the estimator strategy does not (tried on the first shift and not
+adopted: docs/control.md says why).
 """
 
 from __future__ import annotations

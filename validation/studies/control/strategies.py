@@ -20,8 +20,7 @@ vehicle before a shift and learns after it; only the oracle is shown the truth.
   through the pressures), which the controller's view of the valve takes. The fill, which no
   filter state sees, is estimated by a replay of the shift's commands through the TCU's own
   models (:mod:`.fill_estimate`): the fill time whose replayed input speed matches the
-  measured one (searched jointly with the valve's offset while the fill is in doubt), taken
-  outright when it explains the record, else weighed against the earlier
+  measured one, taken outright when it explains the record, else weighed against the earlier
   shifts' by how sharply the record pins it down (:class:`.fill_estimate.FillBelief`); the
   filter considers its remaining doubt.
   It learns from power-on shifts only: a coast shift's record is not learned from (its
@@ -52,7 +51,6 @@ __all__ = [
     "Strategy",
     "TruthView",
     "calibration_knowledge",
-    "joint_offset_sigma",
     "make_strategy",
 ]
 
@@ -170,15 +168,10 @@ class EstimatorStrategy(RuleStrategy):
         # the fill first, from the replay with what was known before this shift (the filter's
         # μ would otherwise take the blame for a piston that pressed early or late), weighed
         # against what the earlier shifts said by how sharply this record pins it down ...
-        # (jointly with the valve's offset while the fill is still in doubt: a replay that
-        # holds a wrong offset blames the fill for the torque it gets wrong)
+        # (the fill alone, at the offset the filter believes: searching the offset with it on
+        # the first shift was tried and not adopted, docs/control.md)
         before = self.fill or fill_prior(self.d)
-        offset_sigma = joint_offset_sigma(
-            before, self.learned.get(VALVE_OFFSET), self.d.estimator.valve_offset_prior()[1]
-        )
-        found = self.replay.estimate(
-            self.knowledge, arrays, commands, phases, offset_sigma=offset_sigma
-        )
+        found = self.replay.estimate(self.knowledge, arrays, commands, phases)
         self.fills.append(found)
         self.fill = before.after(found)
         limit = self.d.control.si("adaptation", "fill_limit")
@@ -273,10 +266,6 @@ FILL_STEP = 1.0e-3
 #: no estimate outright, the belief's own σ floored at 1 ms let the filter's valve offset run
 #: to 3-4 σ of its prior).
 FILL_SIGMA_FLOOR = 1.0e-2
-#: The fill belief's σ (s) above which the replay searches the fill jointly with the valve's
-#: offset (:meth:`.fill_estimate.FillReplay.estimate`; about four times the cost of a search
-#: of the fill alone): before the first shift, and whenever the fill is in doubt again.
-FILL_JOINT_ABOVE = 5.0e-3
 #: How far the fill time may drift between two shifts (s; oil temperature, wear; assumed): the
 #: belief's variance grows by its square per shift, so it never stops learning.
 FILL_DRIFT = 2.0e-3
@@ -290,18 +279,6 @@ def fill_prior(d: GearboxDescription) -> FillBelief:
 
     mean, sigma = d.estimator.fill_time_error_prior()
     return FillBelief(mean, sigma**2, FILL_DRIFT)
-
-
-def joint_offset_sigma(
-    belief: FillBelief, learned: tuple[float, float] | None, prior_sigma: float
-) -> float:
-    """The valve offset's σ (Pa) the fill replay searches over with the fill
-    (:meth:`.fill_estimate.FillReplay.estimate`): the filter's σ of it (the prior's,
-    ``prior_sigma``, before the filter has run) while the fill ``belief`` is in doubt (σ over
-    :data:`FILL_JOINT_ABOVE`), else 0 (the fill alone, at the offset the TCU believes)."""
-    if belief.sigma <= FILL_JOINT_ABOVE:
-        return 0.0
-    return prior_sigma if learned is None else learned[1]
 
 
 def _sensitivity(
