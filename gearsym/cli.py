@@ -119,6 +119,12 @@ def _cached_run(args: argparse.Namespace) -> int | None:
     return status
 
 
+def _terminated() -> int:
+    """SIGTERM's one line and exit code (whatever error it surfaced as on its way out)."""
+    print("gearsym: terminated; nothing was written", file=sys.stderr)
+    return 143
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv`` (default: the process arguments), run the command, return its exit code:
     2 for bad input (one line on stderr), 130 when interrupted, 143 when terminated."""
@@ -135,8 +141,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if terminate_requested():
             # native code (CasADi's integrator) turned the Terminated into its own failure,
             # which the library reported as an error of the run: the signal came first
-            print("gearsym: terminated; nothing was written", file=sys.stderr)
-            return 143
+            return _terminated()
         print(f"gearsym: {err}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # `gearsym ... | head`: the reader left; say nothing more
@@ -148,8 +153,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if err.errno not in STORAGE_ERRORS:
             raise
         if terminate_requested():
-            print("gearsym: terminated; nothing was written", file=sys.stderr)
-            return 143
+            return _terminated()
         # the one output writer discarded its staging folder: nothing half-written remains
         where = err.filename or "output"
         print(
@@ -160,14 +164,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("gearsym: interrupted; nothing was written", file=sys.stderr)
         return 130
     except Terminated:
-        print("gearsym: terminated; nothing was written", file=sys.stderr)
-        return 143
+        return _terminated()
     except Exception:
         if not terminate_requested():
             raise
         # CasADi turns the Terminated its signal check raised into its own RuntimeError
-        print("gearsym: terminated; nothing was written", file=sys.stderr)
-        return 143
+        return _terminated()
 
 
 if __name__ == "__main__":
