@@ -235,9 +235,9 @@ def test_an_appended_state_steps_through_the_inputs(description):
     a polynomial in u, so the difference is exact to rounding), and the outputs do not depend
     on it."""
     from gearsym.symbolic.estimators.ekf_modes import OPEN, SLIDE_POS
-    from gearsym.validation.studies.estimation.drive_ekf import _Appended, _Models
+    from gearsym.validation.studies.estimation.drive_ekf import FilterModels, _Appended
 
-    aug, discrete, logic = _Models(description, {}).get("2-3")
+    aug, discrete, logic = FilterModels(description, {}).get("2-3")
     names = aug.state_names
     nominal = {v.name: v.default for v in aug.model.states if v.default is not None}
     rng = np.random.default_rng(5)
@@ -298,9 +298,9 @@ def test_a_state_that_scales_a_parameter_steps_through_it(description):
     stiffness factor): its Jacobian column is CasADi's ∂Φ/∂p times the calibration's value,
     checked against central differences of the whole step with k_ss moved."""
     from gearsym.symbolic.estimators.ekf_modes import OPEN, STICK
-    from gearsym.validation.studies.estimation.drive_ekf import _Appended, _Models
+    from gearsym.validation.studies.estimation.drive_ekf import FilterModels, _Appended
 
-    aug, discrete, logic = _Models(description, {}).get("2-3")
+    aug, discrete, logic = FilterModels(description, {}).get("2-3")
     names = aug.state_names
     z = np.zeros(len(names))
     z[names.index("m_veh")] = 1900.0

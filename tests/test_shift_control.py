@@ -414,3 +414,17 @@ def test_fill_ending_inside_a_tick_gets_the_same_oil_volume(d) -> None:  # noqa:
     assert commands[round(fill + 0.01, 3)] == pytest.approx(
         spring + d.control.si("shift", "fill_hold")
     )
+
+
+def test_a_repeated_knowledge_reuses_a_record_equal_to_a_fresh_one(d, point) -> None:  # noqa: ANN001
+    """The fixed calibration shifts with the same knowledge every time and the rule's pressure
+    offset settles: the reused records must be what simulating again gives."""
+    vehicle = _vehicle(d, 0.05)
+    kinds = ("fixed", "rule")
+    reused = run_vehicle(d, "2-3", point, vehicle, 4, kinds)
+    fresh = run_vehicle(d, "2-3", point, vehicle, 4, kinds, reuse=False)
+    for kind in kinds:
+        for a, b in zip(reused[kind], fresh[kind], strict=True):
+            assert a.knowledge == b.knowledge
+            assert a.quality.to_dict() == b.quality.to_dict()
+            assert a.observed == b.observed

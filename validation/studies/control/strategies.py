@@ -51,6 +51,7 @@ __all__ = [
     "Strategy",
     "TruthView",
     "calibration_knowledge",
+    "fill_to_command",
     "make_strategy",
 ]
 
@@ -148,11 +149,17 @@ class EstimatorStrategy(RuleStrategy):
     fills: list[Any] = field(default_factory=list)
     #: the belief of the fill over the shifts so far
     fill: FillBelief | None = None
+    #: the filter's models, built at the first shift and kept for the others
+    filter_models: Any = None
 
     def learn(self, observed: Any, log: Any, commands: Any = None, phases: Any = None) -> None:
         Strategy.learn(self, observed, log, commands, phases)
         from gearsym.validation.studies.control.fill_estimate import FillReplay
-        from gearsym.validation.studies.estimation.drive_ekf import AppendedState, run_drive_ekf
+        from gearsym.validation.studies.estimation.drive_ekf import (
+            AppendedState,
+            FilterModels,
+            run_drive_ekf,
+        )
 
         arrays = log.arrays()
         if float(arrays["T_In_cmd"][0]) <= 0.0:
@@ -165,6 +172,7 @@ class EstimatorStrategy(RuleStrategy):
             return
         if self.replay is None:
             self.replay = FillReplay(self.d, self.shift)
+            self.filter_models = FilterModels.of(self.d)
         # the fill first, from the replay with what was known before this shift (the filter's
         # μ would otherwise take the blame for a piston that pressed early or late), weighed
         # against what the earlier shifts said by how sharply this record pins it down ...
@@ -225,6 +233,7 @@ class EstimatorStrategy(RuleStrategy):
             start=self.carry,
             mu_model="map_scale",
             appended=appended,
+            models=self.filter_models,
         )
         self.carry = estimates.carry
         self.learned = {
@@ -249,7 +258,9 @@ class EstimatorStrategy(RuleStrategy):
         )
         # the fill command lasts what strokes the believed piston through the newly learned
         # view of the valve (the replay's fill time is the stroke at the nominal fast fill)
-        self.knowledge = replace(learned, fill_time=self.replay.duration(learned, fill_time))
+        # (biased short by the belief's doubt, :func:`fill_to_command`)
+        command = self.replay.nominal.fill_time + fill_to_command(self.fill, limit)
+        self.knowledge = replace(learned, fill_time=self.replay.duration(learned, command))
 
 
 #: The filter holds each tick's pressures over the tick: it is told their mean over it, on
@@ -266,9 +277,25 @@ FILL_STEP = 1.0e-3
 #: no estimate outright, the belief's own σ floored at 1 ms let the filter's valve offset run
 #: to 3-4 σ of its prior).
 FILL_SIGMA_FLOOR = 1.0e-2
+#: How many of the belief's σ the commanded fill is shortened by (:func:`fill_to_command`).
+#: A fill too long ties the on-coming element up against the off-going one at the fast-fill
+#: pressure, one too short lets the input flare a little before the torque phase's ramp
+#: catches it: on the tuning vehicles (seeds 100000-100039, four 2-3 upshifts) three of the
+#: five worst second shifts were tie-ups after a first record that pinned the fill down
+#: poorly (the belief's σ near its prior's 29 ms). Tried on those 40: 0 (p95 |jerk| at
+#: shifts 2-4 23.1, 10.1, 7.43 m/s³ against the oracle's 7.52) and 0.5 (14.7, 10.7, 7.79);
+#: 1 on the first 20 (worse than 0.5 at shifts 3 and 4).
+FILL_RISK = 0.5
 #: How far the fill time may drift between two shifts (s; oil temperature, wear; assumed): the
 #: belief's variance grows by its square per shift, so it never stops learning.
 FILL_DRIFT = 2.0e-3
+
+
+def fill_to_command(belief: FillBelief, limit: float) -> float:
+    """The fill-time error (s, against the calibration's) the next shift commands: the
+    belief's δ less :data:`FILL_RISK` of its σ, within ±``limit`` (the asymmetric cost of a
+    wrong fill: too long is a tie-up, too short a small flare)."""
+    return min(max(belief.delta - FILL_RISK * belief.sigma, -limit), limit)
 
 
 def fill_prior(d: GearboxDescription) -> FillBelief:

@@ -12,6 +12,7 @@ truth.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -150,9 +151,13 @@ def run_vehicle(
     strategies: Sequence[str] = STRATEGIES,
     seed: int = 0,
     keep_records: bool = False,
+    reuse: bool = True,
 ) -> dict[str, list[ShiftOutcome]]:
     """Every strategy's ``n_shifts`` consecutive shifts ``shift`` on ``vehicle`` (module
-    docstring); ``seed`` draws the estimator's sensor noise."""
+    docstring); ``seed`` draws the estimator's sensor noise. With ``reuse`` a shift whose
+    knowledge a strategy already shifted with on this vehicle is not simulated again (the
+    plant, the actuators and the operating point are the same every shift, so is the
+    record: the fixed calibration and the oracle simulate one shift, not ``n_shifts``)."""
     spec = shift_spec(d, shift)
     off, on = spec.off_going, spec.on_coming
     truth = vehicle.description
@@ -187,31 +192,38 @@ def run_vehicle(
     for name in strategies:
         strategy = make_strategy(name, d, elements, view, shift, gears, seed)
         outcomes = []
+        simulated: dict[str, tuple[ClosedLoopResult, TcuLog, ShiftQuality, Observed]] = {}
         for i in range(1, n_shifts + 1):
             knowledge = strategy.knowledge
-            # the TCU's view of its pistons: the calibration's, or the fill time it has learned
-            belief = (
-                nominal
-                if knowledge.fill_time is None
-                else replace(nominal, fill_time=knowledge.fill_time)
-            )
-            believed = {off: belief, on: belief}
-            controller = make_controller(d, model, knowledge, point.torque)
-            log = TcuLog(TICK, shafts, friction_elements)
-            result = plant.run(
-                controller,
-                point.torque,
-                true_torque,
-                actuators,
-                believed,
-                log,
-                t_end=SHIFT_DURATION,
-            )
-            quality = evaluate(
-                d, truth, result, plant.values, ratio[spec.to_gear] / ratio[spec.from_gear]
-            )
-            arrays = log.arrays()
-            observed = observe_shift(d, model, arrays, result.phases, power_on_upshift)
+            key = json.dumps(knowledge.to_dict(), sort_keys=True)
+            if reuse and key in simulated:
+                result, log, quality, observed = simulated[key]
+            else:
+                # the TCU's view of its pistons: the calibration's, or the fill time it has
+                # learned
+                belief = (
+                    nominal
+                    if knowledge.fill_time is None
+                    else replace(nominal, fill_time=knowledge.fill_time)
+                )
+                believed = {off: belief, on: belief}
+                controller = make_controller(d, model, knowledge, point.torque)
+                log = TcuLog(TICK, shafts, friction_elements)
+                result = plant.run(
+                    controller,
+                    point.torque,
+                    true_torque,
+                    actuators,
+                    believed,
+                    log,
+                    t_end=SHIFT_DURATION,
+                )
+                quality = evaluate(
+                    d, truth, result, plant.values, ratio[spec.to_gear] / ratio[spec.from_gear]
+                )
+                arrays = log.arrays()
+                observed = observe_shift(d, model, arrays, result.phases, power_on_upshift)
+                simulated[key] = (result, log, quality, observed)
             strategy.learn(observed, log, result.commands, result.phases)
             fills = getattr(strategy, "fills", [])
             outcomes.append(

@@ -44,6 +44,7 @@ __all__ = [
     "AppendedState",
     "DriveEstimates",
     "EkfCarry",
+    "FilterModels",
     "ekf_over_drive",
     "run_drive_ekf",
     "stiffness_state",
@@ -359,14 +360,24 @@ class DriveEstimates:
         return out
 
 
-class _Models:
+class FilterModels:
     """The augmented model, its discrete step and mode logic of each shift, built on first
-    use (the calibration's: the filter's model is what the TCU knows)."""
+    use (the calibration's: the filter's model is what the TCU knows). A caller that runs the
+    filter over many logs of the same description hands one to :func:`run_drive_ekf` so they
+    are built once (the lock-up maps alone take about half a second)."""
 
     def __init__(self, d: GearboxDescription, overrides: Mapping[str, float]) -> None:
         self.d = d
         self.overrides = dict(overrides)
         self._cache: dict[str, tuple[Any, Any, Any]] = {}
+
+    @classmethod
+    def of(cls, d: GearboxDescription, twist_model_error: float | None = None) -> FilterModels:
+        """The models of ``d`` with the twist's model error (rad²/s; default the
+        ``[drive.estimator]`` table's, else the description's intensities)."""
+        if twist_model_error is None:
+            twist_model_error = d.drive.twist_model_error()
+        return cls(d, {} if twist_model_error is None else {naming.TWIST: twist_model_error})
 
     def get(self, shift: str) -> tuple[Any, Any, Any]:
         if shift not in self._cache:
@@ -392,6 +403,7 @@ def run_drive_ekf(
     mu_model: str | None = None,
     truth_mu_scale: Mapping[str, float] | None = None,
     appended: Sequence[AppendedState] = (),
+    models: FilterModels | None = None,
 ) -> DriveEstimates:
     """The EKF over a drive's TCU log (module docstring). ``d`` is the calibration (model,
     prior, tuning, piston areas); ``log`` the :class:`~gearsym.validation.sim.drive_log.TcuLog`
@@ -405,14 +417,19 @@ def run_drive_ekf(
     :mod:`~gearsym.validation.studies.estimation.mu_map_form`; then ``truth_mu_scale``, the
     truth's factor per element, scores it). ``appended``: states outside the model that act
     through the pressures (:class:`AppendedState`; the adaptive-control study's valve offset,
-    estimated, and fill time, considered); a corrected one is carried in :attr:`carry`."""
+    estimated, and fill time, considered); a corrected one is carried in :attr:`carry`.
+    ``models``: the filter's models from earlier calls on ``d`` with the same twist model
+    error (:class:`FilterModels`), built here when None."""
     from gearsym.symbolic.estimators.ekf import ekf_predict, ekf_update
     from gearsym.symbolic.estimators.ekf_modes import STICK, ekf_mode_update
 
     if twist_model_error is None:
         twist_model_error = d.drive.twist_model_error()
     scale_form = (mu_model or d.estimator.mu_model) == "map_scale"
-    models = _Models(d, {} if twist_model_error is None else {naming.TWIST: twist_model_error})
+    if models is None:
+        models = FilterModels.of(d, twist_model_error)
+    elif models.d is not d or models.overrides != FilterModels.of(d, twist_model_error).overrides:
+        raise ValueError("models: built for another description or twist model error")
     t = log["t"]
     h = float(t[1] - t[0])
     r_dyn = quantity(d, "vehicle", "r_dyn").value
