@@ -98,7 +98,7 @@ def cmd_drive(args: argparse.Namespace) -> int:
             else "the calibration's own (no --fleet)"
         )
         if estimates is not None:
-            from gearsym.validation.studies.estimation.drive_ekf import plot_drive_estimates
+            from gearsym.validation.studies.estimation.drive_ekf_plot import plot_drive_estimates
 
             data["estimates"] = estimates.to_dict()
             data["estimator"] = estimates.summary()

@@ -40,6 +40,7 @@ from gearsym.symbolic.drive_calibration import Entry
 __all__ = [
     "HOLD_AFTER_FILL",
     "HOLD_LINE",
+    "MOVING",
     "RAMP_FRACTION",
     "SECANT_FORCE_MIN",
     "TICK",
@@ -67,6 +68,9 @@ TIMEOUT_FACTOR = 2.0
 RAMP_FRACTION = 0.25
 #: The least F₁ of the inertia phase feed-forward's secant (N).
 SECANT_FORCE_MIN = 1e3
+#: A shift the input torque drives: the on-coming slip's fall (fraction of its start) that
+#: shows the off-going element slides (the slip target's clock starts there).
+MOVING = 0.01
 
 _DEFAULT = "gearsym default (assumed; the description states none)"
 

@@ -30,9 +30,12 @@ from gearsym.validation.sim.hybrid_simulation import HybridSimulator
 from gearsym.validation.sim.scenario import load_scenario
 from gearsym.validation.studies.control.closed_loop import ClosedLoopShift
 from gearsym.validation.studies.control.controller import Knowledge, ShiftController
-from gearsym.validation.studies.control.study import OperatingPoint
+from gearsym.validation.studies.control.downshift import DownshiftController
+from gearsym.validation.studies.control.study import OperatingPoint, make_controller
 
 GENERATED_C = Path(__file__).resolve().parents[1] / "generated" / "c"
+#: the coast 2-3 upshift (-40 N*m: the input torque drives the shift, inertia phase first)
+COAST = Path(__file__).resolve().parents[1] / "gearsym" / "data" / "scenario_2_3_coast.toml"
 HEADER = GENERATED_C / "gearsym_control_2_3.h"
 LINE = 1.5e6  # [drive.shift] line_pressure (Pa), checked below
 #: float: 32 ulps of line pressure (the ulp of 1.5e6 in float is 0.125 Pa): the commands are
@@ -110,12 +113,13 @@ class Twin:
         return py if self.drive == "python" else c
 
 
-def _run(d, lib: Path, single: bool, drive: str):  # noqa: ANN001, ANN202
+def _run(d, lib: Path, single: bool, drive: str, coast: bool = False):  # noqa: ANN001, ANN202
     truth = _truth(d)
-    point = OperatingPoint.from_scenario(load_scenario(d))
+    point = OperatingPoint.from_scenario(load_scenario(d, COAST if coast else None))
     plant = ClosedLoopShift(truth, "2-3", point.vehicle_speed, {"K38": 0.95, "B05": 1.05})
     model = HybridSimulator(d, plant.scenario(1.0, {}, 0.0), hybrid_shift(d, "2-3"))
-    python = ShiftController(d, model, KNOWLEDGE)
+    python = make_controller(d, model, KNOWLEDGE, point.torque)
+    assert isinstance(python, DownshiftController) == coast
     c = CShiftController(lib, HEADER, "2-3", "K38", "B05", _c_knowledge(python), single=single)
     twin = Twin(python, c, drive)
     nominal = ClutchActuator.from_calibration(d.control)
@@ -174,12 +178,65 @@ def test_the_float_c_controller_closes_the_loop_like_the_python_one(
     assert slip_diff < 0.1
 
 
-def test_a_coast_shift_is_refused_and_the_from_gear_held(libraries) -> None:  # noqa: ANN001
-    """A commanded torque that does not pull (coast): ERR_NOT_POWER_ON (3), the off-going
-    element at line pressure, the on-coming vented, the plan not made."""
+@pytest.fixture(scope="module")
+def coast_loop(d, libraries):  # noqa: ANN001, ANN201
+    """The coast upshift: the Python DownshiftController closing the loop, both builds riding
+    along."""
+    return tuple(
+        _run(d, libraries[single], single, "python", coast=True) for single in (False, True)
+    )
+
+
+def test_coast_double_build_gives_the_python_commands_tick_by_tick(coast_loop) -> None:  # noqa: ANN001
+    """The driven order (fill, inertia phase with the off-going element sliding, torque phase
+    at synchronism, lock-up) tick by tick as the Python controller gives it."""
+    (twin, result), _ = coast_loop
+    assert result.completed and all(a == b for _, a, b, _, _ in twin.ticks)
+    phases = [a for _, a, _, _, _ in twin.ticks]
+    assert {"fill", "inertia", "torque", "lockup", "done"} <= set(phases)
+    assert phases.index("inertia") < phases.index("torque")
+    worst = _differences(twin).max()
+    print(f"coast, double build: largest command difference {worst:.3g} Pa")
+    assert worst <= DOUBLE_TOLERANCE
+
+
+def test_coast_float_build_gives_the_python_commands_within_float_rounding(coast_loop) -> None:  # noqa: ANN001
+    _, (twin, _) = coast_loop
+    assert all(a == b for _, a, b, _, _ in twin.ticks)
+    worst = _differences(twin).max()
+    print(
+        f"coast, float build: largest command difference {worst:.3g} Pa ({worst / 0.125:.1f} ulps)"
+    )
+    assert worst <= FLOAT_TOLERANCE
+
+
+def test_the_float_c_controller_closes_a_coast_shift_like_the_python_one(
+    d, libraries, coast_loop
+) -> None:  # noqa: ANN001
+    """The C controller (float) drives the coast shift: the plant's events (B05 engages, K38
+    breaks away, B05 locks up at synchronism, K38 opens) in the Python loop's order, each
+    within 1 ms of it, and both elements' slips within 0.1 rad/s of it."""
+    (_, reference), _ = coast_loop
+    twin, result = _run(d, libraries[True], True, "c", coast=True)
+    assert result.completed and twin.c.status == 0
+    ours = [(e.kind, e.element) for e in result.events]
+    assert ours == [(e.kind, e.element) for e in reference.events]
+    assert ("lock-up", "B05") in ours
+    shift = max(abs(a.t - b.t) for a, b in zip(result.events, reference.events, strict=True))
+    slips = [naming.slip_column(e) for e in ("K38", "B05")]
+    slip_diff = max(float(np.max(np.abs(result.signals[c] - reference.signals[c]))) for c in slips)
+    print(f"C coast loop: events within {shift:.2g} s, slips within {slip_diff:.3g} rad/s")
+    assert shift < 1e-3
+    assert slip_diff < 0.1
+
+
+def test_a_shift_without_torque_is_refused_and_the_from_gear_held(libraries) -> None:  # noqa: ANN001
+    """A commanded torque of zero (neither power-on nor coast: the phase order depends on its
+    sign): ERR_NO_TORQUE (3), the off-going element at line pressure, the on-coming vented,
+    the plan not made."""
     c = CShiftController(libraries[False], HEADER, "2-3", "K38", "B05", {})
     speeds = np.full(8, 100.0)
-    commands = c.step(0.0, speeds, -40.0)
+    commands = c.step(0.0, speeds, 0.0)
     assert c.status == 3
     assert commands == {"K38": LINE, "B05": 0.0}
     assert c.state.planned == 0 and c.phase == "fill"

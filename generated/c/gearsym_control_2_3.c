@@ -213,6 +213,63 @@ void gearsym_control_2_3_sliding_neg(
     out[2] = -t2 + GEARSYM_LIT(34.1904944472374097371)*v[7]*v[8] + GEARSYM_LIT(1.94891730192754936409)*t4*t5*p->k_ss;
 }
 
+/**
+ * The off-going element's slip [rad/s] (2.59) at the measured speeds, the on-coming element
+ * open (where its mu map is read). v = [omega_in, omega_out].
+ * Operations: 1 add, 1 mul, 0 div, 0 calls; 0 temporaries.
+ */
+void gearsym_control_2_3_driven_slip(
+    const gearsym_control_2_3_params *restrict p,
+    const gearsym_real *restrict v,
+    gearsym_real *restrict out)
+{
+    (void)p;
+    out[0] = -v[0] + (GEARSYM_LIT(120.0)/GEARSYM_LIT(37.0))*v[1];
+}
+
+/**
+ * On-coming open, off-going sliding with positive slip (the shift the input torque drives: a
+ * coast upshift): state rebuilt from the speeds, twist quasi-static at the off-going F_last,
+ * mu_last; out[0] the on-coming slip [rad/s], out[1], out[2] its acceleration [rad/s^2] at the
+ * off-going F_N = 0 and at F_N = F_1 with mu_1. v = [omega_in, omega_out, T_In, m_veh, zeta,
+ * F_last, mu_last, F_1, mu_1].
+ * Operations: 9 add, 26 mul, 2 div, 2 calls (cos 1, sin 1); 4 temporaries.
+ */
+void gearsym_control_2_3_driven_pos(
+    const gearsym_control_2_3_params *restrict p,
+    const gearsym_real *restrict v,
+    gearsym_real *restrict out)
+{
+    const gearsym_real t0 = GEARSYM_SIN(v[4]);
+    const gearsym_real t1 = GEARSYM_COS(v[4]);
+    const gearsym_real t2 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*v[3]));
+    const gearsym_real t3 = GEARSYM_LIT(17.0266641182394368751)*v[2] - GEARSYM_LIT(1.94891730192754936409)*p->k_ss*(-GEARSYM_LIT(0.986866566812568378419)*v[2] + t2*(-(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*v[3] - GEARSYM_LIT(0.00291290912975000988359)*p->A_front*p->c_W*p->rho_air*(v[1]*v[1]) - GEARSYM_LIT(0.429286593317132442284)*t1*v[3]*v[1]*p->f_roll) + GEARSYM_LIT(0.00436758637877538112335)*v[5]*v[6])/(-GEARSYM_LIT(0.247847062522501629394)*p->k_ss - GEARSYM_LIT(2.0)*t2*p->k_ss);
+    out[0] = -(GEARSYM_LIT(36.0)/GEARSYM_LIT(11.0))*v[0] + (GEARSYM_LIT(3000.0)/GEARSYM_LIT(407.0))*v[1];
+    out[1] = -t3;
+    out[2] = -t3 - GEARSYM_LIT(7.37889650307701625046)*v[7]*v[8];
+}
+
+/**
+ * As driven_pos with the off-going element sliding negatively. v = [omega_in, omega_out, T_In,
+ * m_veh, zeta, F_last, mu_last, F_1, mu_1].
+ * Operations: 10 add, 30 mul, 2 div, 2 calls (cos 1, sin 1); 6 temporaries.
+ */
+void gearsym_control_2_3_driven_neg(
+    const gearsym_control_2_3_params *restrict p,
+    const gearsym_real *restrict v,
+    gearsym_real *restrict out)
+{
+    const gearsym_real t0 = GEARSYM_SIN(v[4]);
+    const gearsym_real t1 = GEARSYM_COS(v[4]);
+    const gearsym_real t2 = GEARSYM_LIT(17.0266641182394368751)*v[2];
+    const gearsym_real t3 = (GEARSYM_LIT(1.0)/(p->I_wheel + GEARSYM_LIT(0.108043690000000000000)*v[3]));
+    const gearsym_real t4 = (GEARSYM_LIT(1.0)/(-GEARSYM_LIT(0.247847062522501629394)*p->k_ss - GEARSYM_LIT(2.0)*t3*p->k_ss));
+    const gearsym_real t5 = -GEARSYM_LIT(0.986866566812568378419)*v[2] + t3*(-(GEARSYM_LIT(3224547.0)/GEARSYM_LIT(1000000.0))*t0*v[3] - GEARSYM_LIT(0.00291290912975000988359)*p->A_front*p->c_W*p->rho_air*(v[1]*v[1]) - GEARSYM_LIT(0.429286593317132442284)*t1*v[3]*v[1]*p->f_roll) - GEARSYM_LIT(0.00436758637877538112335)*v[5]*v[6];
+    out[0] = -(GEARSYM_LIT(36.0)/GEARSYM_LIT(11.0))*v[0] + (GEARSYM_LIT(3000.0)/GEARSYM_LIT(407.0))*v[1];
+    out[1] = -t2 + GEARSYM_LIT(1.94891730192754936409)*t4*t5*p->k_ss;
+    out[2] = -t2 + GEARSYM_LIT(7.37889650307701625046)*v[7]*v[8] + GEARSYM_LIT(1.94891730192754936409)*t4*t5*p->k_ss;
+}
+
 /* The larger of a and b (b when equal; neither is NaN here). */
 static gearsym_real gearsym_control_2_3_larger(gearsym_real a, gearsym_real b)
 {
@@ -282,6 +339,13 @@ static gearsym_real gearsym_control_2_3_mu_on(
     return (k->mu_on * gearsym_mu_map(force / GEARSYM_CONTROL_2_3_AREA_ON, GEARSYM_CONTROL_2_3_T_OIL, slip)) / GEARSYM_CONTROL_2_3_MU_NOMINAL;
 }
 
+/* mu of the off-going element at a force and slip (as mu_on). */
+static gearsym_real gearsym_control_2_3_mu_off(
+    const gearsym_control_2_3_knowledge *k, gearsym_real force, gearsym_real slip)
+{
+    return (k->mu_off * gearsym_mu_map(force / GEARSYM_CONTROL_2_3_AREA_OFF, GEARSYM_CONTROL_2_3_T_OIL, slip)) / GEARSYM_CONTROL_2_3_MU_NOMINAL;
+}
+
 /* The fill phase's on-coming command: fast fill, then the hold; a fill ending inside a tick
    gets the same oil volume at a lower pressure. */
 static gearsym_real gearsym_control_2_3_fill_command(const gearsym_control_2_3_state *s, gearsym_real t)
@@ -324,8 +388,8 @@ static int gearsym_control_2_3_plan(
     gearsym_control_2_3_state *s)
 {
     int status = GEARSYM_CONTROL_2_3_OK;
-    if (!(in->torque > GEARSYM_LIT(0.0))) {
-        status = GEARSYM_CONTROL_2_3_ERR_NOT_POWER_ON;
+    if (!((in->torque > GEARSYM_LIT(0.0)) || (in->torque < GEARSYM_LIT(0.0)))) {
+        status = GEARSYM_CONTROL_2_3_ERR_NO_TORQUE;
     } else {
         const gearsym_real v[5] = {in->omega_in, in->omega_out, k->torque_gain * in->torque, k->m_veh, k->zeta};
         gearsym_real from[2];
@@ -337,6 +401,11 @@ static int gearsym_control_2_3_plan(
         s->off_capacity = GEARSYM_CONTROL_2_3_CAPACITY_OFF * k->mu_off;
         s->hold_off = (GEARSYM_CONTROL_2_3_MARGIN * s->off_torque) / s->off_capacity;
         s->carry_on = GEARSYM_FABS(to[0]) / (GEARSYM_CONTROL_2_3_CAPACITY_ON * k->mu_on);
+        /* an upshift the input torque drives is a coast one: inertia phase first */
+        if (in->torque < GEARSYM_LIT(0.0)) {
+            s->driven = 1;
+        }
+        s->off_force = s->hold_off;
         s->planned = 1;
     }
     return status;
@@ -394,6 +463,127 @@ static gearsym_real gearsym_control_2_3_inertia(
     return command;
 }
 
+/* Coast: the off-going force while it slides (hold_sync 0) or while the on-coming element
+   takes over at synchronism (hold_sync 1: the target's end), feed-forward through the
+   on-coming slip acceleration's secant at the off-going F_N = 0 and F_1 in the mode
+   "K38 sliding, B05 open", plus PI on the slip error; the torque phase starts when the
+   slip is small, reverses or the phase takes too long. */
+static gearsym_real gearsym_control_2_3_inertia_driven(
+    const gearsym_control_2_3_params *p,
+    const gearsym_control_2_3_knowledge *k,
+    const gearsym_control_2_3_inputs *in,
+    gearsym_control_2_3_state *s,
+    int hold_sync)
+{
+    const gearsym_real t = in->t;
+    const gearsym_real speeds[2] = {in->omega_in, in->omega_out};
+    if (!((s->off_sign > GEARSYM_LIT(0.0)) || (s->off_sign < GEARSYM_LIT(0.0)))) {
+        /* it slides the way its reaction torque in the from-gear pushes */
+        const gearsym_real v[5] = {in->omega_in, in->omega_out, k->torque_gain * in->torque, k->m_veh, k->zeta};
+        gearsym_real from[2];
+        gearsym_control_2_3_from_gear(p, v, from);
+        s->off_sign = (from[0] > GEARSYM_LIT(0.0)) ? GEARSYM_LIT(1.0) : -GEARSYM_LIT(1.0);
+    }
+    gearsym_real off_slip[1];
+    gearsym_control_2_3_driven_slip(p, speeds, off_slip);
+    const gearsym_real f1 = gearsym_control_2_3_larger(s->hold_off, GEARSYM_CONTROL_2_3_SECANT_FORCE_MIN);
+    const gearsym_real v[9] = {
+        in->omega_in, in->omega_out, k->torque_gain * in->torque, k->m_veh, k->zeta,
+        s->off_force, gearsym_control_2_3_mu_off(k, s->off_force, off_slip[0]),
+        f1, gearsym_control_2_3_mu_off(k, f1, off_slip[0])};
+    gearsym_real o[3];
+    if (s->off_sign > GEARSYM_LIT(0.0)) {
+        gearsym_control_2_3_driven_pos(p, v, o);
+    } else {
+        gearsym_control_2_3_driven_neg(p, v, o);
+    }
+    const gearsym_real slip = o[0];
+    if (s->target_set == 0) {
+        s->sigma0 = slip;
+        s->sign = (slip > GEARSYM_LIT(0.0)) ? GEARSYM_LIT(1.0) : -GEARSYM_LIT(1.0);
+        s->target_set = 1;
+    }
+    /* the target's clock starts when the slip starts to fall (the off-going element has
+       broken away): until then the valve's lag holds the input, not the controller */
+    if ((s->moving == 0) && (GEARSYM_FABS(slip) < ((GEARSYM_LIT(1.0) - GEARSYM_CONTROL_2_3_MOVING) * GEARSYM_FABS(s->sigma0)))) {
+        s->t_moving = t;
+        s->moving = 1;
+    }
+    gearsym_real tau = (s->moving != 0) ? (t - s->t_moving) : GEARSYM_LIT(0.0);
+    if (hold_sync != 0) {
+        tau = GEARSYM_LIT(2.0) * GEARSYM_CONTROL_2_3_INERTIA_PHASE;
+    } else if ((GEARSYM_FABS(slip) <= GEARSYM_CONTROL_2_3_LOCKUP_SLIP) || ((slip * s->sign) < GEARSYM_LIT(0.0))
+        || ((t - s->t_fill_end) > (GEARSYM_CONTROL_2_3_TIMEOUT_FACTOR * GEARSYM_CONTROL_2_3_INERTIA_PHASE))) {
+        s->phase = GEARSYM_CONTROL_2_3_PHASE_TORQUE;
+    } else {
+        /* still sliding towards synchronism */
+    }
+    const gearsym_real r0 = o[1];
+    const gearsym_real r1 = o[2];
+    const gearsym_real wanted = gearsym_control_2_3_target_rate(s->sigma0, tau + GEARSYM_CONTROL_2_3_LEAD);
+    const gearsym_real feed_forward = (r1 == r0) ? s->off_force : (((wanted - r0) / (r1 - r0)) * f1);
+    const gearsym_real error = s->sign * (slip - gearsym_control_2_3_target_slip(s->sigma0, tau));
+    if (s->moving != 0) {
+        s->integral += error * (t - s->t_previous);
+    }
+    /* more off-going force holds the input back: it slows the slip's fall when the slip's
+       rate per newton has the slip's own sign */
+    const gearsym_real direction = (((r1 - r0) * s->sign) > GEARSYM_LIT(0.0)) ? GEARSYM_LIT(1.0) : -GEARSYM_LIT(1.0);
+    const gearsym_real correction = -direction * GEARSYM_CONTROL_2_3_K_P * (error + (s->integral / GEARSYM_CONTROL_2_3_T_I));
+    s->off_force = gearsym_control_2_3_larger(feed_forward, GEARSYM_LIT(0.0));
+    return gearsym_control_2_3_larger(s->off_force + (correction * GEARSYM_CONTROL_2_3_AREA_OFF), GEARSYM_LIT(0.0));
+}
+
+/* Coast: one tick of the phases in the driven order (the Python DownshiftController.step). */
+static void gearsym_control_2_3_step_driven(
+    const gearsym_control_2_3_params *p,
+    const gearsym_control_2_3_knowledge *k,
+    const gearsym_control_2_3_inputs *in,
+    gearsym_control_2_3_state *s,
+    gearsym_control_2_3_outputs *out)
+{
+    const gearsym_real t = in->t;
+    const gearsym_real hold = GEARSYM_CONTROL_2_3_SPRING + GEARSYM_CONTROL_2_3_FILL_HOLD;
+    const gearsym_real on = gearsym_control_2_3_fill_command(s, t);
+    if ((s->phase == GEARSYM_CONTROL_2_3_PHASE_FILL) && (t >= s->t_fill_end)) {
+        s->phase = GEARSYM_CONTROL_2_3_PHASE_INERTIA;
+    }
+    if (s->phase == GEARSYM_CONTROL_2_3_PHASE_FILL) {
+        out->p_off = gearsym_control_2_3_pressure(k, s->hold_off, GEARSYM_CONTROL_2_3_AREA_OFF, GEARSYM_LIT(0.0));
+        out->p_on = on;
+    } else if (s->phase == GEARSYM_CONTROL_2_3_PHASE_INERTIA) {
+        out->p_off = gearsym_control_2_3_pressure(k, gearsym_control_2_3_inertia_driven(p, k, in, s, 0), GEARSYM_CONTROL_2_3_AREA_OFF, GEARSYM_LIT(0.0));
+        out->p_on = on;
+        if (s->phase == GEARSYM_CONTROL_2_3_PHASE_TORQUE) {
+            s->t_sync = t; /* synchronism reached this tick */
+        }
+    } else {
+        /* the torque phase and lock-up follow */
+    }
+    if (s->phase == GEARSYM_CONTROL_2_3_PHASE_TORQUE) {
+        const gearsym_real tau = gearsym_control_2_3_smaller(gearsym_control_2_3_larger((t + GEARSYM_CONTROL_2_3_LEAD - s->t_sync) / GEARSYM_CONTROL_2_3_TORQUE_PHASE, GEARSYM_LIT(0.0)), GEARSYM_LIT(1.0));
+        const gearsym_real share = (GEARSYM_LIT(1.0) - GEARSYM_COS(GEARSYM_CONTROL_2_3_PI * tau)) / GEARSYM_LIT(2.0);
+        const gearsym_real on_force = share * s->carry_on * GEARSYM_CONTROL_2_3_MARGIN;
+        /* the off-going element keeps the input at synchronism while it hands over */
+        const gearsym_real off_force = (GEARSYM_LIT(1.0) - share) * gearsym_control_2_3_inertia_driven(p, k, in, s, 1);
+        out->p_off = (off_force > GEARSYM_LIT(0.0))
+            ? gearsym_control_2_3_pressure(k, off_force, GEARSYM_CONTROL_2_3_AREA_OFF, GEARSYM_LIT(0.0))
+            : GEARSYM_LIT(0.0);
+        out->p_on = gearsym_control_2_3_larger(gearsym_control_2_3_pressure(k, on_force, GEARSYM_CONTROL_2_3_AREA_ON, k->pressure_offset), hold);
+        s->last_force = on_force;
+        /* over at the tick nearest the ramp's end (a rounding either way must not decide) */
+        if (((t + GEARSYM_CONTROL_2_3_LEAD) - s->t_sync) >= (GEARSYM_CONTROL_2_3_TORQUE_PHASE - (GEARSYM_CONTROL_2_3_TICK / GEARSYM_LIT(2.0)))) {
+            s->phase = GEARSYM_CONTROL_2_3_PHASE_LOCKUP;
+            s->t_lock = t;
+            s->locked = 1;
+        }
+    }
+    if ((s->phase == GEARSYM_CONTROL_2_3_PHASE_LOCKUP) || (s->phase == GEARSYM_CONTROL_2_3_PHASE_DONE)) {
+        out->p_off = GEARSYM_LIT(0.0);
+        out->p_on = gearsym_control_2_3_lockup(k, s, t);
+    }
+}
+
 void gearsym_control_2_3_knowledge_default(
     gearsym_control_2_3_knowledge *k)
 {
@@ -430,6 +620,12 @@ void gearsym_control_2_3_init(
     s->t_fill_end = gearsym_control_2_3_larger(k->fill_time + k->fill_offset, GEARSYM_LIT(0.0));
     s->t_torque = s->t_fill_end + GEARSYM_CONTROL_2_3_HOLD_AFTER_FILL;
     s->t_inertia = s->t_torque + GEARSYM_CONTROL_2_3_TORQUE_PHASE;
+    s->driven = 0;
+    s->moving = 0;
+    s->off_sign = GEARSYM_LIT(0.0);
+    s->off_force = GEARSYM_LIT(0.0);
+    s->t_moving = GEARSYM_LIT(0.0);
+    s->t_sync = GEARSYM_LIT(0.0);
 }
 
 int gearsym_control_2_3_step(
@@ -447,6 +643,9 @@ int gearsym_control_2_3_step(
     if (status != GEARSYM_CONTROL_2_3_OK) {
         out->p_off = GEARSYM_CONTROL_2_3_LINE_PRESSURE;
         out->p_on = GEARSYM_LIT(0.0);
+    } else if (s->driven != 0) {
+        gearsym_control_2_3_step_driven(p, k, in, s, out);
+        s->t_previous = t;
     } else {
         if ((s->phase == GEARSYM_CONTROL_2_3_PHASE_FILL) && (t >= s->t_torque)) {
             s->phase = GEARSYM_CONTROL_2_3_PHASE_TORQUE;

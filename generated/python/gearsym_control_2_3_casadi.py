@@ -24,6 +24,9 @@ ARGUMENTS: dict[str, tuple[tuple[str, ...], int]] = {
     "sliding_slip": (('omega_in', 'omega_out'), 1),
     "sliding_pos": (('omega_in', 'omega_out', 'T_In', 'm_veh', 'zeta', 'F_last', 'mu_last', 'F_1', 'mu_1'), 3),
     "sliding_neg": (('omega_in', 'omega_out', 'T_In', 'm_veh', 'zeta', 'F_last', 'mu_last', 'F_1', 'mu_1'), 3),
+    "driven_slip": (('omega_in', 'omega_out'), 1),
+    "driven_pos": (('omega_in', 'omega_out', 'T_In', 'm_veh', 'zeta', 'F_last', 'mu_last', 'F_1', 'mu_1'), 3),
+    "driven_neg": (('omega_in', 'omega_out', 'T_In', 'm_veh', 'zeta', 'F_last', 'mu_last', 'F_1', 'mu_1'), 3),
 }
 
 
@@ -88,12 +91,50 @@ def _sliding_neg(p: Any, v: Any) -> Any:
     out[2, 0] = -t2 + 34.1904944472374097371*v[7]*v[8] + 1.94891730192754936409*t4*t5*p[0]
     return out
 
+
+def _driven_slip(p: Any, v: Any) -> Any:
+    """The off-going element's slip [rad/s] (2.59) at the measured speeds, the on-coming element open (where its mu map is read). v = [omega_in, omega_out]."""
+    out = ca.SX(1, 1)
+    out[0, 0] = -v[0] + (120.0/37.0)*v[1]
+    return out
+
+
+def _driven_pos(p: Any, v: Any) -> Any:
+    """On-coming open, off-going sliding with positive slip (the shift the input torque drives: a coast upshift): state rebuilt from the speeds, twist quasi-static at the off-going F_last, mu_last; out[0] the on-coming slip [rad/s], out[1], out[2] its acceleration [rad/s^2] at the off-going F_N = 0 and at F_N = F_1 with mu_1. v = [omega_in, omega_out, T_In, m_veh, zeta, F_last, mu_last, F_1, mu_1]."""
+    t0 = ca.sin(v[4])
+    t1 = ca.cos(v[4])
+    t2 = (p[2] + 0.108043690000000000000*v[3])**(-1)
+    t3 = 17.0266641182394368751*v[2] - 1.94891730192754936409*p[0]*(-0.986866566812568378419*v[2] + t2*(-(3224547.0/1000000.0)*t0*v[3] - 0.00291290912975000988359*p[5]*p[4]*p[3]*v[1]**2 - 0.429286593317132442284*t1*v[3]*v[1]*p[6]) + 0.00436758637877538112335*v[5]*v[6])/(-0.247847062522501629394*p[0] - 2.0*t2*p[0])
+    out = ca.SX(3, 1)
+    out[0, 0] = -(36.0/11.0)*v[0] + (3000.0/407.0)*v[1]
+    out[1, 0] = -t3
+    out[2, 0] = -t3 - 7.37889650307701625046*v[7]*v[8]
+    return out
+
+
+def _driven_neg(p: Any, v: Any) -> Any:
+    """As driven_pos with the off-going element sliding negatively. v = [omega_in, omega_out, T_In, m_veh, zeta, F_last, mu_last, F_1, mu_1]."""
+    t0 = ca.sin(v[4])
+    t1 = ca.cos(v[4])
+    t2 = 17.0266641182394368751*v[2]
+    t3 = (p[2] + 0.108043690000000000000*v[3])**(-1)
+    t4 = (-0.247847062522501629394*p[0] - 2.0*t3*p[0])**(-1)
+    t5 = -0.986866566812568378419*v[2] + t3*(-(3224547.0/1000000.0)*t0*v[3] - 0.00291290912975000988359*p[5]*p[4]*p[3]*v[1]**2 - 0.429286593317132442284*t1*v[3]*v[1]*p[6]) - 0.00436758637877538112335*v[5]*v[6]
+    out = ca.SX(3, 1)
+    out[0, 0] = -(36.0/11.0)*v[0] + (3000.0/407.0)*v[1]
+    out[1, 0] = -t2 + 1.94891730192754936409*t4*t5*p[0]
+    out[2, 0] = -t2 + 7.37889650307701625046*v[7]*v[8] + 1.94891730192754936409*t4*t5*p[0]
+    return out
+
 _BUILDERS = {
     "from_gear": _from_gear,
     "to_gear": _to_gear,
     "sliding_slip": _sliding_slip,
     "sliding_pos": _sliding_pos,
     "sliding_neg": _sliding_neg,
+    "driven_slip": _driven_slip,
+    "driven_pos": _driven_pos,
+    "driven_neg": _driven_neg,
 }
 
 

@@ -1,12 +1,14 @@
-"""The TCU's shift controller as C: the model parts of a power-on upshift's controller derived
-here, its phase logic in ``templates/c_shift_control.{h,c}.j2``, emitted as
+"""The TCU's shift controller as C: the model parts of an upshift's controller (power-on and
+coast) derived here, its phase logic in ``templates/c_shift_control.{h,c}.j2``, emitted as
 ``gearsym_control_<a>_<b>.{h,c}``.
 
 The controller is the one of ``validation/studies/control/controller.py`` (``ShiftController``:
-fill, torque phase, inertia phase with feed-forward and PI on the on-coming slip, lock-up),
-stated for code: every model evaluation it makes becomes a closed-form expression of the two
-measured shaft speeds (input, output), the commanded input torque and the strategy's knowledge,
-derived from the hybrid shift model (:func:`gearsym.symbolic.hybrid.hybrid_shift`):
+fill, torque phase, inertia phase with feed-forward and PI on the on-coming slip, lock-up;
+for a coast upshift ``DownshiftController``'s order: the inertia phase first with the
+off-going element sliding), stated for code: every model evaluation it makes becomes a
+closed-form expression of the two measured shaft speeds (input, output), the commanded input
+torque and the strategy's knowledge, derived from the hybrid shift model
+(:func:`gearsym.symbolic.hybrid.hybrid_shift`):
 
 * *state rebuild*: the gear states z of a mode from the two measured speeds by least squares
   through the mode's projection (exact rationals: ``(BᵀB)⁻¹Bᵀ`` of the 2 x n_gear map of z to the
@@ -19,7 +21,10 @@ derived from the hybrid shift model (:func:`gearsym.symbolic.hybrid.hybrid_shift
   and its acceleration at F_N = 0 and at F_N = F₁ (the feed-forward's secant; the capacity is
   2 N_disc r_m μ F_N, 2.69/3.14), μ an argument: the C code reads it from ``gearsym_mu_map``
   at the element's pressure and slip, scaled by the strategy's μ over μ_nominal, as the
-  Python controller's model does.
+  Python controller's model does;
+* for a coast upshift, in the mode "off-going sliding, on-coming open" (both directions): the
+  on-coming slip and its acceleration at the off-going F_N = 0 and F_N = F₁, and the
+  off-going slip (where its μ map is read).
 
 The parameters of the expressions are the vehicle's fixed ones (side shafts, wheel inertia,
 road load); the strategy's m_veh and ζ are arguments, as μ. The phase constants (fill time,
@@ -54,6 +59,7 @@ from gearsym.symbolic.codegen.views import ModelView, model_view
 from gearsym.symbolic.control_calibration import (
     HOLD_AFTER_FILL,
     HOLD_LINE,
+    MOVING,
     RAMP_FRACTION,
     SECANT_FORCE_MIN,
     TICK,
@@ -104,6 +110,11 @@ CONTROL_ARGUMENTS: dict[str, tuple[str, ...]] = {
     ),
 }
 CONTROL_ARGUMENTS["sliding_neg"] = CONTROL_ARGUMENTS["sliding_pos"]
+# the shift the input torque drives (a coast upshift): the off-going element slides, the
+# on-coming one is open; F and mu are the off-going element's
+CONTROL_ARGUMENTS["driven_slip"] = CONTROL_ARGUMENTS["sliding_slip"]
+CONTROL_ARGUMENTS["driven_pos"] = CONTROL_ARGUMENTS["sliding_pos"]
+CONTROL_ARGUMENTS["driven_neg"] = CONTROL_ARGUMENTS["sliding_pos"]
 
 
 def control_model_name(shift: str) -> str:
@@ -230,6 +241,24 @@ def control_expressions(
         exprs[name] = (slip.xreplace(x), *rates)
         if name == "sliding_pos":
             exprs["sliding_slip"] = (slip.xreplace(x),)
+    # off-going sliding, on-coming open: the on-coming slip and its rate at the off-going
+    # F_N = 0 and F_N = F_1 (the driven shift's feed-forward, downshift.py)
+    for sign, name in ((1, "driven_pos"), (-1, "driven_neg")):
+        mode = _mode(hybrid, {off: ("sliding", sign), on: ("open", 0)})
+        last = {**known, force[on]: 0, force[off]: args["F_last"], mu[off]: args["mu_last"]}
+        last[mu[on]] = 0
+        x = _rebuilt(d, hybrid, mode, omega, last)
+        states = list(mode.model.state_symbols)
+        rates = []
+        for value, mu_value in ((0, 0), (args["F_1"], args["mu_1"])):
+            u = {**known, force[on]: 0, mu[on]: 0, force[off]: value, mu[off]: mu_value}
+            rhs = mode.model.rhs.xreplace(u)
+            rate = sum(sp.diff(mode.slip[on], s) * rhs[k] for k, s in enumerate(states))
+            rates.append(rate.xreplace(x))
+        exprs[name] = (mode.slip[on].xreplace(x), *rates)
+        if name == "driven_pos":
+            # the off-going element's own slip: where its μ map is read
+            exprs["driven_slip"] = (mode.slip[off].xreplace(x),)
     return hybrid, fixed, exprs, args
 
 
@@ -255,7 +284,8 @@ def control_table(
         metadata={
             "gearbox": d.name,
             "equations": "2.29, 2.44, 2.59, 2.69, 3.14",
-            "content": f"power-on upshift controller of shift {shift} (TCU task, {TICK:g} s)",
+            "content": f"power-on and coast upshift controller of shift {shift} "
+            f"(TCU task, {TICK:g} s)",
         },
     )
     bounds = _normalise_bounds(model, config.bounds)
@@ -277,6 +307,14 @@ def control_table(
         "out[1], out[2] its acceleration [rad/s^2] at F_N = 0 and at F_N = F_1 with mu_1 "
         "(capacity 2 N_disc r_m mu F_N, 2.69/3.14).",
         "sliding_neg": "As sliding_pos with negative slip (the friction torque's sign reversed).",
+        "driven_slip": "The off-going element's slip [rad/s] (2.59) at the measured speeds, "
+        "the on-coming element open (where its mu map is read).",
+        "driven_pos": "On-coming open, off-going sliding with positive slip (the shift the "
+        "input torque drives: a coast upshift): state rebuilt from the speeds, twist "
+        "quasi-static at the off-going F_last, mu_last; out[0] the on-coming slip [rad/s], "
+        "out[1], out[2] its acceleration [rad/s^2] at the off-going F_N = 0 and at F_N = F_1 "
+        "with mu_1.",
+        "driven_neg": "As driven_pos with the off-going element sliding negatively.",
     }
     for name, arguments in CONTROL_ARGUMENTS.items():
         symbols = tuple(args[a] for a in arguments)
@@ -330,6 +368,7 @@ def _constants(d: GearboxDescription, hybrid: HybridShift) -> tuple[ControlConst
     add("TIMEOUT_FACTOR", TIMEOUT_FACTOR, "1", "inertia phase gives up after this many targets")
     add("RAMP", RAMP_FRACTION, "1", "fraction of the inertia phase ramping the slip rate")
     add("SECANT_FORCE_MIN", SECANT_FORCE_MIN, "N", "least F_1 of the feed-forward's secant")
+    add("MOVING", MOVING, "1", "coast: on-coming slip fall that shows the off-going slides")
     add("MU_NOMINAL", quantity(d, "friction", "mu_nominal").value, "1", "mu the map is scaled by")
     add("T_OIL", quantity(d, "friction", "T_oil").value, "degC", "oil temperature the map reads")
     for role, e in (("OFF", spec.off_going), ("ON", spec.on_coming)):
@@ -416,9 +455,9 @@ def ekf_mismatch(d: GearboxDescription, hybrid: HybridShift) -> str:
 def emit_control_files(
     d: GearboxDescription, shift: str, config: CodegenConfig | None = None
 ) -> dict[str, str]:
-    """``{"gearsym_control_<a>_<b>.h", ".c", "_casadi.py"}``: the controller of a power-on
-    upshift and the TCU task that runs it with the shift's EKF (``gearsym_ekf_<a>_<b>``), and
-    its model parts as CasADi functions."""
+    """``{"gearsym_control_<a>_<b>.h", ".c", "_casadi.py"}``: the controller of an upshift
+    (power-on and coast) and the TCU task that runs it with the shift's EKF
+    (``gearsym_ekf_<a>_<b>``), and its model parts as CasADi functions."""
     table, hybrid = control_table(d, shift, config)
     forms: dict[str, CseForm] = {
         spec.name: cse_function(spec, table.config) for spec in table if spec.kind == "expr"
@@ -527,7 +566,8 @@ def control_files(
     }
     names = naming.model_file_names(name)
     row = (
-        f"| `{name}` | power-on upshift {spec.name}: {spec.off_going} off, {spec.on_coming} on; "
+        f"| `{name}` | upshift {spec.name}, power-on and coast: {spec.off_going} off, "
+        f"{spec.on_coming} on; "
         f"task with `ekf_{spec.name.replace('-', '_')}` | {c_dir}/{names['header']}, "
         f"{c_dir}/{names['source']} | {python_dir}/{names['casadi']} (model parts) |"
     )

@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from gearsym.symbolic.control_calibration import MOVING, SECANT_FORCE_MIN, TICK
 from gearsym.validation.studies.control.controller import (
     TIMEOUT_FACTOR,
     ShiftController,
@@ -33,9 +34,6 @@ from gearsym.validation.studies.control.controller import (
 )
 
 __all__ = ["DownshiftController"]
-
-#: The on-coming slip's fall (fraction of its start) that shows the off-going element slides.
-MOVING = 0.01
 
 
 class DownshiftController(ShiftController):
@@ -81,7 +79,9 @@ class DownshiftController(ShiftController):
                 self.on: max(self.pressure(self.on, on_force, offset), hold),
             }
             self._last_force = on_force
-            if tau >= 1.0:
+            # over at the tick nearest the ramp's end: the end falls on a tick when the phase
+            # lengths are whole ticks, and a rounding either way must not decide the tick
+            if t + self.lead - self._t_sync >= self.torque_phase - TICK / 2:
                 self.phase = "lockup"
                 self._t_lock = t
         if self.phase in ("lockup", "done"):
@@ -128,7 +128,7 @@ class DownshiftController(ShiftController):
             or t - self._t_slide > TIMEOUT_FACTOR * self.inertia_phase
         ):
             self.phase = "torque"
-        f1 = max(self._plan.hold_off if self._plan else 0.0, 1e3)
+        f1 = max(self._plan.hold_off if self._plan else 0.0, SECANT_FORCE_MIN)
         r0, r1 = self._slip_rates(sliding, x, torque, j_off, j_on, f1)
         wanted = target.rate(tau + self.lead)
         feed_forward = self._off_force if r1 == r0 else (wanted - r0) / (r1 - r0) * f1

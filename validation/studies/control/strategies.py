@@ -22,7 +22,8 @@ vehicle before a shift and learns after it; only the oracle is shown the truth.
   models (:mod:`.fill_estimate`): the fill time whose replayed input speed matches the
   measured one, taken outright when it explains the record, else weighed against the earlier
   shifts' by how sharply the record pins it down (:class:`.fill_estimate.FillBelief`); the
-  filter considers its remaining doubt.
+  filter considers its remaining doubt, and the next shift commands a fill shortened by part
+  of it (:func:`fill_to_command`: a tie-up costs more than a flare).
   It learns from power-on shifts only: a coast shift's record is not learned from (its
   drag barely excites μ or the valve's offset).
 * ``oracle``: the vehicle's true μ (the map's factor), mass, grade, torque gain, valve gain and
