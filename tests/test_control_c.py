@@ -11,7 +11,9 @@ closes the loop itself, and the shift it makes is the Python controller's.
 
 A vehicle that is not the calibration (heavier, on a grade, μ of both elements off) and a
 strategy's knowledge with every field away from its default (valve view, learned offsets,
-torque gain) exercise every input of the step.
+torque gain) exercise every input of the step. The coast 2-3 upshift (the input torque drives
+it: :class:`~gearsym.validation.studies.control.downshift.DownshiftController`'s order) is
+checked the same way.
 """
 
 from __future__ import annotations
@@ -128,12 +130,26 @@ def _run(d, lib: Path, single: bool, drive: str, coast: bool = False):  # noqa: 
     return twin, result
 
 
-@pytest.fixture(scope="module")
-def python_loop(d, libraries):  # noqa: ANN001, ANN201
-    """The Python controller closing the loop, the double and the float C builds riding along."""
-    double = _run(d, libraries[False], False, "python")
-    single = _run(d, libraries[True], True, "python")
-    return double, single
+#: the phase order of each kind of shift: power-on (the torque phase first) and coast (the
+#: input torque drives the shift: the inertia phase first)
+ORDER = {"power_on": ("torque", "inertia"), "coast": ("inertia", "torque")}
+_LOOPS: dict[str, tuple] = {}
+
+
+def _python_loops(d, libraries, kind: str) -> tuple:  # noqa: ANN001
+    """The Python controller closing the loop, the double and the float C builds riding
+    along (each kind simulated once per module)."""
+    if kind not in _LOOPS:
+        _LOOPS[kind] = tuple(
+            _run(d, libraries[single], single, "python", coast=kind == "coast")
+            for single in (False, True)
+        )
+    return _LOOPS[kind]
+
+
+@pytest.fixture(scope="module", params=sorted(ORDER))
+def python_loop(request, d, libraries):  # noqa: ANN001, ANN201
+    return request.param, _python_loops(d, libraries, request.param)
 
 
 def _differences(twin: Twin) -> np.ndarray:
@@ -141,30 +157,34 @@ def _differences(twin: Twin) -> np.ndarray:
 
 
 def test_double_build_gives_the_python_commands_tick_by_tick(python_loop) -> None:  # noqa: ANN001
-    (twin, result), _ = python_loop
+    """Every phase, in the kind's order, tick by tick as the Python controller gives it."""
+    kind, ((twin, result), _) = python_loop
     assert result.completed and all(a == b for _, a, b, _, _ in twin.ticks)
-    assert {"fill", "torque", "inertia", "lockup", "done"} <= {a for _, a, _, _, _ in twin.ticks}
+    phases = [a for _, a, _, _, _ in twin.ticks]
+    assert {"fill", "torque", "inertia", "lockup", "done"} <= set(phases)
+    first, then = ORDER[kind]
+    assert phases.index(first) < phases.index(then)
     worst = _differences(twin).max()
-    print(f"double build: largest command difference {worst:.3g} Pa")
+    print(f"{kind}, double build: largest command difference {worst:.3g} Pa")
     assert worst <= DOUBLE_TOLERANCE
 
 
 def test_float_build_gives_the_python_commands_within_float_rounding(python_loop) -> None:  # noqa: ANN001
-    _, (twin, _) = python_loop
+    kind, (_, (twin, _)) = python_loop
     assert all(a == b for _, a, b, _, _ in twin.ticks)
     worst = _differences(twin).max()
-    print(f"float build: largest command difference {worst:.3g} Pa ({worst / 0.125:.1f} ulps)")
+    print(
+        f"{kind}, float build: largest command difference {worst:.3g} Pa ({worst / 0.125:.1f} ulps)"
+    )
     assert worst <= FLOAT_TOLERANCE
 
 
-def test_the_float_c_controller_closes_the_loop_like_the_python_one(
-    d, libraries, python_loop
-) -> None:  # noqa: ANN001
+def test_the_float_c_controller_closes_the_loop_like_the_python_one(d, libraries) -> None:  # noqa: ANN001
     """The C controller (float) drives the plant: it ends locked in the to-gear at the Python
     loop's lock-up time (the plant's event, located to 1e-8 by the integrator) within 1 ms,
     and the on-coming slip follows the Python loop's within 0.1 rad/s (5 % of the lock-up
     slip, which is 5 rad/s)."""
-    (_, reference), _ = python_loop
+    (_, reference), _ = _python_loops(d, libraries, "power_on")
     twin, result = _run(d, libraries[True], True, "c")
     assert result.completed and twin.c.status == 0
     slip = naming.slip_column("B05")
@@ -178,45 +198,11 @@ def test_the_float_c_controller_closes_the_loop_like_the_python_one(
     assert slip_diff < 0.1
 
 
-@pytest.fixture(scope="module")
-def coast_loop(d, libraries):  # noqa: ANN001, ANN201
-    """The coast upshift: the Python DownshiftController closing the loop, both builds riding
-    along."""
-    return tuple(
-        _run(d, libraries[single], single, "python", coast=True) for single in (False, True)
-    )
-
-
-def test_coast_double_build_gives_the_python_commands_tick_by_tick(coast_loop) -> None:  # noqa: ANN001
-    """The driven order (fill, inertia phase with the off-going element sliding, torque phase
-    at synchronism, lock-up) tick by tick as the Python controller gives it."""
-    (twin, result), _ = coast_loop
-    assert result.completed and all(a == b for _, a, b, _, _ in twin.ticks)
-    phases = [a for _, a, _, _, _ in twin.ticks]
-    assert {"fill", "inertia", "torque", "lockup", "done"} <= set(phases)
-    assert phases.index("inertia") < phases.index("torque")
-    worst = _differences(twin).max()
-    print(f"coast, double build: largest command difference {worst:.3g} Pa")
-    assert worst <= DOUBLE_TOLERANCE
-
-
-def test_coast_float_build_gives_the_python_commands_within_float_rounding(coast_loop) -> None:  # noqa: ANN001
-    _, (twin, _) = coast_loop
-    assert all(a == b for _, a, b, _, _ in twin.ticks)
-    worst = _differences(twin).max()
-    print(
-        f"coast, float build: largest command difference {worst:.3g} Pa ({worst / 0.125:.1f} ulps)"
-    )
-    assert worst <= FLOAT_TOLERANCE
-
-
-def test_the_float_c_controller_closes_a_coast_shift_like_the_python_one(
-    d, libraries, coast_loop
-) -> None:  # noqa: ANN001
+def test_the_float_c_controller_closes_a_coast_shift_like_the_python_one(d, libraries) -> None:  # noqa: ANN001
     """The C controller (float) drives the coast shift: the plant's events (B05 engages, K38
     breaks away, B05 locks up at synchronism, K38 opens) in the Python loop's order, each
     within 1 ms of it, and both elements' slips within 0.1 rad/s of it."""
-    (_, reference), _ = coast_loop
+    (_, reference), _ = _python_loops(d, libraries, "coast")
     twin, result = _run(d, libraries[True], True, "c", coast=True)
     assert result.completed and twin.c.status == 0
     ours = [(e.kind, e.element) for e in result.events]
