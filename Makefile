@@ -136,7 +136,7 @@ results: $(STAMP)
 	cp build/results/drive_wltc3b_fleet/fleet.png $(RESULTS)/drive_wltc3b_fleet.png
 # The adaptive-control study (docs/control.md): 100 vehicles of the default fleet x 20 2-3
 # upshifts x 4 strategies (the issue's size), 20 vehicles with cold oil (every element's mu
-# +25 %) and 30 vehicles of 3-4 (about 36, 5 and 12 min on two cores).
+# +25 %) and 30 vehicles of 3-4 (about 55, 9 and 15 min on two cores).
 	rm -rf build/results/control_2_3 build/results/control_3_4 build/results/control_2_3_cold
 	$(BIN)/gearsym control --fleet --strategies fixed,rule,estimator,oracle --shifts 20 --runs 100 --seed 10000 --scheduler local --out build/results/control_2_3
 	$(BIN)/gearsym control --fleet --fix mu_scale=1.25 --strategies fixed,rule,estimator,oracle --shifts 20 --runs 20 --seed 10000 --scheduler local --out build/results/control_2_3_cold

@@ -304,14 +304,16 @@ def test_an_estimate_that_explains_the_record_replaces_the_belief() -> None:
     assert weighed.variance == pytest.approx(0.02**2 / 2.0, rel=1e-9)
 
 
-def test_the_commanded_fill_is_shortened_by_the_belief_doubt() -> None:
-    """δ − κσ within the adaptation's limit (κ = FILL_RISK): a tie-up costs more than a
-    flare, so a doubtful belief commands a shorter fill; a sure one its own δ."""
-    from gearsym.validation.studies.control.strategies import FILL_RISK, fill_to_command
+def test_the_commanded_fill_is_the_belief_shortened_by_its_doubt(monkeypatch) -> None:  # noqa: ANN001
+    """δ − κσ within the adaptation's limit (κ = FILL_RISK, 0 since the trial of 0.5 was not
+    adopted: the belief's own δ)."""
+    from gearsym.validation.studies.control import strategies
 
-    sure = FillBelief(0.02, 0.0)
     doubtful = FillBelief(0.02, 0.01**2)
-    assert fill_to_command(sure, 0.1) == pytest.approx(0.02)
-    assert fill_to_command(doubtful, 0.1) == pytest.approx(0.02 - FILL_RISK * 0.01)
-    assert FILL_RISK > 0
-    assert fill_to_command(FillBelief(-0.09, 0.03**2), 0.1) == pytest.approx(-0.1)
+    assert strategies.fill_to_command(doubtful, 0.1) == pytest.approx(
+        0.02 - strategies.FILL_RISK * 0.01
+    )
+    monkeypatch.setattr(strategies, "FILL_RISK", 0.5)
+    assert strategies.fill_to_command(FillBelief(0.02, 0.0), 0.1) == pytest.approx(0.02)
+    assert strategies.fill_to_command(doubtful, 0.1) == pytest.approx(0.015)
+    assert strategies.fill_to_command(FillBelief(-0.09, 0.03**2), 0.1) == pytest.approx(-0.1)

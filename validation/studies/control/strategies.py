@@ -22,8 +22,8 @@ vehicle before a shift and learns after it; only the oracle is shown the truth.
   models (:mod:`.fill_estimate`): the fill time whose replayed input speed matches the
   measured one, taken outright when it explains the record, else weighed against the earlier
   shifts' by how sharply the record pins it down (:class:`.fill_estimate.FillBelief`); the
-  filter considers its remaining doubt, and the next shift commands a fill shortened by part
-  of it (:func:`fill_to_command`: a tie-up costs more than a flare).
+  filter considers its remaining doubt (the next shift commands the belief's fill:
+  :func:`fill_to_command`; biased short by the doubt was tried and not adopted).
   It learns from power-on shifts only: a coast shift's record is not learned from (its
   drag barely excites μ or the valve's offset).
 * ``oracle``: the vehicle's true μ (the map's factor), mass, grade, torque gain, valve gain and
@@ -278,15 +278,17 @@ FILL_STEP = 1.0e-3
 #: no estimate outright, the belief's own σ floored at 1 ms let the filter's valve offset run
 #: to 3-4 σ of its prior).
 FILL_SIGMA_FLOOR = 1.0e-2
-#: How many of the belief's σ the commanded fill is shortened by (:func:`fill_to_command`).
-#: A fill too long ties the on-coming element up against the off-going one at the fast-fill
-#: pressure, one too short lets the input flare a little before the torque phase's ramp
-#: catches it: on the tuning vehicles (seeds 100000-100039, four 2-3 upshifts) three of the
-#: five worst second shifts were tie-ups after a first record that pinned the fill down
-#: poorly (the belief's σ near its prior's 29 ms). Tried on those 40: 0 (p95 |jerk| at
-#: shifts 2-4 23.1, 10.1, 7.43 m/s³ against the oracle's 7.52) and 0.5 (14.7, 10.7, 7.79);
-#: 1 on the first 20 (worse than 0.5 at shifts 3 and 4).
-FILL_RISK = 0.5
+#: How many of the belief's σ the commanded fill is shortened by (:func:`fill_to_command`):
+#: none. A fill too long ties the on-coming element up against the off-going one at the
+#: fast-fill pressure, one too short lets the input flare a little, so a command biased short
+#: by a doubtful belief was tried: 0.5 (chosen on the tuning vehicles, seeds 100000-100039,
+#: four 2-3 upshifts: p95 |jerk| at shifts 2-4 14.7, 10.7, 7.79 m/s³ against 23.1, 10.1, 7.43
+#: without it, the oracle's 7.52) gave on the 100 evaluation vehicles 14.4, 10.5, 8.41, 7.78
+#: at shifts 2-5 against 19.2, 10.4, 7.78, 7.14, within 10 % of the oracle from the fifth
+#: shift instead of the fourth, and with cold oil 8.2-8.9 from the fourth shift against
+#: 7.6-7.9 (within 10 % from the sixth instead of the fourth): a belief that still doubts
+#: commands a fill a millisecond or two short for many shifts. Not adopted (docs/control.md).
+FILL_RISK = 0.0
 #: How far the fill time may drift between two shifts (s; oil temperature, wear; assumed): the
 #: belief's variance grows by its square per shift, so it never stops learning.
 FILL_DRIFT = 2.0e-3
