@@ -224,38 +224,39 @@ def control_expressions(
     target = hybrid.modes[hybrid.to_mode]
     x = _rebuilt(d, hybrid, target, omega, u)
     exprs["to_gear"] = (target.reaction[on].xreplace(u).xreplace(x),)
-    # off-going open, on-coming sliding: the slip, and its rate at F_N = 0 and F_N = F_1
-    for sign, name in ((1, "sliding_pos"), (-1, "sliding_neg")):
-        mode = _mode(hybrid, {off: ("open", 0), on: ("sliding", sign)})
-        last = {**known, force[off]: 0, force[on]: args["F_last"], mu[on]: args["mu_last"]}
-        last[mu[off]] = 0
-        x = _rebuilt(d, hybrid, mode, omega, last)
-        slip = mode.slip[on]
+
+    def secant(
+        mode: Mode, pressed: str, other: str
+    ) -> tuple[dict[sp.Symbol, sp.Expr], tuple[sp.Expr, ...]]:
+        """The state rebuilt in ``mode`` with element ``pressed`` at F_last, mu_last (``other``
+        free), and the on-coming slip with its rate at F_N(pressed) = 0 and F_N = F_1, mu_1."""
+        last = {**known, force[other]: 0, mu[other]: 0}
+        x = _rebuilt(
+            d,
+            hybrid,
+            mode,
+            omega,
+            {**last, force[pressed]: args["F_last"], mu[pressed]: args["mu_last"]},
+        )
         states = list(mode.model.state_symbols)
         rates = []
         for value, mu_value in ((0, 0), (args["F_1"], args["mu_1"])):
-            u = {**known, force[off]: 0, mu[off]: 0, force[on]: value, mu[on]: mu_value}
-            rhs = mode.model.rhs.xreplace(u)
-            rate = sum(sp.diff(slip, s) * rhs[k] for k, s in enumerate(states))
+            rhs = mode.model.rhs.xreplace({**last, force[pressed]: value, mu[pressed]: mu_value})
+            rate = sum(sp.diff(mode.slip[on], s) * rhs[k] for k, s in enumerate(states))
             rates.append(rate.xreplace(x))
-        exprs[name] = (slip.xreplace(x), *rates)
+        return x, (mode.slip[on].xreplace(x), *rates)
+
+    # off-going open, on-coming sliding: the slip, and its rate at F_N = 0 and F_N = F_1
+    for sign, name in ((1, "sliding_pos"), (-1, "sliding_neg")):
+        mode = _mode(hybrid, {off: ("open", 0), on: ("sliding", sign)})
+        _, exprs[name] = secant(mode, on, off)
         if name == "sliding_pos":
-            exprs["sliding_slip"] = (slip.xreplace(x),)
+            exprs["sliding_slip"] = exprs[name][:1]
     # off-going sliding, on-coming open: the on-coming slip and its rate at the off-going
     # F_N = 0 and F_N = F_1 (the driven shift's feed-forward, downshift.py)
     for sign, name in ((1, "driven_pos"), (-1, "driven_neg")):
         mode = _mode(hybrid, {off: ("sliding", sign), on: ("open", 0)})
-        last = {**known, force[on]: 0, force[off]: args["F_last"], mu[off]: args["mu_last"]}
-        last[mu[on]] = 0
-        x = _rebuilt(d, hybrid, mode, omega, last)
-        states = list(mode.model.state_symbols)
-        rates = []
-        for value, mu_value in ((0, 0), (args["F_1"], args["mu_1"])):
-            u = {**known, force[on]: 0, mu[on]: 0, force[off]: value, mu[off]: mu_value}
-            rhs = mode.model.rhs.xreplace(u)
-            rate = sum(sp.diff(mode.slip[on], s) * rhs[k] for k, s in enumerate(states))
-            rates.append(rate.xreplace(x))
-        exprs[name] = (mode.slip[on].xreplace(x), *rates)
+        x, exprs[name] = secant(mode, off, on)
         if name == "driven_pos":
             # the off-going element's own slip: where its μ map is read
             exprs["driven_slip"] = (mode.slip[off].xreplace(x),)
