@@ -130,6 +130,9 @@ def test_a_fill_is_found_jointly_with_a_valve_offset(d, point) -> None:  # noqa:
     assert replay.residual(planted, truth, arrays, result.commands, result.phases) < 1e-3
     joint = replay.estimate(knowledge, arrays, result.commands, result.phases, offset_sigma=6e3)
     assert joint.delta == pytest.approx(planted, abs=3e-3)
+    # so late a piston has not stroked by the compared window's end: later ones replay the
+    # same, and the record bounds the fill from one side (its plateau's edge is the estimate)
+    assert joint.one_sided
     assert joint.offset == pytest.approx(offset, abs=1.5e3)
     alone = replay.estimate(knowledge, arrays, result.commands, result.phases)
     assert abs(alone.delta - planted) > 5e-3
@@ -317,3 +320,45 @@ def test_the_commanded_fill_is_the_belief_shortened_by_its_doubt(monkeypatch) ->
     assert strategies.fill_to_command(FillBelief(0.02, 0.0), 0.1) == pytest.approx(0.02)
     assert strategies.fill_to_command(doubtful, 0.1) == pytest.approx(0.015)
     assert strategies.fill_to_command(FillBelief(-0.09, 0.03**2), 0.1) == pytest.approx(-0.1)
+
+
+def test_a_plateau_of_the_residual_bounds_the_fill_from_one_side() -> None:
+    """Hand-built residuals (:meth:`FillReplay._plateau_edge`): a fill so late that the
+    replay's piston never strokes in the window leaves the residual flat beyond some δ (here
+    falling linearly to 0.5 rad/s at δ = +37 ms, flat after): the edge nearest the fill the
+    shift assumed is found to 1 ms; a sharp valley (a V) has no plateau; a plateau on the
+    other side of the centre gives its own inner edge."""
+
+    def late(x: float) -> float:
+        return 0.5 + max(0.037 - x, 0.0) * 100.0
+
+    grid = [k * GRID_STEP for k in range(-6, 7)]
+    edge = FillReplay._plateau_edge(grid, [late(x) for x in grid], 6, late)
+    assert edge is not None
+    # the plateau starts where the slope's rise falls below the sensors' resolution
+    assert edge[0] == pytest.approx(0.037 - fill_estimate.RESIDUAL_FLOOR / 100.0, abs=1e-3)
+    assert edge[1] <= 0.5 + fill_estimate.RESIDUAL_FLOOR
+
+    def valley(x: float) -> float:
+        return 0.2 + abs(x - 0.013) * 100.0
+
+    assert FillReplay._plateau_edge(grid, [valley(x) for x in grid], 6, valley) is None
+
+    def early(x: float) -> float:
+        return 0.5 + max(x + 0.024, 0.0) * 100.0
+
+    edge = FillReplay._plateau_edge(grid, [early(x) for x in grid], 6, early)
+    assert edge is not None and edge[0] == pytest.approx(-0.024, abs=1e-3)
+
+
+def test_a_one_sided_estimate_moves_the_belief_but_not_its_doubt() -> None:
+    """A one-sided estimate that explains the record replaces the belief's δ (the bound is
+    what the next shift commands) and credits no variance: the belief keeps its predicted
+    variance however steep the plateau's other side."""
+    prior = FillBelief(0.0, 0.02**2, drift=0.002)
+    bound = FillEstimate(0.045, 0.7, 2.5, 9.0, one_sided=True)
+    assert bound.explains and bound.variance == np.inf
+    after = prior.after(bound)
+    assert after.delta == 0.045
+    assert after.variance == pytest.approx(0.02**2 + 0.002**2, rel=1e-12)
+    assert bound.to_dict()["sigma"] is None and bound.to_dict()["one_sided"] is True

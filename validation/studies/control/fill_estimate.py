@@ -37,7 +37,7 @@ adopted: docs/control.md says why).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -79,6 +79,8 @@ OFFSET_GRID = (-2.0, -1.0, 0.0, 1.0, 2.0)
 #: How far past the inertia phase's commanded start the replay is compared (s): a flare shows
 #: once the off-going element is vented, one valve delay after the torque phase.
 AFTER_TORQUE_PHASE = 0.06
+#: How closely the edge of a plateau of the residual is found (s, :meth:`FillReplay._plateau_edge`).
+EDGE_TOLERANCE = 1e-3
 
 
 @dataclass(frozen=True)
@@ -93,6 +95,9 @@ class FillEstimate:
     rms_assumed: float
     #: the valve offset (Pa) the replay found with δ (the one it assumed when not searched)
     offset: float = 0.0
+    #: whether the record bounds δ from one side only (:meth:`FillReplay._plateau_edge`):
+    #: δ is then the bound, and no variance is credited to it
+    one_sided: bool = False
 
     @property
     def variance(self) -> float:
@@ -102,6 +107,8 @@ class FillEstimate:
         var(δ) = σ_e² / (n g²) = h² rms² / (rms_side² − rms²) over the independent samples
         (:data:`INDEPENDENT_SAMPLES`). A record the fill explains (a sharp valley, little left)
         pins δ down; a flat one (the model's own error) tells little."""
+        if self.one_sided:
+            return math.inf
         floor = max(self.rms, RESIDUAL_FLOOR)
         rise = self.rms_side**2 - floor**2
         if not math.isfinite(self.rms_side):
@@ -127,6 +134,7 @@ class FillEstimate:
             "rms_side": self.rms_side,
             "rms_assumed": self.rms_assumed,
             "offset": self.offset,
+            "one_sided": self.one_sided,
             # JSON has no infinity: a record that pins nothing down has no σ
             "sigma": math.sqrt(self.variance) if math.isfinite(self.variance) else None,
         }
@@ -291,6 +299,46 @@ class FillReplay:
         start = list(phases).index("inertia")
         return min(start + int(round(AFTER_TORQUE_PHASE / TICK)), n_ticks)
 
+    @staticmethod
+    def _plateau_edge(
+        grid: Sequence[float], costs: Sequence[float], centre: int, cost: Callable[[float], float]
+    ) -> tuple[float, float] | None:
+        """The edge nearest the centre of a plateau of the grid's lowest residual, or None.
+
+        A fill so late that the replay's piston has not stroked by the window's end gives the
+        same replay whatever its δ beyond that: the residual is flat out to the search's edge
+        (on the tuning vehicle 100004, 35 ms late behind a valve 100 mbar low, flat from
+        δ = +50 ms on, and the estimate landed at +60 ms: the next shift tied up). Such a
+        record says only that the fill is at least so long; of the fills it cannot tell apart
+        (residuals within :data:`RESIDUAL_FLOOR`, the speed sensors' resolution) the one
+        nearest the fill the shift assumed is taken: a fill commanded too long ties the
+        elements up, one too short flares a little and the next record pins it down. The
+        edge is refined by bisection to :data:`EDGE_TOLERANCE` (the last δ towards the
+        centre still on the plateau)."""
+        best = int(np.argmin(costs))
+        level = costs[best] + RESIDUAL_FLOOR
+        on = [k for k in range(len(costs)) if costs[k] <= level]
+        low, high = best, best
+        while low - 1 in on:
+            low -= 1
+        while high + 1 in on:
+            high += 1
+        if low == high:
+            return None
+        inner = low if abs(low - centre) <= abs(high - centre) else high
+        outer = inner - 1 if inner == low else inner + 1
+        inside, outside = grid[inner], grid[outer] if 0 <= outer < len(grid) else None
+        rms = costs[inner]
+        if outside is not None:
+            while abs(outside - inside) > EDGE_TOLERANCE:
+                middle = (inside + outside) / 2
+                value = cost(middle)
+                if value <= level:
+                    inside, rms = middle, value
+                else:
+                    outside = middle
+        return float(inside), float(rms)
+
     def estimate(
         self,
         knowledge: Knowledge,
@@ -334,6 +382,8 @@ class FillReplay:
         offset = min(offsets, key=lambda o: min(table[o]))
         costs = table[offset]
         best = grid[int(np.argmin(costs))]
+        # the record cannot tell a plateau's fills apart: it bounds the fill from one side
+        edge = self._plateau_edge(grid, costs, n, lambda x: cost(x, offset))
 
         def refine_delta(around: float, at: float) -> tuple[float, float]:
             found = minimize_scalar(
@@ -344,9 +394,12 @@ class FillReplay:
             )
             return float(found.x), float(found.fun)
 
-        delta, rms = refine_delta(best, offset)
-        if min(costs) < rms:
-            delta, rms = best, min(costs)
+        if edge is None:
+            delta, rms = refine_delta(best, offset)
+            if min(costs) < rms:
+                delta, rms = best, min(costs)
+        else:
+            delta, rms = edge
         if offset_sigma > 0:
             # the offset refined at that δ (to 1 mbar), then δ once more at that offset
             found = minimize_scalar(
@@ -357,12 +410,21 @@ class FillReplay:
             )
             if float(found.fun) < rms:
                 offset, rms = float(found.x), float(found.fun)
-                again, again_rms = refine_delta(delta, offset)
-                if again_rms < rms:
-                    delta, rms = again, again_rms
+                if edge is None:
+                    again, again_rms = refine_delta(delta, offset)
+                    if again_rms < rms:
+                        delta, rms = again, again_rms
+                else:
+                    at = offset
+                    edge = self._plateau_edge(
+                        grid, [cost(x, at) for x in grid], n, lambda x: cost(x, at)
+                    )
+                    if edge is not None:
+                        delta, rms = edge
         # how sharply the record pins δ down: the residual one grid step either side (a side
         # the TCU's model cannot follow counts as the other's)
         sides = [cost(delta - step, offset), cost(delta + step, offset)]
         finite = [c for c in sides if math.isfinite(c)]
         side = math.sqrt(sum(c**2 for c in finite) / len(finite)) if finite else math.inf
-        return FillEstimate(delta, rms, side, table[assumed][n], offset)
+        one_sided = edge is not None
+        return FillEstimate(delta, rms, side, table[assumed][n], offset, one_sided)
