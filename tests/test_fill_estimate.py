@@ -362,3 +362,27 @@ def test_a_one_sided_estimate_moves_the_belief_but_not_its_doubt() -> None:
     assert after.delta == 0.045
     assert after.variance == pytest.approx(0.02**2 + 0.002**2, rel=1e-12)
     assert bound.to_dict()["sigma"] is None and bound.to_dict()["one_sided"] is True
+
+
+def test_the_fill_is_replayed_again_with_what_the_shift_taught(d, point, monkeypatch) -> None:  # noqa: ANN001
+    """Elements gripping 15 % less than the calibration says and a piston 30 ms early: the
+    first replay, with the calibration's μ, blames part of the weaker grip on the fill (more
+    than 2 ms off the planted fill); the second, with the filter's μ after the shift, finds the
+    planted fill within 1 ms, and that is what the strategy believes."""
+    found: list[FillEstimate] = []
+    original = FillReplay.estimate
+
+    def spy(self, *args, **kwargs):  # noqa: ANN001, ANN002, ANN003, ANN202
+        out = original(self, *args, **kwargs)
+        found.append(out)
+        return out
+
+    monkeypatch.setattr(FillReplay, "estimate", spy)
+    spec = shift_spec(d, SHIFT)
+    planted = -0.03
+    vehicle = Vehicle(d, {spec.off_going: 0.85, spec.on_coming: 0.85}, Actuators(), planted)
+    outcome = run_vehicle(d, SHIFT, point, vehicle, 1, ("estimator",))["estimator"][0]
+    first, second = found
+    assert abs(first.delta - planted) > 2e-3
+    assert second.delta == pytest.approx(planted, abs=1e-3)
+    assert outcome.fill is not None and outcome.fill["delta"] == second.delta
