@@ -282,14 +282,19 @@ def test_the_casadi_model_parts_equal_the_c_ones(libraries) -> None:  # noqa: AN
 
 
 def test_generate_says_why_a_shift_gets_no_controller(d) -> None:  # noqa: ANN001
-    """The controller's phases are an upshift's: for a downshift, generate emits nothing and
-    says so in one line (as it does when the EKF it runs with is not emitted)."""
+    """When the EKF the task runs with is not emitted, generate emits no controller and says
+    so in one line; a downshift's is emitted (tests/test_control_c_downshift.py runs it) and
+    its README row says it is one."""
     from gearsym.symbolic.codegen.control import control_files
     from gearsym.symbolic.shifts import shift_spec
 
     files, rows, skipped = control_files(d, shift_spec(d, "3-2"), "", "c", "python")
-    assert not files and not rows
-    assert skipped == ["`control_3_2`: the controller's phases are those of an upshift"]
+    assert sorted(files) == [
+        "c/gearsym_control_3_2.c",
+        "c/gearsym_control_3_2.h",
+        "python/gearsym_control_3_2_casadi.py",
+    ]
+    assert not skipped and rows[0].startswith("| `control_3_2` | downshift 3-2, power-on and coast")
     files, rows, skipped = control_files(d, shift_spec(d, "2-3"), "no EKF here", "c", "python")
     assert not files and skipped == ["`control_2_3`: no EKF here"]
     assert control_files(d, None, "", "c", "python") == ({}, [], [])

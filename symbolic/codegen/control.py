@@ -1,13 +1,14 @@
-"""The TCU's shift controller as C: the model parts of an upshift's controller (power-on and
-coast) derived here, its phase logic in ``templates/c_shift_control.{h,c}.j2``, emitted as
-``gearsym_control_<a>_<b>.{h,c}``.
+"""The TCU's shift controller as C: the model parts of a shift's controller (power-on and
+coast, upshift or downshift) derived here, its phase logic in
+``templates/c_shift_control.{h,c}.j2``, emitted as ``gearsym_control_<a>_<b>.{h,c}``.
 
 The controller is the one of ``validation/studies/control/controller.py`` (``ShiftController``:
 fill, torque phase, inertia phase with feed-forward and PI on the on-coming slip, lock-up;
-for a coast upshift ``DownshiftController``'s order: the inertia phase first with the
-off-going element sliding), stated for code: every model evaluation it makes becomes a
-closed-form expression of the two measured shaft speeds (input, output), the commanded input
-torque and the strategy's knowledge, derived from the hybrid shift model
+for a shift the input torque drives, a coast upshift or a power-on downshift,
+``DownshiftController``'s order: the inertia phase first with the off-going element
+sliding), stated for code: every model evaluation it makes becomes a closed-form expression
+of the two measured shaft speeds (input, output), the commanded input torque and the
+strategy's knowledge, derived from the hybrid shift model
 (:func:`gearsym.symbolic.hybrid.hybrid_shift`):
 
 * *state rebuild*: the gear states z of a mode from the two measured speeds by least squares
@@ -22,9 +23,9 @@ torque and the strategy's knowledge, derived from the hybrid shift model
   2 N_disc r_m μ F_N, 2.69/3.14), μ an argument: the C code reads it from ``gearsym_mu_map``
   at the element's pressure and slip, scaled by the strategy's μ over μ_nominal, as the
   Python controller's model does;
-* for a coast upshift, in the mode "off-going sliding, on-coming open" (both directions): the
-  on-coming slip and its acceleration at the off-going F_N = 0 and F_N = F₁, and the
-  off-going slip (where its μ map is read).
+* for a shift the input torque drives, in the mode "off-going sliding, on-coming open" (both
+  directions): the on-coming slip and its acceleration at the off-going F_N = 0 and F_N = F₁,
+  and the off-going slip (where its μ map is read).
 
 The parameters of the expressions are the vehicle's fixed ones (side shafts, wheel inertia,
 road load); the strategy's m_veh and ζ are arguments, as μ. The phase constants (fill time,
@@ -110,8 +111,8 @@ CONTROL_ARGUMENTS: dict[str, tuple[str, ...]] = {
     ),
 }
 CONTROL_ARGUMENTS["sliding_neg"] = CONTROL_ARGUMENTS["sliding_pos"]
-# the shift the input torque drives (a coast upshift): the off-going element slides, the
-# on-coming one is open; F and mu are the off-going element's
+# the shift the input torque drives (a coast upshift, a power-on downshift): the off-going
+# element slides, the on-coming one is open; F and mu are the off-going element's
 CONTROL_ARGUMENTS["driven_slip"] = CONTROL_ARGUMENTS["sliding_slip"]
 CONTROL_ARGUMENTS["driven_pos"] = CONTROL_ARGUMENTS["sliding_pos"]
 CONTROL_ARGUMENTS["driven_neg"] = CONTROL_ARGUMENTS["sliding_pos"]
@@ -263,6 +264,14 @@ def control_expressions(
     return hybrid, fixed, exprs, args
 
 
+def is_upshift(d: GearboxDescription, spec: ShiftSpec) -> bool:
+    """Whether the to-gear's ratio is the smaller (the input slows down): the input torque
+    drives an upshift when it is negative (coast), a downshift when it is positive (power on),
+    which picks the controller's phase order at the first tick."""
+    ratio = [abs(float(gear_ratio(d, d.gear(g)).ratio)) for g in (spec.from_gear, spec.to_gear)]
+    return ratio[1] < ratio[0]
+
+
 def control_table(
     d: GearboxDescription, shift: str, config: CodegenConfig | None = None
 ) -> tuple[FunctionTable, HybridShift]:
@@ -270,6 +279,7 @@ def control_table(
     ``params_validate`` and one row per entry of :data:`CONTROL_ARGUMENTS`, ``<name>(p, v,
     out)``."""
     hybrid, fixed, exprs, args = control_expressions(d, shift)
+    kind = "upshift" if is_upshift(d, hybrid.spec) else "downshift"
     if config is None:  # the ranges params_validate enforces: the parameter records' (as generate)
         records = {r.key: r.bounds for r in RECORDS if r.bounds is not None and r.section != "mu"}
         config = CodegenConfig(bounds={v.name: records[v.name] for v in fixed if v.name in records})
@@ -285,7 +295,7 @@ def control_table(
         metadata={
             "gearbox": d.name,
             "equations": "2.29, 2.44, 2.59, 2.69, 3.14",
-            "content": f"power-on and coast upshift controller of shift {shift} "
+            "content": f"power-on and coast {kind} controller of shift {shift} "
             f"(TCU task, {TICK:g} s)",
         },
     )
@@ -406,6 +416,8 @@ class CControlView(ModelView):
     ekf_u: EkfInputs
     ekf_element_off: int  # index of the element in the EKF's modes array
     ekf_element_on: int
+    #: the to-gear's ratio is the smaller: the input torque drives the shift when negative
+    upshift: bool
     math_macros: tuple[MathMacro, ...]
     m_veh_default: str
     zeta_default: str
@@ -456,8 +468,8 @@ def ekf_mismatch(d: GearboxDescription, hybrid: HybridShift) -> str:
 def emit_control_files(
     d: GearboxDescription, shift: str, config: CodegenConfig | None = None
 ) -> dict[str, str]:
-    """``{"gearsym_control_<a>_<b>.h", ".c", "_casadi.py"}``: the controller of an upshift
-    (power-on and coast) and the TCU task that runs it with the shift's EKF
+    """``{"gearsym_control_<a>_<b>.h", ".c", "_casadi.py"}``: the controller of a shift
+    (power-on and coast, upshift or downshift) and the TCU task that runs it with the shift's EKF
     (``gearsym_ekf_<a>_<b>``), and its model parts as CasADi functions."""
     table, hybrid = control_table(d, shift, config)
     forms: dict[str, CseForm] = {
@@ -499,6 +511,7 @@ def emit_control_files(
         ),
         ekf_element_off=elements.index(spec.off_going),
         ekf_element_on=elements.index(spec.on_coming),
+        upshift=is_upshift(d, spec),
         math_macros=tuple(MathMacro(name.upper(), name, False) for name in macros),
         m_veh_default=_lit(defaults["m_veh"]),
         zeta_default=_lit(defaults[naming.GRADE]),
@@ -544,15 +557,12 @@ def control_files(
     """What ``generate`` emits of the controller of ``spec`` (the default shift, ``None`` when
     it is not emitted) into ``c_dir``: the files, their README rows, and, when it cannot be
     emitted, why in one line (``obstacle``: why its EKF is not emitted, "" when it is; the
-    controller needs an upshift and the swapping elements' piston areas too)."""
+    controller needs the swapping elements' piston areas too)."""
     if spec is None:
         return {}, [], []
     name = control_model_name(spec.name)
-    ratio = [abs(float(gear_ratio(d, d.gear(g)).ratio)) for g in (spec.from_gear, spec.to_gear)]
     lacking = [e for e in spec.swapping if d.element(e).a_piston is None]
     why = obstacle
-    if not why and not ratio[1] < ratio[0]:
-        why = "the controller's phases are those of an upshift"
     if not why and lacking:
         why = f"{', '.join(lacking)} has no a_piston (F_N = p a_piston)"
     if not why:
@@ -567,7 +577,8 @@ def control_files(
     }
     names = naming.model_file_names(name)
     row = (
-        f"| `{name}` | upshift {spec.name}, power-on and coast: {spec.off_going} off, "
+        f"| `{name}` | {'upshift' if is_upshift(d, spec) else 'downshift'} {spec.name}, "
+        f"power-on and coast: {spec.off_going} off, "
         f"{spec.on_coming} on; "
         f"task with `ekf_{spec.name.replace('-', '_')}` | {c_dir}/{names['header']}, "
         f"{c_dir}/{names['source']} | {python_dir}/{names['casadi']} (model parts) |"
