@@ -64,6 +64,14 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "if the gearbox has it)",
     )
     p.add_argument(
+        "--controllers",
+        default=None,
+        metavar="WHICH",
+        help="shifts whose TCU shift controller is emitted, each with its EKF as one 10 ms task: "
+        f"none, adjacent, all or a list such as 3-2,4-3 (default: {DEFAULT_SHIFT}, the thesis' "
+        "shift, when its model is emitted)",
+    )
+    p.add_argument(
         "--uio-unknown",
         default="T_res_star",
         metavar="NAMES",
@@ -93,6 +101,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
     """Generate, optionally check, and move the result into place."""
     from gearsym.symbolic.export.generate import (
         check_generatable,
+        controller_shifts,
         generate_tree,
         hybrid_shift_names,
         selected_shifts,
@@ -106,6 +115,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
     check_generatable(d)
     selected_shifts(d, args.shifts)  # a bad --shifts is a one-line error before any work
     hybrid_shift_names(d, args.hybrid_shifts)
+    controller_shifts(d, args.shifts, args.controllers)
     with OutputDir(args.out, "generate", before_commit=check) as out:
         progress(f"generating code for {d.name}")
         unknown = tuple(name.strip() for name in args.uio_unknown.split(",") if name.strip())
@@ -115,6 +125,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
             shifts=args.shifts,
             hybrid_shifts=args.hybrid_shifts,
             uio_unknown=unknown,
+            controllers=args.controllers,
         )
         write_files(tree.files, out.path)
         if args.check:

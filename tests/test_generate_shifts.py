@@ -126,3 +126,50 @@ def test_bad_shift_selection_is_one_line(tmp_path: Path, value: str, message: st
     assert message in lines[-1] and lines[-1].startswith("gearsym: ")
     assert "Traceback" not in result.stderr
     assert not out.exists()
+
+
+def test_controllers_emits_a_downshift_controller_with_its_ekf(tmp_path: Path) -> None:
+    """``--controllers 3-2``: the downshift's controller and the EKF its task runs with are
+    written, its README row says it is a downshift, and the default shift's controller is not
+    (only what was asked for); the task compiles strictly with them (the twin tests of its
+    behaviour: tests/test_control_c_downshift.py)."""
+    from gearsym.validation.checks.control_c import build_control_library
+
+    out = tmp_path / "out"
+    result = subprocess.run(
+        [sys.executable, "-m", "gearsym", "generate", "--controllers", "3-2", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert result.returncode == 0, result.stderr
+    c = out / "c"
+    assert (c / "gearsym_control_3_2.c").is_file() and (c / "gearsym_ekf_3_2.c").is_file()
+    assert not (c / "gearsym_control_2_3.c").exists()
+    readme = (out / "README.md").read_text(encoding="utf-8")
+    assert "| `control_3_2` | downshift 3-2, power-on and coast: B05 off, K38 on" in readme
+    assert build_control_library(c, "3-2", tmp_path / "build", single=True).is_file()
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ("1-5", "swaps two elements each way"),
+        ("3-2,3-2", "listed twice"),
+        ("3-x", "unknown gear 'x'"),
+    ],
+)
+def test_bad_controller_selection_is_one_line(tmp_path: Path, value: str, message: str) -> None:
+    out = tmp_path / "out"
+    result = subprocess.run(
+        [sys.executable, "-m", "gearsym", "generate", "--controllers", value, "--out", str(out)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert message in lines[-1] and lines[-1].startswith("gearsym: ")
+    assert "--controllers" in lines[-1]
+    assert "Traceback" not in result.stderr
+    assert not out.exists()

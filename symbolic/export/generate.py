@@ -319,7 +319,10 @@ def selected_shifts(
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise GearsymError(d.file, key, f"shift {twice[0]} listed twice")
-    return [shift_spec(d, name, max_swaps=2) for name in names]
+    try:
+        return [shift_spec(d, name, max_swaps=2) for name in names]
+    except GearsymError as err:  # the option the user gave, not the description's key
+        raise GearsymError(d.file, key, err.reason) from None
 
 
 def check_generatable(d: GearboxDescription) -> None:
@@ -356,9 +359,35 @@ def _check_bound(
     )
 
 
-def gearbox_model_names(d: GearboxDescription, shifts: str = "adjacent") -> list[str]:
+def gearbox_model_names(
+    d: GearboxDescription, shifts: str = "adjacent", controllers: str | None = None
+) -> list[str]:
     """The names of :func:`gearbox_models`, in output order, without deriving anything."""
-    return [name for name, _ in _model_plan(d, shifts)]
+    return [name for name, _ in _model_plan(d, shifts, controllers)]
+
+
+def controller_shifts(
+    d: GearboxDescription, shifts: str = "adjacent", controllers: str | None = None
+) -> list[ShiftSpec]:
+    """The shifts whose TCU shift controller (with its EKF) ``generate`` emits: by default the
+    thesis' shift (:data:`~gearsym.symbolic.defaults.DEFAULT_SHIFT`) when its model is among
+    ``shifts``; ``"none"``; or ``controllers`` as :func:`selected_shifts` reads it (upshifts,
+    downshifts, skip shifts). A double swap is a one-line error: the controller hands one
+    element's torque over to one other."""
+    if controllers == "none":
+        return []
+    if controllers is None:
+        return [s for s in selected_shifts(d, shifts) if s.name == DEFAULT_SHIFT][:1]
+    specs = selected_shifts(d, controllers, "--controllers")
+    for spec in specs:
+        if not spec.single:
+            raise GearsymError(
+                d.file,
+                "--controllers",
+                f"shift {spec.name} swaps two elements each way: the controller hands one "
+                "element's torque over to one other",
+            )
+    return specs
 
 
 def gearbox_models(
@@ -366,30 +395,35 @@ def gearbox_models(
     progress: Callable[[str], None] | None = None,
     only: str | None = None,
     shifts: str = "adjacent",
+    controllers: str | None = None,
 ) -> list[EmittedModel]:
     """Every model ``gearsym generate`` emits for ``d``, in output order (with ``only``: that
     one model, deriving nothing else; an empty list for an unknown name). ``shifts`` selects
-    the shift models (:func:`selected_shifts`)."""
+    the shift models (:func:`selected_shifts`), ``controllers`` the shifts whose EKF a
+    controller runs with (:func:`controller_shifts`)."""
     say = progress or (lambda message: None)
-    return [build(say) for name, build in _model_plan(d, shifts) if only is None or name == only]
+    plan = _model_plan(d, shifts, controllers)
+    return [build(say) for name, build in plan if only is None or name == only]
 
 
 def _model_plan(
-    d: GearboxDescription, shifts_selected: str = "adjacent"
+    d: GearboxDescription, shifts_selected: str = "adjacent", controllers: str | None = None
 ) -> list[tuple[str, Callable[[Callable[[str], None]], EmittedModel]]]:
     """(name, builder) of every emitted model: the names come from the naming rules, so a
     caller can pick one model before any derivation."""
-    return _plan_and_skips(d, shifts_selected)[0]
+    return _plan_and_skips(d, shifts_selected, controllers)[0]
 
 
-def skipped_models(d: GearboxDescription, shifts: str = "adjacent") -> tuple[str, ...]:
+def skipped_models(
+    d: GearboxDescription, shifts: str = "adjacent", controllers: str | None = None
+) -> tuple[str, ...]:
     """What ``generate`` leaves out for ``d`` and why, one line each (printed, and listed in the
     generated README); empty when every model is emitted."""
-    return _plan_and_skips(d, shifts)[1]
+    return _plan_and_skips(d, shifts, controllers)[1]
 
 
 def _plan_and_skips(
-    d: GearboxDescription, shifts_selected: str = "adjacent"
+    d: GearboxDescription, shifts_selected: str = "adjacent", controllers: str | None = None
 ) -> tuple[list[tuple[str, Callable[[Callable[[str], None]], EmittedModel]]], tuple[str, ...]]:
     from gearsym.symbolic.estimators.ekf import ekf_model_name
     from gearsym.symbolic.estimators.euio import euio_model_name
@@ -466,6 +500,15 @@ def _plan_and_skips(
         else:
             plan.append((ekf_name, lambda say: ekf_model(d, ekf_shift, say)))
             plan.append((euio_name, lambda say: euio_model(d, ekf_shift, say)))
+
+    def ekf(spec: ShiftSpec) -> Callable[[Callable[[str], None]], EmittedModel]:
+        return lambda say: ekf_model(d, spec, say)
+
+    # the EKF each other shift's controller runs with (its obstacle is the controller's skip)
+    planned = {name for name, _ in plan}
+    for spec in controller_shifts(d, shifts_selected, controllers):
+        if ekf_model_name(spec.name) not in planned and not _estimator_obstacle(d, spec):
+            plan.append((ekf_model_name(spec.name), ekf(spec)))
     absent = [k for k in _FRICTION_KEYS if k not in d.friction]
     if absent:
         skipped.append(f"`{naming.SHIFT_ELEMENT_MODEL}`: [friction] has no {', '.join(absent)}")
@@ -718,12 +761,14 @@ def generate_tree(
     shifts: str = "adjacent",
     hybrid_shifts: str | None = None,
     uio_unknown: Sequence[str] = (naming.RESISTANCE_INPUT,),
+    controllers: str | None = None,
 ) -> GeneratedTree:
     """Every file of the output directory for ``d``, by relative path (``/`` separated);
-    ``shifts`` selects the shift models (:func:`selected_shifts`)."""
+    ``shifts`` selects the shift models (:func:`selected_shifts`), ``controllers`` the shift
+    controllers (:func:`controller_shifts`)."""
     say = progress or (lambda message: None)
-    models = gearbox_models(d, say, shifts=shifts)
-    skipped = list(skipped_models(d, shifts))
+    models = gearbox_models(d, say, shifts=shifts, controllers=controllers)
+    skipped = list(skipped_models(d, shifts, controllers))
     if hybrid_shifts is None and not hybrid_shift_names(d):
         specs = {spec.name: spec for spec in selected_shifts(d, "all")}
         if DEFAULT_SHIFT in specs and specs[DEFAULT_SHIFT].single:
@@ -758,11 +803,13 @@ def generate_tree(
             files[f"{folder}/{name}"] = text
     uio, uio_rows, uio_designs = uio_files(d, say, shifts, uio_unknown)
     files.update(uio)
-    default = next((s for s in selected_shifts(d, shifts) if s.name == DEFAULT_SHIFT), None)
-    why = _estimator_obstacle(d, default) if default is not None else ""
-    control, control_rows, control_skipped = control_files(d, default, why, C_DIR, PYTHON_DIR, say)
-    files.update(control)
-    skipped.extend(control_skipped)
+    control_rows: list[str] = []
+    for spec in controller_shifts(d, shifts, controllers):
+        why = _estimator_obstacle(d, spec)
+        control, rows, control_skipped = control_files(d, spec, why, C_DIR, PYTHON_DIR, say)
+        files.update(control)
+        control_rows.extend(rows)
+        skipped.extend(control_skipped)
     say("emitting the mu map and the example")
     mu_map = load_mu_map(d)
     files.update(mu_map_files(mu_map))
