@@ -239,10 +239,11 @@ def test_systick_counts_instructions_and_the_timed_loop_repeats_the_printed_run(
 # ------------------------------------------------------------------ the TCU task (issue 29)
 
 
-@pytest.fixture(scope="module")
-def control_runs(tmp_path_factory: pytest.TempPathFactory):
+@pytest.fixture(scope="module", params=["power-on", "coast"])
+def control_runs(request, tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN001
     """The emitted TCU task of the 2-3 upshift (controller + EKF, float) along the Python
-    controller's closed-loop shift, on the host and on the emulated target."""
+    controller's closed-loop shift, power-on and coast (the input torque drives it: the
+    inertia phase first), on the host and on the emulated target."""
     from gearsym.validation.checks import qemu_control
 
     missing = qemu_m4.missing_tools()
@@ -251,7 +252,7 @@ def control_runs(tmp_path_factory: pytest.TempPathFactory):
         if os.environ.get("CI"):
             pytest.fail(reason)
         pytest.skip(reason)
-    case = qemu_control.control_case(load_description())
+    case = qemu_control.control_case(load_description(), kind=request.param)
     out = tmp_path_factory.mktemp("m4_control")
     elf, host, objects = qemu_control.build(GENERATED_C, case, out)
     return case, qemu_m4.run_host(host), qemu_m4.run_qemu(elf), elf, objects
@@ -272,7 +273,10 @@ def test_the_tcu_task_on_the_target_gives_the_python_controllers_commands(contro
     assert len(lines) == len(case.inputs)
     results = [qemu_control.values(ln) for ln in lines]
     assert all(status == 0 for status, _, _ in results)
-    assert tuple(PHASES[phase] for _, phase, _ in results) == case.phases
+    # the same phase every tick, but where the lock-up's hold ends on a tick (float and
+    # double round either side of it: line pressure either way)
+    phases = tuple(PHASES[phase] for _, phase, _ in results)
+    assert qemu_control.lockup_end_ties(case, phases) in (0, 1)
     commands = np.array([v[:2] for _, _, v in results])
     assert np.max(np.abs(commands - case.commands)) <= 32 * 0.125
     x = np.array([v[2:] for _, _, v in results])

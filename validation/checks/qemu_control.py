@@ -2,8 +2,10 @@
 shift controller in one 10 ms task) bare-metal on the emulated Cortex-M4F (QEMU
 ``mps2-an386``, the harness of :mod:`gearsym.validation.checks.qemu_m4`), against the host.
 
-The case is a closed-loop shift of the Python controller (the calibration's own vehicle, the
-knowledge exact): at each tick the input, output and wheel speeds and the commanded torque it
+A case is a closed-loop shift of the Python controller (the calibration's own vehicle, the
+knowledge exact), power-on (the built-in scenario, torque phase first) or coast (the shipped
+coast scenario, ``scenario_2_3_coast.toml``: the input torque drives the shift, inertia phase
+first, :data:`KINDS`): at each tick the input, output and wheel speeds and the commanded torque it
 saw, and the commands it gave. The driver (``cortex_m4/control_driver.c``) calls the task once
 per tick with those measurements, prints the commands, the phase and the EKF's state as float
 bit patterns, and on the target times every call with SysTick (instructions under ``-icount
@@ -45,6 +47,7 @@ __all__ = [
     "code_size",
     "control_case",
     "control_lines",
+    "lockup_end_ties",
     "main",
     "task_markdown",
     "task_report",
@@ -59,6 +62,8 @@ SOURCES = ("gearsym_control_2_3.c", "gearsym_ekf_2_3.c", "gearsym_mu_map.c")
 SIGMA0 = (1.0, 1.0, 1e-3, 0.5, 200.0, 0.02, 0.02, 0.02)
 #: The task's budget on the TCU (issue 29): instructions per call, EKF included.
 BUDGET = 20_000
+#: The shifts the task is run along: the kind → its scenario (None: the built-in one).
+KINDS = {"power-on": None, "coast": "scenario_2_3_coast.toml"}
 
 
 @dataclass
@@ -73,21 +78,25 @@ class ControlCase:
     q: np.ndarray
 
 
-def control_case(d: Any, t_end: float = 1.2) -> ControlCase:
-    """The Python controller's shift on the calibration's vehicle from the built-in scenario's
-    operating point, sampled at its ticks."""
+def control_case(d: Any, t_end: float = 1.2, kind: str = "power-on") -> ControlCase:
+    """The Python controller's shift of ``kind`` (:data:`KINDS`) on the calibration's vehicle
+    from its scenario's operating point, sampled at its ticks."""
     from gearsym.symbolic import naming
     from gearsym.symbolic.drivetrain import quantity
     from gearsym.symbolic.estimators.ekf import augmented_model
     from gearsym.symbolic.hybrid import hybrid_shift
+    from gearsym.symbolic.io.package_data import data_file
     from gearsym.validation.sim.actuator import ClutchActuator
     from gearsym.validation.sim.hybrid_simulation import HybridSimulator
     from gearsym.validation.sim.scenario import load_scenario
     from gearsym.validation.studies.control.closed_loop import RECORD, TICK, ClosedLoopShift
-    from gearsym.validation.studies.control.controller import Knowledge, ShiftController
-    from gearsym.validation.studies.control.study import OperatingPoint
+    from gearsym.validation.studies.control.controller import Knowledge
+    from gearsym.validation.studies.control.study import OperatingPoint, make_controller
 
-    point = OperatingPoint.from_scenario(load_scenario(d))
+    scenario = KINDS[kind]
+    point = OperatingPoint.from_scenario(
+        load_scenario(d, None if scenario is None else data_file(scenario))
+    )
     plant = ClosedLoopShift(d, "2-3", point.vehicle_speed)
     model = HybridSimulator(d, plant.scenario(1.0, {}, 0.0), hybrid_shift(d, "2-3"))
     mu = quantity(d, "friction", "mu_nominal").value
@@ -96,7 +105,7 @@ def control_case(d: Any, t_end: float = 1.2) -> ControlCase:
         m_veh=plant.values["m_veh"],
         zeta=plant.values[naming.GRADE],
     )
-    controller = ShiftController(d, model, knowledge)
+    controller = make_controller(d, model, knowledge, point.torque)
     nominal = ClutchActuator.from_calibration(d.control)
     actuators = {"K38": nominal, "B05": nominal}
     result = plant.run(controller, point.torque, point.torque, actuators, actuators, t_end=t_end)
@@ -259,34 +268,75 @@ COMMAND = "python -m gearsym.validation.checks.qemu_control"
 
 
 def task_report(c_dir: Path, build_dir: Path) -> dict[str, Any]:
-    """The task on the emulated target along :func:`control_case` as JSON-ready data:
-    instructions per call (mean, largest), the budget, the code size (the linked functions'
-    bytes, each object's text + data + bss), and how far its commands are from the Python
-    controller's (Pa) and whether the phases agree."""
+    """The task on the emulated target along each :func:`control_case` (:data:`KINDS`) as
+    JSON-ready data: per kind the calls, instructions per call (mean, largest) and how far its
+    commands are from the Python controller's (Pa) and whether the phases agree; the budget
+    and the code size (the linked functions' bytes, each object's text + data + bss: the same
+    build for every kind, only the driver's data differ)."""
     from gearsym.symbolic.loader import load_description
     from gearsym.validation.studies.control.controller import PHASES
 
-    case = control_case(load_description())
-    elf, _, objects = build(c_dir, case, build_dir)
-    target = qemu_m4.run_qemu(elf)
-    t = timing(target)
-    functions, objects_size = code_size(elf, objects)
-    results = [values(ln) for ln in control_lines(target)]
-    commands = np.array([v[:2] for _, _, v in results])
+    d = load_description()
+    kinds = []
+    for kind in KINDS:
+        case = control_case(d, kind=kind)
+        elf, _, objects = build(c_dir, case, build_dir / kind)
+        target = qemu_m4.run_qemu(elf)
+        t = timing(target)
+        functions, objects_size = code_size(elf, objects)
+        results = [values(ln) for ln in control_lines(target)]
+        commands = np.array([v[:2] for _, _, v in results])
+        kinds.append(
+            {
+                "kind": kind,
+                "calls": t.calls,
+                "instructions_mean": round(t.mean),
+                "instructions_max": round(t.largest),
+                "command_difference_pa": float(np.max(np.abs(commands - case.commands))),
+                "phases_agree": tuple(PHASES[p] for _, p, _ in results) == case.phases,
+                "lockup_end_ties": lockup_end_ties(case, tuple(PHASES[p] for _, p, _ in results)),
+            }
+        )
     return {
         "shift": "2-3",
         "board": "QEMU mps2-an386 (Cortex-M4F), -icount shift=0",
         "flags": " ".join((*COMMON_FLAGS, *TARGET_FLAGS)),
-        "calls": t.calls,
-        "instructions_mean": round(t.mean),
-        "instructions_max": round(t.largest),
+        "kinds": kinds,
+        "instructions_max": max(k["instructions_max"] for k in kinds),
         "budget": BUDGET,
         "code_bytes": sum(functions.values()),
         "functions": dict(sorted(functions.items())),
         "objects": objects_size,
-        "command_difference_pa": float(np.max(np.abs(commands - case.commands))),
-        "phases_agree": tuple(PHASES[p] for _, p, _ in results) == case.phases,
     }
+
+
+def lockup_end_ties(case: ControlCase, phases: tuple[str, ...]) -> int | None:
+    """How many ticks the task's phases differ from the Python controller's only where the
+    lock-up's hold ends on a tick (``TO_LINE + HOLD_LINE`` after lock-up to rounding: the float
+    task and the double controller may round either side of it, commanding line pressure
+    either way); None when they differ anywhere else."""
+    from gearsym.symbolic.control_calibration import HOLD_LINE, TO_LINE
+
+    t = case.inputs[:, 0]
+    lock = next((t[i] for i, p in enumerate(case.phases) if p == "lockup"), None)
+    ties = 0
+    for i, (ours, theirs) in enumerate(zip(phases, case.phases, strict=True)):
+        if ours == theirs:
+            continue
+        at_end = lock is not None and abs(t[i] - lock - (TO_LINE + HOLD_LINE)) < 1e-4
+        if not (at_end and {ours, theirs} == {"lockup", "done"}):
+            return None
+        ties += 1
+    return ties
+
+
+def _phases(kind: dict[str, Any]) -> str:
+    if kind["phases_agree"]:
+        return "the same"
+    ties = kind.get("lockup_end_ties")
+    if ties:
+        return f"the same but at {ties} tick where the lock-up's hold ends (a float tie)"
+    return "**differing**"
 
 
 def task_markdown(data: dict[str, Any], command: str) -> str:
@@ -297,17 +347,21 @@ def task_markdown(data: dict[str, Any], command: str) -> str:
         f"*Written by `{command}`.*",
         "",
         f"- `gearsym_control_{data['shift'].replace('-', '_')}_tcu_task` on {data['board']}, "
-        f"float build (`{data['flags']}`), {data['calls']} calls along a closed-loop "
-        f"{data['shift']} upshift of the Python controller",
-        f"- its commands against the Python controller's on the same measurements: at most "
-        f"{data['command_difference_pa']:.3g} Pa apart, phases "
-        + ("the same at every tick" if data["phases_agree"] else "**differing**"),
+        f"float build (`{data['flags']}`), along closed-loop {data['shift']} upshifts of the "
+        "Python controller (power-on: the built-in scenario; coast: `scenario_2_3_coast.toml`)",
+        "- its commands against the Python controller's on the same measurements, and the "
+        "phases at every tick",
         "",
-        "| instructions per call (mean) | at most | budget | bytes of the linked functions "
-        "and tables |",
-        "|---|---|---|---|",
-        f"| {data['instructions_mean']} | {data['instructions_max']} | {data['budget']} | "
-        f"{data['code_bytes']} |",
+        "| shift | calls | instructions per call (mean) | at most | budget | commands apart (Pa) "
+        "| phases |",
+        "|---|---|---|---|---|---|---|",
+        *(
+            f"| {k['kind']} | {k['calls']} | {k['instructions_mean']} | {k['instructions_max']} "
+            f"| {data['budget']} | {k['command_difference_pa']:.3g} | {_phases(k)} |"
+            for k in data["kinds"]
+        ),
+        "",
+        f"Bytes of the linked functions and tables: {data['code_bytes']}.",
         "",
         "| object | text + data + bss (bytes) |",
         "|---|---|",
@@ -339,10 +393,10 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     (out / f"{out.name}.json").write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
     (out / f"{out.name}.md").write_text(task_markdown(data, command), encoding="utf-8")
+    means = ", ".join(f"{k['kind']} {k['instructions_mean']}" for k in data["kinds"])
     print(
-        f"{data['instructions_max']} instructions at most per task call (mean "
-        f"{data['instructions_mean']}, budget {BUDGET}), {data['code_bytes']} bytes of code; "
-        f"wrote {out}"
+        f"{data['instructions_max']} instructions at most per task call (mean {means}; budget "
+        f"{BUDGET}), {data['code_bytes']} bytes of code; wrote {out}"
     )
     return 0
 
