@@ -156,17 +156,24 @@ def _differences(twin: Twin) -> np.ndarray:
     return np.array([[abs(py[e] - c[e]) for e in ("K38", "B05")] for _, _, _, py, c in twin.ticks])
 
 
-def test_double_build_gives_the_python_commands_tick_by_tick(python_loop) -> None:  # noqa: ANN001
-    """Every phase, in the kind's order, tick by tick as the Python controller gives it."""
-    kind, ((twin, result), _) = python_loop
+def check_double_build(twin: Twin, result, order: tuple[str, str], label: str) -> None:  # noqa: ANN001
+    """The double build rode along the Python loop ``result``: every phase, ``order``'s first
+    before its second, tick by tick as the Python controller gave it, and its commands within
+    :data:`DOUBLE_TOLERANCE` (also tests/test_control_c_downshift.py)."""
     assert result.completed and all(a == b for _, a, b, _, _ in twin.ticks)
     phases = [a for _, a, _, _, _ in twin.ticks]
     assert {"fill", "torque", "inertia", "lockup", "done"} <= set(phases)
-    first, then = ORDER[kind]
+    first, then = order
     assert phases.index(first) < phases.index(then)
     worst = _differences(twin).max()
-    print(f"{kind}, double build: largest command difference {worst:.3g} Pa")
+    print(f"{label}, double build: largest command difference {worst:.3g} Pa")
     assert worst <= DOUBLE_TOLERANCE
+
+
+def test_double_build_gives_the_python_commands_tick_by_tick(python_loop) -> None:  # noqa: ANN001
+    """Every phase, in the kind's order, tick by tick as the Python controller gives it."""
+    kind, ((twin, result), _) = python_loop
+    check_double_build(twin, result, ORDER[kind], kind)
 
 
 def test_float_build_gives_the_python_commands_within_float_rounding(python_loop) -> None:  # noqa: ANN001
@@ -204,14 +211,22 @@ def test_the_float_c_controller_closes_a_coast_shift_like_the_python_one(d, libr
     within 1 ms of it, and both elements' slips within 0.1 rad/s of it."""
     (_, reference), _ = _python_loops(d, libraries, "coast")
     twin, result = _run(d, libraries[True], True, "c", coast=True)
+    check_same_loop(twin, result, reference, "B05", "C coast loop")
+
+
+def check_same_loop(twin: Twin, result, reference, locks: str, label: str) -> None:  # noqa: ANN001
+    """The C controller's loop ``result`` against the Python one's ``reference``: completed
+    without an error, the plant's events in the same order (``locks`` locking up among them),
+    each within 1 ms, both swapping elements' slips within 0.1 rad/s (also
+    tests/test_control_c_downshift.py)."""
     assert result.completed and twin.c.status == 0
     ours = [(e.kind, e.element) for e in result.events]
     assert ours == [(e.kind, e.element) for e in reference.events]
-    assert ("lock-up", "B05") in ours
+    assert ("lock-up", locks) in ours
     shift = max(abs(a.t - b.t) for a, b in zip(result.events, reference.events, strict=True))
     slips = [naming.slip_column(e) for e in ("K38", "B05")]
     slip_diff = max(float(np.max(np.abs(result.signals[c] - reference.signals[c]))) for c in slips)
-    print(f"C coast loop: events within {shift:.2g} s, slips within {slip_diff:.3g} rad/s")
+    print(f"{label}: events within {shift:.2g} s, slips within {slip_diff:.3g} rad/s")
     assert shift < 1e-3
     assert slip_diff < 0.1
 

@@ -14,9 +14,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-import numpy as np
 import pytest
-from gearsym.symbolic import naming
 from gearsym.symbolic.codegen import emit_all
 from gearsym.symbolic.codegen.control import emit_control_files
 from gearsym.symbolic.control_calibration import HOLD_LINE, TO_LINE
@@ -33,13 +31,15 @@ from gearsym.validation.studies.control.downshift import DownshiftController
 from gearsym.validation.studies.control.study import OperatingPoint, make_controller
 
 from tests.test_control_c import (
-    DOUBLE_TOLERANCE,
     FLOAT_TOLERANCE,
     GENERATED_C,
     KNOWLEDGE,
     Twin,
     _c_knowledge,
+    _differences,
     _truth,
+    check_double_build,
+    check_same_loop,
 )
 
 SHIFT = "3-2"
@@ -127,10 +127,6 @@ def python_loop(request, d, emitted, tmp_path_factory):  # noqa: ANN001, ANN201
     return request.param, _python_loops(d, emitted, request.param, tmp_path_factory)
 
 
-def _differences(twin: Twin) -> np.ndarray:
-    return np.array([[abs(py[e] - c[e]) for e in ("K38", "B05")] for _, _, _, py, c in twin.ticks])
-
-
 def test_the_downshift_controller_is_emitted_as_one(d, emitted) -> None:  # noqa: ANN001
     """The header says what it is: a downshift whose power-on order is the driven one."""
     header, _ = emitted
@@ -144,14 +140,7 @@ def test_the_downshift_controller_is_emitted_as_one(d, emitted) -> None:  # noqa
 def test_double_build_gives_the_python_commands_tick_by_tick(python_loop) -> None:  # noqa: ANN001
     """Every phase, in the kind's order, tick by tick as the Python controller gives it."""
     kind, ((twin, result), _) = python_loop
-    assert result.completed and all(a == b for _, a, b, _, _ in twin.ticks)
-    phases = [a for _, a, _, _, _ in twin.ticks]
-    assert {"fill", "torque", "inertia", "lockup", "done"} <= set(phases)
-    first, then = ORDER[kind]
-    assert phases.index(first) < phases.index(then)
-    worst = _differences(twin).max()
-    print(f"3-2 {kind}, double build: largest command difference {worst:.3g} Pa")
-    assert worst <= DOUBLE_TOLERANCE
+    check_double_build(twin, result, ORDER[kind], f"3-2 {kind}")
 
 
 def test_float_build_gives_the_python_commands_within_float_rounding(python_loop) -> None:  # noqa: ANN001
@@ -176,13 +165,4 @@ def test_the_float_c_controller_closes_a_downshift_like_the_python_one(
     on-coming element locked."""
     (_, reference), _ = _python_loops(d, emitted, kind, tmp_path_factory)
     twin, result = _run(d, emitted, kind, True, "c", tmp_path_factory)
-    assert result.completed and twin.c.status == 0
-    ours = [(e.kind, e.element) for e in result.events]
-    assert ours == [(e.kind, e.element) for e in reference.events]
-    assert ("lock-up", "K38") in ours
-    shift = max(abs(a.t - b.t) for a, b in zip(result.events, reference.events, strict=True))
-    slips = [naming.slip_column(e) for e in ("K38", "B05")]
-    slip_diff = max(float(np.max(np.abs(result.signals[c] - reference.signals[c]))) for c in slips)
-    print(f"C 3-2 {kind} loop: events within {shift:.2g} s, slips within {slip_diff:.3g} rad/s")
-    assert shift < 1e-3
-    assert slip_diff < 0.1
+    check_same_loop(twin, result, reference, "K38", f"C 3-2 {kind} loop")

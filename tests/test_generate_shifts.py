@@ -105,18 +105,24 @@ def test_emitted_downshift_and_skip_shift_compile_and_equal_sympy(d, tmp_path):
 
 
 @pytest.mark.parametrize(
-    ("value", "message"),
+    ("option", "value", "message"),
     [
-        ("2-9", "differ by 3"),  # K81, K38, B06 -> B05, B08, K27: a triple swap
-        ("3-2,3-2", "listed twice"),
-        ("3-x", "unknown gear 'x'"),
-        (",", "expected adjacent, all or a list"),
+        ("--shifts", "2-9", "differ by 3"),  # K81, K38, B06 -> B05, B08, K27: a triple swap
+        ("--shifts", "3-2,3-2", "listed twice"),
+        ("--shifts", "3-x", "unknown gear 'x'"),
+        ("--shifts", ",", "expected adjacent, all or a list"),
+        ("--controllers", "1-5", "swaps two elements each way"),
+        ("--controllers", "3-2,3-2", "listed twice"),
+        ("--controllers", "3-x", "unknown gear 'x'"),
     ],
 )
-def test_bad_shift_selection_is_one_line(tmp_path: Path, value: str, message: str) -> None:
+def test_bad_shift_selection_is_one_line(
+    tmp_path: Path, option: str, value: str, message: str
+) -> None:
+    """A bad selection is one line naming the option and the reason, exit 2, nothing written."""
     out = tmp_path / "out"
     result = subprocess.run(
-        [sys.executable, "-m", "gearsym", "generate", "--shifts", value, "--out", str(out)],
+        [sys.executable, "-m", "gearsym", "generate", option, value, "--out", str(out)],
         capture_output=True,
         text=True,
         check=False,
@@ -124,6 +130,7 @@ def test_bad_shift_selection_is_one_line(tmp_path: Path, value: str, message: st
     assert result.returncode == 2, result.stderr
     lines = result.stderr.strip().splitlines()
     assert message in lines[-1] and lines[-1].startswith("gearsym: ")
+    assert f": {option}: " in lines[-1]
     assert "Traceback" not in result.stderr
     assert not out.exists()
 
@@ -149,27 +156,3 @@ def test_controllers_emits_a_downshift_controller_with_its_ekf(tmp_path: Path) -
     readme = (out / "README.md").read_text(encoding="utf-8")
     assert "| `control_3_2` | downshift 3-2, power-on and coast: B05 off, K38 on" in readme
     assert build_control_library(c, "3-2", tmp_path / "build", single=True).is_file()
-
-
-@pytest.mark.parametrize(
-    ("value", "message"),
-    [
-        ("1-5", "swaps two elements each way"),
-        ("3-2,3-2", "listed twice"),
-        ("3-x", "unknown gear 'x'"),
-    ],
-)
-def test_bad_controller_selection_is_one_line(tmp_path: Path, value: str, message: str) -> None:
-    out = tmp_path / "out"
-    result = subprocess.run(
-        [sys.executable, "-m", "gearsym", "generate", "--controllers", value, "--out", str(out)],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    assert result.returncode == 2, result.stderr
-    lines = result.stderr.strip().splitlines()
-    assert message in lines[-1] and lines[-1].startswith("gearsym: ")
-    assert "--controllers" in lines[-1]
-    assert "Traceback" not in result.stderr
-    assert not out.exists()
