@@ -344,6 +344,20 @@ def test_a_plateau_of_the_residual_bounds_the_fill_from_one_side() -> None:
 
     assert FillReplay._plateau_edge(grid, [valley(x) for x in grid], 6, valley) is None
 
+    # a shallow V (0.4 rad/s per s of δ) bottoming at +15 ms, halfway between two grid points:
+    # its run within the resolution (0.01 rad/s above 0.202) spans -10..+40 ms, and its edge
+    # nearest the centre is where 0.2 + 0.4 |δ - 0.015| = 0.212, δ = -15 ms (by hand) ...
+    def shallow(x: float) -> float:
+        return 0.2 + abs(x - 0.015) * 0.4
+
+    edge = FillReplay._plateau_edge(grid, [shallow(x) for x in grid], 6, shallow)
+    assert edge is not None and edge[0] == pytest.approx(-0.015, abs=1e-3)
+    # ... which does not explain the record (0.206 at the assumed fill) and, one-sided, leaves
+    # the belief where it was
+    found = FillEstimate(edge[0], edge[1], 0.21, shallow(0.0), one_sided=True)
+    prior = FillBelief(0.0, 0.02**2)
+    assert not found.explains and prior.after(found) == prior
+
     def early(x: float) -> float:
         return 0.5 + max(x + 0.024, 0.0) * 100.0
 
