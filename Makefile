@@ -115,6 +115,10 @@ results: $(STAMP)
 	$(BIN)/python -m gearsym.validation.checks.qemu_control --out build/results/tcu_task_2_3
 	cp build/results/tcu_task_2_3/tcu_task_2_3.json $(RESULTS)/tcu_task_2_3.json
 	cp build/results/tcu_task_2_3/tcu_task_2_3.md $(RESULTS)/tcu_task_2_3.md
+	rm -rf build/results/tcu_task_3_2
+	$(BIN)/python -m gearsym.validation.checks.qemu_control --shift 3-2 --out build/results/tcu_task_3_2
+	cp build/results/tcu_task_3_2/tcu_task_3_2.json $(RESULTS)/tcu_task_3_2.json
+	cp build/results/tcu_task_3_2/tcu_task_3_2.md $(RESULTS)/tcu_task_3_2.md
 # A whole WLTC class 3b drive with the EKF over it, the calibration's own vehicle and a fleet
 # vehicle (docs/drive.md; about 2 min each: the fast drive and the EKF over its log), then 20
 # vehicles of the fleet (about 32 min on two cores).

@@ -11,24 +11,23 @@ controller.ShiftController`'s order, torque phase first, every direction from th
 
 from __future__ import annotations
 
-import shutil
-from pathlib import Path
-
+import numpy as np
 import pytest
-from gearsym.symbolic.codegen import emit_all
-from gearsym.symbolic.codegen.control import emit_control_files
 from gearsym.symbolic.control_calibration import HOLD_LINE, TO_LINE
-from gearsym.symbolic.export.generate import ekf_model
 from gearsym.symbolic.hybrid import hybrid_shift
 from gearsym.symbolic.loader import load_description
 from gearsym.symbolic.shifts import shift_spec
-from gearsym.validation.checks.control_c import CShiftController, build_control_library
+from gearsym.validation.checks import qemu_control
+from gearsym.validation.checks.control_c import (
+    CShiftController,
+    build_control_library,
+    emit_task_sources,
+)
 from gearsym.validation.sim.actuator import ClutchActuator
 from gearsym.validation.sim.hybrid_simulation import HybridSimulator
-from gearsym.validation.sim.scenario import load_scenario
 from gearsym.validation.studies.control.closed_loop import ClosedLoopShift
 from gearsym.validation.studies.control.downshift import DownshiftController
-from gearsym.validation.studies.control.study import OperatingPoint, make_controller
+from gearsym.validation.studies.control.study import make_controller
 
 from tests.test_control_c import (
     FLOAT_TOLERANCE,
@@ -43,7 +42,6 @@ from tests.test_control_c import (
 )
 
 SHIFT = "3-2"
-DATA = Path(__file__).resolve().parents[1] / "gearsym" / "data"
 #: the phase order of each kind: power on, the input torque drives the downshift (inertia
 #: phase first); coast, the on-coming element pulls the input up (torque phase first)
 ORDER = {"power_on": ("inertia", "torque"), "coast": ("torque", "inertia")}
@@ -57,38 +55,17 @@ def d():  # noqa: ANN201
 @pytest.fixture(scope="module")
 def emitted(d, tmp_path_factory):  # noqa: ANN001, ANN201
     """The 3-2 controller, its EKF and the μ map, and their double and float builds."""
-    out = tmp_path_factory.mktemp("control_3_2")
-    for name, text in emit_control_files(d, SHIFT).items():
-        (out / name).write_text(text, encoding="utf-8")
-    ekf = ekf_model(d, shift_spec(d, SHIFT))
-    for name, text in emit_all(ekf.model, ekf.config).items():
-        if not name.endswith(".py"):
-            (out / name).write_text(text, encoding="utf-8")
-    for name in ("gearsym_mu_map.c", "gearsym_mu_map.h"):
-        shutil.copy(GENERATED_C / name, out / name)
+    out = emit_task_sources(d, SHIFT, tmp_path_factory.mktemp("control_3_2"), GENERATED_C)
     builds = {single: build_control_library(out, SHIFT, out / "build", single) for single in (0, 1)}
     return out / "gearsym_control_3_2.h", builds
-
-
-def _scenario(kind: str, tmp_path_factory) -> Path:  # noqa: ANN001
-    """The shipped power-on 3-2 scenario, or it with drag instead of drive torque (engine
-    −20 N·m, the electric machine recuperating −20 N·m): a coast downshift."""
-    shipped = DATA / "scenario_3_2_power_on.toml"
-    if kind == "power_on":
-        return shipped
-    text = shipped.read_text(encoding="utf-8")
-    text = text.replace("engine =    [120.0]", "engine =    [-20.0]")
-    text = text.replace("e_machine = [30.0]", "e_machine = [-20.0]")
-    assert text.count("[-20.0]") == 2
-    path = tmp_path_factory.mktemp("coast") / "scenario_3_2_coast.toml"
-    path.write_text(text, encoding="utf-8")
-    return path
 
 
 def _run(d, emitted, kind: str, single: bool, drive: str, tmp_path_factory):  # noqa: ANN001, ANN202
     header, builds = emitted
     spec = shift_spec(d, SHIFT)
-    point = OperatingPoint.from_scenario(load_scenario(d, _scenario(kind, tmp_path_factory)))
+    # the shipped power-on 3-2, or at its speed with drag instead of drive torque (engine
+    # −20 N·m, the machine recuperating −20 N·m): a coast downshift
+    point = qemu_control.operating_point(d, SHIFT, kind.replace("_", "-"))
     plant = ClosedLoopShift(_truth(d), SHIFT, point.vehicle_speed, {"K38": 0.95, "B05": 1.05})
     model = HybridSimulator(d, plant.scenario(1.0, {}, 0.0), hybrid_shift(d, SHIFT))
     python = make_controller(d, model, KNOWLEDGE, point.torque)
@@ -166,3 +143,27 @@ def test_the_float_c_controller_closes_a_downshift_like_the_python_one(
     (_, reference), _ = _python_loops(d, emitted, kind, tmp_path_factory)
     twin, result = _run(d, emitted, kind, True, "c", tmp_path_factory)
     check_same_loop(twin, result, reference, "K38", f"C 3-2 {kind} loop")
+
+
+@pytest.mark.parametrize("kind", ["power-on", "coast"])
+def test_the_downshift_tcu_task_on_the_host_gives_the_python_controllers_commands(
+    d, emitted, tmp_path, kind
+) -> None:  # noqa: ANN001
+    """The whole 3-2 task (EKF and controller, float, the Cortex-M4F driver built for the
+    host) along the Python controller's closed-loop 3-2 on the calibration's vehicle, as
+    tests/test_control_c.py checks the 2-3's: its commands within FLOAT_TOLERANCE, its phase
+    at every tick but a lock-up hold's float tie, the EKF's state finite."""
+    from gearsym.validation.checks import qemu_m4
+    from gearsym.validation.studies.control.controller import PHASES
+
+    header, _ = emitted
+    case = qemu_control.control_case(d, kind=kind, shift=SHIFT)
+    host = qemu_control.build_host(header.parent, case, tmp_path)
+    results = [qemu_control.values(ln) for ln in qemu_control.control_lines(qemu_m4.run_host(host))]
+    assert len(results) == len(case.inputs) and all(s == 0 for s, _, _ in results)
+    phases = tuple(PHASES[phase] for _, phase, _ in results)
+    assert qemu_control.lockup_end_ties(case, phases) in (0, 1)
+    assert phases.index("inertia") < phases.index("lockup")
+    commands = np.array([v[:2] for _, _, v in results])
+    assert np.max(np.abs(commands - case.commands)) <= FLOAT_TOLERANCE
+    assert np.all(np.isfinite(np.array([v[2:] for _, _, v in results])))

@@ -34,6 +34,30 @@ KNOWLEDGE_FIELDS = (
 )
 
 
+def emit_task_sources(d: Any, shift: str, out: Path, mu_map_dir: Path) -> Path:
+    """The TCU task of ``shift`` as C into ``out``: its shift controller (both languages'
+    files of :func:`~gearsym.symbolic.codegen.control.emit_control_files`), its EKF's C and
+    the μ map's C copied from ``mu_map_dir`` (the same for every shift); ``generated/``
+    holds the default shift's only. Returns ``out``."""
+    import shutil
+
+    from gearsym.symbolic.codegen import emit_all
+    from gearsym.symbolic.codegen.control import emit_control_files
+    from gearsym.symbolic.export.generate import ekf_model
+    from gearsym.symbolic.shifts import shift_spec
+
+    out.mkdir(parents=True, exist_ok=True)
+    for name, text in emit_control_files(d, shift).items():
+        (out / name).write_text(text, encoding="utf-8")
+    ekf = ekf_model(d, shift_spec(d, shift))
+    for name, text in emit_all(ekf.model, ekf.config).items():
+        if not name.endswith(".py"):
+            (out / name).write_text(text, encoding="utf-8")
+    for name in ("gearsym_mu_map.c", "gearsym_mu_map.h"):
+        shutil.copy(mu_map_dir / name, out / name)
+    return out
+
+
 def build_control_library(c_dir: Path, shift: str, out: Path, single: bool) -> Path:
     """Compile the controller of ``shift`` with the μ map and the shift's EKF from ``c_dir``
     into a shared library in ``out`` (the project's strict flags, ``-O2``; a warning fails)."""

@@ -1,17 +1,20 @@
-"""The emitted TCU task of the 2-3 upshift (``gearsym_control_2_3_tcu_task``: the EKF and the
-shift controller in one 10 ms task) bare-metal on the emulated Cortex-M4F (QEMU
-``mps2-an386``, the harness of :mod:`gearsym.validation.checks.qemu_m4`), against the host.
+"""The emitted TCU task of a shift (``gearsym_control_2_3_tcu_task`` of the default 2-3
+upshift, with ``--shift 3-2`` the downshift's: the EKF and the shift controller in one 10 ms
+task) bare-metal on the emulated Cortex-M4F (QEMU ``mps2-an386``, the harness of
+:mod:`gearsym.validation.checks.qemu_m4`), against the host.
 
 A case is a closed-loop shift of the Python controller (the calibration's own vehicle, the
-knowledge exact), power-on (the built-in scenario, torque phase first) or coast (the shipped
-coast scenario, ``scenario_2_3_coast.toml``: the input torque drives the shift, inertia phase
-first, :data:`KINDS`): at each tick the input, output and wheel speeds and the commanded torque it
-saw, and the commands it gave. The driver (``cortex_m4/control_driver.c``) calls the task once
-per tick with those measurements, prints the commands, the phase and the EKF's state as float
-bit patterns, and on the target times every call with SysTick (instructions under ``-icount
-shift=0``, calibrated as in :mod:`~gearsym.validation.checks.qemu_m4`). The code size is the
-bytes of the task's functions in the linked ELF (``arm-none-eabi-nm``: the controller, the EKF
-functions it calls and the μ map) and ``arm-none-eabi-size`` of each object.
+knowledge exact), power-on or coast (:data:`CASES`: the 2-3 from the built-in scenario and
+``scenario_2_3_coast.toml``, the 3-2 from ``scenario_3_2_power_on.toml`` and at its speed with
+drag; whichever the input torque drives runs inertia phase first): at each tick the input,
+output and wheel speeds and the commanded torque it saw, and the commands it gave. The driver
+(``cortex_m4/control_driver.c``, one for every shift: the case's header names the shift's
+functions) calls the task once per tick with those measurements, prints the commands, the
+phase and the EKF's state as float bit patterns, and on the target times every call with
+SysTick (instructions under ``-icount shift=0``, calibrated as in
+:mod:`~gearsym.validation.checks.qemu_m4`). The code size is the bytes of the task's functions
+in the linked ELF (``arm-none-eabi-nm``: the controller, the EKF functions it calls and the μ
+map) and ``arm-none-eabi-size`` of each object.
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ from gearsym.validation.checks.qemu_m4 import (
 
 __all__ = [
     "BUDGET",
+    "CASES",
     "COMMAND",
     "SOURCES",
     "ControlCase",
@@ -49,21 +53,61 @@ __all__ = [
     "control_lines",
     "lockup_end_ties",
     "main",
+    "operating_point",
+    "sources",
     "task_markdown",
     "task_report",
     "timing",
     "values",
 ]
 
-#: The emitted sources the task links: the controller, the EKF, the μ map.
-SOURCES = ("gearsym_control_2_3.c", "gearsym_ekf_2_3.c", "gearsym_mu_map.c")
-#: The EKF's initial σ per state (omega_1, omega_2, phi, omega_C, m_veh, mu_38, mu_05, zeta):
-#: assumed, a filter started at the shift command from the speeds it measures.
-SIGMA0 = (1.0, 1.0, 1e-3, 0.5, 200.0, 0.02, 0.02, 0.02)
+#: The EKF's initial σ per kind of state: the measured speeds, the side shafts' twist, the
+#: wheel speed, m_veh, each μ, ζ: assumed, a filter started at the shift command from the
+#: speeds it measures.
+SIGMA0 = {"speed": 1.0, "twist": 1e-3, "wheel": 0.5, "m_veh": 200.0, "mu": 0.02, "zeta": 0.02}
 #: The task's budget on the TCU (issue 29): instructions per call, EKF included.
 BUDGET = 20_000
-#: The shifts the task is run along: the kind → its scenario (None: the built-in one).
-KINDS = {"power-on": None, "coast": "scenario_2_3_coast.toml"}
+#: The shifts the task is run along, per shift: the kind → its operating point, a shipped
+#: scenario (None: the built-in one) and, where none is shipped, the engine and e-machine
+#: torques (N·m) that replace the scenario's: the coast 3-2 at the power-on 3-2's speed with
+#: the coast 2-3's drag (engine −20, the machine recuperating −20; assumed).
+CASES: dict[str, dict[str, tuple[str | None, tuple[float, float] | None]]] = {
+    "2-3": {"power-on": (None, None), "coast": ("scenario_2_3_coast.toml", None)},
+    "3-2": {
+        "power-on": ("scenario_3_2_power_on.toml", None),
+        "coast": ("scenario_3_2_power_on.toml", (-20.0, -20.0)),
+    },
+}
+#: The kinds of :data:`CASES` (each shift has both).
+KINDS = ("power-on", "coast")
+
+
+def sources(shift: str) -> tuple[str, ...]:
+    """The emitted sources the task of ``shift`` links: the controller, the EKF, the μ map."""
+    tag = shift.replace("-", "_")
+    return (f"gearsym_control_{tag}.c", f"gearsym_ekf_{tag}.c", "gearsym_mu_map.c")
+
+
+#: The default shift's sources (generated/c holds them).
+SOURCES = sources("2-3")
+
+
+def operating_point(d: Any, shift: str, kind: str) -> Any:
+    """The :class:`~gearsym.validation.studies.control.study.OperatingPoint` of a case
+    (:data:`CASES`)."""
+    from dataclasses import replace
+
+    from gearsym.symbolic.io.package_data import data_file
+    from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.studies.control.study import OperatingPoint
+
+    scenario, torques = CASES[shift][kind]
+    point = OperatingPoint.from_scenario(
+        load_scenario(d, None if scenario is None else data_file(scenario))
+    )
+    if torques is not None:
+        point = replace(point, engine=torques[0], e_machine=torques[1])
+    return point
 
 
 @dataclass
@@ -76,38 +120,38 @@ class ControlCase:
     x0: np.ndarray
     P0: np.ndarray
     q: np.ndarray
+    shift: str = "2-3"
 
 
-def control_case(d: Any, t_end: float = 1.2, kind: str = "power-on") -> ControlCase:
-    """The Python controller's shift of ``kind`` (:data:`KINDS`) on the calibration's vehicle
-    from its scenario's operating point, sampled at its ticks."""
+def control_case(
+    d: Any, t_end: float = 1.2, kind: str = "power-on", shift: str = "2-3"
+) -> ControlCase:
+    """The Python controller's ``shift`` of ``kind`` (:data:`CASES`) on the calibration's
+    vehicle from its operating point, sampled at its ticks."""
     from gearsym.symbolic import naming
     from gearsym.symbolic.drivetrain import quantity
     from gearsym.symbolic.estimators.ekf import augmented_model
     from gearsym.symbolic.hybrid import hybrid_shift
-    from gearsym.symbolic.io.package_data import data_file
     from gearsym.validation.sim.actuator import ClutchActuator
     from gearsym.validation.sim.hybrid_simulation import HybridSimulator
-    from gearsym.validation.sim.scenario import load_scenario
     from gearsym.validation.studies.control.closed_loop import RECORD, TICK, ClosedLoopShift
     from gearsym.validation.studies.control.controller import Knowledge
-    from gearsym.validation.studies.control.study import OperatingPoint, make_controller
+    from gearsym.validation.studies.control.study import make_controller
 
-    scenario = KINDS[kind]
-    point = OperatingPoint.from_scenario(
-        load_scenario(d, None if scenario is None else data_file(scenario))
-    )
-    plant = ClosedLoopShift(d, "2-3", point.vehicle_speed)
-    model = HybridSimulator(d, plant.scenario(1.0, {}, 0.0), hybrid_shift(d, "2-3"))
+    point = operating_point(d, shift, kind)
+    plant = ClosedLoopShift(d, shift, point.vehicle_speed)
+    model = HybridSimulator(d, plant.scenario(1.0, {}, 0.0), hybrid_shift(d, shift))
     mu = quantity(d, "friction", "mu_nominal").value
+    elements = tuple(model.hybrid.friction_coefficient)
     knowledge = Knowledge(
-        mu={"K38": mu, "B05": mu},
+        mu=dict.fromkeys(elements, mu),
         m_veh=plant.values["m_veh"],
         zeta=plant.values[naming.GRADE],
     )
     controller = make_controller(d, model, knowledge, point.torque)
     nominal = ClutchActuator.from_calibration(d.control)
-    actuators = {"K38": nominal, "B05": nominal}
+    spec = plant.spec
+    actuators = {e: nominal for e in (spec.off_going, spec.on_coming)}
     result = plant.run(controller, point.torque, point.torque, actuators, actuators, t_end=t_end)
     at_ticks = np.round(result.ticks / RECORD).astype(int)
     assert np.allclose(result.t[at_ticks], result.ticks) and TICK == 0.01
@@ -115,36 +159,47 @@ def control_case(d: Any, t_end: float = 1.2, kind: str = "power-on") -> ControlC
     speeds = [signals[naming.speed(s)][at_ticks] for s in (d.input_shaft, d.output_shaft)]
     wheel = signals[naming.WHEEL_SPEED][at_ticks]
     torque = np.full(len(at_ticks), point.torque)
-    aug = augmented_model(d, "2-3")
-    x0 = np.array(
-        [
-            speeds[0][0],
-            speeds[1][0],
-            signals[naming.TWIST][0],
-            wheel[0],
-            knowledge.m_veh,
-            mu,
-            mu,
-            knowledge.zeta,
-        ]
-    )
+    aug = augmented_model(d, shift)
+    # the filter's start: the measured speeds, the record's twist and wheel, the calibration
+    start = {
+        naming.speed(d.input_shaft): (speeds[0][0], SIGMA0["speed"]),
+        naming.speed(d.output_shaft): (speeds[1][0], SIGMA0["speed"]),
+        naming.TWIST: (signals[naming.TWIST][0], SIGMA0["twist"]),
+        naming.WHEEL_SPEED: (wheel[0], SIGMA0["wheel"]),
+        "m_veh": (knowledge.m_veh, SIGMA0["m_veh"]),
+        naming.GRADE: (knowledge.zeta, SIGMA0["zeta"]),
+    }
+    start |= {
+        str(symbol): (mu, SIGMA0["mu"]) for symbol in model.hybrid.friction_coefficient.values()
+    }
+    x0 = np.array([start[name][0] for name in aug.state_names])
+    sigma0 = np.array([start[name][1] for name in aug.state_names])
     return ControlCase(
         inputs=np.column_stack([result.ticks, *speeds, wheel, torque]),
-        commands=np.column_stack([result.commands["K38"], result.commands["B05"]]),
+        commands=np.column_stack(
+            [result.commands[spec.off_going], result.commands[spec.on_coming]]
+        ),
         phases=result.phases,
         x0=x0,
-        P0=np.diag(np.array(SIGMA0) ** 2),
+        P0=np.diag(sigma0**2),
         q=np.array([aug.intensities[n] for n in aug.state_names]),
+        shift=shift,
     )
 
 
 def case_header(case: ControlCase) -> str:
     """``control_case.h``: the case as exact float literals (P0 column-major)."""
     f32 = np.float32
+    tag = case.shift.replace("-", "_")
     return "".join(
         [
             "/* Data of gearsym's TCU-task driver (gearsym.validation.checks.qemu_control). */\n",
             "#ifndef CONTROL_CASE_H\n#define CONTROL_CASE_H\n#include <math.h>\n",
+            # the driver names the shift's task through these (one driver for every shift)
+            f'#include "gearsym_control_{tag}.h"\n',
+            f"#define CTL(name) gearsym_control_{tag}_##name\n",
+            f"#define EKF(name) gearsym_ekf_{tag}_##name\n",
+            f"#define EKF_NX GEARSYM_EKF_{tag}_NX\n",
             f"#define CASE_TICKS {len(case.inputs)}\n",
             f"#define CASE_CALIBRATION_TURNS {CALIBRATION_TURNS}u\n",
             _array("case_in", case.inputs.astype(f32)),
@@ -173,7 +228,7 @@ def build_host(c_dir: Path, case: ControlCase, out: Path) -> Path:
             str(host),
             str(HARNESS_DIR / "host.c"),
             str(HARNESS_DIR / "control_driver.c"),
-            *(str(c_dir / s) for s in SOURCES),
+            *(str(c_dir / s) for s in sources(case.shift)),
             "-lm",
         ],
         out,
@@ -188,11 +243,11 @@ def build(c_dir: Path, case: ControlCase, out: Path) -> tuple[Path, Path, list[P
     raised cosine takes cos(pi tau) up to pi); and the target objects of the task's sources
     alone (for their sizes)."""
     host = build_host(c_dir, case, out)
-    sources = [c_dir / s for s in SOURCES]
+    linked = [c_dir / s for s in sources(case.shift)]
     driver = HARNESS_DIR / "control_driver.c"
-    elf = build_target([driver, *sources], [out, c_dir], out / "control_m4.elf")
+    elf = build_target([driver, *linked], [out, c_dir], out / "control_m4.elf")
     objects = []
-    for source in sources:
+    for source in linked:
         obj = out / (source.stem + ".o")
         _run(
             [
@@ -245,10 +300,13 @@ def timing(text: str) -> ControlTiming:
     )
 
 
-def code_size(elf: Path, objects: list[Path]) -> tuple[dict[str, int], dict[str, int]]:
-    """Bytes of code of each function the task links (controller, EKF, μ map) in the ELF, and
-    ``arm-none-eabi-size`` text + data + bss per object."""
-    prefixes = ("gearsym_control_2_3_", "gearsym_ekf_2_3_", "gearsym_mu_map")
+def code_size(
+    elf: Path, objects: list[Path], shift: str = "2-3"
+) -> tuple[dict[str, int], dict[str, int]]:
+    """Bytes of code of each function the task of ``shift`` links (controller, EKF, μ map) in
+    the ELF, and ``arm-none-eabi-size`` text + data + bss per object."""
+    tag = shift.replace("-", "_")
+    prefixes = (f"gearsym_control_{tag}_", f"gearsym_ekf_{tag}_", "gearsym_mu_map")
     functions = qemu_m4.function_sizes(elf, prefixes)
     sizes = {}
     for obj in objects:
@@ -267,25 +325,31 @@ def code_size(elf: Path, objects: list[Path]) -> tuple[dict[str, int], dict[str,
 COMMAND = "python -m gearsym.validation.checks.qemu_control"
 
 
-def task_report(c_dir: Path, build_dir: Path) -> dict[str, Any]:
-    """The task on the emulated target along each :func:`control_case` (:data:`KINDS`) as
-    JSON-ready data: per kind the calls, instructions per call (mean, largest) and how far its
-    commands are from the Python controller's (Pa) and whether the phases agree; the budget
-    and the code size (the linked functions' bytes, each object's text + data + bss: the same
-    build for every kind, only the driver's data differ)."""
+def task_report(c_dir: Path, build_dir: Path, shift: str = "2-3") -> dict[str, Any]:
+    """The task of ``shift`` on the emulated target along each :func:`control_case`
+    (:data:`CASES`) as JSON-ready data: per kind the calls, instructions per call (mean,
+    largest) and how far its commands are from the Python controller's (Pa) and whether the
+    phases agree; the budget and the code size (the linked functions' bytes, each object's
+    text + data + bss: the same build for every kind, only the driver's data differ)."""
     from gearsym.symbolic.loader import load_description
-    from gearsym.validation.studies.control.controller import PHASES
+    from gearsym.symbolic.shifts import shift_spec
+    from gearsym.validation.studies.control.controller import PHASES, shift_direction
 
     d = load_description()
     kinds = []
     for kind in KINDS:
-        case = control_case(d, kind=kind)
+        case = control_case(d, kind=kind, shift=shift)
         elf, _, objects = build(c_dir, case, build_dir / kind)
         target = qemu_m4.run_qemu(elf)
         t = timing(target)
-        functions, objects_size = code_size(elf, objects)
+        functions, objects_size = code_size(elf, objects, shift)
         results = [values(ln) for ln in control_lines(target)]
         commands = np.array([v[:2] for _, _, v in results])
+        # how the task's filter follows the measured speeds once the shift is done, and the
+        # mass it ends with (the vehicle is the calibration's)
+        x = np.array([v[2:] for _, _, v in results])
+        done = np.array(case.phases) == "done"
+        stray = np.abs(x[done][:, [0, 1, 3]] - case.inputs[done][:, [1, 2, 3]])
         kinds.append(
             {
                 "kind": kind,
@@ -295,10 +359,15 @@ def task_report(c_dir: Path, build_dir: Path) -> dict[str, Any]:
                 "command_difference_pa": float(np.max(np.abs(commands - case.commands))),
                 "phases_agree": tuple(PHASES[p] for _, p, _ in results) == case.phases,
                 "lockup_end_ties": lockup_end_ties(case, tuple(PHASES[p] for _, p, _ in results)),
+                "operating_point": _point_text(shift, kind),
+                "filter_speed_error_done": float(np.max(stray)) if stray.size else None,
+                "filter_m_veh_end": float(x[-1, 4]),
+                "m_veh": float(case.x0[4]),
             }
         )
     return {
-        "shift": "2-3",
+        "shift": shift,
+        "direction": shift_direction(d, shift_spec(d, shift)),
         "board": "QEMU mps2-an386 (Cortex-M4F), -icount shift=0",
         "flags": " ".join((*COMMON_FLAGS, *TARGET_FLAGS)),
         "kinds": kinds,
@@ -308,6 +377,18 @@ def task_report(c_dir: Path, build_dir: Path) -> dict[str, Any]:
         "functions": dict(sorted(functions.items())),
         "objects": objects_size,
     }
+
+
+def _point_text(shift: str, kind: str) -> str:
+    """Where a case's operating point comes from, in words (:data:`CASES`)."""
+    scenario, torques = CASES[shift][kind]
+    name = "the built-in scenario" if scenario is None else f"`{scenario}`"
+    if torques is None:
+        return name
+    return (
+        f"{name} at engine {torques[0]:g} N·m and e-machine {torques[1]:g} N·m (assumed: "
+        "no coast scenario of this shift is shipped)"
+    )
 
 
 def lockup_end_ties(case: ControlCase, phases: tuple[str, ...]) -> int | None:
@@ -330,6 +411,10 @@ def lockup_end_ties(case: ControlCase, phases: tuple[str, ...]) -> int | None:
     return ties
 
 
+def _number(value: float | None, spec: str = ".2f") -> str:
+    return "—" if value is None else format(value, spec)
+
+
 def _phases(kind: dict[str, Any]) -> str:
     if kind["phases_agree"]:
         return "the same"
@@ -347,19 +432,28 @@ def task_markdown(data: dict[str, Any], command: str) -> str:
         f"*Written by `{command}`.*",
         "",
         f"- `gearsym_control_{data['shift'].replace('-', '_')}_tcu_task` on {data['board']}, "
-        f"float build (`{data['flags']}`), along closed-loop {data['shift']} upshifts of the "
-        "Python controller (power-on: the built-in scenario; coast: `scenario_2_3_coast.toml`)",
+        f"float build (`{data['flags']}`), along closed-loop {data['shift']} "
+        f"{data.get('direction', 'up')}shifts of the Python controller ("
+        + "; ".join(f"{k['kind']}: {k.get('operating_point', '')}" for k in data["kinds"])
+        + ")",
         "- its commands against the Python controller's on the same measurements, and the "
         "phases at every tick",
         "",
         "| shift | calls | instructions per call (mean) | at most | budget | commands apart (Pa) "
-        "| phases |",
-        "|---|---|---|---|---|---|---|",
+        "| phases | filter's speeds apart once done (rad/s) | filter's m_veh at the end (kg) |",
+        "|---|---|---|---|---|---|---|---|---|",
         *(
             f"| {k['kind']} | {k['calls']} | {k['instructions_mean']} | {k['instructions_max']} "
-            f"| {data['budget']} | {k['command_difference_pa']:.3g} | {_phases(k)} |"
+            f"| {data['budget']} | {k['command_difference_pa']:.3g} | {_phases(k)} "
+            f"| {_number(k.get('filter_speed_error_done'))} "
+            f"| {_number(k.get('filter_m_veh_end'), '.0f')} of {_number(k.get('m_veh'), '.0f')} |"
             for k in data["kinds"]
         ),
+        "",
+        "The filter's columns: the task's EKF, told the forces its commands give through the "
+        "valve view without the valve's lag or the piston's fill, against the measured input, "
+        "output and wheel speeds over the ticks after the shift (largest difference), and its "
+        "mass at the last tick against the calibration vehicle's.",
         "",
         f"Bytes of the linked functions and tables: {data['code_bytes']}.",
         "",
@@ -381,13 +475,31 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog=COMMAND, description="the TCU task on the Cortex-M4F")
     parser.add_argument("--out", required=True, help="folder for the JSON and the table")
     parser.add_argument("--c-dir", default="generated/c", help="the emitted C (generated/c)")
+    parser.add_argument(
+        "--shift",
+        default="2-3",
+        help="the shift whose task runs (default 2-3); one whose C is not in --c-dir is "
+        "emitted into the build folder first",
+    )
     args = parser.parse_args(argv)
     missing = qemu_m4.missing_tools()
     if missing:
         print(f"{COMMAND}: not installed: {', '.join(missing)}", file=sys.stderr)
         return 2
+    if args.shift not in CASES:
+        print(
+            f"{COMMAND}: --shift: no cases for {args.shift!r} (known: {', '.join(CASES)})",
+            file=sys.stderr,
+        )
+        return 2
+    c_dir = Path(args.c_dir).resolve()
     with tempfile.TemporaryDirectory(prefix="gearsym-task-") as build_dir:
-        data = task_report(Path(args.c_dir).resolve(), Path(build_dir))
+        if not all((c_dir / s).is_file() for s in sources(args.shift)):
+            from gearsym.symbolic.loader import load_description
+            from gearsym.validation.checks.control_c import emit_task_sources
+
+            c_dir = emit_task_sources(load_description(), args.shift, Path(build_dir) / "c", c_dir)
+        data = task_report(c_dir, Path(build_dir), args.shift)
     command = " ".join([COMMAND, *(argv if argv is not None else sys.argv[1:])])
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

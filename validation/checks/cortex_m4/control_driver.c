@@ -1,7 +1,8 @@
 /*
- * gearsym's Cortex-M4F driver of the TCU task: the emitted float shift controller of the 2-3
- * upshift with its EKF (gearsym_control_2_3_tcu_task: EKF predict, update and mode update, then
- * the controller's step) called once per 10 ms tick along a recorded closed-loop shift
+ * gearsym's Cortex-M4F driver of the TCU task: the emitted float shift controller of a shift
+ * with its EKF (e.g. gearsym_control_2_3_tcu_task: EKF predict, update and mode update, then
+ * the controller's step; control_case.h names the shift's through CTL() and EKF()) called
+ * once per 10 ms tick along a recorded closed-loop shift
  * (control_case.h, written by gearsym.validation.checks.qemu_control). After each task the
  * commands, the phase and the EKF's state are printed as float bit patterns, so that the host
  * build and the emulated target can be compared exactly. On the target, SysTick counts each
@@ -11,27 +12,26 @@
 #include <string.h>
 
 #include "control_case.h"
-#include "gearsym_control_2_3.h"
 #include "harness.h"
 
-#define NX GEARSYM_EKF_2_3_NX
+#define NX EKF_NX
 #define GEARSYM_LINE_CHARS (16 + 12 * (NX + 8))
 #include "line_output.h"
 
 
 int main(void)
 {
-    gearsym_control_2_3_tcu_config config;
-    gearsym_control_2_3_knowledge knowledge;
-    gearsym_control_2_3_tcu_state state;
-    gearsym_control_2_3_outputs out;
-    gearsym_control_2_3_params_default(&config.control);
-    gearsym_ekf_2_3_params_default(&config.ekf);
+    CTL(tcu_config) config;
+    CTL(knowledge) knowledge;
+    CTL(tcu_state) state;
+    CTL(outputs) out;
+    CTL(params_default)(&config.control);
+    EKF(params_default)(&config.ekf);
     memcpy(config.q, case_q, sizeof config.q);
     memcpy(config.r, case_r, sizeof config.r);
     memcpy(config.y_floor, case_floor, sizeof config.y_floor);
-    gearsym_control_2_3_knowledge_default(&knowledge);
-    gearsym_control_2_3_tcu_init(&knowledge, case_x0, case_P0, &state);
+    CTL(knowledge_default)(&knowledge);
+    CTL(tcu_init)(&knowledge, case_x0, case_P0, &state);
 #ifdef GEARSYM_M4_TARGET
     uint32_t t_empty = 0u, t_total = 0u, t_max = 0u;
     gearsym_m4_ticks_start();
@@ -43,7 +43,7 @@ int main(void)
     report("calibration", gearsym_m4_calibration(CASE_CALIBRATION_TURNS));
 #endif
     for (int k = 0; k < CASE_TICKS; ++k) {
-        gearsym_control_2_3_tcu_inputs in;
+        CTL(tcu_inputs) in;
         in.control.t = case_in[k][0];
         in.control.omega_in = case_in[k][1];
         in.control.omega_out = case_in[k][2];
@@ -52,7 +52,7 @@ int main(void)
 #ifdef GEARSYM_M4_TARGET
         const uint32_t t0 = TICKS();
 #endif
-        const int status = gearsym_control_2_3_tcu_task(&config, &knowledge, &in, &state, &out);
+        const int status = CTL(tcu_task)(&config, &knowledge, &in, &state, &out);
 #ifdef GEARSYM_M4_TARGET
         const uint32_t elapsed = ELAPSED(t0, TICKS());
         t_total += elapsed;
