@@ -112,7 +112,7 @@ results: $(STAMP)
 	cp build/results/misra/misra.json $(RESULTS)/misra.json
 	cp build/results/misra/misra.md $(RESULTS)/misra.md
 	rm -rf build/results/tcu_task_2_3
-	$(BIN)/python -m gearsym.validation.checks.qemu_control --out build/results/tcu_task_2_3
+	$(BIN)/python -m gearsym.validation.checks.qemu_control --shift 2-3 --out build/results/tcu_task_2_3
 	cp build/results/tcu_task_2_3/tcu_task_2_3.json $(RESULTS)/tcu_task_2_3.json
 	cp build/results/tcu_task_2_3/tcu_task_2_3.md $(RESULTS)/tcu_task_2_3.md
 	rm -rf build/results/tcu_task_3_2

@@ -45,6 +45,7 @@ EXPECTED = {
     "misra.md": "misra.md",
     "one_way_simpson.md": "hybrid.md",
     "tcu_task_2_3.md": "control.md",
+    "tcu_task_3_2.md": "control.md",
 }
 
 
