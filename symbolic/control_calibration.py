@@ -40,6 +40,7 @@ from gearsym.symbolic.drive_calibration import Entry
 __all__ = [
     "HOLD_AFTER_FILL",
     "HOLD_LINE",
+    "MEAN_OVER",
     "MOVING",
     "RAMP_FRACTION",
     "SECANT_FORCE_MIN",
@@ -68,6 +69,9 @@ TIMEOUT_FACTOR = 2.0
 RAMP_FRACTION = 0.25
 #: The least F₁ of the inertia phase feed-forward's secant (N).
 SECANT_FORCE_MIN = 1e3
+#: The filter holds each tick's pressures over the tick: it is told their mean over it, on
+#: this many sub-intervals (the trapezoid rule; the Python study's filter and the emitted task's).
+MEAN_OVER = 8
 #: A shift the input torque drives: the on-coming slip's fall (fraction of its start) that
 #: shows the off-going element slides (the slip target's clock starts there).
 MOVING = 0.01

@@ -274,10 +274,11 @@ def test_the_tcu_task_on_the_target_gives_the_python_controllers_commands(contro
     same measurements, within 32 float ulps of line pressure (the ulp of 1.5e6 Pa is 0.125 Pa;
     the ctypes comparison, tests/test_control_c.py, measures 4 ulps), in the same phase, and
     the host build (glibc's sinf/cosf against newlib's) prints the same to 1e-4 of each value's
-    scale; the EKF's state stays finite and its speeds follow the measured ones once the shift
-    is done."""
+    scale; the EKF follows the shift (:func:`tests.test_control_c.check_filter_tracking`)."""
     from gearsym.validation.checks import qemu_control
     from gearsym.validation.studies.control.controller import PHASES
+
+    from tests.test_control_c import check_filter_tracking
 
     case, host, target, _, _ = control_runs
     lines = qemu_control.control_lines(target)
@@ -291,26 +292,13 @@ def test_the_tcu_task_on_the_target_gives_the_python_controllers_commands(contro
     commands = np.array([v[:2] for _, _, v in results])
     assert np.max(np.abs(commands - case.commands)) <= 32 * 0.125
     x = np.array([v[2:] for _, _, v in results])
-    assert np.all(np.isfinite(x))
-    # the filter's inputs are the commanded forces (no valve lag): it strays while the
-    # pressures move (measured up to 12 rad/s of input speed in the inertia phase), and
-    # follows the measured speeds again in the to-gear
-    done = np.array(case.phases) == "done"
-    stray = np.max(np.abs(x[done][:, [0, 1, 3]] - case.inputs[done][:, [1, 2, 3]]))
+    check_filter_tracking(case, x)
     theirs = [qemu_control.values(ln)[2] for ln in qemu_control.control_lines(host)]
     ours = [v for _, _, v in results]
     worst = max(
         float(np.max(np.abs(a - b) / (np.abs(b) + 1.0))) for a, b in zip(ours, theirs, strict=True)
     )
     assert worst < 1e-4
-    if (case.shift, np.sign(case.inputs[0, 4])) == ("3-2", 1.0):
-        # known: along the power-on 3-2 (inertia phase first, the off-going element's
-        # pressure falling) the commanded forces lead the true ones by the valve's lag, and
-        # the filter reads that as mass (m_veh about 1 400 kg for 1 800 at 1.2 s): the input
-        # speed stays about 1.3 rad/s off in the to-gear. Strict: it fails once fixed.
-        assert stray >= 1.0, f"the power-on 3-2's filter now follows ({stray:.3g} rad/s)"
-        pytest.xfail(f"power-on 3-2: the task's filter stays {stray:.2f} rad/s off")
-    assert stray < 1.0
 
 
 def test_the_tcu_task_fits_its_instruction_budget(control_runs) -> None:

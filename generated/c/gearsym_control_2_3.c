@@ -15,8 +15,14 @@
 #ifndef GEARSYM_COS
 #define GEARSYM_COS(a) cosf(a)
 #endif
+#ifndef GEARSYM_EXP
+#define GEARSYM_EXP(a) expf(a)
+#endif
 #ifndef GEARSYM_FABS
 #define GEARSYM_FABS(a) fabsf(a)
+#endif
+#ifndef GEARSYM_LOG
+#define GEARSYM_LOG(a) logf(a)
 #endif
 #ifndef GEARSYM_SIN
 #define GEARSYM_SIN(a) sinf(a)
@@ -25,8 +31,14 @@
 #ifndef GEARSYM_COS
 #define GEARSYM_COS(a) cos(a)
 #endif
+#ifndef GEARSYM_EXP
+#define GEARSYM_EXP(a) exp(a)
+#endif
 #ifndef GEARSYM_FABS
 #define GEARSYM_FABS(a) fabs(a)
+#endif
+#ifndef GEARSYM_LOG
+#define GEARSYM_LOG(a) log(a)
 #endif
 #ifndef GEARSYM_SIN
 #define GEARSYM_SIN(a) sin(a)
@@ -681,12 +693,133 @@ int gearsym_control_2_3_step(
     return status;
 }
 
-/* F_N a pressure command gives through the knowledge's valve view, above the spring, >= 0. */
-static gearsym_real gearsym_control_2_3_force(
-    const gearsym_control_2_3_knowledge *k, gearsym_real command, gearsym_real area)
+/* The valve's pressure for a command through the knowledge's view (shut for p <= 0). */
+static gearsym_real gearsym_control_2_3_valve(const gearsym_control_2_3_knowledge *k, gearsym_real command)
 {
-    const gearsym_real effective = ((k->valve_gain * command) + k->valve_offset) - GEARSYM_CONTROL_2_3_SPRING;
-    return gearsym_control_2_3_larger(effective, GEARSYM_LIT(0.0)) * area;
+    gearsym_real valve = GEARSYM_LIT(0.0);
+    if (command > GEARSYM_LIT(0.0)) {
+        valve = gearsym_control_2_3_larger((k->valve_gain * command) + k->valve_offset, GEARSYM_LIT(0.0));
+    }
+    return valve;
+}
+
+/* The pressure that presses the discs: p - SPRING once stroked, else 0. */
+static gearsym_real gearsym_control_2_3_effective(const gearsym_control_2_3_actuator *a)
+{
+    gearsym_real effective = GEARSYM_LIT(0.0);
+    if (a->fill >= GEARSYM_LIT(1.0)) {
+        effective = gearsym_control_2_3_larger(a->pressure - GEARSYM_CONTROL_2_3_SPRING, GEARSYM_LIT(0.0));
+    }
+    return effective;
+}
+
+/* Fill and chamber pressure after dt at the constant valve pressure, exactly, piece by piece
+   (ClutchActuator._evolve): stroking (fill linear in t at a rate from the pressure above the
+   spring; stroke is the Pa*s of a full stroke), filled (p - valve decays with TIME_CONSTANT),
+   and the piston leaving the discs at p = SPRING when the valve is below it. */
+static void gearsym_control_2_3_evolve(
+    gearsym_control_2_3_actuator *a, gearsym_real stroke, gearsym_real valve, gearsym_real dt)
+{
+    gearsym_real rest = dt;
+    /* at most three pieces: stroke then lag, or lag then leave then retract */
+    for (int piece = 0; piece < 4; ++piece) {
+        if (rest <= GEARSYM_LIT(0.0)) {
+            /* the whole dt is spent */
+        } else if ((a->fill < GEARSYM_LIT(1.0))
+            || ((a->pressure <= GEARSYM_CONTROL_2_3_SPRING) && (valve < GEARSYM_CONTROL_2_3_SPRING))) {
+            const gearsym_real rate = (valve - GEARSYM_CONTROL_2_3_SPRING) / stroke;
+            a->pressure = GEARSYM_CONTROL_2_3_SPRING;
+            if (rate > GEARSYM_LIT(0.0)) {
+                const gearsym_real to_full = (GEARSYM_LIT(1.0) - a->fill) / rate;
+                if (to_full >= rest) {
+                    a->fill = gearsym_control_2_3_smaller(a->fill + (rate * rest), GEARSYM_LIT(1.0));
+                    rest = GEARSYM_LIT(0.0);
+                } else {
+                    a->fill = GEARSYM_LIT(1.0);
+                    rest = rest - to_full;
+                }
+            } else {
+                a->fill = gearsym_control_2_3_larger(a->fill + (rate * rest), GEARSYM_LIT(0.0));
+                rest = GEARSYM_LIT(0.0);
+            }
+        } else {
+            gearsym_real to_spring = rest;
+            if (valve < GEARSYM_CONTROL_2_3_SPRING) {
+                to_spring = GEARSYM_CONTROL_2_3_TIME_CONSTANT
+                    * GEARSYM_LOG((a->pressure - valve) / (GEARSYM_CONTROL_2_3_SPRING - valve));
+            }
+            if (to_spring < rest) {
+                /* the piston leaves the discs at the spring's pressure and retracts */
+                a->pressure = GEARSYM_CONTROL_2_3_SPRING;
+                rest = rest - to_spring;
+            } else {
+                a->pressure = valve + ((a->pressure - valve) * GEARSYM_EXP(-rest / GEARSYM_CONTROL_2_3_TIME_CONSTANT));
+                rest = GEARSYM_LIT(0.0);
+            }
+        }
+    }
+}
+
+void gearsym_control_2_3_actuator_init(
+    int filled,
+    gearsym_real pressure,
+    gearsym_control_2_3_actuator *a)
+{
+    a->fill = GEARSYM_LIT(0.0);
+    a->pressure = GEARSYM_CONTROL_2_3_SPRING;
+    a->valve = GEARSYM_LIT(0.0);
+    if (filled != 0) {
+        a->fill = GEARSYM_LIT(1.0);
+        a->pressure = gearsym_control_2_3_larger(pressure, GEARSYM_CONTROL_2_3_SPRING);
+        a->valve = a->pressure;
+    }
+    for (int i = 0; i <= GEARSYM_CONTROL_2_3_DEAD_TICKS; ++i) {
+        a->queued[i] = a->valve;
+    }
+}
+
+gearsym_real gearsym_control_2_3_actuator_tick(
+    const gearsym_control_2_3_knowledge *k,
+    gearsym_real command,
+    gearsym_control_2_3_actuator *a)
+{
+    /* a full stroke's Pa*s: the view's fast fill strokes the piston in the believed fill time */
+    const gearsym_real stroke = gearsym_control_2_3_larger(
+        k->fill_time * (gearsym_control_2_3_valve(k, GEARSYM_CONTROL_2_3_FAST_FILL) - GEARSYM_CONTROL_2_3_SPRING), GEARSYM_LIT(1e-9));
+    const gearsym_real step = GEARSYM_CONTROL_2_3_TICK / (gearsym_real)GEARSYM_CONTROL_2_3_MEAN_OVER;
+    gearsym_real now = GEARSYM_LIT(0.0);
+    int switched = 0;
+    gearsym_real sum = GEARSYM_LIT(0.5) * gearsym_control_2_3_effective(a);
+    a->queued[GEARSYM_CONTROL_2_3_DEAD_TICKS] = gearsym_control_2_3_valve(k, command);
+    for (int j = 1; j <= GEARSYM_CONTROL_2_3_MEAN_OVER; ++j) {
+        const gearsym_real at = step * (gearsym_real)j;
+        /* the oldest queued command reaches the valve DEAD_REST into the tick */
+        if ((switched == 0) && (GEARSYM_CONTROL_2_3_DEAD_REST <= at)) {
+            gearsym_control_2_3_evolve(a, stroke, a->valve, GEARSYM_CONTROL_2_3_DEAD_REST - now);
+            now = GEARSYM_CONTROL_2_3_DEAD_REST;
+            a->valve = a->queued[0];
+            switched = 1;
+        }
+        gearsym_control_2_3_evolve(a, stroke, a->valve, at - now);
+        now = at;
+        sum += ((j == GEARSYM_CONTROL_2_3_MEAN_OVER) ? GEARSYM_LIT(0.5) : GEARSYM_LIT(1.0)) * gearsym_control_2_3_effective(a);
+    }
+    for (int i = 0; i < GEARSYM_CONTROL_2_3_DEAD_TICKS; ++i) {
+        a->queued[i] = a->queued[i + 1];
+    }
+    return sum / (gearsym_real)GEARSYM_CONTROL_2_3_MEAN_OVER;
+}
+
+/* The EKF's mode flags in u from its modes (ekf_mode_update leaves u as it is): slide =
+   +-1 while sliding that way, stick = 1 while sticking; what its next predict and update take. */
+static void gearsym_control_2_3_mode_flags(gearsym_control_2_3_tcu_state *s)
+{
+    const int off = s->modes[0];
+    const int on = s->modes[1];
+    s->u[GEARSYM_EKF_2_3_U_slide_K38] = ((off == 1) || (off == -1)) ? (gearsym_real)off : GEARSYM_LIT(0.0);
+    s->u[GEARSYM_EKF_2_3_U_stick_K38] = (off == 2) ? GEARSYM_LIT(1.0) : GEARSYM_LIT(0.0);
+    s->u[GEARSYM_EKF_2_3_U_slide_B05] = ((on == 1) || (on == -1)) ? (gearsym_real)on : GEARSYM_LIT(0.0);
+    s->u[GEARSYM_EKF_2_3_U_stick_B05] = (on == 2) ? GEARSYM_LIT(1.0) : GEARSYM_LIT(0.0);
 }
 
 void gearsym_control_2_3_tcu_init(
@@ -706,10 +839,12 @@ void gearsym_control_2_3_tcu_init(
         s->u[i] = GEARSYM_LIT(0.0);
     }
     /* the from-gear: K38 sticking at line pressure, B05 open */
+    gearsym_control_2_3_actuator_init(1, GEARSYM_CONTROL_2_3_LINE_PRESSURE, &s->actuator_off);
+    gearsym_control_2_3_actuator_init(0, GEARSYM_LIT(0.0), &s->actuator_on);
     s->modes[0] = 2;
     s->modes[1] = 0;
-    s->u[GEARSYM_EKF_2_3_U_stick_K38] = GEARSYM_LIT(1.0);
-    s->u[GEARSYM_EKF_2_3_U_F_N38] = gearsym_control_2_3_force(k, GEARSYM_CONTROL_2_3_LINE_PRESSURE, GEARSYM_CONTROL_2_3_AREA_OFF);
+    gearsym_control_2_3_mode_flags(s);
+    s->u[GEARSYM_EKF_2_3_U_F_N38] = gearsym_control_2_3_effective(&s->actuator_off) * GEARSYM_CONTROL_2_3_AREA_OFF;
     s->started = 0;
     s->nis = GEARSYM_LIT(0.0);
 }
@@ -730,8 +865,9 @@ int gearsym_control_2_3_tcu_task(
     const int status = gearsym_control_2_3_step(&c->control, k, &in->control, &s->control, out);
     /* the inputs held over the next tick, then the filter's modes for it */
     s->u[GEARSYM_EKF_2_3_U_T_In] = k->torque_gain * in->control.torque;
-    s->u[GEARSYM_EKF_2_3_U_F_N38] = gearsym_control_2_3_force(k, out->p_off, GEARSYM_CONTROL_2_3_AREA_OFF);
-    s->u[GEARSYM_EKF_2_3_U_F_N05] = gearsym_control_2_3_force(k, out->p_on, GEARSYM_CONTROL_2_3_AREA_ON);
+    s->u[GEARSYM_EKF_2_3_U_F_N38] = gearsym_control_2_3_actuator_tick(k, out->p_off, &s->actuator_off) * GEARSYM_CONTROL_2_3_AREA_OFF;
+    s->u[GEARSYM_EKF_2_3_U_F_N05] = gearsym_control_2_3_actuator_tick(k, out->p_on, &s->actuator_on) * GEARSYM_CONTROL_2_3_AREA_ON;
     (void)gearsym_ekf_2_3_ekf_mode_update(s->x, s->P, s->u, &c->ekf, s->modes);
+    gearsym_control_2_3_mode_flags(s);
     return status;
 }

@@ -76,6 +76,8 @@ typedef double gearsym_real;
 #define GEARSYM_CONTROL_2_3_FILL_TIME GEARSYM_LIT(0.1) /* [s] calibrated fill time */
 #define GEARSYM_CONTROL_2_3_FAST_FILL GEARSYM_LIT(300000.0) /* [Pa] fast-fill pressure */
 #define GEARSYM_CONTROL_2_3_SPRING GEARSYM_LIT(80000.0) /* [Pa] return-spring pressure */
+#define GEARSYM_CONTROL_2_3_TIME_CONSTANT GEARSYM_LIT(0.03) /* [s] chamber pressure lag */
+#define GEARSYM_CONTROL_2_3_DEAD_REST GEARSYM_LIT(0.0) /* [s] valve dead time past its whole ticks */
 #define GEARSYM_CONTROL_2_3_FILL_HOLD GEARSYM_LIT(20000.0) /* [Pa] hold above the spring after fill */
 #define GEARSYM_CONTROL_2_3_HOLD_AFTER_FILL GEARSYM_LIT(0.03) /* [s] fill hold before the torque phase */
 #define GEARSYM_CONTROL_2_3_TORQUE_PHASE GEARSYM_LIT(0.15) /* [s] torque-phase duration */
@@ -183,12 +185,29 @@ typedef struct gearsym_control_2_3_tcu_inputs {
     gearsym_real omega_wheel; /* [rad/s] wheel speed (NaN: not measured this tick) */
 } gearsym_control_2_3_tcu_inputs;
 
+/*
+ * The TCU's nominal actuator of one element (validation/sim/actuator.py) as the knowledge
+ * views it: the valve (dead time GEARSYM_CONTROL_2_3_DEAD_TICKS ticks + GEARSYM_CONTROL_2_3_DEAD_REST, then
+ * max(valve_gain p + valve_offset, 0), shut for p <= 0), the piston's fill (stroked by the
+ * knowledge's fill_time at the fast-fill command) and the chamber's first-order lag.
+ */
+#define GEARSYM_CONTROL_2_3_DEAD_TICKS 1 /* [1] whole ticks of the valve's dead time */
+#define GEARSYM_CONTROL_2_3_MEAN_OVER 8 /* [1] sub-intervals of a tick's mean pressure */
+typedef struct gearsym_control_2_3_actuator {
+    gearsym_real fill; /* [1] the piston's fill: 1 stroked onto the discs */
+    gearsym_real pressure; /* [Pa] chamber pressure (the spring's while stroking) */
+    gearsym_real valve; /* [Pa] valve pressure now */
+    gearsym_real queued[GEARSYM_CONTROL_2_3_DEAD_TICKS + 1]; /* [Pa] valve pressures of the commands inside the dead time, oldest first */
+} gearsym_control_2_3_actuator;
+
 /* The task's memory (caller-owned): the controller's state and the EKF's x, P, u, modes. */
 typedef struct gearsym_control_2_3_tcu_state {
     gearsym_control_2_3_state control;
     gearsym_real x[GEARSYM_EKF_2_3_NX];
     gearsym_real P[GEARSYM_EKF_2_3_NX * GEARSYM_EKF_2_3_NX];
     gearsym_real u[GEARSYM_EKF_2_3_NU];
+    gearsym_control_2_3_actuator actuator_off; /* K38: what the filter is told it presses */
+    gearsym_control_2_3_actuator actuator_on; /* B05 */
     int modes[2];
     int started; /* the EKF has had its first measurement */
     gearsym_real nis; /* the last update's normalised innovation squared */
@@ -328,8 +347,30 @@ int gearsym_control_2_3_step(
     gearsym_control_2_3_outputs *out);
 
 /**
+ * An actuator at rest: stroked with the chamber and the valve at pressure (not below the
+ * spring; filled != 0), or empty with the valve shut.
+ */
+void gearsym_control_2_3_actuator_init(
+    int filled,
+    gearsym_real pressure,
+    gearsym_control_2_3_actuator *a);
+
+/**
+ * One tick of an actuator under a command given at the tick's start (Pa): it moves on to the
+ * tick's end; returns the mean over the tick of the pressure that presses the discs (p -
+ * SPRING once stroked, else 0; the trapezoid rule on MEAN_OVER sub-intervals), as
+ * ClutchActuator.at_ticks(..., mean_over=MEAN_OVER) of the knowledge's view. Each piece
+ * (stroking, the lag, the piston leaving the discs) is solved exactly.
+ */
+gearsym_real gearsym_control_2_3_actuator_tick(
+    const gearsym_control_2_3_knowledge *k,
+    gearsym_real command,
+    gearsym_control_2_3_actuator *a);
+
+/**
  * At the shift command: init the controller, and start the EKF at x0, P0 (column-major) in
- * the from-gear (K38 sticking, B05 open).
+ * the from-gear (K38 sticking, B05 open; K38's actuator stroked at line
+ * pressure, B05's empty).
  */
 void gearsym_control_2_3_tcu_init(
     const gearsym_control_2_3_knowledge *k,
@@ -342,8 +383,8 @@ void gearsym_control_2_3_tcu_init(
  * tick with the inputs then held, update with y = [omega_in, omega_out, omega_wheel], mode
  * update), then the controller's step; the EKF's inputs for the next tick are the commanded
  * torque times the knowledge's torque gain and the normal forces the commands give through
- * the knowledge's valve view, (gain p + offset - SPRING) a_piston, at least 0. Returns the
- * step's code.
+ * the TCU's actuator model (actuator_tick: the valve's dead time and lag, the piston's fill),
+ * their mean over the tick times a_piston. Returns the step's code.
  */
 int gearsym_control_2_3_tcu_task(
     const gearsym_control_2_3_tcu_config *c,

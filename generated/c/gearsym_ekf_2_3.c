@@ -1127,9 +1127,9 @@ static int gearsym_ekf_2_3_slide_direction(gearsym_real value, gearsym_real slip
  * in the torque's direction; a sliding one whose slip has reached zero locks up if |sticking
  * torque| at A x is within the capacity with mu lowered by the stated sigma multiple (x = A x,
  * P = A P A^T on the physical states, the parameter block untouched), else slides in the
- * torque's direction. Then set u's slide_/stick_ flags from modes (slide = modes[e] if it is
- * +-1, stick = 1 if it is 2) for the next ekf_predict and ekf_update. Returns the number of
- * switches.
+ * torque's direction. Returns the number of switches. u is left as it is: the caller sets its
+ * slide_/stick_ flags from the modes (slide = modes[e] if it is +-1, else 0; stick = 1 if it
+ * is 2, else 0) for the next ekf_predict and ekf_update.
  * Operations (at most): 200 add, 264 mul, 0 div, 0 calls (ekf_mode_quantities at most twice
  * per element, the lock-up map of x and P: 160 add, 176 mul, 0 div, 0 calls); stack: 99 reals.
  */

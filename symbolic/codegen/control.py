@@ -35,6 +35,7 @@ printed as literals.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -60,6 +61,7 @@ from gearsym.symbolic.codegen.views import ModelView, model_view
 from gearsym.symbolic.control_calibration import (
     HOLD_AFTER_FILL,
     HOLD_LINE,
+    MEAN_OVER,
     MOVING,
     RAMP_FRACTION,
     SECANT_FORCE_MIN,
@@ -364,6 +366,9 @@ def _constants(d: GearboxDescription, hybrid: HybridShift) -> tuple[ControlConst
     add("FILL_TIME", control.si("actuator", "fill_time"), "s", "calibrated fill time")
     add("FAST_FILL", control.si("actuator", "fast_fill_pressure"), "Pa", "fast-fill pressure")
     add("SPRING", control.si("actuator", "return_spring"), "Pa", "return-spring pressure")
+    add("TIME_CONSTANT", control.si("actuator", "time_constant"), "s", "chamber pressure lag")
+    dead_ticks, dead_rest = dead_time_ticks(control.si("actuator", "dead_time"))
+    add("DEAD_REST", dead_rest, "s", "valve dead time past its whole ticks")
     add("FILL_HOLD", control.si("shift", "fill_hold"), "Pa", "hold above the spring after fill")
     add("HOLD_AFTER_FILL", HOLD_AFTER_FILL, "s", "fill hold before the torque phase")
     add("TORQUE_PHASE", control.si("shift", "torque_phase"), "s", "torque-phase duration")
@@ -398,6 +403,14 @@ def _constants(d: GearboxDescription, hybrid: HybridShift) -> tuple[ControlConst
     return tuple(out)
 
 
+def dead_time_ticks(dead_time: float) -> tuple[int, float]:
+    """The valve's dead time (s) as whole task ticks and the rest (s, below a tick): a command
+    given at a tick reaches the valve that many ticks and the rest later."""
+    ticks = int(math.floor(dead_time / TICK + 1e-9))
+    rest = dead_time - ticks * TICK
+    return ticks, rest if rest > 1e-12 else 0.0
+
+
 @dataclass(frozen=True)
 class CControlView(ModelView):
     """What ``c_shift_control.{h,c}.j2`` print."""
@@ -418,6 +431,10 @@ class CControlView(ModelView):
     ekf_element_on: int
     #: the to-gear's ratio is the smaller: the input torque drives the shift when negative
     upshift: bool
+    #: the valve's dead time in whole ticks (:func:`dead_time_ticks`)
+    dead_ticks: int
+    #: sub-intervals of the tick's mean pressure the task's filter is told (MEAN_OVER)
+    mean_over: int
     math_macros: tuple[MathMacro, ...]
     m_veh_default: str
     zeta_default: str
@@ -442,6 +459,9 @@ class EkfInputs:
     force_off: str
     force_on: str
     stick_off: str
+    slide_off: str
+    stick_on: str
+    slide_on: str
 
 
 def ekf_mismatch(d: GearboxDescription, hybrid: HybridShift) -> str:
@@ -480,7 +500,8 @@ def emit_control_files(
         raise ValueError(f"controller {shift} needs helpers {sorted(used_helpers)}")
     if used_macros - {"sin", "cos"}:
         raise ValueError(f"controller {shift} needs math functions {sorted(used_macros)}")
-    macros = sorted(used_macros | {"cos", "fabs"})  # the phase logic's own calls
+    # the phase logic's own calls, and the actuator model's
+    macros = sorted(used_macros | {"cos", "fabs", "exp", "log"})
     spec = hybrid.spec
     mismatch = ekf_mismatch(d, hybrid)
     if mismatch:
@@ -508,10 +529,15 @@ def emit_control_files(
             f"{ekf_macro}U_{naming.normal_force(element_short_name(d, spec.off_going))}",
             f"{ekf_macro}U_{naming.normal_force(element_short_name(d, spec.on_coming))}",
             f"{ekf_macro}U_stick_{spec.off_going}",
+            f"{ekf_macro}U_slide_{spec.off_going}",
+            f"{ekf_macro}U_stick_{spec.on_coming}",
+            f"{ekf_macro}U_slide_{spec.on_coming}",
         ),
         ekf_element_off=elements.index(spec.off_going),
         ekf_element_on=elements.index(spec.on_coming),
         upshift=is_upshift(d, spec),
+        dead_ticks=dead_time_ticks(d.control.si("actuator", "dead_time"))[0],
+        mean_over=MEAN_OVER,
         math_macros=tuple(MathMacro(name.upper(), name, False) for name in macros),
         m_veh_default=_lit(defaults["m_veh"]),
         zeta_default=_lit(defaults[naming.GRADE]),

@@ -295,9 +295,9 @@ ROWS: tuple[Row, ...] = (
         "whose slip has reached zero locks up if |sticking torque| at A x is within the "
         "capacity with mu lowered by the stated sigma multiple (x = A x, P = A P A^T on the "
         "physical states, the parameter block untouched), else slides in the torque's "
-        "direction. Then set u's slide_/stick_ flags from modes (slide = modes[e] if it is "
-        "+-1, stick = 1 if it is 2) for the next ekf_predict and ekf_update. Returns the number "
-        "of switches.",
+        "direction. Returns the number of switches. u is left as it is: the caller sets its "
+        "slide_/stick_ flags from the modes (slide = modes[e] if it is +-1, else 0; stick = "
+        "1 if it is 2, else 0) for the next ekf_predict and ekf_update.",
         returns="int",
         when="ekf_modes",
     ),

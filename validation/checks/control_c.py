@@ -17,7 +17,13 @@ from typing import Any
 import numpy as np
 from gearsym.validation.checks.c_check import STRICT_FLAGS, CompileError
 
-__all__ = ["CShiftController", "build_control_library", "struct_fields"]
+__all__ = [
+    "CShiftController",
+    "build_control_library",
+    "emit_task_sources",
+    "struct_fields",
+    "structure",
+]
 
 PHASES = ("fill", "torque", "inertia", "lockup", "done")
 KNOWLEDGE_FIELDS = (
@@ -79,21 +85,46 @@ def build_control_library(c_dir: Path, shift: str, out: Path, single: bool) -> P
 
 def struct_fields(header: str, struct: str) -> list[tuple[str, str]]:
     """(type, name) of each field of ``typedef struct <struct> {...}`` in a header's text."""
+    return [(kind, name) for kind, name, _ in _struct_fields(header, struct)]
+
+
+def _struct_fields(header: str, struct: str) -> list[tuple[str, str, int]]:
+    """(type, name, length: 1 for a scalar) of each field; an array's length is an integer
+    macro of the header plus or minus an integer (``NAME + 1``)."""
     match = re.search(r"typedef struct " + struct + r" \{(.*?)\n\} ", header, flags=re.S)
     if match is None:
         raise ValueError(f"no struct {struct}")
+    macros = {m[0]: int(m[1]) for m in re.findall(r"#define (\w+) (-?\d+)\b", header)}
     fields = []
     for line in match.group(1).splitlines():
-        found = re.match(r"\s+(\w+) (\w+)(\[[^\]]*\])?;", line)
+        found = re.match(r"\s+(\w+) (\w+)(?:\[([^\]]*)\])?;", line)
         if found:
-            fields.append((found.group(1), found.group(2)))
+            length = 1
+            if found.group(3) is not None:
+                terms = re.fullmatch(r"\s*(\w+)\s*(?:([+-])\s*(\d+))?\s*", found.group(3))
+                if terms is None:
+                    raise ValueError(f"{struct}.{found.group(2)}: length {found.group(3)!r}")
+                base = terms[1]
+                length = int(base) if base.isdigit() else macros[base]
+                if terms[2]:
+                    length += int(terms[3]) * (1 if terms[2] == "+" else -1)
+            fields.append((found.group(1), found.group(2), length))
     return fields
 
 
 def _structure(header: str, struct: str, real: Any) -> type[ctypes.Structure]:
     types = {"gearsym_real": real, "int": ctypes.c_int}
-    fields = [(name, types[kind]) for kind, name in struct_fields(header, struct)]
+    fields = [
+        (name, types[kind] if length == 1 else types[kind] * length)
+        for kind, name, length in _struct_fields(header, struct)
+    ]
     return type(struct, (ctypes.Structure,), {"_fields_": fields})
+
+
+def structure(header: str, struct: str, single: bool) -> type[ctypes.Structure]:
+    """The ctypes structure of ``typedef struct <struct>`` in a header's text (gearsym_real
+    float or double; arrays of a macro's length as the header defines them)."""
+    return _structure(header, struct, ctypes.c_float if single else ctypes.c_double)
 
 
 class CShiftController:

@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from gearsym.symbolic import naming
+from gearsym.symbolic.control_calibration import MEAN_OVER
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
 from gearsym.symbolic.estimator_calibration import VALVE_OFFSET
@@ -272,10 +273,6 @@ class EstimatorStrategy(RuleStrategy):
         command = self.replay.nominal.fill_time + fill_to_command(self.fill, limit)
         self.knowledge = replace(learned, fill_time=self.replay.duration(learned, command))
 
-
-#: The filter holds each tick's pressures over the tick: it is told their mean over it, on
-#: this many sub-intervals (:meth:`~gearsym.validation.sim.actuator.ClutchActuator.at_ticks`).
-MEAN_OVER = 8
 
 #: The steps of the central differences in :func:`_sensitivity`: the valve's offset (Pa) and
 #: the fill time (s).
