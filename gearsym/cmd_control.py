@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 from gearsym.commands import add_command, emit_json, load
 from gearsym.interrupts import check
+from gearsym.options import number
 
 if TYPE_CHECKING:
     from gearsym.commands import Subparsers
@@ -46,7 +47,11 @@ def cmd_control(args: argparse.Namespace) -> int:
         raise GearsymError(
             "--strategies", "", f"expected some of {', '.join(STRATEGIES)}, got {args.strategies!r}"
         )
-    for option, value in (("--shifts", args.shifts), ("--runs", args.runs)):
+    for option, value in (
+        ("--shifts", args.shifts),
+        ("--runs", args.runs),
+        ("--workers", args.workers),
+    ):
         if value < 1:
             raise GearsymError(option, "", f"must be at least 1, got {value}")
     if args.runs > 1 and args.fleet is None:
@@ -186,7 +191,10 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--runs", type=int, default=1, help="vehicles: seeds --seed ... --seed + N - 1")
     p.add_argument(
-        "--seed", type=int, default=0, help="the first vehicle and the sensors' noise (default 0)"
+        "--seed",
+        type=number(int, minimum=0),
+        default=0,
+        help="the first vehicle and the sensors' noise (default 0)",
     )
     p.add_argument(
         "--scheduler",

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 from gearsym.commands import add_command, emit_json, load
 from gearsym.interrupts import check
+from gearsym.options import number
 
 if TYPE_CHECKING:
     from gearsym.commands import Subparsers
@@ -39,8 +40,9 @@ def cmd_drive(args: argparse.Namespace) -> int:
             cycle = cycle.window(args.duration)
     grade = load_grade(args.grade) if args.grade is not None else None
     truth = None
-    if args.runs < 1:
-        raise GearsymError("--runs", "", f"must be at least 1, got {args.runs}")
+    for option, value in (("--runs", args.runs), ("--workers", args.workers)):
+        if value < 1:
+            raise GearsymError(option, "", f"must be at least 1, got {value}")
     if (args.runs > 1 or args.scheduler is not None) and args.fleet is None:
         raise GearsymError("--runs", "", "more than one drive, or --scheduler, needs --fleet")
     if args.reference and args.runs > 1:
@@ -208,7 +210,10 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "the TCU keeps the description's calibration",
     )
     p.add_argument(
-        "--seed", type=int, default=0, help="the fleet vehicle and the sensors' noise (default 0)"
+        "--seed",
+        type=number(int, minimum=0),
+        default=0,
+        help="the fleet vehicle and the sensors' noise (default 0)",
     )
     p.add_argument(
         "--runs",

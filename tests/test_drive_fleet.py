@@ -126,6 +126,8 @@ def gearsym(*args: str) -> subprocess.CompletedProcess:
     [
         (["--runs", "3"], "--runs: more than one drive, or --scheduler, needs --fleet"),
         (["--runs", "0"], "--runs: must be at least 1"),
+        (["--fleet", "--seed", "-1"], "--seed: must be at least 0"),
+        (["--fleet", "--runs", "2", "--scheduler", "local", "--workers", "0"], "--workers: must"),
         (["--fleet", "--runs", "2", "--scheduler", "udp://x"], "drive: --scheduler: expected"),
     ],
 )

@@ -327,6 +327,8 @@ def test_cli_control_json_and_files(tmp_path) -> None:  # noqa: ANN001
     [
         (["--strategies", "fixed,psychic"], "--strategies: expected some of"),
         (["--shifts", "0"], "--shifts: must be at least 1"),
+        (["--fleet", "--seed", "-1"], "--seed: must be at least 0"),
+        (["--fleet", "--runs", "2", "--scheduler", "local", "--workers", "0"], "--workers: must"),
         (["--runs", "3"], "--runs: more than one vehicle needs --fleet"),
         (["--fix", "mu_scale=1.2"], "--fix: fixes an entry of a fleet: needs --fleet"),
         (["--fleet", "--fix", "mu_scale"], "--fix: expected NAME=NUMBER"),

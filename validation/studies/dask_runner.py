@@ -66,6 +66,10 @@ def connect(
     one-line error."""
     from dask.distributed import Client, LocalCluster
 
+    if scheduler == "local" and workers < 1:
+        # a LocalCluster of no worker would wait for one forever
+        raise GearsymError("--workers", "", f"must be at least 1, got {workers}")
+
     if scheduler == "local":
         cluster = LocalCluster(
             n_workers=workers,
