@@ -140,12 +140,14 @@ results: $(STAMP)
 	cp build/results/drive_wltc3b_fleet/fleet.png $(RESULTS)/drive_wltc3b_fleet.png
 # The adaptive-control study (docs/control.md): 100 vehicles of the default fleet x 20 2-3
 # upshifts x 4 strategies (the issue's size), 20 vehicles with cold oil (every element's mu
-# +25 %) and 30 vehicles of 3-4 (about 55, 9 and 15 min on two cores).
-	rm -rf build/results/control_2_3 build/results/control_3_4 build/results/control_2_3_cold
+# +25 %), 30 vehicles of 3-4 and 20 vehicles x 10 power-on 3-2 downshifts (about 120, 25, 40
+# and 10 min on two cores).
+	rm -rf build/results/control_2_3 build/results/control_3_4 build/results/control_2_3_cold build/results/control_3_2
 	$(BIN)/gearsym control --fleet --strategies fixed,rule,estimator,oracle --shifts 20 --runs 100 --seed 10000 --scheduler local --out build/results/control_2_3
 	$(BIN)/gearsym control --fleet --fix mu_scale=1.25 --strategies fixed,rule,estimator,oracle --shifts 20 --runs 20 --seed 10000 --scheduler local --out build/results/control_2_3_cold
 	$(BIN)/gearsym control --scenario gearsym/data/scenario_3_4.toml --fleet --strategies fixed,rule,estimator,oracle --shifts 20 --runs 30 --seed 10000 --scheduler local --out build/results/control_3_4
-	for run in control_2_3 control_2_3_cold control_3_4; do \
+	$(BIN)/gearsym control --scenario gearsym/data/scenario_3_2_power_on.toml --fleet --strategies fixed,rule,estimator,oracle --shifts 10 --runs 20 --seed 10000 --scheduler local --out build/results/control_3_2
+	for run in control_2_3 control_2_3_cold control_3_4 control_3_2; do \
 	  cp build/results/$$run/control.json $(RESULTS)/$$run.json; \
 	  cp build/results/$$run/control.md $(RESULTS)/$$run.md; \
 	  cp build/results/$$run/sequence.png $(RESULTS)/$${run}_sequence.png; \

@@ -84,6 +84,7 @@ EXPECTED = {
     "control_2_3.md": "control.md",
     "control_2_3_cold.md": "control.md",
     "control_3_4.md": "control.md",
+    "control_3_2.md": "control.md",
 }
 
 
