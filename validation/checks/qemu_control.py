@@ -64,10 +64,10 @@ __all__ = [
     "values",
 ]
 
-#: The EKF's initial σ per kind of state: the measured speeds, the side shafts' twist, the
-#: wheel speed, m_veh, each μ, ζ: assumed, a filter started at the shift command from the
-#: speeds it measures.
-SIGMA0 = {"speed": 1.0, "twist": 1e-3, "wheel": 0.5, "m_veh": 200.0, "mu": 0.02, "zeta": 0.02}
+#: The EKF's initial σ of the physical states: the measured speeds, the side shafts' twist and
+#: the wheel speed (assumed: a filter started at the shift command from the speeds it
+#: measures); the parameters' is the description's prior (``[estimator]``, prior_of).
+SIGMA0 = {"speed": 1.0, "twist": 1e-3, "wheel": 0.5}
 #: The task's budget on the TCU (issue 29): instructions per call, EKF included.
 BUDGET = 20_000
 #: The shifts the task is run along, per shift: the kind → its operating point, a shipped
@@ -171,12 +171,11 @@ def control_case(
         naming.speed(d.output_shaft): (speeds[1][0], SIGMA0["speed"]),
         naming.TWIST: (signals[naming.TWIST][0], SIGMA0["twist"]),
         naming.WHEEL_SPEED: (wheel[0], SIGMA0["wheel"]),
-        "m_veh": (knowledge.m_veh, SIGMA0["m_veh"]),
-        naming.GRADE: (knowledge.zeta, SIGMA0["zeta"]),
     }
-    start |= {
-        str(symbol): (mu, SIGMA0["mu"]) for symbol in model.hybrid.friction_coefficient.values()
-    }
+    calibration = {"m_veh": knowledge.m_veh, naming.GRADE: knowledge.zeta}
+    calibration |= {str(s): mu for s in model.hybrid.friction_coefficient.values()}
+    for name, value in calibration.items():
+        start[name] = (value, d.estimator.prior_of(name, value)[1])
     x0 = np.array([start[name][0] for name in aug.state_names])
     sigma0 = np.array([start[name][1] for name in aug.state_names])
     return ControlCase(
