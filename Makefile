@@ -119,6 +119,10 @@ results: $(STAMP)
 	$(BIN)/python -m gearsym.validation.checks.qemu_control --shift 3-2 --out build/results/tcu_task_3_2
 	cp build/results/tcu_task_3_2/tcu_task_3_2.json $(RESULTS)/tcu_task_3_2.json
 	cp build/results/tcu_task_3_2/tcu_task_3_2.md $(RESULTS)/tcu_task_3_2.md
+	rm -rf build/results/tcu_task_3_4
+	$(BIN)/python -m gearsym.validation.checks.qemu_control --shift 3-4 --out build/results/tcu_task_3_4
+	cp build/results/tcu_task_3_4/tcu_task_3_4.json $(RESULTS)/tcu_task_3_4.json
+	cp build/results/tcu_task_3_4/tcu_task_3_4.md $(RESULTS)/tcu_task_3_4.md
 # A whole WLTC class 3b drive with the EKF over it, the calibration's own vehicle and a fleet
 # vehicle (docs/drive.md; about 2 min each: the fast drive and the EKF over its log), then 20
 # vehicles of the fleet (about 32 min on two cores).

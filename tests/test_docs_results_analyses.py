@@ -46,6 +46,7 @@ EXPECTED = {
     "one_way_simpson.md": "hybrid.md",
     "tcu_task_2_3.md": "control.md",
     "tcu_task_3_2.md": "control.md",
+    "tcu_task_3_4.md": "control.md",
 }
 
 

@@ -84,6 +84,8 @@ __all__ = [
     "CONTROL_ARGUMENTS",
     "control_files",
     "ekf_mismatch",
+    "extra_speeds",
+    "task_measurements",
     "ControlConstant",
     "control_model_name",
     "control_table",
@@ -435,6 +437,10 @@ class CControlView(ModelView):
     dead_ticks: int
     #: sub-intervals of the tick's mean pressure the task's filter is told (MEAN_OVER)
     mean_over: int
+    #: what the task hands the EKF as y, in its output order (C expressions)
+    task_y: tuple[str, ...]
+    #: the task's input fields of shaft speeds only the EKF measures
+    extra_speeds: tuple[str, ...]
     math_macros: tuple[MathMacro, ...]
     m_veh_default: str
     zeta_default: str
@@ -464,23 +470,56 @@ class EkfInputs:
     slide_on: str
 
 
+def task_measurements(d: GearboxDescription, hybrid: HybridShift) -> tuple[tuple[str, str], ...]:
+    """(the EKF's output, what the task hands it) in the EKF's output order: the controller's
+    input and output shaft speeds, the wheel speed and, for a shaft speed only the EKF
+    measures, a field ``omega_<shaft>`` of the task's inputs. An output that is no speed
+    raises ValueError (:func:`ekf_mismatch` says why)."""
+    from gearsym.symbolic.estimators.ekf import augmented_model
+
+    aug = augmented_model(d, hybrid.spec.name)
+    given = {
+        f"y_{naming.speed(d.input_shaft)}": "in->control.omega_in",
+        f"y_{naming.speed(d.output_shaft)}": "in->control.omega_out",
+        f"y_{naming.WHEEL_SPEED}": "in->omega_wheel",
+    }
+    shafts = {f"y_{naming.speed(s.name)}": naming.speed(s.name) for s in d.shafts}
+    out = []
+    for v in aug.model.outputs:
+        if v.name in given:
+            out.append((v.name, given[v.name]))
+        elif v.name in shafts:
+            out.append((v.name, f"in->{shafts[v.name]}"))
+        else:
+            raise ValueError(f"its EKF measures {v.name}, which is no shaft or wheel speed")
+    return tuple(out)
+
+
+def extra_speeds(measurements: tuple[tuple[str, str], ...]) -> tuple[str, ...]:
+    """The task's input fields of the shaft speeds only its EKF measures (``omega_<shaft>``)."""
+    given = ("in->omega_wheel",)
+    return tuple(
+        c.removeprefix("in->")
+        for _, c in measurements
+        if c.startswith("in->omega_") and c not in given
+    )
+
+
 def ekf_mismatch(d: GearboxDescription, hybrid: HybridShift) -> str:
-    """Why the shift's EKF (4.3) cannot run in the task, "" when it can: the task hands it its
-    measurements as [omega_in, omega_out, omega_wheel] and its modes in the hybrid's element
+    """Why the shift's EKF (4.3) cannot run in the task, "" when it can: the task hands it the
+    speeds it measures (:func:`task_measurements`) and its modes in the hybrid's element
     order."""
     from gearsym.symbolic.estimators.ekf import augmented_model
 
     aug = augmented_model(d, hybrid.spec.name)
-    outputs = [v.name for v in aug.model.outputs]
-    wanted = [
-        f"y_{naming.speed(d.input_shaft)}",
-        f"y_{naming.speed(d.output_shaft)}",
-        f"y_{naming.WHEEL_SPEED}",
-    ]
-    if outputs != wanted or tuple(aug.elements) != tuple(hybrid.elements):
+    try:
+        task_measurements(d, hybrid)
+    except ValueError as err:
+        return str(err)
+    if tuple(aug.elements) != tuple(hybrid.elements):
         return (
-            f"its EKF measures {', '.join(outputs)} with the elements {', '.join(aug.elements)}; "
-            f"the task hands it {', '.join(wanted)} and {', '.join(hybrid.elements)}"
+            f"its EKF's elements are {', '.join(aug.elements)}; the task hands it "
+            f"{', '.join(hybrid.elements)}"
         )
     return ""
 
@@ -506,6 +545,7 @@ def emit_control_files(
     mismatch = ekf_mismatch(d, hybrid)
     if mismatch:
         raise ValueError(f"controller {shift}: {mismatch}")
+    measurements = task_measurements(d, hybrid)
     base = model_view(table)
     ekf_name = "ekf_" + shift.replace("-", "_")
     ekf_macro = macro_prefix(ekf_name)
@@ -538,6 +578,8 @@ def emit_control_files(
         upshift=is_upshift(d, spec),
         dead_ticks=dead_time_ticks(d.control.si("actuator", "dead_time"))[0],
         mean_over=MEAN_OVER,
+        task_y=tuple(c for _, c in measurements),
+        extra_speeds=extra_speeds(measurements),
         math_macros=tuple(MathMacro(name.upper(), name, False) for name in macros),
         m_veh_default=_lit(defaults["m_veh"]),
         zeta_default=_lit(defaults[naming.GRADE]),

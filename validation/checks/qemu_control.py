@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 import subprocess
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -76,6 +76,10 @@ BUDGET = 20_000
 #: the coast 2-3's drag (engine −20, the machine recuperating −20; assumed).
 CASES: dict[str, dict[str, tuple[str | None, tuple[float, float] | None]]] = {
     "2-3": {"power-on": (None, None), "coast": ("scenario_2_3_coast.toml", None)},
+    "3-4": {
+        "power-on": ("scenario_3_4.toml", None),
+        "coast": ("scenario_3_4.toml", (-20.0, -20.0)),
+    },
     "3-2": {
         "power-on": ("scenario_3_2_power_on.toml", None),
         "coast": ("scenario_3_2_power_on.toml", (-20.0, -20.0)),
@@ -126,6 +130,13 @@ class ControlCase:
     shift: str = "2-3"
     #: where the on-coming element's μ sits in the filter's state
     mu_on_index: int = 6
+    #: the EKF's relative measurement noise and its floor per output (3.26)
+    r: np.ndarray = field(default_factory=lambda: np.array(EKF_R))
+    floor: np.ndarray = field(default_factory=lambda: np.array(EKF_FLOOR))
+    #: where the input, output and wheel speeds and m_veh sit in the filter's state
+    tracked: tuple[int, int, int, int] = (0, 1, 3, 4)
+    #: the task's input fields of the shaft speeds only its EKF measures (inputs' columns 5...)
+    extra: tuple[str, ...] = ()
 
 
 def control_case(
@@ -134,6 +145,8 @@ def control_case(
     """The Python controller's ``shift`` of ``kind`` (:data:`CASES`) on the calibration's
     vehicle from its operating point, sampled at its ticks."""
     from gearsym.symbolic import naming
+    from gearsym.symbolic.codegen.control import extra_speeds, task_measurements
+    from gearsym.symbolic.defaults import EKF_FLOOR_FRACTION, EKF_RELATIVE_NOISE
     from gearsym.symbolic.drivetrain import quantity
     from gearsym.symbolic.estimators.ekf import augmented_model
     from gearsym.symbolic.hybrid import hybrid_shift
@@ -165,13 +178,25 @@ def control_case(
     wheel = signals[naming.WHEEL_SPEED][at_ticks]
     torque = np.full(len(at_ticks), point.torque)
     aug = augmented_model(d, shift)
-    # the filter's start: the measured speeds, the record's twist and wheel, the calibration
-    start = {
-        naming.speed(d.input_shaft): (speeds[0][0], SIGMA0["speed"]),
-        naming.speed(d.output_shaft): (speeds[1][0], SIGMA0["speed"]),
-        naming.TWIST: (signals[naming.TWIST][0], SIGMA0["twist"]),
-        naming.WHEEL_SPEED: (wheel[0], SIGMA0["wheel"]),
+    # the shaft speeds only the task's EKF measures (its inputs' extra fields, in order)
+    measurements = task_measurements(d, model.hybrid)
+    extra = extra_speeds(measurements)
+    # the EKF's measurement noise (3.26) as the estimation studies set it: relative, with a
+    # floor of a fraction of each output's largest value over the record
+    measured = {
+        "in->control.omega_in": speeds[0],
+        "in->control.omega_out": speeds[1],
+        "in->omega_wheel": wheel,
+        **{f"in->{f}": signals[f][at_ticks] for f in extra},
     }
+    y = np.column_stack([measured[c] for _, c in measurements])
+    # the filter's start: the shafts' speeds and the record's twist and wheel, the calibration
+    start = {
+        naming.speed(s.name): (float(signals[naming.speed(s.name)][0]), SIGMA0["speed"])
+        for s in d.shafts
+    }
+    start[naming.TWIST] = (signals[naming.TWIST][0], SIGMA0["twist"])
+    start[naming.WHEEL_SPEED] = (wheel[0], SIGMA0["wheel"])
     calibration = {"m_veh": knowledge.m_veh, naming.GRADE: knowledge.zeta}
     calibration |= {str(s): mu for s in model.hybrid.friction_coefficient.values()}
     for name, value in calibration.items():
@@ -179,7 +204,9 @@ def control_case(
     x0 = np.array([start[name][0] for name in aug.state_names])
     sigma0 = np.array([start[name][1] for name in aug.state_names])
     return ControlCase(
-        inputs=np.column_stack([result.ticks, *speeds, wheel, torque]),
+        inputs=np.column_stack(
+            [result.ticks, *speeds, wheel, torque, *(signals[f][at_ticks] for f in extra)]
+        ),
         commands=np.column_stack(
             [result.commands[spec.off_going], result.commands[spec.on_coming]]
         ),
@@ -189,6 +216,18 @@ def control_case(
         q=np.array([aug.intensities[n] for n in aug.state_names]),
         shift=shift,
         mu_on_index=aug.state_names.index(str(model.hybrid.friction_coefficient[spec.on_coming])),
+        r=np.full(y.shape[1], EKF_RELATIVE_NOISE),
+        floor=EKF_FLOOR_FRACTION * np.max(np.abs(y), axis=0),
+        tracked=tuple(
+            aug.state_names.index(n)
+            for n in (
+                naming.speed(d.input_shaft),
+                naming.speed(d.output_shaft),
+                naming.WHEEL_SPEED,
+                "m_veh",
+            )
+        ),
+        extra=extra,
     )
 
 
@@ -209,15 +248,17 @@ class FilterTracking:
 
 def filter_tracking(case: ControlCase, states: np.ndarray) -> FilterTracking:
     """:class:`FilterTracking` of the filter's ``states`` (one row per task call)."""
-    error = np.abs(states[:, [0, 1, 3]] - case.inputs[:, [1, 2, 3]])
+    speeds = list(case.tracked[:3])
+    error = np.abs(states[:, speeds] - case.inputs[:, [1, 2, 3]])
     done = np.array(case.phases) == "done"
-    m_veh = case.x0[4]
+    index = case.tracked[3]
+    m_veh = case.x0[index]
     mu = states[:, case.mu_on_index]
     return FilterTracking(
         speed_error=float(error.max()),
         speed_error_done=float(error[done].max()) if done.any() else math.nan,
-        mass_error=float(np.max(np.abs(states[:, 4] - m_veh)) / m_veh),
-        m_veh_end=float(states[-1, 4]),
+        mass_error=float(np.max(np.abs(states[:, index] - m_veh)) / m_veh),
+        m_veh_end=float(states[-1, index]),
         mu_on_moved=float(abs(mu[-1] - case.x0[case.mu_on_index])),
     )
 
@@ -235,14 +276,18 @@ def case_header(case: ControlCase) -> str:
             f"#define CTL(name) gearsym_control_{tag}_##name\n",
             f"#define EKF(name) gearsym_ekf_{tag}_##name\n",
             f"#define EKF_NX GEARSYM_EKF_{tag}_NX\n",
+            # the shaft speeds only the EKF measures: columns 5... of case_in
+            "#define CASE_SET_EXTRA(in, row) do { "
+            + "".join(f"(in).{f} = (row)[{5 + i}]; " for i, f in enumerate(case.extra))
+            + "} while (0)\n",
             f"#define CASE_TICKS {len(case.inputs)}\n",
             f"#define CASE_CALIBRATION_TURNS {CALIBRATION_TURNS}u\n",
             _array("case_in", case.inputs.astype(f32)),
             _array("case_x0", case.x0.astype(f32)),
             _array("case_P0", case.P0.ravel(order="F").astype(f32)),
             _array("case_q", case.q.astype(f32)),
-            _array("case_r", np.array(EKF_R, dtype=f32)),
-            _array("case_floor", np.array(EKF_FLOOR, dtype=f32)),
+            _array("case_r", case.r.astype(f32)),
+            _array("case_floor", case.floor.astype(f32)),
             "#endif\n",
         ]
     )
@@ -392,7 +437,7 @@ def task_report(c_dir: Path, build_dir: Path, shift: str = "2-3") -> dict[str, A
                 "lockup_end_ties": lockup_end_ties(case, tuple(PHASES[p] for _, p, _ in results)),
                 "operating_point": _point_text(shift, kind),
                 "filter": asdict(tracking),
-                "m_veh": float(case.x0[4]),
+                "m_veh": float(case.x0[case.tracked[3]]),
             }
         )
     return {

@@ -49,6 +49,7 @@ int main(void)
         in.control.omega_out = case_in[k][2];
         in.omega_wheel = case_in[k][3];
         in.control.torque = case_in[k][4];
+        CASE_SET_EXTRA(in, case_in[k]);
 #ifdef GEARSYM_M4_TARGET
         const uint32_t t0 = TICKS();
 #endif
