@@ -250,11 +250,21 @@ def test_the_tcu_task_on_the_host_gives_the_python_controllers_commands(d, tmp_p
     power-on and coast: the Python controller's commands within FLOAT_TOLERANCE and its phase
     at every tick but where the lock-up's hold ends on a tick (a float tie, at most one), the
     EKF following the shift (the emulated target's run: tests/test_cortex_m4_qemu.py)."""
+    from gearsym.validation.checks import qemu_control
+
+    check_task_on_host(GENERATED_C, qemu_control.control_case(d, kind=kind), tmp_path)
+
+
+def check_task_on_host(c_dir, case, out) -> tuple[str, ...]:  # noqa: ANN001
+    """The task of ``c_dir`` (the Cortex-M4F driver built for the host, float) along a recorded
+    case (:func:`gearsym.validation.checks.qemu_control.control_case`): every call succeeds,
+    the Python controller's phase at every tick but a lock-up hold's float tie (at most one),
+    its commands within FLOAT_TOLERANCE, the EKF following the shift
+    (:func:`check_filter_tracking`). Returns the task's phases."""
     from gearsym.validation.checks import qemu_control, qemu_m4
     from gearsym.validation.studies.control.controller import PHASES
 
-    case = qemu_control.control_case(d, kind=kind)
-    host = qemu_control.build_host(GENERATED_C, case, tmp_path)
+    host = qemu_control.build_host(c_dir, case, out)
     results = [qemu_control.values(ln) for ln in qemu_control.control_lines(qemu_m4.run_host(host))]
     assert len(results) == len(case.inputs) and all(s == 0 for s, _, _ in results)
     phases = tuple(PHASES[phase] for _, phase, _ in results)
@@ -262,6 +272,7 @@ def test_the_tcu_task_on_the_host_gives_the_python_controllers_commands(d, tmp_p
     commands = np.array([v[:2] for _, _, v in results])
     assert np.max(np.abs(commands - case.commands)) <= FLOAT_TOLERANCE
     check_filter_tracking(case, np.array([v[2:] for _, _, v in results]))
+    return phases
 
 
 def check_filter_tracking(case, states: np.ndarray) -> None:  # noqa: ANN001

@@ -11,7 +11,6 @@ controller.ShiftController`'s order, torque phase first, every direction from th
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 from gearsym.symbolic.control_calibration import HOLD_LINE, TO_LINE
 from gearsym.symbolic.hybrid import hybrid_shift
@@ -38,8 +37,8 @@ from tests.test_control_c import (
     _differences,
     _truth,
     check_double_build,
-    check_filter_tracking,
     check_same_loop,
+    check_task_on_host,
 )
 
 SHIFT = "3-2"
@@ -154,17 +153,7 @@ def test_the_downshift_tcu_task_on_the_host_gives_the_python_controllers_command
     host) along the Python controller's closed-loop 3-2 on the calibration's vehicle, as
     tests/test_control_c.py checks the 2-3's: its commands within FLOAT_TOLERANCE, its phase
     at every tick but a lock-up hold's float tie, its EKF following the shift."""
-    from gearsym.validation.checks import qemu_m4
-    from gearsym.validation.studies.control.controller import PHASES
-
     header, _ = emitted
     case = qemu_control.control_case(d, kind=kind, shift=SHIFT)
-    host = qemu_control.build_host(header.parent, case, tmp_path)
-    results = [qemu_control.values(ln) for ln in qemu_control.control_lines(qemu_m4.run_host(host))]
-    assert len(results) == len(case.inputs) and all(s == 0 for s, _, _ in results)
-    phases = tuple(PHASES[phase] for _, phase, _ in results)
-    assert qemu_control.lockup_end_ties(case, phases) in (0, 1)
+    phases = check_task_on_host(header.parent, case, tmp_path)
     assert phases.index("inertia") < phases.index("lockup")
-    commands = np.array([v[:2] for _, _, v in results])
-    assert np.max(np.abs(commands - case.commands)) <= FLOAT_TOLERANCE
-    check_filter_tracking(case, np.array([v[2:] for _, _, v in results]))
