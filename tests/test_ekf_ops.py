@@ -1,4 +1,4 @@
-"""The emitted EKF's unrolled predict and selection update (gearsym_ekf_2_3.c, thesis 4.3).
+"""The emitted EKF's unrolled predict and constant-H update (gearsym_ekf_2_3.c, thesis 4.3).
 
 Expected values: the structure derived by hand from the 2-3 model (states omega_1, omega_2,
 phi, omega_C, m_veh, mu_38, mu_05, zeta; the rows of ∂f/∂z of the four parameters are zero, the
@@ -245,6 +245,80 @@ def test_joseph_update_form_equals_the_reference(emitted, tmp_path):
                 ctypes.byref(nis),
             )
             assert count == used == 3
+            P_c = P_c.reshape(n, n, order="F")
+            s = np.sqrt(np.diag(P_ref))
+            assert np.max(np.abs(x_c - z_ref) / (np.abs(z_ref) + s)) < 1e-12
+            assert np.max(np.abs(P_c - P_ref) / np.outer(s, s)) < 1e-12
+            assert np.array_equal(P_c, P_c.T)
+
+
+def test_constant_output_map_update_equals_the_reference(tmp_path):
+    """The 3-4's filter measures shaft 8, whose speed the model eliminates: its row of H is a
+    constant combination of omega_1 and omega_2 (not a selection). Its update takes v = P h^T
+    over the nonzeros of H (no jac_outputs, no dense product): against the NumPy reference's
+    Joseph update at random symmetric P with the μ states frozen or not, to 1e-12, P exactly
+    symmetric; its stated operations are those counted by hand."""
+    from gearsym.symbolic.codegen.c.ekf_code import output_rows, output_selection
+    from gearsym.symbolic.estimators.ekf import ekf_update
+
+    d = load_description()
+    m = ekf_model(d, shift_spec(d, "3-4"))
+    files = {k: v for k, v in emit_all(m.model, m.config).items() if not k.endswith(".py")}
+    prefix = "gearsym_ekf_3_4_"
+    source, header = files["gearsym_ekf_3_4.c"], files["gearsym_ekf_3_4.h"]
+    start = source.index(f"{prefix}ekf_update(\n")
+    body = source[start : source.index("\n}\n", start)]
+    assert "jac_outputs" not in body and "h_coef" in body
+    # outputs omega_1, omega_2, omega_8 = a omega_1 + b omega_2, omega_C: 1 + 1 + 2 + 1 nonzeros
+    assert "h_start[GEARSYM_EKF_3_4_NY + 1] = { 0, 1, 2, 4, 5 }" in body
+    assert "h_state[5] = { 0, 1, 0, 1, 3 }" in body
+    x, y = sp.symbols("x y", real=True)
+    rows = output_rows(sp.Matrix([[1, 0, 0], [sp.Rational(1, 3), 2, 0]]))
+    assert rows == (((0, 1),), ((0, sp.Rational(1, 3)), (1, 2)))
+    assert output_rows(sp.Matrix([[x, 1]])) is None
+    assert output_rows(sp.Matrix([[0, 0], [1, 0]])) is None
+    assert output_selection(sp.Matrix([[sp.Rational(1, 3), 2]])) is None
+    # by hand, per output as the selection update (add 1+1+8+36+1, mul 2+8+8+36+2, 1 div, 5
+    # cmp) plus, per row of k nonzeros, v = P h^T (8 k mul, 8 (k - 1) add) and s (k mul, k add,
+    # where the selection's s = v[m] + R has the 1 add counted above, so k - 1 more)
+    per_add, per_mul = 1 + 1 + 8 + 36 + 1, 2 + 8 + 8 + 36 + 2
+    sizes = (1, 1, 2, 1)
+    # and the outputs at every output: omega_8's combination, 1 add and 2 mul
+    add = 4 * (per_add + 1) + sum(8 * (k - 1) + k - 1 for k in sizes)
+    mul = 4 * (per_mul + 2) + sum(8 * k + k for k in sizes)
+    start = header.index(f"{prefix}ekf_update(")
+    doc = " ".join(header[header.rindex("/**", 0, start) : start].replace("*", " ").split())
+    assert f"Operations: {add} add, {mul} mul, 4 div, 0 calls, {4 * 5 + 4} cmp" in doc
+
+    lib, discrete, p, params = _compiled_filter(files, d, "3-4", tmp_path)
+    n = len(discrete.aug.state_names)
+    ptr = ctypes.POINTER(ctypes.c_double)
+    fn = lib[f"{prefix}ekf_update"]
+    fn.restype = ctypes.c_int
+    rng = np.random.default_rng(34)
+    z0 = np.array([150.0, 80.0, 0.05, 30.0, 1700.0, 0.12, 0.11, 0.01])
+    sigma = np.array([1.5, 0.8, 0.05, 0.3, 300.0, 0.03, 0.03, 0.05])
+    r, floor = np.array([0.01] * 4), np.array([2.0, 0.7, 0.7, 0.27])
+    for u in ([80.0, 3000.0, 2000.0, 1.0, 0.0, 1.0, 0.0], [50.0, 0.0, 5000.0, 0.0, 1.0, 0.0, 0.0]):
+        for _ in range(5):
+            z = z0 * (1 + 0.05 * rng.normal(size=n))
+            C = np.corrcoef(rng.normal(size=(n, 3 * n)))
+            P = 0.5 * (C + C.T) * np.outer(sigma, sigma)  # corrcoef is symmetric to rounding
+            y_true = discrete.outputs(z, u, p)[0]
+            y_meas = y_true * (1 + 0.01 * rng.normal(size=4))
+            z_ref, P_ref, _, used = ekf_update(discrete, z, P, u, y_meas, p, r, floor)
+            x_c, P_c, nis = z.copy(), P.ravel(order="F").copy(), ctypes.c_double(0.0)
+            count = fn(
+                x_c.ctypes.data_as(ptr),
+                P_c.ctypes.data_as(ptr),
+                np.array(u).ctypes.data_as(ptr),
+                ctypes.byref(params),
+                y_meas.ctypes.data_as(ptr),
+                r.ctypes.data_as(ptr),
+                floor.ctypes.data_as(ptr),
+                ctypes.byref(nis),
+            )
+            assert count == used == 4
             P_c = P_c.reshape(n, n, order="F")
             s = np.sqrt(np.diag(P_ref))
             assert np.max(np.abs(x_c - z_ref) / (np.abs(z_ref) + s)) < 1e-12

@@ -21,6 +21,10 @@ product with H: v = P h^T is a column of P and h v one entry of it. The Joseph f
 s = h v + R, on the upper triangle and mirrored: algebraically the Joseph form for *any* gain k
 (so the zeroed gain of a frozen state keeps P exact, and that state's row and variance are
 untouched), at 2 multiplications and 2 additions per entry instead of a dense n x n product.
+When H is constant but not a selection (an output is a fixed combination of states, as the speed
+of a shaft the model eliminates: omega_8 of the 3-4 is one of omega_1 and omega_2), v = P h^T
+is the sum over the row's few nonzeros of coefficient times a column of P, s = h v + R over the
+same nonzeros; the covariance update is the same, since it needs only v and s.
 
 Every count returned here is that of the statements returned (no estimate).
 """
@@ -34,7 +38,14 @@ import sympy as sp
 from gearsym.symbolic.codegen.c.ekf_stage import JAC, SLOPE, FusedStage
 from gearsym.symbolic.codegen.ops import OpCount
 
-__all__ = ["EkfPredictCode", "output_selection", "predict_code", "selection_update_ops"]
+__all__ = [
+    "EkfPredictCode",
+    "linear_update_ops",
+    "output_rows",
+    "output_selection",
+    "predict_code",
+    "selection_update_ops",
+]
 
 _ONE = "GEARSYM_LIT(1.0)"
 
@@ -309,6 +320,34 @@ def output_selection(jacobian: sp.MatrixBase) -> tuple[int, ...] | None:
             return None
         selection.append(ones[0])
     return tuple(selection)
+
+
+def output_rows(jacobian: sp.MatrixBase) -> tuple[tuple[tuple[int, sp.Expr], ...], ...] | None:
+    """Per output, its (state, coefficient) nonzeros in state order if ∂h/∂z is a constant
+    matrix (numbers only) without a zero row; else None (the update then takes H from
+    ``jac_outputs`` at every output)."""
+    rows = []
+    for i in range(jacobian.rows):
+        entries = [(j, sp.sympify(jacobian[i, j])) for j in range(jacobian.cols)]
+        if any(not v.is_number for _, v in entries):
+            return None
+        row = tuple((j, v) for j, v in entries if v != 0)
+        if not row:
+            return None
+        rows.append(row)
+    return tuple(rows)
+
+
+def linear_update_ops(
+    n: int, row_sizes: Sequence[int], n_frozen: int, form: str = "symmetric"
+) -> OpCount:
+    """Operations of the constant-H update (see the template): those of the selection update
+    (:func:`selection_update_ops`) plus, per output with k nonzeros in its row of H, v = P h^T
+    (n k mul, n (k - 1) add) and s = R + h v (k mul, k add, where the selection has 1 add)."""
+    ops = selection_update_ops(n, len(row_sizes), n_frozen, form)
+    for k in row_sizes:
+        ops = ops + OpCount(mul=n * k + k, add=n * (k - 1) + k - 1)
+    return ops
 
 
 def selection_update_ops(n: int, ny: int, n_frozen: int, form: str = "symmetric") -> OpCount:

@@ -9,6 +9,8 @@ from typing import Any
 import sympy as sp
 from gearsym.symbolic.codegen.c.ekf_code import (
     EkfPredictCode,
+    linear_update_ops,
+    output_rows,
     output_selection,
     predict_code,
     selection_update_ops,
@@ -146,7 +148,9 @@ class CFunctionView:
     declarations: tuple[str, ...] = ()  # EKF predict: unrolled from the sparsity (ekf_code)
     statements: tuple[str, ...] = ()
     selection: tuple[int, ...] = ()  # EKF update: the state each output is (H a selection)
-    update_form: str = ""  # EKF update with a selection: "symmetric" or "joseph"
+    # EKF update with H constant but not a selection: per output, (state, coefficient printed)
+    linear_rows: tuple[tuple[tuple[int, str], ...], ...] = ()
+    update_form: str = ""  # EKF update with H constant: "symmetric" or "joseph"
     stage_temporaries: tuple[Temporary, ...] = ()  # RK4: the rhs terms that depend on x
 
 
@@ -475,6 +479,21 @@ def _function_views(
                     what = (
                         f"{ny} x (outputs + {update}, with H a selection of states: "
                         "no product with H, upper triangle), the frozen flags once"
+                    )
+                    stack = ny + 3 * nx
+                elif (h_rows := output_rows(table["jac_outputs"].expressions[0])) is not None:
+                    form = table.config.ekf.update_form
+                    extra["linear_rows"] = tuple(
+                        tuple((j, printer.code(v)) for j, v in row) for row in h_rows
+                    )
+                    extra["update_form"] = form
+                    sizes = [len(row) for row in h_rows]
+                    own = linear_update_ops(nx, sizes, len(table.config.ekf.frozen), form)
+                    total = counts["outputs"].scaled(ny) + own
+                    what = (
+                        f"{ny} x (outputs + v = P h^T over the {sum(sizes)} nonzeros of the "
+                        "constant H + the Schmidt update P - v w^T, upper triangle), the frozen "
+                        "flags once"
                     )
                     stack = ny + 3 * nx
                 else:
