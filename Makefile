@@ -123,6 +123,10 @@ results: $(STAMP)
 	$(BIN)/python -m gearsym.validation.checks.qemu_control --shift 3-4 --out build/results/tcu_task_3_4
 	cp build/results/tcu_task_3_4/tcu_task_3_4.json $(RESULTS)/tcu_task_3_4.json
 	cp build/results/tcu_task_3_4/tcu_task_3_4.md $(RESULTS)/tcu_task_3_4.md
+	rm -rf build/results/tcu_tasks
+	$(BIN)/python -m gearsym.validation.checks.qemu_tasks --out build/results/tcu_tasks
+	cp build/results/tcu_tasks/tcu_tasks.json $(RESULTS)/tcu_tasks.json
+	cp build/results/tcu_tasks/tcu_tasks.md $(RESULTS)/tcu_tasks.md
 # A whole WLTC class 3b drive with the EKF over it, the calibration's own vehicle and a fleet
 # vehicle (docs/drive.md; about 2 min each: the fast drive and the EKF over its log), then 20
 # vehicles of the fleet (about 32 min on two cores).

@@ -16,6 +16,7 @@ from typing import Any
 import pytest
 from gearsym.validation.checks.misra import DEVIATIONS, misra_markdown
 from gearsym.validation.checks.qemu_control import task_markdown
+from gearsym.validation.checks.qemu_tasks import tasks_markdown
 from gearsym.validation.sim.one_way_comparison import one_way_markdown
 from gearsym.validation.studies.fisher import fim_markdown
 from gearsym.validation.studies.hybrid_fisher import hybrid_fim_markdown
@@ -32,6 +33,7 @@ KINDS: dict[str, tuple[Renderer, str]] = {
     "fim_open_loop_*.md": (fim_markdown, "gearsym fim --open-loop "),
     "misra.md": (misra_markdown, "python -m gearsym.validation.checks.misra "),
     "tcu_task_*.md": (task_markdown, "python -m gearsym.validation.checks.qemu_control "),
+    "tcu_tasks.md": (tasks_markdown, "python -m gearsym.validation.checks.qemu_tasks "),
     "one_way_*.md": (one_way_markdown, "python -m gearsym.validation.sim.one_way_comparison "),
 }
 TABLES = sorted((t, *kind) for pattern, kind in KINDS.items() for t in RESULTS.glob(pattern))
@@ -47,6 +49,7 @@ EXPECTED = {
     "tcu_task_2_3.md": "control.md",
     "tcu_task_3_2.md": "control.md",
     "tcu_task_3_4.md": "control.md",
+    "tcu_tasks.md": "control.md",
 }
 
 

@@ -259,7 +259,6 @@ def test_constant_output_map_update_equals_the_reference(tmp_path):
     Joseph update at random symmetric P with the μ states frozen or not, to 1e-12, P exactly
     symmetric; its stated operations are those counted by hand."""
     from gearsym.symbolic.codegen.c.ekf_code import output_rows, output_selection
-    from gearsym.symbolic.estimators.ekf import ekf_update
 
     d = load_description()
     m = ekf_model(d, shift_spec(d, "3-4"))
@@ -276,7 +275,8 @@ def test_constant_output_map_update_equals_the_reference(tmp_path):
     rows = output_rows(sp.Matrix([[1, 0, 0], [sp.Rational(1, 3), 2, 0]]))
     assert rows == (((0, 1),), ((0, sp.Rational(1, 3)), (1, 2)))
     assert output_rows(sp.Matrix([[x, 1]])) is None
-    assert output_rows(sp.Matrix([[0, 0], [1, 0]])) is None
+    assert output_rows(sp.Matrix([[0, 0], [1, 0]])) == ((), ((0, 1),))
+    assert output_rows(sp.Matrix([[0, 0]])) is None
     assert output_selection(sp.Matrix([[sp.Rational(1, 3), 2]])) is None
     # by hand, per output as the selection update (add 1+1+8+36+1, mul 2+8+8+36+2, 1 div, 5
     # cmp) plus, per row of k nonzeros, v = P h^T (8 k mul, 8 (k - 1) add) and s (k mul, k add,
@@ -290,22 +290,67 @@ def test_constant_output_map_update_equals_the_reference(tmp_path):
     doc = " ".join(header[header.rindex("/**", 0, start) : start].replace("*", " ").split())
     assert f"Operations: {add} add, {mul} mul, 4 div, 0 calls, {4 * 5 + 4} cmp" in doc
 
-    lib, discrete, p, params = _compiled_filter(files, d, "3-4", tmp_path)
+    _update_matches_the_reference(
+        files,
+        d,
+        "3-4",
+        tmp_path,
+        z0=np.array([150.0, 80.0, 0.05, 30.0, 1700.0, 0.12, 0.11, 0.01]),
+        floor=np.array([2.0, 0.7, 0.7, 0.27]),
+    )
+
+
+def test_an_output_no_state_moves_leaves_the_filter_alone(tmp_path):
+    """The 8-9's filter measures shaft 8, which both gears hold still: its row of H is zero.
+    The constant-H update skips its products (v = 0: x and P stay) and still counts its NIS
+    term, as the NumPy reference's Joseph update does; the stated operations by hand."""
+    from gearsym.symbolic.estimators.ekf import augmented_model
+
+    d = load_description()
+    assert "omega_8" in augmented_model(d, "8-9").output_names[2]
+    m = ekf_model(d, shift_spec(d, "8-9"))
+    files = {k: v for k, v in emit_all(m.model, m.config).items() if not k.endswith(".py")}
+    source, header = files["gearsym_ekf_8_9.c"], files["gearsym_ekf_8_9.h"]
+    assert "h_start[GEARSYM_EKF_8_9_NY + 1] = { 0, 1, 2, 2, 3 }" in source
+    assert "h_i = 0 (a shaft this shift holds still)" in source
+    # three unit rows as the selection update (add 47, mul 56 each) plus v = P h^T (8 mul) and
+    # s (1 mul) each; the zero row: R 2 mul, innovation 1 add, nu^2/R 1 mul + 1 div + 1 add,
+    # 5 compares; the frozen flags 4 compares
+    start = header.index("gearsym_ekf_8_9_ekf_update(")
+    doc = " ".join(header[header.rindex("/**", 0, start) : start].replace("*", " ").split())
+    assert "Operations: 143 add, 198 mul, 4 div, 0 calls, 24 cmp" in doc
+    _update_matches_the_reference(
+        files,
+        d,
+        "8-9",
+        tmp_path,
+        z0=np.array([190.0, 270.0, 0.05, 110.0, 1700.0, 0.12, 0.11, 0.01]),
+        floor=np.array([2.0, 2.7, 0.5, 1.1]),
+    )
+
+
+def _update_matches_the_reference(files, d, shift: str, tmp_path, z0, floor) -> None:
+    """The emitted ``ekf_update`` of ``shift`` (double) against the NumPy reference's Joseph
+    update at random states near ``z0`` and random symmetric P, with the μ states frozen or
+    not: x and P to 1e-12, the same outputs used, P exactly symmetric."""
+    from gearsym.symbolic.estimators.ekf import ekf_update
+
+    prefix = f"gearsym_ekf_{shift.replace('-', '_')}_"
+    lib, discrete, p, params = _compiled_filter(files, d, shift, tmp_path)
     n = len(discrete.aug.state_names)
     ptr = ctypes.POINTER(ctypes.c_double)
     fn = lib[f"{prefix}ekf_update"]
     fn.restype = ctypes.c_int
     rng = np.random.default_rng(34)
-    z0 = np.array([150.0, 80.0, 0.05, 30.0, 1700.0, 0.12, 0.11, 0.01])
     sigma = np.array([1.5, 0.8, 0.05, 0.3, 300.0, 0.03, 0.03, 0.05])
-    r, floor = np.array([0.01] * 4), np.array([2.0, 0.7, 0.7, 0.27])
+    r = np.array([0.01] * len(floor))
     for u in ([80.0, 3000.0, 2000.0, 1.0, 0.0, 1.0, 0.0], [50.0, 0.0, 5000.0, 0.0, 1.0, 0.0, 0.0]):
         for _ in range(5):
             z = z0 * (1 + 0.05 * rng.normal(size=n))
             C = np.corrcoef(rng.normal(size=(n, 3 * n)))
             P = 0.5 * (C + C.T) * np.outer(sigma, sigma)  # corrcoef is symmetric to rounding
             y_true = discrete.outputs(z, u, p)[0]
-            y_meas = y_true * (1 + 0.01 * rng.normal(size=4))
+            y_meas = y_true * (1 + 0.01 * rng.normal(size=len(floor)))
             z_ref, P_ref, _, used = ekf_update(discrete, z, P, u, y_meas, p, r, floor)
             x_c, P_c, nis = z.copy(), P.ravel(order="F").copy(), ctypes.c_double(0.0)
             count = fn(
@@ -318,7 +363,7 @@ def test_constant_output_map_update_equals_the_reference(tmp_path):
                 floor.ctypes.data_as(ptr),
                 ctypes.byref(nis),
             )
-            assert count == used == 4
+            assert count == used == len(floor)
             P_c = P_c.reshape(n, n, order="F")
             s = np.sqrt(np.diag(P_ref))
             assert np.max(np.abs(x_c - z_ref) / (np.abs(z_ref) + s)) < 1e-12

@@ -140,10 +140,12 @@ class ControlCase:
 
 
 def control_case(
-    d: Any, t_end: float = 1.2, kind: str = "power-on", shift: str = "2-3"
+    d: Any, t_end: float = 1.2, kind: str = "power-on", shift: str = "2-3", point: Any = None
 ) -> ControlCase:
     """The Python controller's ``shift`` of ``kind`` (:data:`CASES`) on the calibration's
-    vehicle from its operating point, sampled at its ticks."""
+    vehicle from its operating point (``point``, an
+    :class:`~gearsym.validation.studies.control.study.OperatingPoint`, where given), sampled at
+    its ticks."""
     from gearsym.symbolic import naming
     from gearsym.symbolic.codegen.control import extra_speeds, task_measurements
     from gearsym.symbolic.defaults import EKF_FLOOR_FRACTION, EKF_RELATIVE_NOISE
@@ -156,7 +158,8 @@ def control_case(
     from gearsym.validation.studies.control.controller import Knowledge
     from gearsym.validation.studies.control.study import make_controller
 
-    point = operating_point(d, shift, kind)
+    if point is None:
+        point = operating_point(d, shift, kind)
     plant = ClosedLoopShift(d, shift, point.vehicle_speed)
     model = HybridSimulator(d, plant.scenario(1.0, {}, 0.0), hybrid_shift(d, shift))
     mu = quantity(d, "friction", "mu_nominal").value

@@ -324,17 +324,17 @@ def output_selection(jacobian: sp.MatrixBase) -> tuple[int, ...] | None:
 
 def output_rows(jacobian: sp.MatrixBase) -> tuple[tuple[tuple[int, sp.Expr], ...], ...] | None:
     """Per output, its (state, coefficient) nonzeros in state order if ∂h/∂z is a constant
-    matrix (numbers only) without a zero row; else None (the update then takes H from
-    ``jac_outputs`` at every output)."""
+    matrix (numbers only); else None (the update then takes H from ``jac_outputs`` at every
+    output). A row may be empty: an output no state moves (the speed of a shaft both gears of
+    the shift hold still, as shaft 8 in the 8-9), whose update changes neither x nor P."""
     rows = []
     for i in range(jacobian.rows):
         entries = [(j, sp.sympify(jacobian[i, j])) for j in range(jacobian.cols)]
         if any(not v.is_number for _, v in entries):
             return None
-        row = tuple((j, v) for j, v in entries if v != 0)
-        if not row:
-            return None
-        rows.append(row)
+        rows.append(tuple((j, v) for j, v in entries if v != 0))
+    if not any(rows):
+        return None  # nothing measured moves: no coefficient table to index
     return tuple(rows)
 
 
@@ -342,12 +342,17 @@ def linear_update_ops(
     n: int, row_sizes: Sequence[int], n_frozen: int, form: str = "symmetric"
 ) -> OpCount:
     """Operations of the constant-H update (see the template): those of the selection update
-    (:func:`selection_update_ops`) plus, per output with k nonzeros in its row of H, v = P h^T
-    (n k mul, n (k - 1) add) and s = R + h v (k mul, k add, where the selection has 1 add)."""
-    ops = selection_update_ops(n, len(row_sizes), n_frozen, form)
-    for k in row_sizes:
+    (:func:`selection_update_ops`) for each output with a nonzero row of H plus, per such row
+    of k nonzeros, v = P h^T (n k mul, n (k - 1) add) and s = R + h v (k mul, k add, where the
+    selection has 1 add); an output with a zero row of H costs its R, s's checks and its NIS
+    term only (x and P stay as they are)."""
+    used = [k for k in row_sizes if k > 0]
+    ops = selection_update_ops(n, len(used), n_frozen, form)
+    for k in used:
         ops = ops + OpCount(mul=n * k + k, add=n * (k - 1) + k - 1)
-    return ops
+    empty = len(row_sizes) - len(used)
+    # isfinite(y), y < 0, level < floor, s > 0, isfinite(s); R; the innovation and ν²/s
+    return ops + OpCount(compare=5, mul=3, add=2, div=1).scaled(empty)
 
 
 def selection_update_ops(n: int, ny: int, n_frozen: int, form: str = "symmetric") -> OpCount:

@@ -491,9 +491,9 @@ def _function_views(
                     own = linear_update_ops(nx, sizes, len(table.config.ekf.frozen), form)
                     total = counts["outputs"].scaled(ny) + own
                     what = (
-                        f"{ny} x (outputs + v = P h^T over the {sum(sizes)} nonzeros of the "
-                        "constant H + the Schmidt update P - v w^T, upper triangle), the frozen "
-                        "flags once"
+                        f"{ny} x outputs; per output with a nonzero row of H v = P h^T over "
+                        f"its nonzeros ({sum(sizes)} in all, H constant) and the Schmidt update "
+                        "P - v w^T (upper triangle); the frozen flags once"
                     )
                     stack = ny + 3 * nx
                 else:
