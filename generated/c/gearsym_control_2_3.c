@@ -520,6 +520,11 @@ static gearsym_real gearsym_control_2_3_inertia_driven(
     if ((s->moving == 0) && (GEARSYM_FABS(slip) < ((GEARSYM_LIT(1.0) - GEARSYM_CONTROL_2_3_MOVING) * GEARSYM_FABS(s->sigma0)))) {
         s->t_moving = t;
         s->moving = 1;
+    } else if ((s->released != 0) && (hold_sync == 0)) {
+        /* the target waits while the element is released and the slip still behind it */
+        s->t_moving += t - s->t_previous;
+    } else {
+        /* the target's clock runs */
     }
     gearsym_real tau = (s->moving != 0) ? (t - s->t_moving) : GEARSYM_LIT(0.0);
     if (hold_sync != 0) {
@@ -535,7 +540,7 @@ static gearsym_real gearsym_control_2_3_inertia_driven(
     const gearsym_real wanted = gearsym_control_2_3_target_rate(s->sigma0, tau + GEARSYM_CONTROL_2_3_LEAD);
     const gearsym_real feed_forward = (r1 == r0) ? s->off_force : (((wanted - r0) / (r1 - r0)) * f1);
     const gearsym_real error = s->sign * (slip - gearsym_control_2_3_target_slip(s->sigma0, tau));
-    if (s->moving != 0) {
+    if ((s->moving != 0) && (s->released == 0)) {
         s->integral += error * (t - s->t_previous);
     }
     /* more off-going force holds the input back: it slows the slip's fall when the slip's
@@ -543,7 +548,14 @@ static gearsym_real gearsym_control_2_3_inertia_driven(
     const gearsym_real direction = (((r1 - r0) * s->sign) > GEARSYM_LIT(0.0)) ? GEARSYM_LIT(1.0) : -GEARSYM_LIT(1.0);
     const gearsym_real correction = -direction * GEARSYM_CONTROL_2_3_K_P * (error + (s->integral / GEARSYM_CONTROL_2_3_T_I));
     s->off_force = gearsym_control_2_3_larger(feed_forward, GEARSYM_LIT(0.0));
-    return gearsym_control_2_3_larger(s->off_force + (correction * GEARSYM_CONTROL_2_3_AREA_OFF), GEARSYM_LIT(0.0));
+    const gearsym_real force = s->off_force + (correction * GEARSYM_CONTROL_2_3_AREA_OFF);
+    if (hold_sync == 0) {
+        s->released = 0;
+        if ((force <= GEARSYM_LIT(0.0)) && (error > GEARSYM_LIT(0.0))) {
+            s->released = 1;
+        }
+    }
+    return gearsym_control_2_3_larger(force, GEARSYM_LIT(0.0));
 }
 
 /* Coast: one tick of the phases in the driven order (the Python DownshiftController.step). */
@@ -625,6 +637,7 @@ void gearsym_control_2_3_init(
     s->off_capacity = GEARSYM_LIT(0.0);
     s->off_torque = GEARSYM_LIT(0.0);
     s->sigma0 = GEARSYM_LIT(0.0);
+    s->released = 0;
     s->integral = GEARSYM_LIT(0.0);
     s->last_force = GEARSYM_LIT(0.0);
     s->t_lock = GEARSYM_LIT(0.0);

@@ -141,6 +141,7 @@ typedef struct gearsym_control_2_3_state {
     int phase;
     int planned; /* the plan is made at the first step */
     int target_set; /* the inertia phase's slip target started */
+    int released; /* driven: the off-going element released and the slip behind its target */
     int locked; /* the lock-up time is set */
     gearsym_real sign; /* +1/-1: the on-coming slip's sign at the shift command */
     gearsym_real hold_off; /* [N] off-going force that holds its torque with the margin */

@@ -9,7 +9,9 @@ torque phase after it, at synchronism:
 * *inertia phase* (from the end of the fast fill): the off-going element slides; its force
   is feed-forward from the shift model in the mode "off-going sliding, on-coming open" (the
   on-coming slip's acceleration is affine in the off-going F_N) so that the on-coming slip
-  follows the target to zero in ``inertia_phase``, plus PI feedback on the slip error; the
+  follows the target to zero in ``inertia_phase``, plus PI feedback on the slip error (while the
+  element is released and the slip still behind, the target waits and the integral holds:
+  the input torque moves the slip no faster); the
   target's acceleration ends at zero, so at synchronism the off-going element carries the
   input torque with the speeds steady;
 * *torque phase* (once |slip| <= ``lockup_slip``): the on-coming force rises along the same
@@ -49,6 +51,7 @@ class DownshiftController(ShiftController):
         self._off_force = 0.0
         self._t_sync = math.nan
         self._t_moving = math.nan
+        self._released = False
 
     def step(self, t: float, speeds: np.ndarray, torque: float) -> dict[str, float]:
         """One TCU tick at ``t`` (s since the shift command): pressure commands (Pa)."""
@@ -119,6 +122,11 @@ class DownshiftController(ShiftController):
         # the input, and an integrator running on that delay would overshoot later
         if math.isnan(self._t_moving) and abs(slip) < (1.0 - MOVING) * abs(target.sigma0):
             self._t_moving = t
+        elif self._released and not hold_sync:
+            # the target waits while the element is released and the slip still behind it:
+            # the input torque moves the slip no faster, and a target run on past its end
+            # would ask the element to hold the input where it is (the shift stalls)
+            self._t_moving += t - self._t_previous
         tau = 0.0 if math.isnan(self._t_moving) else t - self._t_moving
         if hold_sync:
             tau = 2.0 * target.duration
@@ -133,7 +141,7 @@ class DownshiftController(ShiftController):
         wanted = target.rate(tau + self.lead)
         feed_forward = self._off_force if r1 == r0 else (wanted - r0) / (r1 - r0) * f1
         error = self._sign * (slip - target.slip(tau))
-        if not math.isnan(self._t_moving):
+        if not math.isnan(self._t_moving) and not self._released:
             self._integral += error * (t - self._t_previous)
         # more off-going force holds the input back: it slows the on-coming slip's fall when
         # the slip's rate per newton has the slip's own sign
@@ -141,4 +149,7 @@ class DownshiftController(ShiftController):
         correction = -direction * self.k_p * (error + self._integral / self.t_i)
         self._off_force = max(feed_forward, 0.0)
         area = self.model.area[self.off]
-        return max(self._off_force + correction * area, 0.0)
+        force = self._off_force + correction * area
+        if not hold_sync:
+            self._released = force <= 0.0 and error > 0.0
+        return max(force, 0.0)
