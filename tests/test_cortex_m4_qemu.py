@@ -31,13 +31,19 @@ pytestmark = pytest.mark.slow  # QEMU runs on the emulated Cortex-M4F: `make che
 GENERATED_C = Path(__file__).resolve().parents[1] / "generated" / "c"
 
 
-def _runs(tmp_path_factory: pytest.TempPathFactory, same_trig: bool):
+def require_qemu_tools() -> None:
+    """Skip where the cross tools or QEMU are missing, but fail under CI: CI installs them
+    (.ci/run), and a skip there would pass silently."""
     missing = qemu_m4.missing_tools()
     if missing:
         reason = f"not installed: {', '.join(missing)} (CI installs them: .ci/run)"
-        if os.environ.get("CI"):  # CI must run it: a skip there would pass silently
+        if os.environ.get("CI"):
             pytest.fail(reason)
         pytest.skip(reason)
+
+
+def _runs(tmp_path_factory: pytest.TempPathFactory, same_trig: bool):
+    require_qemu_tools()
     case = qemu_m4.reference_case(load_description())
     out = tmp_path_factory.mktemp("m4")
     elf, host = qemu_m4.build(GENERATED_C, case, out, same_trig=same_trig)
@@ -257,12 +263,7 @@ def control_runs(request, tmp_path_factory: pytest.TempPathFactory):  # noqa: AN
     from gearsym.validation.checks import qemu_control
     from gearsym.validation.checks.control_c import emit_task_sources
 
-    missing = qemu_m4.missing_tools()
-    if missing:
-        reason = f"not installed: {', '.join(missing)} (CI installs them: .ci/run)"
-        if os.environ.get("CI"):
-            pytest.fail(reason)
-        pytest.skip(reason)
+    require_qemu_tools()
     shift, kind = request.param
     d = load_description()
     c_dir = GENERATED_C

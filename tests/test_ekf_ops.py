@@ -207,7 +207,6 @@ def test_joseph_update_form_equals_the_reference(emitted, tmp_path):
     import dataclasses
 
     from gearsym.symbolic.codegen.config import EkfLayout
-    from gearsym.symbolic.estimators.ekf import ekf_update
 
     with pytest.raises(ValueError, match="update_form"):
         EkfLayout(update_form="ud")
@@ -217,39 +216,20 @@ def test_joseph_update_form_equals_the_reference(emitted, tmp_path):
     )
     files = {k: v for k, v in emit_all(m.model, config).items() if not k.endswith(".py")}
     assert "Joseph form expanded" in files["gearsym_ekf_2_3.c"]
-    lib, discrete, p, params = _compiled_filter(files, d, "2-3", tmp_path)
-    n = len(discrete.aug.state_names)
-    ptr = ctypes.POINTER(ctypes.c_double)
-    fn = lib[f"{PREFIX}ekf_update"]
-    fn.restype = ctypes.c_int
-    rng = np.random.default_rng(12)
-    z0 = np.array([194.89, 60.09, 0.0578, 24.34, 1500.0, 0.12, 0.1, 0.01])
-    sigma = np.array([1.95, 0.6, 0.05, 0.25, 300.0, 0.03, 0.03, 0.05])
-    r, floor = np.array([0.01] * 3), np.array([2.0, 0.7, 0.27])
-    for u in ([80.0, 3000.0, 2000.0, 1.0, 0.0, 1.0, 0.0], [50.0, 0.0, 5000.0, 0.0, 0.0, 1.0, 0.0]):
-        for _ in range(5):
-            z = z0 * (1 + 0.05 * rng.normal(size=n))
-            C = np.corrcoef(rng.normal(size=(n, 3 * n)))
-            P = C * np.outer(sigma, sigma)
-            y = z[[0, 1, 3]] * (1 + 0.01 * rng.normal(size=3))
-            z_ref, P_ref, _, used = ekf_update(discrete, z, P, u, y, p, r, floor)
-            x_c, P_c, nis = z.copy(), P.ravel(order="F").copy(), ctypes.c_double(0.0)
-            count = fn(
-                x_c.ctypes.data_as(ptr),
-                P_c.ctypes.data_as(ptr),
-                np.array(u).ctypes.data_as(ptr),
-                ctypes.byref(params),
-                y.ctypes.data_as(ptr),
-                r.ctypes.data_as(ptr),
-                floor.ctypes.data_as(ptr),
-                ctypes.byref(nis),
-            )
-            assert count == used == 3
-            P_c = P_c.reshape(n, n, order="F")
-            s = np.sqrt(np.diag(P_ref))
-            assert np.max(np.abs(x_c - z_ref) / (np.abs(z_ref) + s)) < 1e-12
-            assert np.max(np.abs(P_c - P_ref) / np.outer(s, s)) < 1e-12
-            assert np.array_equal(P_c, P_c.T)
+    _update_matches_the_reference(
+        files,
+        d,
+        "2-3",
+        tmp_path,
+        z0=np.array([194.89, 60.09, 0.0578, 24.34, 1500.0, 0.12, 0.1, 0.01]),
+        floor=np.array([2.0, 0.7, 0.27]),
+        sigma=np.array([1.95, 0.6, 0.05, 0.25, 300.0, 0.03, 0.03, 0.05]),
+        seed=12,
+        inputs=(
+            [80.0, 3000.0, 2000.0, 1.0, 0.0, 1.0, 0.0],
+            [50.0, 0.0, 5000.0, 0.0, 0.0, 1.0, 0.0],
+        ),
+    )
 
 
 def test_constant_output_map_update_equals_the_reference(tmp_path):
@@ -329,10 +309,21 @@ def test_an_output_no_state_moves_leaves_the_filter_alone(tmp_path):
     )
 
 
-def _update_matches_the_reference(files, d, shift: str, tmp_path, z0, floor) -> None:
+def _update_matches_the_reference(
+    files,
+    d,
+    shift: str,
+    tmp_path,
+    z0,
+    floor,
+    sigma=None,
+    seed: int = 34,
+    inputs=([80.0, 3000.0, 2000.0, 1.0, 0.0, 1.0, 0.0], [50.0, 0.0, 5000.0, 0.0, 1.0, 0.0, 0.0]),
+) -> None:
     """The emitted ``ekf_update`` of ``shift`` (double) against the NumPy reference's Joseph
-    update at random states near ``z0`` and random symmetric P, with the μ states frozen or
-    not: x and P to 1e-12, the same outputs used, P exactly symmetric."""
+    update at random states near ``z0`` (spread ``sigma``) and random symmetric P, under each
+    of ``inputs`` (the μ states frozen or not): x and P to 1e-12, the same outputs used, P
+    exactly symmetric."""
     from gearsym.symbolic.estimators.ekf import ekf_update
 
     prefix = f"gearsym_ekf_{shift.replace('-', '_')}_"
@@ -341,10 +332,11 @@ def _update_matches_the_reference(files, d, shift: str, tmp_path, z0, floor) -> 
     ptr = ctypes.POINTER(ctypes.c_double)
     fn = lib[f"{prefix}ekf_update"]
     fn.restype = ctypes.c_int
-    rng = np.random.default_rng(34)
-    sigma = np.array([1.5, 0.8, 0.05, 0.3, 300.0, 0.03, 0.03, 0.05])
+    rng = np.random.default_rng(seed)
+    if sigma is None:
+        sigma = np.array([1.5, 0.8, 0.05, 0.3, 300.0, 0.03, 0.03, 0.05])
     r = np.array([0.01] * len(floor))
-    for u in ([80.0, 3000.0, 2000.0, 1.0, 0.0, 1.0, 0.0], [50.0, 0.0, 5000.0, 0.0, 1.0, 0.0, 0.0]):
+    for u in inputs:
         for _ in range(5):
             z = z0 * (1 + 0.05 * rng.normal(size=n))
             C = np.corrcoef(rng.normal(size=(n, 3 * n)))

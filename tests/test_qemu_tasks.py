@@ -10,12 +10,13 @@ closed form r_dyn ω_ref / (i_D i) with the thesis' 8th-gear ratio 43/60 (SPEC g
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import pytest
 from gearsym.symbolic.loader import load_description
 from gearsym.validation.checks import qemu_m4, qemu_tasks
+
+from tests.test_cortex_m4_qemu import require_qemu_tools
 
 GENERATED_C = Path(__file__).resolve().parents[1] / "generated" / "c"
 
@@ -92,12 +93,7 @@ def test_one_shift_end_to_end_fits_and_its_table_is_its_json(tmp_path):
     budget (it took 19 034 instructions before a zero row of H got the constant-H update),
     every call succeeds, the same phases as the Python controller along the power-on upshift,
     and the table is its JSON rendered."""
-    missing = qemu_m4.missing_tools()
-    if missing:
-        reason = f"not installed: {', '.join(missing)} (CI installs them: .ci/run)"
-        if os.environ.get("CI"):
-            pytest.fail(reason)
-        pytest.skip(reason)
+    require_qemu_tools()
     out = tmp_path / "tcu_tasks"
     argv = ["--out", str(out), "--shifts", "8-9", "--c-dir", str(GENERATED_C)]
     assert qemu_tasks.main(argv) == 0
