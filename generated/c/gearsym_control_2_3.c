@@ -859,6 +859,7 @@ void gearsym_control_2_3_tcu_init(
     gearsym_control_2_3_mode_flags(s);
     s->u[GEARSYM_EKF_2_3_U_F_N38] = gearsym_control_2_3_effective(&s->actuator_off) * GEARSYM_CONTROL_2_3_AREA_OFF;
     s->started = 0;
+    s->off_slid = 0;
     s->nis = GEARSYM_LIT(0.0);
 }
 
@@ -880,6 +881,16 @@ int gearsym_control_2_3_tcu_task(
     s->u[GEARSYM_EKF_2_3_U_T_In] = k->torque_gain * in->control.torque;
     s->u[GEARSYM_EKF_2_3_U_F_N38] = gearsym_control_2_3_actuator_tick(k, out->p_off, &s->actuator_off) * GEARSYM_CONTROL_2_3_AREA_OFF;
     s->u[GEARSYM_EKF_2_3_U_F_N05] = gearsym_control_2_3_actuator_tick(k, out->p_on, &s->actuator_on) * GEARSYM_CONTROL_2_3_AREA_ON;
+    /* until the off-going element first slides, the filter's mu of it (frozen while it sticks)
+       is the TCU's map at zero slip, which its break-away test reads: the map's static mu lies
+       below its sliding one, and a constant mu held the element stuck in the filter after
+       the plant's broke away */
+    if ((s->modes[0] == 1) || (s->modes[0] == -1)) {
+        s->off_slid = 1;
+    }
+    if ((s->off_slid == 0) && (s->modes[0] == 2)) {
+        s->x[GEARSYM_EKF_2_3_X_mu_38] = gearsym_control_2_3_mu_off(k, s->u[GEARSYM_EKF_2_3_U_F_N38], GEARSYM_LIT(0.0));
+    }
     (void)gearsym_ekf_2_3_ekf_mode_update(s->x, s->P, s->u, &c->ekf, s->modes);
     gearsym_control_2_3_mode_flags(s);
     return status;

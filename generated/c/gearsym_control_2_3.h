@@ -211,6 +211,7 @@ typedef struct gearsym_control_2_3_tcu_state {
     gearsym_control_2_3_actuator actuator_on; /* B05 */
     int modes[2];
     int started; /* the EKF has had its first measurement */
+    int off_slid; /* the off-going element has slid (its mu the filter's own since) */
     gearsym_real nis; /* the last update's normalised innovation squared */
 } gearsym_control_2_3_tcu_state;
 

@@ -268,6 +268,11 @@ def control_expressions(
     return hybrid, fixed, exprs, args
 
 
+def _mu_state(d: GearboxDescription, element: str) -> str:
+    """The name of an element's μ state in the EKF (4.1)."""
+    return naming.friction_coefficient(element_short_name(d, element))
+
+
 def is_upshift(d: GearboxDescription, spec: ShiftSpec) -> bool:
     """Whether the to-gear's ratio is the smaller (the input slows down): the input torque
     drives an upshift when it is negative (coast), a downshift when it is positive (power on),
@@ -431,6 +436,8 @@ class CControlView(ModelView):
     ekf_u: EkfInputs
     ekf_element_off: int  # index of the element in the EKF's modes array
     ekf_element_on: int
+    #: the EKF's state of the off-going element's μ (its macro; "" where μ is not a state)
+    ekf_mu_off: str
     #: the to-gear's ratio is the smaller: the input torque drives the shift when negative
     upshift: bool
     #: the valve's dead time in whole ticks (:func:`dead_time_ticks`)
@@ -548,6 +555,9 @@ def emit_control_files(
     measurements = task_measurements(d, hybrid)
     base = model_view(table)
     ekf_name = "ekf_" + shift.replace("-", "_")
+    from gearsym.symbolic.estimators.ekf import default_parameters
+
+    states = default_parameters(d, shift)  # the EKF's augmented states (4.1)
     ekf_macro = macro_prefix(ekf_name)
     elements = list(hybrid.elements)
     defaults = {v.name: float(v.default or 0.0) for v in hybrid.parameters}
@@ -575,6 +585,9 @@ def emit_control_files(
         ),
         ekf_element_off=elements.index(spec.off_going),
         ekf_element_on=elements.index(spec.on_coming),
+        ekf_mu_off=(
+            f"{ekf_macro}X_{mu_off}" if (mu_off := _mu_state(d, spec.off_going)) in states else ""
+        ),
         upshift=is_upshift(d, spec),
         dead_ticks=dead_time_ticks(d.control.si("actuator", "dead_time"))[0],
         mean_over=MEAN_OVER,
