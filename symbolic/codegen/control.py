@@ -73,6 +73,7 @@ from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import element_short_name, quantity
 from gearsym.symbolic.dynamics import gearbox_dynamics
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.estimators.ekf import default_parameters
 from gearsym.symbolic.hybrid import HybridShift, Mode, hybrid_shift
 from gearsym.symbolic.model import Model, Variable
 from gearsym.symbolic.naming import function_prefix, macro_prefix
@@ -555,8 +556,6 @@ def emit_control_files(
     measurements = task_measurements(d, hybrid)
     base = model_view(table)
     ekf_name = "ekf_" + shift.replace("-", "_")
-    from gearsym.symbolic.estimators.ekf import default_parameters
-
     states = default_parameters(d, shift)  # the EKF's augmented states (4.1)
     ekf_macro = macro_prefix(ekf_name)
     elements = list(hybrid.elements)

@@ -30,6 +30,7 @@ __all__ = [
     "POWER_ON",
     "REFERENCE_INPUT_SPEED",
     "generic_point",
+    "inertia_give_up",
     "main",
     "task_shifts",
     "tasks_markdown",
@@ -87,6 +88,23 @@ def _point(d: Any, shift: str, kind: str) -> tuple[Any, str]:
     return point, f"{point.vehicle_speed:.3g} m/s, {point.engine:g} + {point.e_machine:g} N·m"
 
 
+def inertia_give_up(
+    expected: tuple[str, ...], task: tuple[str, ...], limit: float, tick: float
+) -> tuple[bool, bool]:
+    """Whether the Python controller's inertia phase (``expected``, one phase per tick) ran
+    to its ``limit`` (s: the controller's fallback, TIMEOUT_FACTOR targets) and whether the
+    task's phases first part from it at the tick the controller left that phase: a time
+    compared on a tick, where the float task and the double controller may round either side
+    (as the lock-up's hold end, :func:`.qemu_control.lockup_end_ties`)."""
+    gave_up = expected.count("inertia") * tick >= limit - tick / 2
+    apart = next((i for i, (a, b) in enumerate(zip(task, expected, strict=True)) if a != b), None)
+    left = next(
+        (i for i in range(1, len(expected)) if expected[i - 1] == "inertia" != expected[i]),
+        None,
+    )
+    return gave_up, gave_up and apart is not None and apart == left
+
+
 def _kind_row(d: Any, c_dir: Path, shift: str, kind: str, build_dir: Path) -> dict[str, Any]:
     """One shift of one kind through the task on the board (as :func:`.qemu_control.
     task_report` does for one shift)."""
@@ -104,20 +122,8 @@ def _kind_row(d: Any, c_dir: Path, shift: str, kind: str, build_dir: Path) -> di
     commands = np.array([v[:2] for _, _, v in results])
     tracking = qemu_control.filter_tracking(case, np.array([v[2:] for _, _, v in results]))
     functions, objects_size = qemu_control.code_size(elf, objects, shift)
-    # the inertia phase gives up after TIMEOUT_FACTOR targets (the controller's fallback): a
-    # time compared on a tick, where the float task and the double controller may round
-    # either side (as the lock-up's hold end, qemu_control.lockup_end_ties)
     limit = TIMEOUT_FACTOR * d.control.si("shift", "inertia_phase")
-    inertia = case.phases.count("inertia") * TICK
-    apart = [i for i, (a, b) in enumerate(zip(phases, case.phases, strict=True)) if a != b]
-    left = next(
-        (
-            i
-            for i, p in enumerate(case.phases)
-            if i and case.phases[i - 1] == "inertia" and p != "inertia"
-        ),
-        None,
-    )
+    gave_up, tie = inertia_give_up(case.phases, phases, limit, TICK)
     return {
         "kind": kind,
         "operating_point": where,
@@ -129,8 +135,8 @@ def _kind_row(d: Any, c_dir: Path, shift: str, kind: str, build_dir: Path) -> di
         "phases_agree": phases == case.phases,
         "lockup_end_ties": qemu_control.lockup_end_ties(case, phases),
         "completed": "done" in case.phases,
-        "inertia_gave_up": inertia >= limit - TICK / 2,
-        "apart_from_give_up": bool(apart) and apart[0] == left,
+        "inertia_gave_up": gave_up,
+        "apart_from_give_up": tie,
         "filter": asdict(tracking),
         "m_veh": float(case.x0[case.tracked[3]]),
         "code_bytes": sum(functions.values()),
