@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 from fractions import Fraction
 from pathlib import Path
 
@@ -343,6 +344,23 @@ class GearboxDescription:
 
     def shaft(self, name: str) -> Shaft:
         return next(s for s in self.shafts if s.name == name)
+
+    def with_inertias(self, scaled: Callable[[Quantity], Quantity]) -> GearboxDescription:
+        """This description with every shaft's and every set's planet inertia replaced by
+        ``scaled(inertia)``: the rotating parts a fleet's tolerance on the inertias covers (a
+        vehicle's truth) and that a filter's inertia factor scales (one definition for both).
+        Planet masses, the propeller shaft and the differential (``[drivetrain]``) keep
+        theirs."""
+        return replace(
+            self,
+            shafts=tuple(replace(s, inertia=scaled(s.inertia)) for s in self.shafts),
+            planetary_sets=tuple(
+                replace(ps, planet_inertia=scaled(ps.planet_inertia))
+                if ps.planet_inertia is not None
+                else ps
+                for ps in self.planetary_sets
+            ),
+        )
 
 
 def default_config_path() -> Path:

@@ -428,6 +428,7 @@ def drivetrain_model(
     keep: tuple[str, ...] | None = None,
     with_wheel_acceleration: bool = False,
     slip_signs: dict[str, int] | None = None,
+    extra_parameters: tuple[Variable, ...] = (),
 ) -> Model:
     """Gearbox + elastic drivetrain as a :class:`Model` (2.42–2.58).
 
@@ -436,7 +437,9 @@ def drivetrain_model(
     ``keep`` names the shafts whose speeds are the gearbox states (default: the generalized
     coordinates when nothing is locked, else input and output shaft). Outputs are the measured
     shaft speeds (those a locked element makes equal to another are dropped) and the wheel
-    speed (3.31), optionally the wheel acceleration (3.32).
+    speed (3.31), optionally the wheel acceleration (3.32). ``extra_parameters``: symbols a
+    caller put into ``d``'s quantities (an inertia factor), parameters of the model after the
+    description's own.
     """
     parts = drivetrain_parts(d, locked, torque_elements, keep, slip_signs)
     wheel = (2 * parts.side_shaft_torque - parts.road_torque) / parts.wheel_inertia  # (2.50)
@@ -504,7 +507,7 @@ def drivetrain_model(
         name=name,
         states=states,
         inputs=inputs,
-        parameters=parts.parameters,
+        parameters=(*parts.parameters, *extra_parameters),
         outputs=tuple(outputs),
         rhs=rhs,
         output_expressions=sp.Matrix(output_exprs),
@@ -547,6 +550,7 @@ def shift_model(
     shift: str,
     with_wheel_acceleration: bool = False,
     friction_inputs: bool = False,
+    extra_parameters: tuple[Variable, ...] = (),
 ) -> Model:
     """Reduced model of a shift (2.55–2.58); for 2-3: x = [ω1, ω2, φ, ω_C],
     u = [T_In, T_K38, T_B05].
@@ -579,6 +583,7 @@ def shift_model(
         keep=shift_keep(d, spec),
         with_wheel_acceleration=with_wheel_acceleration,
         slip_signs=power_on_slip_signs(d, spec) if friction_inputs else None,
+        extra_parameters=extra_parameters,
     )
     metadata = dict(model.metadata)
     if dogs:

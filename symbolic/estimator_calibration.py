@@ -35,6 +35,7 @@ from gearsym.symbolic.parameters import RECORDS, is_mu, record
 
 __all__ = [
     "AUGMENTED_STATES",
+    "INERTIA_FACTOR",
     "INPUT_TORQUE_GAIN",
     "MODEL_ERROR_AUGMENTED",
     "MU_MODELS",
@@ -82,6 +83,16 @@ INPUT_TORQUE_GAIN = "input_torque_gain"
 #: built-in 2-3 shift's 1.5 s for a 5 % engine error (assumed).
 INPUT_TORQUE_GAIN_RANDOM_WALK = 3.0e-4
 
+#: A common factor on every rotating inertia of the gearbox (shafts and planets) a shift filter
+#: may estimate as a state (``--params ...,inertia_factor``): the true inertias over the
+#: design values. The twist's frequency holds the stiffness against these inertias, the speed
+#: phase the element's μ against them, so a filter that takes them as exact claims a stiffness
+#: and a μ more certain than they are; with the factor a state their tolerance is in its model.
+INERTIA_FACTOR = "inertia_factor"
+
+#: Default random walk of the inertia factor (1/s): none, a part's inertia does not drift.
+INERTIA_FACTOR_RANDOM_WALK = 0.0
+
 #: The names ``[estimator.prior]`` may give: the unmeasured state φ (side-shaft twist) and
 #: every quantity whose record states a prior (``mu`` stands for every ``mu_<element>``).
 PRIOR_NAMES: tuple[str, ...] = (
@@ -92,6 +103,7 @@ PRIOR_NAMES: tuple[str, ...] = (
     FILL_TIME_ERROR,
     STIFFNESS_FACTOR,
     INPUT_TORQUE_GAIN,
+    INERTIA_FACTOR,
 )
 
 #: The names ``[estimator.random_walk]`` may give (``mu``: every ``mu_<element>``; ``mu_scale``:
@@ -102,6 +114,7 @@ RANDOM_WALK_NAMES: tuple[str, ...] = (
     VALVE_OFFSET,
     STIFFNESS_FACTOR,
     INPUT_TORQUE_GAIN,
+    INERTIA_FACTOR,
 )
 
 #: The fixed parameter a shift filter may estimate as a state beside the thesis' (4.1)
@@ -110,7 +123,7 @@ RANDOM_WALK_NAMES: tuple[str, ...] = (
 STIFFNESS = "k_ss"
 
 #: The states a shift filter over a fleet may carry beside the thesis' (4.1).
-AUGMENTED_STATES: tuple[str, ...] = (STIFFNESS, INPUT_TORQUE_GAIN)
+AUGMENTED_STATES: tuple[str, ...] = (STIFFNESS, INPUT_TORQUE_GAIN, INERTIA_FACTOR)
 
 #: The table of the model-error intensities of a filter that estimates more than the thesis'
 #: parameters (any of :data:`AUGMENTED_STATES`), beside ``model_error`` (the thesis' filter):
@@ -131,6 +144,7 @@ _PRIOR_UNITS = {
     FILL_TIME_ERROR: "s",
     STIFFNESS_FACTOR: "1",
     INPUT_TORQUE_GAIN: "1",
+    INERTIA_FACTOR: "1",
 }
 
 #: Default priors of the entries without a record: φ untwisted, σ 0.05 rad; the μ-map scale
@@ -138,7 +152,8 @@ _PRIOR_UNITS = {
 #: (uniform within ±100 mbar); the fill time's error 0, σ 0.029 s (production fill times
 #: uniform within ±50 ms); the side shafts' stiffness factor 1, σ 0.058 (uniform within
 #: ±10 %: production spread and temperature); the input-torque gain 1, σ 0.029 (the engine's
-#: torque model uniform within ±5 %); all assumed.
+#: torque model uniform within ±5 %); the inertia factor 1, σ 0.017 (inertias uniform within
+#: ±3 % of the design values); all assumed.
 _DEFAULT_PRIORS = {
     "phi": (0.0, 0.05),
     MU_SCALE: (1.0, 0.2),
@@ -146,6 +161,7 @@ _DEFAULT_PRIORS = {
     FILL_TIME_ERROR: (0.0, 0.029),
     STIFFNESS_FACTOR: (1.0, 0.058),
     INPUT_TORQUE_GAIN: (1.0, 0.029),
+    INERTIA_FACTOR: (1.0, 0.017),
 }
 
 #: Default random walk of the valve's offset (Pa²/s): constant within a drive, allowed to
@@ -277,13 +293,19 @@ class EstimatorCalibration:
         return {
             name: t.value
             for name, t in (*self.random_walk, *self.model_error)
-            if name not in (MU_SCALE, VALVE_OFFSET, STIFFNESS_FACTOR, INPUT_TORQUE_GAIN)
+            if name
+            not in (MU_SCALE, VALVE_OFFSET, STIFFNESS_FACTOR, INPUT_TORQUE_GAIN, INERTIA_FACTOR)
         }
 
     def input_torque_gain_random_walk(self) -> float:
         """q of the input-torque gain state (1/s)."""
         given = dict(self.random_walk).get(INPUT_TORQUE_GAIN)
         return INPUT_TORQUE_GAIN_RANDOM_WALK if given is None else given.value
+
+    def inertia_factor_random_walk(self) -> float:
+        """q of the inertia factor state (1/s)."""
+        given = dict(self.random_walk).get(INERTIA_FACTOR)
+        return INERTIA_FACTOR_RANDOM_WALK if given is None else given.value
 
     def intensities_augmented(self) -> dict[str, float]:
         """The model-error intensities of a filter that estimates any of

@@ -20,8 +20,11 @@ from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.set_kinds import HOUSING
 
 
-def exact(value: float) -> sp.Rational:
-    """The decimal number exactly as written in the file (0.054 → 27/500), not its binary float."""
+def exact(value: float | sp.Expr) -> sp.Expr:
+    """The decimal number exactly as written in the file (0.054 → 27/500), not its binary float;
+    an expression (a quantity a caller made symbolic, e.g. an inertia times a factor) as it is."""
+    if isinstance(value, sp.Basic):
+        return value
     return sp.Rational(repr(float(value)))
 
 

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import sympy as sp
@@ -45,8 +45,14 @@ from gearsym.symbolic.drivetrain import (
     shift_model,
 )
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.estimator_calibration import AUGMENTED_STATES, INPUT_TORQUE_GAIN, STIFFNESS
+from gearsym.symbolic.estimator_calibration import (
+    AUGMENTED_STATES,
+    INERTIA_FACTOR,
+    INPUT_TORQUE_GAIN,
+    STIFFNESS,
+)
 from gearsym.symbolic.input_gain import with_input_torque_gain
+from gearsym.symbolic.kinematics import exact
 from gearsym.symbolic.model import Model, Variable
 from gearsym.symbolic.parameters import RECORDS
 from gearsym.symbolic.shifts import shift_spec
@@ -179,6 +185,18 @@ class AugmentedModel:
         ]
 
 
+def inertia_factor() -> Variable:
+    """f of J_true = f J_design for every gearbox inertia: dimensionless, nominal 1."""
+    return Variable(
+        INERTIA_FACTOR,
+        sp.Symbol(INERTIA_FACTOR, positive=True),
+        "1",
+        "the gearbox's true inertias over their design values",
+        1.0,
+        "assumed: the design values are right on average",
+    )
+
+
 def augmented_model(
     d: GearboxDescription,
     shift: str = "2-3",
@@ -211,23 +229,31 @@ def augmented_model(
             "has not (it is locked or open, commanded: its shifts run through the hybrid model)",
         )
     base = shift_model(d, shift, friction_inputs=True)
-    torque_model = shift_model(d, shift)
     if parameters is None:
         parameters = default_parameters(d, shift)
     names = [v.name for v in base.parameters]
-    unknown = [p for p in parameters if p not in names and p != INPUT_TORQUE_GAIN]
+    factors = (INPUT_TORQUE_GAIN, INERTIA_FACTOR)  # states that are no parameter of the model
+    unknown = [p for p in parameters if p not in names and p not in factors]
     if unknown or len(set(parameters)) != len(parameters) or not parameters:
         raise GearsymError(
             d.file,
             "params",
             f"{', '.join(unknown) or 'a repeated name'}: choose distinct parameters of the "
-            f"{shift} model ({', '.join(names)}) or {INPUT_TORQUE_GAIN}",
+            f"{shift} model ({', '.join(names)}), {INPUT_TORQUE_GAIN} or {INERTIA_FACTOR}",
         )
     elements = (spec.off_going, spec.on_coming)
     parts = drivetrain_parts(d, spec.locked, elements)
     signs = power_on_slip_signs(d, spec)
     by_param = {v.name: v for v in base.parameters}
     sym = {v.name: v.symbol for v in (*base.states, *base.inputs, *base.parameters)}
+    torque_model = shift_model(d, shift)
+    if INERTIA_FACTOR in parameters:
+        # every gearbox inertia times a factor the filter estimates (a fleet's tolerance on
+        # them): the torque model derived again with f J in place of each J
+        factor = inertia_factor()
+        scaled = d.with_inertias(lambda q: replace(q, value=factor.symbol * exact(q.value)))
+        torque_model = shift_model(scaled, shift, extra_parameters=(factor,))
+        by_param[INERTIA_FACTOR] = factor
     if INPUT_TORQUE_GAIN in parameters:
         # the input torque the TCU is told, times a gain the filter estimates: the true T_In
         # over the told one (the engine's torque model, the e-machine's command)
@@ -330,6 +356,8 @@ def augmented_model(
         stated.setdefault(STIFFNESS, d.estimator.stiffness_factor_random_walk() * k_ss**2)
     if INPUT_TORQUE_GAIN in parameters:
         stated.setdefault(INPUT_TORQUE_GAIN, d.estimator.input_torque_gain_random_walk())
+    if INERTIA_FACTOR in parameters:
+        stated.setdefault(INERTIA_FACTOR, d.estimator.inertia_factor_random_walk())
     if any(name in parameters for name in AUGMENTED_STATES):
         # the states take the intensities tuned for a filter that estimates more, where stated
         stated.update(d.estimator.intensities_augmented())

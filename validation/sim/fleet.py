@@ -427,16 +427,7 @@ def truth_description(
     )
     inertia = values.get(f"factor.{FACTOR_INERTIA}")
     if inertia is not None:
-        truth = replace(
-            truth,
-            shafts=tuple(replace(s, inertia=_scaled(s.inertia, inertia)) for s in truth.shafts),
-            planetary_sets=tuple(
-                replace(ps, planet_inertia=_scaled(ps.planet_inertia, inertia))
-                if ps.planet_inertia is not None
-                else ps
-                for ps in truth.planetary_sets
-            ),
-        )
+        truth = truth.with_inertias(lambda q: _scaled(q, inertia))
     return truth
 
 

@@ -68,7 +68,7 @@ def check_fleet_request(request: EstimateRequest) -> None:
     ):
         refuse(option, given, f"is not available with --fleet: {reason}")
     if cal.parameters is not None:
-        from gearsym.symbolic.estimator_calibration import INPUT_TORQUE_GAIN, STIFFNESS
+        from gearsym.symbolic.estimator_calibration import AUGMENTED_STATES, STIFFNESS
         from gearsym.symbolic.estimators.ekf import default_parameters
 
         thesis = default_parameters(cal.description, request.truth.scenario.shift.name)
@@ -76,10 +76,10 @@ def check_fleet_request(request: EstimateRequest) -> None:
         refuse(
             "--params",
             not set(thesis) <= set(cal.parameters)
-            or not extra <= {STIFFNESS, INPUT_TORQUE_GAIN}
+            or not extra <= set(AUGMENTED_STATES)
             or len(set(cal.parameters)) != len(cal.parameters),
-            f"with --fleet: the thesis' (4.1) {','.join(thesis)}, optionally with {STIFFNESS} "
-            f"(the side shafts' stiffness) and {INPUT_TORQUE_GAIN}, got "
+            f"with --fleet: the thesis' (4.1) {','.join(thesis)}, optionally with "
+            f"{', '.join(AUGMENTED_STATES)} ({STIFFNESS}: the side shafts' stiffness), got "
             f"{','.join(cal.parameters)}",
         )
 

@@ -14,7 +14,7 @@ from gearsym.symbolic.defaults import EKF_FLOOR_FRACTION, EKF_RELATIVE_NOISE
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.estimator_calibration import INPUT_TORQUE_GAIN, STIFFNESS
+from gearsym.symbolic.estimator_calibration import INERTIA_FACTOR, INPUT_TORQUE_GAIN, STIFFNESS
 from gearsym.validation.sim.phases import Phase
 from gearsym.validation.sim.simulate import SimulationResult
 from gearsym.validation.studies.estimation.modes import (
@@ -95,6 +95,13 @@ class EkfSetup:
 #: |told T_In| (N·m) below which the input-torque gain has no truth: the ratio of two
 #: torques near zero says nothing about a gain (and the filter learns nothing of it there).
 GAIN_TORQUE_FLOOR = 5.0
+
+
+def inertia_factor_truth(d: GearboxDescription, truth: GearboxDescription) -> float:
+    """The common factor on the gearbox's inertias of the vehicle ``truth`` against the
+    calibration ``d`` (the fleet scales them all alike), for scoring only."""
+    shaft = max(d.shafts, key=lambda s: s.inertia.value)
+    return float(truth.shaft(shaft.name).inertia.value / shaft.inertia.value)
 
 
 def prepare_ekf(
@@ -216,6 +223,9 @@ def prepare_ekf(
             scored[:, j] = True
         elif name == STIFFNESS:  # the stiffness as a state (--params ...,k_ss)
             truth[:, j] = quantity(truth_description, "drivetrain", STIFFNESS).value
+            scored[:, j] = True
+        elif name == INERTIA_FACTOR:  # the truth's inertias over the calibration's
+            truth[:, j] = inertia_factor_truth(d, truth_description)
             scored[:, j] = True
         elif name == INPUT_TORQUE_GAIN:  # the true T_In over the told one, where it is told
             told_torque = u[:, aug.input_names.index(naming.INPUT_TORQUE)]
