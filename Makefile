@@ -55,7 +55,7 @@ results: $(STAMP)
 	cp build/results/fleet_ekf_2_3_map_scale/fleet.md $(RESULTS)/fleet_ekf_2_3_map_scale.md
 	cp build/results/fleet_ekf_2_3_map_scale/fleet.png $(RESULTS)/fleet_ekf_2_3_map_scale.png
 	rm -rf build/results/fleet_ekf_2_3_augmented
-	$(BIN)/gearsym estimate --filter ekf --fleet --params m_veh,mu_38,mu_05,zeta,k_ss,input_torque_gain --runs 200 --seed 10000 --scheduler local --out build/results/fleet_ekf_2_3_augmented
+	$(BIN)/gearsym estimate --filter ekf --fleet --params m_veh,mu_38,mu_05,zeta,k_ss,input_torque_gain,inertia_factor,valve_offset,valve_gain --runs 200 --seed 10000 --scheduler local --out build/results/fleet_ekf_2_3_augmented
 	cp build/results/fleet_ekf_2_3_augmented/fleet.json $(RESULTS)/fleet_ekf_2_3_augmented.json
 	cp build/results/fleet_ekf_2_3_augmented/fleet.md $(RESULTS)/fleet_ekf_2_3_augmented.md
 	cp build/results/fleet_ekf_2_3_augmented/fleet.png $(RESULTS)/fleet_ekf_2_3_augmented.png

@@ -50,6 +50,8 @@ from gearsym.symbolic.estimator_calibration import (
     INERTIA_FACTOR,
     INPUT_TORQUE_GAIN,
     STIFFNESS,
+    VALVE_GAIN,
+    VALVE_OFFSET,
 )
 from gearsym.symbolic.input_gain import with_input_torque_gain
 from gearsym.symbolic.kinematics import exact
@@ -128,6 +130,12 @@ def stick_input(element: str) -> str:
     return f"stick_{element}"
 
 
+def valve_input(element: str) -> str:
+    """Name of the 0/1 input that says ``element``'s pressure is commanded (> 0): the valve's
+    offset acts on its piston then (a filter with the ``valve_offset`` state)."""
+    return f"valve_{element}"
+
+
 @dataclass(frozen=True)
 class AugmentedModel:
     """ż = [f(x, u, p); 0] of (4.1) as a :class:`Model` (states z = [x; p]), and what the filter
@@ -185,6 +193,40 @@ class AugmentedModel:
         ]
 
 
+def _valve_offset(
+    d: GearboxDescription, elements: tuple[str, ...]
+) -> tuple[Variable, dict[str, Variable]]:
+    """The valve's pressure offset (Pa, nominal 0) as the filter's state, and per element the
+    0/1 input that says its pressure is commanded (the offset acts only then: a valve told
+    nothing gives nothing). One offset for every element: the valves of one TCU share a
+    supply and a calibration. A one-line error for an element without a piston area."""
+    no_piston = [e for e in elements if d.element(e).a_piston is None]
+    if no_piston:
+        raise GearsymError(
+            d.file,
+            "params",
+            f"{VALVE_OFFSET}: {no_piston[0]} has no a_piston, so no pressure the offset acts on",
+        )
+    offset = Variable(
+        VALVE_OFFSET,
+        sp.Symbol(VALVE_OFFSET, real=True),
+        "Pa",
+        "the valves' pressure over the commanded one while commanded",
+        0.0,
+        "assumed: the nominal valve",
+    )
+    valves = {
+        e: Variable(
+            valve_input(e),
+            sp.Symbol(valve_input(e), real=True),
+            "1",
+            f"1 while {e}'s pressure is commanded",
+        )
+        for e in elements
+    }
+    return offset, valves
+
+
 def inertia_factor() -> Variable:
     """f of J_true = f J_design for every gearbox inertia: dimensionless, nominal 1."""
     return Variable(
@@ -232,14 +274,15 @@ def augmented_model(
     if parameters is None:
         parameters = default_parameters(d, shift)
     names = [v.name for v in base.parameters]
-    factors = (INPUT_TORQUE_GAIN, INERTIA_FACTOR)  # states that are no parameter of the model
+    # states that are no parameter of the model
+    factors = (INPUT_TORQUE_GAIN, INERTIA_FACTOR, VALVE_OFFSET, VALVE_GAIN)
     unknown = [p for p in parameters if p not in names and p not in factors]
     if unknown or len(set(parameters)) != len(parameters) or not parameters:
         raise GearsymError(
             d.file,
             "params",
             f"{', '.join(unknown) or 'a repeated name'}: choose distinct parameters of the "
-            f"{shift} model ({', '.join(names)}), {INPUT_TORQUE_GAIN} or {INERTIA_FACTOR}",
+            f"{shift} model ({', '.join(names)}) or {', '.join(factors)}",
         )
     elements = (spec.off_going, spec.on_coming)
     parts = drivetrain_parts(d, spec.locked, elements)
@@ -263,15 +306,32 @@ def augmented_model(
 
     # The element torques in terms of the modes: slide -> k_sign 2 N r μ F_N (2.69, 3.14),
     # stick -> the constraint torque that holds its slip rate at zero, open -> 0.
+    offset, valves = _valve_offset(d, elements) if VALVE_OFFSET in parameters else (None, {})
+    if offset is not None:
+        by_param[VALVE_OFFSET] = offset
+    if VALVE_GAIN in parameters:
+        by_param[VALVE_GAIN] = Variable(
+            VALVE_GAIN,
+            sp.Symbol(VALVE_GAIN, positive=True),
+            "1",
+            "the valves' pressure over the commanded one (a gain)",
+            1.0,
+            "assumed: the nominal valve",
+        )
     friction = {}
     for e in elements:
         element = d.element(e)
         assert element.n_disc is not None and element.r_m is not None
         short = element_short_name(d, e)
         gain = signs[e] * 2 * element.n_disc * sp.nsimplify(element.r_m.value)
-        friction[e] = (
-            gain * sym[naming.friction_coefficient(short)] * sym[naming.normal_force(short)]
-        )
+        force = sym[naming.normal_force(short)]
+        if VALVE_GAIN in parameters:  # the valve's gain on the commanded pressure
+            force = by_param[VALVE_GAIN].symbol * force
+        if offset is not None:  # the TCU is told A p_cmd; the piston sees A (p_cmd + offset)
+            assert element.a_piston is not None
+            area = sp.nsimplify(element.a_piston.value)
+            force = force + area * offset.symbol * valves[e].symbol
+        friction[e] = gain * sym[naming.friction_coefficient(short)] * force
     torque_symbols = {e: torque_model.variable(naming.torque(e)).symbol for e in elements}
     gearbox = torque_rhs[: len(parts.speeds), :]  # ω̇ of the kept shafts (2.39)
     slip = {}
@@ -328,7 +388,7 @@ def augmented_model(
             for v in augmented
         ),
     )
-    inputs = (*base.inputs, *(f for e in elements for f in flags[e]))
+    inputs = (*base.inputs, *(f for e in elements for f in flags[e]), *valves.values())
     rhs = sp.Matrix([*rhs_x, *([sp.Integer(0)] * len(augmented))])
     model = Model(
         name=ekf_model_name(spec.name),
@@ -358,6 +418,10 @@ def augmented_model(
         stated.setdefault(INPUT_TORQUE_GAIN, d.estimator.input_torque_gain_random_walk())
     if INERTIA_FACTOR in parameters:
         stated.setdefault(INERTIA_FACTOR, d.estimator.inertia_factor_random_walk())
+    if VALVE_OFFSET in parameters:
+        stated.setdefault(VALVE_OFFSET, d.estimator.valve_offset_random_walk())
+    if VALVE_GAIN in parameters:
+        stated.setdefault(VALVE_GAIN, d.estimator.valve_gain_random_walk())
     if any(name in parameters for name in AUGMENTED_STATES):
         # the states take the intensities tuned for a filter that estimates more, where stated
         stated.update(d.estimator.intensities_augmented())

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.estimator_calibration import VALVE_GAIN, VALVE_OFFSET
 from gearsym.validation.sim.fleet import Fleet, FleetDraw, told_inputs, truth_world
 from gearsym.validation.sim.scenario import Scenario
 
@@ -141,6 +142,8 @@ class FleetEvaluation:
     mu_model: str = "random_walk"
     #: what one shift cannot separate (:mod:`.separability`), on the calibration's vehicle
     separability: dict[str, Any] = field(default_factory=dict)
+    #: the states the filter carries as consider states (never corrected)
+    considered: tuple[str, ...] = ()
 
     @property
     def parameter_names(self) -> list[str]:
@@ -281,6 +284,7 @@ class FleetEvaluation:
                 "calibration": cal.to_dict(),
             },
             "initial": {name: {"value": v, "sigma": s} for name, (v, s) in self.initial.items()},
+            "considered": list(self.considered),
             "parameters": {
                 name: {
                     "final": self.final_stats(name).to_dict(),
@@ -437,6 +441,10 @@ def vehicle_setup(
         truth_description=world.description,
         floor=context.floor,
         truth_mu_scale=world.mu_scale,
+        truth_valve={
+            VALVE_OFFSET: float(dict(draw.values).get("pressure_offset", 0.0)),
+            VALVE_GAIN: float(dict(draw.values).get("pressure_gain", 1.0)),
+        },
     )
     return draw, setup, tuple(told)
 
@@ -596,4 +604,5 @@ def run_fleet(
         mu_elements={mu: e for e, mu in model.aug.mu_state.items()},
         mu_model=d.estimator.mu_model,
         separability=separability,
+        considered=tuple(nominal.names[j] for j in nominal.considered),
     )

@@ -111,6 +111,13 @@ def _assumptions(data: dict[str, Any]) -> list[str]:
         "coverage: the share of scored samples whose error lies within 1.96 sigma, judged "
         f"against {100 * COVERAGE_RANGE[0]:.0f}-{100 * COVERAGE_RANGE[1]:.0f} %",
     ]
+    considered = data.get("considered") or []
+    if considered:
+        lines.append(
+            "considered, not estimated (Schmidt consider states: their prior in the covariance, "
+            "so in the sigma of what they are confounded with; no measurement corrects them): "
+            + ", ".join(_name(n, data) for n in considered)
+        )
     if _has_bound(data):
         lines.append(
             "bound: the posterior Cramer-Rao bound along each vehicle's truth under the "

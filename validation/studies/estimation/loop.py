@@ -325,6 +325,7 @@ def filter_run(
             u_now = form(z, u_now)
         # a μ whose element may already stick is not corrected (ambiguous_mu)
         consider = [] if logic is None else ambiguous_mu(logic, z, P, u_now, s.p, modes)
+        consider = [*s.considered, *consider]  # and the states no shift corrects
         z, P, nis[k], nis_dof[k] = ekf_update(
             s.discrete, z, P, u_now, first if k == 0 else y[k], s.p, s.relative, s.floor, consider
         )

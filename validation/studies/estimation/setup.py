@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -12,9 +13,16 @@ import numpy as np
 from gearsym.symbolic import naming
 from gearsym.symbolic.defaults import EKF_FLOOR_FRACTION, EKF_RELATIVE_NOISE
 from gearsym.symbolic.description import GearboxDescription
-from gearsym.symbolic.drivetrain import quantity
+from gearsym.symbolic.drivetrain import element_short_name, quantity
 from gearsym.symbolic.errors import GearsymError
-from gearsym.symbolic.estimator_calibration import INERTIA_FACTOR, INPUT_TORQUE_GAIN, STIFFNESS
+from gearsym.symbolic.estimator_calibration import (
+    CONSIDERED_STATES,
+    INERTIA_FACTOR,
+    INPUT_TORQUE_GAIN,
+    STIFFNESS,
+    VALVE_GAIN,
+    VALVE_OFFSET,
+)
 from gearsym.validation.sim.phases import Phase
 from gearsym.validation.sim.simulate import SimulationResult
 from gearsym.validation.studies.estimation.modes import (
@@ -69,6 +77,10 @@ class EkfSetup:
     #: the inputs along the truth for the posterior bound (the F_N inputs mapped at the true
     #: slip under ``input_form``); ``None``: ``u``
     bound_u: np.ndarray | None = None
+    #: indices of the states the filter carries as consider states (Schmidt): their prior
+    #: enters the covariance, no measurement corrects them (:data:`~gearsym.symbolic.
+    #: estimator_calibration.CONSIDERED_STATES`)
+    considered: tuple[int, ...] = ()
 
     @property
     def names(self) -> list[str]:
@@ -120,6 +132,7 @@ def prepare_ekf(
     truth_description: GearboxDescription | None = None,
     floor: np.ndarray | None = None,
     truth_mu_scale: Mapping[str, float] | None = None,
+    truth_valve: Mapping[str, float] | None = None,
 ) -> EkfSetup:
     """The seed-independent part of :func:`run_ekf` (its arguments of the same name).
 
@@ -141,8 +154,10 @@ def prepare_ekf(
     ``d``). ``floor``: the noise floor y_min of (3.26) per output (default: a fraction of the
     largest |y| of ``result``, right only when the truth is the calibration).
     ``truth_mu_scale``: the truth's factor on the μ map per element (a fleet's draw), the truth
-    of the map-scale states (``[estimator] mu_model = "map_scale"``), for scoring only."""
-    from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model
+    of the map-scale states (``[estimator] mu_model = "map_scale"``), for scoring only.
+    ``truth_valve``: the vehicle's valve (a fleet's draw): ``valve_offset`` (Pa) and
+    ``valve_gain``, the truths of those states, for scoring only (absent: not scored)."""
+    from gearsym.symbolic.estimators.ekf import DiscreteModel, augmented_model, valve_input
 
     shift = result.scenario.shift.name
     if modes not in MODE_SOURCES:
@@ -199,7 +214,11 @@ def prepare_ekf(
     columns = []
     for name in aug.input_names:
         element = name.split("_", 1)[1] if name.startswith(("slide_", "stick_")) else None
-        if element is not None:
+        valve = next((e for e in aug.elements if name == valve_input(e)), None)
+        if valve is not None:  # commanded (as the TCU's F_N column says): the offset acts
+            force = naming.normal_force(element_short_name(d, valve))
+            columns.append((columns[aug.input_names.index(force)] > 0).astype(float))
+        elif element is not None:
             columns.append(reference_modes[element][0 if name.startswith("slide_") else 1])
         elif told is not None and name in told:
             columns.append(np.asarray(told[name], dtype=float))
@@ -224,6 +243,10 @@ def prepare_ekf(
         elif name == STIFFNESS:  # the stiffness as a state (--params ...,k_ss)
             truth[:, j] = quantity(truth_description, "drivetrain", STIFFNESS).value
             scored[:, j] = True
+        elif name in (VALVE_OFFSET, VALVE_GAIN):  # the vehicle's valve (a fleet draw)
+            value = (truth_valve or {}).get(name, math.nan)
+            truth[:, j] = value
+            scored[:, j] = math.isfinite(value)
         elif name == INERTIA_FACTOR:  # the truth's inertias over the calibration's
             truth[:, j] = inertia_factor_truth(d, truth_description)
             scored[:, j] = True
@@ -290,4 +313,5 @@ def prepare_ekf(
         reference_switches=tuple(reference_switches(d, result)),
         input_form=input_form,
         bound_u=bound_u,
+        considered=tuple(j for j, name in enumerate(names) if name in CONSIDERED_STATES),
     )
