@@ -59,6 +59,11 @@ results: $(STAMP)
 	cp build/results/fleet_ekf_2_3_augmented/fleet.json $(RESULTS)/fleet_ekf_2_3_augmented.json
 	cp build/results/fleet_ekf_2_3_augmented/fleet.md $(RESULTS)/fleet_ekf_2_3_augmented.md
 	cp build/results/fleet_ekf_2_3_augmented/fleet.png $(RESULTS)/fleet_ekf_2_3_augmented.png
+	rm -rf build/results/fleet_ekf_2_3_tooth_wheels
+	$(BIN)/gearsym estimate --filter ekf --fleet gearsym/data/fleet_tooth_wheels.toml --params m_veh,mu_38,mu_05,zeta,k_ss,input_torque_gain,inertia_factor,valve_offset,valve_gain --runs 200 --seed 10000 --scheduler local --out build/results/fleet_ekf_2_3_tooth_wheels
+	cp build/results/fleet_ekf_2_3_tooth_wheels/fleet.json $(RESULTS)/fleet_ekf_2_3_tooth_wheels.json
+	cp build/results/fleet_ekf_2_3_tooth_wheels/fleet.md $(RESULTS)/fleet_ekf_2_3_tooth_wheels.md
+	cp build/results/fleet_ekf_2_3_tooth_wheels/fleet.png $(RESULTS)/fleet_ekf_2_3_tooth_wheels.png
 	rm -rf build/results/ekf_2_3 build/results/euio_2_3
 	$(BIN)/gearsym estimate --filter ekf --runs 50 --seed 0 --out build/results/ekf_2_3
 	cp build/results/ekf_2_3/ekf.json $(RESULTS)/montecarlo_ekf_2_3.json

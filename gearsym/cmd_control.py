@@ -147,7 +147,8 @@ def _fleet(d: object, argument: str | None) -> object:
         return _Calibration()
     from gearsym.validation.sim.fleet import load_fleet
 
-    return load_fleet(d, None if argument == DEFAULT_FLEET_ARGUMENT else argument)  # type: ignore[arg-type]
+    fleet = load_fleet(d, None if argument == DEFAULT_FLEET_ARGUMENT else argument)  # type: ignore[arg-type]
+    return fleet.without_speed_sensors("control")
 
 
 def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:

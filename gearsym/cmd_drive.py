@@ -55,6 +55,7 @@ def cmd_drive(args: argparse.Namespace) -> int:
         from gearsym.validation.sim.fleet import load_fleet
 
         fleet = load_fleet(d, None if args.fleet == DEFAULT_FLEET_ARGUMENT else args.fleet)
+        fleet = fleet.without_speed_sensors("drive")
         if args.runs > 1:
             return _drive_fleet(args, d, cycle, grade, fleet)
         truth = DriveTruth.from_draw(d, fleet.draw(args.seed), constant_grade=grade is None)

@@ -134,6 +134,11 @@ def test_each_entry_has_its_own_stream(d):
             "the true fill time (the description's 0.1 s plus the error) must stay positive",
         ),
         ("", "fleet.fleet", "draws nothing"),
+        (
+            'speed_sensor_teeth = { value = 48.0, unit = "1", source = "x" }',
+            "fleet.speed_sensor_timer",
+            "a tooth-wheel speed sensor needs its teeth and its timer",
+        ),
     ],
 )
 def test_a_bad_fleet_is_refused_in_one_line(d, body, key, reason):
@@ -150,7 +155,13 @@ def test_every_documented_quantity_is_accepted(d):
     for name in FLEET_QUANTITIES:
         unit, (low, high) = _unit_and_range(name)
         value = min(max(1.0, low), high) if name != "m_veh" else 1800.0
-        fleet = _fleet(d, f'{name} = {{ value = {value!r}, unit = "{unit}", source = "x" }}')
+        body = f'{name} = {{ value = {value!r}, unit = "{unit}", source = "x" }}'
+        if name.startswith("speed_sensor_"):  # a sensor is its teeth and its timer at least
+            partners = {"speed_sensor_teeth": (48.0, "1"), "speed_sensor_timer": (1e-6, "s")}
+            for other, (v, u) in partners.items():
+                if other != name:
+                    body += f'\n{other} = {{ value = {v!r}, unit = "{u}", source = "x" }}'
+        fleet = _fleet(d, body)
         assert dict(fleet.entries)[name].a == value
 
 
@@ -591,3 +602,39 @@ def test_the_nees_interval_over_vehicles_is_a_bootstrap_of_their_means(d, scenar
         FleetEvaluation(load_fleet(d), d, scenario, (0,), [vehicle(5.0)]).nees_over_vehicles()
         is None
     )
+
+
+def test_a_fleet_extending_the_default_draws_its_vehicles_with_its_own_entries(d, tmp_path):
+    """The shipped tooth-wheel fleet extends the default: the same entries (so, each drawing
+    from its own stream, the same vehicles for the same seeds) plus the sensor's; an entry it
+    names replaces the default's; a base that is not there is a one-line error."""
+    from pathlib import Path
+
+    import gearsym
+
+    default = load_fleet(d)
+    wheels = load_fleet(d, Path(gearsym.__file__).parent / "data" / "fleet_tooth_wheels.toml")
+    base = dict(default.entries)
+    own = dict(wheels.entries)
+    assert set(own) == set(base) | {
+        "speed_sensor_teeth",
+        "speed_sensor_timer",
+        "speed_sensor_latency",
+    }
+    drawn, drawn_default = dict(wheels.draw(10007).values), dict(default.draw(10007).values)
+    assert all(drawn[k] == v for k, v in drawn_default.items())
+    heavy = tmp_path / "heavy.toml"
+    heavy.write_text(
+        '[fleet]\nextends = "default"\nm_veh = { value = 2400.0, unit = "kg", source = "x" }\n'
+    )
+    fleet = load_fleet(d, heavy)
+    assert dict(fleet.entries)["m_veh"].a == 2400.0 and len(fleet.entries) == len(base)
+    chained = tmp_path / "chained.toml"
+    chained.write_text('[fleet]\nextends = "heavy.toml"\n')
+    assert dict(load_fleet(d, chained).entries)["m_veh"].a == 2400.0
+    lost = tmp_path / "lost.toml"
+    lost.write_text('[fleet]\nextends = "nowhere.toml"\n')
+    with pytest.raises(GearsymError) as err:
+        load_fleet(d, lost)
+    text = str(err.value)
+    assert "\n" not in text and "fleet.extends" in text and "nowhere.toml" in text

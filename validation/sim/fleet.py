@@ -42,6 +42,7 @@ from gearsym.symbolic.io.input_files import parse_toml, read_text
 from gearsym.symbolic.io.package_data import data_file
 from gearsym.symbolic.io.table_reader import TableReader
 from gearsym.validation.sim.scenario import Profile, Scenario
+from gearsym.validation.sim.tooth_wheel import ToothWheel
 
 __all__ = [
     "DEFAULT_FLEET",
@@ -93,6 +94,23 @@ EFFECTS: dict[str, tuple[str, tuple[float, float], str]] = {
         (-5.0e5, 5.0e5),
         "added to the true pressure of an applied element (valve, return spring) at each knot "
         "of the commanded profile where it is above zero; linear between the knots",
+    ),
+    "speed_sensor_teeth": (
+        "1",
+        (1.0, 1000.0),
+        "every measured speed read from a toothed wheel of this many teeth (rounded) as the "
+        "pitch over the last tooth period (validation/sim/tooth_wheel.py) instead of with the "
+        "Gaussian noise of (3.26); needs speed_sensor_timer",
+    ),
+    "speed_sensor_timer": (
+        "s",
+        (1.0e-9, 1.0e-3),
+        "the tooth-period counter's resolution: each period rounded to it",
+    ),
+    "speed_sensor_latency": (
+        "s",
+        (0.0, 0.05),
+        "from a tooth edge to the TCU sample that may use it (capture, transport, task phase)",
     ),
     "fill_time_error": (
         "s",
@@ -208,6 +226,19 @@ class Fleet:
             values.append((name, dist.sample(rng)))
         return FleetDraw(seed, tuple(values))
 
+    def without_speed_sensors(self, command: str) -> Fleet:
+        """This fleet, for a ``command`` that does not read tooth-wheel speed sensors: a
+        one-line error when it draws any (they would be silently ignored)."""
+        sensors = [name for name, _ in self.entries if name.startswith("speed_sensor_")]
+        if sensors:
+            raise GearsymError(
+                self.file,
+                f"fleet.{sensors[0]}",
+                f"tooth-wheel speed sensors are read by gearsym estimate --fleet only; "
+                f"gearsym {command} would ignore them (use a fleet without them)",
+            )
+        return self
+
     def fixed(self, name: str, value: float, where: str) -> Fleet:
         """The same fleet with entry ``name`` fixed at ``value`` (its other entries draw as
         before: each has its own stream). ``where`` names the option in a refusal."""
@@ -273,16 +304,37 @@ def _distribution(entry: TableReader, unit: str, low: float, high: float) -> Dis
     return dist
 
 
-def parse_fleet(text: str, file: str, d: GearboxDescription) -> Fleet:
-    """A fleet file's text, checked against the description (element names, quantities)."""
+def _base_fleet(extends: str, file: str, d: GearboxDescription, depth: int) -> Fleet:
+    """The fleet ``extends`` names: "default" (the shipped fleet) or a file relative to the
+    extending one's folder."""
+    if depth >= 8:
+        raise GearsymError(file, "fleet.extends", "more than 8 fleets extend each other")
+    if extends == "default":
+        return parse_fleet(
+            read_text(data_file(DEFAULT_FLEET), f"<built-in {DEFAULT_FLEET}>"),
+            f"<built-in {DEFAULT_FLEET}>",
+            d,
+            _depth=depth + 1,
+        )
+    path = Path(file).parent / extends
+    if not path.is_file():
+        raise GearsymError(file, "fleet.extends", f"no fleet file {str(path)!r} (or 'default')")
+    return parse_fleet(read_text(path, str(path)), str(path), d, _depth=depth + 1)
+
+
+def parse_fleet(text: str, file: str, d: GearboxDescription, _depth: int = 0) -> Fleet:
+    """A fleet file's text, checked against the description (element names, quantities).
+    ``extends = "default"`` (or a fleet file's path relative to this one) starts from that
+    fleet's entries; this file's entries replace those of the same name and add the rest."""
     root = TableReader(file, parse_toml(text, file), "")
     table = root.table("fleet")
     name = table.string("name", required=False, default=Path(file).stem)
     source = table.string("source", required=False, default="")
+    extends = table.string("extends", required=False, default="")
     elements = {e.name for e in d.shift_elements if not e.one_way}
     entries: list[tuple[str, Distribution]] = []
     for key in list(table.data):
-        if key in ("name", "source", "factor"):
+        if key in ("name", "source", "factor", "extends"):
             continue
         if key in FLEET_QUANTITIES:
             unit, (low, high) = _unit_and_range(key)
@@ -329,8 +381,17 @@ def parse_fleet(text: str, file: str, d: GearboxDescription) -> Fleet:
     factor.reject_unknown()
     table.reject_unknown()
     root.reject_unknown()
+    if extends:
+        base = _base_fleet(extends, file, d, _depth)
+        own = {key for key, _ in entries}
+        entries = [*(e for e in base.entries if e[0] not in own), *entries]
     if not entries:
         raise table.fail("fleet", "draws nothing: give at least one entry")
+    drawn = {key for key, _ in entries}
+    sensor = {"speed_sensor_teeth", "speed_sensor_timer", "speed_sensor_latency"} & drawn
+    for needed in ("speed_sensor_teeth", "speed_sensor_timer"):
+        if sensor and needed not in sensor:
+            raise table.fail(needed, "a tooth-wheel speed sensor needs its teeth and its timer")
     return Fleet(name, file, source, tuple(sorted(entries)))
 
 
@@ -464,6 +525,19 @@ def truth_world(d: GearboxDescription, scenario: Scenario, draw: FleetDraw) -> T
         grade=grade,
     )
     return TruthWorld(truth, true_scenario, mu_scales(d, draw), draw)
+
+
+def speed_sensor(draw: FleetDraw) -> ToothWheel | None:
+    """The vehicle's tooth-wheel speed sensor (one for every measured speed), or ``None`` when
+    the fleet draws none (the speeds then carry the Gaussian noise of (3.26))."""
+    values = dict(draw.values)
+    if "speed_sensor_teeth" not in values:
+        return None
+    return ToothWheel(
+        teeth=max(int(round(values["speed_sensor_teeth"])), 1),
+        timer=values["speed_sensor_timer"],
+        latency=values.get("speed_sensor_latency", 0.0),
+    )
 
 
 def told_inputs(

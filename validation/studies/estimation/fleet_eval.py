@@ -18,15 +18,22 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.estimator_calibration import VALVE_GAIN, VALVE_OFFSET
-from gearsym.validation.sim.fleet import Fleet, FleetDraw, told_inputs, truth_world
+from gearsym.validation.sim.fleet import (
+    Fleet,
+    FleetDraw,
+    speed_sensor,
+    told_inputs,
+    truth_world,
+)
 from gearsym.validation.sim.scenario import Scenario
+from gearsym.validation.sim.tooth_wheel import tooth_wheel_speeds
 
 __all__ = [
     "COVERAGE_Z",
@@ -446,6 +453,13 @@ def vehicle_setup(
             VALVE_GAIN: float(dict(draw.values).get("pressure_gain", 1.0)),
         },
     )
+    sensor = speed_sensor(draw)
+    if sensor is not None:  # the speeds as the TCU reads them from its tooth wheels
+        readings = [
+            tooth_wheel_speeds(result.t, result.signals[name], setup.t, sensor)
+            for name in setup.outputs
+        ]
+        setup = replace(setup, y_true=np.column_stack(readings), sensed=True)
     return draw, setup, tuple(told)
 
 

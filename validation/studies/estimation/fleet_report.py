@@ -83,6 +83,16 @@ def _has_bound(data: dict[str, Any]) -> bool:
     )
 
 
+def _entry(entry: dict[str, Any]) -> str:
+    """A fleet entry as a value or a range, with its unit."""
+    unit = "" if entry.get("unit") in (None, "1") else f" {entry['unit']}"
+    if "value" in entry:
+        return f"{_g(entry['value'], 4)}{unit}"
+    if entry.get("dist") == "uniform":
+        return f"{_g(entry['low'], 4)}-{_g(entry['high'], 4)}{unit}"
+    return f"normal {_g(entry['mean'], 4)} ± {_g(entry['sd'], 3)}{unit}"
+
+
 def _assumptions(data: dict[str, Any]) -> list[str]:
     seeds = data["seeds"]
     prior = ", ".join(
@@ -111,6 +121,17 @@ def _assumptions(data: dict[str, Any]) -> list[str]:
         "coverage: the share of scored samples whose error lies within 1.96 sigma, judged "
         f"against {100 * COVERAGE_RANGE[0]:.0f}-{100 * COVERAGE_RANGE[1]:.0f} %",
     ]
+    sensors = {k: v for k, v in fleet["entries"].items() if k.startswith("speed_sensor_")}
+    if sensors:
+        lines.append(
+            "the speeds: read from tooth wheels ("
+            + ", ".join(
+                f"{k.removeprefix('speed_sensor_')} {_entry(v)}" for k, v in sensors.items()
+            )
+            + "; validation/sim/tooth_wheel.py: the pitch over the last tooth period, late by up "
+            "to 1.5 periods plus the latency, rounded to the timer), with no Gaussian noise; "
+            "the filter keeps the calibration's noise model (3.26)"
+        )
     considered = data.get("considered") or []
     if considered:
         lines.append(

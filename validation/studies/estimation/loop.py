@@ -273,7 +273,7 @@ def filter_run(
     s = setup
     t, names, n = s.t, s.names, len(s.names)
     sample_time = float(t[1] - t[0])
-    y = s.y_true.copy() if s.measured else noisy_outputs(s, seed)
+    y = s.y_true.copy() if s.measured or s.sensed else noisy_outputs(s, seed)
     if dropout is not None:
         lost = (t >= dropout[0]) & (t < dropout[1])
         for name in dropout_outputs if dropout_outputs is not None else s.outputs:

@@ -81,6 +81,9 @@ class EkfSetup:
     #: enters the covariance, no measurement corrects them (:data:`~gearsym.symbolic.
     #: estimator_calibration.CONSIDERED_STATES`)
     considered: tuple[int, ...] = ()
+    #: ``y_true`` holds a sensor model's readings (tooth wheels, a fleet's draw), not the
+    #: reference's outputs: no noise is drawn on them, and the states keep their truth
+    sensed: bool = False
 
     @property
     def names(self) -> list[str]:
