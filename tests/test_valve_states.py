@@ -133,3 +133,42 @@ def test_considered_valve_states_are_never_corrected_but_widen_mu(
 
     wide, narrow = sliding_sigma(fr.run), sliding_sigma(plain.run)
     assert wide > 1.05 * narrow, (wide, narrow)
+
+
+def test_under_the_map_scale_the_offsets_force_goes_through_the_same_map_value(
+    default_description,
+):
+    """With μ = s μ_map (``mu_model = "map_scale"``) the filter's F_N input carries the map
+    value, F_N μ_map; the valve's force A θ must carry it too, or θ acts as if μ were s (about
+    eight times μ): the form multiplies each element's valve input by the same map value as its
+    F_N, read at the commanded pressure and the filter's slip, along a state and along a known
+    slip history (the bound's)."""
+    from gearsym.symbolic.drivetrain import quantity
+    from gearsym.symbolic.friction import load_mu_map
+    from gearsym.validation.studies.estimation.mu_map_form import map_scale_form
+
+    d = default_description
+    aug = augmented_model(d, "2-3", (*default_parameters(d, "2-3"), VALVE_OFFSET, VALVE_GAIN))
+    form = map_scale_form(d, aug)
+    names = list(aug.input_names)
+    z = np.zeros(len(aug.state_names))
+    z[aug.state_names.index("omega_1")] = 190.0
+    z[aug.state_names.index("omega_2")] = 120.0
+    u = np.zeros(len(names))
+    pressures = {"K38": 3.0e5, "B05": 5.0e5}
+    for e, p in pressures.items():
+        u[names.index(naming.normal_force(element_short_name(d, e)))] = p * (
+            d.element(e).a_piston.value
+        )
+        u[names.index(valve_input(e))] = 1.0
+    mapped = form(z, u)
+    along = form.along(u[None, :], np.array([[abs(r @ z) for r in form.slip_rows]]))[0]
+    mu_map, t_oil = load_mu_map(d), quantity(d, "friction", "T_oil").value
+    for k, (e, p) in enumerate(pressures.items()):
+        slip = abs(form.slip_rows[k] @ z)
+        value = float(mu_map(np.array([p]), t_oil, np.array([slip]))[0])
+        assert 0.05 < value < 0.3  # a μ, not 1
+        for out in (mapped, along):
+            assert out[names.index(valve_input(e))] == pytest.approx(value, rel=1e-12)
+            force = out[names.index(naming.normal_force(element_short_name(d, e)))]
+            assert force == pytest.approx(p * d.element(e).a_piston.value * value, rel=1e-12)

@@ -36,6 +36,9 @@ class MapScaleForm:
     slip_rows: np.ndarray  # (elements × states): Δω_E = row · z
     mu_map: Any  # gearsym.symbolic.friction.MuMap
     t_oil: float
+    #: index of each element's valve input (``valve_<E>``, a filter with the valves' offset
+    #: state), else empty: the offset's force A θ acts through the same map value
+    valve_columns: tuple[int, ...] = ()
 
     def factors(self, z: np.ndarray, u: np.ndarray) -> np.ndarray:
         """μ_map(p_E, T_oil, |Δω_E|) per element at the state estimate ``z`` and inputs ``u``."""
@@ -46,7 +49,10 @@ class MapScaleForm:
     def __call__(self, z: np.ndarray, u: np.ndarray) -> np.ndarray:
         """``u`` with each swapping element's F_N times its map value at ``z``."""
         out = np.array(u, dtype=float)
-        out[list(self.columns)] *= self.factors(z, out)
+        factors = self.factors(z, out)
+        out[list(self.columns)] *= factors
+        if self.valve_columns:
+            out[list(self.valve_columns)] *= factors
         return out
 
     def along(self, u: np.ndarray, slips: np.ndarray) -> np.ndarray:
@@ -54,9 +60,12 @@ class MapScaleForm:
         linearises along the truth."""
         out = np.array(u, dtype=float)
         for k, (c, a) in enumerate(zip(self.columns, self.areas, strict=True)):
-            out[:, c] *= np.asarray(
+            factor = np.asarray(
                 self.mu_map(out[:, c] / a, self.t_oil, np.abs(slips[:, k])), dtype=float
             )
+            out[:, c] *= factor
+            if self.valve_columns:
+                out[:, self.valve_columns[k]] *= factor
         return out
 
 
@@ -65,6 +74,7 @@ def map_scale_form(d: GearboxDescription, aug: Any) -> MapScaleForm:
     calibration ``d``'s μ map, oil temperature and piston areas."""
     from gearsym.symbolic import naming
     from gearsym.symbolic.drivetrain import element_short_name, quantity
+    from gearsym.symbolic.estimators.ekf import valve_input
     from gearsym.symbolic.friction import load_mu_map
 
     states = aug.model.state_symbols
@@ -83,4 +93,7 @@ def map_scale_form(d: GearboxDescription, aug: Any) -> MapScaleForm:
         slip_rows=np.array(rows),
         mu_map=load_mu_map(d),
         t_oil=float(quantity(d, "friction", "T_oil").value),
+        valve_columns=tuple(
+            inputs.index(valve_input(e)) for e in aug.elements if valve_input(e) in inputs
+        ),
     )
