@@ -215,7 +215,9 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--params",
         help="ekf: parameters appended as random-walk states, comma-separated (default "
-        "m_veh and mu of both swapping elements and zeta, thesis 4.1)",
+        "m_veh and mu of both swapping elements and zeta, thesis 4.1); with --fleet also "
+        "k_ss, input_torque_gain, inertia_factor, and valve_offset, valve_gain (consider "
+        "states: in the covariance, never corrected)",
     )
     p.add_argument(
         "--initial",
