@@ -137,7 +137,18 @@ def test_each_entry_has_its_own_stream(d):
         (
             'speed_sensor_teeth = { value = 48.0, unit = "1", source = "x" }',
             "fleet.speed_sensor_timer",
-            "a tooth-wheel speed sensor needs its teeth and its timer",
+            "a tooth-wheel speed sensor needs its timer",
+        ),
+        (
+            'speed_sensor_timer = { value = 1e-6, unit = "s", source = "x" }\n'
+            'speed_sensor_teeth_omega_C = { value = 48.0, unit = "1", source = "x" }',
+            "fleet.speed_sensor_teeth_omega_1",
+            "every measured speed needs its teeth",
+        ),
+        (
+            'speed_sensor_teeth_omega_9 = { value = 48.0, unit = "1", source = "x" }',
+            "fleet.speed_sensor_teeth_omega_9",
+            "unknown fleet quantity",
         ),
     ],
 )

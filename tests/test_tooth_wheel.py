@@ -141,3 +141,30 @@ def test_commands_that_do_not_read_tooth_wheels_refuse_a_fleet_with_them(command
     (line,) = result.stderr.strip().splitlines()
     assert "fleet_tooth_wheels.toml" in line and "fleet.speed_sensor_" in line, line
     assert f"gearsym {command} would ignore them" in line
+
+
+def test_a_sensor_of_its_own_overrides_the_common_wheel(default_description):
+    """speed_sensor_teeth_omega_C gives the wheel speed its own 100-tooth wheel beside the
+    common 48: the wheel's sensor has 100 teeth, a shaft's 48; without any teeth entry there
+    is no sensor (Gaussian noise)."""
+    from gearsym.validation.sim.fleet import measured_speeds, parse_fleet, speed_sensor
+
+    d = default_description
+    fleet = parse_fleet(
+        '[fleet]\nname = "w"\n'
+        'speed_sensor_teeth = { value = 48.0, unit = "1", source = "t" }\n'
+        'speed_sensor_teeth_omega_C = { value = 100.0, unit = "1", source = "t" }\n'
+        'speed_sensor_timer = { value = 1.0e-6, unit = "s", source = "t" }\n',
+        "w.toml",
+        d,
+    )
+    draw = fleet.draw(3)
+    assert measured_speeds(d) == ("omega_1", "omega_2", "omega_8", "omega_C")
+    assert speed_sensor(draw, "omega_C") == ToothWheel(100, 1e-6, 0.0)
+    assert speed_sensor(draw, "omega_1") == ToothWheel(48, 1e-6, 0.0)
+    plain = parse_fleet(
+        '[fleet]\nname = "p"\nm_veh = { value = 1800.0, unit = "kg", source = "t" }\n',
+        "p.toml",
+        d,
+    )
+    assert speed_sensor(plain.draw(3), "omega_C") is None

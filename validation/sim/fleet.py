@@ -100,7 +100,8 @@ EFFECTS: dict[str, tuple[str, tuple[float, float], str]] = {
         (1.0, 1000.0),
         "every measured speed read from a toothed wheel of this many teeth (rounded) as the "
         "pitch over the last tooth period (validation/sim/tooth_wheel.py) instead of with the "
-        "Gaussian noise of (3.26); needs speed_sensor_timer",
+        "Gaussian noise of (3.26); speed_sensor_teeth_<speed> (omega_C, ...) for one sensor; "
+        "needs speed_sensor_timer",
     ),
     "speed_sensor_timer": (
         "s",
@@ -332,6 +333,7 @@ def parse_fleet(text: str, file: str, d: GearboxDescription, _depth: int = 0) ->
     source = table.string("source", required=False, default="")
     extends = table.string("extends", required=False, default="")
     elements = {e.name for e in d.shift_elements if not e.one_way}
+    per_sensor = {f"{SENSOR_TEETH}_{speed}" for speed in measured_speeds(d)}
     entries: list[tuple[str, Distribution]] = []
     for key in list(table.data):
         if key in ("name", "source", "factor", "extends"):
@@ -340,8 +342,14 @@ def parse_fleet(text: str, file: str, d: GearboxDescription, _depth: int = 0) ->
             unit, (low, high) = _unit_and_range(key)
         elif key.startswith("mu_scale_") and key.removeprefix("mu_scale_") in elements:
             unit, (low, high) = _unit_and_range("mu_scale")
+        elif key in per_sensor:
+            unit, (low, high) = _unit_and_range(SENSOR_TEETH)
         else:
-            known = [*FLEET_QUANTITIES, *(f"mu_scale_{e}" for e in sorted(elements))]
+            known = [
+                *FLEET_QUANTITIES,
+                *(f"mu_scale_{e}" for e in sorted(elements)),
+                *sorted(per_sensor),
+            ]
             raise table.fail(key, f"unknown fleet quantity (known: {', '.join(known)})")
         dist = _distribution(table.table(key), unit, low, high)
         fill_time = d.control.si("actuator", "fill_time")
@@ -388,10 +396,17 @@ def parse_fleet(text: str, file: str, d: GearboxDescription, _depth: int = 0) ->
     if not entries:
         raise table.fail("fleet", "draws nothing: give at least one entry")
     drawn = {key for key, _ in entries}
-    sensor = {"speed_sensor_teeth", "speed_sensor_timer", "speed_sensor_latency"} & drawn
-    for needed in ("speed_sensor_teeth", "speed_sensor_timer"):
-        if sensor and needed not in sensor:
-            raise table.fail(needed, "a tooth-wheel speed sensor needs its teeth and its timer")
+    sensors = {key for key in drawn if key.startswith("speed_sensor_")}
+    teeth = {key for key in sensors if key.startswith(SENSOR_TEETH)}
+    if sensors and "speed_sensor_timer" not in sensors:
+        raise table.fail("speed_sensor_timer", "a tooth-wheel speed sensor needs its timer")
+    if sensors and SENSOR_TEETH not in teeth and teeth != per_sensor:
+        missing = sorted(per_sensor - teeth)[0] if teeth else SENSOR_TEETH
+        raise table.fail(
+            missing,
+            f"every measured speed needs its teeth: give {SENSOR_TEETH} (all) or "
+            f"{SENSOR_TEETH}_<speed> for each of {', '.join(sorted(per_sensor))}",
+        )
     return Fleet(name, file, source, tuple(sorted(entries)))
 
 
@@ -527,14 +542,28 @@ def truth_world(d: GearboxDescription, scenario: Scenario, draw: FleetDraw) -> T
     return TruthWorld(truth, true_scenario, mu_scales(d, draw), draw)
 
 
-def speed_sensor(draw: FleetDraw) -> ToothWheel | None:
-    """The vehicle's tooth-wheel speed sensor (one for every measured speed), or ``None`` when
-    the fleet draws none (the speeds then carry the Gaussian noise of (3.26))."""
+#: The fleet's name of the tooth count; ``speed_sensor_teeth_<speed>`` (``<speed>`` a measured
+#: speed such as ``omega_C``) gives one sensor its own wheel.
+SENSOR_TEETH = "speed_sensor_teeth"
+
+
+def measured_speeds(d: GearboxDescription) -> tuple[str, ...]:
+    """The speeds a TCU of ``d`` measures: every measured shaft's and the wheel's (3.31)."""
+    from gearsym.symbolic import naming
+
+    return (*(naming.speed(s) for s in d.measured_shafts), naming.WHEEL_SPEED)
+
+
+def speed_sensor(draw: FleetDraw, speed: str) -> ToothWheel | None:
+    """The vehicle's tooth-wheel sensor of the measured ``speed``: its own
+    ``speed_sensor_teeth_<speed>`` wheel, else the common ``speed_sensor_teeth``; ``None`` when
+    the fleet draws no sensor (the speeds then carry the Gaussian noise of (3.26))."""
     values = dict(draw.values)
-    if "speed_sensor_teeth" not in values:
+    teeth = values.get(f"{SENSOR_TEETH}_{speed}", values.get(SENSOR_TEETH))
+    if teeth is None:
         return None
     return ToothWheel(
-        teeth=max(int(round(values["speed_sensor_teeth"])), 1),
+        teeth=max(int(round(teeth)), 1),
         timer=values["speed_sensor_timer"],
         latency=values.get("speed_sensor_latency", 0.0),
     )

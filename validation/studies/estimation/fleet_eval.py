@@ -453,11 +453,14 @@ def vehicle_setup(
             VALVE_GAIN: float(dict(draw.values).get("pressure_gain", 1.0)),
         },
     )
-    sensor = speed_sensor(draw)
-    if sensor is not None:  # the speeds as the TCU reads them from its tooth wheels
+    # the speeds as the TCU reads them from its tooth wheels (a fleet draws a wheel for every
+    # measured speed or for none: parse_fleet)
+    sensors = [speed_sensor(draw, name) for name in setup.outputs]
+    if all(sensor is not None for sensor in sensors):
         readings = [
             tooth_wheel_speeds(result.t, result.signals[name], setup.t, sensor)
-            for name in setup.outputs
+            for name, sensor in zip(setup.outputs, sensors, strict=True)
+            if sensor is not None
         ]
         setup = replace(setup, y_true=np.column_stack(readings), sensed=True)
     return draw, setup, tuple(told)
