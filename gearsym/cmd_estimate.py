@@ -59,6 +59,12 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         measured_truth,
     )
 
+    if args.input_hold != "sample" and (args.fleet is None or args.tune):
+        raise GearsymError(
+            "estimate",
+            "--input-hold",
+            "mean is for the EKF over a fleet (--fleet, without --tune) only so far",
+        )
     d = load(args.config)
     calibration = Calibration(
         description=d,
@@ -68,6 +74,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         initial=_initial_values(args.initial),
         modes=args.modes,
         mu_model=args.mu_model,
+        input_hold=args.input_hold,
     )
     scenario = load_scenario(d, args.scenario)
     source = args.scenario or "built-in"
@@ -321,6 +328,14 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "(seeds --seed ...): one factor on the calibration's values, NEES/dof and NIS/dof "
         "nearest 1; prints the values for the description's [estimator.model_error] table "
         "(tune and evaluate on different seeds)",
+    )
+    p.add_argument(
+        "--input-hold",
+        choices=("sample", "mean"),
+        default="sample",
+        help="ekf with --fleet: the known inputs (T_In, F_N) over a prediction interval: "
+        "'sample' (default) held at the interval's start, as the emitted C filter; 'mean' the "
+        "mean of the interval's two samples (a TCU knows the ramps it commands)",
     )
     p.add_argument(
         "--mu-model",

@@ -151,6 +151,8 @@ class FleetEvaluation:
     separability: dict[str, Any] = field(default_factory=dict)
     #: the states the filter carries as consider states (never corrected)
     considered: tuple[str, ...] = ()
+    #: :attr:`~gearsym.validation.studies.estimation.setup.EkfSetup.input_hold`
+    input_hold: str = "sample"
 
     @property
     def parameter_names(self) -> list[str]:
@@ -292,6 +294,7 @@ class FleetEvaluation:
             },
             "initial": {name: {"value": v, "sigma": s} for name, (v, s) in self.initial.items()},
             "considered": list(self.considered),
+            "input_hold": self.input_hold,
             "parameters": {
                 name: {
                     "final": self.final_stats(name).to_dict(),
@@ -372,6 +375,8 @@ class FleetContext:
     filter_noise: Any = None
     #: the filter's augmented parameters (``None``: the thesis' 4.1)
     parameters: tuple[str, ...] | None = None
+    #: :attr:`~gearsym.validation.studies.estimation.setup.EkfSetup.input_hold`
+    input_hold: str = "sample"
 
     @property
     def key(self) -> str:
@@ -453,6 +458,7 @@ def vehicle_setup(
             VALVE_GAIN: float(dict(draw.values).get("pressure_gain", 1.0)),
         },
     )
+    setup = replace(setup, input_hold=context.input_hold)
     # the speeds as the TCU reads them from its tooth wheels (a fleet draws a wheel for every
     # measured speed or for none: parse_fleet)
     sensors = [speed_sensor(draw, name) for name in setup.outputs]
@@ -548,6 +554,7 @@ def run_fleet(
     filter_noise: Any = None,
     client: Any = None,
     parameters: Sequence[str] | None = None,
+    input_hold: str = "sample",
 ) -> FleetEvaluation:
     """The EKF of the calibration ``d`` over ``runs`` vehicles of ``fleet`` (run i: seed
     ``seed`` + i draws the vehicle and, in its own stream, the speed noise) on ``scenario``
@@ -592,6 +599,7 @@ def run_fleet(
         bound,
         filter_noise,
         None if parameters is None else tuple(parameters),
+        input_hold,
     )
     seeds = tuple(range(seed, seed + runs))
 
@@ -622,4 +630,5 @@ def run_fleet(
         mu_model=d.estimator.mu_model,
         separability=separability,
         considered=tuple(nominal.names[j] for j in nominal.considered),
+        input_hold=input_hold,
     )

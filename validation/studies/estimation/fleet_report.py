@@ -132,6 +132,12 @@ def _assumptions(data: dict[str, Any]) -> list[str]:
             "to 1.5 periods plus the latency, rounded to the timer), with no Gaussian noise; "
             "the filter keeps the calibration's noise model (3.26)"
         )
+    if data.get("input_hold") == "mean":
+        lines.append(
+            "the known inputs (T_In, F_N) in each prediction: the mean of the interval's two "
+            "samples (--input-hold mean: the TCU knows the ramps it commands), the mode flags "
+            "held; the emitted C filter holds the inputs at the interval's start"
+        )
     considered = data.get("considered") or []
     if considered:
         lines.append(

@@ -115,6 +115,7 @@ def run_fleet_request(
                 progress=update,
                 client=client,
                 parameters=cal.parameters,
+                input_hold=cal.input_hold,
             )
         finally:
             done()

@@ -206,6 +206,21 @@ def run_ekf(
     return filter_run(setup, seed, dropout)
 
 
+#: The values ``input_hold = "mean"`` averages: the known continuous inputs, not the element
+#: modes and valve flags the filter holds over the interval.
+HELD_INPUT_PREFIXES = ("slide_", "stick_", "valve_")
+
+
+def interval_mean(setup: EkfSetup, u_before: np.ndarray, k: int) -> np.ndarray:
+    """``u_before`` (the inputs held from sample k - 1) with each known continuous input at
+    the mean of its samples k - 1 and k: the interval's mean of a linear ramp."""
+    out = np.array(u_before, dtype=float)
+    for i, name in enumerate(setup.aug.input_names):
+        if not name.startswith(HELD_INPUT_PREFIXES):
+            out[i] = 0.5 * (float(setup.u[k - 1][i]) + float(setup.u[k][i]))
+    return out
+
+
 def noisy_outputs(setup: EkfSetup, seed: int) -> np.ndarray:
     """The synthetic measurements: the reference's outputs plus Gaussian noise of
     σ_i = r_i max(|y_i|, y_i^min) (3.26), drawn from ``seed``."""
@@ -320,6 +335,8 @@ def filter_run(
         if form is not None:  # the μ map read at the filter's own estimate (mu_map_form)
             u_before = form(z, u_before)
         if k > 0:
+            if s.input_hold == "mean":  # the commanded ramp's mean over the interval
+                u_before = interval_mean(s, u_before, k)
             z, P = ekf_predict(s.discrete, z, P, u_before, sample_time, s.p, s.q)
         if form is not None:
             u_now = form(z, u_now)

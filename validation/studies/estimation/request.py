@@ -78,6 +78,8 @@ class Calibration:
     modes: str | None = None
     #: overrides the description's ``[estimator] mu_model`` (``None``: the description's)
     mu_model: str | None = None
+    #: :attr:`~gearsym.validation.studies.estimation.setup.EkfSetup.input_hold` (with a fleet)
+    input_hold: str = "sample"
 
     @property
     def mode_source(self) -> str:

@@ -84,6 +84,11 @@ class EkfSetup:
     #: ``y_true`` holds a sensor model's readings (tooth wheels, a fleet's draw), not the
     #: reference's outputs: no noise is drawn on them, and the states keep their truth
     sensed: bool = False
+    #: what the prediction over a sample interval takes for the known continuous inputs (T_In
+    #: and each F_N): "sample", their values at the interval's start, held (as the emitted C
+    #: filter); "mean", the mean of the interval's two samples (a TCU that commands ramps
+    #: knows them: a steep lock-up ramp held at its start is read as μ)
+    input_hold: str = "sample"
 
     @property
     def names(self) -> list[str]:
