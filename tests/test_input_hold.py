@@ -6,13 +6,13 @@ end 10 σ high (docs/fleet.md)."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from gearsym.validation.studies.estimation.loop import interval_mean
+
+from tests.test_cli import gearsym
 
 
 def test_the_mean_averages_the_known_inputs_and_holds_the_flags():
@@ -23,7 +23,7 @@ def test_the_mean_averages_the_known_inputs_and_holds_the_flags():
     u = np.zeros((6, 5))
     u[4] = [150.0, 910.0, 1.0, 0.0, 1.0]
     u[5] = [140.0, 2828.0, 0.0, 1.0, 0.0]
-    setup = SimpleNamespace(aug=SimpleNamespace(input_names=names), u=u)
+    setup = SimpleNamespace(aug=SimpleNamespace(input_names=names, elements=("K27",)), u=u)
     held = np.array([150.0, 910.0, 1.0, 0.0, 1.0])
     got = interval_mean(setup, held, 5)
     assert got == pytest.approx([145.0, 1869.0, 1.0, 0.0, 1.0])
@@ -33,13 +33,7 @@ def test_the_mean_averages_the_known_inputs_and_holds_the_flags():
 @pytest.mark.parametrize("extra", [(), ("--fleet", "--tune")])
 def test_the_mean_is_refused_where_it_is_not_built(extra):
     """Without --fleet (or with --tune) the option would be ignored: one line, exit 2."""
-    result = subprocess.run(
-        [sys.executable, "-m", "gearsym", "estimate", "--filter", "ekf", "--input-hold", "mean"]
-        + list(extra),
-        capture_output=True,
-        text=True,
-        check=False,
-    )
+    result = gearsym("estimate", "--filter", "ekf", "--input-hold", "mean", *extra)
     assert result.returncode == 2 and result.stdout == ""
     (line,) = result.stderr.strip().splitlines()
     assert "--input-hold" in line and "fleet" in line, line
@@ -71,3 +65,48 @@ def test_on_the_3_4_the_mean_keeps_the_on_coming_mu_within_its_sigma(default_des
         z_scores[hold] = (estimate - truth) / sigma
     assert z_scores["sample"] > 4.0, z_scores
     assert abs(z_scores["mean"]) < 2.0, z_scores
+
+
+def test_under_the_map_scale_the_mean_is_taken_before_the_map(
+    default_description, default_scenario, monkeypatch
+):
+    """With μ = s μ_map the prediction's F_N input is the interval's mean force times the map
+    value (a μ, 0.05-0.3), not the raw mean: the mean is taken of the told forces, then read
+    through the map. Checked on every prediction of the 2-3 where F_N05 rises."""
+    import dataclasses
+
+    import gearsym.symbolic.estimators.ekf as ekf
+    from gearsym.validation.sim.fleet import parse_fleet
+    from gearsym.validation.studies.estimation.loop import filter_run
+
+    from tests.test_tooth_wheel import one_vehicle
+
+    d = dataclasses.replace(
+        default_description,
+        estimator=dataclasses.replace(default_description.estimator, mu_model="map_scale"),
+    )
+    scenario = default_scenario
+    fleet = parse_fleet(
+        '[fleet]\nname = "own"\nm_veh = { value = 1950.0, unit = "kg", source = "t" }\n',
+        "own.toml",
+        d,
+    )
+    _, setup = one_vehicle(d, scenario, fleet, 1)
+    setup = dataclasses.replace(setup, input_hold="mean")
+    assert setup.input_form is not None
+    column = list(setup.aug.input_names).index("F_N05")
+    seen: list[float] = []
+    predict = ekf.ekf_predict
+
+    def spy(discrete, z, P, u, *args):
+        seen.append(float(u[column]))
+        return predict(discrete, z, P, u, *args)
+
+    monkeypatch.setattr(ekf, "ekf_predict", spy)
+    filter_run(setup, 0)
+    told = setup.u[:, column]
+    means = 0.5 * (told[:-1] + told[1:])
+    rising = np.flatnonzero((means > 100.0) & (np.diff(told) > 0))
+    assert rising.size > 3
+    ratios = np.array(seen)[rising] / means[rising]
+    assert np.all((ratios > 0.05) & (ratios < 0.3)), ratios

@@ -67,6 +67,25 @@ def test_a_sensor_without_teeth_or_timer_is_refused(kwargs, word):
         ToothWheel(**kwargs)
 
 
+def one_vehicle(d, scenario, fleet, seed: int):
+    """(draw, the filter's set-up) of vehicle ``seed`` of ``fleet`` as the fleet evaluation
+    builds it (10 ms, 1 % speed noise in the filter's model, modes decided by the filter)."""
+    from gearsym.validation.studies.estimation.fleet_eval import (
+        FleetContext,
+        calibration_setup,
+        filter_model,
+        vehicle_setup,
+    )
+
+    model = filter_model(d, scenario.shift.name, "filter", None)
+    nominal = calibration_setup(d, scenario, model, 0.01, 0.01)
+    context = FleetContext(
+        d, scenario, fleet, 0.01, 0.01, "filter", nominal.floor, nominal.t, bound=False
+    )
+    draw, setup, _ = vehicle_setup(context, model, seed)
+    return draw, setup
+
+
 def test_a_fleet_with_tooth_wheels_hands_the_filter_the_readings_without_noise(
     default_description, default_scenario
 ):
@@ -77,12 +96,6 @@ def test_a_fleet_with_tooth_wheels_hands_the_filter_the_readings_without_noise(
     truth for scoring."""
     from gearsym.validation.sim.fleet import parse_fleet, truth_world
     from gearsym.validation.sim.simulate import simulate
-    from gearsym.validation.studies.estimation.fleet_eval import (
-        FleetContext,
-        calibration_setup,
-        filter_model,
-        vehicle_setup,
-    )
     from gearsym.validation.studies.estimation.loop import filter_run
 
     d, scenario = default_description, default_scenario
@@ -94,12 +107,7 @@ def test_a_fleet_with_tooth_wheels_hands_the_filter_the_readings_without_noise(
         "wheels.toml",
         d,
     )
-    model = filter_model(d, scenario.shift.name, "filter", None)
-    nominal = calibration_setup(d, scenario, model, 0.01, 0.01)
-    context = FleetContext(
-        d, scenario, fleet, 0.01, 0.01, "filter", nominal.floor, nominal.t, bound=False
-    )
-    draw, setup, _ = vehicle_setup(context, model, 5)
+    draw, setup = one_vehicle(d, scenario, fleet, 5)
     assert setup.sensed
 
     world = truth_world(d, scenario, draw)
@@ -124,19 +132,13 @@ def test_a_fleet_with_tooth_wheels_hands_the_filter_the_readings_without_noise(
 def test_commands_that_do_not_read_tooth_wheels_refuse_a_fleet_with_them(command):
     """gearsym drive and control read speeds without the sensor model: a fleet with tooth
     wheels is refused in one line naming the file and the entry (exit 2), not ignored."""
-    import subprocess
-    import sys
     from pathlib import Path
 
     import gearsym
+    from tests.test_cli import gearsym as run_gearsym
 
     wheels = Path(gearsym.__file__).parent / "data" / "fleet_tooth_wheels.toml"
-    result = subprocess.run(
-        [sys.executable, "-m", "gearsym", command, "--fleet", str(wheels)],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
+    result = run_gearsym(command, "--fleet", str(wheels))
     assert result.returncode == 2 and result.stdout == ""
     (line,) = result.stderr.strip().splitlines()
     assert "fleet_tooth_wheels.toml" in line and "fleet.speed_sensor_" in line, line

@@ -227,6 +227,18 @@ def _valve_offset(
     return offset, valves
 
 
+def _valve_gain() -> Variable:
+    """g of p = g p_cmd (+ offset): the valves' gain, dimensionless, nominal 1."""
+    return Variable(
+        VALVE_GAIN,
+        sp.Symbol(VALVE_GAIN, positive=True),
+        "1",
+        "the valves' pressure over the commanded one (a gain)",
+        1.0,
+        "assumed: the nominal valve",
+    )
+
+
 def inertia_factor() -> Variable:
     """f of J_true = f J_design for every gearbox inertia: dimensionless, nominal 1."""
     return Variable(
@@ -289,14 +301,15 @@ def augmented_model(
     signs = power_on_slip_signs(d, spec)
     by_param = {v.name: v for v in base.parameters}
     sym = {v.name: v.symbol for v in (*base.states, *base.inputs, *base.parameters)}
-    torque_model = shift_model(d, shift)
     if INERTIA_FACTOR in parameters:
         # every gearbox inertia times a factor the filter estimates (a fleet's tolerance on
-        # them): the torque model derived again with f J in place of each J
+        # them): the torque model derived with f J in place of each J
         factor = inertia_factor()
         scaled = d.with_inertias(lambda q: replace(q, value=factor.symbol * exact(q.value)))
         torque_model = shift_model(scaled, shift, extra_parameters=(factor,))
         by_param[INERTIA_FACTOR] = factor
+    else:
+        torque_model = shift_model(d, shift)
     if INPUT_TORQUE_GAIN in parameters:
         # the input torque the TCU is told, times a gain the filter estimates: the true T_In
         # over the told one (the engine's torque model, the e-machine's command)
@@ -310,14 +323,7 @@ def augmented_model(
     if offset is not None:
         by_param[VALVE_OFFSET] = offset
     if VALVE_GAIN in parameters:
-        by_param[VALVE_GAIN] = Variable(
-            VALVE_GAIN,
-            sp.Symbol(VALVE_GAIN, positive=True),
-            "1",
-            "the valves' pressure over the commanded one (a gain)",
-            1.0,
-            "assumed: the nominal valve",
-        )
+        by_param[VALVE_GAIN] = _valve_gain()
     friction = {}
     for e in elements:
         element = d.element(e)

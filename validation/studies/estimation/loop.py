@@ -206,17 +206,16 @@ def run_ekf(
     return filter_run(setup, seed, dropout)
 
 
-#: The values ``input_hold = "mean"`` averages: the known continuous inputs, not the element
-#: modes and valve flags the filter holds over the interval.
-HELD_INPUT_PREFIXES = ("slide_", "stick_", "valve_")
-
-
 def interval_mean(setup: EkfSetup, u_before: np.ndarray, k: int) -> np.ndarray:
-    """``u_before`` (the inputs held from sample k - 1) with each known continuous input at
-    the mean of its samples k - 1 and k: the interval's mean of a linear ramp."""
+    """``u_before`` (the inputs held from sample k - 1) with each known continuous input (T_In,
+    each F_N) at the mean of its samples k - 1 and k: the interval's mean of a linear ramp. The
+    element modes and valve flags the filter decided stay held."""
+    from gearsym.symbolic.estimators.ekf import slide_input, stick_input, valve_input
+
+    flags = {f(e) for e in setup.aug.elements for f in (slide_input, stick_input, valve_input)}
     out = np.array(u_before, dtype=float)
     for i, name in enumerate(setup.aug.input_names):
-        if not name.startswith(HELD_INPUT_PREFIXES):
+        if name not in flags:
             out[i] = 0.5 * (float(setup.u[k - 1][i]) + float(setup.u[k][i]))
     return out
 
@@ -332,11 +331,11 @@ def filter_run(
             u_before, u_now = s.u[k - 1], s.u[k]
         else:  # the modes held since the previous sample, the known inputs of this one
             u_before, u_now = held, logic.inputs(s.u[k], modes)
+        if k > 0 and s.input_hold == "mean":  # the commanded ramp's mean over the interval
+            u_before = interval_mean(s, u_before, k)  # (before the map: it reads the F_N)
         if form is not None:  # the μ map read at the filter's own estimate (mu_map_form)
             u_before = form(z, u_before)
         if k > 0:
-            if s.input_hold == "mean":  # the commanded ramp's mean over the interval
-                u_before = interval_mean(s, u_before, k)
             z, P = ekf_predict(s.discrete, z, P, u_before, sample_time, s.p, s.q)
         if form is not None:
             u_now = form(z, u_now)
