@@ -45,6 +45,8 @@ def cmd_drive(args: argparse.Namespace) -> int:
             raise GearsymError(option, "", f"must be at least 1, got {value}")
     if (args.runs > 1 or args.scheduler is not None) and args.fleet is None:
         raise GearsymError("--runs", "", "more than one drive, or --scheduler, needs --fleet")
+    if args.engine_gain_state and (args.runs > 1 or args.estimate != "ekf"):
+        raise GearsymError("--engine-gain-state", "", "one drive with --estimate ekf only")
     if args.reference and args.runs > 1:
         raise GearsymError("--reference", "", "drives one vehicle; a fleet runs the fast drive")
     if args.scheduler is not None:
@@ -85,7 +87,14 @@ def cmd_drive(args: argparse.Namespace) -> int:
 
             print("  … the EKF over the drive's TCU log", file=sys.stderr, flush=True)
             assert result.log is not None
-            estimates = ekf_over_drive(d, result, seed=args.seed)
+            gain = truth.actuators.engine_gain if truth is not None else 1.0
+            estimates = ekf_over_drive(
+                d,
+                result,
+                seed=args.seed,
+                engine_gain=args.engine_gain_state,
+                engine_gain_truth=gain,
+            )
         from gearsym.validation.sim.drive_report import (
             drive_markdown,
             format_drive_summary,
@@ -134,6 +143,7 @@ def _command(args: argparse.Namespace) -> str:
     if args.fleet is not None:
         fleet = "" if args.fleet == DEFAULT_FLEET_ARGUMENT else args.fleet
     command = drive_command(args.cycle, args.duration, fleet, args.seed, args.runs)
+    command += " --engine-gain-state" if args.engine_gain_state else ""
     return command + (" --reference" if args.reference else "")
 
 
@@ -233,6 +243,12 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         choices=("ekf", "none"),
         default="ekf",
         help="carry the EKF over the drive from the TCU's log (default ekf)",
+    )
+    p.add_argument(
+        "--engine-gain-state",
+        action="store_true",
+        help="one drive: the EKF estimates the engine's torque gain too (tried and not "
+        "adopted: docs/drive.md)",
     )
     p.add_argument(
         "--reference",

@@ -38,6 +38,7 @@ __all__ = [
     "CONSIDERED_STATES",
     "INERTIA_FACTOR",
     "INPUT_TORQUE_GAIN",
+    "ENGINE_TORQUE_GAIN",
     "MODEL_ERROR_AUGMENTED",
     "MU_MODELS",
     "MU_SCALE",
@@ -94,6 +95,19 @@ INPUT_TORQUE_GAIN = "input_torque_gain"
 #: built-in 2-3 shift's 1.5 s for a 5 % engine error (assumed).
 INPUT_TORQUE_GAIN_RANDOM_WALK = 3.0e-4
 
+#: The engine's torque gain a filter over a whole drive estimates as a state: the true engine
+#: torque over the torque model's (the fleet's ``engine_torque_gain``). Over a drive the torque
+#: split moves (electric launch, recuperation, the engine at its limit with the machine
+#: boosting), so the engine's gain and the vehicle's mass are seen in different combinations;
+#: within one shift the split is fixed and only the gain of their sum exists
+#: (:data:`INPUT_TORQUE_GAIN`).
+ENGINE_TORQUE_GAIN = "engine_torque_gain"
+
+#: Default random walk of the engine's torque gain (1/s): a torque model's error does not
+#: drift within a drive but with fuel, altitude and temperature, about 0.4 % over a 30 min
+#: drive (assumed).
+ENGINE_TORQUE_GAIN_RANDOM_WALK = 1.0e-8
+
 #: A common factor on every rotating inertia of the gearbox (shafts and planets) a shift filter
 #: may estimate as a state (``--params ...,inertia_factor``): the true inertias over the
 #: design values. The twist's frequency holds the stiffness against these inertias, the speed
@@ -114,6 +128,7 @@ PRIOR_NAMES: tuple[str, ...] = (
     FILL_TIME_ERROR,
     STIFFNESS_FACTOR,
     INPUT_TORQUE_GAIN,
+    ENGINE_TORQUE_GAIN,
     INERTIA_FACTOR,
     VALVE_GAIN,
 )
@@ -126,6 +141,7 @@ RANDOM_WALK_NAMES: tuple[str, ...] = (
     VALVE_OFFSET,
     STIFFNESS_FACTOR,
     INPUT_TORQUE_GAIN,
+    ENGINE_TORQUE_GAIN,
     INERTIA_FACTOR,
     VALVE_GAIN,
 )
@@ -171,17 +187,18 @@ _PRIOR_UNITS = {
     FILL_TIME_ERROR: "s",
     STIFFNESS_FACTOR: "1",
     INPUT_TORQUE_GAIN: "1",
+    ENGINE_TORQUE_GAIN: "1",
     INERTIA_FACTOR: "1",
     VALVE_GAIN: "1",
 }
 
-#: Default priors of the entries without a record: φ untwisted, σ 0.05 rad; the μ-map scale
-#: 1 (the calibration's map), σ 0.2; the valve's offset 0 (the nominal valve), σ 6 000 Pa
-#: (uniform within ±100 mbar); the fill time's error 0, σ 0.029 s (production fill times
-#: uniform within ±50 ms); the side shafts' stiffness factor 1, σ 0.058 (uniform within
-#: ±10 %: production spread and temperature); the input-torque gain 1, σ 0.029 (the engine's
-#: torque model uniform within ±5 %); the inertia factor 1, σ 0.017 (inertias uniform within
-#: ±3 % of the design values); the valves' gain 1, σ 0.017 (±3 %); all assumed.
+#: Default priors of the entries without a record: φ untwisted, σ 0.05 rad; the μ-map scale 1 (the
+#: calibration's map), σ 0.2; the valve's offset 0 (the nominal valve), σ 6 000 Pa (uniform within
+#: ±100 mbar); the fill time's error 0, σ 0.029 s (production fill times uniform within ±50 ms); the
+#: side shafts' stiffness factor 1, σ 0.058 (uniform within ±10 %: production spread and
+#: temperature); the input-torque gain and the engine's torque gain 1, σ 0.029 (the engine's torque
+#: model uniform within ±5 %); the inertia factor 1, σ 0.017 (inertias uniform within ±3 % of the
+#: design values); the valves' gain 1, σ 0.017 (±3 %); all assumed.
 _DEFAULT_PRIORS = {
     "phi": (0.0, 0.05),
     MU_SCALE: (1.0, 0.2),
@@ -189,6 +206,7 @@ _DEFAULT_PRIORS = {
     FILL_TIME_ERROR: (0.0, 0.029),
     STIFFNESS_FACTOR: (1.0, 0.058),
     INPUT_TORQUE_GAIN: (1.0, 0.029),
+    ENGINE_TORQUE_GAIN: (1.0, 0.029),
     INERTIA_FACTOR: (1.0, 0.017),
     VALVE_GAIN: (1.0, 0.017),
 }
@@ -329,6 +347,7 @@ class EstimatorCalibration:
                 VALVE_GAIN,
                 STIFFNESS_FACTOR,
                 INPUT_TORQUE_GAIN,
+                ENGINE_TORQUE_GAIN,
                 INERTIA_FACTOR,
             )
         }
@@ -337,6 +356,15 @@ class EstimatorCalibration:
         """q of the input-torque gain state (1/s)."""
         given = dict(self.random_walk).get(INPUT_TORQUE_GAIN)
         return INPUT_TORQUE_GAIN_RANDOM_WALK if given is None else given.value
+
+    def engine_torque_gain_prior(self) -> tuple[float, float]:
+        """(mean, σ) of the engine's torque gain state (a filter over a drive)."""
+        return self._stated_prior(ENGINE_TORQUE_GAIN)
+
+    def engine_torque_gain_random_walk(self) -> float:
+        """q of the engine's torque gain state (1/s)."""
+        given = dict(self.random_walk).get(ENGINE_TORQUE_GAIN)
+        return ENGINE_TORQUE_GAIN_RANDOM_WALK if given is None else given.value
 
     def inertia_factor_random_walk(self) -> float:
         """q of the inertia factor state (1/s)."""

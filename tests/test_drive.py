@@ -59,6 +59,85 @@ def test_short_drive_shifts_up_and_down_without_a_miss(short_drive):
         current = b
 
 
+def test_the_schedule_is_a_level_not_only_a_crossing(description, short_drive):
+    """The short cycle's braked stop: the input falls through the 4-3's downshift speed
+    while the gear waits out its dwell after the 5-4. A schedule read as crossings only
+    never shifts again (the speed keeps falling; planted, this drive sat 3.7 s in gear 3
+    below the 3-2's speed and came to rest in it); read as a level it shifts when the dwell
+    ends, down to the lowest gear before the stop."""
+    from gearsym.validation.sim.drive import MIN_DWELL
+    from gearsym.validation.sim.drive_schedule import missed_shifts
+
+    _, result = short_drive
+    assert missed_shifts(result, description.drive.schedule, MIN_DWELL) == []
+    assert [s.name for s in result.shifts][-2:] == ["3-2", "2-1"]
+
+
+def test_a_downshift_braking_to_a_stop_does_not_reverse_the_input(description, short_drive):
+    """The short cycle's 2-1 at about 10 km/h while the machine recuperates: with the
+    recuperation held through the shift, the input shaft (free between the two sliding
+    elements) was driven backwards to −23 rad/s; handed to the brake it never turns back."""
+    _, result = short_drive
+    assert "2-1" in [s.name for s in result.shifts]
+    log = result.log.arrays()
+    in_2_1 = np.array([shift == "2-1" for shift in result.log.shifts()])
+    assert np.min(log[f"omega_{description.input_shaft}"][in_2_1]) > 0.0
+
+
+def test_blended_split_moves_recuperation_to_the_brake_by_hand():
+    """A downshift under recuperation: −50 N·m of machine torque through an overall ratio of
+    10 is 500 N·m at the wheel, added to the brake's 100; the wheel's torque is unchanged
+    (−50 · 10 − 100 = −600 = −(0 + 600)). An upshift, or a downshift under drive, keeps its
+    split."""
+    from gearsym.validation.sim.drive_powertrain import TorqueSplit
+    from gearsym.validation.sim.drive_schedule import blended_split
+
+    recuperating = TorqueSplit(0.0, -50.0, 100.0, 0.0)
+    assert blended_split(recuperating, "downshift", 10.0) == TorqueSplit(0.0, 0.0, 600.0, 0.0)
+    assert blended_split(recuperating, "upshift", 10.0) == recuperating
+    driving = TorqueSplit(80.0, 20.0, 0.0, 0.4)
+    assert blended_split(driving, "downshift", 10.0) == driving
+
+
+def _record(gears, samples, shifts=()):
+    from types import SimpleNamespace
+
+    columns = ("t", "gear", "omega_in", "pedal")
+    data = {
+        name: np.array([row[i] for row in samples], dtype=float) for i, name in enumerate(columns)
+    }
+    return SimpleNamespace(
+        gears=gears,
+        samples=data,
+        shifts=[SimpleNamespace(t_start=t) for t in shifts],
+    )
+
+
+def test_missed_shifts_reads_the_schedule_by_hand():
+    """A schedule of constant speeds (up 100, down 50 rad/s at any pedal), dwell 1 s, three
+    gears: a sample above 100 in the middle gear after its dwell is a missed upshift, one
+    below 50 a missed downshift; inside the dwell, with a shift started, or at the top and
+    bottom gear's open side nothing is missed."""
+    from types import SimpleNamespace
+
+    from gearsym.validation.sim.drive_schedule import missed_shifts
+
+    schedule = SimpleNamespace(up=lambda pedal: 100.0, down=lambda pedal: 50.0)
+    gears = ("1", "2", "3")
+    rows = [
+        (0.0, 1, 80.0, 0.5),
+        (0.5, 1, 120.0, 0.5),  # inside the dwell after entering gear 2 at t = 0
+        (1.5, 1, 120.0, 0.5),  # missed upshift
+        (2.0, 1, 40.0, 0.5),  # missed downshift
+        (3.0, 1, 120.0, 0.5),  # a shift started at 2.5 s is under way
+        (4.0, 2, 300.0, 0.5),
+        (5.5, 2, 300.0, 0.5),  # the top gear cannot shift up
+        (6.0, 0, 10.0, 0.5),
+        (7.5, 0, 10.0, 0.5),  # the lowest gear cannot shift down
+    ]
+    assert missed_shifts(_record(gears, rows, shifts=[2.5, 3.5]), schedule, 1.0) == [1.5, 2.0]
+
+
 def test_energy_balance_closes_over_the_drive(short_drive):
     """W_in = ΔE_stored + W_clutches + W_damper + W_road + W_brake, every term integrated
     separately along the solution (gear segments, shifts, standstill)."""
@@ -184,6 +263,18 @@ def test_cli_drive_json_and_files(tmp_path):
         assert (out / name).exists()
 
 
+def test_cli_drive_engine_gain_state_reports_the_gain(tmp_path):
+    """With --engine-gain-state the EKF's estimates name the engine's gain, scored against
+    the vehicle's (the calibration's own here: exactly 1)."""
+    out = tmp_path / "drive"
+    args = ["drive", "--cycle", "udds", "--duration", "25", "--engine-gain-state", "--json"]
+    run = gearsym(*args, "--out", str(out))
+    assert run.returncode == 0, run.stderr
+    entry = json.loads(run.stdout)["estimates"]["engine_torque_gain"]
+    assert entry["truth"] == 1.0
+    assert 0.0 < entry["sigma"] <= 0.029 + 1e-12  # at most the prior's
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [
@@ -191,6 +282,8 @@ def test_cli_drive_json_and_files(tmp_path):
         (["--cycle", "{bad}"], "row 2, column v: not a number"),
         (["--duration", "-3"], "--duration: must be positive"),
         (["--fleet", "--runs", "2", "--reference"], "--reference: drives one vehicle"),
+        (["--fleet", "--runs", "2", "--engine-gain-state"], "--engine-gain-state: one drive"),
+        (["--estimate", "none", "--engine-gain-state"], "--engine-gain-state: one drive"),
     ],
 )
 def test_cli_drive_bad_input_is_one_line(tmp_path, args, message):

@@ -151,7 +151,8 @@ def test_the_filter_s_lock_ups_follow_the_plant_s(description, drive, estimates)
     """In each shift the truth's on-coming element stops sliding at its lock-up (its μ has a
     truth only while it slides); the filter, from noisy speeds and the commanded pressures,
     decides the same lock-up within 50 ms (5 samples). A filter that never locks the element
-    up would report it at the shift's end, about 0.3 s late."""
+    up would report it at the shift's end, about 0.3 s late. Shifts under the brake (the
+    short cycle's downshifts braking to its stop) are not followed: the filter holds."""
     from gearsym.symbolic.estimators.ekf_modes import STICK
     from gearsym.symbolic.shifts import shift_spec
 
@@ -162,6 +163,8 @@ def test_the_filter_s_lock_ups_follow_the_plant_s(description, drive, estimates)
     for record in drive.shifts:
         on = shift_spec(description, record.name).on_coming
         inside = np.flatnonzero(np.array([s == record.name for s in shifts]))
+        if np.all(log["T_brake"][inside] > 0.0):
+            continue  # under the brake the filter holds (its model has no brake)
         sliding = np.flatnonzero(np.isfinite(log[f"truth_mu_{on}"][inside]))
         if not sliding.size:
             continue
@@ -332,9 +335,10 @@ def test_a_state_that_scales_a_parameter_steps_through_it(description):
 def test_a_stiffer_vehicle_is_not_read_as_a_lighter_one(description, tmp_path):
     """A vehicle whose side shafts are 9 % stiffer than the calibration's, nothing else
     changed: the filter with the stiffness factor state learns the factor (inside 3 σ) and
-    keeps the mass inside 3 σ of the truth; with the calibration's k_ss fixed it read the
-    twist's higher frequency as a lighter vehicle, its mass more than 3 σ low (the planted
-    error this state exists for)."""
+    keeps the mass inside 3 σ of the truth; with the calibration's k_ss fixed it reads the
+    twist's higher frequency as a lighter vehicle, its mass further below the truth (on this
+    short cycle 2 % low; more than 3 σ low before the filter forgot the twist over the
+    brake's holds, when a stale twist added its own error)."""
     from gearsym.validation.sim.drive import DriveTruth
     from gearsym.validation.sim.fleet import load_fleet
     from gearsym.validation.studies.estimation.drive_ekf import stiffness_state, stiffness_truth
@@ -359,8 +363,8 @@ def test_a_stiffer_vehicle_is_not_read_as_a_lighter_one(description, tmp_path):
     assert entry["sigma"] < 0.058 / 3  # learned, not the prior
     m, sd = with_state.mean["m_veh"][-1], with_state.sigma["m_veh"][-1]
     assert abs(m - 1800.0) <= 3 * sd
-    m0, sd0 = without.mean["m_veh"][-1], without.sigma["m_veh"][-1]
-    assert m0 < 1800.0 - 3 * sd0
+    m0 = without.mean["m_veh"][-1]
+    assert m0 < 1800.0 and 1800.0 - m0 > abs(m - 1800.0)
 
 
 def test_a_larger_tyre_reads_as_the_wheel_side_mass(description, tmp_path):
@@ -390,3 +394,59 @@ def test_a_larger_tyre_reads_as_the_wheel_side_mass(description, tmp_path):
     m, sd = estimates.mean["m_veh"][-1], estimates.sigma["m_veh"][-1]
     assert abs(m - wheel_side_mass(1800.0, 1.06)) <= 3 * sd
     assert m > 1800.0 + 3 * sd
+
+
+def test_the_engine_gain_state_moves_the_engine_s_part_of_the_torque(description, tmp_path):
+    """A vehicle whose engine gives 8 % less torque than its torque model says. A filter told
+    the true input torque by hand (T_In,cmd + (0.92 − 1) T_eng,cmd in the log) and one with
+    the engine's gain as a state held at 0.92 (prior σ 1e-9, no random walk) run the same
+    model: their estimates agree to the last digits. Planted: a state that scaled the whole
+    input torque (sensitivity T_In,cmd) gives another mass."""
+    import dataclasses
+
+    from gearsym.validation.sim.drive import DriveTruth
+    from gearsym.validation.sim.fleet import Actuators, load_fleet
+    from gearsym.validation.studies.estimation.drive_ekf import engine_gain_state
+
+    fleet_file = tmp_path / "weak.toml"
+    fleet_file.write_text(
+        '[fleet]\nname = "weak engine"\nsource = "test"\n'
+        'm_veh = { value = 1800.0, unit = "kg", source = "test" }\n'
+        'engine_torque_gain = { value = 0.92, unit = "1", source = "test" }\n'
+    )
+    draw = load_fleet(description, fleet_file).draw(0)
+    gain = Actuators.from_draw(draw).engine_gain
+    assert gain == pytest.approx(0.92)
+    truth = DriveTruth.from_draw(description, draw)
+    drive = DriveSimulator(description, load_cycle(SHORT), truth=truth).run()
+    assert drive.failure == ""
+    log = drive.log.arrays()
+    assert np.any(log["T_eng_cmd"] > 0) and np.any(log["T_eng_cmd"] != log["T_In_cmd"])
+    told = dict(log, T_In_cmd=log["T_In_cmd"] + (gain - 1.0) * log["T_eng_cmd"])
+    rest = (drive.log.shifts(), drive.gears, 1800.0)
+    by_hand = run_drive_ekf(description, told, *rest, seed=3)
+    held = dataclasses.replace(
+        engine_gain_state(description, log, gain), prior=(gain, 1e-9), random_walk=0.0
+    )
+    as_state = run_drive_ekf(description, log, *rest, seed=3, appended=(held,))
+    np.testing.assert_allclose(as_state.mean["m_veh"], by_hand.mean["m_veh"], rtol=1e-6)
+    np.testing.assert_allclose(as_state.mean["zeta"], by_hand.mean["zeta"], atol=1e-7)
+    whole = dataclasses.replace(held, sensitivity={"T_In": log["T_In_cmd"]})
+    planted = run_drive_ekf(description, log, *rest, seed=3, appended=(whole,))
+    assert abs(planted.mean["m_veh"][-1] - by_hand.mean["m_veh"][-1]) > 1.0
+
+
+def test_the_log_records_the_engine_s_part_of_the_torque(description, drive):
+    """The split rule (validation/sim/drive_powertrain.py): below idle speed the engine is
+    decoupled (its commanded part zero, an electric launch); positive demand goes to the
+    engine first, so its part never exceeds the commanded input torque, and negative demand is
+    the e-machine's alone."""
+    log = drive.log.arrays()
+    engine, total = log["T_eng_cmd"], log["T_In_cmd"]
+    idle = description.drive.si("engine", "n_idle")
+    below = log[f"omega_{description.input_shaft}"] < idle - 1.0
+    assert np.any(below & (total > 0))  # the launch is electric
+    assert np.all(engine[below] == 0.0)
+    assert np.all(engine <= np.maximum(total, 0.0) + 1e-9) and np.all(engine >= 0.0)
+    assert np.any(engine > 0.0)
+    assert np.all(engine[total < 0] == 0.0)

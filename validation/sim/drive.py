@@ -54,6 +54,7 @@ from gearsym.validation.sim.drive_fast import (
 )
 from gearsym.validation.sim.drive_log import TcuLog
 from gearsym.validation.sim.drive_powertrain import Powertrain, TorqueSplit
+from gearsym.validation.sim.drive_schedule import blended_split, due_shift
 from gearsym.validation.sim.drive_shift import (
     BRAKE_SPEED,
     ShiftRecord,
@@ -416,7 +417,12 @@ class DriveSimulator:
                 t_stop = min(t_next, last_shift + MIN_DWELL)
             y0 = np.concatenate([x, [integral, distance], np.zeros(5)])
             segments += 1
-            if reference:
+            # a threshold already passed shifts now (drive_schedule); the events below see
+            # crossings inside the segment only
+            due = due_shift(segment, t, y0, [e.__name__ for e in events])
+            if due:
+                fired_name, t_end, y = due, t, y0
+            elif reference:
                 sol = solve_ivp(
                     segment.rhs,
                     (t, t_stop),
@@ -467,10 +473,10 @@ class DriveSimulator:
                 continue
             name = fired_name
             target = k + 1 if name == "upshift" else k - 1
-            split, _ = segment.control(t, y)
+            split, omega_in = segment.control(t, y)
+            split = blended_split(split, name, self.powertrain.i_d * self.ratios[k])
             pair = (self.gears[k], self.gears[target])
             runner, planner = self.runner(pair), self.planner(pair)
-            omega_in = segment.control(t, y)[1]
             outcome = runner.run(
                 t_start=t,
                 speeds=np.asarray(fns["speeds"](x)).ravel(),
@@ -633,6 +639,7 @@ class DriveSimulator:
                 "",
                 {},
                 self._zeta(float(y[n + 1])),
+                split.engine,
             )
 
     def _log_rest(self, log: TcuLog, t0: float, t1: float, k: int, distance: float) -> None:
@@ -651,6 +658,7 @@ class DriveSimulator:
                 "",
                 {},
                 self._zeta(distance),
+                0.0,
             )
 
     def _energies(self, k: int, x: np.ndarray) -> np.ndarray:

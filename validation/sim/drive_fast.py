@@ -384,4 +384,5 @@ def log_segment(
         pressures,
         gear,
         column["zeta"],
+        column["engine"],
     )

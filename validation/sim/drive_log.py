@@ -17,7 +17,8 @@ __all__ = ["TcuLog"]
 @dataclass
 class TcuLog:
     """Samples every ``sample_time`` (s). Columns: ``t``; ``omega_<shaft>`` of every shaft,
-    ``phi``, ``omega_C`` (truth); ``T_In_cmd`` (N·m, what the TCU commanded), ``T_brake``
+    ``phi``, ``omega_C`` (truth); ``T_In_cmd`` (N·m, what the TCU commanded), ``T_eng_cmd`` (its
+    engine's part: the torque model's share, which the engine's gain error acts on), ``T_brake``
     (N·m at the wheel), ``p_<element>`` (Pa, commanded: in a shift the mean over the tick the
     sample starts); ``gear`` (index into the drive's
     gears) and ``shift`` (the shift under way, "" in a gear); ``truth_mu_<element>`` (NaN
@@ -36,6 +37,7 @@ class TcuLog:
             "phi",
             "omega_C",
             "T_In_cmd",
+            "T_eng_cmd",
             "T_brake",
             *(f"p_{e}" for e in self.elements),
             "gear",
@@ -64,7 +66,9 @@ class TcuLog:
         shift: str,
         mu: Mapping[str, float],
         zeta: float,
+        engine: float,
     ) -> None:
+        """One sample; ``torque`` the commanded input torque, ``engine`` its engine part."""
         c = self.columns
         c["t"].append(float(t))
         for s, w in zip(self.shafts, speeds, strict=True):
@@ -72,6 +76,7 @@ class TcuLog:
         c["phi"].append(float(phi))
         c["omega_C"].append(float(omega_c))
         c["T_In_cmd"].append(float(torque))
+        c["T_eng_cmd"].append(float(engine))
         c["T_brake"].append(float(brake))
         for e in self.elements:
             c[f"p_{e}"].append(float(pressures.get(e, 0.0)))
@@ -91,6 +96,7 @@ class TcuLog:
         pressures: Mapping[str, float],
         gear: int,
         zeta: np.ndarray,
+        engine: np.ndarray,
     ) -> None:
         """Samples in a gear (no shift under way, no element sliding) at the times ``t``, one
         row of ``speeds`` (samples × shafts) each: :meth:`add` for a whole array at once (the
@@ -103,6 +109,7 @@ class TcuLog:
         c["phi"].extend(np.asarray(phi, dtype=float).tolist())
         c["omega_C"].extend(np.asarray(omega_c, dtype=float).tolist())
         c["T_In_cmd"].extend(np.asarray(torque, dtype=float).tolist())
+        c["T_eng_cmd"].extend(np.asarray(engine, dtype=float).tolist())
         c["T_brake"].extend(np.asarray(brake, dtype=float).tolist())
         for e in self.elements:
             c[f"p_{e}"].extend([float(pressures.get(e, 0.0))] * count)

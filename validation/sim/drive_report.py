@@ -9,11 +9,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from gearsym.symbolic.estimator_calibration import STIFFNESS_FACTOR
+from gearsym.symbolic.estimator_calibration import ENGINE_TORQUE_GAIN, STIFFNESS_FACTOR
 from gearsym.validation.sim.drive import DriveResult
 
 #: What a state the filter appends over a drive is, for the report.
-APPENDED_MEANING = {STIFFNESS_FACTOR: "the side shafts' stiffness on the calibration's k_ss"}
+APPENDED_MEANING = {
+    STIFFNESS_FACTOR: "the side shafts' stiffness on the calibration's k_ss",
+    ENGINE_TORQUE_GAIN: "the engine's true torque over its torque model's",
+}
 
 __all__ = [
     "drive_command",

@@ -15,7 +15,9 @@ the TCU's calibration (the description's values with the prior mass, never the t
 
 Up- and downshifts use the same plan: a sliding on-coming element always pulls its slip
 towards zero, so it brings the input up in a downshift and down in an upshift. The input torque
-and the brake are held at their values at the shift's start (the driver waits the shift out).
+and the brake are held at their values at the shift's start (the driver waits the shift out;
+in a downshift under recuperation the machine's torque goes to the brake,
+:func:`~gearsym.validation.sim.drive_schedule.blended_split`).
 The hybrid simulation decides what really happens (break-away, lock-up, flare); a shift that
 does not end in the to-gear is reported as failed.
 """
@@ -404,6 +406,7 @@ class ShiftRunner:
                 self.spec.name,
                 mu,
                 zeta,
+                split.engine,
             )
 
     def _capacity_per_force(self, element: str, p: np.ndarray) -> float:

@@ -11,6 +11,7 @@ really gives and its own μ, mass, grade and inertias.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -115,6 +116,8 @@ class ClosedLoopShift:
             self.spec.name if in_shift else "",
             mu,
             self.values[naming.GRADE],
+            # the shift study commands one input torque; its filter has no engine-gain state
+            math.nan,
         )
 
     def scenario(self, t_end: float, pressure: Mapping[str, Profile], torque: float) -> Scenario:

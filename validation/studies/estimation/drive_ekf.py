@@ -39,6 +39,13 @@ from gearsym.symbolic import naming
 from gearsym.symbolic.defaults import EKF_FLOOR_FRACTION, EKF_RELATIVE_NOISE
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import element_short_name, quantity
+from gearsym.validation.studies.estimation.drive_states import (
+    AppendedState,
+    _Appended,
+    engine_gain_state,
+    stiffness_state,
+    stiffness_truth,
+)
 
 __all__ = [
     "AppendedState",
@@ -46,6 +53,7 @@ __all__ = [
     "EkfCarry",
     "FilterModels",
     "ekf_over_drive",
+    "engine_gain_state",
     "run_drive_ekf",
     "stiffness_state",
 ]
@@ -97,110 +105,32 @@ class EkfCarry:
         raise KeyError(name)
 
 
-@dataclass(frozen=True)
-class AppendedState:
-    """A state the filter appends to its model's (4.1) that acts only through the normal
-    forces: each element's pressure in the log moves by ``sensitivity[element][k]`` per unit
-    of the state (what the TCU's own actuator model says, :mod:`~gearsym.validation.sim.actuator`),
-    so the filter presses with p + (θ − ``logged``) ∂p/∂θ. ``logged`` is the value the log's
-    pressures were rebuilt with. ``corrected`` False makes it a consider state (Schmidt): it
-    is never corrected, but its variance enters the filter's covariance where the pressures
-    depend on it (an uncertainty the filter must not learn from, e.g. a fill time that a
-    separate estimate fixed within a stated σ).
-
-    With ``scales`` naming one of the model's fixed parameters the state is instead that
-    parameter's factor: the filter's model uses the calibration's value times θ (a tolerance
-    the TCU cannot know per vehicle, e.g. the side shafts' stiffness, whose frequency would
-    otherwise be read as mass); ``sensitivity`` is then empty."""
-
-    name: str
-    prior: tuple[float, float]
-    random_walk: float
-    sensitivity: Mapping[str, np.ndarray] = field(default_factory=dict)
-    logged: float = 0.0
-    corrected: bool = True
-    #: the truth, for scoring only (NaN: not known)
-    truth: float = math.nan
-    #: the fixed parameter the state scales ("" : the state acts through the pressures)
-    scales: str = ""
-
-
-def stiffness_state(d: GearboxDescription, truth: float = math.nan) -> AppendedState:
-    """The side shafts' stiffness as a filter state over a drive: the factor on the
-    calibration's k_ss (2.47), prior and random walk from the ``[estimator]`` table
-    (:data:`~gearsym.symbolic.estimator_calibration.STIFFNESS_FACTOR`). The twist's frequency,
-    seen in every measured speed, holds the stiffness against the inertias on both sides of
-    it, the vehicle's among them: with the calibration's k_ss fixed, a vehicle 9 % stiffer
-    had its mass read 10 % low over a WLTC drive. ``truth``: the vehicle's factor, for
-    scoring only."""
-    from gearsym.symbolic.estimator_calibration import STIFFNESS_FACTOR
-
-    return AppendedState(
-        STIFFNESS_FACTOR,
-        d.estimator.stiffness_factor_prior(),
-        d.estimator.stiffness_factor_random_walk(),
-        scales="k_ss",
-        truth=truth,
-    )
-
-
-def stiffness_truth(d: GearboxDescription, values: Mapping[str, float]) -> float:
-    """The driven vehicle's stiffness factor (``values``: the plant's parameters), for
-    scoring; NaN when they do not name k_ss."""
-    if "k_ss" not in values:
-        return math.nan
-    return float(values["k_ss"]) / quantity(d, "drivetrain", "k_ss").value
-
-
-def ekf_over_drive(d: GearboxDescription, drive: Any, seed: int) -> DriveEstimates:
+def ekf_over_drive(
+    d: GearboxDescription,
+    drive: Any,
+    seed: int,
+    engine_gain: bool = False,
+    engine_gain_truth: float = math.nan,
+) -> DriveEstimates:
     """The EKF over a finished drive's TCU log (:class:`~gearsym.validation.sim.drive.DriveResult`
     with a log), as ``gearsym drive`` and the fleet's drives run it: the side shafts'
-    stiffness factor as a state (:func:`stiffness_state`), the drive's truth for scoring only
-    (its mass and stiffness factor), the sensors' noise from ``seed``."""
+    stiffness factor as a state (:func:`stiffness_state`), with ``engine_gain`` the engine's
+    torque gain too (:func:`engine_gain_state`; tried and not adopted, docs/drive.md); the
+    drive's truth for scoring only (its mass and stiffness factor; ``engine_gain_truth`` the
+    vehicle's engine gain), the sensors' noise from ``seed``."""
+    arrays = drive.log.arrays()
+    appended = [stiffness_state(d, stiffness_truth(d, drive.values))]
+    if engine_gain:
+        appended.append(engine_gain_state(d, arrays, engine_gain_truth))
     return run_drive_ekf(
         d,
-        drive.log.arrays(),
+        arrays,
         drive.log.shifts(),
         drive.gears,
         drive.values["m_veh"],
         seed,
-        appended=(stiffness_state(d, stiffness_truth(d, drive.values)),),
+        appended=tuple(appended),
     )
-
-
-class _Appended:
-    """The filter's discrete model (:class:`~gearsym.symbolic.estimators.ekf.DiscreteModel`)
-    with :class:`AppendedState` s after its states: they are constant over a step and act only
-    through the inputs u(θ) and the fixed parameters p(θ), so the step's Jacobian gains the
-    columns ∂Φ/∂u · ∂u/∂θ + ∂Φ/∂p · ∂p/∂θ (``du_dtheta``, this sample's; ``dp_dtheta``) and
-    the outputs (speeds) do not depend on them. The p the filter passes is already p(θ)."""
-
-    def __init__(
-        self, discrete: Any, du_dtheta: np.ndarray, dp_dtheta: np.ndarray | None = None
-    ) -> None:
-        self.discrete = discrete
-        self.aug = discrete.aug
-        self.du_dtheta = du_dtheta
-        self.dp_dtheta = dp_dtheta
-        self.m = du_dtheta.shape[1]
-
-    def step(
-        self, z: np.ndarray, u: np.ndarray, h: float, p: Sequence[float]
-    ) -> tuple[np.ndarray, np.ndarray]:
-        n = len(z) - self.m
-        z_next, F = self.discrete.step(z[:n], u, h, p)
-        jac = np.eye(len(z))
-        jac[:n, :n] = F
-        jac[:n, n:] = self.discrete.step_du(z[:n], u, h, p) @ self.du_dtheta
-        if self.dp_dtheta is not None:
-            jac[:n, n:] += self.discrete.step_dp(z[:n], u, h, p) @ self.dp_dtheta
-        return np.concatenate([z_next, z[n:]]), jac
-
-    def outputs(
-        self, z: np.ndarray, u: np.ndarray, p: Sequence[float]
-    ) -> tuple[np.ndarray, np.ndarray]:
-        y, H = self.discrete.outputs(z[: len(z) - self.m], u, p)
-        return y, np.hstack([H, np.zeros((H.shape[0], self.m))])
 
 
 @dataclass
@@ -480,6 +410,7 @@ def run_drive_ekf(
         else:
             z[j], sig0[j] = d.estimator.prior_of(name, nominal.get(name))
     P = np.diag(sig0**2)
+    twist_sigma = d.estimator.prior_of(naming.TWIST, 0.0)[1]
     modes = logic.initial_modes()
     store: dict[str, tuple[float, float]] = {}  # μ of elements outside the model
     if start is not None:
@@ -520,7 +451,11 @@ def run_drive_ekf(
         u = np.zeros(len(aug.input_names))
         for i, name in enumerate(aug.input_names):
             if name == naming.INPUT_TORQUE:
-                u[i] = log["T_In_cmd"][k]
+                u[i] = log["T_In_cmd"][k] + sum(
+                    (value - a.logged) * a.sensitivity[name][k]
+                    for a, value in zip(appended, theta, strict=True)
+                    if name in a.sensitivity
+                )
             elif name.startswith("F_N"):
                 e = next(e for e, s in short.items() if naming.normal_force(s) == name)
                 pressure = log[f"p_{e}"][k]
@@ -637,6 +572,14 @@ def run_drive_ekf(
                 P[:, j] = 0.0
                 z[j] = y_all[k, c]
                 P[j, j] = sigma_all[k, c] ** 2
+            if naming.TWIST in names:
+                # what the brake did to the side shafts' twist the filter cannot know: it
+                # starts again from its prior's doubt (its mean kept), not from a stale
+                # certainty that the next samples would read as stiffness or mass
+                j = names.index(naming.TWIST)
+                P[j, :] = 0.0
+                P[:, j] = 0.0
+                P[j, j] = twist_sigma**2
             modes = _gear_modes(logic, current, gears[int(log["gear"][k])])
         else:
             if k > 0:
