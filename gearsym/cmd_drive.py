@@ -29,7 +29,8 @@ def cmd_drive(args: argparse.Namespace) -> int:
     from gearsym.symbolic.errors import GearsymError
     from gearsym.symbolic.io.output_dir import OutputDir
     from gearsym.validation.sim.cycles import load_cycle, load_grade
-    from gearsym.validation.sim.drive import DriveSimulator, DriveTruth
+    from gearsym.validation.sim.drive import MIN_DWELL, DriveSimulator, DriveTruth
+    from gearsym.validation.sim.drive_schedule import missed_shifts
 
     d = load(args.config)
     cycle = load_cycle(args.cycle)
@@ -103,6 +104,7 @@ def cmd_drive(args: argparse.Namespace) -> int:
         )
 
         data = {"gearbox": d.name, **result.to_dict()}
+        data["missed_shifts"] = len(missed_shifts(result, d.drive.schedule, MIN_DWELL))
         data["calibration"] = d.drive.to_dict()
         data["vehicle"] = (
             {"fleet": args.fleet, "seed": args.seed, **truth.draw.to_dict()}

@@ -182,7 +182,13 @@ def drive_markdown(data: dict[str, Any], command: str) -> str:
         f"{data['tracking_max_kmh']:.2f} km/h",
         f"- {data['shifts']} shifts, "
         f"{sum(1 for s in shifts if not s['completed'])} not completed"
-        + (f"; failed: {data['failure']}" if data["failure"] else ""),
+        + (f"; failed: {data['failure']}" if data["failure"] else "")
+        + (
+            f"; record samples beyond the schedule's shift speeds with no shift made: "
+            f"{data['missed_shifts']}"
+            if "missed_shifts" in data
+            else ""
+        ),
         f"- energy audit residual {data['energy_residual']:.1e} of the losses (input "
         f"{energy['input_J'] / 1e3:.0f} kJ: road {energy['road_J'] / 1e3:.0f} kJ, clutches "
         f"{energy['friction_J'] / 1e3:.1f} kJ, damper {energy['damper_J'] / 1e3:.1f} kJ, brake "

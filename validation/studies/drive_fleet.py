@@ -42,7 +42,8 @@ def drive_vehicle(context: DriveContext, seed: int) -> dict[str, Any]:
     """One vehicle ``seed`` of the fleet: its drive and the EKF on its TCU log (the sensors'
     noise from the same seed). Returns the drive's and the estimates' summaries and the mass
     error's trace every :data:`TRACE_STEP`."""
-    from gearsym.validation.sim.drive import DriveSimulator, DriveTruth
+    from gearsym.validation.sim.drive import MIN_DWELL, DriveSimulator, DriveTruth
+    from gearsym.validation.sim.drive_schedule import missed_shifts
     from gearsym.validation.studies.estimation.drive_ekf import ekf_over_drive
 
     d = context.description
@@ -51,6 +52,7 @@ def drive_vehicle(context: DriveContext, seed: int) -> dict[str, Any]:
     result = DriveSimulator(d, context.cycle, context.grade, truth=truth).run()
     out: dict[str, Any] = {"seed": seed, "vehicle": draw.to_dict(), "drive": result.to_dict()}
     out["drive"].pop("shift_list")
+    out["drive"]["missed_shifts"] = len(missed_shifts(result, d.drive.schedule, MIN_DWELL))
     if result.failure or result.log is None:
         return out
     estimates = ekf_over_drive(d, result, seed)
@@ -180,6 +182,7 @@ def fleet_aggregates(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
             "min": float(np.min(factors)),
         }
         out["drive_wall_s"] = float(sum(d["wall_s"] for d in drives))
+        out["missed_shifts"] = int(sum(d.get("missed_shifts", 0) for d in drives))
     return out
 
 
@@ -220,7 +223,13 @@ def drive_fleet_markdown(data: dict[str, Any], command: str) -> str:
         f"*Written by `{command}`.*",
         "",
         f"- {mass.get('vehicles', 0)} vehicles of the {data['fleet']} fleet on {cycle['name']} "
-        f"({cycle['duration_s']:.0f} s); {len(data['failed'])} drive(s) failed",
+        f"({cycle['duration_s']:.0f} s); {len(data['failed'])} drive(s) failed"
+        + (
+            f"; samples where a drive sat beyond its schedule's shift speeds "
+            f"(validation/sim/drive_schedule.py): {data['missed_shifts']}"
+            if "missed_shifts" in data
+            else ""
+        ),
         "- the TCU's view: commanded torque (the fleet's engine and machine torque errors), "
         "noisy speeds, no grade sensor",
         "",
