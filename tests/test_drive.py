@@ -258,6 +258,7 @@ def test_cli_drive_json_and_files(tmp_path):
     for key in ("shifts", "wall_s", "real_time_factor", "energy_residual", "tracking_rms_kmh"):
         assert key in data
     assert data["energy_residual"] < 1e-6
+    assert data["missed_shifts"] == 0
     assert data["gear_integrator"] == "fast"
     for name in ("drive.json", "drive.csv", "shifts.csv", "drive.png"):
         assert (out / name).exists()

@@ -54,7 +54,12 @@ def test_aggregates_by_hand():
         third = {"t": 1.0, "truth": 0.1, "error": 0.0, "sigma": 0.01}
         return {
             "seed": seed,
-            "drive": {"failure": failure, "real_time_factor": factor, "wall_s": 1800 / factor},
+            "drive": {
+                "failure": failure,
+                "real_time_factor": factor,
+                "wall_s": 1800 / factor,
+                "missed_shifts": seed * 3,
+            },
             "estimates": {
                 "m_veh": {"final": 1.0},
                 "zeta": {"rms_rad": {"all": 0.01}},
@@ -83,10 +88,12 @@ def test_aggregates_by_hand():
     assert out["nis_per_dof"] == pytest.approx({"p50": 1.0, "p95": 1.45})
     assert out["real_time_factor"] == pytest.approx({"p50": 150.0, "min": 100.0})
     assert out["drive_wall_s"] == pytest.approx(18.0 + 9.0)
+    assert out["missed_shifts"] == 0 + 3
     data = DriveFleet(load_cycle("wltc3b"), runs, "test", 60.0, "in one process").to_dict()
     text = drive_fleet_markdown(data, "gearsym drive --fleet --runs 2")
     assert "3 of 4 (vehicle, element) pairs (mu_38 2 of 2, mu_05 1 of 2)" in text
     assert "1.0 min in one process" in text
+    assert "beyond its schedule's shift speeds (validation/sim/drive_schedule.py): 3" in text
 
 
 def test_fleet_drives_each_vehicle_of_its_seed():
