@@ -238,7 +238,8 @@ def test_an_appended_state_steps_through_the_inputs(description):
     a polynomial in u, so the difference is exact to rounding), and the outputs do not depend
     on it."""
     from gearsym.symbolic.estimators.ekf_modes import OPEN, SLIDE_POS
-    from gearsym.validation.studies.estimation.drive_ekf import FilterModels, _Appended
+    from gearsym.validation.studies.estimation.drive_ekf import FilterModels
+    from gearsym.validation.studies.estimation.drive_states import _Appended
 
     aug, discrete, logic = FilterModels(description, {}).get("2-3")
     names = aug.state_names
@@ -301,7 +302,8 @@ def test_a_state_that_scales_a_parameter_steps_through_it(description):
     stiffness factor): its Jacobian column is CasADi's ∂Φ/∂p times the calibration's value,
     checked against central differences of the whole step with k_ss moved."""
     from gearsym.symbolic.estimators.ekf_modes import OPEN, STICK
-    from gearsym.validation.studies.estimation.drive_ekf import FilterModels, _Appended
+    from gearsym.validation.studies.estimation.drive_ekf import FilterModels
+    from gearsym.validation.studies.estimation.drive_states import _Appended
 
     aug, discrete, logic = FilterModels(description, {}).get("2-3")
     names = aug.state_names
@@ -341,7 +343,7 @@ def test_a_stiffer_vehicle_is_not_read_as_a_lighter_one(description, tmp_path):
     brake's holds, when a stale twist added its own error)."""
     from gearsym.validation.sim.drive import DriveTruth
     from gearsym.validation.sim.fleet import load_fleet
-    from gearsym.validation.studies.estimation.drive_ekf import stiffness_state, stiffness_truth
+    from gearsym.validation.studies.estimation.drive_states import stiffness_state, stiffness_truth
 
     fleet_file = tmp_path / "stiff.toml"
     fleet_file.write_text(
@@ -406,7 +408,7 @@ def test_the_engine_gain_state_moves_the_engine_s_part_of_the_torque(description
 
     from gearsym.validation.sim.drive import DriveTruth
     from gearsym.validation.sim.fleet import Actuators, load_fleet
-    from gearsym.validation.studies.estimation.drive_ekf import engine_gain_state
+    from gearsym.validation.studies.estimation.drive_states import engine_gain_state
 
     fleet_file = tmp_path / "weak.toml"
     fleet_file.write_text(

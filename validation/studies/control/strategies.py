@@ -157,11 +157,8 @@ class EstimatorStrategy(RuleStrategy):
     def learn(self, observed: Any, log: Any, commands: Any = None, phases: Any = None) -> None:
         Strategy.learn(self, observed, log, commands, phases)
         from gearsym.validation.studies.control.fill_estimate import FillReplay
-        from gearsym.validation.studies.estimation.drive_ekf import (
-            AppendedState,
-            FilterModels,
-            run_drive_ekf,
-        )
+        from gearsym.validation.studies.estimation.drive_ekf import FilterModels, run_drive_ekf
+        from gearsym.validation.studies.estimation.drive_states import AppendedState
 
         arrays = log.arrays()
         if float(arrays["T_In_cmd"][0]) <= 0.0:

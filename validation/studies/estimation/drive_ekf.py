@@ -23,8 +23,9 @@ move what the filter sees; :meth:`~gearsym.symbolic.estimators.ekf.AugmentedMode
 **What the filter cannot model.** Its model has no service brake and no standstill: while the
 TCU sees the brake applied or the vehicle standing (measured wheel speed below
 :data:`STANDSTILL_SPEED`, no torque), it holds the parameters and their covariance and sets
-the measured speeds from the measurement (their variance from R). Stated, not hidden: the
-samples held are counted.
+the measured speeds from the measurement (their variance from R); the side shafts' twist it
+cannot measure goes back to its prior's σ (what the brake did to it is unknown to the model).
+Stated, not hidden: the samples held are counted.
 """
 
 from __future__ import annotations
@@ -47,16 +48,7 @@ from gearsym.validation.studies.estimation.drive_states import (
     stiffness_truth,
 )
 
-__all__ = [
-    "AppendedState",
-    "DriveEstimates",
-    "EkfCarry",
-    "FilterModels",
-    "ekf_over_drive",
-    "engine_gain_state",
-    "run_drive_ekf",
-    "stiffness_state",
-]
+__all__ = ["DriveEstimates", "EkfCarry", "FilterModels", "ekf_over_drive", "run_drive_ekf"]
 
 #: Below this measured vehicle speed (m/s), with no torque commanded, the vehicle stands.
 STANDSTILL_SPEED = 0.3
