@@ -191,6 +191,33 @@ def test_compiled_c_is_casadis_arithmetic():
         assert np.allclose(compiled[name](x, u, p), mode.rhs(x, u, p), rtol=1e-14, atol=0)
 
 
+def test_compiled_many_is_one_call_per_point():
+    """``many`` (one C loop over the rows) gives, row by row, the values of one call per
+    point and of CasADi's ``map``; an input given once holds for every row; inputs of
+    different row counts are refused."""
+    from gearsym.validation.sim.compiled_c import CompiledFunctions, compiler_available
+
+    if not compiler_available():
+        pytest.skip("no C compiler")
+    d = load_description()
+    simulator = DriveSimulator(d, load_cycle(SHORT))
+    runner = simulator.runner((simulator.gears[0], simulator.gears[1]))
+    name, mode = next(iter(runner.simulator.modes.items()))
+    compiled = CompiledFunctions({"torques": mode.torques})["torques"]
+    p = simulator.parameters_of(runner.simulator, simulator.values)
+    rng = np.random.default_rng(1)
+    x = rng.normal(scale=50.0, size=(7, mode.n))
+    u = np.column_stack([rng.normal(80.0, 5.0, 7), np.full(7, 2e4), np.full(7, 1e4), np.zeros(7)])
+    rows = compiled.many(x, u, p)
+    one_by_one = np.array([compiled(xi, ui, p) for xi, ui in zip(x, u, strict=True)])
+    assert np.array_equal(rows, one_by_one)
+    mapped = np.asarray(mode.torques.map(7)(x.T, u.T, p).full()).T
+    assert np.allclose(rows, mapped, rtol=1e-14, atol=0), name
+    assert np.array_equal(compiled.many(x, u[0], p), compiled.many(x, np.tile(u[0], (7, 1)), p))
+    with pytest.raises(ValueError, match="one count needed"):
+        compiled.many(x, u[:3], p)
+
+
 def test_compiled_c_is_kept_in_the_cache(tmp_path, monkeypatch):
     """The second build of the same functions loads the cached library, no compiler run;
     GEARSYM_NO_CACHE=1 compiles again."""

@@ -10,6 +10,7 @@ import numpy as np
 from gearsym.symbolic import naming
 from gearsym.symbolic.dynamics import gearbox_dynamics
 from gearsym.symbolic.numeric import to_casadi
+from gearsym.validation.sim.compiled_c import CompiledFunction
 from gearsym.validation.sim.hybrid_result import HybridResult
 from gearsym.validation.sim.hybrid_simulation import HybridSimulator
 from gearsym.validation.sim.simulation_result import EnergyAudit
@@ -78,7 +79,8 @@ def energy_audit(
     (zero slip); a residual would show an inconsistent reaction, sign or map. A dog element
     engaged at non-zero slip loses ½ Δẏᵀ M Δẏ in its map (``Event.energy_loss``): counted in
     W_friction, the impact's dissipation. ``functions``: :func:`energy_functions` of this
-    simulator when the caller keeps them (building them costs more than a shift's audit)."""
+    simulator when the caller keeps them (building them costs more than a shift's audit); a
+    mode's powers may be its :class:`~gearsym.validation.sim.compiled_c.CompiledFunction`."""
     p = simulator.parameter_vector(result.values)
     if functions is None:
         functions = energy_functions(simulator)
@@ -95,8 +97,11 @@ def energy_audit(
         times = times.ravel()
         x = piece.state(times)[:, :n]
         u = simulator.inputs_many(times)
-        power_of = functions[piece.mode][0].map(len(times))
-        values = np.asarray(power_of(x.T, u.T, p).full()).T
+        powers = functions[piece.mode][0]
+        if isinstance(powers, CompiledFunction):
+            values = powers.many(x, u, p)
+        else:
+            values = np.asarray(powers.map(len(times))(x.T, u.T, p).full()).T
         w = (half[:, None] * weights[None, :]).ravel()
         works += w @ values
     first, last = result.pieces[0], result.pieces[-1]

@@ -84,7 +84,8 @@ from gearsym.symbolic.hybrid import (
 from gearsym.symbolic.numeric import to_casadi
 from gearsym.validation.sim.compiled_c import CompiledFunctions, compiler_available
 from gearsym.validation.sim.hybrid_modes import CompiledMode
-from gearsym.validation.sim.hybrid_result import Event, HybridResult, Piece, states_of
+from gearsym.validation.sim.hybrid_result import Event, HybridResult, Piece
+from gearsym.validation.sim.hybrid_sample import sample_signals, signal_name
 from gearsym.validation.sim.hybrid_slips import check_slip_signs, onto_sliding_side
 from gearsym.validation.sim.scenario import SAMPLE_TIME, Scenario, load_scenario
 from scipy.integrate import solve_ivp
@@ -148,6 +149,10 @@ class HybridSimulator:
                 functions[name] = mode.f
                 for k, guard in enumerate(mode.guard):
                     functions[guard_name(name, k)] = guard
+                # what :meth:`_sample` reads at every sample, evaluated in one C loop
+                functions[signal_name(name, "speeds")] = self.shaft_speeds(name)
+                for signal in ("slips", "torques", "mu"):
+                    functions[signal_name(name, signal)] = getattr(mode, signal)
             self._compiled_c = CompiledFunctions(functions)
         return self._compiled_c
 
@@ -691,93 +696,9 @@ class HybridSimulator:
     def _sample(
         self, pieces: Sequence[Piece], grid: np.ndarray, p: np.ndarray, m: int = 0
     ) -> tuple[dict[str, np.ndarray], tuple[str, ...], dict[str, np.ndarray]]:
-        """Every signal (and its sensitivities, samples × parameters) at the grid; a sample at a
-        switch takes the later piece."""
-        shafts = [s.name for s in self.d.shafts]
-        keys = [naming.speed(s) for s in shafts] + [naming.TWIST, naming.WHEEL_SPEED]
-        signals = {k: np.zeros(len(grid)) for k in keys}
-        sensitivities = {k: np.zeros((len(grid), m)) for k in keys} if m else {}
-        for e in self.hybrid.elements:
-            keys = [naming.slip_column(e), naming.torque(e)]
-            if e in self.hybrid.normal_force:
-                keys += [str(self.hybrid.normal_force[e]), str(self.hybrid.friction_coefficient[e])]
-            for key in keys:
-                signals[key] = np.zeros(len(grid))
-        modes = [""] * len(grid)
-        owner = _owners(pieces, grid)
-        # the states piece by piece, the mode's functions once per mode over all its samples
-        # (a CasADi map per piece cost more than the arithmetic: a closed-loop shift has
-        # hundreds of pieces)
-        by_mode: dict[str, list[tuple[np.ndarray, Piece]]] = {}
-        order = np.argsort(owner, kind="stable")
-        bounds = np.searchsorted(owner[order], np.arange(len(pieces) + 1))
-        for k, piece in enumerate(pieces):
-            index = order[bounds[k] : bounds[k + 1]]
-            if index.size:
-                by_mode.setdefault(piece.mode, []).append((index, piece))
-        for mode, parts in by_mode.items():
-            index = np.concatenate([i for i, _ in parts])
-            y = states_of([piece for _, piece in parts], [grid[i] for i, _ in parts])
-            compiled = self.modes[mode]
-            n = compiled.n
-            x = y[:, :n]
-            u = self.inputs_many(grid[index])
-            speeds_of = self.shaft_speeds(mode).map(len(x))
-            speeds = np.asarray(speeds_of(x.T).full()).T
-            names = [v.name for v in compiled.mode.model.states]
-            for j, s in enumerate(shafts):
-                signals[naming.speed(s)][index] = speeds[:, j]
-            signals[naming.TWIST][index] = x[:, names.index(naming.TWIST)]
-            signals[naming.WHEEL_SPEED][index] = x[:, names.index(naming.WHEEL_SPEED)]
-            for col in range(m):
-                # the shaft speeds are linear in x (ẏ = P z): their sensitivities are the same
-                # map applied to S
-                s_col = y[:, n + col * n : n + (col + 1) * n]
-                d_speeds = np.asarray(speeds_of(s_col.T).full()).T
-                for j, s in enumerate(shafts):
-                    sensitivities[naming.speed(s)][index, col] = d_speeds[:, j]
-                for key in (naming.TWIST, naming.WHEEL_SPEED):
-                    sensitivities[key][index, col] = s_col[:, names.index(key)]
-            slips = compiled.many(compiled.slips, x, u, p)
-            torques = compiled.many(compiled.torques, x, u, p)
-            mu = compiled.many(compiled.mu, x, u, p)
-            for j, e in enumerate(self.hybrid.elements):
-                signals[naming.slip_column(e)][index] = slips[:, j]
-                signals[naming.torque(e)][index] = torques[:, j]
-                if e not in self.hybrid.normal_force:
-                    continue
-                signals[str(self.hybrid.normal_force[e])][index] = u[:, 1 + j]
-                signals[str(self.hybrid.friction_coefficient[e])][index] = mu[:, j]
-            for i in index:
-                modes[i] = mode
-        w_in = signals[naming.speed(self.d.input_shaft)]
-        w_out = signals[naming.speed(self.d.output_shaft)]
-        signals[naming.RATIO] = w_in / np.where(w_out != 0, w_out, np.nan)
-        return signals, tuple(modes), sensitivities
-
-
-def _owners(pieces: Sequence[Piece], grid: np.ndarray) -> np.ndarray:
-    """The piece each grid time is sampled from (−1: none): the last piece whose
-    [t_start, t_end] holds it, so a sample at a switch takes the later piece. Pieces follow
-    each other in time: the last one starting at or before a time is found by bisection, and
-    a time it does not hold (only where pieces overlap by rounding) by the search over all."""
-    owner = np.full(len(grid), -1)
-    if not len(grid) or not pieces:
-        return owner
-    starts = np.array([piece.t_start for piece in pieces])
-    ends = np.array([piece.t_end for piece in pieces])
-    if np.any(np.diff(starts) < 0):
-        rest = np.arange(len(grid))
-    else:
-        last = np.searchsorted(starts, grid, side="right") - 1
-        held = (last >= 0) & (grid <= ends[np.maximum(last, 0)])
-        owner[held] = last[held]
-        rest = np.flatnonzero(~held)
-    for i in rest:
-        inside = np.flatnonzero((starts <= grid[i]) & (grid[i] <= ends))
-        if inside.size:
-            owner[i] = inside[-1]
-    return owner
+        """Every signal (and its sensitivities) at the grid
+        (:func:`~gearsym.validation.sim.hybrid_sample.sample_signals`)."""
+        return sample_signals(self, pieces, grid, p, m)
 
 
 def guard_name(mode: str, k: int) -> str:
