@@ -47,6 +47,35 @@ def test_the_truth_changes_the_scores_not_the_estimates(description, drive, esti
     assert not np.allclose(estimates.nees, other.nees)
 
 
+def test_the_compiled_steps_give_casadi_s_estimates(description, drive, estimates):
+    """The filter's discrete steps as emitted C (the default where a compiler is there) give
+    the estimates of CasADi's own calls to rounding (the same operations, CasADi's virtual
+    machine against the compiler's: 5e-15 relative over the short drive, 1e-12 of each
+    series' largest value allowed)."""
+    from gearsym.validation.sim.compiled_c import compiler_available
+    from gearsym.validation.studies.estimation.drive_ekf import FilterModels
+
+    if not compiler_available():
+        pytest.skip("no C compiler: the filter keeps CasADi's calls")
+    log = drive.log
+    models = FilterModels.of(description, compiled=False)
+    casadi_s = run_drive_ekf(
+        description,
+        log.arrays(),
+        log.shifts(),
+        drive.gears,
+        drive.values["m_veh"],
+        seed=3,
+        models=models,
+    )
+    assert type(models.get("1-2")[1]).__name__ == "DiscreteModel"
+    assert type(FilterModels.of(description).get("1-2")[1]).__name__ == "CompiledDiscrete"
+    for name in estimates.mean:
+        for ours, theirs in ((estimates.mean, casadi_s.mean), (estimates.sigma, casadi_s.sigma)):
+            scale = np.nanmax(np.abs(theirs[name]), initial=0.0)
+            np.testing.assert_allclose(ours[name], theirs[name], rtol=1e-12, atol=1e-12 * scale)
+
+
 def test_mass_of_the_calibration_s_own_vehicle(description, estimates):
     """Truth 1800 kg (the description), prior 1950 ± 300 kg (the [estimator] table)."""
     m = estimates.mean["m_veh"][-1]

@@ -40,6 +40,7 @@ from gearsym.symbolic import naming
 from gearsym.symbolic.defaults import EKF_FLOOR_FRACTION, EKF_RELATIVE_NOISE
 from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import element_short_name, quantity
+from gearsym.validation.studies.estimation.compiled_discrete import compiled_or_casadi
 from gearsym.validation.studies.estimation.drive_states import (
     AppendedState,
     _Appended,
@@ -286,20 +287,29 @@ class FilterModels:
     """The augmented model, its discrete step and mode logic of each shift, built on first
     use (the calibration's: the filter's model is what the TCU knows). A caller that runs the
     filter over many logs of the same description hands one to :func:`run_drive_ekf` so they
-    are built once (the lock-up maps alone take about half a second)."""
+    are built once (the lock-up maps alone take about half a second). The discrete steps run
+    as emitted C (``compiled``, default) where a C compiler is there."""
 
-    def __init__(self, d: GearboxDescription, overrides: Mapping[str, float]) -> None:
+    def __init__(
+        self, d: GearboxDescription, overrides: Mapping[str, float], compiled: bool = True
+    ) -> None:
         self.d = d
         self.overrides = dict(overrides)
+        #: the discrete steps as emitted C where a compiler is there (the same values to rounding,
+        #: :mod:`~gearsym.validation.studies.estimation.compiled_discrete`); False: CasADi's
+        self.compiled = compiled
         self._cache: dict[str, tuple[Any, Any, Any]] = {}
 
     @classmethod
-    def of(cls, d: GearboxDescription, twist_model_error: float | None = None) -> FilterModels:
+    def of(
+        cls, d: GearboxDescription, twist_model_error: float | None = None, compiled: bool = True
+    ) -> FilterModels:
         """The models of ``d`` with the twist's model error (rad²/s; default the
         ``[drive.estimator]`` table's, else the description's intensities)."""
         if twist_model_error is None:
             twist_model_error = d.drive.twist_model_error()
-        return cls(d, {} if twist_model_error is None else {naming.TWIST: twist_model_error})
+        overrides = {} if twist_model_error is None else {naming.TWIST: twist_model_error}
+        return cls(d, overrides, compiled)
 
     def get(self, shift: str) -> tuple[Any, Any, Any]:
         if shift not in self._cache:
@@ -308,7 +318,10 @@ class FilterModels:
 
             intensities = self.d.estimator.intensities() | self.overrides
             aug = augmented_model(self.d, shift, intensities=intensities)
-            self._cache[shift] = (aug, DiscreteModel(aug), ModeLogic(self.d, aug))
+            discrete = DiscreteModel(aug)
+            if self.compiled:
+                discrete = compiled_or_casadi(discrete)
+            self._cache[shift] = (aug, discrete, ModeLogic(self.d, aug))
         return self._cache[shift]
 
 
