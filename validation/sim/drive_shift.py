@@ -35,10 +35,6 @@ from gearsym.symbolic.description import GearboxDescription
 from gearsym.symbolic.drivetrain import quantity
 from gearsym.symbolic.hybrid import LOCK_UP, hybrid_shift
 from gearsym.symbolic.shifts import shift_spec
-from gearsym.validation.sim.compiled_c import (
-    CompiledFunctions,
-    compiler_available,
-)
 from gearsym.validation.sim.drive_powertrain import TorqueSplit
 from gearsym.validation.sim.hybrid_energy import energy_audit
 from gearsym.validation.sim.hybrid_simulation import HybridSimulator
@@ -157,22 +153,23 @@ class ShiftRunner:
         self.speed_phase = d.drive.si("shift", "speed_phase")
         self.r_dyn = quantity(d, "vehicle", "r_dyn").value
         self._energy: dict[str, tuple[Any, Any]] | None = None
-        self._energy_c: dict[str, tuple[Any, Any]] | None = None
 
     def energy_functions(self, fast: bool = False) -> dict[str, tuple[Any, Any]]:
         """The powers and stored energies of every mode (built once, for the energy audit);
-        ``fast``: the powers as compiled C (the same arithmetic, read in one C loop), where a
-        C compiler is there."""
+        ``fast``: the powers from the simulator's compiled C (the same arithmetic, read in
+        one C loop), where a C compiler is there."""
         if self._energy is None:
             from gearsym.validation.sim.hybrid_energy import energy_functions
 
             self._energy = energy_functions(self.simulator)
+            # compiled with the modes: one library (one compiler run) per shift and vehicle
+            self.simulator.also_compiled |= {f"{m}#powers": f[0] for m, f in self._energy.items()}
         if not fast:
             return self._energy
-        if self._energy_c is None and compiler_available():
-            compiled = CompiledFunctions({m: f[0] for m, f in self._energy.items()})
-            self._energy_c = {m: (compiled[m], f[1]) for m, f in self._energy.items()}
-        return self._energy_c or self._energy
+        library = self.simulator.compiled_functions()
+        if library is None or any(f"{m}#powers" not in library.functions for m in self._energy):
+            return self._energy  # no compiler, or compiled before the powers were added
+        return {m: (library[f"{m}#powers"], f[1]) for m, f in self._energy.items()}
 
     def line_forces(self, mode: str) -> list[float]:
         """F_N of the swapping elements in a gear mode: line pressure on the locked ones."""
@@ -297,8 +294,9 @@ class ShiftRunner:
         values = dict(zip(sim.parameter_names, (float(v) for v in p), strict=True))
         grid = np.arange(0.0, t_end + SHIFT_SAMPLE / 2, SHIFT_SAMPLE)
         tolerance = FAST_TOLERANCE if fast else REFERENCE_TOLERANCE
+        energies = self.energy_functions(fast)  # before the run: compiled with the modes
         result = sim.run(values, rtol=tolerance, atol=tolerance, x0=x0, t_eval=grid)
-        audit = energy_audit(sim, result, functions=self.energy_functions(fast))
+        audit = energy_audit(sim, result, functions=energies)
         omega = result.signals[naming.WHEEL_SPEED]
         brake_power = split.brake * np.tanh(omega / BRAKE_SPEED) * omega
         brake_work = float(np.trapezoid(brake_power, grid))

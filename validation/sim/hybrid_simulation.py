@@ -138,22 +138,33 @@ class HybridSimulator:
         #: switched per run (the drive's shifts: fast or reference)
         self.compiled = compiled
         self._compiled_c: CompiledFunctions | None = None
+        #: further functions of (x, u, p) compiled with the modes (name → CasADi function;
+        #: the drive's energy audit adds each mode's powers), set before the first compile
+        self.also_compiled: dict[str, Any] = {}
 
     def compiled_functions(self) -> CompiledFunctions | None:
         """Every mode's right-hand side and continuous guards emitted as C and compiled (built
         once, at first use: the compile, or the cache's load, is paid only by a simulator that
-        runs compiled); None without a C compiler (the callers keep CasADi's calls)."""
+        runs compiled), with what :meth:`_sample` reads at every sample and :attr:`also_compiled`;
+        None without a C compiler (the callers keep CasADi's calls). Two libraries: the
+        functions that hold the description's numbers (inertias, r_dyn: a fleet's vehicles
+        each compile their own), and the kinematic ones (shaft speeds, slips, μ: the same
+        source for every vehicle of a gearbox, so compiled once and then loaded from the
+        cache)."""
         if self._compiled_c is None and compiler_available():
-            functions = {}
+            numbers = dict(self.also_compiled)
+            kinematic = {}
             for name, mode in self.modes.items():
-                functions[name] = mode.f
+                numbers[name] = mode.f
                 for k, guard in enumerate(mode.guard):
-                    functions[guard_name(name, k)] = guard
-                # what :meth:`_sample` reads at every sample, evaluated in one C loop
-                functions[signal_name(name, "speeds")] = self.shaft_speeds(name)
-                for signal in ("slips", "torques", "mu"):
-                    functions[signal_name(name, signal)] = getattr(mode, signal)
-            self._compiled_c = CompiledFunctions(functions)
+                    numbers[guard_name(name, k)] = guard
+                numbers[signal_name(name, "torques")] = mode.torques
+                kinematic[signal_name(name, "speeds")] = self.shaft_speeds(name)
+                for signal in ("slips", "mu"):
+                    kinematic[signal_name(name, signal)] = getattr(mode, signal)
+            library = CompiledFunctions(numbers)
+            library.functions.update(CompiledFunctions(kinematic).functions)
+            self._compiled_c = library
         return self._compiled_c
 
     def _c(self) -> CompiledFunctions | None:
