@@ -54,6 +54,7 @@ from gearsym.validation.sim.drive_fast import (
 )
 from gearsym.validation.sim.drive_log import TcuLog
 from gearsym.validation.sim.drive_powertrain import Powertrain, TorqueSplit
+from gearsym.validation.sim.drive_result import DriveResult, Works
 from gearsym.validation.sim.drive_schedule import blended_split, due_shift
 from gearsym.validation.sim.drive_shift import (
     BRAKE_SPEED,
@@ -76,44 +77,6 @@ MIN_DWELL = 1.0
 
 #: Spacing of the recorded samples (s).
 RECORD_STEP = 0.1
-
-
-@dataclass
-class Works:
-    """Works (J) over the drive: input, friction, damper, road, brake, and the change of the
-    stored energies (kinetic, spring)."""
-
-    input: float = 0.0
-    friction: float = 0.0
-    damper: float = 0.0
-    road: float = 0.0
-    brake: float = 0.0
-    kinetic: float = 0.0
-    spring: float = 0.0
-
-    @property
-    def residual(self) -> float:
-        return self.input - (
-            self.kinetic + self.spring + self.friction + self.damper + self.road + self.brake
-        )
-
-    @property
-    def relative_residual(self) -> float:
-        scale = max(abs(self.input), self.friction + self.damper + abs(self.road) + self.brake)
-        return abs(self.residual) / scale if scale > 0 else 0.0
-
-    def to_dict(self) -> dict[str, float]:
-        return {
-            "input_J": self.input,
-            "kinetic_change_J": self.kinetic,
-            "spring_change_J": self.spring,
-            "friction_J": self.friction,
-            "damper_J": self.damper,
-            "road_J": self.road,
-            "brake_J": self.brake,
-            "residual_J": self.residual,
-            "relative_residual": self.relative_residual,
-        }
 
 
 @dataclass(frozen=True)
@@ -142,60 +105,13 @@ class DriveTruth:
         )
 
 
-@dataclass
-class DriveResult:
-    """The recorded drive: samples every :data:`RECORD_STEP` (``t``, ``v_ref``, ``v`` in m/s,
-    ``gear`` index into ``gears``, engine, e-machine and brake torque, input speed, pedal,
-    distance), the shifts, the energy audit and the wall time."""
-
-    cycle: Cycle
-    gears: tuple[str, ...]
-    samples: dict[str, np.ndarray]
-    shifts: list[ShiftRecord]
-    works: Works
-    wall_s: float
-    values: dict[str, float]
-    failure: str = ""
-    stats: dict[str, float] = field(default_factory=dict)
-    #: the TCU's record of the drive at its sample time (:mod:`.drive_log`)
-    log: TcuLog | None = None
-
-    @property
-    def tracking_rms_kmh(self) -> float:
-        e = (self.samples["v"] - self.samples["v_ref"]) * 3.6
-        return float(np.sqrt(np.mean(e * e)))
-
-    @property
-    def real_time_factor(self) -> float:
-        """Simulated seconds per wall-clock second."""
-        return float(self.samples["t"][-1]) / self.wall_s if self.wall_s > 0 else math.inf
-
-    def to_dict(self) -> dict[str, Any]:
-        t = self.samples["t"]
-        return {
-            "cycle": self.cycle.to_dict(),
-            "simulated_s": float(t[-1]),
-            "shifts": len(self.shifts),
-            "shift_list": [s.to_dict() for s in self.shifts],
-            "wall_s": self.wall_s,
-            "real_time_factor": self.real_time_factor,
-            "gear_integrator": "reference" if self.stats.get("reference") else "fast",
-            "energy_residual": self.works.relative_residual,
-            "energy": self.works.to_dict(),
-            "tracking_rms_kmh": self.tracking_rms_kmh,
-            "tracking_max_kmh": float(
-                np.max(np.abs(self.samples["v"] - self.samples["v_ref"])) * 3.6
-            ),
-            "distance_km": float(self.samples["s"][-1] / 1000.0),
-            "failure": self.failure,
-            "truth": self.values,
-        }
-
-
 class DriveSimulator:
     """A drive of one vehicle along a cycle (module docstring). ``d`` is the calibration: the
     TCU's driver model, torque split, schedule and shift plans; ``truth`` the vehicle driven
-    (default: the calibration's own). ``tcu_sample``: the sample time of the TCU's log."""
+    (default: the calibration's own). ``tcu_sample``: the sample time of the TCU's log.
+    ``planners``: the calibration's shift models (:meth:`planner`) kept by the caller for
+    the drives of other vehicles with the same calibration (a fleet's worker builds them
+    once), filled here as the drive needs them."""
 
     def __init__(
         self,
@@ -205,6 +121,7 @@ class DriveSimulator:
         truth: DriveTruth | None = None,
         progress: Callable[[float], None] | None = None,
         tcu_sample: float = 0.01,
+        planners: dict[tuple[str, str], ShiftRunner] | None = None,
     ) -> None:
         self.d = d
         self.truth = truth if truth is not None else DriveTruth(d)
@@ -255,7 +172,7 @@ class DriveSimulator:
         # shift's models are compiled when the drive first needs them.
         plant = self.truth.description
         self._runners: dict[tuple[str, str], ShiftRunner] = {}
-        self._planners: dict[tuple[str, str], ShiftRunner] = {}
+        self._planners = {} if planners is None else planners
         self.line = d.drive.si("shift", "line_pressure")
         first = (self.gears[0], self.gears[1])
         self.values = self._values(plant, self.runner(first), self.truth.mu_scale)

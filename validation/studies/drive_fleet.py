@@ -44,18 +44,23 @@ def drive_vehicle(context: DriveContext, seed: int) -> dict[str, Any]:
     error's trace every :data:`TRACE_STEP`."""
     from gearsym.validation.sim.drive import MIN_DWELL, DriveSimulator, DriveTruth
     from gearsym.validation.sim.drive_schedule import missed_shifts
-    from gearsym.validation.studies.estimation.drive_ekf import ekf_over_drive
+    from gearsym.validation.studies.dask_runner import content_key, worker_cached
+    from gearsym.validation.studies.estimation.drive_ekf import FilterModels, ekf_over_drive
 
     d = context.description
     draw = context.fleet.draw(seed)
     truth = DriveTruth.from_draw(d, draw, constant_grade=context.grade is None)
-    result = DriveSimulator(d, context.cycle, context.grade, truth=truth).run()
+    # the calibration's models (the TCU's shift plans, the filter's) once per process: every
+    # vehicle of the fleet has the same calibration
+    planners = worker_cached(content_key("drive planners", d), dict)
+    models = worker_cached(content_key("drive filter models", d), lambda: FilterModels.of(d))
+    result = DriveSimulator(d, context.cycle, context.grade, truth=truth, planners=planners).run()
     out: dict[str, Any] = {"seed": seed, "vehicle": draw.to_dict(), "drive": result.to_dict()}
     out["drive"].pop("shift_list")
     out["drive"]["missed_shifts"] = len(missed_shifts(result, d.drive.schedule, MIN_DWELL))
     if result.failure or result.log is None:
         return out
-    estimates = ekf_over_drive(d, result, seed)
+    estimates = ekf_over_drive(d, result, seed, models=models)
     out["estimates"] = estimates.to_dict()
     out["estimator"] = estimates.summary()
     grid = np.arange(0.0, estimates.t[-1] + 1e-9, TRACE_STEP)

@@ -104,13 +104,15 @@ def ekf_over_drive(
     seed: int,
     engine_gain: bool = False,
     engine_gain_truth: float = math.nan,
+    models: FilterModels | None = None,
 ) -> DriveEstimates:
     """The EKF over a finished drive's TCU log (:class:`~gearsym.validation.sim.drive.DriveResult`
     with a log), as ``gearsym drive`` and the fleet's drives run it: the side shafts'
     stiffness factor as a state (:func:`stiffness_state`), with ``engine_gain`` the engine's
     torque gain too (:func:`engine_gain_state`; tried and not adopted, docs/drive.md); the
     drive's truth for scoring only (its mass and stiffness factor; ``engine_gain_truth`` the
-    vehicle's engine gain), the sensors' noise from ``seed``."""
+    vehicle's engine gain), the sensors' noise from ``seed``; ``models``: the filter's
+    models kept by a caller that runs many drives (:class:`FilterModels`)."""
     arrays = drive.log.arrays()
     appended = [stiffness_state(d, stiffness_truth(d, drive.values))]
     if engine_gain:
@@ -123,6 +125,7 @@ def ekf_over_drive(
         drive.values["m_veh"],
         seed,
         appended=tuple(appended),
+        models=models,
     )
 
 
