@@ -296,7 +296,12 @@ def ambiguous_mu(
     import numpy as np
 
     inputs = logic.inputs(u, modes)
-    slip, _, _ = logic._evaluate(np.asarray(z, dtype=float), inputs, p)
+    # the model's states only (a state appended outside the model, e.g. the drive EKF's
+    # stiffness factor, has no slip of its own)
+    n = len(logic.aug.state_names)
+    z = np.asarray(z, dtype=float)[:n]
+    P = np.asarray(P, dtype=float)[:n, :n]
+    slip, _, _ = logic._evaluate(z, inputs, p)
     gradient, rate = (np.asarray(v, dtype=float) for v in logic.slip_gradient_fn(z, inputs, p))
     out = []
     for i, e in enumerate(logic.elements):

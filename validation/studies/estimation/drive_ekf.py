@@ -359,14 +359,16 @@ def run_drive_ekf(
     ``models``: the filter's models from earlier calls on ``d`` with the same twist model
     error (:class:`FilterModels`), built here when None."""
     from gearsym.symbolic.estimators.ekf import ekf_predict, ekf_update
-    from gearsym.symbolic.estimators.ekf_modes import STICK, ekf_mode_update
+    from gearsym.symbolic.estimators.ekf_modes import STICK, ambiguous_mu, ekf_mode_update
 
     if twist_model_error is None:
         twist_model_error = d.drive.twist_model_error()
     scale_form = (mu_model or d.estimator.mu_model) == "map_scale"
     if models is None:
         models = FilterModels.of(d, twist_model_error)
-    elif models.d is not d or models.overrides != FilterModels.of(d, twist_model_error).overrides:
+    elif (models.d is not d and models.d != d) or models.overrides != FilterModels.of(
+        d, twist_model_error
+    ).overrides:
         raise ValueError("models: built for another description or twist model error")
     t = log["t"]
     h = float(t[1] - t[0])
@@ -605,6 +607,12 @@ def run_drive_ekf(
             p = parameters_at(z, aug)
             u_known, u_now, model = filter_inputs(z, k, aug, logic, modes)
             relative = np.full(len(columns), relative_noise)
+            consider = [names.index(name) for name in considered]
+            if not in_gear:
+                # a μ whose element may already have locked up is not corrected (its slip
+                # within MU_AMBIGUITY_SIGMA σ of zero and closing): the speeds of a locked
+                # element say nothing of its friction, and a μ corrected there runs away
+                consider += ambiguous_mu(logic, z, P, u_known, p, modes)
             z, P, nis[k], nis_dof[k] = ekf_update(
                 model,
                 z,
@@ -614,7 +622,7 @@ def run_drive_ekf(
                 p,
                 relative,
                 floor_all[columns],
-                consider=[names.index(name) for name in considered],
+                consider=consider,
             )
             if not in_gear:
                 p = parameters_at(z, aug)
