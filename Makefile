@@ -154,7 +154,7 @@ results: $(STAMP)
 	cp build/results/drive_wltc3b_fleet_10000/drive.md $(RESULTS)/drive_wltc3b_fleet_10000.md
 	cp build/results/drive_wltc3b_fleet_10000/estimates.png $(RESULTS)/drive_wltc3b_fleet_10000_estimates.png
 	rm -rf build/results/drive_wltc3b_fleet
-	$(BIN)/gearsym drive --cycle wltc3b --fleet --runs 100 --seed 10000 --scheduler local --out build/results/drive_wltc3b_fleet
+	$(BIN)/gearsym drive --cycle wltc3b --fleet --runs 20 --seed 10000 --scheduler local --out build/results/drive_wltc3b_fleet
 	cp build/results/drive_wltc3b_fleet/fleet.json $(RESULTS)/drive_wltc3b_fleet.json
 	cp build/results/drive_wltc3b_fleet/fleet.md $(RESULTS)/drive_wltc3b_fleet.md
 	cp build/results/drive_wltc3b_fleet/fleet.png $(RESULTS)/drive_wltc3b_fleet.png
