@@ -140,8 +140,8 @@ results: $(STAMP)
 	cp build/results/tcu_tasks/tcu_tasks.json $(RESULTS)/tcu_tasks.json
 	cp build/results/tcu_tasks/tcu_tasks.md $(RESULTS)/tcu_tasks.md
 # A whole WLTC class 3b drive with the EKF over it, the calibration's own vehicle and a fleet
-# vehicle (docs/drive.md; about 2 min each: the fast drive and the EKF over its log), then 20
-# vehicles of the fleet (about 32 min on two cores).
+# vehicle (docs/drive.md; about 1-2 min each: the fast drive and the EKF over its log), then 20
+# vehicles of the fleet (about 20 min on two cores).
 	rm -rf build/results/drive_wltc3b
 	$(BIN)/gearsym drive --cycle wltc3b --out build/results/drive_wltc3b
 	cp build/results/drive_wltc3b/drive.json $(RESULTS)/drive_wltc3b.json

@@ -8,23 +8,22 @@ running compiled reads each mode's functions through its compiled C in one loop 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 from gearsym.symbolic import naming
 from gearsym.validation.sim.hybrid_result import Piece, states_of
 
-if TYPE_CHECKING:
-    from gearsym.validation.sim.hybrid_simulation import HybridSimulator
-
 __all__ = ["sample_signals", "signal_name"]
 
 
 def sample_signals(
-    simulator: HybridSimulator, pieces: Sequence[Piece], grid: np.ndarray, p: np.ndarray, m: int = 0
+    simulator: Any, pieces: Sequence[Piece], grid: np.ndarray, p: np.ndarray, m: int = 0
 ) -> tuple[dict[str, np.ndarray], tuple[str, ...], dict[str, np.ndarray]]:
     """Every signal (and its sensitivities, samples × parameters) at the grid; a sample at a
-    switch takes the later piece."""
+    switch takes the later piece. ``simulator``: the
+    :class:`~gearsym.validation.sim.hybrid_simulation.HybridSimulator` (typed loosely: that
+    module imports this one)."""
     hybrid = simulator.hybrid
     shafts = [s.name for s in simulator.d.shafts]
     keys = [naming.speed(s) for s in shafts] + [naming.TWIST, naming.WHEEL_SPEED]
