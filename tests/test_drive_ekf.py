@@ -31,12 +31,23 @@ def drive(description):
     return DriveSimulator(description, load_cycle(SHORT)).run()
 
 
-@pytest.fixture(scope="module")
-def estimates(description, drive):
+def _filter(description, drive, **options):
+    """The EKF over the short drive's log (seed 3), with ``options`` of :func:`run_drive_ekf`."""
     log = drive.log
     return run_drive_ekf(
-        description, log.arrays(), log.shifts(), drive.gears, drive.values["m_veh"], seed=3
+        description,
+        log.arrays(),
+        log.shifts(),
+        drive.gears,
+        drive.values["m_veh"],
+        seed=3,
+        **options,
     )
+
+
+@pytest.fixture(scope="module")
+def estimates(description, drive):
+    return _filter(description, drive)
 
 
 def test_the_truth_changes_the_scores_not_the_estimates(description, drive, estimates):
@@ -57,17 +68,8 @@ def test_the_compiled_steps_give_casadi_s_estimates(description, drive, estimate
 
     if not compiler_available():
         pytest.skip("no C compiler: the filter keeps CasADi's calls")
-    log = drive.log
     models = FilterModels.of(description, compiled=False)
-    casadi_s = run_drive_ekf(
-        description,
-        log.arrays(),
-        log.shifts(),
-        drive.gears,
-        drive.values["m_veh"],
-        seed=3,
-        models=models,
-    )
+    casadi_s = _filter(description, drive, models=models)
     assert type(models.get("1-2")[1]).__name__ == "DiscreteModel"
     assert type(FilterModels.of(description).get("1-2")[1]).__name__ == "CompiledDiscrete"
     for name in estimates.mean:
@@ -163,15 +165,8 @@ def test_drive_estimator_table_bad_unit(tmp_path):
 
 
 def test_twist_model_error_reaches_the_filter(description, drive, estimates):
-    log = drive.log
-    other = run_drive_ekf(
-        description,
-        log.arrays(),
-        log.shifts(),
-        drive.gears,
-        drive.values["m_veh"],
-        seed=3,
-        twist_model_error=100 * description.estimator.intensities()["phi"],
+    other = _filter(
+        description, drive, twist_model_error=100 * description.estimator.intensities()["phi"]
     )
     assert not np.array_equal(other.mean["m_veh"], estimates.mean["m_veh"])
 
