@@ -462,6 +462,32 @@ def test_the_engine_gain_state_moves_the_engine_s_part_of_the_torque(description
     assert abs(planted.mean["m_veh"][-1] - by_hand.mean["m_veh"][-1]) > 1.0
 
 
+def test_the_engine_gain_learns_in_the_gears_only(description, drive):
+    """The engine's gain state is a consider state through every shift: over the short
+    drive's shifts its mean does not move at all, in the gears it does. Planted: the same
+    state corrected through the shifts moves there too."""
+    import dataclasses
+
+    from gearsym.validation.studies.estimation.drive_states import engine_gain_state
+
+    log = drive.log.arrays()
+    in_shift = np.array([bool(s) for s in drive.log.shifts()])
+    assert in_shift.sum() > 100 and (~in_shift).sum() > 100
+
+    def moves(state):
+        gain = _filter(description, drive, appended=(state,)).mean["engine_torque_gain"]
+        step = np.abs(np.diff(gain, prepend=gain[0]))
+        return step[in_shift].sum(), step[~in_shift].sum()
+
+    state = engine_gain_state(description, log, 1.0)
+    assert not state.learns_in_shifts
+    in_shifts, in_gears = moves(state)
+    assert in_shifts == 0.0
+    assert in_gears > 1e-3
+    planted, _ = moves(dataclasses.replace(state, learns_in_shifts=True))
+    assert planted > 1e-3
+
+
 def test_the_log_records_the_engine_s_part_of_the_torque(description, drive):
     """The split rule (validation/sim/drive_powertrain.py): below idle speed the engine is
     decoupled (its commanded part zero, an electric launch); positive demand goes to the

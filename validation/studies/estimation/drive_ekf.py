@@ -613,6 +613,10 @@ def run_drive_ekf(
                 # within MU_AMBIGUITY_SIGMA σ of zero and closing): the speeds of a locked
                 # element say nothing of its friction, and a μ corrected there runs away
                 consider += ambiguous_mu(logic, z, P, u_known, p, modes)
+                # a state that learns in the gears only is held through the shift
+                consider += [
+                    names.index(a.name) for a in appended if a.corrected and not a.learns_in_shifts
+                ]
             z, P, nis[k], nis_dof[k] = ekf_update(
                 model,
                 z,

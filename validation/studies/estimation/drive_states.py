@@ -46,6 +46,9 @@ class AppendedState:
     truth: float = math.nan
     #: the fixed parameter the state scales ("" : the state acts through the pressures)
     scales: str = ""
+    #: False: corrected only in a gear and a consider state (Schmidt) through a shift, where
+    #: what the filter's shift model lacks (μ's form, the valves) would be read as this state
+    learns_in_shifts: bool = True
 
 
 def stiffness_state(d: GearboxDescription, truth: float = math.nan) -> AppendedState:
@@ -78,8 +81,10 @@ def engine_gain_state(
     whole input torque would scale the mass's acceleration term exactly (a 5 % torque error
     reads as 5 % less mass); over a drive the engine's share moves (electric launch below
     idle speed, the machine boosting at the engine's limit, recuperation), so the engine's
-    gain and the mass are seen in different combinations. ``truth``: the vehicle's gain,
-    for scoring only."""
+    gain and the mass are seen in different combinations. The gain learns in the gears only
+    (:attr:`AppendedState.learns_in_shifts` False): corrected through the shifts too it fell
+    in steps at each shift on the calibration's own vehicle (docs/drive.md). ``truth``: the
+    vehicle's gain, for scoring only."""
     from gearsym.symbolic.estimator_calibration import ENGINE_TORQUE_GAIN
 
     engine = np.asarray(log["T_eng_cmd"], dtype=float)
@@ -92,6 +97,7 @@ def engine_gain_state(
         sensitivity={naming.INPUT_TORQUE: engine},
         logged=1.0,
         truth=truth,
+        learns_in_shifts=False,
     )
 
 
