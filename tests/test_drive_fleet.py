@@ -45,6 +45,33 @@ def test_percentiles_by_hand():
     assert stats["vehicles"] == 3
 
 
+def test_the_mass_targets_judged_by_hand():
+    """The drive issue's targets on the p95 of |m_veh error| (3 % after 300 s, 2 % at the end):
+    the same three runs as above give p95 0.029 at 300 s (|errors| 0.01, 0.02, 0.03: 0.02 +
+    0.9 x 0.01) and 0.019 at the end, both met; a fourth run with 5 % at both misses both; a
+    drive that ended before 300 s has not reached that target."""
+    from gearsym.validation.studies.drive_fleet import fleet_targets
+
+    cycle = load_cycle("wltc3b")
+    runs = [
+        _run(0, [0.10, 0.04, 0.02, 0.010]),
+        _run(1, [-0.20, -0.05, 0.01, -0.005]),
+        _run(2, [0.05, 0.03, -0.03, 0.020]),
+    ]
+    stats = DriveFleet(cycle, runs, "test").percentiles()
+    judged = {(t["what"], t["at"]): t for t in fleet_targets(stats, stats)}
+    assert judged[("m_veh", "300")]["p95"] == pytest.approx(0.029)
+    assert judged[("m_veh", "300")]["verdict"] == "met"
+    assert judged[("m_veh", "end")]["p95"] == pytest.approx(0.019)
+    assert judged[("wheel-side mass", "end")]["verdict"] == "met"
+    worse = DriveFleet(cycle, [*runs, _run(3, [0.0, 0.0, 0.05, 0.05])], "test").percentiles()
+    verdicts = {t["at"]: t["verdict"] for t in fleet_targets(worse, worse)}
+    assert verdicts == {"300": "missed", "end": "missed"}
+    short = DriveFleet(cycle, [_run(0, [0.01, 0.01])], "test").percentiles()
+    judged = {t["at"]: t for t in fleet_targets(short, {})}
+    assert judged["300"]["verdict"] == "not reached" and judged["300"]["p95"] is None
+
+
 def test_aggregates_by_hand():
     """μ after the third slide counted per element and over all, NEES/NIS percentiles and the
     real-time factor from synthetic run summaries (numbers by hand)."""
