@@ -72,6 +72,36 @@ def test_the_mass_targets_judged_by_hand():
     assert judged["300"]["verdict"] == "not reached" and judged["300"]["p95"] is None
 
 
+def test_end_normalized_errors_by_hand():
+    """Each vehicle's (x̂ − x)² / σ² at the end, mean over the vehicles against χ²(N)/N: two
+    vehicles with m_veh 2 σ and 0 σ off give 2.0; their band is χ²(2)/2 at 2.5 % and 97.5 %,
+    by hand -ln(0.975) = 0.0253 and -ln(0.025) = 3.689 (χ²(2) is exponential with mean 2):
+    inside. Against the wheel-side mass (1 σ and 3 σ off): 5.0, above. ζ 0.1 σ off in both:
+    0.01, below."""
+    from gearsym.validation.studies.drive_fleet import end_normalized_errors
+
+    def run(final, truth, wheel, zeta_error):
+        return {
+            "estimates": {
+                "m_veh": {"final": final, "sigma": 10.0, "truth": truth},
+                "zeta": {"final": zeta_error, "sigma": 1.0, "truth": 0.0},
+            },
+            "wheel_side_mass": {"truth": wheel, "final": final},
+        }
+
+    judged = end_normalized_errors(
+        [run(1020.0, 1000.0, 1010.0, 0.1), run(1000.0, 1000.0, 970.0, -0.1)]
+    )
+    mass = judged["m_veh"]
+    assert mass["mean"] == pytest.approx(2.0)
+    assert mass["band"] == pytest.approx([-np.log(0.975), -np.log(0.025)], rel=1e-6)
+    assert mass["verdict"] == "inside" and mass["vehicles"] == 2
+    assert judged["wheel-side mass"]["mean"] == pytest.approx(5.0)
+    assert judged["wheel-side mass"]["verdict"] == "above"
+    assert judged["zeta"]["mean"] == pytest.approx(0.01)
+    assert judged["zeta"]["verdict"] == "below"
+
+
 def test_aggregates_by_hand():
     """μ after the third slide counted per element and over all, NEES/NIS percentiles and the
     real-time factor from synthetic run summaries (numbers by hand)."""

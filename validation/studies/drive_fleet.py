@@ -172,6 +172,47 @@ def fleet_targets(mass: dict[str, Any], wheel_side: dict[str, Any]) -> list[dict
     return out
 
 
+def end_normalized_errors(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """The filter's consistency where the samples are independent: each vehicle's squared
+    error over its own variance at the end of its drive, (x̂ − x)² / σ², for m_veh against its
+    truth, against the wheel-side mass (the product the speeds carry, ``wheel_side_mass`` of
+    each run) and for ζ; the mean over the N vehicles is χ²(N)/N for a consistent filter, so
+    its two-sided 95 % band is [χ²₀.₀₂₅(N), χ²₀.₉₇₅(N)] / N (each vehicle its own draw and noise,
+    one sample each: no correlation between them)."""
+    from gearsym.symbolic import naming
+    from scipy.stats import chi2
+
+    values: dict[str, list[float]] = {"m_veh": [], "wheel-side mass": [], naming.GRADE: []}
+    for run in runs:
+        estimates = run["estimates"]
+        mass = estimates["m_veh"]
+        if not mass.get("sigma"):
+            continue
+        values["m_veh"].append(((mass["final"] - mass["truth"]) / mass["sigma"]) ** 2)
+        wheel = run.get("wheel_side_mass")
+        if wheel:
+            values["wheel-side mass"].append(
+                ((mass["final"] - wheel["truth"]) / mass["sigma"]) ** 2
+            )
+        grade = estimates.get(naming.GRADE, {})
+        if grade.get("sigma"):
+            values[naming.GRADE].append(((grade["final"] - grade["truth"]) / grade["sigma"]) ** 2)
+    out = {}
+    for name, squares in values.items():
+        if not squares:
+            continue
+        n = len(squares)
+        low, high = (float(chi2.ppf(q, n) / n) for q in (0.025, 0.975))
+        mean = float(np.mean(squares))
+        out[name] = {
+            "mean": mean,
+            "band": [low, high],
+            "vehicles": n,
+            "verdict": "inside" if low <= mean <= high else "above" if mean > high else "below",
+        }
+    return out
+
+
 def _p50_p95(values: Sequence[float]) -> dict[str, float]:
     return {"p50": float(np.percentile(values, 50)), "p95": float(np.percentile(values, 95))}
 
@@ -201,6 +242,9 @@ def fleet_aggregates(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
             "inside_2_sigma": sum(c["inside_2_sigma"] for c in mu.values()),
         },
     }
+    normalized = end_normalized_errors(done)
+    if normalized:
+        out["normalized_error_end"] = normalized
     if done:
         out["nees_per_dof"] = _p50_p95([r["estimator"]["nees_per_dof_mean"] for r in done])
         out["nis_per_dof"] = _p50_p95([r["estimator"]["nis_per_dof"] for r in done])
@@ -306,6 +350,17 @@ def drive_fleet_markdown(data: dict[str, Any], command: str) -> str:
             f"- each element's μ after its third slide inside 2 σ of the truth: "
             f"{mu['inside_2_sigma']} of {mu['pairs']} (vehicle, element) pairs ({per})",
         ]
+    normalized = data.get("normalized_error_end") or {}
+    if normalized:
+        parts = "; ".join(
+            f"{name} {entry['mean']:.2f} in [{entry['band'][0]:.2f}, {entry['band'][1]:.2f}]: "
+            f"{entry['verdict']}"
+            for name, entry in normalized.items()
+        )
+        out.append(
+            "- the squared error over the filter's own variance at the end of each drive, mean "
+            "over the vehicles (one independent sample each: χ²(N)/N, its 95 % band): " + parts
+        )
     for key, label in (("nees_per_dof", "NEES/dof of (m_veh, ζ)"), ("nis_per_dof", "NIS/dof")):
         if key in data:
             out.append(
