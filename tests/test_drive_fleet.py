@@ -102,6 +102,28 @@ def test_end_normalized_errors_by_hand():
     assert judged["zeta"]["verdict"] == "below"
 
 
+def test_the_error_against_the_engine_gain_by_hand():
+    """Three vehicles whose wheel-side mass errors lie on error = −0.5 (g − 1) + 1 %
+    exactly: slope −0.5, intercept 0.01, r −1; fewer than three vehicles, or one gain, give
+    no line."""
+    from gearsym.validation.studies.drive_fleet import error_against_engine_gain
+
+    def run(gain, error):
+        return {
+            "vehicle": {"engine_torque_gain": gain},
+            "wheel_side_mass": {"truth": 2000.0, "final": 2000.0 * (1.0 + error)},
+        }
+
+    runs = [run(g, -0.5 * (g - 1.0) + 0.01) for g in (0.96, 1.0, 1.05)]
+    line = error_against_engine_gain(runs)
+    assert line["slope"] == pytest.approx(-0.5)
+    assert line["intercept"] == pytest.approx(0.01)
+    assert line["r"] == pytest.approx(-1.0)
+    assert line["vehicles"] == 3
+    assert error_against_engine_gain(runs[:2]) == {}
+    assert error_against_engine_gain([run(1.02, e) for e in (0.0, 0.01, 0.02)]) == {}
+
+
 def test_aggregates_by_hand():
     """μ after the third slide counted per element and over all, NEES/NIS percentiles and the
     real-time factor from synthetic run summaries (numbers by hand)."""

@@ -213,6 +213,35 @@ def end_normalized_errors(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
+def error_against_engine_gain(runs: Sequence[dict[str, Any]]) -> dict[str, float]:
+    """The wheel-side mass's relative error at the end of each drive against the vehicle's
+    engine-torque gain (its truth, for scoring only): the least-squares line error = slope
+    (gain − 1) + intercept and the correlation r over the vehicles. The filter is told the
+    commanded torque, so an engine that gives more than its torque model says reads as less
+    mass where the engine drives (a slope near −1 if all the mass's information came from
+    the engine's torque, 0 if none did). Empty with fewer than three vehicles or one gain."""
+    pairs = [
+        (
+            run["vehicle"]["engine_torque_gain"] - 1.0,
+            run["wheel_side_mass"]["final"] / run["wheel_side_mass"]["truth"] - 1.0,
+        )
+        for run in runs
+        if "engine_torque_gain" in run.get("vehicle", {}) and run.get("wheel_side_mass")
+    ]
+    if len(pairs) < 3:
+        return {}
+    gain, error = (np.array(v, dtype=float) for v in zip(*pairs, strict=True))
+    if np.ptp(gain) == 0.0:
+        return {}
+    slope, intercept = np.polyfit(gain, error, 1)
+    return {
+        "slope": float(slope),
+        "intercept": float(intercept),
+        "r": float(np.corrcoef(gain, error)[0, 1]),
+        "vehicles": len(pairs),
+    }
+
+
 def _p50_p95(values: Sequence[float]) -> dict[str, float]:
     return {"p50": float(np.percentile(values, 50)), "p95": float(np.percentile(values, 95))}
 
@@ -245,6 +274,9 @@ def fleet_aggregates(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
     normalized = end_normalized_errors(done)
     if normalized:
         out["normalized_error_end"] = normalized
+    against_gain = error_against_engine_gain(done)
+    if against_gain:
+        out["wheel_side_error_against_engine_gain"] = against_gain
     if done:
         out["nees_per_dof"] = _p50_p95([r["estimator"]["nees_per_dof_mean"] for r in done])
         out["nis_per_dof"] = _p50_p95([r["estimator"]["nis_per_dof"] for r in done])
@@ -360,6 +392,14 @@ def drive_fleet_markdown(data: dict[str, Any], command: str) -> str:
         out.append(
             "- the squared error over the filter's own variance at the end of each drive, mean "
             "over the vehicles (one independent sample each: χ²(N)/N, its 95 % band): " + parts
+        )
+    against = data.get("wheel_side_error_against_engine_gain")
+    if against:
+        out.append(
+            "- the wheel-side mass's error at the end against the vehicle's engine-torque gain "
+            f"(the truth, for scoring): least squares error = {against['slope']:+.2f} (gain − 1) "
+            f"{100 * against['intercept']:+.1f} %, r = {against['r']:+.2f} over "
+            f"{against['vehicles']} vehicles (−1: the mass takes the engine's whole error)"
         )
     for key, label in (("nees_per_dof", "NEES/dof of (m_veh, ζ)"), ("nis_per_dof", "NIS/dof")):
         if key in data:
