@@ -140,8 +140,8 @@ results: $(STAMP)
 	cp build/results/tcu_tasks/tcu_tasks.json $(RESULTS)/tcu_tasks.json
 	cp build/results/tcu_tasks/tcu_tasks.md $(RESULTS)/tcu_tasks.md
 # A whole WLTC class 3b drive with the EKF over it, the calibration's own vehicle and a fleet
-# vehicle (docs/drive.md; about 1-2 min each: the fast drive and the EKF over its log), then 20
-# vehicles of the fleet (about 20 min on two cores).
+# vehicle (docs/drive.md; about 1-2 min each: the fast drive and the EKF over its log), then 100
+# vehicles of the fleet (about 80-90 min on two cores).
 	rm -rf build/results/drive_wltc3b
 	$(BIN)/gearsym drive --cycle wltc3b --out build/results/drive_wltc3b
 	cp build/results/drive_wltc3b/drive.json $(RESULTS)/drive_wltc3b.json
@@ -154,7 +154,7 @@ results: $(STAMP)
 	cp build/results/drive_wltc3b_fleet_10000/drive.md $(RESULTS)/drive_wltc3b_fleet_10000.md
 	cp build/results/drive_wltc3b_fleet_10000/estimates.png $(RESULTS)/drive_wltc3b_fleet_10000_estimates.png
 	rm -rf build/results/drive_wltc3b_fleet
-	$(BIN)/gearsym drive --cycle wltc3b --fleet --runs 20 --seed 10000 --scheduler local --out build/results/drive_wltc3b_fleet
+	$(BIN)/gearsym drive --cycle wltc3b --fleet --runs 100 --seed 10000 --scheduler local --out build/results/drive_wltc3b_fleet
 	cp build/results/drive_wltc3b_fleet/fleet.json $(RESULTS)/drive_wltc3b_fleet.json
 	cp build/results/drive_wltc3b_fleet/fleet.md $(RESULTS)/drive_wltc3b_fleet.md
 	cp build/results/drive_wltc3b_fleet/fleet.png $(RESULTS)/drive_wltc3b_fleet.png
