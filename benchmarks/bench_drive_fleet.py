@@ -23,7 +23,7 @@ from record import Target, begin, record, row
 #: Vehicles per fleet and seconds of WLTC 3b each drives.
 VEHICLES = 4
 DURATION = 300.0
-ROUNDS = 2
+ROUNDS = 3
 SEED = 10000
 
 
