@@ -139,19 +139,19 @@ class DriveFleet:
         }
 
     def to_dict(self) -> dict[str, Any]:
+        mass, wheel_side = self.percentiles(), self.percentiles("trace_wheel_mass_error")
         return {
             "cycle": self.cycle.to_dict(),
             "fleet": self.fleet_name,
             "runs": [{k: v for k, v in r.items() if not k.startswith("trace")} for r in self.runs],
             "failed": [r["seed"] for r in self.runs if r["drive"]["failure"]],
-            "mass_error": self.percentiles(),
-            "wheel_side_mass_error": self.percentiles("trace_wheel_mass_error"),
+            "mass_error": mass,
+            "wheel_side_mass_error": wheel_side,
             **fleet_aggregates(self.runs),
             "fleet_wall_s": self.wall_s,
             "ran_on": self.ran_on,
             "grade_rms_rad": self.grade_rms(),
-        } | {
-            "targets": fleet_targets(self.percentiles(), self.percentiles("trace_wheel_mass_error"))
+            "targets": fleet_targets(mass, wheel_side),
         }
 
 
