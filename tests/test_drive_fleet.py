@@ -27,13 +27,18 @@ def _run(seed: int, errors: list[float]) -> dict:
     }
 
 
-def test_percentiles_by_hand():
-    cycle = load_cycle("wltc3b")
-    runs = [
+def _three_runs():
+    """Three vehicles' mass errors at 0, 60, 300 and 600 s (the percentiles' hand cases)."""
+    return [
         _run(0, [0.10, 0.04, 0.02, 0.010]),
         _run(1, [-0.20, -0.05, 0.01, -0.005]),
         _run(2, [0.05, 0.03, -0.03, 0.020]),
     ]
+
+
+def test_percentiles_by_hand():
+    cycle = load_cycle("wltc3b")
+    runs = _three_runs()
     stats = DriveFleet(cycle, runs, "test").percentiles()
     # |errors| at 60 s: 0.03, 0.04, 0.05 -> median 0.04; p95 by linear interpolation:
     # 0.04 + 0.9 (0.05 - 0.04) = 0.049
@@ -53,11 +58,7 @@ def test_the_mass_targets_judged_by_hand():
     from gearsym.validation.studies.drive_fleet import fleet_targets
 
     cycle = load_cycle("wltc3b")
-    runs = [
-        _run(0, [0.10, 0.04, 0.02, 0.010]),
-        _run(1, [-0.20, -0.05, 0.01, -0.005]),
-        _run(2, [0.05, 0.03, -0.03, 0.020]),
-    ]
+    runs = _three_runs()
     stats = DriveFleet(cycle, runs, "test").percentiles()
     judged = {(t["what"], t["at"]): t for t in fleet_targets(stats, stats)}
     assert judged[("m_veh", "300")]["p95"] == pytest.approx(0.029)
