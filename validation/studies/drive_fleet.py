@@ -369,8 +369,8 @@ def drive_fleet_markdown(data: dict[str, Any], command: str) -> str:
         )
         out += [
             "",
-            "- against the drive issue's targets (p95 of |error| within 3 % after 300 s and 2 % "
-            f"at the end, no grade sensor, the fleet's engine-torque error): {judged}",
+            "- against the drive issue's targets on the p95 of |error| (no grade sensor, the "
+            f"fleet's engine-torque error): {judged}",
         ]
     mu = data.get("mu_after_third_slide") or {}
     if mu.get("pairs"):
