@@ -21,6 +21,8 @@ The table::
     omega_1 = { value = 6.0, unit = "rad^2/s^3", source = "..." }
     [estimator.model_error_augmented]    # the same, of a filter that estimates more (k_ss, gain)
     phi = { value = 4.7e-5, unit = "rad^2/s", source = "..." }
+    [estimator.model_error_map_scale]    # the same, with mu_model = "map_scale" besides
+    phi = { value = 4.7e-5, unit = "rad^2/s", source = "..." }
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ __all__ = [
     "INPUT_TORQUE_GAIN",
     "ENGINE_TORQUE_GAIN",
     "MODEL_ERROR_AUGMENTED",
+    "MODEL_ERROR_MAP_SCALE",
     "MU_MODELS",
     "MU_SCALE",
     "PRIOR_NAMES",
@@ -175,6 +178,12 @@ AUGMENTED_STATES: tuple[str, ...] = (
 #: ``model_error``'s value.
 MODEL_ERROR_AUGMENTED = "model_error_augmented"
 
+#: The table of the model-error intensities of such a filter whose μ states are scales on the
+#: calibration's μ map (``mu_model = "map_scale"``): the map's slip dependence is then in its
+#: model, so what its speeds and twist must stand for differs again; tuned on its own, a state
+#: it does not name takes :data:`MODEL_ERROR_AUGMENTED`'s value.
+MODEL_ERROR_MAP_SCALE = "model_error_map_scale"
+
 #: The states beside the shaft speeds ``omega_<shaft>`` that ``[estimator.model_error]`` may
 #: name: the side-shaft twist and the wheel speed (2.43, 2.44).
 MODEL_ERROR_NAMES: tuple[str, ...] = ("phi", "omega_C")
@@ -255,6 +264,9 @@ class EstimatorCalibration:
     #: ``[estimator.model_error_augmented]``: the intensities of a filter that estimates more
     #: than the thesis' parameters (:data:`MODEL_ERROR_AUGMENTED`)
     model_error_augmented: tuple[tuple[str, Tuning], ...] = ()
+    #: ``[estimator.model_error_map_scale]``: the same with the μ states map scales
+    #: (:data:`MODEL_ERROR_MAP_SCALE`)
+    model_error_map_scale: tuple[tuple[str, Tuning], ...] = ()
     tuned_on: str = ""
     #: :data:`MU_MODELS`
     mu_model: str = "random_walk"
@@ -382,6 +394,11 @@ class EstimatorCalibration:
         when the table is absent)."""
         return {name: t.value for name, t in self.model_error_augmented}
 
+    def intensities_map_scale(self) -> dict[str, float]:
+        """The model-error intensities of such a filter whose μ states are map scales, by state
+        name (``[estimator.model_error_map_scale]``, empty when the table is absent)."""
+        return {name: t.value for name, t in self.model_error_map_scale}
+
     def to_dict(self) -> dict[str, Any]:
         """For a report: what the filter was told, with the sources."""
         return {
@@ -393,6 +410,11 @@ class EstimatorCalibration:
             **(
                 {MODEL_ERROR_AUGMENTED: {n: t.value for n, t in self.model_error_augmented}}
                 if self.model_error_augmented
+                else {}
+            ),
+            **(
+                {MODEL_ERROR_MAP_SCALE: {n: t.value for n, t in self.model_error_map_scale}}
+                if self.model_error_map_scale
                 else {}
             ),
             "tuned_on": self.tuned_on,
@@ -437,7 +459,7 @@ def parse_estimator_table(table: Any, shafts: Sequence[str] = ()) -> EstimatorCa
         priors.append((name, Prior(sd=sd, mean=mean, source=source)))
     prior_table.reject_unknown()
     tables = {}
-    for kind in ("random_walk", "model_error", MODEL_ERROR_AUGMENTED):
+    for kind in ("random_walk", "model_error", MODEL_ERROR_AUGMENTED, MODEL_ERROR_MAP_SCALE):
         sub = table.table(kind, required=False)
         values: list[tuple[str, Tuning]] = []
         for name in list(sub.data):
@@ -468,6 +490,7 @@ def parse_estimator_table(table: Any, shafts: Sequence[str] = ()) -> EstimatorCa
         random_walk=tables["random_walk"],
         model_error=tables["model_error"],
         model_error_augmented=tables[MODEL_ERROR_AUGMENTED],
+        model_error_map_scale=tables[MODEL_ERROR_MAP_SCALE],
         tuned_on=tuned_on,
         mu_model=mu_model,
         file=table.file,

@@ -11,9 +11,15 @@ import json
 import subprocess
 import sys
 
+from dataclasses import replace
+
 import pytest
 from gearsym.symbolic.drivetrain import quantity
-from gearsym.symbolic.estimator_calibration import MODEL_ERROR_AUGMENTED, STIFFNESS
+from gearsym.symbolic.estimator_calibration import (
+    MODEL_ERROR_AUGMENTED,
+    MODEL_ERROR_MAP_SCALE,
+    STIFFNESS,
+)
 from gearsym.symbolic.estimators.ekf import augmented_model, default_parameters
 from gearsym.validation.sim.fleet import parse_fleet
 
@@ -101,6 +107,51 @@ def test_tuning_with_the_stiffness_names_its_own_table(default_description, defa
     assert result.intensities["phi"] == pytest.approx(0.5 * twist)
     assert result.table == MODEL_ERROR_AUGMENTED
     assert f"[estimator.{MODEL_ERROR_AUGMENTED}]" in result.text()
+
+
+def _map_scale(d):
+    """The description with its filter's μ states map scales (``--mu-model map_scale``)."""
+    return replace(d, estimator=replace(d.estimator, mu_model="map_scale"))
+
+
+def test_a_map_scale_filter_takes_its_own_tuned_intensities(default_description):
+    """With the μ states map scales and the fleet's tolerances as states, the speeds and the
+    twist take [estimator.model_error_map_scale]'s values (each differs from the random-walk
+    form's [estimator.model_error_augmented]); the random-walk form and a map-scale filter of
+    the thesis' parameters alone keep theirs."""
+    d = default_description
+    scaled = _map_scale(d)
+    aug = augmented_model(scaled, "2-3", THESIS_AND_STIFFNESS)
+    random_walk = augmented_model(d, "2-3", THESIS_AND_STIFFNESS)
+    thesis_scaled = augmented_model(scaled, "2-3", default_parameters(d, "2-3"))
+    for name in ("phi", "omega_1", "omega_2", "omega_C"):
+        _, own = _stated(d, MODEL_ERROR_MAP_SCALE, name)
+        _, augmented_value = _stated(d, MODEL_ERROR_AUGMENTED, name)
+        assert aug.intensities[name] == own != augmented_value
+        assert random_walk.intensities[name] == augmented_value
+        assert thesis_scaled.intensities[name] == _stated(d, "model_error", name)[1]
+
+
+def test_tuning_a_map_scale_filter_names_its_own_table(default_description, default_scenario):
+    """Tuned with μ as map scales and the stiffness as a state, the result belongs in
+    [estimator.model_error_map_scale] and multiplies that table's values."""
+    d = _map_scale(default_description)
+    from gearsym.validation.sim.fleet import load_fleet
+    from gearsym.validation.studies.estimation.tuning import tune_model_error
+
+    result = tune_model_error(
+        d,
+        default_scenario,
+        load_fleet(d),
+        [500002],
+        factors=(2.0,),
+        twist_factors=(1.0,),
+        parameters=THESIS_AND_STIFFNESS,
+    )
+    _, speed = _stated(d, MODEL_ERROR_MAP_SCALE, "omega_1")
+    assert result.intensities["omega_1"] == pytest.approx(2.0 * speed)
+    assert result.table == MODEL_ERROR_MAP_SCALE
+    assert f"[estimator.{MODEL_ERROR_MAP_SCALE}]" in result.text()
 
 
 def _gearsym(*args: str) -> subprocess.CompletedProcess:

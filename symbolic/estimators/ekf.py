@@ -431,6 +431,8 @@ def augmented_model(
     if any(name in parameters for name in AUGMENTED_STATES):
         # the states take the intensities tuned for a filter that estimates more, where stated
         stated.update(d.estimator.intensities_augmented())
+        if d.estimator.mu_model == "map_scale":  # ... and with its μ states map scales
+            stated.update(d.estimator.intensities_map_scale())
     stated.update(intensities or {})
     rates: dict[str, float] = {}
     for v in states:

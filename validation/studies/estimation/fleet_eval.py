@@ -85,6 +85,10 @@ class FleetStats:
     bound: float | None = None  # RMS of the posterior bound over the same samples
     efficiency: float | None = None  # rmse / bound
     identifiable: float | None = None  # fraction of runs whose phase identifies it
+    #: ``coverage_95`` over the samples of those runs only (``None``: no such run): a run
+    #: that cannot identify the parameter keeps it near its prior, whose interval covers a
+    #: fleet drawn within the prior's range whatever the filter does
+    coverage_identifiable: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -97,6 +101,11 @@ class FleetStats:
             "bound": self.bound,
             "efficiency": self.efficiency,
             "identifiable": self.identifiable,
+            **(
+                {}
+                if self.identifiable is None
+                else {"coverage_95_identifiable": self.coverage_identifiable}
+            ),
         }
 
 
@@ -112,6 +121,10 @@ def _stats(
     err = np.concatenate([errors[k] for k in kept])
     sig = np.concatenate([sigmas[k] for k in kept])
     rmse = float(np.sqrt(np.mean(err**2)))
+    covered = [np.abs(errors[k]) <= COVERAGE_Z * sigmas[k] for k in kept]
+    where = (
+        [] if identifiable is None else [covered[i] for i, k in enumerate(kept) if identifiable[k]]
+    )
     bound = None
     if bounds is not None and all(bounds[k] is not None for k in kept):
         b = np.concatenate([bounds[k] for k in kept])
@@ -128,6 +141,7 @@ def _stats(
         identifiable=None
         if identifiable is None
         else float(np.mean([identifiable[k] for k in kept])),
+        coverage_identifiable=float(np.mean(np.concatenate(where))) if where else None,
     )
 
 

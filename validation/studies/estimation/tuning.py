@@ -52,7 +52,8 @@ class TuningResult:
     intensities: dict[str, float]
     base: dict[str, float]
     #: the description's table the intensities belong in (``model_error``, or
-    #: ``model_error_augmented`` for a filter that estimates more than the thesis' parameters)
+    #: ``model_error_augmented`` for a filter that estimates more than the thesis' parameters,
+    #: ``model_error_map_scale`` for such a filter with its μ states map scales)
     table: str = "model_error"
 
     def criterion(self, k: int) -> float:
@@ -110,7 +111,11 @@ def tune_model_error(
     numbers as without. ``parameters``: the filter's augmented parameters (``None``: the
     thesis' 4.1), e.g. with the side shafts' stiffness k_ss."""
     from gearsym.symbolic import naming
-    from gearsym.symbolic.estimator_calibration import AUGMENTED_STATES, MODEL_ERROR_AUGMENTED
+    from gearsym.symbolic.estimator_calibration import (
+        AUGMENTED_STATES,
+        MODEL_ERROR_AUGMENTED,
+        MODEL_ERROR_MAP_SCALE,
+    )
     from gearsym.validation.studies.estimation.fleet_eval import (
         FleetContext,
         calibration_setup,
@@ -121,6 +126,8 @@ def tune_model_error(
     # a filter that estimates more than the thesis' parameters has its own table
     augmented = parameters is not None and any(p in AUGMENTED_STATES for p in parameters)
     table = MODEL_ERROR_AUGMENTED if augmented else "model_error"
+    if augmented and d.estimator.mu_model == "map_scale":  # ... with μ as map scales: its own
+        table = MODEL_ERROR_MAP_SCALE
     if not seeds:
         raise GearsymError("estimate", "--runs", "tuning needs at least one seed")
     report = progress or (lambda fraction, message: None)
