@@ -69,7 +69,7 @@ def test_the_criteria_name_each_miss():
     1.96 σ on 85 % of the vehicles is below 90 %; the consider state is not judged."""
     (line,) = criteria(_report())
     assert "NEES inside and NIS OUTSIDE" in line
-    assert "2 of 3 (phase, parameter) pairs, MISSED: μ₀₅ in gear 2 99 %" in line
+    assert "2 of 3 (phase, parameter) pairs, MISSED: μ₀₅ in gear 2 99.0 %" in line
     assert "consider states not judged: valve_gain" in line
     assert "1.4 at most, MISSED" in line
     assert "μ₀₅ 85 %, MISSED: μ₀₅" in line

@@ -208,7 +208,8 @@ def criteria(data: dict[str, Any]) -> list[str]:
             continue
         judged += 1
         if not lo <= there <= hi:
-            misses.append(f"{_name(name, data)} in {phase} {100 * there:.0f} %")
+            # one decimal: a miss must not print as the range's own end (89.7 % as "90 %")
+            misses.append(f"{_name(name, data)} in {phase} {100 * there:.1f} %")
     efficiency = [s["efficiency"] for _, name, s in rows if name == "m_veh" and s.get("efficiency")]
     mu = {
         name: entry["final"]["coverage_95"]
