@@ -40,9 +40,9 @@ run: $(STAMP)
 # The documentation's result tables, written by the evaluation commands (never typed): the EKF
 # of the 2-3 upshift over 200 vehicles of the default fleet on evaluation seeds 10000-10199
 # (the tuning used seeds 100000-100099): the thesis' filter (about 10 min on one core), and on
-# two cores (about 10 min each) mu as a scale on the calibration's map, the fleet's tolerances as
-# states, the same read through tooth-wheel speed sensors, and the 3-4 with the interval's mean
-# inputs.
+# two cores (about 10-15 min each) mu as a scale on the calibration's map (the 2-3, the 3-4 and
+# the 1-2), the fleet's tolerances as states, the same read through tooth-wheel speed sensors,
+# and the 3-4 with the interval's mean inputs.
 RESULTS := docs/results
 results: $(STAMP)
 	rm -rf build/results/fleet_ekf_2_3
@@ -56,6 +56,14 @@ results: $(STAMP)
 	cp build/results/fleet_ekf_2_3_map_scale/fleet.json $(RESULTS)/fleet_ekf_2_3_map_scale.json
 	cp build/results/fleet_ekf_2_3_map_scale/fleet.md $(RESULTS)/fleet_ekf_2_3_map_scale.md
 	cp build/results/fleet_ekf_2_3_map_scale/fleet.png $(RESULTS)/fleet_ekf_2_3_map_scale.png
+	rm -rf build/results/fleet_ekf_3_4_map_scale build/results/fleet_ekf_1_2_map_scale
+	$(BIN)/gearsym estimate --filter ekf --fleet --scenario gearsym/data/scenario_3_4.toml --input-hold mean --mu-model map_scale --params m_veh,mu_81,mu_27,zeta,k_ss,input_torque_gain,inertia_factor,valve_offset,valve_gain --runs 200 --seed 10000 --scheduler local --out build/results/fleet_ekf_3_4_map_scale
+	$(BIN)/gearsym estimate --filter ekf --fleet --scenario gearsym/data/scenario_1_2.toml --mu-model map_scale --params m_veh,mu_05,mu_81,zeta,k_ss,input_torque_gain,inertia_factor,valve_offset,valve_gain --runs 200 --seed 10000 --scheduler local --out build/results/fleet_ekf_1_2_map_scale
+	for run in fleet_ekf_3_4_map_scale fleet_ekf_1_2_map_scale; do \
+	  cp build/results/$$run/fleet.json $(RESULTS)/$$run.json; \
+	  cp build/results/$$run/fleet.md $(RESULTS)/$$run.md; \
+	  cp build/results/$$run/fleet.png $(RESULTS)/$$run.png; \
+	done
 	rm -rf build/results/fleet_ekf_2_3_augmented
 	$(BIN)/gearsym estimate --filter ekf --fleet --params m_veh,mu_38,mu_05,zeta,k_ss,input_torque_gain,inertia_factor,valve_offset,valve_gain --runs 200 --seed 10000 --scheduler local --out build/results/fleet_ekf_2_3_augmented
 	cp build/results/fleet_ekf_2_3_augmented/fleet.json $(RESULTS)/fleet_ekf_2_3_augmented.json

@@ -68,6 +68,8 @@ EXPECTED = {
     "fleet_ekf_2_3_augmented.md": "fleet.md",
     "fleet_ekf_2_3_tooth_wheels.md": "fleet.md",
     "fleet_ekf_3_4_input_mean.md": "fleet.md",
+    "fleet_ekf_3_4_map_scale.md": "fleet.md",
+    "fleet_ekf_1_2_map_scale.md": "fleet.md",
     "montecarlo_ekf_2_3.md": "ekf.md",
     "montecarlo_ekf_2_3_1ms.md": "ekf.md",
     "montecarlo_ekf_2_3_prior_draws.md": "ekf.md",
