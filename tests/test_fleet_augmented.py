@@ -85,29 +85,6 @@ def test_one_shift_moves_the_stiffness_towards_a_stiffer_vehicle(
     assert evaluation.final_stats(STIFFNESS).runs == 1
 
 
-def test_tuning_with_the_stiffness_names_its_own_table(default_description, default_scenario):
-    """Tuned with the stiffness as a state, the result belongs in [estimator.model_error_augmented]
-    and multiplies that table's values, so that the thesis filter's stay their own."""
-    d = default_description
-    scenario = default_scenario
-    from gearsym.validation.sim.fleet import load_fleet
-    from gearsym.validation.studies.estimation.tuning import tune_model_error
-
-    result = tune_model_error(
-        d,
-        scenario,
-        load_fleet(d),
-        [500002],
-        factors=(1.0,),
-        twist_factors=(0.5,),
-        parameters=THESIS_AND_STIFFNESS,
-    )
-    _, twist = _stated(d, MODEL_ERROR_AUGMENTED, "phi")
-    assert result.intensities["phi"] == pytest.approx(0.5 * twist)
-    assert result.table == MODEL_ERROR_AUGMENTED
-    assert f"[estimator.{MODEL_ERROR_AUGMENTED}]" in result.text()
-
-
 def _map_scale(d):
     """The description with its filter's μ states map scales (``--mu-model map_scale``)."""
     return replace(d, estimator=replace(d.estimator, mu_model="map_scale"))
@@ -131,10 +108,18 @@ def test_a_map_scale_filter_takes_its_own_tuned_intensities(default_description)
         assert thesis_scaled.intensities[name] == _stated(d, "model_error", name)[1]
 
 
-def test_tuning_a_map_scale_filter_names_its_own_table(default_description, default_scenario):
-    """Tuned with μ as map scales and the stiffness as a state, the result belongs in
-    [estimator.model_error_map_scale] and multiplies that table's values."""
-    d = _map_scale(default_description)
+@pytest.mark.parametrize(
+    ("mu_model", "table"),
+    [("random_walk", MODEL_ERROR_AUGMENTED), ("map_scale", MODEL_ERROR_MAP_SCALE)],
+)
+def test_tuning_with_the_stiffness_names_its_own_table(
+    default_description, default_scenario, mu_model, table
+):
+    """Tuned with the stiffness as a state, the result belongs in [estimator.model_error_augmented]
+    (with μ as map scales: [estimator.model_error_map_scale]) and multiplies that table's
+    values, so that the thesis filter's stay their own."""
+    d = default_description
+    d = replace(d, estimator=replace(d.estimator, mu_model=mu_model))
     from gearsym.validation.sim.fleet import load_fleet
     from gearsym.validation.studies.estimation.tuning import tune_model_error
 
@@ -144,13 +129,15 @@ def test_tuning_a_map_scale_filter_names_its_own_table(default_description, defa
         load_fleet(d),
         [500002],
         factors=(2.0,),
-        twist_factors=(1.0,),
+        twist_factors=(0.5,),
         parameters=THESIS_AND_STIFFNESS,
     )
-    _, speed = _stated(d, MODEL_ERROR_MAP_SCALE, "omega_1")
+    _, twist = _stated(d, table, "phi")
+    _, speed = _stated(d, table, "omega_1")
+    assert result.intensities["phi"] == pytest.approx(0.5 * twist)
     assert result.intensities["omega_1"] == pytest.approx(2.0 * speed)
-    assert result.table == MODEL_ERROR_MAP_SCALE
-    assert f"[estimator.{MODEL_ERROR_MAP_SCALE}]" in result.text()
+    assert result.table == table
+    assert f"[estimator.{table}]" in result.text()
 
 
 def _gearsym(*args: str) -> subprocess.CompletedProcess:
