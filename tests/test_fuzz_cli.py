@@ -192,7 +192,14 @@ def _plausible_change(tree: dict[str, Any], data: st.DataObject) -> dict[str, An
         )
         return _rename_everywhere(tree, old, new)
     if kind == "scale-value":
-        quantities = [p for p in _paths(tree) if p[-1] == "value"]
+        # a scalar quantity (a schedule's "value" is a list: scaling it is another change)
+        quantities = [
+            p
+            for p in _paths(tree)
+            if p[-1] == "value"
+            and isinstance(_get(tree, p), int | float)
+            and not isinstance(_get(tree, p), bool)
+        ]
         path = data.draw(st.sampled_from(quantities), label="quantity")
         factor = data.draw(st.sampled_from([0.5, 0.9, 1.1, 2.0, -1.0, 0.0]), label="factor")
         _get(tree, path[:-1])["value"] = _get(tree, path) * factor
