@@ -62,10 +62,15 @@ def _coverage(stats: dict[str, Any]) -> str:
     return f"{100 * value:.0f} %{flag} of {stats['samples']}"
 
 
+def _inside(value: float | None, band: Sequence[float] | None) -> bool:
+    """A consistency statistic inside its χ² band (the edges included)."""
+    return value is not None and band is not None and band[0] <= value <= band[1]
+
+
 def _band(value: float | None, band: Sequence[float] | None) -> str:
     if value is None or band is None:
         return "—"
-    inside = band[0] <= value <= band[1]
+    inside = _inside(value, band)
     return f"{value:.3g} in [{band[0]:.3g}, {band[1]:.3g}]: {'inside' if inside else 'OUTSIDE'}"
 
 
@@ -216,8 +221,8 @@ def criteria(data: dict[str, Any]) -> list[str]:
         for name, entry in data["parameters"].items()
         if name.startswith("mu_") and entry["final"].get("coverage_95") is not None
     }
-    nees = data["nees_band"][0] <= data["nees_mean"] <= data["nees_band"][1]
-    nis = data["nis_band"][0] <= data["nis_mean"] <= data["nis_band"][1]
+    nees = _inside(data.get("nees_mean"), data.get("nees_band"))
+    nis = _inside(data.get("nis_mean"), data.get("nis_band"))
     worst = max(efficiency) if efficiency else None
     mu_missed = [n for n, v in mu.items() if v < MU_KEPT_SHARE]
     return [
