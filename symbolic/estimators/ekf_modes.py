@@ -332,6 +332,7 @@ def ekf_mode_update(
     p: Sequence[float],
     modes: Mapping[str, int],
     sync_band: float = 0.0,
+    lock_ups_only: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, dict[str, int], list[ModeEvent]]:
     """One decision of the filter's own mode logic (module text), after the measurement update
     at a sample: from the posterior (``z``, ``P``), the known inputs ``u`` at the sample (its
@@ -343,7 +344,14 @@ def ekf_mode_update(
     sample before it crosses, and the on-coming pressure the TCU raises at synchronism then
     drives the filter's μ down if the sliding model stays). The elements are taken in turn
     (off-going first), each seeing the other's mode as already decided. Pure: the arguments
-    are not modified."""
+    are not modified.
+
+    ``lock_ups_only``: only a sliding element that locks up (sticks) switches; every other
+    decision (opening, engagement, break-away, a slip that reaches zero but cannot stick) is
+    left to the decision after the update. This is the check on the *predicted* state before
+    the measurement update (:func:`~gearsym.validation.studies.estimation.loop.filter_run`):
+    an element that locked up inside the interval is mapped before the sample's measurement
+    is weighed, not one sample later."""
     import numpy as np
 
     z = np.array(z, dtype=float)
@@ -356,6 +364,8 @@ def ekf_mode_update(
         code = new[e]
         sign = aug.slip_sign[e]
         force = float(u[logic.normal_force[e]])
+        if lock_ups_only and (code in (OPEN, STICK) or not force > 0):
+            continue
         if not force > 0:
             if code != OPEN:
                 new[e] = OPEN
@@ -387,7 +397,7 @@ def ekf_mode_update(
                     events.append(ModeEvent(e, LOCK_UP, code, STICK))
                     continue
                 direction = _direction(needed[i], sign)
-            if direction != code:
+            if direction != code and not lock_ups_only:
                 new[e] = direction
                 events.append(ModeEvent(e, LOCK_UP, code, direction))
     return z, P, new, events
