@@ -319,6 +319,27 @@ def ambiguous_mu(
     return out
 
 
+def _slip_sigma(
+    logic: ModeLogic,
+    z: np.ndarray,
+    P: np.ndarray,
+    u: Sequence[float],
+    p: Sequence[float],
+    modes: Mapping[str, int],
+    i: int,
+) -> float:
+    """σ of element ``i``'s estimated slip (σ² = g P gᵀ, g = ∂slip/∂z)."""
+    import numpy as np
+
+    n = len(logic.aug.state_names)
+    gradient, _ = (
+        np.asarray(v, dtype=float)
+        for v in logic.slip_gradient_fn(np.asarray(z, dtype=float)[:n], logic.inputs(u, modes), p)
+    )
+    g = gradient[i]
+    return float(np.sqrt(max(float(g @ np.asarray(P, dtype=float)[:n, :n] @ g), 0.0)))
+
+
 def _direction(value: float, slip_sign: int) -> int:
     """The slide code whose slip sign (2.70) is the sign of ``value`` (+1 at zero)."""
     return SLIDE_NEG if value * slip_sign < 0 else SLIDE_POS
@@ -333,6 +354,7 @@ def ekf_mode_update(
     modes: Mapping[str, int],
     sync_band: float = 0.0,
     lock_ups_only: bool = False,
+    passed_sigmas: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, dict[str, int], list[ModeEvent]]:
     """One decision of the filter's own mode logic (module text), after the measurement update
     at a sample: from the posterior (``z``, ``P``), the known inputs ``u`` at the sample (its
@@ -351,7 +373,9 @@ def ekf_mode_update(
     left to the decision after the update. This is the check on the *predicted* state before
     the measurement update (:func:`~gearsym.validation.studies.estimation.loop.filter_run`):
     an element that locked up inside the interval is mapped before the sample's measurement
-    is weighed, not one sample later."""
+    is weighed, not one sample later. ``passed_sigmas``: a lock-up also needs the slip to
+    have passed zero by this many of its σ (σ² = g P gᵀ, g = ∂slip/∂z), i.e. the filter is that
+    sure the element has locked up (a prediction's slip has the σ of a prediction)."""
     import numpy as np
 
     z = np.array(z, dtype=float)
@@ -379,7 +403,9 @@ def ekf_mode_update(
             if abs(torque[i]) > capacity[i]:
                 new[e] = _direction(torque[i], sign)
                 events.append(ModeEvent(e, BREAK_AWAY, code, new[e]))
-        elif code * sign * slip[i] <= sync_band:  # sliding, and the slip has reached zero
+        elif code * sign * slip[i] <= sync_band - (
+            passed_sigmas * _slip_sigma(logic, z, P, u, p, new, i) if passed_sigmas else 0.0
+        ):  # sliding, and the slip has reached zero (passed it by passed_sigmas σ)
             candidate = {**new, e: STICK}
             if new[other] == STICK:  # a tie-up: it cannot stick, it slides on
                 direction = _direction(torque[i], sign)
