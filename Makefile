@@ -46,7 +46,7 @@ run: $(STAMP)
 RESULTS := docs/results
 results: $(STAMP)
 	rm -rf build/results/fleet_ekf_2_3
-	$(BIN)/gearsym estimate --filter ekf --fleet --runs 200 --seed 10000 --out build/results/fleet_ekf_2_3
+	$(BIN)/gearsym estimate --filter ekf --fleet --runs 200 --seed 10000 --scheduler local --out build/results/fleet_ekf_2_3
 	mkdir -p $(RESULTS)
 	cp build/results/fleet_ekf_2_3/fleet.json $(RESULTS)/fleet_ekf_2_3.json
 	cp build/results/fleet_ekf_2_3/fleet.md $(RESULTS)/fleet_ekf_2_3.md
