@@ -302,7 +302,7 @@ def ambiguous_mu(
     z = np.asarray(z, dtype=float)[:n]
     P = np.asarray(P, dtype=float)[:n, :n]
     slip, _, _ = logic._evaluate(z, inputs, p)
-    gradient, rate = (np.asarray(v, dtype=float) for v in logic.slip_gradient_fn(z, inputs, p))
+    _, rate = (np.asarray(v, dtype=float) for v in logic.slip_gradient_fn(z, inputs, p))
     out = []
     for i, e in enumerate(logic.elements):
         code = modes[e]
@@ -312,9 +312,7 @@ def ambiguous_mu(
         direction = code * logic.aug.slip_sign[e]
         if not direction * float(rate[i, 0]) < 0.0:  # not closing
             continue
-        g = gradient[i]
-        sigma = float(np.sqrt(max(float(g @ P @ g), 0.0)))
-        if direction * slip[i] < sigmas * sigma:
+        if direction * slip[i] < sigmas * _slip_sigma(logic, z, P, u, p, modes, i):
             out.append(j)
     return out
 
