@@ -293,16 +293,10 @@ def ambiguous_mu(
     near zero but opening) keeps its updates: whether it slides is what its μ is learnt from.
     ``z``, ``P`` are the prediction at the sample, ``u`` the known inputs there (their mode
     flags are set from ``modes``)."""
-    import numpy as np
 
     inputs = logic.inputs(u, modes)
-    # the model's states only (a state appended outside the model, e.g. the drive EKF's
-    # stiffness factor, has no slip of its own)
-    n = len(logic.aug.state_names)
-    z = np.asarray(z, dtype=float)[:n]
-    P = np.asarray(P, dtype=float)[:n, :n]
     slip, _, _ = logic._evaluate(z, inputs, p)
-    _, rate = (np.asarray(v, dtype=float) for v in logic.slip_gradient_fn(z, inputs, p))
+    sigma, rate = _slip_spread(logic, z, P, inputs, p)
     out = []
     for i, e in enumerate(logic.elements):
         code = modes[e]
@@ -312,30 +306,25 @@ def ambiguous_mu(
         direction = code * logic.aug.slip_sign[e]
         if not direction * float(rate[i, 0]) < 0.0:  # not closing
             continue
-        if direction * slip[i] < sigmas * _slip_sigma(logic, z, P, u, p, modes, i):
+        if direction * slip[i] < sigmas * sigma[i]:
             out.append(j)
     return out
 
 
-def _slip_sigma(
-    logic: ModeLogic,
-    z: np.ndarray,
-    P: np.ndarray,
-    u: Sequence[float],
-    p: Sequence[float],
-    modes: Mapping[str, int],
-    i: int,
-) -> float:
-    """σ of element ``i``'s estimated slip (σ² = g P gᵀ, g = ∂slip/∂z)."""
+def _slip_spread(
+    logic: ModeLogic, z: np.ndarray, P: np.ndarray, inputs: np.ndarray, p: Sequence[float]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per element: σ of its estimated slip (σ² = g P gᵀ, g = ∂slip/∂z) and the slip's rate,
+    over the model's states only (a state appended outside the model, e.g. the drive EKF's
+    stiffness factor, has no slip of its own). ``inputs`` carry the mode flags."""
     import numpy as np
 
     n = len(logic.aug.state_names)
-    gradient, _ = (
-        np.asarray(v, dtype=float)
-        for v in logic.slip_gradient_fn(np.asarray(z, dtype=float)[:n], logic.inputs(u, modes), p)
-    )
-    g = gradient[i]
-    return float(np.sqrt(max(float(g @ np.asarray(P, dtype=float)[:n, :n] @ g), 0.0)))
+    z = np.asarray(z, dtype=float)[:n]
+    P = np.asarray(P, dtype=float)[:n, :n]
+    gradient, rate = (np.asarray(v, dtype=float) for v in logic.slip_gradient_fn(z, inputs, p))
+    sigma = np.array([np.sqrt(max(float(g @ P @ g), 0.0)) for g in gradient])
+    return sigma, rate
 
 
 def _direction(value: float, slip_sign: int) -> int:
@@ -402,7 +391,9 @@ def ekf_mode_update(
                 new[e] = _direction(torque[i], sign)
                 events.append(ModeEvent(e, BREAK_AWAY, code, new[e]))
         elif code * sign * slip[i] <= sync_band - (
-            passed_sigmas * _slip_sigma(logic, z, P, u, p, new, i) if passed_sigmas else 0.0
+            passed_sigmas * _slip_spread(logic, z, P, logic.inputs(u, new), p)[0][i]
+            if passed_sigmas
+            else 0.0
         ):  # sliding, and the slip has reached zero (passed it by passed_sigmas σ)
             candidate = {**new, e: STICK}
             if new[other] == STICK:  # a tie-up: it cannot stick, it slides on

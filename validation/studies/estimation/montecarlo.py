@@ -173,11 +173,10 @@ class EkfMonteCarlo:
     def nees_band(self, probability: float = 0.95) -> tuple[float, float]:
         """Band of the NEES mean of a consistent filter: one sample's mean over the R runs is
         χ²(R n)/R (n its dof, the runs independent); the time average of such means, which are
-        correlated in time, scatters no more than one of them. n: the mean dof (over the
-        samples and the runs: a sample a lock-up leaves semidefinite counts its rank)."""
+        correlated in time, scatters no more than one of them. n: the mean dof."""
         from scipy.stats import chi2
 
-        runs, dof = len(self.runs), float(np.mean(self._stack("nees_dof")))
+        runs, dof = len(self.runs), float(np.mean(self.first.nees_dof))
         return (
             float(chi2.ppf((1 - probability) / 2, runs * dof) / runs),
             float(chi2.ppf((1 + probability) / 2, runs * dof) / runs),
@@ -187,7 +186,7 @@ class EkfMonteCarlo:
         """Fraction of samples whose run-averaged NEES lies inside its χ²(R n_k)/R band."""
         from scipy.stats import chi2
 
-        runs, dof = len(self.runs), np.mean(self._stack("nees_dof"), axis=0)
+        runs, dof = len(self.runs), self.first.nees_dof
         lo = chi2.ppf((1 - probability) / 2, runs * dof) / runs
         hi = chi2.ppf((1 + probability) / 2, runs * dof) / runs
         mean = self.nees_run_mean()
@@ -248,7 +247,7 @@ class EkfMonteCarlo:
             "bound": BOUND_ASSUMPTION,
             "nees_mean": self.nees_mean,
             "nees_band": list(band),
-            "nees_dof_mean": float(np.mean(self._stack("nees_dof"))),
+            "nees_dof_mean": float(np.mean(first.nees_dof)),
             "nees_inside_95": self.nees_inside(),
             "nis_mean": float(np.mean(nis[:, used])) if used.any() else None,
             "nis_band": list(_chi2_mean_band(np.tile(nis_dof[used], len(self.runs))))
