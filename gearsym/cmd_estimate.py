@@ -59,11 +59,11 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         measured_truth,
     )
 
-    if args.input_hold != "sample" and (args.fleet is None or args.tune):
+    if args.input_hold != "sample" and args.fleet is None:
         raise GearsymError(
             "estimate",
             "--input-hold",
-            "mean is for the EKF over a fleet (--fleet, without --tune) only so far",
+            "mean is for the EKF over a fleet (--fleet, also with --tune) only so far",
         )
     d = load(args.config)
     calibration = Calibration(

@@ -30,10 +30,9 @@ def test_the_mean_averages_the_known_inputs_and_holds_the_flags():
     assert held == pytest.approx([150.0, 910.0, 1.0, 0.0, 1.0])  # not modified
 
 
-@pytest.mark.parametrize("extra", [(), ("--fleet", "--tune")])
-def test_the_mean_is_refused_where_it_is_not_built(extra):
-    """Without --fleet (or with --tune) the option would be ignored: one line, exit 2."""
-    result = gearsym("estimate", "--filter", "ekf", "--input-hold", "mean", *extra)
+def test_the_mean_is_refused_where_it_is_not_built():
+    """Without --fleet the option would be ignored: one line, exit 2."""
+    result = gearsym("estimate", "--filter", "ekf", "--input-hold", "mean")
     assert result.returncode == 2 and result.stdout == ""
     (line,) = result.stderr.strip().splitlines()
     assert "--input-hold" in line and "fleet" in line, line
@@ -65,6 +64,40 @@ def test_on_the_3_4_the_mean_keeps_the_on_coming_mu_within_its_sigma(default_des
         z_scores[hold] = (estimate - truth) / sigma
     assert z_scores["sample"] > 4.0, z_scores
     assert abs(z_scores["mean"]) < 2.0, z_scores
+
+
+def test_tuning_runs_the_filter_with_the_hold_it_is_told(default_description, default_scenario):
+    """The tuning's sums at the factors (1, 1) are the evaluation's NEES and NIS sums of the
+    same vehicle with the same input hold (two code paths: run_fleet and tuning_sums), and the
+    mean's sums differ from the held inputs' (so the hold reaches the filter)."""
+    from gearsym.validation.sim.fleet import load_fleet
+    from gearsym.validation.studies.estimation.fleet_eval import run_fleet
+    from gearsym.validation.studies.estimation.tuning import tune_model_error
+
+    d, seed = default_description, 500002
+    fleet = load_fleet(d)
+    sums = {}
+    for hold in ("sample", "mean"):
+        tuned = tune_model_error(
+            d,
+            default_scenario,
+            fleet,
+            [seed],
+            factors=(1.0,),
+            twist_factors=(1.0,),
+            input_hold=hold,
+        )
+        assert tuned.input_hold == hold and tuned.to_dict()["input_hold"] == hold
+        (run,) = run_fleet(
+            d, default_scenario, fleet, runs=1, seed=seed, bound=False, input_hold=hold
+        ).runs
+        used = run.run.nis_dof > 0
+        nees = float(np.sum(run.run.nees)) / float(np.sum(run.run.nees_dof))
+        nis = float(np.sum(run.run.nis[used])) / float(np.sum(run.run.nis_dof[used]))
+        assert tuned.nees_per_dof[0] == pytest.approx(nees, rel=1e-12)
+        assert tuned.nis_per_dof[0] == pytest.approx(nis, rel=1e-12)
+        sums[hold] = (nees, nis)
+    assert sums["mean"] != pytest.approx(sums["sample"], rel=1e-6), sums
 
 
 def test_under_the_map_scale_the_mean_is_taken_before_the_map(

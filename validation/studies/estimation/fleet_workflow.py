@@ -181,6 +181,7 @@ def _tune(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> 
                 progress=update,
                 client=client,
                 parameters=cal.parameters,
+                input_hold=cal.input_hold,
             )
         finally:
             done()

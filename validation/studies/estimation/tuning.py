@@ -55,6 +55,9 @@ class TuningResult:
     #: ``model_error_augmented`` for a filter that estimates more than the thesis' parameters,
     #: ``model_error_map_scale`` for such a filter with its μ states map scales)
     table: str = "model_error"
+    #: the known inputs over a prediction interval the filter was tuned with
+    #: (:attr:`~gearsym.validation.studies.estimation.setup.EkfSetup.input_hold`)
+    input_hold: str = "sample"
 
     def criterion(self, k: int) -> float:
         return math.log(self.nees_per_dof[k]) ** 2 + math.log(self.nis_per_dof[k]) ** 2
@@ -70,13 +73,14 @@ class TuningResult:
             "model_error": self.intensities,
             "table": f"estimator.{self.table}",
             "from": self.base,
+            "input_hold": self.input_hold,
         }
 
     def text(self) -> str:
         lines = [
             f"  tuned on the fleet {self.fleet}, seeds {self.seeds[0]}-{self.seeds[-1]} "
             f"({len(self.seeds)} vehicles): factors c on the speeds' and c_phi on the twist's "
-            "model-error intensities",
+            f"model-error intensities (the inputs held over an interval: {self.input_hold})",
             f"    {'c':>6} {'c_phi':>7} {'NEES/dof':>9} {'NIS/dof':>9} {'criterion':>10}",
         ]
         for k, (c, c_phi) in enumerate(self.factors):
@@ -103,13 +107,16 @@ def tune_model_error(
     progress: Callable[[float, str], None] | None = None,
     client: Any = None,
     parameters: Sequence[str] | None = None,
+    input_hold: str = "sample",
 ) -> TuningResult:
     """Choose the factors on the calibration's model-error intensities (module text): every
     tuning vehicle simulated once, the filter run once per pair of factors on the same
     noise. ``client``: a ``dask.distributed`` client; the vehicles then run on its workers
     (:func:`~gearsym.validation.studies.estimation.fleet_eval.each_vehicle`), the same
     numbers as without. ``parameters``: the filter's augmented parameters (``None``: the
-    thesis' 4.1), e.g. with the side shafts' stiffness k_ss."""
+    thesis' 4.1), e.g. with the side shafts' stiffness k_ss. ``input_hold``: the known
+    inputs over a prediction interval (``"sample"`` or the interval's ``"mean"``), as the
+    evaluation that will use the intensities runs."""
     from gearsym.symbolic import naming
     from gearsym.symbolic.estimator_calibration import (
         AUGMENTED_STATES,
@@ -147,6 +154,7 @@ def tune_model_error(
         nominal.floor,
         nominal.t,
         parameters=None if parameters is None else tuple(parameters),
+        input_hold=input_hold,
     )
 
     def told(done: int, total: int, outcome: Any) -> None:
@@ -182,6 +190,7 @@ def tune_model_error(
         },
         table=table,
         base=base,
+        input_hold=input_hold,
     )
 
 
