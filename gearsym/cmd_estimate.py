@@ -92,6 +92,9 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         truths = drive_truths(d, args.drive)
     else:
         truths = (Truth(scenario, source),)
+    if args.tune_scenario and not args.tune:
+        raise GearsymError("estimate", "--tune-scenario", "is for --fleet --tune only")
+    tune_scenarios = tuple(load_scenario(d, path) for path in args.tune_scenario or ())
     fleet = None
     if args.fleet is not None:
         from gearsym.validation.sim.fleet import load_fleet
@@ -111,6 +114,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         plots=not args.no_plots,
         fleet=fleet,
         tune=args.tune,
+        tune_scenarios=tune_scenarios,
         scheduler=args.scheduler,
         workers=args.workers,
         command=" ".join(["gearsym", *sys.argv[1:]]) if sys.argv[1:] else "",
@@ -328,6 +332,15 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "(seeds --seed ...): one factor on the calibration's values, NEES/dof and NIS/dof "
         "nearest 1; prints the values for the description's [estimator.model_error] table "
         "(tune and evaluate on different seeds)",
+    )
+    p.add_argument(
+        "--tune-scenario",
+        action="append",
+        default=None,
+        metavar="FILE",
+        help="with --tune (repeatable): tune on this shift too, every tuning vehicle running "
+        "each shift and NEES and NIS summed over all: one calibration's intensities for every "
+        "shift it serves (--scenario, or the built-in 2-3, is the first)",
     )
     p.add_argument(
         "--input-hold",

@@ -66,6 +66,51 @@ def test_on_the_3_4_the_mean_keeps_the_on_coming_mu_within_its_sigma(default_des
     assert abs(z_scores["mean"]) < 2.0, z_scores
 
 
+def test_on_the_1_2_the_mean_removes_the_on_coming_scales_and_the_stiffness_bias(
+    default_description,
+):
+    """The calibration's own vehicle on the shipped 1-2 with μ as map scales and the side
+    shafts' stiffness as a state: held at the interval's start, the on-coming K81's rising
+    force is under-predicted over every interval of its ramp, and the filter ends the shift with
+    K81's scale more than 3 σ and the stiffness more than 2 σ high (the 1-2 fleet table's K81
+    scale read 0.165 high); with the interval's mean both lie within 2 σ of the truth."""
+    from dataclasses import replace
+    from pathlib import Path
+
+    from gearsym.validation.sim.fleet import parse_fleet
+    from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.studies.estimation.fleet_eval import run_fleet
+
+    import gearsym
+
+    d = default_description
+    d = replace(d, estimator=replace(d.estimator, mu_model="map_scale"))
+    scenario = load_scenario(d, Path(gearsym.__file__).parent / "data" / "scenario_1_2.toml")
+    fleet = parse_fleet(
+        '[fleet]\nname = "own"\nm_veh = { value = 1800.0, unit = "kg", source = "t" }\n',
+        "own.toml",
+        d,
+    )
+    z_scores = {}
+    for hold in ("sample", "mean"):
+        ev = run_fleet(
+            d,
+            scenario,
+            fleet,
+            runs=1,
+            seed=700002,
+            bound=False,
+            input_hold=hold,
+            parameters=("m_veh", "mu_05", "mu_81", "zeta", "k_ss"),
+        )
+        rows = ev.final_rows(ev.runs[0])
+        z_scores[hold] = {
+            name: (rows[name][0] - rows[name][2]) / rows[name][1] for name in ("mu_81", "k_ss")
+        }
+    assert z_scores["sample"]["mu_81"] > 3.0 and z_scores["sample"]["k_ss"] > 2.0, z_scores
+    assert max(abs(z) for z in z_scores["mean"].values()) < 2.0, z_scores
+
+
 def test_tuning_runs_the_filter_with_the_hold_it_is_told(default_description, default_scenario):
     """The tuning's sums at the factors (1, 1) are the evaluation's NEES and NIS sums of the
     same vehicle with the same input hold (two code paths: run_fleet and tuning_sums), and the
@@ -143,3 +188,68 @@ def test_under_the_map_scale_the_mean_is_taken_before_the_map(
     assert rising.size > 3
     ratios = np.array(seen)[rising] / means[rising]
     assert np.all((ratios > 0.05) & (ratios < 0.3)), ratios
+
+
+def test_tuning_over_several_shifts_sums_their_nees_and_nis(default_description, default_scenario):
+    """--tune-scenario: each tuning vehicle runs every shift, each shift's filter with its own
+    elements' μ in place of the first shift's, and the NEES/dof and NIS/dof at a factor pair
+    are the sums over all shifts' samples over the summed dof, here checked against the
+    evaluation (run_fleet) of each shift on its own for the same vehicle."""
+    from pathlib import Path
+
+    from gearsym.validation.sim.fleet import load_fleet
+    from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.studies.estimation.fleet_eval import run_fleet
+    from gearsym.validation.studies.estimation.tuning import tune_model_error
+
+    import gearsym
+
+    d, seed = default_description, 500003
+    fleet = load_fleet(d)
+    scenarios = (
+        default_scenario,
+        load_scenario(d, Path(gearsym.__file__).parent / "data" / "scenario_3_4.toml"),
+    )
+    own = {
+        "2-3": ("m_veh", "mu_38", "mu_05", "zeta", "k_ss"),
+        "3-4": ("m_veh", "mu_81", "mu_27", "zeta", "k_ss"),  # each shift's own μ (4.1)
+    }
+    tuned = tune_model_error(
+        d,
+        scenarios,
+        fleet,
+        [seed],
+        factors=(1.0,),
+        twist_factors=(1.0,),
+        parameters=own["2-3"],
+        input_hold="mean",
+    )
+    assert tuned.shifts == ("2-3", "3-4") and tuned.to_dict()["shifts"] == ["2-3", "3-4"]
+    sums = np.zeros(4)
+    for scenario in scenarios:
+        (run,) = run_fleet(
+            d,
+            scenario,
+            fleet,
+            runs=1,
+            seed=seed,
+            bound=False,
+            input_hold="mean",
+            parameters=own[scenario.shift.name],
+        ).runs
+        used = run.run.nis_dof > 0
+        sums += [
+            np.sum(run.run.nees),
+            np.sum(run.run.nees_dof),
+            np.sum(run.run.nis[used]),
+            np.sum(run.run.nis_dof[used]),
+        ]
+    assert tuned.nees_per_dof[0] == pytest.approx(sums[0] / sums[1], rel=1e-12)
+    assert tuned.nis_per_dof[0] == pytest.approx(sums[2] / sums[3], rel=1e-12)
+
+
+def test_tune_scenario_is_refused_without_tune():
+    result = gearsym("estimate", "--filter", "ekf", "--tune-scenario", "any.toml")
+    assert result.returncode == 2 and result.stdout == ""
+    (line,) = result.stderr.strip().splitlines()
+    assert "--tune-scenario" in line and "--tune" in line, line

@@ -169,11 +169,13 @@ def _tune(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> 
     cal, truth = request.calibration, request.truth
     seeds = list(range(request.seed, request.seed + request.runs))
     with _dask(request, reporter) as client:
-        update, done = reporter.bar(f"tuning over the fleet, {request.runs} vehicles")
+        shifts = 1 + len(request.tune_scenarios)
+        each = f" x {shifts} shifts" if shifts > 1 else ""
+        update, done = reporter.bar(f"tuning over the fleet, {request.runs} vehicles{each}")
         try:
             result = tune_model_error(
                 cal.description,
-                truth.scenario,
+                (truth.scenario, *request.tune_scenarios),
                 request.fleet,
                 seeds,
                 sample_time=cal.filter_sample_time,

@@ -131,6 +131,9 @@ class EstimateRequest:
     #: with ``fleet``: tune the model-error intensities on these runs' vehicles instead of
     #: evaluating (:func:`~gearsym.validation.studies.estimation.tuning.tune_model_error`)
     tune: bool = False
+    #: with ``tune``: further shifts (scenarios) every tuning vehicle runs besides the truth's:
+    #: one calibration's intensities for every shift it serves
+    tune_scenarios: tuple[Any, ...] = ()
     #: with ``fleet``: run the vehicles on Dask, ``"local"`` (a LocalCluster of ``workers``
     #: processes, default :data:`DEFAULT_WORKERS`) or ``"tcp://HOST:PORT"`` (a running
     #: scheduler and its workers); ``None``: one after the other in this process

@@ -58,6 +58,8 @@ class TuningResult:
     #: the known inputs over a prediction interval the filter was tuned with
     #: (:attr:`~gearsym.validation.studies.estimation.setup.EkfSetup.input_hold`)
     input_hold: str = "sample"
+    #: the shifts tuned on (every tuning vehicle runs each; the sums are over all of them)
+    shifts: tuple[str, ...] = ()
 
     def criterion(self, k: int) -> float:
         return math.log(self.nees_per_dof[k]) ** 2 + math.log(self.nis_per_dof[k]) ** 2
@@ -74,12 +76,14 @@ class TuningResult:
             "table": f"estimator.{self.table}",
             "from": self.base,
             "input_hold": self.input_hold,
+            "shifts": list(self.shifts),
         }
 
     def text(self) -> str:
         lines = [
             f"  tuned on the fleet {self.fleet}, seeds {self.seeds[0]}-{self.seeds[-1]} "
-            f"({len(self.seeds)} vehicles): factors c on the speeds' and c_phi on the twist's "
+            f"({len(self.seeds)} vehicles) on the shift(s) {', '.join(self.shifts)}: factors c on "
+            "the speeds' and c_phi on the twist's "
             f"model-error intensities (the inputs held over an interval: {self.input_hold})",
             f"    {'c':>6} {'c_phi':>7} {'NEES/dof':>9} {'NIS/dof':>9} {'criterion':>10}",
         ]
@@ -97,7 +101,7 @@ class TuningResult:
 
 def tune_model_error(
     d: GearboxDescription,
-    scenario: Scenario,
+    scenario: Scenario | Sequence[Scenario],
     fleet: Fleet,
     seeds: Sequence[int],
     sample_time: float = 0.01,
@@ -116,7 +120,9 @@ def tune_model_error(
     numbers as without. ``parameters``: the filter's augmented parameters (``None``: the
     thesis' 4.1), e.g. with the side shafts' stiffness k_ss. ``input_hold``: the known
     inputs over a prediction interval (``"sample"`` or the interval's ``"mean"``), as the
-    evaluation that will use the intensities runs."""
+    evaluation that will use the intensities runs. ``scenario``: one shift, or several (every
+    tuning vehicle runs each, and NEES and NIS are summed over all of them): one calibration's
+    intensities for every shift it serves."""
     from gearsym.symbolic import naming
     from gearsym.symbolic.estimator_calibration import (
         AUGMENTED_STATES,
@@ -138,41 +144,63 @@ def tune_model_error(
     if not seeds:
         raise GearsymError("estimate", "--runs", "tuning needs at least one seed")
     report = progress or (lambda fraction, message: None)
-    model = filter_model(d, scenario.shift.name, parameters=parameters)
-    aug = model.aug
-    nominal = calibration_setup(d, scenario, model, sample_time, relative_noise)
-    n_x = aug.n_x
-    base = {name: float(q) for name, q in zip(aug.state_names[:n_x], nominal.q, strict=False)}
+    scenarios = (scenario,) if isinstance(scenario, Scenario) else tuple(scenario)
+    if not scenarios:
+        raise GearsymError("estimate", "--scenario", "tuning needs at least one shift")
     grid = [(float(c), float(c_phi)) for c in factors for c_phi in twist_factors]
-    context = FleetContext(
-        d,
-        scenario,
-        fleet,
-        sample_time,
-        relative_noise,
-        "filter",
-        nominal.floor,
-        nominal.t,
-        parameters=None if parameters is None else tuple(parameters),
-        input_hold=input_hold,
-    )
-
-    def told(done: int, total: int, outcome: Any) -> None:
-        report(done / total, f"vehicle {done} of {total}")
-
-    outcomes = each_vehicle(
-        list(seeds),
-        lambda seed: tuning_sums(context, model, seed, grid),
-        _tuning_task,
-        context,
-        client,
-        told,
-        args=(grid,),
-    )
     sums = np.zeros((len(grid), 4))  # NEES, its dof, NIS, its dof
-    for vehicle in outcomes:
-        if vehicle is not None:  # a vehicle the reference cannot simulate does not tune
-            sums += vehicle
+    base: dict[str, float] = {}
+    for number, shift_scenario in enumerate(scenarios):
+        own_parameters = _shift_parameters(
+            d, scenarios[0].shift.name, shift_scenario.shift.name, parameters
+        )
+        model = filter_model(d, shift_scenario.shift.name, parameters=own_parameters)
+        aug = model.aug
+        nominal = calibration_setup(d, shift_scenario, model, sample_time, relative_noise)
+        n_x = aug.n_x
+        names = aug.state_names[:n_x]
+        own = {name: float(q) for name, q in zip(names, nominal.q, strict=False)}
+        if base and own != base:  # one factor per group scales every shift's intensities
+            raise GearsymError(
+                "estimate",
+                "--tune-scenario",
+                f"the {shift_scenario.shift.name} filter's model-error states or intensities "
+                f"({', '.join(own)}) differ from the {scenarios[0].shift.name} filter's "
+                f"({', '.join(base)}): tune them apart",
+            )
+        base = own
+        context = FleetContext(
+            d,
+            shift_scenario,
+            fleet,
+            sample_time,
+            relative_noise,
+            "filter",
+            nominal.floor,
+            nominal.t,
+            parameters=own_parameters,
+            input_hold=input_hold,
+        )
+
+        def told(done: int, total: int, outcome: Any, number: int = number) -> None:
+            overall = number * total + done
+            report(
+                overall / (total * len(scenarios)),
+                f"vehicle {overall} of {total * len(scenarios)}",
+            )
+
+        outcomes = each_vehicle(
+            list(seeds),
+            lambda seed, context=context, model=model: tuning_sums(context, model, seed, grid),
+            _tuning_task,
+            context,
+            client,
+            told,
+            args=(grid,),
+        )
+        for vehicle in outcomes:
+            if vehicle is not None:  # a vehicle the reference cannot simulate does not tune
+                sums += vehicle
     nees = tuple(float(v) for v in sums[:, 0] / sums[:, 1])
     nis = tuple(float(v) for v in sums[:, 2] / sums[:, 3])
     scores = [math.log(a) ** 2 + math.log(b) ** 2 for a, b in zip(nees, nis, strict=True)]
@@ -191,7 +219,24 @@ def tune_model_error(
         table=table,
         base=base,
         input_hold=input_hold,
+        shifts=tuple(sc.shift.name for sc in scenarios),
     )
+
+
+def _shift_parameters(
+    d: GearboxDescription, first: str, shift: str, parameters: Sequence[str] | None
+) -> tuple[str, ...] | None:
+    """The augmented parameters of ``shift``'s filter given those of the ``first`` shift's: the
+    off-going and the on-coming element's μ (4.1) replaced by ``shift``'s own, everything else
+    (m_veh, ζ, the fleet's tolerances) kept."""
+    from gearsym.symbolic.estimators.ekf import default_parameters
+
+    if parameters is None or shift == first:
+        return None if parameters is None else tuple(parameters)
+    swap = dict(
+        zip(default_parameters(d, first)[1:3], default_parameters(d, shift)[1:3], strict=True)
+    )
+    return tuple(swap.get(name, name) for name in parameters)
 
 
 def tuning_sums(
