@@ -92,10 +92,22 @@ def _map_scale(d):
 
 def test_a_map_scale_filter_takes_its_own_tuned_intensities(default_description):
     """With the μ states map scales and the fleet's tolerances as states, the speeds and the
-    twist take [estimator.model_error_map_scale]'s values (each differs from the random-walk
+    twist take [estimator.model_error_map_scale]'s values (made to differ from the random-walk
     form's [estimator.model_error_augmented]); the random-walk form and a map-scale filter of
     the thesis' parameters alone keep theirs."""
     d = default_description
+    # the map-scale table's values made distinct from every other table's (the shipped
+    # tables may share a value, as phi's 1.5e-5 does), so that the test sees which is taken
+    d = replace(
+        d,
+        estimator=replace(
+            d.estimator,
+            model_error_map_scale=tuple(
+                (name, replace(t, value=7.0 * t.value))
+                for name, t in d.estimator.model_error_map_scale
+            ),
+        ),
+    )
     scaled = _map_scale(d)
     aug = augmented_model(scaled, "2-3", THESIS_AND_STIFFNESS)
     random_walk = augmented_model(d, "2-3", THESIS_AND_STIFFNESS)
