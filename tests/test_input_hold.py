@@ -14,6 +14,41 @@ from gearsym.validation.studies.estimation.loop import interval_mean
 
 from tests.test_cli import gearsym
 
+#: The calibration's own vehicle (the description's mass, nothing drawn) and its noise seed.
+OWN_VEHICLE = '[fleet]\nname = "own"\nm_veh = { value = 1800.0, unit = "kg", source = "t" }\n'
+OWN_SEED = 700002
+
+
+def _shipped_scenario(d, name: str):
+    from gearsym.symbolic.io.package_data import data_file
+    from gearsym.validation.sim.scenario import load_scenario
+
+    return load_scenario(d, data_file(name))
+
+
+def _final_rows_per_hold(d, scenario_name: str, parameters=None) -> dict:
+    """The filter's final (estimate, σ, truth) per parameter on the calibration's own vehicle
+    and the shipped scenario, once per input hold ("sample", "mean")."""
+    from gearsym.validation.sim.fleet import parse_fleet
+    from gearsym.validation.studies.estimation.fleet_eval import run_fleet
+
+    scenario = _shipped_scenario(d, scenario_name)
+    fleet = parse_fleet(OWN_VEHICLE, "own.toml", d)
+    rows = {}
+    for hold in ("sample", "mean"):
+        ev = run_fleet(
+            d,
+            scenario,
+            fleet,
+            runs=1,
+            seed=OWN_SEED,
+            bound=False,
+            input_hold=hold,
+            parameters=parameters,
+        )
+        rows[hold] = ev.final_rows(ev.runs[0])
+    return rows
+
 
 def test_the_mean_averages_the_known_inputs_and_holds_the_flags():
     """Inputs T_In, F_N27, slide_K27, stick_K27, valve_K27 at samples 4 and 5: the ramp's
@@ -42,25 +77,10 @@ def test_on_the_3_4_the_mean_keeps_the_on_coming_mu_within_its_sigma(default_des
     """The calibration's own vehicle on the shipped 3-4 (its K27 lock-up ramp 1.3 to 15 bar in
     50 ms): held at the interval's start the filter's μ27 after the shift is more than 4 σ
     above the mean true μ while K27 slid; with the interval's mean within 2 σ of it."""
-    from pathlib import Path
-
-    from gearsym.validation.sim.fleet import parse_fleet
-    from gearsym.validation.sim.scenario import load_scenario
-    from gearsym.validation.studies.estimation.fleet_eval import run_fleet
-
-    import gearsym
-
-    d = default_description
-    scenario = load_scenario(d, Path(gearsym.__file__).parent / "data" / "scenario_3_4.toml")
-    fleet = parse_fleet(
-        '[fleet]\nname = "own"\nm_veh = { value = 1800.0, unit = "kg", source = "t" }\n',
-        "own.toml",
-        d,
-    )
+    rows = _final_rows_per_hold(default_description, "scenario_3_4.toml")
     z_scores = {}
-    for hold in ("sample", "mean"):
-        ev = run_fleet(d, scenario, fleet, runs=1, seed=700002, bound=False, input_hold=hold)
-        estimate, sigma, truth = ev.final_rows(ev.runs[0])["mu_27"]
+    for hold, final in rows.items():
+        estimate, sigma, truth = final["mu_27"]
         z_scores[hold] = (estimate - truth) / sigma
     assert z_scores["sample"] > 4.0, z_scores
     assert abs(z_scores["mean"]) < 2.0, z_scores
@@ -75,38 +95,18 @@ def test_on_the_1_2_the_mean_removes_the_on_coming_scales_and_the_stiffness_bias
     K81's scale more than 3 σ and the stiffness more than 2 σ high (the 1-2 fleet table's K81
     scale read 0.165 high); with the interval's mean both lie within 2 σ of the truth."""
     from dataclasses import replace
-    from pathlib import Path
-
-    from gearsym.validation.sim.fleet import parse_fleet
-    from gearsym.validation.sim.scenario import load_scenario
-    from gearsym.validation.studies.estimation.fleet_eval import run_fleet
-
-    import gearsym
 
     d = default_description
     d = replace(d, estimator=replace(d.estimator, mu_model="map_scale"))
-    scenario = load_scenario(d, Path(gearsym.__file__).parent / "data" / "scenario_1_2.toml")
-    fleet = parse_fleet(
-        '[fleet]\nname = "own"\nm_veh = { value = 1800.0, unit = "kg", source = "t" }\n',
-        "own.toml",
-        d,
+    rows = _final_rows_per_hold(
+        d, "scenario_1_2.toml", parameters=("m_veh", "mu_05", "mu_81", "zeta", "k_ss")
     )
-    z_scores = {}
-    for hold in ("sample", "mean"):
-        ev = run_fleet(
-            d,
-            scenario,
-            fleet,
-            runs=1,
-            seed=700002,
-            bound=False,
-            input_hold=hold,
-            parameters=("m_veh", "mu_05", "mu_81", "zeta", "k_ss"),
-        )
-        rows = ev.final_rows(ev.runs[0])
-        z_scores[hold] = {
-            name: (rows[name][0] - rows[name][2]) / rows[name][1] for name in ("mu_81", "k_ss")
+    z_scores = {
+        hold: {
+            name: (final[name][0] - final[name][2]) / final[name][1] for name in ("mu_81", "k_ss")
         }
+        for hold, final in rows.items()
+    }
     assert z_scores["sample"]["mu_81"] > 3.0 and z_scores["sample"]["k_ss"] > 2.0, z_scores
     assert max(abs(z) for z in z_scores["mean"].values()) < 2.0, z_scores
 
@@ -195,21 +195,14 @@ def test_tuning_over_several_shifts_sums_their_nees_and_nis(default_description,
     elements' μ in place of the first shift's, and the NEES/dof and NIS/dof at a factor pair
     are the sums over all shifts' samples over the summed dof, here checked against the
     evaluation (run_fleet) of each shift on its own for the same vehicle."""
-    from pathlib import Path
 
     from gearsym.validation.sim.fleet import load_fleet
-    from gearsym.validation.sim.scenario import load_scenario
     from gearsym.validation.studies.estimation.fleet_eval import run_fleet
     from gearsym.validation.studies.estimation.tuning import tune_model_error
 
-    import gearsym
-
     d, seed = default_description, 500003
     fleet = load_fleet(d)
-    scenarios = (
-        default_scenario,
-        load_scenario(d, Path(gearsym.__file__).parent / "data" / "scenario_3_4.toml"),
-    )
+    scenarios = (default_scenario, _shipped_scenario(d, "scenario_3_4.toml"))
     own = {
         "2-3": ("m_veh", "mu_38", "mu_05", "zeta", "k_ss"),
         "3-4": ("m_veh", "mu_81", "mu_27", "zeta", "k_ss"),  # each shift's own μ (4.1)
