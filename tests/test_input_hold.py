@@ -246,3 +246,60 @@ def test_tune_scenario_is_refused_without_tune():
     assert result.returncode == 2 and result.stdout == ""
     (line,) = result.stderr.strip().splitlines()
     assert "--tune-scenario" in line and "--tune" in line, line
+
+
+def test_the_command_hands_the_tuning_every_shift_and_the_hold(monkeypatch, capsys):
+    """`gearsym estimate --fleet --tune --input-hold mean --tune-scenario F` reaches the tuning
+    with the --scenario's shift first, then F's, and the mean hold (the tuning itself replaced
+    by a recorder: the plumbing from the command line, not the numbers, which the tests above
+    check)."""
+    import json
+
+    import gearsym.validation.studies.estimation.tuning as tuning
+    from gearsym.symbolic.io.package_data import data_file
+
+    from gearsym.cli import main
+
+    seen = {}
+
+    def recorder(d, scenario, fleet, seeds, **options):  # the real one's signature
+        seen.update(shifts=[s.shift.name for s in scenario], seeds=list(seeds), **options)
+        return tuning.TuningResult(
+            fleet="f",
+            seeds=tuple(seeds),
+            factors=((1.0, 1.0),),
+            nees_per_dof=(1.0,),
+            nis_per_dof=(1.0,),
+            chosen=(1.0, 1.0),
+            intensities={},
+            base={},
+            input_hold=options["input_hold"],
+            shifts=tuple(seen["shifts"]),
+        )
+
+    monkeypatch.setattr(tuning, "tune_model_error", recorder)
+    code = main(
+        [
+            "estimate",
+            "--filter",
+            "ekf",
+            "--fleet",
+            "--tune",
+            "--runs",
+            "2",
+            "--seed",
+            "123",
+            "--input-hold",
+            "mean",
+            "--scenario",
+            str(data_file("scenario_1_2.toml")),
+            "--tune-scenario",
+            str(data_file("scenario_3_4.toml")),
+            "--json",
+        ]
+    )
+    assert code == 0
+    assert seen["shifts"] == ["1-2", "3-4"] and seen["seeds"] == [123, 124]
+    assert seen["input_hold"] == "mean"
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["tuning"]["shifts"] == ["1-2", "3-4"]
