@@ -182,7 +182,7 @@ def test_the_command_reports_the_stiffness_beside_the_thesis_parameters():
     "params",
     [
         "m_veh,k_ss",  # a thesis parameter missing
-        "m_veh,mu_38,mu_05,zeta,d_ss",  # an extra the fleet's filter does not carry
+        "m_veh,mu_38,mu_05,zeta,c_W",  # an extra the fleet's filter does not carry
     ],
 )
 def test_the_fleet_takes_the_thesis_parameters_with_the_stiffness_or_without_only(params):

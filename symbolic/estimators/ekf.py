@@ -47,6 +47,7 @@ from gearsym.symbolic.drivetrain import (
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.estimator_calibration import (
     AUGMENTED_STATES,
+    DAMPING,
     INERTIA_FACTOR,
     INPUT_TORQUE_GAIN,
     STIFFNESS,
@@ -420,6 +421,9 @@ def augmented_model(
     if STIFFNESS in parameters:  # its random walk: the stiffness factor's times k_ss²
         k_ss = next(v.default for v in base.parameters if v.name == STIFFNESS)
         stated.setdefault(STIFFNESS, d.estimator.stiffness_factor_random_walk() * k_ss**2)
+    if DAMPING in parameters:  # the same for the damping: the damping factor's times d_ss²
+        d_ss = next(v.default for v in base.parameters if v.name == DAMPING)
+        stated.setdefault(DAMPING, d.estimator.damping_factor_random_walk() * d_ss**2)
     if INPUT_TORQUE_GAIN in parameters:
         stated.setdefault(INPUT_TORQUE_GAIN, d.estimator.input_torque_gain_random_walk())
     if INERTIA_FACTOR in parameters:

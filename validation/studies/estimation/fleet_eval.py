@@ -284,6 +284,45 @@ class FleetEvaluation:
             float(chi2.ppf(0.975, total) / dof.size),
         )
 
+    def consistency_per_phase(self) -> dict[str, dict[str, Any]]:
+        """Per phase (as each run's reference detected it): NEES and NIS over the phase's
+        samples of every run, each summed and divided by its summed dof, and the NIS's 95 %
+        band (innovations are white: the summed NIS is χ² with the summed dof; the NEES's
+        samples are correlated in time, so it gets no band). Where a filter is consistent
+        overall but not in a phase, its model error is in the wrong place."""
+        from gearsym.validation.studies.estimation.bounds import _phase_samples
+        from scipy.stats import chi2
+
+        sums: dict[str, np.ndarray] = {name: np.zeros(5) for name in self.phase_names()}
+        for fr in self.runs:
+            run = fr.run
+            for k, phase in enumerate(run.phases):
+                inside = _phase_samples(run.t, phase, last=k == len(run.phases) - 1)
+                used = inside[run.nis_dof[inside] > 0]
+                sums[phase.name] += (
+                    float(np.sum(run.nees[inside])),
+                    float(np.sum(run.nees_dof[inside])),
+                    float(np.sum(run.nis[used])),
+                    float(np.sum(run.nis_dof[used])),
+                    float(inside.size),
+                )
+        out: dict[str, dict[str, Any]] = {}
+        for name, (nees, nees_dof, nis, nis_dof, samples) in sums.items():
+            out[name] = {
+                "nees_per_dof": nees / nees_dof if nees_dof else None,
+                "nis_per_dof": nis / nis_dof if nis_dof else None,
+                "nis_band_per_dof": [
+                    float(chi2.ppf(0.025, nis_dof) / nis_dof),
+                    float(chi2.ppf(0.975, nis_dof) / nis_dof),
+                ]
+                if nis_dof
+                else None,
+                "nees_dof": int(nees_dof),
+                "nis_dof": int(nis_dof),
+                "samples": int(samples),
+            }
+        return out
+
     def to_dict(self) -> dict[str, Any]:
         nees, nees_band = self.nees()
         nis, nis_band = self.nis()
@@ -324,6 +363,7 @@ class FleetEvaluation:
             "nees_over_vehicles": self.nees_over_vehicles(),
             "nis_mean": nis,
             "nis_band": None if nis_band is None else list(nis_band),
+            "consistency_per_phase": self.consistency_per_phase(),
             "separability": self.separability,
             "draws": [fr.draw.to_dict() for fr in self.runs],
         }

@@ -286,6 +286,23 @@ def _separability(data: dict[str, Any]) -> list[str]:
     ]
 
 
+def _per_phase(data: dict[str, Any]) -> list[tuple[str, str, str, str]]:
+    """(phase, NEES/dof, NIS/dof with its band and verdict, samples) per phase; none for a
+    JSON written before the per-phase consistency was recorded."""
+    rows = []
+    for phase, c in (data.get("consistency_per_phase") or {}).items():
+        nis = c["nis_per_dof"]
+        rows.append(
+            (
+                phase,
+                _g(c["nees_per_dof"]),
+                "-" if nis is None else _band(nis, c["nis_band_per_dof"]),
+                str(c["samples"]),
+            )
+        )
+    return rows
+
+
 def format_fleet_text(data: dict[str, Any]) -> str:
     """The printed report of a fleet evaluation, from its JSON."""
     lines = [f"  assumes {line}" for line in _assumptions(data)]
@@ -315,6 +332,8 @@ def format_fleet_text(data: dict[str, Any]) -> str:
     lines.append(f"  NEES mean {_band(data['nees_mean'], data['nees_band'])}")
     lines += [f"  {line}" for line in _over_vehicles(data)]
     lines.append(f"  NIS mean {_band(data['nis_mean'], data['nis_band'])}")
+    for phase, nees, nis, samples in _per_phase(data):
+        lines.append(f"    {phase}: NEES/dof {nees}, NIS/dof {nis} ({samples} samples)")
     lines += [f"  {line}" for line in criteria(data)]
     if data["failed"]:
         lines.append(
@@ -393,6 +412,20 @@ def fleet_markdown(data: dict[str, Any], command: str) -> str:
             f"{_g(s['mean_sigma'])} | {_coverage(s)} | {_g(s['bound'])} | "
             f"{_g(s['efficiency'])} | {_identifiable(s)} |"
         )
+    per_phase = _per_phase(data)
+    if per_phase:
+        out += [
+            "",
+            "Consistency per phase (summed over the vehicles, divided by the summed dof; the NIS "
+            "against its 95 % band, the NEES without one: its samples are correlated in time):",
+            "",
+            "| phase | NEES/dof | NIS/dof | samples |",
+            "|---|---|---|---|",
+            *(
+                f"| {phase} | {nees} | {nis} | {samples} |"
+                for phase, nees, nis, samples in per_phase
+            ),
+        ]
     return "\n".join(out) + "\n"
 
 

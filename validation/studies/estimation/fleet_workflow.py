@@ -68,7 +68,11 @@ def check_fleet_request(request: EstimateRequest) -> None:
     ):
         refuse(option, given, f"is not available with --fleet: {reason}")
     if cal.parameters is not None:
-        from gearsym.symbolic.estimator_calibration import AUGMENTED_STATES, STIFFNESS
+        from gearsym.symbolic.estimator_calibration import (
+            AUGMENTED_STATES,
+            DAMPING,
+            STIFFNESS,
+        )
         from gearsym.symbolic.estimators.ekf import default_parameters
 
         thesis = default_parameters(cal.description, request.truth.scenario.shift.name)
@@ -79,7 +83,8 @@ def check_fleet_request(request: EstimateRequest) -> None:
             or not extra <= set(AUGMENTED_STATES)
             or len(set(cal.parameters)) != len(cal.parameters),
             f"with --fleet: the thesis' (4.1) {','.join(thesis)}, optionally with "
-            f"{', '.join(AUGMENTED_STATES)} ({STIFFNESS}: the side shafts' stiffness), got "
+            f"{', '.join(AUGMENTED_STATES)} ({STIFFNESS}, {DAMPING}: the side shafts' stiffness "
+            f"and damping), got "
             f"{','.join(cal.parameters)}",
         )
 

@@ -108,7 +108,11 @@ def torque_gain_separability(
             try:
                 cov = np.linalg.inv(with_gain)
                 a, b = shown.index("m_veh"), m
-                correlation = float(cov[a, b] / np.sqrt(cov[a, a] * cov[b, b]))
+                # a window that cannot tell a parameter from the others has a singular FIM;
+                # its inverse is then rounding, not a covariance: no correlation to report
+                if cov[a, a] > 0 and cov[b, b] > 0:
+                    value = float(cov[a, b] / np.sqrt(cov[a, a] * cov[b, b]))
+                    correlation = value if abs(value) <= 1.0 else None
             except np.linalg.LinAlgError:
                 correlation = None
         out[name] = {

@@ -17,6 +17,7 @@ from gearsym.symbolic.drivetrain import element_short_name, quantity
 from gearsym.symbolic.errors import GearsymError
 from gearsym.symbolic.estimator_calibration import (
     CONSIDERED_STATES,
+    DAMPING,
     INERTIA_FACTOR,
     INPUT_TORQUE_GAIN,
     STIFFNESS,
@@ -248,8 +249,8 @@ def prepare_ekf(
         elif name == "m_veh":
             truth[:, j] = quantity(truth_description, "vehicle", "m_veh").value
             scored[:, j] = True
-        elif name == STIFFNESS:  # the stiffness as a state (--params ...,k_ss)
-            truth[:, j] = quantity(truth_description, "drivetrain", STIFFNESS).value
+        elif name in (STIFFNESS, DAMPING):  # the side shafts as states (--params ...,k_ss,d_ss)
+            truth[:, j] = quantity(truth_description, "drivetrain", name).value
             scored[:, j] = True
         elif name in (VALVE_OFFSET, VALVE_GAIN):  # the vehicle's valve (a fleet draw)
             value = (truth_valve or {}).get(name, math.nan)
