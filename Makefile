@@ -52,13 +52,13 @@ results: $(STAMP)
 	cp build/results/fleet_ekf_2_3/fleet.md $(RESULTS)/fleet_ekf_2_3.md
 	cp build/results/fleet_ekf_2_3/fleet.png $(RESULTS)/fleet_ekf_2_3.png
 	rm -rf build/results/fleet_ekf_2_3_map_scale
-	$(BIN)/gearsym estimate --filter ekf --fleet --input-hold mean --mu-model map_scale --params m_veh,mu_38,mu_05,zeta,k_ss,input_torque_gain,inertia_factor,valve_offset,valve_gain --runs 200 --seed 10000 --scheduler local --out build/results/fleet_ekf_2_3_map_scale
+	$(BIN)/gearsym estimate --filter ekf --fleet --input-hold mean --mu-model map_scale --params m_veh,mu_38,mu_05,zeta,k_ss,d_ss,input_torque_gain,inertia_factor,valve_offset,valve_gain --runs 200 --seed 10000 --scheduler local --out build/results/fleet_ekf_2_3_map_scale
 	cp build/results/fleet_ekf_2_3_map_scale/fleet.json $(RESULTS)/fleet_ekf_2_3_map_scale.json
 	cp build/results/fleet_ekf_2_3_map_scale/fleet.md $(RESULTS)/fleet_ekf_2_3_map_scale.md
 	cp build/results/fleet_ekf_2_3_map_scale/fleet.png $(RESULTS)/fleet_ekf_2_3_map_scale.png
 	rm -rf build/results/fleet_ekf_3_4_map_scale build/results/fleet_ekf_1_2_map_scale
-	$(BIN)/gearsym estimate --filter ekf --fleet --scenario gearsym/data/scenario_3_4.toml --input-hold mean --mu-model map_scale --params m_veh,mu_81,mu_27,zeta,k_ss,input_torque_gain,inertia_factor,valve_offset,valve_gain --runs 200 --seed 10000 --scheduler local --out build/results/fleet_ekf_3_4_map_scale
-	$(BIN)/gearsym estimate --filter ekf --fleet --scenario gearsym/data/scenario_1_2.toml --input-hold mean --mu-model map_scale --params m_veh,mu_05,mu_81,zeta,k_ss,input_torque_gain,inertia_factor,valve_offset,valve_gain --runs 200 --seed 10000 --scheduler local --out build/results/fleet_ekf_1_2_map_scale
+	$(BIN)/gearsym estimate --filter ekf --fleet --scenario gearsym/data/scenario_3_4.toml --input-hold mean --mu-model map_scale --params m_veh,mu_81,mu_27,zeta,k_ss,d_ss,input_torque_gain,inertia_factor,valve_offset,valve_gain --runs 200 --seed 10000 --scheduler local --out build/results/fleet_ekf_3_4_map_scale
+	$(BIN)/gearsym estimate --filter ekf --fleet --scenario gearsym/data/scenario_1_2.toml --input-hold mean --mu-model map_scale --params m_veh,mu_05,mu_81,zeta,k_ss,d_ss,input_torque_gain,inertia_factor,valve_offset,valve_gain --runs 200 --seed 10000 --scheduler local --out build/results/fleet_ekf_1_2_map_scale
 	for run in fleet_ekf_3_4_map_scale fleet_ekf_1_2_map_scale; do \
 	  cp build/results/$$run/fleet.json $(RESULTS)/$$run.json; \
 	  cp build/results/$$run/fleet.md $(RESULTS)/$$run.md; \
