@@ -23,6 +23,7 @@ The table::
     phi = { value = 4.7e-5, unit = "rad^2/s", source = "..." }
     [estimator.model_error_map_scale]    # the same, with mu_model = "map_scale" besides
     phi = { value = 4.7e-5, unit = "rad^2/s", source = "..." }
+    in_gear = { value = 0.1, unit = "1", source = "..." }  # factor while no element slides
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ __all__ = [
     "PRIOR_NAMES",
     "DAMPING",
     "DAMPING_FACTOR",
+    "IN_GEAR",
     "STIFFNESS",
     "STIFFNESS_FACTOR",
     "VALVE_GAIN",
@@ -203,6 +205,14 @@ MODEL_ERROR_MAP_SCALE = "model_error_map_scale"
 #: The states beside the shaft speeds ``omega_<shaft>`` that ``[estimator.model_error]`` may
 #: name: the side-shaft twist and the wheel speed (2.43, 2.44).
 MODEL_ERROR_NAMES: tuple[str, ...] = ("phi", "omega_C")
+
+#: The entry of a model-error table that is no state: a factor (unit "1", default 1) on that
+#: table's intensities of the model's physical states over a prediction interval in which no
+#: element of the shift slides (the gears before and after it). The model's errors are largest
+#: while a clutch slides (its friction's map, its force); in a gear the elastic drivetrain
+#: model leaves little, and one white model error for both widens every predicted speed of the
+#: gears (the fleet evaluation's consistency per phase shows it).
+IN_GEAR = "in_gear"
 
 #: Units of the prior entries that have no record (φ, the μ-map scale).
 _PRIOR_UNITS = {
@@ -384,6 +394,7 @@ class EstimatorCalibration:
             for name, t in (*self.random_walk, *self.model_error)
             if name
             not in (
+                IN_GEAR,
                 MU_SCALE,
                 VALVE_OFFSET,
                 VALVE_GAIN,
@@ -423,12 +434,23 @@ class EstimatorCalibration:
         """The model-error intensities of a filter that estimates any of
         :data:`AUGMENTED_STATES`, by state name (``[estimator.model_error_augmented]``, empty
         when the table is absent)."""
-        return {name: t.value for name, t in self.model_error_augmented}
+        return {name: t.value for name, t in self.model_error_augmented if name != IN_GEAR}
 
     def intensities_map_scale(self) -> dict[str, float]:
         """The model-error intensities of such a filter whose μ states are map scales, by state
         name (``[estimator.model_error_map_scale]``, empty when the table is absent)."""
-        return {name: t.value for name, t in self.model_error_map_scale}
+        return {name: t.value for name, t in self.model_error_map_scale if name != IN_GEAR}
+
+    def in_gear_factor(self, tables: Sequence[str]) -> float:
+        """The :data:`IN_GEAR` factor of a filter whose intensities come from ``tables`` (model
+        -error table names, each over the one before, as the intensities): the last one that
+        states it, else 1 (the same intensities in a gear as in a shift)."""
+        factor = 1.0
+        for kind in tables:
+            given = dict(getattr(self, kind)).get(IN_GEAR)
+            if given is not None:
+                factor = given.value
+        return factor
 
     def to_dict(self) -> dict[str, Any]:
         """For a report: what the filter was told, with the sources."""
@@ -499,8 +521,10 @@ def parse_estimator_table(table: Any, shafts: Sequence[str] = ()) -> EstimatorCa
                     name,
                     f"not a random-walk parameter (known: {', '.join(RANDOM_WALK_NAMES)})",
                 )
-            if kind != "random_walk" and not (name in MODEL_ERROR_NAMES or name in shaft_states):
-                known = ", ".join((*MODEL_ERROR_NAMES, *sorted(shaft_states)))
+            if kind != "random_walk" and not (
+                name in MODEL_ERROR_NAMES or name in shaft_states or name == IN_GEAR
+            ):
+                known = ", ".join((*MODEL_ERROR_NAMES, *sorted(shaft_states), IN_GEAR))
                 raise sub.fail(name, f"not a state of a filter's model (known: {known})")
             entry = sub.table(name)
             value = entry.number("value")
@@ -510,6 +534,8 @@ def parse_estimator_table(table: Any, shafts: Sequence[str] = ()) -> EstimatorCa
             entry.reject_unknown()
             if not (math.isfinite(value) and value >= 0):
                 raise entry.fail("value", f"must be finite and >= 0, got {value:g}")
+            if name == IN_GEAR and unit != "1":
+                raise entry.fail("unit", f"a factor: expected '1', got {unit!r}")
             if not source.strip():
                 raise entry.fail("source", "must say where the value comes from (or 'assumed')")
             values.append((name, Tuning(value, unit, source)))

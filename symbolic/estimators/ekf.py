@@ -50,6 +50,8 @@ from gearsym.symbolic.estimator_calibration import (
     DAMPING,
     INERTIA_FACTOR,
     INPUT_TORQUE_GAIN,
+    MODEL_ERROR_AUGMENTED,
+    MODEL_ERROR_MAP_SCALE,
     STIFFNESS,
     VALVE_GAIN,
     VALVE_OFFSET,
@@ -159,6 +161,9 @@ class AugmentedModel:
     sticking_torque: dict[str, sp.Expr] = field(default_factory=dict, repr=False)
     capacity: dict[str, sp.Expr] = field(default_factory=dict, repr=False)
     slip_sign: dict[str, int] = field(default_factory=dict)
+    #: the factor on the physical states' intensities over an interval in which no element
+    #: slides (``in_gear`` of the description's model-error table; 1: the same as in a shift)
+    in_gear_factor: float = 1.0
 
     @property
     def state_names(self) -> list[str]:
@@ -192,6 +197,19 @@ class AugmentedModel:
             for e, mu in self.mu_state.items()
             if not abs(u[names.index(slide_input(e))]) > 0.5
         ]
+
+    def process_rates(self, q: Sequence[float], u: Sequence[float]) -> np.ndarray:
+        """The intensities of one prediction interval under the inputs ``u``: ``q`` with the μ
+        states of elements that do not slide at 0 (:meth:`frozen_states`) and, where no element
+        slides at all, the physical states' (the model error) times :attr:`in_gear_factor`."""
+        import numpy as np
+
+        rates = np.array(q, dtype=float)
+        rates[self.frozen_states(u)] = 0.0
+        names = self.input_names
+        if not any(abs(u[names.index(slide_input(e))]) > 0.5 for e in self.elements):
+            rates[: self.n_x] *= self.in_gear_factor
+        return rates
 
 
 def _valve_offset(
@@ -432,11 +450,14 @@ def augmented_model(
         stated.setdefault(VALVE_OFFSET, d.estimator.valve_offset_random_walk())
     if VALVE_GAIN in parameters:
         stated.setdefault(VALVE_GAIN, d.estimator.valve_gain_random_walk())
+    tables = ["model_error"]  # where the intensities come from, each over the one before
     if any(name in parameters for name in AUGMENTED_STATES):
         # the states take the intensities tuned for a filter that estimates more, where stated
         stated.update(d.estimator.intensities_augmented())
+        tables.append(MODEL_ERROR_AUGMENTED)
         if d.estimator.mu_model == "map_scale":  # ... and with its μ states map scales
             stated.update(d.estimator.intensities_map_scale())
+            tables.append(MODEL_ERROR_MAP_SCALE)
     stated.update(intensities or {})
     rates: dict[str, float] = {}
     for v in states:
@@ -473,6 +494,7 @@ def augmented_model(
         sticking_torque=sticking_torque,
         capacity={e: sp.expand(signs[e] * friction[e]) for e in elements},
         slip_sign={e: int(signs[e]) for e in elements},
+        in_gear_factor=d.estimator.in_gear_factor(tables),
     )
 
 
@@ -586,14 +608,15 @@ def ekf_predict(
     """Time update: z⁻ = Φ_h(z, u), P⁻ = F P Fᵀ + h diag(q) with F the exact step Jacobian.
 
     A μ state whose element does not slide gets q = 0, and its row of F is the unit row (its
-    right-hand side is 0 and its column does not act): estimate and variance stay bit for bit.
+    right-hand side is 0 and its column does not act): estimate and variance stay bit for bit;
+    where no element slides the model error is the in-gear one (:meth:`AugmentedModel.
+    process_rates`).
     Returns (z⁻, P⁻), P⁻ symmetrised ((P + Pᵀ)/2, against rounding drift).
     """
     import numpy as np
 
     z_next, F = discrete.step(z, u, h, p)
-    rates = np.array(q, dtype=float)
-    rates[discrete.aug.frozen_states(u)] = 0.0
+    rates = discrete.aug.process_rates(q, u)
     P_next = F @ P @ F.T + np.diag(h * rates)
     return z_next, 0.5 * (P_next + P_next.T)
 

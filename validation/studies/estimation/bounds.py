@@ -104,9 +104,7 @@ def ekf_bound(setup: EkfSetup, relative_step: float = 1e-5) -> EkfBound:
     h_step = float(setup.t[1] - setup.t[0]) if len(setup.t) > 1 else 0.0
     process = np.zeros((len(setup.t), n, n))
     for k in range(len(setup.t)):
-        rates = np.array(setup.q, dtype=float)
-        rates[setup.aug.frozen_states(u[k])] = 0.0
-        process[k] = np.diag(h_step * rates)
+        process[k] = np.diag(h_step * setup.aug.process_rates(setup.q, u[k]))
     sigma_process = process_noise_bound(flow, S, used_once, np.diag(setup.prior_sigma**2), process)
     parameters = list(setup.aug.parameters)
     values = {name: float(z0[names.index(name)]) for name in parameters}

@@ -1,0 +1,102 @@
+"""The model error of a gear apart from a shift's (``in_gear`` in a model-error table of the
+description's ``[estimator]``): a factor on the table's intensities of the filter's physical
+states over a prediction interval in which no element slides, by hand on the intensities the
+filter predicts with and on one covariance step."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from gearsym.symbolic.errors import GearsymError
+from gearsym.symbolic.estimator_calibration import IN_GEAR
+from gearsym.symbolic.estimators.ekf import (
+    augmented_model,
+    default_parameters,
+    ekf_predict,
+    slide_input,
+)
+from gearsym.symbolic.io.package_data import data_file
+
+from gearsym.commands import load as load_description
+
+SHIPPED = data_file("thesis_9speed.toml")
+WITH_STATES = ("m_veh", "mu_38", "mu_05", "zeta", "k_ss")
+
+
+def _description(tmp_path: Path, entry: str, table: str = "model_error_map_scale"):
+    """The shipped description with ``entry`` added to its ``[estimator.<table>]``, as map-scale
+    filter (``mu_model = "map_scale"``)."""
+    text = SHIPPED.read_text(encoding="utf-8")
+    header = f"\n[estimator.{table}]\n"
+    assert header in text
+    text = text.replace(header, header + entry + "\n", 1)
+    text = text.replace("[estimator]\n", '[estimator]\nmu_model = "map_scale"\n', 1)
+    path = tmp_path / "in_gear.toml"
+    path.write_text(text, encoding="utf-8")
+    return load_description(str(path))
+
+
+def test_the_factor_is_the_filters_whose_table_states_it(tmp_path):
+    d = _description(tmp_path, 'in_gear = { value = 0.1, unit = "1", source = "test" }')
+    scaled = augmented_model(d, "2-3", WITH_STATES)
+    assert scaled.in_gear_factor == 0.1
+    assert IN_GEAR not in scaled.intensities  # not a state
+    # the thesis' filter takes [estimator.model_error], which does not state it
+    assert augmented_model(d, "2-3", default_parameters(d, "2-3")).in_gear_factor == 1.0
+
+
+def test_the_intensities_of_an_interval_by_hand(tmp_path):
+    """q = 1, 2, 3, ... per state; in a gear (no slide flag) the physical states' rates are a
+    tenth, the parameters' kept and both μ at 0; with the on-coming element sliding every
+    physical state's rate is its q, that μ's too, the other μ's 0."""
+    d = _description(tmp_path, 'in_gear = { value = 0.1, unit = "1", source = "test" }')
+    aug = augmented_model(d, "2-3", WITH_STATES)
+    names = aug.state_names
+    q = np.arange(1.0, len(names) + 1.0)
+    mu_index = {e: names.index(mu) for e, mu in aug.mu_state.items()}
+    in_gear = np.zeros(len(aug.input_names))
+    rates = aug.process_rates(q, in_gear)
+    for j, name in enumerate(names):
+        if j < aug.n_x:
+            assert rates[j] == pytest.approx(0.1 * q[j]), name
+        elif j in mu_index.values():
+            assert rates[j] == 0.0, name
+        else:
+            assert rates[j] == q[j], name
+    off_going, on_coming = aug.elements
+    sliding = in_gear.copy()
+    sliding[aug.input_names.index(slide_input(on_coming))] = 1.0
+    rates = aug.process_rates(q, sliding)
+    assert np.array_equal(rates[: aug.n_x], q[: aug.n_x])
+    assert rates[mu_index[on_coming]] == q[mu_index[on_coming]]
+    assert rates[mu_index[off_going]] == 0.0
+
+
+def test_one_prediction_adds_h_times_those_rates(tmp_path):
+    """With a step whose Jacobian is the identity, P⁻ − P is h diag(rates) exactly: a tenth of
+    the model error in a gear, all of it while an element slides."""
+    d = _description(tmp_path, 'in_gear = { value = 0.1, unit = "1", source = "test" }')
+    aug = augmented_model(d, "2-3", WITH_STATES)
+    n = len(aug.state_names)
+    discrete = SimpleNamespace(aug=aug, step=lambda z, u, h, p: (np.asarray(z), np.eye(n)))
+    q = np.full(n, 2.0)
+    P = np.eye(n)
+    h = 0.01
+    u = np.zeros(len(aug.input_names))
+    _, P_gear = ekf_predict(discrete, np.zeros(n), P, u, h, [], q)
+    u[aug.input_names.index(slide_input(aug.elements[1]))] = 1.0
+    _, P_slide = ekf_predict(discrete, np.zeros(n), P, u, h, [], q)
+    x = slice(0, aug.n_x)
+    assert np.allclose(np.diag(P_gear - P)[x], 0.1 * h * 2.0, rtol=0, atol=1e-15)
+    assert np.allclose(np.diag(P_slide - P)[x], h * 2.0, rtol=0, atol=1e-15)
+
+
+def test_a_factor_with_a_unit_is_refused(tmp_path):
+    with pytest.raises(GearsymError) as error:
+        _description(tmp_path, 'in_gear = { value = 0.1, unit = "rad^2/s^3", source = "test" }')
+    message = str(error.value)
+    assert "in_gear" in message and "unit" in message and "'1'" in message, message
+    assert "\n" not in message
