@@ -95,6 +95,15 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     if args.tune_scenario and not args.tune:
         raise GearsymError("estimate", "--tune-scenario", "is for --fleet --tune only")
     tune_scenarios = tuple(load_scenario(d, path) for path in args.tune_scenario or ())
+    axes = {
+        "--tune-factors": args.tune_factors,
+        "--tune-twist-factors": args.tune_twist_factors,
+        "--tune-in-gear": args.tune_in_gear,
+    }
+    for option, text in axes.items():
+        if text is not None and not args.tune:
+            raise GearsymError("estimate", option, "is for --fleet --tune only")
+    grid = {option: _tuning_factors(text, option) for option, text in axes.items()}
     fleet = None
     if args.fleet is not None:
         from gearsym.validation.sim.fleet import load_fleet
@@ -115,6 +124,9 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         fleet=fleet,
         tune=args.tune,
         tune_scenarios=tune_scenarios,
+        tune_factors=grid["--tune-factors"],
+        tune_twist_factors=grid["--tune-twist-factors"],
+        tune_in_gear=grid["--tune-in-gear"],
         scheduler=args.scheduler,
         workers=args.workers,
         command=" ".join(["gearsym", *sys.argv[1:]]) if sys.argv[1:] else "",
@@ -146,6 +158,20 @@ def _names(text: str | None) -> tuple[str, ...] | None:
     if text is None:
         return None
     return tuple(name.strip() for name in text.split(",") if name.strip())
+
+
+def _tuning_factors(text: str | None, option: str) -> tuple[float, ...] | None:
+    """A tuning axis (``--tune-factors``, ``--tune-twist-factors``, ``--tune-in-gear``):
+    distinct factors > 0; ``None`` when the option is absent."""
+    if text is None:
+        return None
+    try:
+        values = tuple(float(number(float, above=0)(v)) for v in text.split(","))
+    except argparse.ArgumentTypeError as err:
+        raise GearsymError("estimate", option, str(err)) from None
+    if len(set(values)) != len(values):
+        raise GearsymError("estimate", option, "a factor given twice")
+    return values
 
 
 def _noise(args: argparse.Namespace) -> tuple[float, ...] | None:
@@ -341,6 +367,29 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         help="with --tune (repeatable): tune on this shift too, every tuning vehicle running "
         "each shift and NEES and NIS summed over all: one calibration's intensities for every "
         "shift it serves (--scenario, or the built-in 2-3, is the first)",
+    )
+    p.add_argument(
+        "--tune-factors",
+        default=None,
+        metavar="C1,C2,...",
+        help="with --tune: the factors c on the table's intensities of the speeds tried "
+        "(default 0.5,1,2)",
+    )
+    p.add_argument(
+        "--tune-twist-factors",
+        default=None,
+        metavar="C1,C2,...",
+        help="with --tune: the factors c_phi on the table's intensity of the twist tried "
+        "(default 0.01,0.0316,0.1,0.316,1,3.16)",
+    )
+    p.add_argument(
+        "--tune-in-gear",
+        default=None,
+        metavar="G1,G2,...",
+        help="with --tune: an axis of factors on the model-error table's in_gear factor (its "
+        "intensities of the speeds and the twist over an interval in which no element slides, "
+        "1 where the table has none): the gears and the shift phases then tuned apart; the "
+        "chosen in_gear is printed with the intensities",
     )
     p.add_argument(
         "--input-hold",

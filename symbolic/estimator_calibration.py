@@ -376,6 +376,10 @@ class EstimatorCalibration:
         """(mean, σ) of the side shafts' stiffness factor state."""
         return self._stated_prior(STIFFNESS_FACTOR)
 
+    def damping_factor_prior(self) -> tuple[float, float]:
+        """(mean, σ) of the side shafts' damping factor state."""
+        return self._stated_prior(DAMPING_FACTOR)
+
     def stiffness_factor_random_walk(self) -> float:
         """q of the side shafts' stiffness factor state (1/s)."""
         given = dict(self.random_walk).get(STIFFNESS_FACTOR)

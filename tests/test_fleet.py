@@ -466,7 +466,8 @@ def test_tuning_chooses_the_factors_with_the_smallest_criterion(d, scenario):
         for a, b in zip(result.nees_per_dof, result.nis_per_dof, strict=True)
     ]
     assert result.factors[int(np.argmin(scores))] == result.chosen
-    c, c_phi = result.chosen
+    c, c_phi, g = result.chosen
+    assert g == 1.0 and "in_gear" not in result.intensities  # no in-gear axis asked for
     assert result.intensities["phi"] == pytest.approx(c_phi * result.base["phi"])
     assert result.intensities["omega_1"] == pytest.approx(c * result.base["omega_1"])
     # the base is the description's [estimator.model_error]

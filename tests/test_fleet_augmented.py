@@ -321,3 +321,17 @@ def test_with_constant_inputs_the_gain_is_tied_to_each_sliding_elements_mu():
             assert mode["rank"] == mode["n_unknowns"] - 1, mode
         else:
             assert mode["unobservable"] == [] and mode["full_rank"], mode
+
+
+def test_the_mass_gain_correlation_by_hand_and_none_where_the_fim_is_singular():
+    """fim_correlation: the Cramér-Rao correlation of two parameters from the inverse of the
+    FIM. For [[2, 1], [1, 2]] the inverse is [[2, -1], [-1, 2]] / 3: correlation -1/2. A FIM
+    whose two columns are one (the window cannot tell the parameters apart) has no inverse:
+    None; nor has one that rounding left indefinite ([[1, 2], [2, 1]]: its inverse
+    [[-1, 2], [2, -1]] / 3 has negative variances)."""
+    import numpy as np
+    from gearsym.validation.studies.estimation.separability import fim_correlation
+
+    assert fim_correlation(np.array([[2.0, 1.0], [1.0, 2.0]]), 0, 1) == pytest.approx(-0.5)
+    assert fim_correlation(np.array([[1.0, 1.0], [1.0, 1.0]]), 0, 1) is None
+    assert fim_correlation(np.array([[1.0, 2.0], [2.0, 1.0]]), 0, 1) is None

@@ -11,10 +11,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from gearsym.symbolic.drivetrain import quantity
-from gearsym.symbolic.estimator_calibration import (
-    DAMPING,
-    DAMPING_FACTOR,
-)
+from gearsym.symbolic.estimator_calibration import DAMPING
 from gearsym.symbolic.estimators.ekf import augmented_model
 from gearsym.validation.sim.fleet import parse_fleet
 
@@ -32,7 +29,7 @@ def test_the_damping_state_takes_the_factors_prior_and_random_walk(default_descr
     d = default_description
     d_ss = quantity(d, "drivetrain", DAMPING).value
     assert d_ss == pytest.approx(40.0)
-    mean, sd = d.estimator._stated_prior(DAMPING_FACTOR)
+    mean, sd = d.estimator.damping_factor_prior()
     assert mean == 1.0 and sd == pytest.approx(0.2 / 3**0.5, rel=0.01)
     assert d.estimator.prior_of(DAMPING, d_ss) == pytest.approx((40.0, 40.0 * sd))
     aug = augmented_model(d, "2-3", WITH_DAMPING)

@@ -267,10 +267,10 @@ def test_the_command_hands_the_tuning_every_shift_and_the_hold(monkeypatch, caps
         return tuning.TuningResult(
             fleet="f",
             seeds=tuple(seeds),
-            factors=((1.0, 1.0),),
+            factors=((1.0, 1.0, 1.0),),
             nees_per_dof=(1.0,),
             nis_per_dof=(1.0,),
-            chosen=(1.0, 1.0),
+            chosen=(1.0, 1.0, 1.0),
             intensities={},
             base={},
             input_hold=options["input_hold"],

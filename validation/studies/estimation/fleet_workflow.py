@@ -169,7 +169,12 @@ def _dask(request: EstimateRequest, reporter: Reporter) -> Iterator[Any]:
 def _tune(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> EstimateReport:
     """``--fleet --tune``: the model-error intensities chosen on the runs' vehicles (tuning
     seeds, which an evaluation must not reuse)."""
-    from gearsym.validation.studies.estimation.tuning import tune_model_error
+    from gearsym.validation.studies.estimation.tuning import (
+        FACTORS,
+        IN_GEAR_FACTORS,
+        TWIST_FACTORS,
+        tune_model_error,
+    )
 
     cal, truth = request.calibration, request.truth
     seeds = list(range(request.seed, request.seed + request.runs))
@@ -189,6 +194,9 @@ def _tune(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> 
                 client=client,
                 parameters=cal.parameters,
                 input_hold=cal.input_hold,
+                factors=request.tune_factors or FACTORS,
+                twist_factors=request.tune_twist_factors or TWIST_FACTORS,
+                in_gear_factors=request.tune_in_gear or IN_GEAR_FACTORS,
             )
         finally:
             done()

@@ -134,6 +134,12 @@ class EstimateRequest:
     #: with ``tune``: further shifts (scenarios) every tuning vehicle runs besides the truth's:
     #: one calibration's intensities for every shift it serves
     tune_scenarios: tuple[Any, ...] = ()
+    #: with ``tune``: the factors tried on the model-error table's intensities of the speeds,
+    #: of the twist and on its in-gear factor (``None``: the tuning's default axis; for the
+    #: in-gear factor none, the table's own)
+    tune_factors: tuple[float, ...] | None = None
+    tune_twist_factors: tuple[float, ...] | None = None
+    tune_in_gear: tuple[float, ...] | None = None
     #: with ``fleet``: run the vehicles on Dask, ``"local"`` (a LocalCluster of ``workers``
     #: processes, default :data:`DEFAULT_WORKERS`) or ``"tcp://HOST:PORT"`` (a running
     #: scheduler and its workers); ``None``: one after the other in this process

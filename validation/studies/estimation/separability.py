@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["GAIN", "Separability", "torque_gain_separability"]
+__all__ = ["GAIN", "Separability", "fim_correlation", "torque_gain_separability"]
 
 #: The name of the input-torque gain in the reports.
 GAIN = "input_torque_gain"
@@ -35,6 +35,21 @@ class Separability:
 
     def to_dict(self) -> dict[str, Any]:
         return self.phases
+
+
+def fim_correlation(fim: np.ndarray, a: int, b: int) -> float | None:
+    """The correlation of parameters ``a`` and ``b`` in the inverse of the Fisher information
+    ``fim`` (the Cramér-Rao covariance, 3.25); ``None`` where ``fim`` is singular: a window that
+    cannot tell a parameter from the others has no covariance, and the inverse of a singular
+    matrix is rounding (a "correlation" beyond ±1 or a negative variance)."""
+    try:
+        cov = np.linalg.inv(fim)
+    except np.linalg.LinAlgError:
+        return None
+    if not (cov[a, a] > 0 and cov[b, b] > 0):
+        return None
+    value = float(cov[a, b] / np.sqrt(cov[a, a] * cov[b, b]))
+    return value if abs(value) <= 1.0 else None
 
 
 def _gamma(fim: np.ndarray, names: list[str], scales: np.ndarray) -> dict[str, float | None]:
@@ -105,16 +120,7 @@ def torque_gain_separability(
         gamma_unknown = _gamma(with_gain, [*shown, GAIN], np.append(scales[seen], 1.0))
         correlation = None
         if "m_veh" in shown:
-            try:
-                cov = np.linalg.inv(with_gain)
-                a, b = shown.index("m_veh"), m
-                # a window that cannot tell a parameter from the others has a singular FIM;
-                # its inverse is then rounding, not a covariance: no correlation to report
-                if cov[a, a] > 0 and cov[b, b] > 0:
-                    value = float(cov[a, b] / np.sqrt(cov[a, a] * cov[b, b]))
-                    correlation = value if abs(value) <= 1.0 else None
-            except np.linalg.LinAlgError:
-                correlation = None
+            correlation = fim_correlation(with_gain, shown.index("m_veh"), m)
         out[name] = {
             "gamma_gain_known": gamma_known,
             "gamma_gain_unknown": gamma_unknown,

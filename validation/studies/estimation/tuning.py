@@ -27,7 +27,14 @@ from gearsym.validation.sim.scenario import Scenario
 if TYPE_CHECKING:
     from gearsym.validation.studies.estimation.fleet_eval import FilterModel, FleetContext
 
-__all__ = ["FACTORS", "TWIST_FACTORS", "TuningResult", "tune_model_error", "tuning_sums"]
+__all__ = [
+    "FACTORS",
+    "IN_GEAR_FACTORS",
+    "TWIST_FACTORS",
+    "TuningResult",
+    "tune_model_error",
+    "tuning_sums",
+]
 
 #: The factors on the speeds' model-error intensities tried (around the description's).
 FACTORS: tuple[float, ...] = (0.5, 1.0, 2.0)
@@ -36,19 +43,25 @@ FACTORS: tuple[float, ...] = (0.5, 1.0, 2.0)
 #: stiffness tolerance and the torque errors, and moves by decades between filters with and
 #: without the stiffness as a state).
 TWIST_FACTORS: tuple[float, ...] = (0.01, 0.0316, 0.1, 0.316, 1.0, 3.16)
+#: The factors g on the table's ``in_gear`` factor (the physical states' intensities over an
+#: interval in which no element slides, :attr:`~gearsym.symbolic.estimators.ekf.AugmentedModel.
+#: in_gear_factor`): by default one, the table's own (no axis); ``--tune-in-gear`` sets an axis
+#: (the gears and the shift phases then get intensities of their own).
+IN_GEAR_FACTORS: tuple[float, ...] = (1.0,)
 
 
 @dataclass(frozen=True)
 class TuningResult:
-    """Per factor: NEES/dof and NIS/dof over the tuning runs; the chosen factor and the
-    intensities it gives, by state name."""
+    """Per triple of factors (c on the speeds, c_φ on the twist, g on the in-gear factor):
+    NEES/dof and NIS/dof over the tuning runs; the chosen triple and the intensities it gives,
+    by state name (with ``in_gear`` where the grid had an in-gear axis or the table a factor)."""
 
     fleet: str
     seeds: tuple[int, ...]
-    factors: tuple[tuple[float, float], ...]  # (c, c_φ)
+    factors: tuple[tuple[float, float, float], ...]  # (c, c_φ, g)
     nees_per_dof: tuple[float, ...]
     nis_per_dof: tuple[float, ...]
-    chosen: tuple[float, float]
+    chosen: tuple[float, float, float]
     intensities: dict[str, float]
     base: dict[str, float]
     #: the description's table the intensities belong in (``model_error``, or
@@ -83,14 +96,14 @@ class TuningResult:
         lines = [
             f"  tuned on the fleet {self.fleet}, seeds {self.seeds[0]}-{self.seeds[-1]} "
             f"({len(self.seeds)} vehicles) on the shift(s) {', '.join(self.shifts)}: factors c on "
-            "the speeds' and c_phi on the twist's "
-            f"model-error intensities (the inputs held over an interval: {self.input_hold})",
-            f"    {'c':>6} {'c_phi':>7} {'NEES/dof':>9} {'NIS/dof':>9} {'criterion':>10}",
+            "the speeds' and c_phi on the twist's model-error intensities, g on their in-gear "
+            f"factor (the inputs held over an interval: {self.input_hold})",
+            f"    {'c':>6} {'c_phi':>7} {'g':>6} {'NEES/dof':>9} {'NIS/dof':>9} {'criterion':>10}",
         ]
-        for k, (c, c_phi) in enumerate(self.factors):
-            mark = "  <- chosen" if (c, c_phi) == self.chosen else ""
+        for k, (c, c_phi, g) in enumerate(self.factors):
+            mark = "  <- chosen" if (c, c_phi, g) == self.chosen else ""
             lines.append(
-                f"    {c:>6g} {c_phi:>7g} {self.nees_per_dof[k]:>9.3f} "
+                f"    {c:>6g} {c_phi:>7g} {g:>6g} {self.nees_per_dof[k]:>9.3f} "
                 f"{self.nis_per_dof[k]:>9.3f} {self.criterion(k):>10.4f}{mark}"
             )
         lines.append(f"  for the description's [estimator.{self.table}] table:")
@@ -108,6 +121,7 @@ def tune_model_error(
     relative_noise: Any = 0.01,
     factors: Sequence[float] = FACTORS,
     twist_factors: Sequence[float] = TWIST_FACTORS,
+    in_gear_factors: Sequence[float] = IN_GEAR_FACTORS,
     progress: Callable[[float, str], None] | None = None,
     client: Any = None,
     parameters: Sequence[str] | None = None,
@@ -122,10 +136,13 @@ def tune_model_error(
     inputs over a prediction interval (``"sample"`` or the interval's ``"mean"``), as the
     evaluation that will use the intensities runs. ``scenario``: one shift, or several (every
     tuning vehicle runs each, and NEES and NIS are summed over all of them): one calibration's
-    intensities for every shift it serves."""
+    intensities for every shift it serves. ``in_gear_factors``: the factors g on the table's
+    in-gear factor (``in_gear``, 1 where it has none) tried, every triple (c, c_φ, g) of the
+    grid on the same runs."""
     from gearsym.symbolic import naming
     from gearsym.symbolic.estimator_calibration import (
         AUGMENTED_STATES,
+        IN_GEAR,
         MODEL_ERROR_AUGMENTED,
         MODEL_ERROR_MAP_SCALE,
     )
@@ -147,7 +164,14 @@ def tune_model_error(
     scenarios = (scenario,) if isinstance(scenario, Scenario) else tuple(scenario)
     if not scenarios:
         raise GearsymError("estimate", "--scenario", "tuning needs at least one shift")
-    grid = [(float(c), float(c_phi)) for c in factors for c_phi in twist_factors]
+    grid = [
+        (float(c), float(c_phi), float(g))
+        for c in factors
+        for c_phi in twist_factors
+        for g in in_gear_factors
+    ]
+    if any(g <= 0.0 or not math.isfinite(g) for _, _, g in grid):
+        raise GearsymError("estimate", "--tune-in-gear", "the in-gear factors must be > 0")
     sums = np.zeros((len(grid), 4))  # NEES, its dof, NIS, its dof
     base: dict[str, float] = {}
     for number, shift_scenario in enumerate(scenarios):
@@ -169,6 +193,7 @@ def tune_model_error(
                 f"({', '.join(base)}): tune them apart",
             )
         base = own
+        in_gear = aug.in_gear_factor
         context = FleetContext(
             d,
             shift_scenario,
@@ -206,6 +231,11 @@ def tune_model_error(
     scores = [math.log(a) ** 2 + math.log(b) ** 2 for a, b in zip(nees, nis, strict=True)]
     best = int(np.argmin(scores))
     chosen = grid[best]
+    intensities = {
+        name: (chosen[1] if name == naming.TWIST else chosen[0]) * q for name, q in base.items()
+    }
+    if tuple(in_gear_factors) != IN_GEAR_FACTORS or in_gear != 1.0:
+        intensities[IN_GEAR] = chosen[2] * in_gear
     return TuningResult(
         fleet=f"{fleet.name} ({fleet.file})",
         seeds=tuple(seeds),
@@ -213,9 +243,7 @@ def tune_model_error(
         nees_per_dof=nees,
         nis_per_dof=nis,
         chosen=chosen,
-        intensities={
-            name: (chosen[1] if name == naming.TWIST else chosen[0]) * q for name, q in base.items()
-        },
+        intensities=intensities,
         table=table,
         base=base,
         input_hold=input_hold,
@@ -240,11 +268,18 @@ def _shift_parameters(
 
 
 def tuning_sums(
-    context: FleetContext, model: FilterModel, seed: int, grid: Sequence[tuple[float, float]]
+    context: FleetContext,
+    model: FilterModel,
+    seed: int,
+    grid: Sequence[tuple[float, float, float]],
 ) -> np.ndarray | None:
-    """One tuning vehicle: per pair of factors (c, c_φ) of ``grid`` the filter's summed NEES,
-    its dof, summed NIS and its dof over the run (one row each); ``None`` when the reference
-    cannot simulate the vehicle."""
+    """One tuning vehicle: per triple of factors (c, c_φ, g) of ``grid`` the filter's summed
+    NEES, its dof, summed NIS and its dof over the run (one row each); ``None`` when the
+    reference cannot simulate the vehicle. g multiplies the filter's in-gear factor: its
+    model (prediction and bound) a copy with the factor, the compiled step shared."""
+    import copy
+    import dataclasses
+
     from gearsym.symbolic import naming
     from gearsym.validation.studies.estimation.fleet_eval import vehicle_setup
     from gearsym.validation.studies.estimation.loop import filter_run
@@ -257,8 +292,12 @@ def tuning_sums(
     twist = model.aug.state_names.index(naming.TWIST)
     sums = np.zeros((len(grid), 4))
     q0 = list(setup.q)
-    for k, (c, c_phi) in enumerate(grid):
+    aug0, discrete0 = setup.aug, setup.discrete
+    for k, (c, c_phi, g) in enumerate(grid):
         setup.q = [(c_phi if j == twist else c) * q if j < n_x else q for j, q in enumerate(q0)]
+        setup.aug = dataclasses.replace(aug0, in_gear_factor=g * aug0.in_gear_factor)
+        setup.discrete = copy.copy(discrete0)
+        setup.discrete.aug = setup.aug
         run = filter_run(setup, seed)
         used = run.nis_dof > 0
         sums[k] = (
@@ -270,6 +309,8 @@ def tuning_sums(
     return sums
 
 
-def _tuning_task(context: Any, seed: int, grid: Sequence[tuple[float, float]]) -> np.ndarray | None:
+def _tuning_task(
+    context: Any, seed: int, grid: Sequence[tuple[float, float, float]]
+) -> np.ndarray | None:
     """:func:`tuning_sums` on a Dask worker, with the worker's own filter model."""
     return tuning_sums(context, context.model(), seed, grid)
