@@ -104,6 +104,8 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         if text is not None and not args.tune:
             raise GearsymError("estimate", option, "is for --fleet --tune only")
     grid = {option: _tuning_factors(text, option) for option, text in axes.items()}
+    if args.tune_criterion is not None and not args.tune:
+        raise GearsymError("estimate", "--tune-criterion", "is for --fleet --tune only")
     fleet = None
     if args.fleet is not None:
         from gearsym.validation.sim.fleet import load_fleet
@@ -127,6 +129,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         tune_factors=grid["--tune-factors"],
         tune_twist_factors=grid["--tune-twist-factors"],
         tune_in_gear=grid["--tune-in-gear"],
+        tune_criterion=(args.tune_criterion or "pooled").replace("-", "_"),
         scheduler=args.scheduler,
         workers=args.workers,
         command=" ".join(["gearsym", *sys.argv[1:]]) if sys.argv[1:] else "",
@@ -390,6 +393,14 @@ def register(subparsers: Subparsers, common: argparse.ArgumentParser) -> None:
         "intensities of the speeds and the twist over an interval in which no element slides, "
         "1 where the table has none): the gears and the shift phases then tuned apart; the "
         "chosen in_gear is printed with the intensities",
+    )
+    p.add_argument(
+        "--tune-criterion",
+        choices=("pooled", "per-shift"),
+        default=None,
+        help="with --tune: 'pooled' (default), NEES/dof and NIS/dof summed over every shift "
+        "near 1; 'per-shift', each shift's own near 1 (the sum of the shifts' criteria), so "
+        "that no shift's inconsistency hides behind another's",
     )
     p.add_argument(
         "--input-hold",

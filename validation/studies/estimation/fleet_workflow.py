@@ -197,6 +197,7 @@ def _tune(request: EstimateRequest, folder: Path | None, reporter: Reporter) -> 
                 factors=request.tune_factors or FACTORS,
                 twist_factors=request.tune_twist_factors or TWIST_FACTORS,
                 in_gear_factors=request.tune_in_gear or IN_GEAR_FACTORS,
+                criterion=request.tune_criterion,
             )
         finally:
             done()

@@ -140,6 +140,9 @@ class EstimateRequest:
     tune_factors: tuple[float, ...] | None = None
     tune_twist_factors: tuple[float, ...] | None = None
     tune_in_gear: tuple[float, ...] | None = None
+    #: with ``tune``: ``"pooled"`` or ``"per_shift"`` (:func:`~gearsym.validation.studies.
+    #: estimation.tuning.tune_model_error`)
+    tune_criterion: str = "pooled"
     #: with ``fleet``: run the vehicles on Dask, ``"local"`` (a LocalCluster of ``workers``
     #: processes, default :data:`DEFAULT_WORKERS`) or ``"tcp://HOST:PORT"`` (a running
     #: scheduler and its workers); ``None``: one after the other in this process

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -73,9 +73,17 @@ class TuningResult:
     input_hold: str = "sample"
     #: the shifts tuned on (every tuning vehicle runs each; the sums are over all of them)
     shifts: tuple[str, ...] = ()
+    #: per shift: its own NEES/dof and NIS/dof per grid point (its vehicles' sums alone)
+    per_shift: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = field(default_factory=dict)
+    #: how the grid point was chosen: ``"pooled"`` (the criterion of the sums over every
+    #: shift) or ``"per_shift"`` (the sum over the shifts of each shift's own criterion)
+    criterion_form: str = "pooled"
 
     def criterion(self, k: int) -> float:
-        return math.log(self.nees_per_dof[k]) ** 2 + math.log(self.nis_per_dof[k]) ** 2
+        """Grid point ``k``'s criterion in :attr:`criterion_form`."""
+        if self.criterion_form == "per_shift" and self.per_shift:
+            return sum(_criterion(a[k], b[k]) for a, b in self.per_shift.values())
+        return _criterion(self.nees_per_dof[k], self.nis_per_dof[k])
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -90,6 +98,11 @@ class TuningResult:
             "from": self.base,
             "input_hold": self.input_hold,
             "shifts": list(self.shifts),
+            "criterion": self.criterion_form,
+            "per_shift": {
+                shift: {"nees_per_dof": list(a), "nis_per_dof": list(b)}
+                for shift, (a, b) in self.per_shift.items()
+            },
         }
 
     def text(self) -> str:
@@ -106,6 +119,11 @@ class TuningResult:
                 f"    {c:>6g} {c_phi:>7g} {g:>6g} {self.nees_per_dof[k]:>9.3f} "
                 f"{self.nis_per_dof[k]:>9.3f} {self.criterion(k):>10.4f}{mark}"
             )
+        chosen = self.factors.index(self.chosen)
+        if len(self.per_shift) > 1:
+            lines.append(f"  per shift at the chosen factors (criterion: {self.criterion_form}):")
+            for shift, (a, b) in self.per_shift.items():
+                lines.append(f"    {shift}: NEES/dof {a[chosen]:.3f}, NIS/dof {b[chosen]:.3f}")
         lines.append(f"  for the description's [estimator.{self.table}] table:")
         for name, value in self.intensities.items():
             lines.append(f"    {name} = {value:.3g}")
@@ -126,6 +144,7 @@ def tune_model_error(
     client: Any = None,
     parameters: Sequence[str] | None = None,
     input_hold: str = "sample",
+    criterion: str = "pooled",
 ) -> TuningResult:
     """Choose the factors on the calibration's model-error intensities (module text): every
     tuning vehicle simulated once, the filter run once per pair of factors on the same
@@ -138,7 +157,11 @@ def tune_model_error(
     tuning vehicle runs each, and NEES and NIS are summed over all of them): one calibration's
     intensities for every shift it serves. ``in_gear_factors``: the factors g on the table's
     in-gear factor (``in_gear``, 1 where it has none) tried, every triple (c, c_φ, g) of the
-    grid on the same runs."""
+    grid on the same runs. ``criterion``: ``"pooled"``, (ln NEES/dof)² + (ln NIS/dof)² of the
+    sums over every shift, or ``"per_shift"``, the sum over the shifts of each one's own: a
+    shift whose NIS is low cannot hide behind another's high one."""
+    if criterion not in ("pooled", "per_shift"):
+        raise GearsymError("estimate", "--tune-criterion", f"unknown criterion {criterion!r}")
     from gearsym.symbolic import naming
     from gearsym.symbolic.estimator_calibration import (
         AUGMENTED_STATES,
@@ -173,6 +196,7 @@ def tune_model_error(
     if any(g <= 0.0 or not math.isfinite(g) for _, _, g in grid):
         raise GearsymError("estimate", "--tune-in-gear", "the in-gear factors must be > 0")
     sums = np.zeros((len(grid), 4))  # NEES, its dof, NIS, its dof
+    own_sums: dict[str, np.ndarray] = {}  # the same per shift
     base: dict[str, float] = {}
     for number, shift_scenario in enumerate(scenarios):
         own_parameters = _shift_parameters(
@@ -223,12 +247,28 @@ def tune_model_error(
             told,
             args=(grid,),
         )
+        shift_sums = np.zeros((len(grid), 4))
         for vehicle in outcomes:
             if vehicle is not None:  # a vehicle the reference cannot simulate does not tune
-                sums += vehicle
+                shift_sums += vehicle
+        name = shift_scenario.shift.name
+        own_sums[name] = own_sums.get(name, np.zeros_like(shift_sums)) + shift_sums
+        sums += shift_sums
     nees = tuple(float(v) for v in sums[:, 0] / sums[:, 1])
     nis = tuple(float(v) for v in sums[:, 2] / sums[:, 3])
-    scores = [math.log(a) ** 2 + math.log(b) ** 2 for a, b in zip(nees, nis, strict=True)]
+    per_shift = {
+        name: (
+            tuple(float(v) for v in own[:, 0] / own[:, 1]),
+            tuple(float(v) for v in own[:, 2] / own[:, 3]),
+        )
+        for name, own in own_sums.items()
+    }
+    if criterion == "per_shift":
+        scores = [
+            sum(_criterion(a[k], b[k]) for a, b in per_shift.values()) for k in range(len(grid))
+        ]
+    else:
+        scores = [_criterion(a, b) for a, b in zip(nees, nis, strict=True)]
     best = int(np.argmin(scores))
     chosen = grid[best]
     intensities = {
@@ -248,7 +288,15 @@ def tune_model_error(
         base=base,
         input_hold=input_hold,
         shifts=tuple(sc.shift.name for sc in scenarios),
+        per_shift=per_shift,
+        criterion_form=criterion,
     )
+
+
+def _criterion(nees_per_dof: float, nis_per_dof: float) -> float:
+    """(ln NEES/dof)² + (ln NIS/dof)²: 0 for a consistent filter, a factor too much or too
+    little of either counting alike."""
+    return math.log(nees_per_dof) ** 2 + math.log(nis_per_dof) ** 2
 
 
 def _shift_parameters(

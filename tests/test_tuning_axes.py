@@ -1,8 +1,9 @@
-"""The tuning's in-gear axis (``gearsym estimate --fleet --tune --tune-in-gear G1,G2``): each
-factor g tried on the table's ``in_gear`` gives the NEES and NIS sums of an evaluation whose
-description states that ``in_gear`` (two code paths: the tuning's copy of the filter's model
-and the description read from TOML), the chosen ``in_gear`` is g times the table's, and the
-option is refused where it cannot act."""
+"""The tuning's grid and criterion from the command line (``gearsym estimate --fleet --tune
+--tune-factors --tune-twist-factors --tune-in-gear --tune-criterion``): each factor g tried on
+the table's ``in_gear`` gives the NEES and NIS sums of an evaluation whose description states
+that ``in_gear`` (two code paths: the tuning's copy of the filter's model and the description
+read from TOML), the chosen ``in_gear`` is g times the table's, each shift's own sums are its
+evaluation's, and the options are refused where they cannot act."""
 
 from __future__ import annotations
 
@@ -104,13 +105,14 @@ def test_the_chosen_in_gear_is_g_times_the_tables(default_scenario, tmp_path):
         (("--fleet", "--tune", "--tune-twist-factors", "-1"), "greater than 0"),
         (("--fleet", "--tune", "--tune-in-gear", "0.1,x"), "x"),
         (("--fleet", "--tune", "--tune-factors", "0.1,0.1"), "twice"),
+        (("--tune-criterion", "per-shift"), "--tune"),
     ],
 )
 def test_bad_tuning_axes_are_refused_in_one_line(arguments, reason):
     result = gearsym("estimate", "--filter", "ekf", *arguments)
     assert result.returncode == 2 and result.stdout == ""
     (line,) = result.stderr.strip().splitlines()
-    option = next(a for a in arguments if a.startswith("--tune-"))
+    option = next(a for a in arguments if a.startswith("--tune-"))  # the axis named
     assert option in line and reason in line, line
 
 
@@ -137,9 +139,52 @@ def test_the_axes_reach_the_tuning(monkeypatch, capsys):
     monkeypatch.setattr(tuning, "tune_model_error", recorder)
     code = main(
         ["estimate", "--filter", "ekf", "--fleet", "--tune", "--runs", "1"]
-        + ["--tune-in-gear", "0.3,1", "--tune-factors", "2", "--json"]
+        + ["--tune-in-gear", "0.3,1", "--tune-factors", "2", "--tune-criterion", "per-shift"]
+        + ["--json"]
     )
     assert code == 0
     assert seen["in_gear_factors"] == (0.3, 1.0) and seen["factors"] == (2.0,)
     assert seen["twist_factors"] == tuning.TWIST_FACTORS  # the default axis
+    assert seen["criterion"] == "per_shift"
     assert json.loads(capsys.readouterr().out)["tuning"]["model_error"]["in_gear"] == 0.3
+
+
+def test_per_shift_sums_and_the_per_shift_criterion(default_description, default_scenario):
+    """Tuned on the 2-3 and the 3-4 (one vehicle, two in-gear factors): each shift's own
+    NEES/dof and NIS/dof are its evaluation's alone (the 2-3 against run_fleet), the pooled ones
+    lie between the two shifts' (a dof-weighted mean), and ``criterion="per_shift"`` chooses
+    the grid point with the smallest sum of the shifts' own criteria."""
+    import math
+
+    from gearsym.validation.sim.fleet import load_fleet
+    from gearsym.validation.sim.scenario import load_scenario
+    from gearsym.validation.studies.estimation.tuning import tune_model_error
+
+    d = default_description
+    fleet = load_fleet(d)
+    scenarios = (default_scenario, load_scenario(d, data_file("scenario_3_4.toml")))
+    tuned = tune_model_error(
+        d,
+        scenarios,
+        fleet,
+        [SEED],
+        factors=(1.0,),
+        twist_factors=(1.0,),
+        in_gear_factors=(1.0, 0.1),
+        criterion="per_shift",
+    )
+    assert set(tuned.per_shift) == {"2-3", "3-4"}
+    nees, nis = _evaluation_sums(d, default_scenario, fleet)
+    assert tuned.per_shift["2-3"][0][0] == pytest.approx(nees, rel=1e-12)
+    assert tuned.per_shift["2-3"][1][0] == pytest.approx(nis, rel=1e-12)
+    for k in range(2):
+        for pooled, own in ((tuned.nees_per_dof, 0), (tuned.nis_per_dof, 1)):
+            values = [tuned.per_shift[s][own][k] for s in ("2-3", "3-4")]
+            assert min(values) <= pooled[k] <= max(values)
+    scores = [
+        sum(math.log(a[k]) ** 2 + math.log(b[k]) ** 2 for a, b in tuned.per_shift.values())
+        for k in range(2)
+    ]
+    assert tuned.chosen == tuned.factors[int(np.argmin(scores))]
+    assert tuned.to_dict()["criterion"] == "per_shift"
+    assert "3-4: NEES/dof" in tuned.text()
