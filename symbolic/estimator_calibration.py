@@ -50,6 +50,7 @@ __all__ = [
     "DAMPING",
     "DAMPING_FACTOR",
     "IN_GEAR",
+    "IN_GEAR_SETTLE",
     "STIFFNESS",
     "STIFFNESS_FACTOR",
     "VALVE_GAIN",
@@ -213,6 +214,13 @@ MODEL_ERROR_NAMES: tuple[str, ...] = ("phi", "omega_C")
 #: model leaves little, and one white model error for both widens every predicted speed of the
 #: gears (the fleet evaluation's consistency per phase shows it).
 IN_GEAR = "in_gear"
+#: The entries of a model-error table that are not a state's intensity.
+IN_GEAR_ENTRIES = ("in_gear", "in_gear_settle")
+#: A model-error table's settling time (s): the in-gear factor acts only once the filter's
+#: last mode switch lies this long behind; a lock-up or an opening is a torque step that rings
+#: the drivetrain's torsional modes, which the rigid shift model does not have, for tens of
+#: milliseconds (0: from the switch on).
+IN_GEAR_SETTLE = "in_gear_settle"
 
 #: Units of the prior entries that have no record (φ, the μ-map scale).
 _PRIOR_UNITS = {
@@ -399,6 +407,7 @@ class EstimatorCalibration:
             if name
             not in (
                 IN_GEAR,
+                IN_GEAR_SETTLE,
                 MU_SCALE,
                 VALVE_OFFSET,
                 VALVE_GAIN,
@@ -438,12 +447,20 @@ class EstimatorCalibration:
         """The model-error intensities of a filter that estimates any of
         :data:`AUGMENTED_STATES`, by state name (``[estimator.model_error_augmented]``, empty
         when the table is absent)."""
-        return {name: t.value for name, t in self.model_error_augmented if name != IN_GEAR}
+        return {
+            name: t.value
+            for name, t in self.model_error_augmented
+            if name not in (IN_GEAR, IN_GEAR_SETTLE)
+        }
 
     def intensities_map_scale(self) -> dict[str, float]:
         """The model-error intensities of such a filter whose μ states are map scales, by state
         name (``[estimator.model_error_map_scale]``, empty when the table is absent)."""
-        return {name: t.value for name, t in self.model_error_map_scale if name != IN_GEAR}
+        return {
+            name: t.value
+            for name, t in self.model_error_map_scale
+            if name not in (IN_GEAR, IN_GEAR_SETTLE)
+        }
 
     def in_gear_factor(self, tables: Sequence[str]) -> float:
         """The :data:`IN_GEAR` factor of a filter whose intensities come from ``tables`` (model
@@ -455,6 +472,16 @@ class EstimatorCalibration:
             if given is not None:
                 factor = given.value
         return factor
+
+    def in_gear_settle(self, tables: Sequence[str]) -> float:
+        """The :data:`IN_GEAR_SETTLE` time (s) of a filter whose intensities come from
+        ``tables``, as :meth:`in_gear_factor` (0 where none states it)."""
+        settle = 0.0
+        for kind in tables:
+            given = dict(getattr(self, kind)).get(IN_GEAR_SETTLE)
+            if given is not None:
+                settle = given.value
+        return settle
 
     def to_dict(self) -> dict[str, Any]:
         """For a report: what the filter was told, with the sources."""
@@ -526,9 +553,9 @@ def parse_estimator_table(table: Any, shafts: Sequence[str] = ()) -> EstimatorCa
                     f"not a random-walk parameter (known: {', '.join(RANDOM_WALK_NAMES)})",
                 )
             if kind != "random_walk" and not (
-                name in MODEL_ERROR_NAMES or name in shaft_states or name == IN_GEAR
+                name in MODEL_ERROR_NAMES or name in shaft_states or name in IN_GEAR_ENTRIES
             ):
-                known = ", ".join((*MODEL_ERROR_NAMES, *sorted(shaft_states), IN_GEAR))
+                known = ", ".join((*MODEL_ERROR_NAMES, *sorted(shaft_states), *IN_GEAR_ENTRIES))
                 raise sub.fail(name, f"not a state of a filter's model (known: {known})")
             entry = sub.table(name)
             value = entry.number("value")
@@ -540,6 +567,8 @@ def parse_estimator_table(table: Any, shafts: Sequence[str] = ()) -> EstimatorCa
                 raise entry.fail("value", f"must be finite and >= 0, got {value:g}")
             if name == IN_GEAR and unit != "1":
                 raise entry.fail("unit", f"a factor: expected '1', got {unit!r}")
+            if name == IN_GEAR_SETTLE and unit != "s":
+                raise entry.fail("unit", f"a time: expected 's', got {unit!r}")
             if not source.strip():
                 raise entry.fail("source", "must say where the value comes from (or 'assumed')")
             values.append((name, Tuning(value, unit, source)))

@@ -30,6 +30,10 @@ def _description(tmp_path: Path, entry: str, table: str = "model_error_map_scale
     """The shipped description with ``entry`` added to its ``[estimator.<table>]``, as map-scale
     filter (``mu_model = "map_scale"``)."""
     text = SHIPPED.read_text(encoding="utf-8")
+    # the shipped calibration's own factor (its map-scale table states one) gives way
+    text = "".join(
+        line for line in text.splitlines(keepends=True) if not line.startswith("in_gear = ")
+    )
     header = f"\n[estimator.{table}]\n"
     assert header in text
     text = text.replace(header, header + entry + "\n", 1)
@@ -100,3 +104,67 @@ def test_a_factor_with_a_unit_is_refused(tmp_path):
     message = str(error.value)
     assert "in_gear" in message and "unit" in message and "'1'" in message, message
     assert "\n" not in message
+
+
+def test_the_factor_waits_for_the_settling_time_after_a_switch(tmp_path):
+    """in_gear_settle = 0.05 s: in a gear the physical states keep their full rates while the
+    last mode switch lies less than 0.05 s back (the drivetrain still rings), a tenth of them
+    from then on, and with no switch at all (``since_switch`` infinite, the default)."""
+    d = _description(
+        tmp_path,
+        'in_gear = { value = 0.1, unit = "1", source = "test" }\n'
+        'in_gear_settle = { value = 0.05, unit = "s", source = "test" }',
+    )
+    aug = augmented_model(d, "2-3", WITH_STATES)
+    assert aug.in_gear_settle == 0.05
+    q = np.arange(1.0, len(aug.state_names) + 1.0)
+    gear = np.zeros(len(aug.input_names))
+    x = slice(0, aug.n_x)
+    assert np.array_equal(aug.process_rates(q, gear, 0.0)[x], q[x])
+    assert np.array_equal(aug.process_rates(q, gear, 0.049)[x], q[x])
+    assert np.allclose(aug.process_rates(q, gear, 0.05)[x], 0.1 * q[x], rtol=1e-15)
+    assert np.allclose(aug.process_rates(q, gear)[x], 0.1 * q[x], rtol=1e-15)
+    assert "in_gear_settle" not in aug.intensities  # not a state
+
+
+def test_a_settling_time_in_another_unit_is_refused(tmp_path):
+    with pytest.raises(GearsymError) as error:
+        _description(tmp_path, 'in_gear_settle = { value = 50, unit = "ms", source = "test" }')
+    message = str(error.value)
+    assert "in_gear_settle" in message and "'s'" in message and "\n" not in message, message
+
+
+def test_the_filter_counts_the_time_since_its_own_last_switch(
+    default_description, default_scenario, monkeypatch
+):
+    """Over one fleet vehicle's 2-3 the prediction of each interval is told the time from the
+    filter's last mode switch to the interval's start: infinite before the first switch, 0 for
+    the interval that starts at a switch's sample (and for the rest of an interval in which an
+    element locks up), then one sample time more per interval."""
+    import gearsym.symbolic.estimators.ekf as ekf
+    from gearsym.validation.sim.fleet import load_fleet
+    from gearsym.validation.studies.estimation.fleet_eval import run_fleet
+
+    told: list[float] = []
+    predict = ekf.ekf_predict
+
+    def spy(*args, **kwargs):
+        since = kwargs.get("since_switch", args[7] if len(args) > 7 else np.inf)
+        told.append(float(since))
+        return predict(*args, **kwargs)
+
+    monkeypatch.setattr(ekf, "ekf_predict", spy)
+    d = default_description
+    (fr,) = run_fleet(d, default_scenario, load_fleet(d), runs=1, seed=700200, bound=False).runs
+    run = fr.run
+    h = float(run.t[1] - run.t[0])
+    switch_times = sorted({s.t for s in run.switches})
+    assert switch_times, "the filter switched modes"
+    assert np.isinf(told[0])  # before any switch
+    # the intervals that start at a switch's sample are told 0; each later one h more
+    finite = np.array([s for s in told if np.isfinite(s)])
+    assert finite[0] == 0.0
+    steps = np.diff(finite)
+    ok = np.isclose(steps, h, rtol=1e-9) | (finite[1:] == 0.0)
+    assert ok.all(), finite[:20]
+    assert np.sum(finite == 0.0) >= len(switch_times)

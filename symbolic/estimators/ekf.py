@@ -164,6 +164,9 @@ class AugmentedModel:
     #: the factor on the physical states' intensities over an interval in which no element
     #: slides (``in_gear`` of the description's model-error table; 1: the same as in a shift)
     in_gear_factor: float = 1.0
+    #: the time (s) after the filter's last mode switch from which :attr:`in_gear_factor`
+    #: acts (``in_gear_settle``; 0: at once)
+    in_gear_settle: float = 0.0
 
     @property
     def state_names(self) -> list[str]:
@@ -198,16 +201,20 @@ class AugmentedModel:
             if not abs(u[names.index(slide_input(e))]) > 0.5
         ]
 
-    def process_rates(self, q: Sequence[float], u: Sequence[float]) -> np.ndarray:
+    def process_rates(
+        self, q: Sequence[float], u: Sequence[float], since_switch: float = math.inf
+    ) -> np.ndarray:
         """The intensities of one prediction interval under the inputs ``u``: ``q`` with the μ
         states of elements that do not slide at 0 (:meth:`frozen_states`) and, where no element
-        slides at all, the physical states' (the model error) times :attr:`in_gear_factor`."""
+        slides at all and the last mode switch lies ``since_switch`` ≥ :attr:`in_gear_settle`
+        seconds back, the physical states' (the model error) times :attr:`in_gear_factor`."""
         import numpy as np
 
         rates = np.array(q, dtype=float)
         rates[self.frozen_states(u)] = 0.0
         names = self.input_names
-        if not any(abs(u[names.index(slide_input(e))]) > 0.5 for e in self.elements):
+        sliding = any(abs(u[names.index(slide_input(e))]) > 0.5 for e in self.elements)
+        if not sliding and since_switch >= self.in_gear_settle:
             rates[: self.n_x] *= self.in_gear_factor
         return rates
 
@@ -495,6 +502,7 @@ def augmented_model(
         capacity={e: sp.expand(signs[e] * friction[e]) for e in elements},
         slip_sign={e: int(signs[e]) for e in elements},
         in_gear_factor=d.estimator.in_gear_factor(tables),
+        in_gear_settle=d.estimator.in_gear_settle(tables),
     )
 
 
@@ -604,6 +612,7 @@ def ekf_predict(
     h: float,
     p: Sequence[float],
     q: Sequence[float],
+    since_switch: float = math.inf,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Time update: z⁻ = Φ_h(z, u), P⁻ = F P Fᵀ + h diag(q) with F the exact step Jacobian.
 
@@ -616,7 +625,7 @@ def ekf_predict(
     import numpy as np
 
     z_next, F = discrete.step(z, u, h, p)
-    rates = discrete.aug.process_rates(q, u)
+    rates = discrete.aug.process_rates(q, u, since_switch)
     P_next = F @ P @ F.T + np.diag(h * rates)
     return z_next, 0.5 * (P_next + P_next.T)
 

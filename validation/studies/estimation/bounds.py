@@ -78,6 +78,7 @@ def ekf_bound(setup: EkfSetup, relative_step: float = 1e-5) -> EkfBound:
     with the states at its start as nuisance (Schur complement, restarted there) goes through
     the thesis' elimination (3.3, γ_max of :data:`GAMMA_MAX`)."""
     from gearsym.symbolic.defaults import GAMMA_MAX
+    from gearsym.symbolic.estimators.ekf import slide_input
     from gearsym.symbolic.fisher import eliminate
     from gearsym.validation.studies.hybrid_fisher import schur_complement
     from gearsym.validation.studies.posterior_bound import (
@@ -103,8 +104,13 @@ def ekf_bound(setup: EkfSetup, relative_step: float = 1e-5) -> EkfBound:
     # element does not slide (its random walk is switched off there, ekf_predict)
     h_step = float(setup.t[1] - setup.t[0]) if len(setup.t) > 1 else 0.0
     process = np.zeros((len(setup.t), n, n))
+    slides = [setup.aug.input_names.index(slide_input(e)) for e in setup.aug.elements]
+    last_switch = -np.inf  # the truth's last change of an element's slide flag (settling)
     for k in range(len(setup.t)):
-        process[k] = np.diag(h_step * setup.aug.process_rates(setup.q, u[k]))
+        if k > 0 and np.any(np.asarray(u[k])[slides] != np.asarray(u[k - 1])[slides]):
+            last_switch = float(setup.t[k])
+        since = float(setup.t[k] - last_switch)
+        process[k] = np.diag(h_step * setup.aug.process_rates(setup.q, u[k], since))
     sigma_process = process_noise_bound(flow, S, used_once, np.diag(setup.prior_sigma**2), process)
     parameters = list(setup.aug.parameters)
     values = {name: float(z0[names.index(name)]) for name in parameters}

@@ -335,6 +335,7 @@ def filter_run(
         codes = {e: np.zeros(len(t), dtype=int) for e in logic.elements}
         switches: list[ModeSwitch] = []
         held = logic.inputs(s.u[0], modes)
+    last_switch = -np.inf  # the time of the filter's last mode switch (in-gear settling)
     for k in range(len(t)):
         if logic is None:
             u_before, u_now = s.u[k - 1], s.u[k]
@@ -346,7 +347,8 @@ def filter_run(
             u_before = form(z, u_before)
         if k > 0:
             z_before, P_before = z, P
-            z, P = ekf_predict(s.discrete, z, P, u_before, sample_time, s.p, s.q)
+            since = float(t[k - 1] - last_switch)
+            z, P = ekf_predict(s.discrete, z, P, u_before, sample_time, s.p, s.q, since)
         if logic is not None and k > 0 and lock_up_before_update:
             known = s.u[k] if form is None else form(z, s.u[k])
             _, _, after, decided = ekf_mode_update(
@@ -358,6 +360,7 @@ def filter_run(
                     s, logic, z_before, P_before, z, u_before, locked.element, after, sample_time
                 )
                 modes = after
+                last_switch = float(t[k])
                 switches.append(
                     ModeSwitch(
                         locked.element, locked.kind, float(t[k]), locked.before, locked.after
@@ -384,6 +387,8 @@ def filter_run(
             switches += [
                 ModeSwitch(ev.element, ev.kind, float(t[k]), ev.before, ev.after) for ev in decided
             ]
+            if decided:
+                last_switch = float(t[k])
             for e, code in modes.items():
                 codes[e][k] = code
             held = logic.inputs(s.u[k], modes)
@@ -464,7 +469,7 @@ def _predict_through_lock_up(
     rest = (1.0 - tau) * sample_time
     if rest > 0.0:
         u_rest = logic.inputs(u_before, modes_after)
-        z, P = ekf_predict(s.discrete, z, P, u_rest, rest, s.p, s.q)
+        z, P = ekf_predict(s.discrete, z, P, u_rest, rest, s.p, s.q, since_switch=0.0)
     return z, P
 
 
