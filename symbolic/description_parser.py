@@ -220,7 +220,9 @@ def parse_description(
     _check_references(description)
     description = replace(
         description,
-        estimator=parse_estimator_table(estimator_table, [s.name for s in shafts]),
+        estimator=parse_estimator_table(
+            estimator_table, [s.name for s in shafts], [g.name for g in gears]
+        ),
         drive=drive,
         control=control,
     )

@@ -216,6 +216,8 @@ MODEL_ERROR_NAMES: tuple[str, ...] = ("phi", "omega_C")
 IN_GEAR = "in_gear"
 #: The entries of a model-error table that are not a state's intensity.
 IN_GEAR_ENTRIES = ("in_gear", "in_gear_settle")
+#: A model-error table's sub-table of per-shift in-gear entries (``shift."2-3"``).
+SHIFT_KEY = "shift"
 #: A model-error table's settling time (s): the in-gear factor acts only once the filter's
 #: last mode switch lies this long behind; a lock-up or an opening is a torque step that rings
 #: the drivetrain's torsional modes, which the rigid shift model does not have, for tens of
@@ -308,6 +310,9 @@ class EstimatorCalibration:
     #: ``[estimator.model_error_map_scale]``: the same with the μ states map scales
     #: (:data:`MODEL_ERROR_MAP_SCALE`)
     model_error_map_scale: tuple[tuple[str, Tuning], ...] = ()
+    #: a model-error table's ``[... .shift."<from>-<to>"]`` sub-tables: (table, shift, its
+    #: :data:`IN_GEAR_ENTRIES`), which override the table's own for that shift's filter
+    in_gear_by_shift: tuple[tuple[str, str, tuple[tuple[str, Tuning], ...]], ...] = ()
     tuned_on: str = ""
     #: :data:`MU_MODELS`
     mu_model: str = "random_walk"
@@ -462,26 +467,30 @@ class EstimatorCalibration:
             if name not in (IN_GEAR, IN_GEAR_SETTLE)
         }
 
-    def in_gear_factor(self, tables: Sequence[str]) -> float:
+    def in_gear_factor(self, tables: Sequence[str], shift: str | None = None) -> float:
         """The :data:`IN_GEAR` factor of a filter whose intensities come from ``tables`` (model
         -error table names, each over the one before, as the intensities): the last one that
-        states it, else 1 (the same intensities in a gear as in a shift)."""
-        factor = 1.0
-        for kind in tables:
-            given = dict(getattr(self, kind)).get(IN_GEAR)
-            if given is not None:
-                factor = given.value
-        return factor
+        states it, its ``shift`` sub-table over the table's own; else 1 (the same
+        intensities in a gear as in a shift)."""
+        return self._in_gear_entry(IN_GEAR, tables, shift, 1.0)
 
-    def in_gear_settle(self, tables: Sequence[str]) -> float:
+    def in_gear_settle(self, tables: Sequence[str], shift: str | None = None) -> float:
         """The :data:`IN_GEAR_SETTLE` time (s) of a filter whose intensities come from
         ``tables``, as :meth:`in_gear_factor` (0 where none states it)."""
-        settle = 0.0
+        return self._in_gear_entry(IN_GEAR_SETTLE, tables, shift, 0.0)
+
+    def _in_gear_entry(
+        self, name: str, tables: Sequence[str], shift: str | None, default: float
+    ) -> float:
+        value = default
         for kind in tables:
-            given = dict(getattr(self, kind)).get(IN_GEAR_SETTLE)
+            given = dict(getattr(self, kind)).get(name)
             if given is not None:
-                settle = given.value
-        return settle
+                value = given.value
+            for table, own_shift, entries in self.in_gear_by_shift:
+                if table == kind and own_shift == shift and name in dict(entries):
+                    value = dict(entries)[name].value
+        return value
 
     def to_dict(self) -> dict[str, Any]:
         """For a report: what the filter was told, with the sources."""
@@ -501,6 +510,16 @@ class EstimatorCalibration:
                 if self.model_error_map_scale
                 else {}
             ),
+            **(
+                {
+                    "in_gear_by_shift": [
+                        {"table": kind, "shift": shift, **{n: t.value for n, t in entries}}
+                        for kind, shift, entries in self.in_gear_by_shift
+                    ]
+                }
+                if self.in_gear_by_shift
+                else {}
+            ),
             "tuned_on": self.tuned_on,
             "mu_model": self.mu_model,
         }
@@ -510,11 +529,14 @@ def _unit_of(name: str) -> str:
     return _PRIOR_UNITS.get(name) or record(name).unit
 
 
-def parse_estimator_table(table: Any, shafts: Sequence[str] = ()) -> EstimatorCalibration:
+def parse_estimator_table(
+    table: Any, shafts: Sequence[str] = (), gears: Sequence[str] = ()
+) -> EstimatorCalibration:
     """The ``[estimator]`` table read through a
     :class:`~gearsym.symbolic.io.table_reader.TableReader` (an absent table: every default).
     One-line errors name the file and the key; ``shafts``: the description's shafts, whose
-    speeds ``omega_<shaft>`` may carry a model-error intensity."""
+    speeds ``omega_<shaft>`` may carry a model-error intensity; ``gears``: the description's
+    gears, between which a model-error table's ``shift."<from>-<to>"`` sub-tables are."""
     shaft_states = {f"omega_{name}" for name in shafts}
     tuned_on = table.string("tuned_on", required=False, default="")
     mu_model = table.string("mu_model", required=False, default="random_walk")
@@ -543,10 +565,14 @@ def parse_estimator_table(table: Any, shafts: Sequence[str] = ()) -> EstimatorCa
         priors.append((name, Prior(sd=sd, mean=mean, source=source)))
     prior_table.reject_unknown()
     tables = {}
+    by_shift: list[tuple[str, str, tuple[tuple[str, Tuning], ...]]] = []
     for kind in ("random_walk", "model_error", MODEL_ERROR_AUGMENTED, MODEL_ERROR_MAP_SCALE):
         sub = table.table(kind, required=False)
         values: list[tuple[str, Tuning]] = []
         for name in list(sub.data):
+            if kind != "random_walk" and name == SHIFT_KEY:
+                by_shift += [(kind, *own) for own in _in_gear_shifts(sub.table(name), gears)]
+                continue
             if kind == "random_walk" and name not in RANDOM_WALK_NAMES:
                 raise sub.fail(
                     name,
@@ -557,21 +583,7 @@ def parse_estimator_table(table: Any, shafts: Sequence[str] = ()) -> EstimatorCa
             ):
                 known = ", ".join((*MODEL_ERROR_NAMES, *sorted(shaft_states), *IN_GEAR_ENTRIES))
                 raise sub.fail(name, f"not a state of a filter's model (known: {known})")
-            entry = sub.table(name)
-            value = entry.number("value")
-            assert value is not None
-            unit = entry.string("unit")
-            source = entry.string("source")
-            entry.reject_unknown()
-            if not (math.isfinite(value) and value >= 0):
-                raise entry.fail("value", f"must be finite and >= 0, got {value:g}")
-            if name == IN_GEAR and unit != "1":
-                raise entry.fail("unit", f"a factor: expected '1', got {unit!r}")
-            if name == IN_GEAR_SETTLE and unit != "s":
-                raise entry.fail("unit", f"a time: expected 's', got {unit!r}")
-            if not source.strip():
-                raise entry.fail("source", "must say where the value comes from (or 'assumed')")
-            values.append((name, Tuning(value, unit, source)))
+            values.append((name, _tuning(sub.table(name), name)))
         sub.reject_unknown()
         tables[kind] = tuple(values)
     table.reject_unknown()
@@ -581,7 +593,55 @@ def parse_estimator_table(table: Any, shafts: Sequence[str] = ()) -> EstimatorCa
         model_error=tables["model_error"],
         model_error_augmented=tables[MODEL_ERROR_AUGMENTED],
         model_error_map_scale=tables[MODEL_ERROR_MAP_SCALE],
+        in_gear_by_shift=tuple(by_shift),
         tuned_on=tuned_on,
         mu_model=mu_model,
         file=table.file,
     )
+
+
+def _tuning(entry: Any, name: str) -> Tuning:
+    """One ``{ value, unit, source }`` entry of a random-walk or model-error table."""
+    value = entry.number("value")
+    assert value is not None
+    unit = entry.string("unit")
+    source = entry.string("source")
+    entry.reject_unknown()
+    if not (math.isfinite(value) and value >= 0):
+        raise entry.fail("value", f"must be finite and >= 0, got {value:g}")
+    if name == IN_GEAR and unit != "1":
+        raise entry.fail("unit", f"a factor: expected '1', got {unit!r}")
+    if name == IN_GEAR_SETTLE and unit != "s":
+        raise entry.fail("unit", f"a time: expected 's', got {unit!r}")
+    if not source.strip():
+        raise entry.fail("source", "must say where the value comes from (or 'assumed')")
+    return Tuning(value, unit, source)
+
+
+def _in_gear_shifts(
+    shifts: Any, gears: Sequence[str]
+) -> list[tuple[str, tuple[tuple[str, Tuning], ...]]]:
+    """A model-error table's ``shift`` sub-tables: per shift ``"<from>-<to>"`` between two of
+    the description's ``gears``, its :data:`IN_GEAR_ENTRIES` (the in-gear factor and settling
+    time of that shift's filter, calibrated per shift type)."""
+    found = []
+    for shift in list(shifts.data):
+        ends = shift.split("-")
+        if (
+            len(ends) != 2
+            or (gears and not all(end in gears for end in ends))
+            or ends[0] == ends[1]
+        ):
+            raise shifts.fail(
+                shift, f"not a shift between two of the description's gears ({', '.join(gears)})"
+            )
+        own = shifts.table(shift)
+        entries = []
+        for name in list(own.data):
+            if name not in IN_GEAR_ENTRIES:
+                raise own.fail(name, "a shift may state in_gear and in_gear_settle only")
+            entries.append((name, _tuning(own.table(name), name)))
+        own.reject_unknown()
+        found.append((shift, tuple(entries)))
+    shifts.reject_unknown()
+    return found

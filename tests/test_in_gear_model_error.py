@@ -168,3 +168,55 @@ def test_the_filter_counts_the_time_since_its_own_last_switch(
     ok = np.isclose(steps, h, rtol=1e-9) | (finite[1:] == 0.0)
     assert ok.all(), finite[:20]
     assert np.sum(finite == 0.0) >= len(switch_times)
+
+
+def _with_shift_table(tmp_path: Path, shift: str, entries: str):
+    """The shipped description, map-scale filter, with a ``shift."<shift>"`` sub-table of its
+    ``[estimator.model_error_map_scale]``."""
+    text = SHIPPED.read_text(encoding="utf-8")
+    text = "".join(
+        line for line in text.splitlines(keepends=True) if not line.startswith("in_gear")
+    )
+    text = text.replace("[estimator]\n", '[estimator]\nmu_model = "map_scale"\n', 1)
+    text += f'\n[estimator.model_error_map_scale.shift."{shift}"]\n{entries}\n'
+    path = tmp_path / "per_shift.toml"
+    path.write_text(text, encoding="utf-8")
+    return load_description(str(path))
+
+
+def test_a_shift_sub_table_overrides_the_tables_factor_for_that_shift_only(tmp_path):
+    d = _with_shift_table(
+        tmp_path,
+        "2-3",
+        'in_gear = { value = 0.1, unit = "1", source = "test" }\n'
+        'in_gear_settle = { value = 0.05, unit = "s", source = "test" }',
+    )
+    own = augmented_model(d, "2-3", WITH_STATES)
+    assert (own.in_gear_factor, own.in_gear_settle) == (0.1, 0.05)
+    other = augmented_model(d, "3-4", ("m_veh", "mu_81", "mu_27", "zeta", "k_ss"))
+    assert (other.in_gear_factor, other.in_gear_settle) == (1.0, 0.0)
+    # the thesis' filter takes [estimator.model_error], whose sub-tables are its own
+    assert augmented_model(d, "2-3", default_parameters(d, "2-3")).in_gear_factor == 1.0
+    assert d.estimator.to_dict()["in_gear_by_shift"] == [
+        {"table": "model_error_map_scale", "shift": "2-3", "in_gear": 0.1, "in_gear_settle": 0.05}
+    ]
+
+
+@pytest.mark.parametrize(
+    ("shift", "entries", "reason"),
+    [
+        ("2-x", 'in_gear = { value = 0.1, unit = "1", source = "t" }', "two of the description"),
+        ("3-3", 'in_gear = { value = 0.1, unit = "1", source = "t" }', "two of the description"),
+        (
+            "2-3",
+            'omega_1 = { value = 0.1, unit = "rad^2/s^3", source = "t" }',
+            "in_gear_settle only",
+        ),
+    ],
+)
+def test_a_bad_shift_sub_table_is_refused_in_one_line(tmp_path, shift, entries, reason):
+    with pytest.raises(GearsymError) as error:
+        _with_shift_table(tmp_path, shift, entries)
+    message = str(error.value)
+    assert "model_error_map_scale.shift" in message and reason in message, message
+    assert "\n" not in message

@@ -501,8 +501,8 @@ def augmented_model(
         sticking_torque=sticking_torque,
         capacity={e: sp.expand(signs[e] * friction[e]) for e in elements},
         slip_sign={e: int(signs[e]) for e in elements},
-        in_gear_factor=d.estimator.in_gear_factor(tables),
-        in_gear_settle=d.estimator.in_gear_settle(tables),
+        in_gear_factor=d.estimator.in_gear_factor(tables, spec.name),
+        in_gear_settle=d.estimator.in_gear_settle(tables, spec.name),
     )
 
 
