@@ -26,14 +26,24 @@ SHIPPED = data_file("thesis_9speed.toml")
 WITH_STATES = ("m_veh", "mu_38", "mu_05", "zeta", "k_ss")
 
 
+def _without_in_gear(text: str) -> str:
+    """The shipped description without its own in-gear entries (its per-shift sub-tables, and
+    any table-level ``in_gear``): the tests state theirs."""
+    kept, skipping = [], False
+    for line in text.splitlines(keepends=True):
+        if line.startswith("[estimator.") and ".shift." in line:
+            skipping = True
+        elif line.startswith("["):
+            skipping = False
+        if not skipping and not line.startswith("in_gear"):
+            kept.append(line)
+    return "".join(kept)
+
+
 def _description(tmp_path: Path, entry: str, table: str = "model_error_map_scale"):
     """The shipped description with ``entry`` added to its ``[estimator.<table>]``, as map-scale
     filter (``mu_model = "map_scale"``)."""
-    text = SHIPPED.read_text(encoding="utf-8")
-    # the shipped calibration's own factor (its map-scale table states one) gives way
-    text = "".join(
-        line for line in text.splitlines(keepends=True) if not line.startswith("in_gear = ")
-    )
+    text = _without_in_gear(SHIPPED.read_text(encoding="utf-8"))
     header = f"\n[estimator.{table}]\n"
     assert header in text
     text = text.replace(header, header + entry + "\n", 1)
@@ -173,10 +183,7 @@ def test_the_filter_counts_the_time_since_its_own_last_switch(
 def _with_shift_table(tmp_path: Path, shift: str, entries: str):
     """The shipped description, map-scale filter, with a ``shift."<shift>"`` sub-table of its
     ``[estimator.model_error_map_scale]``."""
-    text = SHIPPED.read_text(encoding="utf-8")
-    text = "".join(
-        line for line in text.splitlines(keepends=True) if not line.startswith("in_gear")
-    )
+    text = _without_in_gear(SHIPPED.read_text(encoding="utf-8"))
     text = text.replace("[estimator]\n", '[estimator]\nmu_model = "map_scale"\n', 1)
     text += f'\n[estimator.model_error_map_scale.shift."{shift}"]\n{entries}\n'
     path = tmp_path / "per_shift.toml"
