@@ -218,25 +218,14 @@ def test_non_finite_numbers_in_a_description(tmp_path, capsys, value):
     assert "finite" in ratios(capsys, write(tmp_path, text), 'gear[name="2"].ratio')
 
 
-def _without_shift_tables(text: str) -> str:
-    """``text`` without its ``[estimator.<table>.shift."<from>-<to>"]`` sub-tables."""
-    kept, skipping = [], False
-    for line in text.splitlines(keepends=True):
-        if line.startswith("[estimator.") and ".shift." in line:
-            skipping = True
-        elif line.startswith("["):
-            skipping = False
-        if not skipping:
-            kept.append(line)
-    return "".join(kept)
-
-
 def test_generate_with_one_forward_gear(tmp_path, capsys):
+    from tests.test_in_gear_model_error import without_shift_tables
+
     start = DESCRIPTION.index('[[gear]]\nname = "2"')
     text = DESCRIPTION[:start] + DESCRIPTION[DESCRIPTION.index('[[gear]]\nname = "N"') :]
     # the estimator's per-shift entries name gears this gearbox no longer has (refused on
     # their own, tests/test_in_gear_model_error.py): gone with them
-    text = _without_shift_tables(text)
+    text = without_shift_tables(text)
     path, out = write(tmp_path, text), tmp_path / "out"
     code = main(["generate", path, "--out", str(out)])
     _, err = capsys.readouterr()

@@ -33,6 +33,24 @@ def _with_in_gear(tmp_path: Path, value: float) -> object:
     return load_description(str(path))
 
 
+def _tuned(d, scenario, in_gear_factors, **options):
+    """The tuning on vehicle :data:`SEED` of the default fleet, c = c_φ = 1, the in-gear axis
+    ``in_gear_factors``."""
+    from gearsym.validation.sim.fleet import load_fleet
+    from gearsym.validation.studies.estimation.tuning import tune_model_error
+
+    return tune_model_error(
+        d,
+        scenario,
+        load_fleet(d),
+        [SEED],
+        factors=(1.0,),
+        twist_factors=(1.0,),
+        in_gear_factors=in_gear_factors,
+        **options,
+    )
+
+
 def _evaluation_sums(d, scenario, fleet) -> tuple[float, float]:
     from gearsym.validation.studies.estimation.fleet_eval import run_fleet
 
@@ -47,19 +65,10 @@ def test_each_in_gear_factor_is_an_evaluation_with_that_in_gear(
     default_description, default_scenario, tmp_path
 ):
     from gearsym.validation.sim.fleet import load_fleet
-    from gearsym.validation.studies.estimation.tuning import tune_model_error
 
     d = default_description
     fleet = load_fleet(d)
-    tuned = tune_model_error(
-        d,
-        default_scenario,
-        fleet,
-        [SEED],
-        factors=(1.0,),
-        twist_factors=(1.0,),
-        in_gear_factors=(1.0, 0.1),
-    )
+    tuned = _tuned(d, default_scenario, (1.0, 0.1))
     assert tuned.factors == ((1.0, 1.0, 1.0), (1.0, 1.0, 0.1))
     for k, description in enumerate((d, _with_in_gear(tmp_path, 0.1))):
         nees, nis = _evaluation_sums(description, default_scenario, fleet)
@@ -77,19 +86,10 @@ def test_the_chosen_in_gear_is_g_times_the_tables(default_scenario, tmp_path):
     """A table stating in_gear = 0.5 tried at g = 0.2 gives in_gear = 0.1, and the sums are an
     evaluation's with in_gear = 0.1."""
     from gearsym.validation.sim.fleet import load_fleet
-    from gearsym.validation.studies.estimation.tuning import tune_model_error
 
     d = _with_in_gear(tmp_path, 0.5)
     fleet = load_fleet(d)
-    tuned = tune_model_error(
-        d,
-        default_scenario,
-        fleet,
-        [SEED],
-        factors=(1.0,),
-        twist_factors=(1.0,),
-        in_gear_factors=(0.2,),
-    )
+    tuned = _tuned(d, default_scenario, (0.2,))
     assert tuned.intensities["in_gear"] == pytest.approx(0.1, rel=1e-12)
     nees, nis = _evaluation_sums(_with_in_gear(tmp_path, 0.1), default_scenario, fleet)
     assert tuned.nees_per_dof[0] == pytest.approx(nees, rel=1e-12)
@@ -158,21 +158,11 @@ def test_per_shift_sums_and_the_per_shift_criterion(default_description, default
 
     from gearsym.validation.sim.fleet import load_fleet
     from gearsym.validation.sim.scenario import load_scenario
-    from gearsym.validation.studies.estimation.tuning import tune_model_error
 
     d = default_description
     fleet = load_fleet(d)
     scenarios = (default_scenario, load_scenario(d, data_file("scenario_3_4.toml")))
-    tuned = tune_model_error(
-        d,
-        scenarios,
-        fleet,
-        [SEED],
-        factors=(1.0,),
-        twist_factors=(1.0,),
-        in_gear_factors=(1.0, 0.1),
-        criterion="per_shift",
-    )
+    tuned = _tuned(d, scenarios, (1.0, 0.1), criterion="per_shift")
     assert set(tuned.per_shift) == {"2-3", "3-4"}
     nees, nis = _evaluation_sums(d, default_scenario, fleet)
     assert tuned.per_shift["2-3"][0][0] == pytest.approx(nees, rel=1e-12)
