@@ -178,3 +178,26 @@ def test_per_shift_sums_and_the_per_shift_criterion(default_description, default
     assert tuned.chosen == tuned.factors[int(np.argmin(scores))]
     assert tuned.to_dict()["criterion"] == "per_shift"
     assert "3-4: NEES/dof" in tuned.text()
+
+
+def test_shifts_with_in_gear_entries_of_their_own_are_tuned_apart(default_scenario, tmp_path):
+    """The shipped description gives the 2-3's map-scale filter its own in-gear factor; tuned
+    together with the 3-4 (factor 1) the result could name only one: refused in one line
+    when the second shift's filter is built."""
+    import dataclasses
+
+    from gearsym.symbolic.errors import GearsymError
+    from gearsym.validation.sim.scenario import load_scenario
+
+    d = dataclasses.replace(
+        load_description(str(SHIPPED)),
+        estimator=dataclasses.replace(
+            load_description(str(SHIPPED)).estimator, mu_model="map_scale"
+        ),
+    )
+    scenarios = (default_scenario, load_scenario(d, data_file("scenario_3_4.toml")))
+    with pytest.raises(GearsymError) as error:
+        _tuned(d, scenarios, (1.0,), parameters=("m_veh", "mu_38", "mu_05", "zeta", "k_ss"))
+    message = str(error.value)
+    assert "--tune-scenario" in message and "in-gear factor" in message, message
+    assert "\n" not in message

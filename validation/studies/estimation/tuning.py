@@ -197,6 +197,7 @@ def tune_model_error(
         raise GearsymError("estimate", "--tune-in-gear", "the in-gear factors must be > 0")
     sums = np.zeros((len(grid), 4))  # NEES, its dof, NIS, its dof
     own_sums: dict[str, np.ndarray] = {}  # the same per shift
+    in_gear, in_gear_settle = 1.0, 0.0  # the group's in-gear factor and settling time
     base: dict[str, float] = {}
     for number, shift_scenario in enumerate(scenarios):
         own_parameters = _shift_parameters(
@@ -217,7 +218,18 @@ def tune_model_error(
                 f"({', '.join(base)}): tune them apart",
             )
         base = own
-        in_gear = aug.in_gear_factor
+        # the in-gear factor is one per group too: a shift type with its own (a shift."a-b"
+        # sub-table) would otherwise be reported with another's
+        own_gear = (aug.in_gear_factor, aug.in_gear_settle)
+        if number and own_gear != (in_gear, in_gear_settle):
+            raise GearsymError(
+                "estimate",
+                "--tune-scenario",
+                f"the {shift_scenario.shift.name} filter's in-gear factor and settling time "
+                f"{own_gear} differ from the {scenarios[0].shift.name} filter's "
+                f"{(in_gear, in_gear_settle)}: tune them apart",
+            )
+        in_gear, in_gear_settle = own_gear
         context = FleetContext(
             d,
             shift_scenario,
